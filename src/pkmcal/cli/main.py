@@ -1,0 +1,54 @@
+"""Entry point of the ``pkmcal`` command.
+
+Every sub-command lives in its own module under :mod:`pkmcal.cli` and is registered here.
+User errors (:class:`pkmcal.errors.PkmcalError`) are printed as one line on stderr and exit
+with code 2, without a traceback; anything else is a bug and keeps its traceback.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+from pkmcal import __version__
+from pkmcal.errors import PkmcalError
+
+
+class PkmcalGroup(click.Group):
+    """A click group that turns :class:`PkmcalError` into one stderr line and exit code 2."""
+
+    def invoke(self, ctx: click.Context):
+        try:
+            return super().invoke(ctx)
+        except PkmcalError as exc:
+            click.echo(f"pkmcal: error: {exc}", err=True)
+            sys.exit(exc.exit_code)
+
+
+@click.group(cls=PkmcalGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="pkmcal")
+def cli() -> None:
+    """Calibrate parallel kinematic machines (hexapods, redundantly actuated PKMs).
+
+    Units: mm; angles in degrees on the command line and in files. Pose = x y z a b c with
+    R = Rz(c)·Ry(b)·Rx(a) (roll, pitch, yaw about the fixed base axes).
+    """
+
+
+def _register() -> None:
+    # One line per command module; each module defines click commands and adds them here.
+    from pkmcal.cli import machines_cmd
+
+    machines_cmd.register(cli)
+
+
+_register()
+
+
+def main() -> None:
+    cli(prog_name="pkmcal")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,109 @@
+"""Units and the pose convention of pkmcal, stated once and imported everywhere.
+
+* Lengths are millimetres (mm).
+* Angles are radians inside the library; degrees in files and on the command line.
+  Conversion happens only at the edges (``pkmcal.io`` and ``pkmcal.cli``).
+* A pose is ``(x, y, z, a, b, c)``: the position of the platform frame {P} origin in the
+  base frame {F} (mm), and roll ``a``, pitch ``b``, yaw ``c`` about the *fixed* base axes
+  x, y, z, so that
+
+      R = Rz(c) · Ry(b) · Rx(a)          (scipy: ``Rotation.from_euler("xyz", ...)``)
+
+  and a point ``p_P`` of the platform is ``p_F = [x, y, z] + R p_P`` in the base frame.
+  This is LinuxCNC genhexkins' ``X Y Z A B C`` (its ``pmRpyMatConvert``).
+* A small change of orientation is a rotation vector ``δω`` in the base frame,
+  ``R ← exp([δω]×) R``. "Twist" Jacobians are with respect to ``(δp, δω)``; "Euler"
+  Jacobians with respect to ``(x, y, z, a, b, c)``, related by ``δω = E(a, b, c) d(a, b, c)``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+#: scipy sequence for R = Rz(c) Ry(b) Rx(a): lower case = extrinsic (fixed axes).
+EULER_SEQUENCE = "xyz"
+#: Names of the pose coordinates, in order, as they appear in every file.
+POSE_COLUMNS = ("x", "y", "z", "a", "b", "c")
+LENGTH_UNIT = "mm"
+FILE_ANGLE_UNIT = "deg"
+
+
+def euler_to_matrix(abc: np.ndarray) -> np.ndarray:
+    """Rotation matrices ``Rz(c) Ry(b) Rx(a)`` for angles ``abc`` of shape (..., 3), radians.
+
+    Closed form (fast path for the kinematics); ``tests/test_conventions.py`` checks it
+    against ``scipy.spatial.transform.Rotation``.
+    """
+    abc = np.asarray(abc, dtype=float)
+    ca, cb, cc = np.cos(abc[..., 0]), np.cos(abc[..., 1]), np.cos(abc[..., 2])
+    sa, sb, sc = np.sin(abc[..., 0]), np.sin(abc[..., 1]), np.sin(abc[..., 2])
+    R = np.empty(abc.shape[:-1] + (3, 3))
+    R[..., 0, 0] = cc * cb
+    R[..., 0, 1] = cc * sb * sa - sc * ca
+    R[..., 0, 2] = cc * sb * ca + sc * sa
+    R[..., 1, 0] = sc * cb
+    R[..., 1, 1] = sc * sb * sa + cc * ca
+    R[..., 1, 2] = sc * sb * ca - cc * sa
+    R[..., 2, 0] = -sb
+    R[..., 2, 1] = cb * sa
+    R[..., 2, 2] = cb * ca
+    return R
+
+
+def matrix_to_euler(R: np.ndarray) -> np.ndarray:
+    """Angles ``(a, b, c)`` (radians) of rotation matrices ``R`` (..., 3, 3); inverse of
+    :func:`euler_to_matrix` with ``b`` in [-π/2, π/2] and ``a, c`` in (-π, π]."""
+    R = np.asarray(R, dtype=float)
+    shape = R.shape[:-2]
+    angles = Rotation.from_matrix(R.reshape(-1, 3, 3)).as_euler(EULER_SEQUENCE)
+    return angles.reshape(shape + (3,))
+
+
+def euler_rate_matrix(abc: np.ndarray) -> np.ndarray:
+    """``E(a, b, c)`` with ``δω = E d(a, b, c)``: the base-frame angular velocity of
+    ``R = Rz(c) Ry(b) Rx(a)``; columns ``Rz Ry e_x``, ``Rz e_y``, ``e_z``. Shape (..., 3, 3)."""
+    abc = np.asarray(abc, dtype=float)
+    cb, sb = np.cos(abc[..., 1]), np.sin(abc[..., 1])
+    cc, sc = np.cos(abc[..., 2]), np.sin(abc[..., 2])
+    E = np.zeros(abc.shape[:-1] + (3, 3))
+    E[..., 0, 0] = cb * cc
+    E[..., 1, 0] = cb * sc
+    E[..., 2, 0] = -sb
+    E[..., 0, 1] = -sc
+    E[..., 1, 1] = cc
+    E[..., 2, 2] = 1.0
+    return E
+
+
+def poses_from_file_units(poses_deg: np.ndarray) -> np.ndarray:
+    """File/CLI poses (mm, degrees) to internal poses (mm, radians)."""
+    poses = np.array(poses_deg, dtype=float)
+    poses[..., 3:6] = np.deg2rad(poses[..., 3:6])
+    return poses
+
+
+def poses_to_file_units(poses_rad: np.ndarray) -> np.ndarray:
+    """Internal poses (mm, radians) to file/CLI poses (mm, degrees)."""
+    poses = np.array(poses_rad, dtype=float)
+    poses[..., 3:6] = np.rad2deg(poses[..., 3:6])
+    return poses
+
+
+def rotation_vector_to_matrix(w: np.ndarray) -> np.ndarray:
+    """``exp([w]×)`` for rotation vectors ``w`` of shape (..., 3) (Rodrigues)."""
+    return Rotation.from_rotvec(np.asarray(w, dtype=float).reshape(-1, 3)).as_matrix().reshape(
+        np.shape(w)[:-1] + (3, 3)
+    )
+
+
+def rotation_error(R_a: np.ndarray, R_b: np.ndarray) -> np.ndarray:
+    """Angle (radians) of the rotation ``R_a R_bᵀ`` that takes ``R_b`` to ``R_a``; shape (...)."""
+    rel = np.einsum("...ij,...kj->...ik", R_a, R_b)
+    cos = np.clip((np.trace(rel, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0)
+    # arccos is ill-conditioned near 0: use the skew part for small angles.
+    skew = np.stack(
+        [rel[..., 2, 1] - rel[..., 1, 2], rel[..., 0, 2] - rel[..., 2, 0], rel[..., 1, 0] - rel[..., 0, 1]],
+        axis=-1,
+    )
+    return np.arctan2(np.linalg.norm(skew, axis=-1) / 2.0, cos)

@@ -1,0 +1,163 @@
+"""The mechanism interface shared by every machine pkmcal calibrates.
+
+A mechanism is an immutable description of a machine: a vector of named kinematic
+parameters ρ, and pure, vectorised functions of N poses:
+
+* ``ik(poses)``                    → actuator readings q (N, l)
+* ``actuator_pose_jacobian(poses)`` → ∂q/∂pose (N, l, n) at fixed ρ
+* ``actuator_param_jacobian(poses)``→ ∂q/∂ρ (N, l, p) at fixed pose
+* ``fk(readings)``                 → poses (N, n), with a per-pose convergence flag
+
+This is everything the identification engine needs: every calibration model in pkmcal is
+the closure equation ``q = IK(x, ρ)`` plus a sensor model ``y = h(x, θ)``, with the pose x
+of each measurement as a nuisance unknown. The hexapod (n = l = 6) and the redundantly
+actuated planar machines (l > n) are both implementations of this class.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pkmcal.errors import PkmcalError
+
+
+@dataclass(frozen=True)
+class FKResult:
+    """Forward kinematics of N actuator-reading sets.
+
+    ``poses`` (N, n) in internal units; ``converged`` (N,) is True only where the IK of the
+    returned pose reproduces the readings within ``tol``; ``iterations`` (N,) Newton steps
+    taken; ``residual`` (N,) the final max |q − IK(pose)| (mm or rad, per actuator).
+    """
+
+    poses: np.ndarray
+    converged: np.ndarray
+    iterations: np.ndarray
+    residual: np.ndarray
+
+    @property
+    def all_converged(self) -> bool:
+        return bool(np.all(self.converged))
+
+
+@dataclass(frozen=True)
+class LimitReport:
+    """Which limits each of N poses violates.
+
+    ``violations`` maps a limit name (e.g. ``"stroke"``, ``"u_joint_tilt"``) to a boolean
+    array (N,) that is True where the pose violates it; ``margins`` maps the same names to
+    the signed margin (N,) (negative = violated), in the limit's own unit (mm or radians).
+    """
+
+    violations: dict[str, np.ndarray]
+    margins: dict[str, np.ndarray] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> np.ndarray:
+        n = len(next(iter(self.violations.values()))) if self.violations else 0
+        bad = np.zeros(n, dtype=bool)
+        for v in self.violations.values():
+            bad |= v
+        return ~bad
+
+    def reasons(self, k: int) -> list[str]:
+        """Names of the limits pose ``k`` violates (empty when reachable)."""
+        return [name for name, v in self.violations.items() if v[k]]
+
+    def verdicts(self) -> list[str]:
+        """One string per pose: ``"ok"`` or the violated limits joined by ``+``."""
+        return ["+".join(self.reasons(k)) or "ok" for k in range(len(self.ok))]
+
+
+class Mechanism(ABC):
+    """Abstract parallel mechanism (see module docstring)."""
+
+    name: str
+    #: Names of the pose coordinates, e.g. ("x", "y", "z", "a", "b", "c").
+    pose_names: tuple[str, ...]
+    #: True for pose coordinates that are angles (degrees in files, radians inside).
+    pose_is_angle: tuple[bool, ...]
+    #: Names of the actuator readings, e.g. ("lambda1", ..., "lambda6").
+    actuator_names: tuple[str, ...]
+
+    @property
+    def n_dof(self) -> int:
+        return len(self.pose_names)
+
+    @property
+    def n_actuators(self) -> int:
+        return len(self.actuator_names)
+
+    @property
+    @abstractmethod
+    def param_names(self) -> tuple[str, ...]:
+        """Names of the kinematic parameters, in the order of :attr:`params`."""
+
+    @property
+    @abstractmethod
+    def params(self) -> np.ndarray:
+        """The kinematic parameter vector ρ (p,) in internal units."""
+
+    @abstractmethod
+    def with_params(self, params: np.ndarray, name: str | None = None) -> "Mechanism":
+        """A copy of this machine with the parameter vector replaced."""
+
+    @property
+    @abstractmethod
+    def home_pose(self) -> np.ndarray:
+        """The pose (n,) the FK starts from by default."""
+
+    @abstractmethod
+    def ik(self, poses: np.ndarray) -> np.ndarray:
+        """Actuator readings q (N, l) of poses (N, n)."""
+
+    @abstractmethod
+    def actuator_pose_jacobian(self, poses: np.ndarray) -> np.ndarray:
+        """∂q/∂pose (N, l, n), with respect to the pose coordinates of :attr:`pose_names`."""
+
+    @abstractmethod
+    def actuator_param_jacobian(self, poses: np.ndarray) -> np.ndarray:
+        """∂q/∂ρ (N, l, p) at fixed pose."""
+
+    @abstractmethod
+    def fk(self, readings: np.ndarray, guess: np.ndarray | None = None) -> FKResult:
+        """Poses (N, n) whose IK reproduces ``readings`` (N, l)."""
+
+    @abstractmethod
+    def check_limits(self, poses: np.ndarray) -> LimitReport:
+        """Which of the machine's limits each pose violates."""
+
+    # -- conveniences shared by every mechanism ---------------------------------------
+
+    def param_index(self, names: "list[str] | tuple[str, ...]") -> np.ndarray:
+        """Indices of the named parameters; a clear error for an unknown name.
+
+        A name may be a shell-style pattern (``"b1.*"``, ``"L0_*"``) matching several.
+        """
+        from fnmatch import fnmatchcase
+
+        out: list[int] = []
+        for name in names:
+            hits = [i for i, p in enumerate(self.param_names) if fnmatchcase(p, name)]
+            if not hits:
+                raise PkmcalError(
+                    f"machine '{self.name}' has no parameter '{name}'; "
+                    f"its parameters are {', '.join(self.param_names)}"
+                )
+            out.extend(h for h in hits if h not in out)
+        return np.array(out, dtype=int)
+
+    def as_pose_array(self, poses: np.ndarray) -> np.ndarray:
+        """``poses`` as a float array (N, n); a single pose (n,) becomes (1, n)."""
+        poses = np.asarray(poses, dtype=float)
+        if poses.ndim == 1:
+            poses = poses[None, :]
+        if poses.ndim != 2 or poses.shape[1] != self.n_dof:
+            raise PkmcalError(
+                f"machine '{self.name}' needs poses with {self.n_dof} coordinates "
+                f"({', '.join(self.pose_names)}); got an array of shape {poses.shape}"
+            )
+        return poses

@@ -1,0 +1,354 @@
+"""The Gough–Stewart hexapod (6-UPS) and its 42 kinematic parameters.
+
+Model (paper 2 §2.1 eq. 1–2, paper 1 §II eq. 1): leg i joins the base (universal) joint
+b_i, given in the base frame {F}, to the platform (spherical) joint a_i, given in the
+platform frame {P}; with the pose (p, R) of {P} in {F},
+
+    l_i = p + R a_i − b_i,        L_i = ‖l_i‖,        λ_i = L_i − L0_i            (1)–(2)
+
+where λ_i is the actuator reading and L0_i the leg offset. The parameter vector ρ (42,) is
+ordered per leg i = 1..6 as ``b_i.x, b_i.y, b_i.z, a_i.x, a_i.y, a_i.z, L0_i``.
+
+Analytic derivatives, with the unit leg vector u_i = l_i / L_i:
+
+    ∂λ_i/∂p = u_iᵀ,    ∂λ_i/∂δω = ((R a_i) × u_i)ᵀ,    ∂λ_i/∂(a,b,c) = ((R a_i) × u_i)ᵀ E
+    ∂λ_i/∂b_i = −u_iᵀ,  ∂λ_i/∂a_i = u_iᵀ R,            ∂λ_i/∂L0_i = −1
+
+(E from :func:`pkmcal.conventions.euler_rate_matrix`). Limits (paper 2 §5): actuator
+stroke, U-joint tilt (angle between u_i and the base joint axis), S-joint tilt (angle
+between u_i and the platform joint axis R n_i), leg–leg collision (minimum distance
+between leg segments b_i → p + R a_i below the leg diameter) and a singularity margin
+(inverse condition number of the length-scaled pose Jacobian).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from pkmcal.conventions import POSE_COLUMNS, euler_rate_matrix, euler_to_matrix
+from pkmcal.errors import PkmcalError
+from pkmcal.mechanisms import _hexapod_kernels as kernels
+from pkmcal.mechanisms.base import FKResult, LimitReport, Mechanism
+
+N_LEGS = 6
+PARAMS_PER_LEG = 7
+_LEG_PARAM_SUFFIXES = ("b{i}.x", "b{i}.y", "b{i}.z", "a{i}.x", "a{i}.y", "a{i}.z", "L0_{i}")
+HEXAPOD_PARAM_NAMES = tuple(s.format(i=i + 1) for i in range(N_LEGS) for s in _LEG_PARAM_SUFFIXES)
+
+#: Default FK tolerance on leg lengths (mm) and iteration cap.
+FK_TOL_MM = 1e-9
+FK_MAX_ITER = 30
+
+
+@dataclass(frozen=True)
+class HexapodLimits:
+    """Joint and leg limits. Angles in radians, lengths in mm; ``None`` disables a check.
+
+    ``singularity_margin`` is the smallest accepted inverse condition number of the pose
+    Jacobian ∂L/∂(p, r·δω), r being the mean platform-joint radius (so both blocks are mm).
+    """
+
+    u_joint_tilt: float | None = None
+    s_joint_tilt: float | None = None
+    leg_diameter: float | None = None
+    singularity_margin: float = 0.01
+
+
+def _frozen(a, shape) -> np.ndarray:
+    arr = np.array(a, dtype=float).reshape(shape)
+    arr.setflags(write=False)
+    return arr
+
+
+@dataclass(frozen=True, eq=False)
+class Hexapod(Mechanism):
+    """A 6-UPS Gough–Stewart platform. Immutable; compare with ``==``.
+
+    Parameters
+    ----------
+    name : machine name.
+    base : (6, 3) base joint centres b_i in {F}, mm.
+    platform : (6, 3) platform joint centres a_i in {P}, mm.
+    offset : (6,) leg offsets L0_i, mm (leg length = L0_i + λ_i).
+    stroke : (6, 2) actuator reading range [λ_min, λ_max], mm.
+    base_axis, platform_axis : (6, 3) joint axis directions (unit), default z of {F}/{P}.
+    limits : :class:`HexapodLimits`.
+    home : (6,) home pose (mm, rad); default: level, centred, mid-stroke.
+    workspace : optional (6, 2) box [min, max] of each pose coordinate (mm, rad).
+    covariance : optional (42, 42) covariance of the parameters (identified machines).
+    description : free text.
+    """
+
+    name: str
+    base: np.ndarray
+    platform: np.ndarray
+    offset: np.ndarray
+    stroke: np.ndarray
+    base_axis: np.ndarray | None = None
+    platform_axis: np.ndarray | None = None
+    limits: HexapodLimits = field(default_factory=HexapodLimits)
+    home: np.ndarray | None = None
+    workspace: np.ndarray | None = None
+    covariance: np.ndarray | None = None
+    description: str = ""
+
+    pose_names = POSE_COLUMNS
+    pose_is_angle = (False, False, False, True, True, True)
+    actuator_names = tuple(f"lambda{i + 1}" for i in range(N_LEGS))
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__
+        set_(self, "base", _frozen(self.base, (N_LEGS, 3)))
+        set_(self, "platform", _frozen(self.platform, (N_LEGS, 3)))
+        set_(self, "offset", _frozen(self.offset, (N_LEGS,)))
+        set_(self, "stroke", _frozen(self.stroke, (N_LEGS, 2)))
+        z = np.tile([0.0, 0.0, 1.0], (N_LEGS, 1))
+        for attr in ("base_axis", "platform_axis"):
+            axes = np.array(z if getattr(self, attr) is None else getattr(self, attr), dtype=float)
+            axes = axes.reshape(N_LEGS, 3)
+            norms = np.linalg.norm(axes, axis=1)
+            if np.any(norms < 1e-12):
+                raise PkmcalError(f"machine '{self.name}': a {attr.replace('_', ' ')} is the zero vector")
+            set_(self, attr, _frozen(axes / norms[:, None], (N_LEGS, 3)))
+        if np.any(self.stroke[:, 1] < self.stroke[:, 0]):
+            leg = int(np.argmax(self.stroke[:, 1] < self.stroke[:, 0])) + 1
+            raise PkmcalError(f"machine '{self.name}': leg {leg} stroke has max < min")
+        if self.home is None:
+            set_(self, "home", _frozen(self._default_home(), (6,)))
+        else:
+            set_(self, "home", _frozen(self.home, (6,)))
+        if self.workspace is not None:
+            set_(self, "workspace", _frozen(self.workspace, (6, 2)))
+        if self.covariance is not None:
+            set_(self, "covariance", _frozen(self.covariance, (len(HEXAPOD_PARAM_NAMES),) * 2))
+
+    # -- parameters ---------------------------------------------------------------------
+
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        return HEXAPOD_PARAM_NAMES
+
+    @property
+    def params(self) -> np.ndarray:
+        return np.concatenate([self.base, self.platform, self.offset[:, None]], axis=1).ravel()
+
+    def with_params(self, params: np.ndarray, name: str | None = None, covariance=None) -> "Hexapod":
+        rho = np.asarray(params, dtype=float).reshape(N_LEGS, PARAMS_PER_LEG)
+        return replace(
+            self,
+            name=self.name if name is None else name,
+            base=rho[:, 0:3],
+            platform=rho[:, 3:6],
+            offset=rho[:, 6],
+            covariance=covariance,
+        )
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Hexapod):
+            return NotImplemented
+        arrays = ("base", "platform", "offset", "stroke", "base_axis", "platform_axis", "home")
+        same = all(np.array_equal(getattr(self, a), getattr(other, a)) for a in arrays)
+        for opt in ("workspace", "covariance"):
+            x, y = getattr(self, opt), getattr(other, opt)
+            same &= (x is None and y is None) or (x is not None and y is not None and np.array_equal(x, y))
+        return bool(same and self.name == other.name and self.limits == other.limits
+                    and self.description == other.description)
+
+    __hash__ = None  # type: ignore[assignment]
+
+    @property
+    def home_pose(self) -> np.ndarray:
+        return self.home
+
+    @property
+    def platform_radius(self) -> float:
+        """Mean distance of the platform joints from the platform origin (mm)."""
+        return float(np.mean(np.linalg.norm(self.platform, axis=1)))
+
+    def _default_home(self) -> np.ndarray:
+        """Level, centred pose at which the mean reading is mid-stroke."""
+        target = self.offset + self.stroke.mean(axis=1)
+        horiz = np.linalg.norm((self.platform - self.base)[:, :2], axis=1)
+        dz = self.base[:, 2] - self.platform[:, 2]
+        z = np.sqrt(np.maximum(target**2 - horiz**2, 0.0)) + dz
+        return np.array([0.0, 0.0, float(np.mean(z)), 0.0, 0.0, 0.0])
+
+    # -- kinematics ---------------------------------------------------------------------
+
+    def leg_vectors(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(R, Ra, l)``: rotations (N, 3, 3), platform joints in {F} relative to p
+        (N, 6, 3) = R a_i, and leg vectors l_i = p + R a_i − b_i (N, 6, 3)."""
+        poses = self.as_pose_array(poses)
+        R = euler_to_matrix(poses[:, 3:6])
+        Ra = np.einsum("nrc,ic->nir", R, self.platform)
+        legs = poses[:, None, 0:3] + Ra - self.base[None]
+        return R, Ra, legs
+
+    def leg_lengths(self, poses: np.ndarray) -> np.ndarray:
+        """Leg lengths L (N, 6), mm (compiled kernel)."""
+        poses = np.ascontiguousarray(self.as_pose_array(poses))
+        return kernels.ik_lengths(poses, self.base, self.platform)
+
+    def ik(self, poses: np.ndarray) -> np.ndarray:
+        """Actuator readings λ = L − L0 (N, 6), mm."""
+        return self.leg_lengths(poses) - self.offset
+
+    def _unit_legs(self, poses):
+        R, Ra, legs = self.leg_vectors(poses)
+        u = legs / np.linalg.norm(legs, axis=2, keepdims=True)
+        return R, Ra, u
+
+    def twist_jacobian(self, poses: np.ndarray) -> np.ndarray:
+        """∂L/∂(δp, δω) (N, 6, 6): row i = [u_iᵀ, ((R a_i) × u_i)ᵀ]."""
+        _, Ra, u = self._unit_legs(poses)
+        return np.concatenate([u, np.cross(Ra, u)], axis=2)
+
+    def actuator_pose_jacobian(self, poses: np.ndarray) -> np.ndarray:
+        """∂λ/∂(x, y, z, a, b, c) (N, 6, 6) = twist Jacobian · diag(I, E(a, b, c))."""
+        poses = self.as_pose_array(poses)
+        Jt = self.twist_jacobian(poses)
+        E = euler_rate_matrix(poses[:, 3:6])
+        return np.concatenate([Jt[:, :, :3], Jt[:, :, 3:] @ E], axis=2)
+
+    def actuator_param_jacobian(self, poses: np.ndarray) -> np.ndarray:
+        """∂λ/∂ρ (N, 6, 42): for leg i only its 7 columns are non-zero:
+        [−u_iᵀ, u_iᵀ R, −1]."""
+        R, _, u = self._unit_legs(poses)
+        n = u.shape[0]
+        J = np.zeros((n, N_LEGS, N_LEGS, PARAMS_PER_LEG))
+        legs = np.arange(N_LEGS)
+        J[:, legs, legs, 0:3] = -u
+        J[:, legs, legs, 3:6] = np.einsum("nir,nrc->nic", u, R)
+        J[:, legs, legs, 6] = -1.0
+        return J.reshape(n, N_LEGS, N_LEGS * PARAMS_PER_LEG)
+
+    def length_param_jacobian(self, poses: np.ndarray) -> np.ndarray:
+        """∂L/∂ρ (N, 6, 42): as :meth:`actuator_param_jacobian` with the L0 columns zero
+        (a leg's length at a given pose does not depend on its offset)."""
+        J = self.actuator_param_jacobian(poses)
+        J[:, :, PARAMS_PER_LEG - 1 :: PARAMS_PER_LEG] = 0.0
+        return J
+
+    def fk(
+        self,
+        readings: np.ndarray,
+        guess: np.ndarray | None = None,
+        *,
+        tol: float = FK_TOL_MM,
+        max_iter: int = FK_MAX_ITER,
+    ) -> FKResult:
+        """Poses from actuator readings λ (N, 6) by Newton–Raphson on SO(3).
+
+        ``guess`` is one pose (6,) or one per reading (N, 6); default the home pose.
+        """
+        readings = np.asarray(readings, dtype=float)
+        return self.fk_lengths(readings + self.offset, guess, tol=tol, max_iter=max_iter)
+
+    def fk_lengths(self, lengths, guess=None, *, tol: float = FK_TOL_MM, max_iter: int = FK_MAX_ITER) -> FKResult:
+        """As :meth:`fk`, from leg lengths L (N, 6) instead of readings."""
+        lengths = np.ascontiguousarray(np.atleast_2d(np.asarray(lengths, dtype=float)))
+        if lengths.ndim != 2 or lengths.shape[1] != N_LEGS:
+            raise PkmcalError(f"FK needs 6 leg lengths per pose; got an array of shape {lengths.shape}")
+        g = self.home if guess is None else np.asarray(guess, dtype=float)
+        guesses = np.ascontiguousarray(np.broadcast_to(g, lengths.shape))
+        poses, conv, iters, res = kernels.fk_newton(lengths, guesses, self.base, self.platform, tol, max_iter)
+        return FKResult(poses=poses, converged=conv, iterations=iters, residual=res)
+
+    # -- limits -------------------------------------------------------------------------
+
+    def check_limits(self, poses: np.ndarray, margin: float = 0.0) -> LimitReport:
+        """Reachability of N poses against every limit of the machine.
+
+        ``margin`` shrinks every limit by that safety margin (mm for stroke and collision,
+        the same number in degrees for the joint tilts).
+        """
+        poses = self.as_pose_array(poses)
+        R, Ra, legs = self.leg_vectors(poses)
+        L = np.linalg.norm(legs, axis=2)
+        u = legs / L[..., None]
+        lam = L - self.offset
+        margins: dict[str, np.ndarray] = {}
+        margins["stroke"] = np.min(np.minimum(lam - self.stroke[:, 0], self.stroke[:, 1] - lam), axis=1) - margin
+        lim = self.limits
+        if lim.u_joint_tilt is not None:
+            tilt = np.arccos(np.clip(np.einsum("nir,ir->ni", u, self.base_axis), -1, 1))
+            margins["u_joint_tilt"] = lim.u_joint_tilt - np.deg2rad(margin) - tilt.max(axis=1)
+        if lim.s_joint_tilt is not None:
+            axes = np.einsum("nrc,ic->nir", R, self.platform_axis)
+            tilt = np.arccos(np.clip(np.einsum("nir,nir->ni", u, axes), -1, 1))
+            margins["s_joint_tilt"] = lim.s_joint_tilt - np.deg2rad(margin) - tilt.max(axis=1)
+        if lim.leg_diameter is not None:
+            tops = poses[:, None, 0:3] + Ra
+            margins["leg_collision"] = self._min_leg_distance(tops) - lim.leg_diameter - margin
+        Jt = self.twist_jacobian(poses)
+        Jt[:, :, 3:] /= self.platform_radius
+        s = np.linalg.svd(Jt, compute_uv=False)
+        margins["singularity"] = s[:, -1] / s[:, 0] - lim.singularity_margin
+        violations = {k: ~(m >= 0.0) for k, m in margins.items()}
+        return LimitReport(violations=violations, margins=margins)
+
+    def _leg_pairs(self) -> np.ndarray:
+        """Leg pairs (i, j) whose segments can collide: pairs sharing a joint centre
+        (3-6 designs) meet by construction and are left out."""
+        pairs = []
+        for i in range(N_LEGS):
+            for j in range(i + 1, N_LEGS):
+                shared = (np.linalg.norm(self.base[i] - self.base[j]) < 1e-6
+                          or np.linalg.norm(self.platform[i] - self.platform[j]) < 1e-6)
+                if not shared:
+                    pairs.append((i, j))
+        return np.array(pairs, dtype=int).reshape(-1, 2)
+
+    def _min_leg_distance(self, tops: np.ndarray) -> np.ndarray:
+        """Minimum distance (N,) between the leg segments b_i → top_i over leg pairs."""
+        pairs = self._leg_pairs()
+        if len(pairs) == 0:
+            return np.full(tops.shape[0], np.inf)
+        i, j = pairs[:, 0], pairs[:, 1]
+        p1 = np.broadcast_to(self.base[i], tops[:, i].shape)
+        p2 = np.broadcast_to(self.base[j], tops[:, j].shape)
+        return segment_distance(p1, tops[:, i], p2, tops[:, j]).min(axis=1)
+
+    # -- description --------------------------------------------------------------------
+
+    def summary(self) -> str:
+        """A few human-readable lines describing the machine."""
+        lim = self.limits
+        deg = lambda v: "off" if v is None else f"{np.rad2deg(v):.1f}°"  # noqa: E731
+        lines = [
+            f"{self.name}: 6-UPS hexapod, 42 kinematic parameters" + (f" — {self.description}" if self.description else ""),
+            f"  base joint radius {np.mean(np.linalg.norm(self.base[:, :2], axis=1)):.3f} mm, "
+            f"platform joint radius {self.platform_radius:.3f} mm",
+            f"  leg offsets L0 {np.array2string(self.offset, precision=3)} mm, "
+            f"stroke {self.stroke[0, 0]:g}..{self.stroke[0, 1]:g} mm",
+            f"  limits: U-joint tilt {deg(lim.u_joint_tilt)}, S-joint tilt {deg(lim.s_joint_tilt)}, "
+            f"leg diameter {'off' if lim.leg_diameter is None else f'{lim.leg_diameter:g} mm'}, "
+            f"singularity margin {lim.singularity_margin:g}",
+            f"  home pose x y z = {self.home[0]:.3f} {self.home[1]:.3f} {self.home[2]:.3f} mm, "
+            f"a b c = {np.rad2deg(self.home[3]):.2f} {np.rad2deg(self.home[4]):.2f} {np.rad2deg(self.home[5]):.2f}°",
+        ]
+        return "\n".join(lines)
+
+
+def segment_distance(p1, q1, p2, q2) -> np.ndarray:
+    """Minimum distance between segments p1→q1 and p2→q2, arrays (..., 3) → (...).
+
+    Closed form: minimise ‖p1 + s d1 − p2 − t d2‖ over s, t ∈ [0, 1], clamping s, then t,
+    then s again (Ericson, *Real-Time Collision Detection*, §5.1.9).
+    """
+    d1, d2, r = q1 - p1, q2 - p2, p1 - p2
+    a = np.einsum("...k,...k->...", d1, d1)
+    e = np.einsum("...k,...k->...", d2, d2)
+    f = np.einsum("...k,...k->...", d2, r)
+    c = np.einsum("...k,...k->...", d1, r)
+    b = np.einsum("...k,...k->...", d1, d2)
+    denom = a * e - b * b
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.where(denom > 1e-12 * a * e, np.clip((b * f - c * e) / denom, 0.0, 1.0), 0.0)
+        t = (b * s + f) / e
+        s = np.where(t < 0.0, np.clip(-c / a, 0.0, 1.0), np.where(t > 1.0, np.clip((b - c) / a, 0.0, 1.0), s))
+        t = np.clip(t, 0.0, 1.0)
+    diff = p1 + s[..., None] * d1 - p2 - t[..., None] * d2
+    return np.linalg.norm(diff, axis=-1)

@@ -1,0 +1,171 @@
+"""Built-in machines, usable by name wherever a machine file is accepted.
+
+* ``stewart-prototype``: the Gough–Stewart prototype of paper 2 (Saputra, Ong, Nee 2014),
+  §5 and Table 3: joints as tabulated, L0 = 305 mm, stroke 0–50 mm, U-joint tilt 45°,
+  S-joint tilt 29°, leg diameter 36.1 mm. The default machine of pkmcal.
+* ``stewart-prototype-real``: the same machine with paper 2's Table 4 deviations added
+  (its "real model for calibration simulation").
+* ``symmetric:KEY=VALUE,...``: a symmetric 6-6 (or, with ``platform_separation=0``, 3-6)
+  hexapod from joint radii and pair separation angles; see :func:`symmetric_hexapod`.
+
+Other planar/redundant machines register themselves in :data:`BUILTIN_MACHINES`.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+
+from pkmcal.errors import PkmcalError
+from pkmcal.mechanisms.base import Mechanism
+from pkmcal.mechanisms.hexapod import Hexapod, HexapodLimits
+
+#: Paper 2, Table 3 (mm): base joints b_i (rows = legs 1..6).
+PROTOTYPE_BASE = np.array(
+    [
+        [-152.500, 0.000, 0.000],
+        [-132.068, -76.250, 0.000],
+        [76.250, -132.068, 0.000],
+        [132.068, -76.250, 0.000],
+        [76.250, 132.068, 0.000],
+        [0.000, 152.500, 0.000],
+    ]
+)
+#: Paper 2, Table 3 (mm): platform joints a_i in {P}.
+PROTOTYPE_PLATFORM = np.array(
+    [
+        [-60.622, 35.000, 0.000],
+        [-35.000, -60.622, 0.000],
+        [0.000, -70.000, 0.000],
+        [70.000, 0.000, 0.000],
+        [60.622, 35.000, 0.000],
+        [-35.000, 60.622, 0.000],
+    ]
+)
+#: Paper 2, Table 4 (mm): deviations of the "real" model: δL0_i, δb_i, δa_i.
+TABLE4_DELTA_OFFSET = np.array([1.0, 2.0, 3.0, 1.0, 2.0, 3.0])
+TABLE4_DELTA_BASE = np.array(
+    [[0, 0, 0], [3, 0, 0.3], [0.1, 1.8, 0.7], [-0.1, 1.8, 0.7], [-0.1, 1.8, 0.7], [-0.1, 1.8, 0.7]], dtype=float
+)
+TABLE4_DELTA_PLATFORM = np.array(
+    [[0, 0, 0], [-0.9, 0.67, 0.53], [3, -2, 0.7], [3, -2, 0.7], [3, -2, 0.7], [3, -2, 0.7]], dtype=float
+)
+PROTOTYPE_LIMITS = HexapodLimits(
+    u_joint_tilt=np.deg2rad(45.0), s_joint_tilt=np.deg2rad(29.0), leg_diameter=36.1
+)
+
+
+def stewart_prototype() -> Hexapod:
+    """Paper 2's prototype (Table 3 and §5)."""
+    return Hexapod(
+        name="stewart-prototype",
+        base=PROTOTYPE_BASE,
+        platform=PROTOTYPE_PLATFORM,
+        offset=np.full(6, 305.0),
+        stroke=np.tile([0.0, 50.0], (6, 1)),
+        limits=PROTOTYPE_LIMITS,
+        description="Gough-Stewart prototype of Saputra, Ong & Nee (2014), Table 3",
+    )
+
+
+def stewart_prototype_real() -> Hexapod:
+    """Paper 2's prototype with the Table 4 deviations (the simulated "real" machine)."""
+    nominal = stewart_prototype()
+    rho = np.concatenate(
+        [nominal.base + TABLE4_DELTA_BASE, nominal.platform + TABLE4_DELTA_PLATFORM,
+         (nominal.offset + TABLE4_DELTA_OFFSET)[:, None]],
+        axis=1,
+    ).ravel()
+    real = nominal.with_params(rho, name="stewart-prototype-real")
+    from dataclasses import replace
+
+    # Keep the nominal home pose: the real machine is commanded as the nominal one is.
+    return replace(real, home=nominal.home, description="stewart-prototype with the Table 4 deviations of Saputra et al. (2014)")
+
+
+def symmetric_hexapod(
+    base_radius: float = 152.5,
+    platform_radius: float = 70.0,
+    base_separation: float = 30.0,
+    platform_separation: float = 30.0,
+    phase: float = 195.0,
+    offset: float = 305.0,
+    stroke: float = 50.0,
+    u_joint_tilt: float | None = 45.0,
+    s_joint_tilt: float | None = 29.0,
+    leg_diameter: float | None = None,
+    name: str | None = None,
+) -> Hexapod:
+    """A hexapod with 3-fold symmetric joint pairs (angles in degrees, lengths in mm).
+
+    Base pair k (k = 0, 1, 2) is centred at θ_k = phase + 120k; its legs 2k+1 and 2k+2 have
+    base joints at θ_k ∓ base_separation/2 and platform joints at
+    θ_k ∓ (60 − platform_separation/2). ``platform_separation = 0`` gives a 3-6 hexapod
+    (platform joints shared pairwise). The defaults reproduce ``stewart-prototype``.
+    """
+    base, plat = [], []
+    for k in range(3):
+        th = phase + 120.0 * k
+        for sign in (-1.0, 1.0):
+            tb = np.deg2rad(th + sign * base_separation / 2)
+            tp = np.deg2rad(th + sign * (60.0 - platform_separation / 2))
+            base.append([base_radius * np.cos(tb), base_radius * np.sin(tb), 0.0])
+            plat.append([platform_radius * np.cos(tp), platform_radius * np.sin(tp), 0.0])
+    deg = lambda v: None if v is None else np.deg2rad(v)  # noqa: E731
+    return Hexapod(
+        name=name or (f"symmetric:base_radius={base_radius:g},platform_radius={platform_radius:g},"
+                      f"base_separation={base_separation:g},platform_separation={platform_separation:g}"),
+        base=np.array(base),
+        platform=np.array(plat),
+        offset=np.full(6, float(offset)),
+        stroke=np.tile([0.0, float(stroke)], (6, 1)),
+        limits=HexapodLimits(u_joint_tilt=deg(u_joint_tilt), s_joint_tilt=deg(s_joint_tilt), leg_diameter=leg_diameter),
+        description="symmetric hexapod generated from radii and pair separation angles",
+    )
+
+
+#: Built-in machines by name → (factory, one-line description).
+BUILTIN_MACHINES: dict[str, tuple[Callable[[], Mechanism], str]] = {
+    "stewart-prototype": (stewart_prototype, "paper 2 prototype, Table 3 (default machine)"),
+    "stewart-prototype-real": (stewart_prototype_real, "paper 2 prototype with Table 4 deviations"),
+}
+
+DEFAULT_MACHINE = "stewart-prototype"
+SYMMETRIC_PREFIX = "symmetric:"
+
+
+def _parse_symmetric(spec: str) -> Hexapod:
+    body = spec[len(SYMMETRIC_PREFIX):]
+    kwargs: dict[str, float | None] = {}
+    allowed = set(symmetric_hexapod.__code__.co_varnames[: symmetric_hexapod.__code__.co_argcount]) - {"name"}
+    for item in filter(None, body.split(",")):
+        key, sep, value = item.partition("=")
+        key = key.strip()
+        if not sep or key not in allowed:
+            raise PkmcalError(
+                f"machine '{spec}': '{item}' is not KEY=VALUE with KEY one of {', '.join(sorted(allowed))}"
+            )
+        try:
+            kwargs[key] = None if value.strip().lower() in ("none", "off") else float(value)
+        except ValueError:
+            raise PkmcalError(f"machine '{spec}': value of '{key}' is not a number: '{value}'") from None
+    return symmetric_hexapod(**kwargs, name=spec)
+
+
+def builtin_machine(name: str) -> Mechanism:
+    """The built-in machine called ``name``; a clear error listing the names otherwise."""
+    if name.startswith(SYMMETRIC_PREFIX):
+        return _parse_symmetric(name)
+    try:
+        factory, _ = BUILTIN_MACHINES[name]
+    except KeyError:
+        raise PkmcalError(
+            f"unknown machine '{name}': not a file and not a built-in machine "
+            f"({', '.join(BUILTIN_MACHINES)}, or symmetric:KEY=VALUE,...); run 'pkmcal machines'"
+        ) from None
+    return factory()
+
+
+def is_builtin_name(name: str) -> bool:
+    return name in BUILTIN_MACHINES or name.startswith(SYMMETRIC_PREFIX)
