@@ -1,0 +1,1 @@
+"""Identification: one weighted least-squares engine; the papers' methods are configurations."""

@@ -1,0 +1,1 @@
+"""Planning: which poses to measure (observability indices, candidates, selection)."""
