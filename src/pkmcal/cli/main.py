@@ -38,9 +38,19 @@ def cli() -> None:
 
 def _register() -> None:
     # One line per command module; each module defines click commands and adds them here.
-    from pkmcal.cli import machines_cmd
+    from pkmcal.cli import info_cmd, kinematics_cmds, machines_cmd
 
     machines_cmd.register(cli)
+    kinematics_cmds.register(cli)
+    info_cmd.register(cli)
+    from pkmcal.cli import campaign_cmds
+    campaign_cmds.register(cli)
+    from pkmcal.cli import demo_cmd
+    demo_cmd.register(cli)
+    from pkmcal.cli import plan_cmds
+    plan_cmds.register(cli)
+    from pkmcal.cli import identify_cmds
+    identify_cmds.register(cli)
 
 
 _register()

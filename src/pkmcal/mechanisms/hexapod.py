@@ -79,6 +79,8 @@ class Hexapod(Mechanism):
     workspace : optional (6, 2) box [min, max] of each pose coordinate (mm, rad).
     covariance : optional (42, 42) covariance of the parameters (identified machines).
     description : free text.
+    metadata : free-form information carried along (e.g. ``{"calibration": {...}}`` from a
+        machine file); not part of the kinematic identity, so ``==`` ignores it.
     """
 
     name: str
@@ -93,6 +95,7 @@ class Hexapod(Mechanism):
     workspace: np.ndarray | None = None
     covariance: np.ndarray | None = None
     description: str = ""
+    metadata: dict = field(default_factory=dict, compare=False)
 
     pose_names = POSE_COLUMNS
     pose_is_angle = (False, False, False, True, True, True)

@@ -20,6 +20,7 @@ import numpy as np
 from pkmcal.errors import PkmcalError
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.mechanisms.hexapod import Hexapod, HexapodLimits
+from pkmcal.mechanisms.planar import planar_2dof_3act, planar_3dof_4act
 
 #: Paper 2, Table 3 (mm): base joints b_i (rows = legs 1..6).
 PROTOTYPE_BASE = np.array(
@@ -129,6 +130,8 @@ def symmetric_hexapod(
 BUILTIN_MACHINES: dict[str, tuple[Callable[[], Mechanism], str]] = {
     "stewart-prototype": (stewart_prototype, "paper 2 prototype, Table 3 (default machine)"),
     "stewart-prototype-real": (stewart_prototype_real, "paper 2 prototype with Table 4 deviations"),
+    "planar-2dof-3act": (planar_2dof_3act, "paper 3 case 1: 2-dof planar, 3 rotary actuators (redundant)"),
+    "planar-3dof-4act": (planar_3dof_4act, "paper 3 case 2: 3-dof planar, 4 linear actuators (redundant)"),
 }
 
 DEFAULT_MACHINE = "stewart-prototype"

@@ -1,5 +1,24 @@
-"""Sensors: what is measured. Every sensor implements :class:`~pkmcal.sensors.base.Sensor`."""
+"""Sensors: what is measured. Every sensor implements :class:`~pkmcal.sensors.base.Sensor`.
+
+* :class:`FullPoseSensor` (``full-pose``): x, y, z, a, b, c of a target frame (paper 1)
+* :class:`PositionSensor` (``position``): one target point, 3D laser tracker
+* :class:`IndicatorSensor` (``indicators``): K ≥ 3 dial indicators under the platform (paper 2)
+"""
 
 from pkmcal.sensors.base import MeasurementSetup, NoiseModel, Sensor
+from pkmcal.sensors.full_pose import FullPoseSensor
+from pkmcal.sensors.indicators import IndicatorSensor
+from pkmcal.sensors.position import PositionSensor
 
-__all__ = ["MeasurementSetup", "NoiseModel", "Sensor"]
+#: Sensor classes by the ``kind`` written in setup files.
+SENSOR_KINDS = {cls.kind: cls for cls in (FullPoseSensor, PositionSensor, IndicatorSensor)}
+
+__all__ = [
+    "FullPoseSensor",
+    "IndicatorSensor",
+    "MeasurementSetup",
+    "NoiseModel",
+    "PositionSensor",
+    "SENSOR_KINDS",
+    "Sensor",
+]

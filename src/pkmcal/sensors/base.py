@@ -61,11 +61,13 @@ class Sensor(ABC):
 
     @abstractmethod
     def predict(self, poses: np.ndarray) -> np.ndarray:
-        """Readings y (N, m) at poses (N, 6)."""
+        """Readings y (N, m) at poses (N, n); n = 6 for the hexapod, n = the mechanism's
+        pose dimension for planar machines (2 or 3)."""
 
     @abstractmethod
     def pose_jacobian(self, poses: np.ndarray) -> np.ndarray:
-        """∂y/∂(x, y, z, a, b, c) (N, m, 6)."""
+        """∂y/∂pose (N, m, n): (x, y, z, a, b, c) for the hexapod (n = 6), the mechanism's
+        pose coordinates otherwise."""
 
     @abstractmethod
     def param_jacobian(self, poses: np.ndarray) -> np.ndarray:

@@ -1,0 +1,143 @@
+"""``pkmcal simulate`` and ``pkmcal verify``: simulated campaigns and held-out verification.
+
+* ``simulate``: commanded poses → nominal IK → real FK → sensor and encoder readings with
+  seeded noise (:func:`pkmcal.identification.simulation.simulate_campaign`; paper 1 §IV,
+  paper 2 §5), written as a measurement CSV (:mod:`pkmcal.io.measurements`).
+* ``verify``: pose errors of the real machine commanded through the calibrated (and the
+  nominal) model on held-out poses (:mod:`pkmcal.identification.verification`).
+
+Everything is read, validated and computed before any output is written (atomically); on
+a user error nothing is written and the exit code is 2.
+"""
+
+from __future__ import annotations
+
+import json
+
+import click
+import numpy as np
+
+from pkmcal.errors import PkmcalError
+from pkmcal.identification.simulation import perturb_machine, simulate_campaign
+from pkmcal.identification.verification import verify
+from pkmcal.io.atomic import atomic_write_text, check_output_path
+from pkmcal.io.machine_file import load_machine, machine_to_text
+from pkmcal.io.measurements import measurement_columns
+from pkmcal.io.setup_file import BUILTIN_SETUPS, load_setup
+from pkmcal.io.tables import format_table, read_table
+from pkmcal.mechanisms.base import Mechanism
+
+
+def read_poses(path: str, machine: Mechanism) -> np.ndarray:
+    """Poses of a CSV with the machine's pose columns (x,y,z mm; a,b,c deg) → internal units."""
+    table = read_table(path, machine.pose_names,
+                       kinds={n: ("angle" if a else "length") for n, a in zip(machine.pose_names, machine.pose_is_angle)})
+    poses = table.values.copy()
+    ang = np.array(machine.pose_is_angle, dtype=bool)
+    poses[:, ang] = np.deg2rad(poses[:, ang])
+    return poses
+
+
+@click.command("simulate")
+@click.argument("machine")
+@click.option("--real", "real_spec", metavar="REAL", help="The 'real' machine: a machine file or built-in name.")
+@click.option("--random-errors", type=float, metavar="MM",
+              help="Instead of --real: every parameter of MACHINE plus a random error of this size (mm).")
+@click.option("--error-distribution", type=click.Choice(["uniform", "gaussian"]), default="uniform",
+              show_default=True, help="With --random-errors: U(-MM, MM) (paper 1) or N(0, MM^2).")
+@click.option("--save-real", metavar="REAL.yaml", help="With --random-errors: write the drawn real machine here.")
+@click.option("--setup", "setup_spec", required=True, metavar="SETUP.yaml",
+              help=f"Measurement setup file or built-in ({', '.join(BUILTIN_SETUPS)}).")
+@click.option("--poses", required=True, metavar="POSES.csv", help="Commanded poses: columns x,y,z (mm), a,b,c (deg).")
+@click.option("--seed", type=int, default=0, show_default=True, help="Random seed (same seed, same bytes).")
+@click.option("--ignore-limit", "ignore_limits", multiple=True, metavar="NAME",
+              help="A limit of the real machine not to check (e.g. leg_collision); repeatable.")
+@click.option("-o", "--output", metavar="MEAS.csv", help="Measurement CSV (default: standard output).")
+def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_real, setup_spec, poses, seed,
+                 ignore_limits, output) -> None:
+    """Simulate measuring POSES.csv on a real machine commanded with the nominal MACHINE.
+
+    The actuators are commanded by MACHINE's inverse kinematics; the real machine goes where
+    its forward kinematics take it; the sensor of the setup reads that pose, with the setup's
+    noise on the sensor and on the actuator readings. Poses the real machine cannot reach
+    (FK not converged, its limits) are dropped and listed. The output has lambda1..lambda6,
+    the sensor's columns and the commanded pose cmd_x..cmd_c (mm, deg).
+    """
+    if (real_spec is None) == (random_errors is None):
+        raise PkmcalError("give the real machine with --real REAL, or draw one with --random-errors MM")
+    if save_real is not None and random_errors is None:
+        raise PkmcalError("--save-real writes the machine drawn by --random-errors; use it with --random-errors")
+    inputs = [machine, real_spec, setup_spec, poses]
+    for out in (output, save_real):
+        if out is not None:
+            check_output_path(out, inputs)
+    if output is not None and save_real is not None and output == save_real:
+        raise PkmcalError("-o and --save-real name the same file; choose two paths")
+    nominal = load_machine(machine)
+    setup = load_setup(setup_spec)
+    commanded = read_poses(poses, nominal)
+    rng = np.random.default_rng(seed)
+    if random_errors is not None:
+        real = perturb_machine(nominal, random_errors, rng, distribution=error_distribution,
+                               name=f"{nominal.name}-random-{random_errors:g}mm-seed{seed}")
+    else:
+        real = load_machine(real_spec)
+    result = simulate_campaign(nominal, real, setup, commanded, rng, ignore_limits=tuple(ignore_limits))
+    if len(result.kept) == 0:
+        raise PkmcalError(f"the real machine '{real.name}' reaches none of the {len(commanded)} poses of "
+                          f"'{poses}' ({'; '.join(sorted(set(result.dropped.values())))}); nothing written")
+    comments = [
+        f"pkmcal simulate: nominal {nominal.name}, real {real.name}, setup {setup_spec} "
+        f"({setup.sensor.kind}, {setup.noise.distribution} noise), poses {poses}, seed {seed}",
+    ]
+    if result.dropped:
+        comments.append("dropped rows of the pose file: " + ", ".join(
+            f"{k + 1} ({why})" for k, why in result.dropped.items()))
+    text = format_table(measurement_columns(result.measurements, nominal, setup), comments=comments)
+    real_text = machine_to_text(real) if save_real is not None else None
+    if real_text is not None:
+        atomic_write_text(save_real, real_text)
+    summary = result.summary()
+    if output is None:
+        click.echo(text, nl=False)
+        click.echo(summary, err=True)
+    else:
+        atomic_write_text(output, text)
+        click.echo(summary)
+        click.echo(f"wrote {output}" + (f" and {save_real}" if save_real else ""))
+
+
+@click.command("verify")
+@click.argument("calibrated")
+@click.option("--real", "real_spec", required=True, metavar="REAL", help="The real machine (file or built-in name).")
+@click.option("--poses", required=True, metavar="HELDOUT.csv", help="Held-out poses: x,y,z (mm), a,b,c (deg).")
+@click.option("--nominal", metavar="NOMINAL", help="The nominal machine, for the 'before' column.")
+@click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
+@click.option("--ignore-limit", "ignore_limits", multiple=True, metavar="NAME",
+              help="A limit of the real machine not to check (e.g. leg_collision); repeatable.")
+@click.option("-o", "--output", metavar="FILE", help="Write the table/JSON here (default: standard output).")
+def verify_cmd(calibrated, real_spec, poses, nominal, as_json, ignore_limits, output) -> None:
+    """Pose errors of the REAL machine commanded through CALIBRATED (and NOMINAL) on held-out poses.
+
+    For each pose the actuators are commanded by the model's inverse kinematics and the real
+    machine's pose is compared with the commanded one: position (mm), orientation angle,
+    platform-plane tilt and height error at the platform centre (what indicators see).
+    JSON keys: before/after: {position_mean_mm, position_max_mm, position_rms_mm,
+    orientation_mean_rad, ..., tilt_*_rad, height_*_mm}.
+    """
+    if output is not None:
+        check_output_path(output, [calibrated, real_spec, poses, nominal])
+    cal = load_machine(calibrated)
+    real = load_machine(real_spec)
+    nom = None if nominal is None else load_machine(nominal)
+    report = verify(cal, real, read_poses(poses, cal), nominal=nom, ignore_limits=tuple(ignore_limits))
+    text = json.dumps(report.to_dict(), indent=2, allow_nan=False) + "\n" if as_json else report.format_table() + "\n"
+    if output is None:
+        click.echo(text, nl=False)
+    else:
+        atomic_write_text(output, text)
+
+
+def register(group: click.Group) -> None:
+    group.add_command(simulate_cmd)
+    group.add_command(verify_cmd)

@@ -1,0 +1,161 @@
+"""``pkmcal ik`` and ``pkmcal fk``: the kinematics of a machine over a CSV table of poses.
+
+* ``ik``: poses (x, y, z mm; a, b, c deg) → leg lengths L_i = ‖p + R a_i − b_i‖, readings
+  λ_i = L_i − L0_i (paper 2 eq. 1–2) and the limits each pose violates.
+* ``fk``: readings λ_i (or lengths L_i) → poses by Newton–Raphson (see
+  :meth:`pkmcal.mechanisms.hexapod.Hexapod.fk`), with a convergence flag per row.
+
+Every input is validated and every result computed before the output is written
+(atomically); on a user error nothing is written and the exit code is 2.
+"""
+
+from __future__ import annotations
+
+import click
+import numpy as np
+
+from pkmcal.errors import PkmcalError
+from pkmcal.io.atomic import atomic_write_text, check_output_path
+from pkmcal.io.machine_file import load_machine
+from pkmcal.io.tables import LENGTH_COLUMNS, format_table, read_table
+from pkmcal.mechanisms.base import Mechanism
+
+_MAX_LISTED = 20
+
+
+def _emit(text: str, output: str | None) -> None:
+    if output is None:
+        click.echo(text, nl=False)
+    else:
+        atomic_write_text(output, text)
+
+
+def _note(message: str) -> None:
+    click.echo(f"pkmcal: {message}", err=True)
+
+
+def _line_list(lines: np.ndarray) -> str:
+    shown = ", ".join(str(int(n)) for n in lines[:_MAX_LISTED])
+    return shown + (f" and {len(lines) - _MAX_LISTED} more" if len(lines) > _MAX_LISTED else "")
+
+
+def parse_pose_option(text: str, mech: Mechanism, option: str) -> np.ndarray:
+    """A pose given on the command line as ``x,y,z,a,b,c`` (mm, deg) → internal units."""
+    parts = [p.strip() for p in text.split(",")]
+    if len(parts) != mech.n_dof:
+        raise PkmcalError(f"{option} '{text}': needs {mech.n_dof} comma-separated numbers "
+                          f"{','.join(mech.pose_names)} (mm, deg), got {len(parts)}")
+    try:
+        values = np.array([float(p) for p in parts])
+    except ValueError:
+        raise PkmcalError(f"{option} '{text}': not all of {','.join(mech.pose_names)} are numbers") from None
+    if not np.all(np.isfinite(values)):
+        raise PkmcalError(f"{option} '{text}': the pose must be finite")
+    angle = np.array(mech.pose_is_angle)
+    values[angle] = np.deg2rad(values[angle])
+    return values
+
+
+@click.command("ik")
+@click.argument("machine")
+@click.argument("poses")
+@click.option("-o", "--output", metavar="LEGS.csv", help="Output CSV (default: standard output).")
+def ik_cmd(machine: str, poses: str, output: str | None) -> None:
+    """Inverse kinematics: leg lengths and readings of the poses in POSES.csv.
+
+    MACHINE is a built-in name (see 'pkmcal machines') or a machine YAML file. POSES.csv has
+    columns x,y,z (mm) and a,b,c (degrees); other columns are ignored. The output repeats
+    x..c and adds l1..l6 (leg lengths, mm), lambda1..lambda6 (actuator readings, mm) and
+    'reachable': 'ok' or the violated limits joined by '+'.
+    """
+    if output is not None:
+        check_output_path(output, [poses, machine])
+    mech = load_machine(machine)
+    kinds = {n: ("angle" if a else "length") for n, a in zip(mech.pose_names, mech.pose_is_angle)}
+    table = read_table(poses, mech.pose_names, kinds=kinds)
+    file_poses = table.values
+    internal = _to_internal(mech, file_poses)
+    with np.errstate(all="ignore"):
+        readings = mech.ik(internal)
+        verdicts = mech.check_limits(internal).verdicts()
+        lengths = mech.leg_lengths(internal) if hasattr(mech, "leg_lengths") else None
+    columns: dict[str, np.ndarray] = {n: file_poses[:, k] for k, n in enumerate(mech.pose_names)}
+    if lengths is not None:
+        columns.update({f"l{i + 1}": lengths[:, i] for i in range(lengths.shape[1])})
+    columns.update({n: readings[:, i] for i, n in enumerate(mech.actuator_names)})
+    columns["reachable"] = np.array(verdicts, dtype=object)
+    text = format_table(columns)
+    _emit(text, output)
+    n_bad = sum(v != "ok" for v in verdicts)
+    _note(f"ik: {len(table)} poses, {len(table) - n_bad} reachable"
+          + (f"; {n_bad} violate limits (column 'reachable')" if n_bad else ""))
+
+
+def _to_internal(mech: Mechanism, values: np.ndarray) -> np.ndarray:
+    out = np.array(values, dtype=float)
+    angle = np.array(mech.pose_is_angle)
+    out[:, angle] = np.deg2rad(out[:, angle])
+    return out
+
+
+def _to_file(mech: Mechanism, values: np.ndarray) -> np.ndarray:
+    out = np.array(values, dtype=float)
+    angle = np.array(mech.pose_is_angle)
+    out[:, angle] = np.rad2deg(out[:, angle])
+    return out
+
+
+@click.command("fk")
+@click.argument("machine")
+@click.argument("legs")
+@click.option("-o", "--output", metavar="POSES.csv", help="Output CSV (default: standard output).")
+@click.option("--guess", metavar="X,Y,Z,A,B,C", help="Start pose of the Newton iteration (mm, deg); "
+              "default: the machine's home pose.")
+def fk_cmd(machine: str, legs: str, output: str | None, guess: str | None) -> None:
+    """Forward kinematics: the poses that give the readings in LEGS.csv.
+
+    LEGS.csv has columns lambda1..lambda6 (actuator readings, mm) or l1..l6 (leg lengths,
+    mm); when both are present the readings are used. The output has x,y,z (mm), a,b,c
+    (degrees), 'converged' (1/0) and 'iterations'. Rows that did not converge are listed on
+    standard error by their line in LEGS.csv and get 'nan' poses; the exit code is still 0
+    (check the 'converged' column).
+    """
+    if output is not None:
+        check_output_path(output, [legs, machine])
+    mech = load_machine(machine)
+    start = None if guess is None else parse_pose_option(guess, mech, "--guess")
+    groups = [mech.actuator_names]
+    if hasattr(mech, "fk_lengths"):
+        groups.append(LENGTH_COLUMNS[: mech.n_actuators])
+    # Hexapod readings and lengths are mm; other machines' actuators may be angles: no conversion.
+    kinds = {c: "length" for g in groups for c in g} if hasattr(mech, "fk_lengths") else {}
+    table = read_table(legs, either=groups, kinds=kinds)
+    values = table.values
+    with np.errstate(all="ignore"):
+        if table.columns == tuple(mech.actuator_names):
+            result = mech.fk(values, guess=start)
+        else:
+            result = mech.fk_lengths(values, guess=start)
+    conv = np.asarray(result.converged, dtype=bool)
+    poses = _to_file(mech, result.poses)
+    poses[~conv] = np.nan
+    columns: dict[str, np.ndarray] = {n: poses[:, k] for k, n in enumerate(mech.pose_names)}
+    columns["converged"] = conv.astype(int)
+    columns["iterations"] = np.asarray(result.iterations, dtype=int)
+    text = format_table(columns)
+    _emit(text, output)
+    n = len(table)
+    iters = np.asarray(result.iterations)
+    _note(f"fk: {n} rows, {int(conv.sum())} converged"
+          + (f" (at most {int(iters[conv].max())} iterations)" if conv.any() else ""))
+    if not conv.all():
+        _note(f"fk: {int((~conv).sum())} rows did not converge (their poses are nan): lines "
+              f"{_line_list(table.lines[~conv])} of {legs}; try --guess near the expected pose")
+
+
+def register(group: click.Group) -> None:
+    group.add_command(ik_cmd)
+    group.add_command(fk_cmd)
+
+
+__all__ = ["fk_cmd", "ik_cmd", "parse_pose_option", "register"]

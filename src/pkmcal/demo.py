@@ -1,0 +1,306 @@
+"""``pkmcal demo``: a complete calibration, planned, simulated, identified, verified, exported.
+
+On the default machine (``stewart-prototype``, paper 2 §5, Table 3) with its built-in "real"
+counterpart (``stewart-prototype-real``: Table 4's joint and offset errors of 1–3 mm):
+
+1. **plan** (:func:`pkmcal.planning.plan.plan_poses`) — checked random candidate poses of
+   the workspace box, their whitened, scaled identification-Jacobian blocks G_j
+   (:mod:`pkmcal.planning.blocks`) and a D-optimal selection max log det Σ G_jᵀG_j
+   (:mod:`pkmcal.planning.selection`, paper 2 §4). Candidates are
+   checked against the nominal machine with a safety margin on the stroke and the joint
+   tilts, so that the real machine — whose legs differ by millimetres — still reaches them;
+2. **simulate** the campaign on the real machine (:mod:`pkmcal.identification.simulation`,
+   paper 1 §IV): q = IK(x_c, ρ_nom), x_r = FK(q, ρ_real), y = h(x_r) + noise;
+3. **identify** the 42 parameters (:func:`pkmcal.identification.engine.identify`, the
+   method the setup calls for: ``ik-residual`` for full pose, paper 1 §V; ``fk-residual``
+   for indicators, paper 2 §3);
+4. **verify** on held-out poses, not used for identification
+   (:mod:`pkmcal.identification.verification`): e_p = ‖p_r − p_c‖, e_R = ∠(R_r R_cᵀ), with
+   the nominal model (before) and the identified one (after), and an error map;
+5. **export** the calibrated machine (YAML), LinuxCNC genhexkins HAL settings, a JSON
+   summary, the measurements and the poses (CSV);
+6. **report**: ``report.html`` and its figures (:mod:`pkmcal.report`).
+
+The default setup is paper 1's full-pose measurement (``full-pose-paper1``: uniform noise
+±0.025 mm, ±0.001 rad, legs ±0.01 mm); ``indicators-prototype`` (paper 2's three dial
+indicators) is the other built-in choice. Every random draw comes from one seed, so the
+same seed writes the same bytes.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from pkmcal import __version__
+from pkmcal.conventions import POSE_COLUMNS, poses_to_file_units
+from pkmcal.errors import PkmcalError
+
+DEMO_MACHINE = "stewart-prototype"
+DEMO_REAL = "stewart-prototype-real"
+DEMO_SETUP = "full-pose-paper1"
+DEMO_OUT = "pkmcal-demo"
+
+#: Demo steps, in order, as reported to the progress callback.
+STEPS = ("plan", "simulate", "identify", "verify", "export", "report")
+
+#: progress(step_number (1-based), n_steps, step name, message)
+Progress = Callable[[int, int, str, str], None]
+
+
+@dataclass(frozen=True)
+class DemoConfig:
+    """What the demo does. Lengths mm, angles degrees (as on the command line)."""
+
+    machine: str = DEMO_MACHINE
+    real: str = DEMO_REAL
+    setup: str = DEMO_SETUP
+    out: str = DEMO_OUT
+    seed: int = 0
+    n_poses: int = 40
+    n_candidates: int = 1000
+    n_held_out: int = 100
+    stroke_margin: float = 3.0
+    tilt_margin_deg: float = 2.5
+    error_map_points: int = 31
+    png: bool = True
+
+    def __post_init__(self) -> None:
+        for name in ("n_poses", "n_candidates", "n_held_out", "error_map_points"):
+            if int(getattr(self, name)) < 1:
+                raise PkmcalError(f"demo: {name.replace('_', ' ')} must be a positive integer; "
+                                  f"got {getattr(self, name)}")
+        if self.n_candidates < self.n_poses:
+            raise PkmcalError(f"demo: {self.n_poses} poses cannot be chosen from {self.n_candidates} candidates; "
+                              "ask for more candidates or fewer poses")
+        for name in ("stroke_margin", "tilt_margin_deg"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise PkmcalError(f"demo: {name.replace('_', ' ')} must be a non-negative number; got {v}")
+
+
+@dataclass(frozen=True)
+class DemoResult:
+    """What the demo produced: the output folder, the files written (label → path), the
+    planned and held-out poses, the engine's and verifier's results, and headline numbers
+    (``headline``: held-out position/orientation rms and max before/after, mm and rad)."""
+
+    out: Path
+    files: dict[str, Path]
+    planned: np.ndarray
+    held_out: np.ndarray
+    simulation: object
+    identification: object
+    verification: object
+    headline: dict[str, float]
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+    def summary(self) -> str:
+        """Closing summary for the terminal."""
+        h = self.headline
+        v = self.verification.to_dict()
+        lines = [
+            f"Held-out verification on {v['used']} poses not used for identification:",
+            f"  position error    rms {h['position_rms_before'] * 1000:9.1f} µm -> {h['position_rms_after'] * 1000:7.2f} µm"
+            f"   (max {h['position_max_before'] * 1000:.1f} -> {h['position_max_after'] * 1000:.2f} µm)",
+            f"  orientation error rms {math.degrees(h['orientation_rms_before']) * 3600:9.1f} ″  -> "
+            f"{math.degrees(h['orientation_rms_after']) * 3600:7.2f} ″ "
+            f"   (max {math.degrees(h['orientation_max_before']) * 3600:.1f} -> "
+            f"{math.degrees(h['orientation_max_after']) * 3600:.2f} ″)",
+            f"Report:  {self.files['report']}",
+            "Files:   " + ", ".join(p.name for k, p in self.files.items() if k != "report"),
+        ]
+        lines += [f"Note:    {n}" for n in self.notes]
+        return "\n".join(lines)
+
+
+def _safe_planning_machine(machine, stroke_margin: float, tilt_margin_deg: float):
+    """The nominal hexapod with its stroke shrunk by ``stroke_margin`` mm at both ends and its
+    joint-tilt limits by ``tilt_margin_deg``: planning inside these limits leaves room for
+    the real machine's deviations (the candidate checks' own margin is one number for mm and
+    degrees, and the prototype's legs pass within 0.14 mm of each other at home)."""
+    from pkmcal.mechanisms.hexapod import Hexapod
+
+    if not isinstance(machine, Hexapod):
+        raise PkmcalError(f"pkmcal demo runs on hexapods; machine '{machine.name}' is a {type(machine).__name__}")
+    lim = machine.limits
+    t = math.radians(tilt_margin_deg)
+    shrink = lambda v: None if v is None else v - t  # noqa: E731
+    stroke = machine.stroke + np.array([stroke_margin, -stroke_margin])
+    if np.any(stroke[:, 1] <= stroke[:, 0]):
+        raise PkmcalError(f"demo: a stroke margin of {stroke_margin} mm leaves no stroke on machine '{machine.name}'")
+    return replace(machine, stroke=stroke,
+                   limits=replace(lim, u_joint_tilt=shrink(lim.u_joint_tilt), s_joint_tilt=shrink(lim.s_joint_tilt)))
+
+
+def _finite(obj):
+    """JSON-safe copy: non-finite floats → None, numpy scalars/arrays → Python."""
+    if isinstance(obj, dict):
+        return {str(k): _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _finite(obj.tolist())
+    if isinstance(obj, (np.floating, float)):
+        return float(obj) if math.isfinite(obj) else None
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, (np.bool_,)):
+        return bool(obj)
+    return obj
+
+
+def _pose_columns(poses: np.ndarray) -> dict[str, np.ndarray]:
+    f = poses_to_file_units(poses)
+    return {c: f[:, k] for k, c in enumerate(POSE_COLUMNS)}
+
+
+def run_demo(config: DemoConfig = DemoConfig(), progress: Progress | None = None) -> DemoResult:
+    """Run the demo pipeline (module docstring) and write its files into ``config.out``.
+
+    ``progress(k, n, step, message)`` is called when each of the :data:`STEPS` starts
+    (message "") and ends (message: what it did).
+    """
+    from pkmcal.identification.engine import identify
+    from pkmcal.identification.simulation import simulate_campaign
+    from pkmcal.identification.verification import verify
+    from pkmcal.io.atomic import atomic_write_text
+    from pkmcal.io.export_linuxcnc import linuxcnc_hal
+    from pkmcal.io.machine_file import load_machine, save_machine
+    from pkmcal.io.measurements import save_measurements
+    from pkmcal.io.setup_file import load_setup, setup_to_yaml
+    from pkmcal.io.tables import write_table
+    from pkmcal.planning.blocks import default_method, planning_model
+    from pkmcal.planning.candidates import generate_candidates
+    from pkmcal.planning.plan import plan_poses
+    from pkmcal.report import write_report
+    from pkmcal.report.from_results import error_map, report_data_from_results
+
+    report = progress or (lambda k, n, step, msg: None)
+    n_steps = len(STEPS)
+
+    def step(name: str, message: str = "") -> None:
+        report(STEPS.index(name) + 1, n_steps, name, message)
+
+    out = Path(config.out)
+    if out.exists() and not out.is_dir():
+        raise PkmcalError(f"demo output '{out}' exists and is not a folder; choose another with --out")
+    nominal = load_machine(config.machine)
+    real = load_machine(config.real)
+    setup = load_setup(config.setup)
+    method = default_method(setup)
+    seed_plan, seed_sim, seed_held = np.random.SeedSequence(config.seed).generate_state(3)
+    rng_sim, rng_held = np.random.default_rng(int(seed_sim)), np.random.default_rng(int(seed_held))
+    notes: list[str] = []
+
+    # 1. plan ---------------------------------------------------------------------------
+    step("plan")
+    safe = _safe_planning_machine(nominal, config.stroke_margin, config.tilt_margin_deg)
+    pm = planning_model(nominal, setup, method=method)
+    plan = plan_poses(safe, setup, config.n_poses, algorithm="default", n_candidates=config.n_candidates,
+                      seed=int(seed_plan), method=method, model=pm)
+    selection, pool = plan.selection, plan.candidates.poses
+    planned = pool[np.sort(selection.chosen)]
+    step("plan", f"{len(planned)} poses chosen from {len(pool)} candidates (D-optimal, {pm.n_params} parameters; "
+                 f"O1 = {selection.indices['O1']:.3g})")
+
+    # 2. simulate -----------------------------------------------------------------------
+    step("simulate")
+    sim = simulate_campaign(nominal, real, setup, planned, rng=rng_sim)
+    if sim.dropped:
+        notes.append(sim.summary().replace("\n", ";"))
+    step("simulate", f"{len(sim.kept)} of {len(planned)} poses measured on '{real.name}' ({setup.sensor.kind} sensor)")
+
+    # 3. identify -----------------------------------------------------------------------
+    step("identify")
+    result = identify(nominal, setup, sim.measurements, method=method)
+    calibrated = result.mechanism.with_params(result.mechanism.params, name=f"{nominal.name}-calibrated",
+                                              covariance=getattr(result.mechanism, "covariance", None))
+    calibrated = replace(calibrated, description=f"{nominal.name} calibrated by pkmcal demo (seed {config.seed}, "
+                                                 f"{len(result.used_poses)} poses, {method})")
+    step("identify", f"{len(result.free)} parameters, {result.method}, rms residual "
+                     f"{result.rms_residual * 1000:.2f} µm, {result.nfev} evaluations")
+
+    # 4. verify -------------------------------------------------------------------------
+    step("verify")
+    held = generate_candidates(safe, setup, kind="random", n=config.n_held_out, rng=rng_held).poses
+    verification = verify(calibrated, real, held, nominal)
+    m = verification.common
+    b, a = verification.before, verification.after
+    headline = {
+        "position_rms_before": float(np.sqrt(np.mean(b.position[m] ** 2))),
+        "position_rms_after": float(np.sqrt(np.mean(a.position[m] ** 2))),
+        "position_max_before": float(np.max(b.position[m])),
+        "position_max_after": float(np.max(a.position[m])),
+        "orientation_rms_before": float(np.sqrt(np.mean(b.orientation[m] ** 2))),
+        "orientation_rms_after": float(np.sqrt(np.mean(a.orientation[m] ** 2))),
+        "orientation_max_before": float(np.max(b.orientation[m])),
+        "orientation_max_after": float(np.max(a.orientation[m])),
+    }
+    k = config.error_map_points
+    lo, hi = pool[:, :2].min(axis=0), pool[:, :2].max(axis=0)
+    emap = error_map(nominal, calibrated, real, np.linspace(lo[0], hi[0], k), np.linspace(lo[1], hi[1], k),
+                     float(nominal.home_pose[2]))
+    step("verify", f"{int(m.sum())} held-out poses: position rms {headline['position_rms_before'] * 1000:.1f} µm "
+                   f"-> {headline['position_rms_after'] * 1000:.2f} µm")
+
+    # 5. export -------------------------------------------------------------------------
+    step("export")
+    out.mkdir(parents=True, exist_ok=True)
+    files: dict[str, Path] = {}
+    files["calibrated"] = out / f"{calibrated.name}.yaml"
+    save_machine(calibrated, files["calibrated"])
+    files["linuxcnc"] = out / f"{calibrated.name}.hal"
+    atomic_write_text(files["linuxcnc"], linuxcnc_hal(calibrated))
+    files["setup"] = out / "setup.yaml"
+    atomic_write_text(files["setup"], setup_to_yaml(setup))
+    files["poses"] = out / "planned-poses.csv"
+    write_table(files["poses"], _pose_columns(planned), comments=(f"pkmcal demo: {len(planned)} planned poses, "
+                                                                  f"seed {config.seed}",))
+    files["measurements"] = out / "measurements.csv"
+    save_measurements(files["measurements"], sim.measurements, nominal, setup,
+                      comments=(f"simulated on {real.name}, seed {config.seed}",))
+    files["held_out"] = out / "held-out-poses.csv"
+    write_table(files["held_out"], _pose_columns(held), comments=(f"pkmcal demo: held-out poses, seed {config.seed}",))
+    summary = {
+        "pkmcal": __version__,
+        "demo": _finite({k: v for k, v in asdict(config).items() if k != "out"}),
+        "machine": nominal.name,
+        "real_machine": real.name,
+        "setup": setup.sensor.kind,
+        "planning": {"candidates": int(len(pool)), "chosen": int(len(planned)), "algorithm": selection.algorithm,
+                     "criterion": selection.criterion, "indices": selection.indices, "parameters": list(pm.names)},
+        "simulation": {"measured": int(len(sim.kept)),
+                       "dropped": [{"pose": int(i) + 1, "reason": r} for i, r in sim.dropped.items()]},
+        "identification": result.to_dict(),
+        "verification": verification.to_dict(),
+        "headline_mm_rad": headline,
+    }
+    files["json"] = out / "calibration.json"
+    atomic_write_text(files["json"], json.dumps(_finite(summary), indent=2, ensure_ascii=False) + "\n")
+    step("export", ", ".join(p.name for p in files.values()))
+
+    # 6. report -------------------------------------------------------------------------
+    step("report")
+    data = report_data_from_results(
+        nominal, result, setup, sim.commanded[sim.kept],
+        verification=verification, identified=calibrated, true_machine=real, error_map=emap,
+        title=f"pkmcal demo: calibration of {nominal.name}",
+        setup_summary=setup_to_yaml(setup),
+        facts=(("real machine (simulated)", real.name), ("seed", str(config.seed)),
+               ("pose plan", f"{len(planned)} D-optimal poses of {len(pool)} random candidates; safety margin "
+                             f"{config.stroke_margin:g} mm stroke, {config.tilt_margin_deg:g}° joint tilt"),
+               ("held-out poses", f"{int(m.sum())} of {len(held)} (random, other seed)"),
+               ("calibrated machine file", files["calibrated"].name),
+               ("LinuxCNC settings", files["linuxcnc"].name)),
+    )
+    written = write_report(data, out, png=config.png)
+    files["report"] = written.html
+    step("report", f"{written.html} and {len(written.figures)} figure files")
+    return DemoResult(out=out, files=files, planned=planned, held_out=held, simulation=sim,
+                      identification=result, verification=verification, headline=headline, notes=tuple(notes))

@@ -1,0 +1,437 @@
+"""The identification engine: one noise-weighted nonlinear least-squares fit for every method.
+
+Unknowns θ = [ρ; s] (mechanism parameters ``Mechanism.param_names``, then sensor
+parameters ``Sensor.param_names``), a free subset chosen by name (shell patterns allowed),
+and per pose the nuisance pose x_j, eliminated by the method (:mod:`.residuals`:
+``ik-residual`` paper 1 §V eq. 3, ``fk-residual`` paper 2 §3 eq. 3, ``projection`` paper 3
+§2 eq. 4–10). The fit is
+
+    θ̂ = argmin_θ Σ_j ‖W_j r_j(θ)‖²,    W_j = L_j⁻¹,  L_j L_jᵀ = Σ_j                 (GLS)
+
+with Σ_j the covariance that the sensor and actuator noise induce on pose j's residual
+(generalised least squares = maximum likelihood for Gaussian noise; ``weighted=False``
+gives the papers' plain fits, W_j = I). The weights are computed **once, at the start**
+(nominal machine, initial poses) and held fixed: the objective is then a fixed sum of
+squares whose Jacobian is exactly W_j ∂r_j/∂θ (re-weighting at every iterate would make
+the Jacobian miss ∂W/∂θ and can stall the solver), and Σ_j changes only by O(δρ/L) ~ 1 %
+between the nominal and the identified machine, which moves the estimate by a
+second-order amount. The reported covariance uses weights recomputed at the solution.
+
+Solved with :func:`scipy.optimize.least_squares` (Levenberg–Marquardt as in paper 1, or
+trust-region-reflective for under-determined starts) with the analytic Jacobian and
+``x_scale="jac"``. Before fitting, the requested free set is checked with
+:func:`~pkmcal.identification.identifiability.analyse_jacobian`: an unidentifiable set is
+a :class:`PkmcalError` naming the unobservable combination and what to fix; by default the
+engine fixes the suggested gauge itself (``fix="auto"``).
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from pkmcal.errors import PkmcalError
+from pkmcal.identification.identifiability import IdentifiabilityReport, analyse_jacobian, format_direction
+from pkmcal.identification.residuals import (
+    METHODS,
+    Evaluation,
+    Method,
+    Model,
+    candidate_parameters,
+    make_method,
+    single_threaded_blas,
+    whitening,
+)
+from pkmcal.identification.uncertainty import Uncertainty, embed, parameter_uncertainty
+from pkmcal.mechanisms.base import Mechanism
+from pkmcal.sensors.base import MeasurementSetup, Sensor
+
+#: A fit fails (error) when more than this fraction of the poses has no FK / pose solution.
+MAX_DROPPED_FRACTION = 0.1
+
+
+@dataclass(frozen=True)
+class IdentificationResult:
+    """Outcome of :func:`identify` (numbers in internal units: mm, rad).
+
+    Attributes
+    ----------
+    mechanism, sensor : the calibrated machine (with ``covariance`` where supported, full
+        size, zeros for fixed parameters) and the calibrated sensor.
+    method, weighted : the method and whether the fit was noise-weighted.
+    names : all parameter names (machine then sensor); ``free`` / ``fixed`` the split
+        (``fixed`` includes sensor parameters held at their values); ``gauge`` the
+        parameters the engine fixed automatically (empty when identifiable as asked).
+    initial, estimate : full parameter vectors before / after (len(names),).
+    x : the free parameters' estimates (len(free),), with ``std`` and ``covariance``
+        (the file covariance, see :mod:`.uncertainty`) and ``correlation``.
+    uncertainty : both covariances (a priori, a posteriori), χ² and degrees of freedom.
+    residuals : raw residuals per pose (N, k) at the solution; ``residuals_weighted`` whitened.
+    poses : the eliminated nuisance poses (N, n) at the solution.
+    used_poses : indices (into the input) of the poses used; ``dropped`` those left out.
+    cost : ½ Σ ‖W r‖²; ``nfev``, ``njev``, ``status``, ``success``, ``message`` from the solver.
+    identifiability : the report on the candidate parameters at the start.
+    warnings : human-readable notes (dropped poses, auto-fixed gauge, …).
+    """
+
+    mechanism: Mechanism
+    sensor: Sensor
+    method: str
+    weighted: bool
+    names: tuple[str, ...]
+    free: tuple[str, ...]
+    fixed: tuple[str, ...]
+    initial: np.ndarray
+    estimate: np.ndarray
+    uncertainty: Uncertainty
+    residuals: np.ndarray
+    residuals_weighted: np.ndarray
+    residual_names: tuple[str, ...]
+    poses: np.ndarray
+    used_poses: np.ndarray
+    dropped: np.ndarray
+    cost: float
+    nfev: int
+    njev: int
+    status: int
+    success: bool
+    message: str
+    identifiability: IdentifiabilityReport
+    gauge: tuple[str, ...] = ()
+    warnings: tuple[str, ...] = field(default_factory=tuple)
+
+    @property
+    def free_index(self) -> np.ndarray:
+        return np.array([self.names.index(n) for n in self.free], dtype=int)
+
+    @property
+    def x(self) -> np.ndarray:
+        return self.estimate[self.free_index]
+
+    @property
+    def covariance(self) -> np.ndarray:
+        return self.uncertainty.covariance
+
+    @property
+    def std(self) -> np.ndarray:
+        return self.uncertainty.std
+
+    @property
+    def correlation(self) -> np.ndarray:
+        return self.uncertainty.correlation
+
+    @property
+    def rms_residual(self) -> float:
+        return float(np.sqrt(np.mean(self.residuals**2)))
+
+    def to_dict(self) -> dict:
+        """A JSON-ready summary (internal units)."""
+        u = self.uncertainty
+        return {
+            "method": self.method,
+            "weighted": self.weighted,
+            "success": self.success,
+            "status": self.status,
+            "message": self.message,
+            "cost": self.cost,
+            "nfev": self.nfev,
+            "njev": self.njev,
+            "n_poses": int(len(self.used_poses)),
+            "dropped_poses": [int(i) + 1 for i in self.dropped],
+            "free": list(self.free),
+            "fixed": list(self.fixed),
+            "gauge": list(self.gauge),
+            "parameters": {
+                n: {"initial": float(self.initial[i]), "estimate": float(self.estimate[i]),
+                    **({"std": float(u.std[self.free.index(n)]),
+                        "std_prior": float(u.std_prior[self.free.index(n)]),
+                        "std_posterior": float(u.std_posterior[self.free.index(n)])} if n in self.free else {})}
+                for i, n in enumerate(self.names)
+            },
+            "chi2": u.chi2,
+            "dof": u.dof,
+            "reduced_chi2": u.reduced_chi2,
+            "covariance_in_file": "max(1, reduced_chi2) * a-priori covariance",
+            "rms_residual": self.rms_residual,
+            "residual_names": list(self.residual_names),
+            "identifiability": self.identifiability.to_dict(),
+            "warnings": list(self.warnings),
+        }
+
+
+# -- input handling ---------------------------------------------------------------------
+
+
+def measurement_arrays(measurements) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """``(q, y, commanded)`` from a measurements object, a mapping or a tuple.
+
+    Accepts an object or mapping with ``actuators``/``q`` and ``readings``/``y`` (and
+    optionally ``commanded``), or a tuple ``(q, y)`` / ``(q, y, commanded)``.
+    """
+    if isinstance(measurements, (tuple, list)):
+        if len(measurements) not in (2, 3):
+            raise PkmcalError("measurements must be (q, y) or (q, y, commanded)")
+        q, y, *rest = measurements
+        return np.asarray(q, float), np.asarray(y, float), (None if not rest or rest[0] is None else np.asarray(rest[0], float))
+
+    def get(*keys):
+        for k in keys:
+            v = measurements.get(k) if isinstance(measurements, dict) else getattr(measurements, k, None)
+            if v is not None:
+                return v
+        return None
+
+    q = get("actuators", "q", "actuator_readings")
+    y = get("readings", "y", "sensor_readings")
+    if q is None or y is None:
+        raise PkmcalError("measurements need actuator readings (q) and sensor readings (y)")
+    cmd = get("commanded", "commanded_poses")
+    return np.asarray(q, float), np.asarray(y, float), (None if cmd is None else np.asarray(cmd, float))
+
+
+# -- the engine -------------------------------------------------------------------------
+
+
+class _Objective:
+    """Whitened residual and Jacobian of the free parameters, with a one-entry cache."""
+
+    def __init__(self, method: Method, theta0: np.ndarray, free: np.ndarray, W: np.ndarray | None,
+                 analytic: bool = True):
+        self.method, self.theta0, self.free, self.W = method, theta0, free, W
+        self.analytic = analytic  # evaluate the Jacobian together with the residual
+        self._key = None
+        self._ev: Evaluation | None = None
+
+    def theta(self, x):
+        th = self.theta0.copy()
+        th[self.free] = x
+        return th
+
+    def _eval(self, x, jac):
+        key = x.tobytes()
+        if self._key != key or (jac and self._ev.J is None):
+            self._ev = self.method.evaluate(self.theta(x), jac=jac, cov=False)
+            self._key = key
+        return self._ev
+
+    def fun(self, x):
+        r = self._eval(x, self.analytic).r
+        if self.W is not None:
+            r = (self.W @ r[..., None])[..., 0]
+        return r.ravel()
+
+    def jac(self, x):
+        J = self._eval(x, True).J[:, :, self.free]
+        if self.W is not None:
+            J = self.W @ J
+        return J.reshape(-1, J.shape[-1])
+
+
+def _solver_args(solver: str, m: int, n: int) -> str:
+    if solver == "auto":
+        return "lm" if m >= n else "trf"
+    if solver not in ("lm", "trf", "dogbox"):
+        raise PkmcalError(f"solver must be one of auto, lm, trf, dogbox; got '{solver}'")
+    return solver
+
+
+def identify(
+    machine: Mechanism,
+    setup: MeasurementSetup,
+    measurements=None,
+    *,
+    method: str = "fk-residual",
+    free=None,
+    fix=None,
+    weighted: bool = True,
+    form: str = "plain",
+    jac: str = "analytic",
+    solver: str = "auto",
+    ftol: float = 1e-12,
+    xtol: float = 1e-12,
+    gtol: float = 1e-12,
+    max_nfev: int | None = None,
+    q: np.ndarray | None = None,
+    y: np.ndarray | None = None,
+    commanded: np.ndarray | None = None,
+    max_dropped_fraction: float = MAX_DROPPED_FRACTION,
+) -> IdentificationResult:
+    """Identify the kinematic (and free sensor) parameters from measured poses.
+
+    Parameters
+    ----------
+    machine : the nominal machine (the starting point; its parameters are ρ).
+    setup : the sensor (its parameters are s) and the noise model.
+    measurements : a measurements object / mapping / tuple (see :func:`measurement_arrays`);
+        or give the arrays ``q`` (N, l) actuator readings, ``y`` (N, m) sensor readings and
+        optionally ``commanded`` (N, n) poses (FK / pose-solve starting points).
+    method : ``"ik-residual"`` (full-pose sensor, paper 1), ``"fk-residual"`` (paper 2) or
+        ``"projection"`` (paper 3; any sensor, redundant machines).
+    free : names or shell patterns of the parameters to estimate (default: all machine
+        parameters and the sensor's ``default_free``).
+    fix : names/patterns held at their nominal values, or ``"auto"``; default (``None``):
+        the suggested gauge is fixed automatically unless ``free`` was given.
+    weighted : noise-weighted (generalised) least squares; False = the papers' plain fit.
+    form : ik-residual only: ``"plain"`` (q − IK) or ``"squared"`` (paper 1 eq. 3).
+    jac : ``"analytic"`` or a scipy finite-difference scheme (``"2-point"``, ``"3-point"``),
+        for comparison only.
+    solver : ``"auto"`` (LM when there are at least as many residuals as unknowns),
+        ``"lm"``, ``"trf"`` or ``"dogbox"`` (scipy.optimize.least_squares methods).
+
+    Returns
+    -------
+    IdentificationResult
+
+    Notes
+    -----
+    GLS objective Σ_j ‖W_j r_j‖² with fixed weights from the start (module docstring);
+    covariance (J̃ᵀJ̃)⁻¹ and its a-posteriori version (:mod:`.uncertainty`).
+
+    References
+    ----------
+    Paper 1 (Agheli & Nategh) §V; paper 2 (Saputra et al.) §2.2–3; paper 3 (Jeon et al.) §2.
+    """
+    with single_threaded_blas():
+        return _identify(machine, setup, measurements, method=method, free=free, fix=fix, weighted=weighted,
+                         form=form, jac=jac, solver=solver, ftol=ftol, xtol=xtol, gtol=gtol, max_nfev=max_nfev,
+                         q=q, y=y, commanded=commanded, max_dropped_fraction=max_dropped_fraction)
+
+
+def _identify(machine, setup, measurements, *, method, free, fix, weighted, form, jac, solver, ftol, xtol, gtol,
+              max_nfev, q, y, commanded, max_dropped_fraction) -> IdentificationResult:
+    if method not in METHODS:
+        raise PkmcalError(f"unknown identification method '{method}'; use one of {', '.join(METHODS)}")
+    if jac not in ("analytic", "2-point", "3-point", "cs"):
+        raise PkmcalError(f"jac must be 'analytic', '2-point' or '3-point'; got '{jac}'")
+    if measurements is not None:
+        q, y, cmd = measurement_arrays(measurements)
+        commanded = cmd if commanded is None else commanded
+    if q is None or y is None:
+        raise PkmcalError("identify needs measurements: actuator readings q and sensor readings y")
+    model = Model(machine, setup.sensor, setup.noise, q, y, commanded)
+    notes: list[str] = []
+    n_total = model.n_poses
+    used = np.arange(n_total)
+
+    meth = make_method(method, model, weighted, form=form)
+    theta0 = model.theta0
+    ev0 = meth.evaluate(theta0, jac=True, cov=True)
+    if not ev0.converged.all():
+        bad = np.flatnonzero(~ev0.converged)
+        if len(bad) > max_dropped_fraction * n_total:
+            raise PkmcalError(
+                f"the pose could not be solved for {len(bad)} of {n_total} poses at the nominal machine "
+                f"(poses {', '.join(str(i + 1) for i in bad[:10])}{' ...' if len(bad) > 10 else ''}): "
+                "check that the measurements belong to this machine and setup, or give commanded poses"
+            )
+        notes.append(f"dropped {len(bad)} pose(s) whose pose could not be solved at the nominal machine: "
+                     + ", ".join(str(i + 1) for i in bad))
+        used = np.flatnonzero(ev0.converged)
+        model = model.subset(used)
+        meth = make_method(method, model, weighted, form=form)
+        ev0 = meth.evaluate(theta0, jac=True, cov=True)
+
+    W = whitening(ev0.cov, f"{method} residual") if weighted and method != "projection" else None
+    Jw0 = ev0.J if W is None else W @ ev0.J
+
+    names = model.names
+    cand, explicit = candidate_parameters(model, free, fix)
+    if not cand:
+        raise PkmcalError("no free parameters to identify (check --free / --fix)")
+    rows = Jw0.reshape(-1, Jw0.shape[-1])
+    report = analyse_jacobian(rows[:, cand], tuple(names[i] for i in cand), tuple(model.mechanism.param_names))
+    auto = (fix is None and not explicit) or (isinstance(fix, str) and fix == "auto")
+    if not report.identifiable:
+        if not auto:
+            raise PkmcalError(
+                f"the requested free parameters are not identifiable from these poses with this sensor: "
+                f"{report.describe()} (or use --fix auto)"
+            )
+        notes.append(f"fixed the gauge automatically (rank {report.rank} of {report.n_params}): "
+                     f"{', '.join(report.fixed)}")
+        cand = [i for i in cand if names[i] not in report.fixed]
+    free_idx = np.array(cand, dtype=int)
+    M = rows.shape[0]
+    if M < len(free_idx):
+        raise PkmcalError(f"{model.n_poses} poses give {M} residuals for {len(free_idx)} free parameters: "
+                          "measure more poses or fix parameters")
+
+    obj = _Objective(meth, theta0, free_idx, W, analytic=jac == "analytic")
+    lsq_method = _solver_args(solver, M, len(free_idx))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        sol = least_squares(
+            obj.fun, theta0[free_idx], jac=obj.jac if jac == "analytic" else jac, method=lsq_method,
+            x_scale="jac", ftol=ftol, xtol=xtol, gtol=gtol, max_nfev=max_nfev,
+        )
+    theta = obj.theta(sol.x)
+    ev = meth.evaluate(theta, jac=True, cov=True)
+    if not ev.converged.all():
+        bad = used[np.flatnonzero(~ev.converged)]
+        notes.append("the pose could not be solved at the identified machine for pose(s) "
+                     + ", ".join(str(i + 1) for i in bad) + "; their residuals are unreliable")
+
+    # covariance with weights recomputed at the solution (module docstring)
+    if method == "projection" and weighted:
+        W_end = np.broadcast_to(np.eye(ev.r.shape[1]), ev.cov.shape)
+    elif weighted:
+        W_end = whitening(ev.cov, f"{method} residual")
+    else:
+        try:
+            W_end = whitening(ev.cov, f"{method} residual")
+        except PkmcalError:  # noise-free noise model: no χ², the sandwich covariance is zero
+            W_end = None
+    J_free = ev.J[:, :, free_idx]
+    free_names = tuple(names[i] for i in free_idx)
+    if weighted:
+        unc = parameter_uncertainty(free_names, W_end @ J_free, (W_end @ ev.r[..., None])[..., 0], weighted=True)
+    else:
+        unc = parameter_uncertainty(free_names, J_free, ev.r, weighted=False, W=W_end, cov_rows=ev.cov)
+    r_w = (W_end @ ev.r[..., None])[..., 0] if weighted else ev.r
+
+    mech_cal, sensor_cal = model.split(theta)
+    p = model.n_mech
+    mech_free = free_idx[free_idx < p]
+    if mech_free.size:
+        sel = np.flatnonzero(free_idx < p)
+        cov_mech = embed(unc.covariance[np.ix_(sel, sel)], mech_free, p)
+        try:
+            mech_cal = model.mechanism.with_params(theta[:p], covariance=cov_mech)
+        except TypeError:
+            notes.append(f"machine type {type(model.mechanism).__name__} does not store a covariance")
+
+    fixed = tuple(n for i, n in enumerate(names) if i not in set(free_idx.tolist()))
+    dropped = np.setdiff1d(np.arange(n_total), used)
+    return IdentificationResult(
+        mechanism=mech_cal,
+        sensor=sensor_cal,
+        method=method,
+        weighted=weighted,
+        names=names,
+        free=free_names,
+        fixed=fixed,
+        initial=theta0,
+        estimate=theta,
+        uncertainty=unc,
+        residuals=ev.r,
+        residuals_weighted=r_w,
+        residual_names=meth.row_names(),
+        poses=ev.poses,
+        used_poses=used,
+        dropped=dropped,
+        cost=float(sol.cost),
+        nfev=int(sol.nfev),
+        njev=int(sol.njev) if sol.njev is not None else 0,
+        status=int(sol.status),
+        success=bool(sol.success),
+        message=str(sol.message),
+        identifiability=report,
+        gauge=tuple(report.fixed) if not report.identifiable else (),
+        warnings=tuple(notes),
+    )
+
+
+__all__ = ["IdentificationResult", "candidate_parameters", "identify", "measurement_arrays", "format_direction"]

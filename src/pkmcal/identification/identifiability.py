@@ -1,0 +1,257 @@
+"""Identifiability: which parameter combinations a machine + setup + pose set can determine.
+
+The identification Jacobian J (rows: the noise-whitened residuals of every pose, as the
+engine fits them; columns: the candidate parameters) is analysed as follows.
+
+* **Scaling.** Columns are scaled to unit Euclidean norm, J_s = J D, D = diag(1/‖J_:,i‖),
+  so that the rank and the singular values do not depend on the parameters' units (mm,
+  rad). A column that is identically zero is a parameter the data do not see at all.
+* **Rank.** Singular values σ_1 ≥ … of J_s; rank = #{σ_i > rtol·σ_1} with
+  ``rtol = 1e-8`` (exact gauge freedoms give σ/σ_1 ~ 1e-15; a genuine but weak parameter
+  on realistic pose sets is above 1e-6). Directions with rtol < σ_i/σ_1 < ``weak_ratio``
+  (1e-4, i.e. noise amplified more than 10⁴ times relative to the best direction) are
+  reported as *weakly identifiable*.
+* **Null space** in physical units: δθ = D V_null. It is a subspace; we write it in the
+  basis tied to the suggested gauge G (one direction per fixed parameter g, with
+  coefficient +1 on g and 0 on the other fixed parameters): N_G = N (N[G])⁻¹. Each
+  direction says "raise g by 1 (mm or rad) and move these parameters by these amounts, and
+  no reading changes". Coefficients below 1e-6 of the largest are dropped.
+* **Gauge** (a minimal set of parameters to fix so that the rest is identifiable): chosen
+  greedily in an order of preference, keeping the fixed set well conditioned (a parameter
+  is fixed only if its row of the null-space basis, projected off the rows already chosen,
+  has at least 1 % of the largest row norm). Preference (documented, paper 2 §2.2): fix
+  the joints that *define the frames* first: mechanism parameters in the order of
+  ``Mechanism.param_names`` (for the hexapod: b1, a1, then b2, a2, ... — paper 2 fixes b1,
+  b2, a1, a2), leg offsets (``L0_*``) after all joints, sensor parameters last (they
+  describe the measuring set-up, which the calibration should determine).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+import numpy as np
+
+RANK_RTOL = 1e-8
+WEAK_RATIO = 1e-4
+_DROP = 1e-6
+_WEAK_DROP = 0.05
+
+
+@dataclass(frozen=True)
+class IdentifiabilityReport:
+    """What a pose set and sensor can identify (module docstring).
+
+    ``names`` the candidate parameters; ``singular_values`` of the column-scaled Jacobian
+    (descending); ``rank``; ``null_space`` one {name: coefficient} per unidentifiable
+    direction (physical units, gauge basis); ``fixed`` the suggested gauge; ``weak`` one
+    {"ratio": σ/σ_1, "direction": {name: coefficient}} per weakly identifiable direction;
+    ``unseen`` parameters whose Jacobian column is zero.
+    """
+
+    names: tuple[str, ...]
+    singular_values: np.ndarray
+    rank: int
+    null_space: list[dict[str, float]]
+    fixed: tuple[str, ...]
+    weak: list[dict] = field(default_factory=list)
+    unseen: tuple[str, ...] = ()
+    rtol: float = RANK_RTOL
+    n_rows: int = 0
+
+    @property
+    def n_params(self) -> int:
+        return len(self.names)
+
+    @property
+    def identifiable(self) -> bool:
+        return self.rank == self.n_params
+
+    @property
+    def condition_number(self) -> float:
+        s = self.singular_values
+        return float(s[0] / s[self.rank - 1]) if self.rank > 0 else float("inf")
+
+    def to_dict(self) -> dict:
+        return {
+            "n_params": self.n_params,
+            "n_rows": self.n_rows,
+            "rank": self.rank,
+            "rank_rtol": self.rtol,
+            "column_scaling": "unit norm",
+            "condition_number": self.condition_number,
+            "singular_values": [float(s) for s in self.singular_values],
+            "null_space": [dict(d) for d in self.null_space],
+            "fixed": list(self.fixed),
+            "weak": [dict(w) for w in self.weak],
+            "unseen": list(self.unseen),
+            "parameters": list(self.names),
+        }
+
+    def describe(self, limit: int = 3) -> str:
+        """One-line human summary of the unidentifiable combinations."""
+        if self.identifiable:
+            return f"all {self.n_params} parameters identifiable (rank {self.rank})"
+        parts = [format_direction(d) for d in self.null_space[:limit]]
+        more = "" if len(self.null_space) <= limit else f" and {len(self.null_space) - limit} more"
+        return (f"rank {self.rank} of {self.n_params}: unobservable combinations {'; '.join(parts)}{more}; "
+                f"fix e.g. {', '.join(self.fixed)}")
+
+
+def format_direction(direction: dict[str, float], digits: int = 3) -> str:
+    """``{'b1.x': 1, 'b2.x': -0.5}`` → ``"b1.x − 0.5·b2.x"``."""
+    out = []
+    for i, (name, c) in enumerate(direction.items()):
+        sign = "-" if c < 0 else "+"
+        mag = abs(c)
+        term = name if abs(mag - 1.0) < 10 ** (-digits) else f"{mag:.{digits}g}*{name}"
+        out.append((("-" if sign == "-" else "") if i == 0 else f" {sign} ") + term)
+    return "".join(out)
+
+
+def _fix_priority(names: tuple[str, ...], mechanism_names: tuple[str, ...]) -> list[int]:
+    """Indices of ``names`` in the order they are preferred for fixing (module docstring)."""
+    mech = set(mechanism_names)
+    order = {n: i for i, n in enumerate(mechanism_names)}
+
+    def key(i: int):
+        n = names[i]
+        if n not in mech:
+            return (2, i)
+        if re.match(r"L0_", n):
+            return (1, order[n])
+        m = re.search(r"(\d+)", n)
+        leg = int(m.group(1)) if m else 0
+        return (0, leg, order[n])
+
+    return sorted(range(len(names)), key=key)
+
+
+def choose_gauge(null: np.ndarray, priority: list[int]) -> list[int]:
+    """Rows of the null-space basis ``null`` (P, d) to fix, greedily in ``priority`` order."""
+    d = null.shape[1]
+    if d == 0:
+        return []
+    norms = np.linalg.norm(null, axis=1)
+    chosen: list[int] = []
+    for thresh in (1e-2, 1e-8):
+        for i in priority:
+            if len(chosen) == d:
+                break
+            if i in chosen:
+                continue
+            row = null[i]
+            if chosen:
+                basis, _ = np.linalg.qr(null[chosen].T)
+                row = row - basis @ (basis.T @ row)
+            if np.linalg.norm(row) > thresh * norms.max():
+                chosen.append(i)
+    return chosen
+
+
+def _clean(vec: np.ndarray, names, drop: float) -> dict[str, float]:
+    big = np.max(np.abs(vec)) if vec.size else 0.0
+    return {names[i]: float(c) for i, c in enumerate(vec) if big > 0 and abs(c) > drop * big}
+
+
+def analyse_jacobian(
+    J: np.ndarray,
+    names: tuple[str, ...],
+    mechanism_names: tuple[str, ...] = (),
+    *,
+    rtol: float = RANK_RTOL,
+    weak_ratio: float = WEAK_RATIO,
+) -> IdentifiabilityReport:
+    """Rank, null space, weak directions and a suggested gauge of an identification Jacobian.
+
+    ``J`` (M, P): rows the (whitened) residuals of all poses, columns the parameters
+    ``names``; ``mechanism_names`` orders the gauge preference (module docstring).
+    """
+    J = np.asarray(J, dtype=float)
+    names = tuple(names)
+    P = J.shape[1]
+    col = np.linalg.norm(J, axis=0)
+    unseen = tuple(names[i] for i in np.flatnonzero(col == 0.0))
+    scale = np.where(col > 0, 1.0 / np.where(col > 0, col, 1.0), 1.0)
+    Js = J * scale
+    _, s, Vt = np.linalg.svd(Js, full_matrices=Js.shape[0] < P)
+    s_full = np.zeros(P)
+    s_full[: s.size] = s
+    smax = s_full[0] if P else 0.0
+    rank = int(np.sum(s_full > rtol * smax)) if smax > 0 else 0
+    V_null = Vt[rank:].T                                   # (P, d) scaled coordinates
+    N = V_null * scale[:, None]                            # physical directions
+    gauge = choose_gauge(N / np.linalg.norm(N, axis=0, keepdims=True) if N.size else N,
+                         _fix_priority(names, tuple(mechanism_names)))
+    null_space = []
+    if gauge:
+        NG = N @ np.linalg.inv(N[gauge])
+        NG[np.abs(NG) < 1e-12 * np.abs(NG).max()] = 0.0
+        NG[gauge] = np.eye(len(gauge))
+        null_space = [_clean(NG[:, k], names, _DROP) for k in range(len(gauge))]
+    weak = []
+    for k in range(rank):
+        ratio = s_full[k] / smax
+        if ratio < weak_ratio:
+            v = Vt[k] * scale
+            v = v / np.max(np.abs(v))
+            if v[np.argmax(np.abs(v))] < 0:
+                v = -v
+            weak.append({"ratio": float(ratio), "direction": _clean(v, names, _WEAK_DROP)})
+    return IdentifiabilityReport(
+        names=names,
+        singular_values=s_full,
+        rank=rank,
+        null_space=null_space,
+        fixed=tuple(names[i] for i in gauge),
+        weak=weak,
+        unseen=unseen,
+        rtol=rtol,
+        n_rows=J.shape[0],
+    )
+
+
+def identifiability(
+    machine,
+    setup,
+    poses: np.ndarray,
+    *,
+    method: str | None = None,
+    free=None,
+    fix=None,
+    weighted: bool = True,
+) -> IdentifiabilityReport:
+    """Identifiability of the parameters for ``machine`` + ``setup`` measured at ``poses``.
+
+    The Jacobian is the engine's (same method, same noise whitening), evaluated at the
+    nominal machine on noise-free readings simulated at ``poses`` (N, n) (internal units).
+    ``method`` defaults to ``fk-residual`` (``projection`` for redundant machines);
+    ``free`` / ``fix`` select the candidate parameters as in
+    :func:`~pkmcal.identification.engine.identify` (an explicit ``fix`` list is removed
+    from the candidates; ``"auto"`` or ``None`` keeps them, the report suggests the gauge).
+    """
+    from pkmcal.identification.residuals import single_threaded_blas
+
+    with single_threaded_blas():
+        return _identifiability(machine, setup, poses, method=method, free=free, fix=fix, weighted=weighted)
+
+
+def _identifiability(machine, setup, poses, *, method, free, fix, weighted) -> IdentifiabilityReport:
+    from pkmcal.identification.residuals import Model, candidate_parameters, make_method, whitening
+
+    poses = machine.as_pose_array(poses)
+    if method is None:
+        method = "fk-residual" if machine.n_actuators == machine.n_dof else "projection"
+    q = machine.ik(poses)
+    y = setup.sensor.predict(poses)
+    model = Model(machine, setup.sensor, setup.noise, q, y, poses)
+    meth = make_method(method, model, weighted)
+    ev = meth.evaluate(model.theta0, jac=True, cov=True)
+    J = ev.J
+    if weighted and method != "projection":
+        J = whitening(ev.cov, f"{method} residual") @ J
+    cand, _ = candidate_parameters(model, free, None if fix == "auto" else fix)
+    names = model.names
+    return analyse_jacobian(J.reshape(-1, J.shape[-1])[:, cand], tuple(names[i] for i in cand),
+                            tuple(machine.param_names))

@@ -1,0 +1,490 @@
+"""The elimination strategies: residuals, analytic Jacobians and noise covariances per pose.
+
+Every calibration model in pkmcal is ``q_j = IK(x_j, ρ)`` (actuators) plus ``y_j = h(x_j, s)``
+(external sensor), with the pose x_j of measurement j a nuisance unknown. The unknowns of
+the engine are θ = [ρ; s]. A *method* eliminates x_j and returns, for all N poses at once,
+
+* ``r``   (N, k)     the residual of each pose,
+* ``J``   (N, k, P)  its analytic derivative ∂r/∂θ (all P = p + s parameters),
+* ``cov`` (N, k, k)  the covariance the sensor and actuator noise induce on r (first order),
+
+with, per pose, A = ∂IK/∂x (l×n), B = ∂IK/∂ρ (l×p), H = ∂h/∂x (m×n), G = ∂h/∂s (m×s),
+Σ_q = diag(σ_q²), Σ_y = diag(σ_y²):
+
+``ik-residual`` (paper 1 §V, eq. 3; x measured by a full-pose sensor)
+    x̂_j solves h(x̂_j, s) = y_j (Newton; x̂ = y for identity sensor transforms);
+    r_j = q_j − IK(x̂_j, ρ);  ∂r/∂ρ = −B;  ∂r/∂s = A H⁻¹ G  (x̂ moves with s);
+    Σ_j = Σ_q + A H⁻¹ Σ_y H⁻ᵀ Aᵀ.
+    ``form="squared"`` is the paper's own residual (L_q² − ‖l(x̂, ρ)‖²) with L_q = q + L0
+    the measured leg length; it needs a mechanism with leg lengths (the hexapod).
+
+``fk-residual`` (paper 2 §3, eq. 3; x from the forward kinematics)
+    x_j = FK(q_j, ρ);  r_j = y_j − h(x_j, s);  implicit differentiation of IK(x, ρ) = q:
+    ∂x/∂ρ = −A⁻¹B, so ∂r/∂ρ = H A⁻¹ B and ∂r/∂s = −G (one batched solve over the poses);
+    Σ_j = Σ_y + H A⁻¹ Σ_q A⁻ᵀ Hᵀ.  Poses whose FK does not converge are flagged.
+
+``projection`` (paper 3 §2, eq. 4–10; general errors-in-variables)
+    e_j(x, θ) = W [y_j − h(x, s); q_j − IK(x, ρ)] with W = Σ_e^{-1/2} (identity if
+    unweighted); x_j*(θ) = argmin_x ‖e_j‖ (Gauss–Newton); Q = W [H; A] ((m+l)×n) and U⊥
+    an orthonormal basis of the orthogonal complement of range(Q) (complete QR), so that
+    R = I − Q(QᵀQ)⁻¹Qᵀ = U⊥U⊥ᵀ (eq. 7); r_j = U⊥ᵀ e_j (m + l − n rows, eq. 8–9),
+    ∂r/∂θ = U⊥ᵀ ∂e/∂θ (the x-dependence is projected out; the derivative of U⊥ is dropped,
+    which leaves the gradient Jᵀr of the cost exact at x*). Weighted, cov = I.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from contextlib import contextmanager, nullcontext
+from dataclasses import dataclass
+from fnmatch import fnmatchcase
+
+import numpy as np
+
+from pkmcal.errors import PkmcalError
+from pkmcal.mechanisms.base import Mechanism
+from pkmcal.sensors.base import NoiseModel, Sensor
+
+METHODS = ("ik-residual", "fk-residual", "projection")
+IK_FORMS = ("plain", "squared")
+
+#: Newton tolerance (mm/rad) and iteration cap for inverting the full-pose sensor and for
+#: the projection's inner pose solve.
+_POSE_TOL = 1e-11
+_POSE_MAX_ITER = 30
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """Residuals of all poses at one parameter vector (module docstring)."""
+
+    r: np.ndarray
+    J: np.ndarray | None
+    cov: np.ndarray | None
+    converged: np.ndarray
+    poses: np.ndarray
+
+
+@dataclass
+class Model:
+    """A machine, a sensor, their noise and the measured data, with θ = [ρ; s] packing."""
+
+    mechanism: Mechanism
+    sensor: Sensor
+    noise: NoiseModel
+    q: np.ndarray
+    y: np.ndarray
+    commanded: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        self.q = np.asarray(self.q, dtype=float)
+        self.y = np.asarray(self.y, dtype=float)
+        n_pose = self.q.shape[0] if self.q.ndim == 2 else -1
+        if self.q.ndim != 2 or self.q.shape[1] != self.mechanism.n_actuators:
+            raise PkmcalError(
+                f"actuator readings must be an array (N, {self.mechanism.n_actuators}) "
+                f"({', '.join(self.mechanism.actuator_names)}); got shape {self.q.shape}"
+            )
+        if self.y.shape != (n_pose, self.sensor.n_readings):
+            raise PkmcalError(
+                f"sensor readings must be an array ({n_pose}, {self.sensor.n_readings}) "
+                f"({', '.join(self.sensor.reading_names)}), one row per actuator row; got shape {self.y.shape}"
+            )
+        for what, arr in (("actuator", self.q), ("sensor", self.y)):
+            bad = ~np.all(np.isfinite(arr), axis=1)
+            if bad.any():
+                raise PkmcalError(f"{what} readings of pose {int(np.argmax(bad)) + 1} are not finite numbers")
+        if self.commanded is not None:
+            self.commanded = self.mechanism.as_pose_array(self.commanded)
+            if self.commanded.shape[0] != n_pose:
+                raise PkmcalError(f"{self.commanded.shape[0]} commanded poses for {n_pose} measured poses")
+        names = self.names
+        if len(set(names)) != len(names):
+            dup = sorted({n for n in names if names.count(n) > 1})
+            raise PkmcalError(f"machine and sensor both have parameters named {', '.join(dup)}")
+        self.sigma_q = np.broadcast_to(np.asarray(self.noise.actuator_std, dtype=float), (self.q.shape[1],)).copy()
+        self.sigma_y = np.broadcast_to(np.asarray(self.noise.reading_std, dtype=float), (self.y.shape[1],)).copy()
+
+    @property
+    def n_poses(self) -> int:
+        return self.q.shape[0]
+
+    @property
+    def n_mech(self) -> int:
+        return len(self.mechanism.param_names)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(self.mechanism.param_names) + tuple(self.sensor.param_names)
+
+    @property
+    def theta0(self) -> np.ndarray:
+        return np.concatenate([self.mechanism.params, self.sensor.params])
+
+    def split(self, theta: np.ndarray) -> tuple[Mechanism, Sensor]:
+        """The machine and sensor at θ = [ρ; s] (the sensor object is reused while s is unchanged)."""
+        p = self.n_mech
+        s = np.asarray(theta[p:], dtype=float)
+        cached = getattr(self, "_sensor_cache", None)
+        if cached is None or not np.array_equal(cached[0], s):
+            cached = (s.copy(), self.sensor.with_params(s))
+            self._sensor_cache = cached
+        return self.mechanism.with_params(theta[:p]), cached[1]
+
+    def subset(self, keep: np.ndarray) -> "Model":
+        """The same model on the poses ``keep`` (boolean or index array)."""
+        return Model(self.mechanism, self.sensor, self.noise, self.q[keep], self.y[keep],
+                     None if self.commanded is None else self.commanded[keep])
+
+    def start_poses(self) -> np.ndarray:
+        """Starting poses (N, n) for the FK / pose solves: the commanded poses, else home."""
+        if self.commanded is not None:
+            return self.commanded.copy()
+        return np.tile(self.mechanism.home_pose, (self.n_poses, 1))
+
+
+# -- small dense linear algebra --------------------------------------------------------
+
+
+_BLAS_CONTROLLER = None
+
+
+@contextmanager
+def single_threaded_blas():
+    """Run the block with one BLAS thread (threadpoolctl, when installed).
+
+    The engine's matrices are small (≤ a few thousand rows × ≤ ~60 columns); a threaded
+    BLAS only adds synchronisation, and on a busy machine a threaded SVD of a 90×42
+    Jacobian was measured 30–100× slower than the single-threaded one.
+    """
+    global _BLAS_CONTROLLER
+    try:
+        if _BLAS_CONTROLLER is None:
+            from threadpoolctl import ThreadpoolController
+
+            _BLAS_CONTROLLER = ThreadpoolController()
+        ctx = _BLAS_CONTROLLER.limit(limits=1, user_api="blas")
+    except ImportError:
+        ctx = nullcontext()
+    with ctx:
+        yield
+
+
+# -- parameter selection ---------------------------------------------------------------
+
+
+def _match(names: tuple[str, ...], patterns, what: str) -> list[int]:
+    if isinstance(patterns, str):
+        patterns = [p for p in patterns.replace(",", " ").split() if p]
+    out: list[int] = []
+    for pat in patterns:
+        hits = [i for i, n in enumerate(names) if fnmatchcase(n, pat)]
+        if not hits:
+            raise PkmcalError(f"{what}: no parameter matches '{pat}'; the parameters are {', '.join(names)}")
+        out.extend(h for h in hits if h not in out)
+    return out
+
+
+def candidate_parameters(model: Model, free=None, fix=None) -> tuple[list[int], bool]:
+    """Indices of the parameters to estimate before any automatic gauge, and whether the
+    choice was explicit (``free`` or a ``fix`` list given)."""
+    names = model.names
+    if free is None:
+        cand = list(range(model.n_mech)) + [names.index(n) for n in model.sensor.default_free]
+        explicit = False
+    else:
+        cand = sorted(_match(names, free, "--free"))
+        explicit = True
+    if fix is not None and not (isinstance(fix, str) and fix == "auto"):
+        drop = set(_match(names, fix, "--fix"))
+        cand = [i for i in cand if i not in drop]
+        explicit = True
+    return cand, explicit
+
+
+# -- helpers ----------------------------------------------------------------------------
+
+
+def _diag_cov(sigma: np.ndarray, n: int) -> np.ndarray:
+    return np.broadcast_to(np.diag(sigma**2), (n, sigma.size, sigma.size))
+
+
+def _sandwich(M: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """M diag(σ²) Mᵀ for stacks M (N, a, b)."""
+    Ms = M * sigma**2
+    return Ms @ np.swapaxes(M, 1, 2)
+
+
+def invert_sensor(sensor: Sensor, y: np.ndarray, start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Poses x̂ (N, 6) with h(x̂) = y by batched Newton (needs m = 6); and a converged flag."""
+    x = np.array(start, dtype=float)
+    if tuple(sensor.reading_names) == ("x", "y", "z", "a", "b", "c"):
+        x = np.array(y, dtype=float)
+    conv = np.zeros(len(x), dtype=bool)
+    for _ in range(_POSE_MAX_ITER):
+        res = sensor.reading_residual(y, sensor.predict(x))
+        conv = np.max(np.abs(res), axis=1) <= _POSE_TOL * (1.0 + np.max(np.abs(y), axis=1))
+        if conv.all():
+            break
+        H = sensor.pose_jacobian(x)
+        try:
+            x = x + np.linalg.solve(H, res[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            raise PkmcalError("the full-pose sensor's pose Jacobian is singular at a measured pose; "
+                              "check the sensor's world/tool transforms") from None
+    return x, conv
+
+
+# -- the methods ------------------------------------------------------------------------
+
+
+class Method(ABC):
+    """One elimination strategy; subclasses implement :meth:`evaluate`."""
+
+    name: str
+
+    def __init__(self, model: Model, weighted: bool = True):
+        self.model = model
+        self.weighted = weighted
+
+    @abstractmethod
+    def rows_per_pose(self) -> int:
+        """Residual rows k per pose."""
+
+    @abstractmethod
+    def evaluate(self, theta: np.ndarray, jac: bool = True, cov: bool = True) -> Evaluation:
+        """Residuals (and Jacobian, covariance) of all poses at the full parameter vector θ."""
+
+    def row_names(self) -> tuple[str, ...]:
+        return tuple(f"r{i + 1}" for i in range(self.rows_per_pose()))
+
+
+class IKResidual(Method):
+    """``ik-residual``: r_j = q_j − IK(x̂_j, ρ), x̂_j from a full-pose sensor (paper 1)."""
+
+    name = "ik-residual"
+
+    def __init__(self, model: Model, weighted: bool = True, form: str = "plain"):
+        super().__init__(model, weighted)
+        if form not in IK_FORMS:
+            raise PkmcalError(f"ik-residual form must be one of {', '.join(IK_FORMS)}; got '{form}'")
+        mech, sensor = model.mechanism, model.sensor
+        if sensor.n_readings != mech.n_dof:
+            raise PkmcalError(
+                f"method 'ik-residual' needs a full-pose sensor ({mech.n_dof} readings per pose); "
+                f"the '{sensor.kind}' sensor gives {sensor.n_readings} ({', '.join(sensor.reading_names)}): "
+                "use --method fk-residual or projection"
+            )
+        if form == "squared" and not hasattr(mech, "length_param_jacobian"):
+            raise PkmcalError(f"ik-residual form 'squared' needs leg lengths; machine '{mech.name}' has none")
+        self.form = form
+        self._cache = None
+
+    def rows_per_pose(self) -> int:
+        return self.model.mechanism.n_actuators
+
+    def row_names(self) -> tuple[str, ...]:
+        return tuple(self.model.mechanism.actuator_names)
+
+    def _measured_poses(self, sensor):
+        """x̂, converged, H⁻¹ and H⁻¹G, cached while the sensor parameters do not change
+        (they depend on s only, not on ρ)."""
+        key = sensor.params.tobytes()
+        if self._cache is None or self._cache[0] != key:
+            y = self.model.y
+            x, conv = invert_sensor(sensor, y, self.model.start_poses())
+            Hinv = np.linalg.inv(sensor.pose_jacobian(x))            # (N, n, m)
+            self._cache = (key, x, conv, Hinv, Hinv @ sensor.param_jacobian(x))
+        return self._cache[1:]
+
+    def evaluate(self, theta, jac=True, cov=True):
+        m = self.model
+        mech, sensor = m.split(theta)
+        x, conv, Hinv, HinvG = self._measured_poses(sensor)
+        q_model = mech.ik(x)
+        r = m.q - q_model
+        A = mech.actuator_pose_jacobian(x) if (jac or cov) else None
+        J = C = None
+        if jac:
+            B = mech.actuator_param_jacobian(x)
+            Js = A @ HinvG
+            J = np.concatenate([-B, Js], axis=2)
+        if cov:
+            AH = A @ Hinv
+            C = _diag_cov(m.sigma_q, m.n_poses) + _sandwich(AH, m.sigma_y)
+        if self.form == "squared":
+            # r² = L_q² − L(x)², L_q = q + L0, L0 = L(x) − IK(x) (offset, independent of x).
+            L = mech.leg_lengths(x)
+            Lq = m.q + (L - q_model)
+            r = Lq**2 - L**2
+            if jac:
+                dL = mech.length_param_jacobian(x)                     # ∂L/∂ρ
+                dL0 = dL - mech.actuator_param_jacobian(x)              # ∂L0/∂ρ
+                Jr = 2.0 * Lq[..., None] * dL0 - 2.0 * L[..., None] * dL
+                Js = 2.0 * L[..., None] * (A @ HinvG)
+                J = np.concatenate([Jr, Js], axis=2)
+            if cov:
+                AH = A @ Hinv
+                C = _diag_cov(m.sigma_q, m.n_poses) * (2 * Lq)[:, :, None] * (2 * Lq)[:, None, :] \
+                    + _sandwich(2 * L[..., None] * AH, m.sigma_y)
+        return Evaluation(r=r, J=J, cov=C, converged=conv, poses=x)
+
+
+class FKResidual(Method):
+    """``fk-residual``: r_j = y_j − h(FK(q_j, ρ), s) (paper 2)."""
+
+    name = "fk-residual"
+
+    def __init__(self, model: Model, weighted: bool = True):
+        super().__init__(model, weighted)
+        mech = model.mechanism
+        if mech.n_actuators != mech.n_dof:
+            raise PkmcalError(
+                f"method 'fk-residual' needs as many actuators as degrees of freedom; machine "
+                f"'{mech.name}' has {mech.n_actuators} for {mech.n_dof}: use --method projection"
+            )
+        self._guess = model.start_poses()
+
+    def rows_per_pose(self) -> int:
+        return self.model.sensor.n_readings
+
+    def row_names(self) -> tuple[str, ...]:
+        return tuple(self.model.sensor.reading_names)
+
+    def evaluate(self, theta, jac=True, cov=True):
+        m = self.model
+        mech, sensor = m.split(theta)
+        fk = mech.fk(m.q, guess=self._guess)
+        x = fk.poses
+        ok = fk.converged & np.all(np.isfinite(x), axis=1)
+        # warm start the next evaluation from the converged poses
+        self._guess = np.where(ok[:, None], x, self._guess)
+        x = np.where(ok[:, None], x, self._guess)
+        r = sensor.reading_residual(m.y, sensor.predict(x))
+        J = C = None
+        if jac or cov:
+            A = mech.actuator_pose_jacobian(x)
+            H = sensor.pose_jacobian(x)
+        if jac:
+            B = mech.actuator_param_jacobian(x)
+            dx = np.linalg.solve(A, B)                                   # A⁻¹B = −∂x/∂ρ
+            J = np.concatenate([H @ dx, -sensor.param_jacobian(x)], axis=2)
+        if cov:
+            HAi = H @ np.linalg.inv(A)
+            C = _diag_cov(m.sigma_y, m.n_poses) + _sandwich(HAi, m.sigma_q)
+        return Evaluation(r=r, J=J, cov=C, converged=ok, poses=x)
+
+
+class Projection(Method):
+    """``projection``: the nuisance pose projected out of the stacked residual (paper 3)."""
+
+    name = "projection"
+
+    def __init__(self, model: Model, weighted: bool = True):
+        super().__init__(model, weighted)
+        mech, sensor = model.mechanism, model.sensor
+        k = sensor.n_readings + mech.n_actuators - mech.n_dof
+        if k <= 0:
+            raise PkmcalError("method 'projection' needs more readings (sensor + actuators) than pose coordinates")
+        sig = np.concatenate([model.sigma_y, model.sigma_q])
+        if weighted:
+            if np.any(sig <= 0):
+                raise PkmcalError(
+                    "the weighted projection method needs a positive noise standard deviation for every "
+                    "sensor and actuator reading; give them in the setup or use --unweighted"
+                )
+            self._w = 1.0 / sig
+        else:
+            self._w = np.ones_like(sig)
+        self._sig = sig
+        # start the inner pose solve from the FK of the readings at the nominal machine
+        start = model.start_poses()
+        if mech.n_actuators == mech.n_dof:
+            fk = mech.fk(model.q, guess=start)
+            start = np.where(fk.converged[:, None], fk.poses, start)
+        self._x = start
+
+    def rows_per_pose(self) -> int:
+        mech = self.model.mechanism
+        return self.model.sensor.n_readings + mech.n_actuators - mech.n_dof
+
+    def _stacked(self, mech, sensor, x):
+        m = self.model
+        ey = sensor.reading_residual(m.y, sensor.predict(x))
+        eq = m.q - mech.ik(x)
+        return np.concatenate([ey, eq], axis=1) * self._w
+
+    def _Q(self, mech, sensor, x):
+        return np.concatenate([sensor.pose_jacobian(x), mech.actuator_pose_jacobian(x)], axis=1) * self._w[:, None]
+
+    def solve_poses(self, mech, sensor) -> tuple[np.ndarray, np.ndarray]:
+        """x_j* = argmin ‖e_j(x)‖ for every pose by batched Gauss–Newton (warm started)."""
+        x = self._x.copy()
+        conv = np.zeros(len(x), dtype=bool)
+        for _ in range(_POSE_MAX_ITER):
+            e = self._stacked(mech, sensor, x)
+            Q = self._Q(mech, sensor, x)
+            QtQ = np.swapaxes(Q, 1, 2) @ Q
+            step = np.linalg.solve(QtQ, (np.swapaxes(Q, 1, 2) @ e[..., None]))[..., 0]
+            x = x + step
+            conv = np.max(np.abs(step), axis=1) <= 1e-12 * (1.0 + np.max(np.abs(x), axis=1))
+            if conv.all():
+                break
+        ok = conv & np.all(np.isfinite(x), axis=1)
+        self._x = np.where(ok[:, None], x, self._x)
+        return x, ok
+
+    def evaluate(self, theta, jac=True, cov=True):
+        m = self.model
+        mech, sensor = m.split(theta)
+        x, ok = self.solve_poses(mech, sensor)
+        e = self._stacked(mech, sensor, x)
+        Q = self._Q(mech, sensor, x)
+        Qfull, _ = np.linalg.qr(Q, mode="complete")
+        U = Qfull[:, :, mech.n_dof:]                                    # (N, m+l, k)
+        Ut = np.swapaxes(U, 1, 2)
+        r = (Ut @ e[..., None])[..., 0]
+        J = C = None
+        if jac:
+            ms = sensor.n_readings
+            de = np.zeros((m.n_poses, ms + mech.n_actuators, len(theta)))
+            de[:, ms:, : m.n_mech] = -mech.actuator_param_jacobian(x)
+            de[:, :ms, m.n_mech:] = -sensor.param_jacobian(x)
+            J = Ut @ (de * self._w[:, None])
+        if cov:
+            # whitened e has covariance diag((w σ)²); projected: U⊥ᵀ diag(.) U⊥ (= I if weighted)
+            C = _sandwich(Ut, self._w * self._sig)
+        return Evaluation(r=r, J=J, cov=C, converged=ok, poses=x)
+
+
+def make_method(name: str, model: Model, weighted: bool = True, form: str = "plain") -> Method:
+    """The method called ``name`` (one of :data:`METHODS`) on ``model``."""
+    if name == "ik-residual":
+        return IKResidual(model, weighted, form=form)
+    if form != "plain":
+        raise PkmcalError(f"option form='{form}' only applies to method 'ik-residual'")
+    if name == "fk-residual":
+        return FKResidual(model, weighted)
+    if name == "projection":
+        return Projection(model, weighted)
+    raise PkmcalError(f"unknown identification method '{name}'; use one of {', '.join(METHODS)}")
+
+
+def whitening(cov: np.ndarray, what: str = "residual") -> np.ndarray:
+    """W_j = L_j⁻¹ with L_j L_jᵀ = Σ_j (batched Cholesky), so that W_j r_j has unit covariance.
+
+    A singular Σ_j (a zero noise standard deviation that leaves a residual noise-free) is
+    a user error: the weighted fit needs every residual to have some noise.
+    """
+    try:
+        L = np.linalg.cholesky(cov)
+    except np.linalg.LinAlgError:
+        eig = np.linalg.eigvalsh(cov)
+        bad = int(np.argmax(eig[:, 0] <= 0)) if np.any(eig[:, 0] <= 0) else 0
+        raise PkmcalError(
+            f"the noise model makes the {what} of pose {bad + 1} noise-free (singular covariance): "
+            "give positive standard deviations for the sensor and actuator noise in the setup, "
+            "or fit unweighted (--unweighted)"
+        ) from None
+    n = cov.shape[-1]
+    return np.linalg.solve(L, np.broadcast_to(np.eye(n), L.shape))

@@ -1,0 +1,184 @@
+"""Simulated calibration campaigns: what a sensor and the encoders would read on a "real"
+machine commanded with a nominal model.
+
+Paper 1 §IV (steps 1–4) and paper 2 §5 (Table 5): a commanded pose x_c is turned into
+actuator commands by the nominal model, q = IK(x_c, ρ_nom); the real machine goes where its
+own kinematics take it, x_r = FK(q, ρ_real) (Newton from x_c); the sensor reads
+y = h(x_r, θ) + e_y and the encoders q + e_q, with e_y, e_q drawn from the setup's
+:class:`~pkmcal.sensors.base.NoiseModel` (Gaussian, or uniform of half-width h = √3·std).
+Encoder noise is a reading error: the machine moves to FK(q), the file records q + e_q.
+
+Poses the real machine cannot reach — FK not converged, real pose outside the real machine's
+limits, or not readable by the sensor (indicator plane near vertical) — are dropped and
+reported with their reasons. Noise is drawn for all N commanded poses before dropping, so a
+pose's noise does not depend on which other poses were dropped.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pkmcal.conventions import euler_to_matrix
+from pkmcal.errors import PkmcalError
+from pkmcal.io.measurements import Measurements
+from pkmcal.mechanisms.base import Mechanism
+from pkmcal.sensors.base import MeasurementSetup, Sensor
+from pkmcal.sensors.indicators import MIN_NORMAL_Z, IndicatorSensor
+
+
+def as_rng(rng: np.random.Generator | int | None) -> np.random.Generator:
+    """A NumPy generator from a generator, a seed, or None (fresh entropy)."""
+    if isinstance(rng, np.random.Generator):
+        return rng
+    if rng is None or isinstance(rng, (int, np.integer)):
+        return np.random.default_rng(rng)
+    raise PkmcalError(f"expected a seed (integer) or numpy Generator; got {type(rng).__name__}")
+
+
+@dataclass(frozen=True)
+class SimulationResult:
+    """A simulated campaign.
+
+    ``commanded`` (N, 6) all commanded poses; ``kept`` (K,) indices of the poses measured;
+    ``dropped`` {index: reason} for the others; for the kept poses: ``real_poses`` (K, 6)
+    reached by the real machine, ``actuator_true`` (K, l) the commands (noise-free readings),
+    ``sensor_true`` (K, m) noise-free sensor readings, ``actuator_readings`` and
+    ``sensor_readings`` the noisy ones. Internal units (mm, rad).
+    """
+
+    commanded: np.ndarray
+    kept: np.ndarray
+    dropped: dict[int, str]
+    real_poses: np.ndarray
+    actuator_true: np.ndarray
+    sensor_true: np.ndarray
+    actuator_readings: np.ndarray
+    sensor_readings: np.ndarray
+    setup: MeasurementSetup
+
+    @property
+    def measurements(self) -> Measurements:
+        """The kept poses as :class:`~pkmcal.io.measurements.Measurements` (what a CSV holds)."""
+        return Measurements(
+            actuators=self.actuator_readings,
+            readings=self.sensor_readings,
+            commanded=self.commanded[self.kept],
+            source=None,
+        )
+
+    def summary(self) -> str:
+        """Lines for the terminal: poses kept, dropped with reasons."""
+        n = len(self.commanded)
+        lines = [f"{len(self.kept)} of {n} poses measured, {len(self.dropped)} dropped"
+                 + (" (pose numbers count the commanded poses from 1)" if self.dropped else "")]
+        by_reason: dict[str, list[int]] = {}
+        for k, why in self.dropped.items():
+            by_reason.setdefault(why, []).append(k)
+        for why, ks in sorted(by_reason.items()):
+            shown = ", ".join(str(k + 1) for k in ks[:20]) + (", ..." if len(ks) > 20 else "")
+            lines.append(f"  dropped ({why}): {len(ks)} pose(s): {shown}")
+        return "\n".join(lines)
+
+
+def _unreadable(sensor: Sensor, poses: np.ndarray) -> np.ndarray:
+    """True where the sensor cannot read the pose (indicator plane near vertical)."""
+    if isinstance(sensor, IndicatorSensor):
+        return ~(np.abs(euler_to_matrix(poses[:, 3:6])[:, 2, 2]) >= MIN_NORMAL_Z)
+    return np.zeros(len(poses), dtype=bool)
+
+
+def simulate_campaign(
+    nominal: Mechanism,
+    real: Mechanism,
+    setup: MeasurementSetup,
+    commanded_poses: np.ndarray,
+    rng: np.random.Generator | int | None = None,
+    ignore_limits: tuple[str, ...] = (),
+) -> SimulationResult:
+    """Simulate measuring ``commanded_poses`` (N, 6; mm, rad) on ``real`` commanded by ``nominal``.
+
+    See the module docstring for the model. ``rng`` is a seed or a generator; the same seed
+    gives bit-identical readings. ``ignore_limits`` names limits of the real machine not
+    checked (e.g. ``("leg_collision",)``: a parameter perturbation of a few mm can bring
+    the modelled legs of a tight design such as ``stewart-prototype`` into contact).
+    """
+    commanded = nominal.as_pose_array(commanded_poses)
+    if not np.all(np.isfinite(commanded)):
+        raise PkmcalError("a commanded pose is not a finite number")
+    if nominal.n_actuators != real.n_actuators:
+        raise PkmcalError(f"nominal machine '{nominal.name}' and real machine '{real.name}' differ in actuator count")
+    gen = as_rng(rng)
+    n = len(commanded)
+    sensor = setup.sensor
+    e_y, e_q = setup.noise.sample(gen, (n, sensor.n_readings), (n, real.n_actuators))
+
+    q = nominal.ik(commanded)
+    dropped: dict[int, str] = {}
+    finite = np.all(np.isfinite(q), axis=1)
+    for k in np.flatnonzero(~finite):
+        dropped[int(k)] = "nominal-ik-failed"
+    fk = real.fk(np.where(finite[:, None], q, 0.0), guess=commanded)
+    bad_fk = finite & ~fk.converged
+    for k in np.flatnonzero(bad_fk):
+        dropped[int(k)] = f"fk-not-converged (residual {fk.residual[k]:.3g})"
+    ok = finite & fk.converged
+    poses = np.where(ok[:, None], fk.poses, commanded)   # placeholders where not ok, never kept
+    report = real.check_limits(poses)
+    unknown = [n for n in ignore_limits if n not in report.violations]
+    if unknown:
+        raise PkmcalError(f"machine '{real.name}' has no limit {', '.join(unknown)}; "
+                          f"its limits are {', '.join(report.violations)}")
+    violated = {n: v for n, v in report.violations.items() if n not in ignore_limits}
+    bad = np.zeros(len(ok), dtype=bool)
+    for v in violated.values():
+        bad |= v
+    for k in np.flatnonzero(ok & bad):
+        dropped[int(k)] = "real-limits: " + "+".join(n for n, v in violated.items() if v[k])
+    ok &= ~bad
+    unread = ok & _unreadable(sensor, poses)
+    for k in np.flatnonzero(unread):
+        dropped[int(k)] = "not-readable-by-sensor"
+    ok &= ~unread
+
+    kept = np.flatnonzero(ok)
+    real_poses = poses[kept]
+    y_true = sensor.predict(real_poses) if len(kept) else np.zeros((0, sensor.n_readings))
+    q_true = q[kept]
+    return SimulationResult(
+        commanded=commanded,
+        kept=kept,
+        dropped=dict(sorted(dropped.items())),
+        real_poses=real_poses,
+        actuator_true=q_true,
+        sensor_true=y_true,
+        actuator_readings=q_true + e_q[kept],
+        sensor_readings=y_true + e_y[kept],
+        setup=setup,
+    )
+
+
+def perturb_machine(
+    machine: Mechanism,
+    magnitude_mm: float,
+    rng: np.random.Generator | int | None = None,
+    distribution: str = "uniform",
+    name: str | None = None,
+) -> Mechanism:
+    """A random "real" machine: every kinematic parameter plus an error of size ``magnitude_mm``.
+
+    ``distribution="uniform"``: errors U(−m, m) (paper 1 §IV: ±5 mm); ``"gaussian"``: N(0, m²).
+    The home pose is kept, so the real machine is commanded as the nominal one is.
+    """
+    if not np.isfinite(magnitude_mm) or magnitude_mm < 0:
+        raise PkmcalError(f"parameter error magnitude must be a non-negative number of mm; got {magnitude_mm}")
+    gen = as_rng(rng)
+    p = machine.params
+    if distribution == "uniform":
+        delta = gen.uniform(-magnitude_mm, magnitude_mm, size=p.shape)
+    elif distribution == "gaussian":
+        delta = gen.standard_normal(size=p.shape) * magnitude_mm
+    else:
+        raise PkmcalError(f"unknown error distribution '{distribution}'; use uniform or gaussian")
+    return machine.with_params(p + delta, name=name or f"{machine.name}-perturbed")

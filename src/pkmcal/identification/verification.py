@@ -1,0 +1,200 @@
+"""Verification of a calibration on held-out poses: how far the real machine lands from
+where it is commanded, with the nominal model ("before") and the calibrated one ("after").
+
+For a model M (nominal or calibrated) and a commanded pose x_c, the actuators are commanded
+with q = IK(x_c, ρ_M) and the real machine reaches x_r = FK(q, ρ_real) (Newton from x_c).
+Paper 1 §IV reports the pose errors; paper 2 §5 (Table 5) the errors its indicators see:
+
+    position error     e_p = ‖p_r − p_c‖ (mm)
+    orientation error  e_R = ∠(R_r R_cᵀ) (rad, :func:`pkmcal.conventions.rotation_error`)
+    plane tilt         e_n = ∠(n_r, n_c), n = R e_z (rad): the tilt the indicators see
+    height error       e_z = z of the real platform plane (through p_r, normal n_r) above the
+                       commanded centre (x_c, y_c), minus z_c (mm): the height an indicator
+                       under the platform centre sees (eq. 6 with d_off = 0)
+
+Summaries (mean, max, RMS; for e_z of |e_z|) are taken over the poses that both models
+reach; a pose the real machine cannot reach (FK not converged, real limits) is reported.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pkmcal.conventions import POSE_COLUMNS, euler_to_matrix, rotation_error
+from pkmcal.errors import PkmcalError
+from pkmcal.mechanisms.base import Mechanism
+
+#: Error measures: key → (unit, description).
+MEASURES = {
+    "position": ("mm", "position error"),
+    "orientation": ("rad", "orientation error"),
+    "tilt": ("rad", "plane tilt error"),
+    "height": ("mm", "height error at centre (z)"),
+}
+
+
+@dataclass(frozen=True)
+class PoseErrors:
+    """Per-pose errors (N,) of one model (see module docstring); ``valid`` (N,) False where
+    the real machine cannot reach the pose (errors NaN there), with the reason in
+    ``dropped``; ``reached`` (N, 6) the real machine's poses (mm, rad)."""
+
+    model: str
+    reached: np.ndarray
+    position: np.ndarray
+    orientation: np.ndarray
+    tilt: np.ndarray
+    height: np.ndarray
+    valid: np.ndarray
+    dropped: dict[int, str] = field(default_factory=dict)
+
+    def summary(self, mask: np.ndarray | None = None) -> dict[str, float]:
+        """``{position_mean_mm, position_max_mm, position_rms_mm, orientation_mean_rad, …}``
+        over ``mask`` (default: the valid poses); signed height errors are taken as |e_z|."""
+        m = self.valid if mask is None else mask
+        out: dict[str, float] = {"poses": int(np.count_nonzero(m))}
+        for key, (unit, _) in MEASURES.items():
+            v = np.abs(getattr(self, key)[m])
+            if v.size == 0:
+                stats = (float("nan"),) * 3
+            else:
+                stats = (float(np.mean(v)), float(np.max(v)), float(np.sqrt(np.mean(v**2))))
+            for name, s in zip(("mean", "max", "rms"), stats):
+                out[f"{key}_{name}_{unit}"] = s
+        return out
+
+
+def pose_errors(model: Mechanism, real: Mechanism, poses: np.ndarray, ignore_limits: tuple[str, ...] = ()) -> PoseErrors:
+    """Errors of the real machine commanded through ``model`` at ``poses`` (N, 6; mm, rad).
+
+    ``ignore_limits`` names limits of the real machine not checked (e.g. ``leg_collision``).
+    """
+    if model.pose_names != POSE_COLUMNS or real.pose_names != POSE_COLUMNS:
+        raise PkmcalError(f"pose errors are defined for 6-DOF poses (x, y, z, a, b, c); machine "
+                          f"'{model.name}' has poses ({', '.join(model.pose_names)})")
+    cmd = model.as_pose_array(poses)
+    if not np.all(np.isfinite(cmd)):
+        raise PkmcalError("a held-out pose is not a finite number")
+    q = model.ik(cmd)
+    finite = np.all(np.isfinite(q), axis=1)
+    fk = real.fk(np.where(finite[:, None], q, 0.0), guess=cmd)
+    dropped: dict[int, str] = {}
+    for k in np.flatnonzero(~finite):
+        dropped[int(k)] = "ik-failed"
+    for k in np.flatnonzero(finite & ~fk.converged):
+        dropped[int(k)] = "fk-not-converged"
+    ok = finite & fk.converged
+    reached = np.where(ok[:, None], fk.poses, cmd)
+    lim = real.check_limits(reached)
+    unknown = [n for n in ignore_limits if n not in lim.violations]
+    if unknown:
+        raise PkmcalError(f"machine '{real.name}' has no limit {', '.join(unknown)}; "
+                          f"its limits are {', '.join(lim.violations)}")
+    violated = {n: v for n, v in lim.violations.items() if n not in ignore_limits}
+    bad = np.zeros(len(ok), dtype=bool)
+    for v in violated.values():
+        bad |= v
+    for k in np.flatnonzero(ok & bad):
+        dropped[int(k)] = "real-limits: " + "+".join(n for n, v in violated.items() if v[k])
+    ok &= ~bad
+
+    Rc, Rr = euler_to_matrix(cmd[:, 3:6]), euler_to_matrix(reached[:, 3:6])
+    e_p = np.linalg.norm(reached[:, 0:3] - cmd[:, 0:3], axis=1)
+    e_R = rotation_error(Rr, Rc)
+    nc, nr = Rc[:, :, 2], Rr[:, :, 2]
+    cross = np.linalg.norm(np.cross(nr, nc), axis=1)
+    e_n = np.arctan2(cross, np.einsum("nk,nk->n", nr, nc))
+    # plane through p_r with normal n_r, height above (x_c, y_c): eq. (6) with d_off = 0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z_plane = (np.einsum("nk,nk->n", nr, reached[:, 0:3]) - nr[:, 0] * cmd[:, 0] - nr[:, 1] * cmd[:, 1]) / nr[:, 2]
+    e_z = z_plane - cmd[:, 2]
+    nan = np.where(ok, 1.0, np.nan)
+    return PoseErrors(model=model.name, reached=reached, position=e_p * nan, orientation=e_R * nan, tilt=e_n * nan,
+                      height=e_z * nan, valid=ok, dropped=dict(sorted(dropped.items())))
+
+
+@dataclass(frozen=True)
+class VerificationReport:
+    """Before/after pose errors on held-out poses. ``before`` is None without a nominal model.
+    Summaries use the poses both models reach (``common``)."""
+
+    real: str
+    after: PoseErrors
+    before: PoseErrors | None = None
+
+    @property
+    def common(self) -> np.ndarray:
+        m = self.after.valid.copy()
+        if self.before is not None:
+            m &= self.before.valid
+        return m
+
+    @property
+    def dropped(self) -> dict[int, str]:
+        out = dict(self.after.dropped)
+        if self.before is not None:
+            for k, why in self.before.dropped.items():
+                out[k] = why if k not in out else out[k]
+        return dict(sorted(out.items()))
+
+    def to_dict(self) -> dict:
+        """JSON-ready: ``{"poses": N, "used": K, "real": …, "after": {...}, "before": {...},
+        "dropped": [{"pose": 1-based, "reason": …}], "reduction_percent": {...}}``."""
+        mask = self.common
+        out: dict = {"poses": int(len(mask)), "used": int(np.count_nonzero(mask)), "real": self.real,
+                     "calibrated": self.after.model}
+        if self.before is not None:
+            out["nominal"] = self.before.model
+            out["before"] = self.before.summary(mask)
+        out["after"] = self.after.summary(mask)
+        if self.before is not None:
+            b, a = out["before"], out["after"]
+            out["reduction_percent"] = {
+                k[: -len("_mm") if k.endswith("_mm") else -len("_rad")]: (100.0 * (1.0 - a[k] / b[k]) if b[k] > 0 else None)
+                for k in a if k.endswith(("_mm", "_rad")) and "_mean_" in k
+            }
+        out["dropped"] = [{"pose": k + 1, "reason": why} for k, why in self.dropped.items()]
+        return out
+
+    def format_table(self) -> str:
+        """A before/after table for the terminal (angles in degrees there)."""
+        d = self.to_dict()
+        cols = (["before"] if self.before is not None else []) + ["after"]
+        lines = [f"verification on {d['used']} of {d['poses']} held-out poses; real machine '{self.real}'"]
+        head = f"{'error':<36}" + "".join(f"{c:>14}" for c in cols)
+        if self.before is not None:
+            head += f"{'reduction':>11}"
+        lines.append(head)
+        for key, (unit, text) in MEASURES.items():
+            show_unit = "deg" if unit == "rad" else unit
+            scale = float(np.rad2deg(1.0)) if unit == "rad" else 1.0
+            for stat in ("mean", "max", "rms"):
+                name = f"{key}_{stat}_{unit}"
+                row = f"{text + ' ' + stat + ' (' + show_unit + ')':<36}"
+                row += "".join(f"{d[c][name] * scale:>14.6g}" for c in cols)
+                if self.before is not None:
+                    b, a = d["before"][name], d["after"][name]
+                    row += f"{100 * (1 - a / b):>10.1f}%" if b > 0 else f"{'-':>11}"
+                lines.append(row)
+        for item in d["dropped"]:
+            lines.append(f"  pose {item['pose']} not used: {item['reason']}")
+        return "\n".join(lines)
+
+
+def verify(
+    calibrated: Mechanism,
+    real: Mechanism,
+    poses: np.ndarray,
+    nominal: Mechanism | None = None,
+    ignore_limits: tuple[str, ...] = (),
+) -> VerificationReport:
+    """Pose errors of ``real`` commanded through ``calibrated`` (and ``nominal``, "before")."""
+    after = pose_errors(calibrated, real, poses, ignore_limits)
+    before = None if nominal is None else pose_errors(nominal, real, poses, ignore_limits)
+    report = VerificationReport(real=real.name, after=after, before=before)
+    if not report.common.any():
+        raise PkmcalError(f"the real machine '{real.name}' reaches none of the {len(after.valid)} held-out poses "
+                          f"({'; '.join(sorted(set(report.dropped.values())))}); choose poses inside its workspace")
+    return report

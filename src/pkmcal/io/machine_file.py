@@ -1,0 +1,610 @@
+"""Machine files (YAML): load, validate, save. Format: ``docs/file-formats.md``.
+
+A machine file describes one mechanism; ``kind`` (default ``hexapod``) selects the schema.
+The hexapod schema is paper 2's Table 3 layout per leg (base joint b_i, platform joint a_i,
+offset L0_i, stroke) plus limits (paper 2 §5), an optional home pose and workspace box, and
+for identified machines the parameter covariance written as standard deviations and a
+correlation matrix, Σ_ij = σ_i ρ_ij σ_j over the named parameters, zeros elsewhere.
+
+Lengths are mm, angles degrees in the file (radians inside). Every check is done on load
+(pydantic v2); an error names the file, the line, the key path (``legs[3].stroke``, with the
+1-based leg number), what is wrong and what to do, as :class:`~pkmcal.errors.InputFileError`.
+:func:`save_machine` writes atomically and exactly: every float as its shortest repr, angles
+as degree texts that convert back to the same radians (:mod:`pkmcal.io._yaml`), so
+``load_machine(save_machine(m)) == m`` bit for bit; it checks this before writing.
+"""
+
+from __future__ import annotations
+
+import difflib
+import os
+from pathlib import Path
+from typing import Annotated, Any, Callable, Literal
+
+import numpy as np
+import yaml
+from pydantic import BaseModel, ConfigDict, StrictFloat, StrictStr, ValidationError, WrapValidator, field_validator
+
+from pkmcal.errors import InputFileError, PkmcalError
+from pkmcal.io._yaml import (
+    FlowList,
+    RawFloat,
+    TextFloat,
+    YamlSyntaxError,
+    deg_to_rad,
+    dump_yaml,
+    parse_yaml,
+    plain,
+    rad_to_deg_text,
+)
+from pkmcal.io.atomic import atomic_write_text
+from pkmcal.mechanisms.base import Mechanism
+from pkmcal.mechanisms.hexapod import HEXAPOD_PARAM_NAMES, N_LEGS, Hexapod, HexapodLimits
+from pkmcal.mechanisms.library import builtin_machine, is_builtin_name
+
+MACHINE_FILE_SUFFIXES = (".yaml", ".yml")
+_MAX_FILE_BYTES = 50_000_000
+
+
+# -- schema -------------------------------------------------------------------------------
+
+def _keep_text(value: Any, handler: Callable[[Any], float]) -> float:
+    out = handler(value)
+    if isinstance(value, TextFloat) and out == float(value):
+        return TextFloat(out, value.text)
+    return out
+
+
+Num = StrictFloat
+#: An angle in degrees; remembers its text for the exact conversion (:func:`deg_to_rad`).
+Deg = Annotated[StrictFloat, WrapValidator(_keep_text)]
+Vec3 = tuple[Num, Num, Num]
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, frozen=True)
+
+
+class LegSpec(_Model):
+    """One leg: base joint b_i in {F}, platform joint a_i in {P}, offset L0_i, stroke (mm)."""
+
+    base: Vec3
+    platform: Vec3
+    offset: Num
+    stroke: tuple[Num, Num]
+    base_axis: Vec3 | None = None
+    platform_axis: Vec3 | None = None
+
+    @field_validator("offset")
+    @classmethod
+    def _positive_offset(cls, v: float) -> float:
+        if not v > 0:
+            raise ValueError(f"{v!r} mm is not a leg offset: L0 is the leg length at reading 0, give a positive length")
+        return v
+
+    @field_validator("stroke")
+    @classmethod
+    def _ordered_stroke(cls, v: tuple[float, float]) -> tuple[float, float]:
+        if v[1] < v[0]:
+            raise ValueError(f"[{v[0]!r}, {v[1]!r}] has max < min; write it as [min, max]")
+        return v
+
+    @field_validator("base_axis", "platform_axis")
+    @classmethod
+    def _nonzero_axis(cls, v):
+        if v is not None and not np.linalg.norm(v) > 1e-12:
+            raise ValueError("a joint axis cannot be the zero vector; give its direction, e.g. [0, 0, 1]")
+        return v
+
+
+class LimitsSpec(_Model):
+    """Joint tilt limits (degrees), leg diameter (mm) for the collision check, singularity margin."""
+
+    u_joint_tilt: Deg | None = None
+    s_joint_tilt: Deg | None = None
+    leg_diameter: Num | None = None
+    singularity_margin: Num = 0.01
+
+    @field_validator("u_joint_tilt", "s_joint_tilt")
+    @classmethod
+    def _tilt(cls, v):
+        if v is not None and not 0 < v <= 180:
+            raise ValueError(f"{float(v)!r}° is not a joint tilt limit: give an angle in (0, 180] degrees, or remove the key")
+        return v
+
+    @field_validator("leg_diameter")
+    @classmethod
+    def _diameter(cls, v):
+        if v is not None and v < 0:
+            raise ValueError(f"{v!r} mm: a leg diameter cannot be negative")
+        return v
+
+    @field_validator("singularity_margin")
+    @classmethod
+    def _margin(cls, v):
+        if not 0 <= v < 1:
+            raise ValueError(f"{v!r} is not an inverse condition number margin: give a number in [0, 1)")
+        return v
+
+
+class PoseSpec(_Model):
+    """A pose: x, y, z (mm), a, b, c (degrees)."""
+
+    x: Num
+    y: Num
+    z: Num
+    a: Deg
+    b: Deg
+    c: Deg
+
+
+def _ordered(v):
+    if v[1] < v[0]:
+        raise ValueError(f"[{float(v[0])!r}, {float(v[1])!r}] has max < min; write it as [min, max]")
+    return v
+
+
+Range = Annotated[tuple[Num, Num], WrapValidator(lambda v, h: _ordered(h(v)))]
+DegRange = Annotated[tuple[Deg, Deg], WrapValidator(lambda v, h: _ordered(h(v)))]
+
+
+class WorkspaceSpec(_Model):
+    """A box [min, max] per pose coordinate (mm, degrees)."""
+
+    x: Range
+    y: Range
+    z: Range
+    a: DegRange
+    b: DegRange
+    c: DegRange
+
+
+class UncertaintySpec(_Model):
+    """Parameter uncertainty: σ by name (mm), correlation in ``parameters`` order, and
+    optionally the exact covariance (mm²) that pkmcal writes alongside them."""
+
+    parameters: list[StrictStr] | None = None
+    std: dict[StrictStr, Num]
+    correlation: list[list[Num]] | None = None
+    covariance: list[list[Num]] | None = None
+
+
+class HexapodFile(_Model):
+    """The ``kind: hexapod`` machine file."""
+
+    kind: Literal["hexapod"] = "hexapod"
+    name: StrictStr | None = None
+    description: StrictStr = ""
+    legs: list[LegSpec]
+    limits: LimitsSpec = LimitsSpec()
+    home: PoseSpec | None = None
+    workspace: WorkspaceSpec | None = None
+    uncertainty: UncertaintySpec | None = None
+    calibration: dict[StrictStr, Any] | None = None
+    metadata: dict[StrictStr, Any] | None = None
+
+    @field_validator("legs", mode="before")
+    @classmethod
+    def _six_legs(cls, v):
+        if isinstance(v, list) and len(v) != N_LEGS:
+            raise ValueError(f"{len(v)} legs given, a hexapod needs exactly {N_LEGS}; "
+                             f"list one entry per leg, legs 1 to {N_LEGS} in order")
+        return v
+
+
+_ALLOWED_KEYS: dict[str, tuple[str, ...]] = {
+    "": tuple(HexapodFile.model_fields),
+    "legs": tuple(LegSpec.model_fields),
+    "limits": tuple(LimitsSpec.model_fields),
+    "home": tuple(PoseSpec.model_fields),
+    "workspace": tuple(WorkspaceSpec.model_fields),
+    "uncertainty": tuple(UncertaintySpec.model_fields),
+}
+_EXPECTED_SHAPE = {
+    "base": "3 numbers [x, y, z] (mm)", "platform": "3 numbers [x, y, z] (mm)",
+    "base_axis": "3 numbers [x, y, z]", "platform_axis": "3 numbers [x, y, z]",
+    "stroke": "2 numbers [min, max] (mm)",
+    "x": "2 numbers [min, max]", "y": "2 numbers [min, max]", "z": "2 numbers [min, max]",
+    "a": "2 numbers [min, max]", "b": "2 numbers [min, max]", "c": "2 numbers [min, max]",
+}
+
+
+# -- errors -------------------------------------------------------------------------------
+
+def _key_path(loc: tuple) -> str:
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        elif isinstance(part, str) and part.replace("_", "").isalnum():
+            out += ("." if out else "") + part
+        else:
+            out += f"[{part!r}]"
+    if len(loc) >= 2 and loc[0] == "legs" and isinstance(loc[1], int):
+        out += f" (leg {loc[1] + 1})"
+    return out or "top level"
+
+
+def _line_of(loc: tuple, lines: dict[tuple, int]) -> int | None:
+    for k in range(len(loc), -1, -1):
+        if tuple(loc[:k]) in lines:
+            return lines[tuple(loc[:k])]
+    return None
+
+
+def _show(value: Any) -> str:
+    text = repr(plain(value))
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _describe(err: dict) -> tuple[tuple, str]:
+    """``(loc, message)`` of one pydantic error, in the file's words."""
+    loc = tuple(p for p in err["loc"] if not (isinstance(p, str) and p.startswith("function-")))
+    kind, value = err["type"], err.get("input")
+    field_name = next((p for p in reversed(loc) if isinstance(p, str)), "")
+    section = "legs" if len(loc) >= 2 and loc[0] == "legs" else (loc[0] if loc else "")
+    if kind == "missing" and loc and isinstance(loc[-1], int):  # a tuple that is too short
+        want = _EXPECTED_SHAPE.get(str(field_name), "more items")
+        return loc[:-1], f"expected {want}, got {loc[-1]} item{'s' if loc[-1] != 1 else ''}"
+    if kind == "missing":
+        return loc[:-1], f"missing key '{loc[-1]}'; add it (see docs/file-formats.md)"
+    if kind == "extra_forbidden":
+        allowed = _ALLOWED_KEYS.get(str(section) if len(loc) > 1 else "", ())
+        close = difflib.get_close_matches(str(loc[-1]), allowed, n=1)
+        hint = f"did you mean '{close[0]}'? " if close else ""
+        return loc, f"unknown key {loc[-1]!r}; {hint}allowed keys here: {', '.join(allowed)}"
+    if kind in ("float_type", "float_parsing"):
+        return loc, f"expected a number, got {_show(value)}"
+    if kind == "finite_number":
+        return loc, f"expected a finite number, got {_show(value)}"
+    if kind in ("too_short", "too_long"):
+        n = (err.get("ctx") or {}).get("actual_length")
+        want = _EXPECTED_SHAPE.get(str(field_name), "a different number of items")
+        return loc, f"expected {want}, got {n} item{'s' if n != 1 else ''}"
+    if kind in ("tuple_type", "list_type"):
+        want = _EXPECTED_SHAPE.get(str(field_name), "a list")
+        return loc, f"expected a list of {want}, got {_show(value)}" if field_name in _EXPECTED_SHAPE \
+            else f"expected a list, got {_show(value)}"
+    if kind in ("model_type", "dict_type", "model_attributes_type"):
+        return loc, f"expected a mapping of 'key: value' lines, got {_show(value)}"
+    if kind == "string_type":
+        return loc, f"expected text, got {_show(value)}; quote it if it looks like a number"
+    if kind == "literal_error":
+        return loc, f"{_show(value)} is not a known machine kind; known kinds: {', '.join(_KINDS)}"
+    if kind == "value_error":
+        return loc, err["msg"].removeprefix("Value error, ")
+    return loc, f"{err['msg']} (got {_show(value)})"
+
+
+def _validation_error(path: object, exc: ValidationError, lines: dict[tuple, int]) -> InputFileError:
+    errors = exc.errors(include_url=False)
+    # Report the outermost problem first (e.g. the leg count before a leg's contents).
+    errors.sort(key=lambda e: len(e["loc"]))
+    loc, message = _describe(errors[0])
+    more = f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''})" if len(errors) > 1 else ""
+    return InputFileError(path, f"{_key_path(loc)}: {message}{more}", line=_line_of(loc, lines))
+
+
+# -- hexapod <-> file ---------------------------------------------------------------------
+
+def _covariance_from_spec(path: object, spec: UncertaintySpec, lines: dict[tuple, int]) -> np.ndarray:
+    def fail(loc: tuple, message: str) -> InputFileError:
+        return InputFileError(path, f"{_key_path(('uncertainty',) + loc)}: {message}",
+                              line=_line_of(("uncertainty",) + loc, lines))
+
+    names = list(spec.parameters) if spec.parameters is not None else list(spec.std)
+    for i, name in enumerate(names):
+        if name not in HEXAPOD_PARAM_NAMES:
+            close = difflib.get_close_matches(name, HEXAPOD_PARAM_NAMES, n=1)
+            hint = f" (did you mean '{close[0]}'?)" if close else ""
+            raise fail(("parameters", i) if spec.parameters is not None else ("std", name),
+                       f"unknown parameter {name!r}{hint}; hexapod parameters are b1.x, b1.y, b1.z, "
+                       "a1.x, a1.y, a1.z, L0_1, ..., L0_6")
+        if name in names[:i]:
+            raise fail(("parameters", i), f"parameter {name!r} is listed twice")
+    if set(spec.std) != set(names):
+        missing = [n for n in names if n not in spec.std]
+        extra = [n for n in spec.std if n not in names]
+        what = (f"no standard deviation for {', '.join(missing)}" if missing
+                else f"{', '.join(extra)} not in 'parameters'")
+        raise fail(("std",), f"{what}; give one std per entry of 'parameters'")
+    std = np.array([spec.std[n] for n in names], dtype=float)
+    if np.any(std < 0):
+        bad = names[int(np.argmax(std < 0))]
+        raise fail(("std", bad), "a standard deviation cannot be negative")
+    n = len(names)
+
+    def square(key: str, rows: list[list[float]] | None) -> np.ndarray | None:
+        if rows is None:
+            return None
+        if len(rows) != n:
+            raise fail((key,), f"{len(rows)} rows, need {n} (one per parameter, in 'parameters' order)")
+        for i, row in enumerate(rows):
+            if len(row) != n:
+                raise fail((key, i), f"{len(row)} numbers, need {n} (one per parameter)")
+        return np.array(rows, dtype=float).reshape(n, n)
+
+    full = np.zeros((len(HEXAPOD_PARAM_NAMES),) * 2)
+    if n == 0:
+        return full
+    corr = square("correlation", spec.correlation)
+    cov = square("covariance", spec.covariance)
+    if corr is not None:
+        if not np.allclose(corr, corr.T, rtol=0, atol=1e-12):
+            i, j = np.unravel_index(np.argmax(np.abs(corr - corr.T)), corr.shape)
+            raise fail(("correlation", int(i), int(j)), "the correlation matrix is not symmetric")
+        if not np.allclose(np.diag(corr), 1.0, rtol=0, atol=1e-12) or np.any(np.abs(corr) > 1 + 1e-12):
+            raise fail(("correlation",), "correlations must lie in [-1, 1] with ones on the diagonal")
+    if cov is not None:
+        scale = max(float(np.max(np.abs(cov))), 1e-300)
+        if not np.allclose(cov, cov.T, rtol=0, atol=1e-12 * scale):
+            raise fail(("covariance",), "the covariance matrix is not symmetric")
+        s_cov = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        if np.any(np.diag(cov) < 0) or not np.allclose(s_cov, std, rtol=1e-9, atol=1e-300):
+            raise fail(("std",), "disagrees with the square roots of the covariance diagonal; "
+                                 "delete 'covariance' to rebuild it from std and correlation")
+        if corr is not None:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                implied = cov / np.outer(s_cov, s_cov)
+            ok = np.outer(s_cov, s_cov) > 0
+            if not np.allclose(implied[ok], corr[ok], rtol=0, atol=1e-9):
+                raise fail(("correlation",), "disagrees with 'covariance'; delete 'covariance' to rebuild "
+                                             "it from std and correlation")
+    else:
+        corr = np.eye(n) if corr is None else corr
+        cov = std[:, None] * corr * std[None, :]
+    scale = float(np.max(np.diag(cov))) if n else 0.0
+    if n and not np.all(np.isfinite(cov)):
+        raise fail(("std",), "the covariance overflows; give standard deviations in mm")
+    if n and scale > 0 and np.min(np.linalg.eigvalsh((cov + cov.T) / 2)) < -1e-9 * scale:
+        raise fail(("correlation",), "the covariance is not positive semi-definite; check the correlations")
+    idx = np.array([HEXAPOD_PARAM_NAMES.index(n_) for n_ in names], dtype=int)
+    full[np.ix_(idx, idx)] = cov
+    return full
+
+
+def _hexapod_from_file(path: object, data: dict, lines: dict[tuple, int]) -> Hexapod:
+    try:
+        spec = HexapodFile.model_validate(data)
+    except ValidationError as exc:
+        raise _validation_error(path, exc, lines) from None
+    legs = spec.legs
+    lim = spec.limits
+    rad = lambda v: None if v is None else deg_to_rad(v)  # noqa: E731
+    limits = HexapodLimits(u_joint_tilt=rad(lim.u_joint_tilt), s_joint_tilt=rad(lim.s_joint_tilt),
+                           leg_diameter=lim.leg_diameter, singularity_margin=lim.singularity_margin)
+    home = None
+    if spec.home is not None:
+        h = spec.home
+        home = np.array([h.x, h.y, h.z, deg_to_rad(h.a), deg_to_rad(h.b), deg_to_rad(h.c)])
+    workspace = None
+    if spec.workspace is not None:
+        w = spec.workspace
+        workspace = np.array([list(w.x), list(w.y), list(w.z),
+                              [deg_to_rad(v) for v in w.a], [deg_to_rad(v) for v in w.b],
+                              [deg_to_rad(v) for v in w.c]], dtype=float)
+    covariance = None if spec.uncertainty is None else _covariance_from_spec(path, spec.uncertainty, lines)
+    metadata: dict = {}
+    if spec.metadata:
+        metadata.update(plain(spec.metadata))
+    if spec.calibration is not None:
+        metadata["calibration"] = plain(spec.calibration)
+    axes = lambda key: (None if all(getattr(l, key) is None for l in legs)  # noqa: E731,E741
+                        else [getattr(l, key) or (0.0, 0.0, 1.0) for l in legs])
+    name = spec.name if spec.name is not None else Path(str(path)).stem
+    try:
+        machine = Hexapod(
+            name=name,
+            base=[l.base for l in legs],  # noqa: E741
+            platform=[l.platform for l in legs],  # noqa: E741
+            offset=[l.offset for l in legs],  # noqa: E741
+            stroke=[l.stroke for l in legs],  # noqa: E741
+            base_axis=axes("base_axis"),
+            platform_axis=axes("platform_axis"),
+            limits=limits,
+            home=home,
+            workspace=workspace,
+            covariance=covariance,
+            description=spec.description,
+            metadata=metadata,
+        )
+    except PkmcalError as exc:
+        raise InputFileError(path, str(exc)) from None
+    if not np.all(np.isfinite(machine.home)):
+        raise InputFileError(path, "legs: the joints and offsets give no finite home pose; check the "
+                                   "numbers or give 'home: {x, y, z, a, b, c}'", line=_line_of(("legs",), lines))
+    return machine
+
+
+def _unnormalised(axis: np.ndarray) -> list[float]:
+    """A vector w with ``w / ‖w‖ == axis`` bit for bit, so the Hexapod's normalisation on load
+    reproduces ``axis`` exactly (normalising a unit vector again can move it by an ulp).
+    Candidates: ``axis`` scaled by 1 + k/4096 and moved by up to one ulp per component,
+    normalised exactly as :class:`Hexapod` does (``norm(..., axis=1)``)."""
+    axis = np.asarray(axis, dtype=float)
+    steps = np.array(np.meshgrid(*[[0, -1, 1]] * 3, indexing="ij")).reshape(3, -1).T  # (27, 3), 0 first
+    for lo, hi in ((0, 1), (1, 64), (64, 4096)):  # cheap candidates first
+        scaled = axis[None, :] * (1.0 + np.arange(lo, hi) / 4096.0)[:, None]
+        up, down = np.nextafter(scaled, np.inf), np.nextafter(scaled, -np.inf)
+        cand = np.where(steps[None] == 1, up[:, None], np.where(steps[None] == -1, down[:, None], scaled[:, None]))
+        cand = cand.reshape(-1, 3)
+        normalised = cand / np.linalg.norm(cand, axis=1)[:, None]
+        hits = np.flatnonzero(np.all(normalised == axis[None, :], axis=1))
+        if len(hits):
+            return [float(v) for v in cand[hits[0]]]
+    return [float(v) for v in axis]
+
+
+def _floats(values) -> FlowList:
+    return FlowList(float(v) for v in np.asarray(values, dtype=float).ravel())
+
+
+def _degs(values) -> FlowList:
+    return FlowList(RawFloat(rad_to_deg_text(v)) for v in np.asarray(values, dtype=float).ravel())
+
+
+def _hexapod_to_file(m: Hexapod) -> dict:
+    z = np.array([0.0, 0.0, 1.0])
+    out: dict[str, Any] = {"kind": "hexapod", "name": m.name}
+    if m.description:
+        out["description"] = m.description
+    legs = []
+    for i in range(N_LEGS):
+        leg: dict[str, Any] = {"base": _floats(m.base[i]), "platform": _floats(m.platform[i]),
+                               "offset": float(m.offset[i]), "stroke": _floats(m.stroke[i])}
+        for key in ("base_axis", "platform_axis"):
+            axis = getattr(m, key)[i]
+            if not np.array_equal(axis, z):
+                leg[key] = FlowList(_unnormalised(axis))
+        legs.append(leg)
+    out["legs"] = legs
+    lim = m.limits
+    limits: dict[str, Any] = {}
+    if lim.u_joint_tilt is not None:
+        limits["u_joint_tilt"] = RawFloat(rad_to_deg_text(lim.u_joint_tilt))
+    if lim.s_joint_tilt is not None:
+        limits["s_joint_tilt"] = RawFloat(rad_to_deg_text(lim.s_joint_tilt))
+    if lim.leg_diameter is not None:
+        limits["leg_diameter"] = float(lim.leg_diameter)
+    limits["singularity_margin"] = float(lim.singularity_margin)
+    out["limits"] = limits
+    default_home = Hexapod(name=m.name, base=m.base, platform=m.platform, offset=m.offset, stroke=m.stroke).home
+    if not np.array_equal(m.home, default_home):
+        out["home"] = {k: float(v) for k, v in zip("xyz", m.home[:3])}
+        out["home"].update({k: RawFloat(rad_to_deg_text(v)) for k, v in zip("abc", m.home[3:])})
+    if m.workspace is not None:
+        ws = {k: _floats(m.workspace[i]) for i, k in enumerate("xyz")}
+        ws.update({k: _degs(m.workspace[3 + i]) for i, k in enumerate("abc")})
+        out["workspace"] = ws
+    if m.covariance is not None:
+        cov = np.asarray(m.covariance)
+        used = [i for i in range(cov.shape[0]) if np.any(cov[i] != 0) or np.any(cov[:, i] != 0)]
+        sub = cov[np.ix_(used, used)]
+        std = np.sqrt(np.maximum(np.diag(sub), 0.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            corr = np.where(np.outer(std, std) > 0, sub / np.outer(std, std), 0.0)
+        np.fill_diagonal(corr, 1.0)
+        names = [HEXAPOD_PARAM_NAMES[i] for i in used]
+        out["uncertainty"] = {
+            "parameters": FlowList(names),
+            "std": {n: float(s) for n, s in zip(names, std)},
+            "correlation": [_floats(row) for row in corr],
+            "covariance": [_floats(row) for row in sub],
+        }
+    meta = dict(m.metadata)
+    if "calibration" in meta:
+        out["calibration"] = meta.pop("calibration")
+    if meta:
+        out["metadata"] = meta
+    return out
+
+
+#: Machine kinds: kind → (file data → machine, machine class, machine → file data).
+_KINDS: dict[str, tuple[Callable[[object, dict, dict], Mechanism], type, Callable[[Any], dict]]] = {
+    "hexapod": (_hexapod_from_file, Hexapod, _hexapod_to_file),
+}
+
+
+# -- public API ---------------------------------------------------------------------------
+
+def register_machine_kind(kind: str, reader: Callable[[object, dict, dict], Mechanism], cls: type,
+                          writer: Callable[[Any], dict]) -> None:
+    """Add a machine file ``kind``: ``reader(source, data, lines)`` builds the machine from the
+    parsed YAML mapping (``lines`` maps key paths to line numbers, for error messages) and
+    raises :class:`InputFileError`; ``writer(machine)`` returns the mapping to write for
+    machines of class ``cls`` (floats exact; see :mod:`pkmcal.io._yaml`)."""
+    _KINDS[kind] = (reader, cls, writer)
+
+
+def machine_from_text(text: str, source: object = "<machine file>") -> Mechanism:
+    """The machine described by YAML ``text``; errors name ``source`` as the file."""
+    try:
+        data, lines = parse_yaml(text)
+    except YamlSyntaxError as exc:
+        raise InputFileError(source, f"{exc}; fix the YAML syntax", line=exc.line) from None
+    if data is None:
+        raise InputFileError(source, "the file is empty; a machine file needs at least 'name:' and 'legs:' "
+                                     "(see docs/file-formats.md)")
+    if not isinstance(data, dict):
+        raise InputFileError(source, f"expected a mapping of 'key: value' lines (name:, legs:, ...), "
+                                     f"got a {type(data).__name__}", line=lines.get(()))
+    kind = data.get("kind", "hexapod")
+    if not isinstance(kind, str) or kind not in _KINDS:
+        raise InputFileError(source, f"kind: {_show(kind)} is not a known machine kind; known kinds: "
+                                     f"{', '.join(_KINDS)}", line=lines.get(("kind",)))
+    return _KINDS[kind][0](source, data, lines)
+
+
+def read_machine_file(path: str | os.PathLike) -> Mechanism:
+    """The machine in the YAML file ``path``; :class:`InputFileError` when it cannot be used."""
+    try:
+        with open(path, "rb") as fh:
+            raw = fh.read(_MAX_FILE_BYTES + 1)
+    except OSError as exc:
+        raise InputFileError(path, f"cannot read the machine file: {exc.strerror or exc}") from None
+    if len(raw) > _MAX_FILE_BYTES:
+        raise InputFileError(path, f"larger than {_MAX_FILE_BYTES // 1_000_000} MB: not a machine file")
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise InputFileError(path, f"not a UTF-8 text file (byte {exc.start}); save it as UTF-8 YAML") from None
+    return machine_from_text(text, path)
+
+
+def load_machine(spec: str | os.PathLike) -> Mechanism:
+    """A machine by built-in name (``stewart-prototype``, ``symmetric:...``; see
+    ``pkmcal machines``) or by the path of a YAML machine file. An existing file wins over
+    a built-in of the same name."""
+    text = os.fspath(spec)
+    if os.path.exists(text):
+        return read_machine_file(text)
+    if is_builtin_name(text):
+        return builtin_machine(text)
+    if text.lower().endswith(MACHINE_FILE_SUFFIXES) or os.sep in text or "/" in text:
+        raise InputFileError(text, "no such machine file; check the path (or run 'pkmcal machines' for "
+                                   "the built-in machines)")
+    return builtin_machine(text)  # raises: unknown machine, listing the built-in names
+
+
+def machine_to_text(machine: Mechanism) -> str:
+    """The YAML text of ``machine`` (deterministic; exact floats; angles in degrees)."""
+    for kind, (_, cls, writer) in _KINDS.items():
+        if isinstance(machine, cls):
+            body = dump_yaml(writer(machine))
+            return f"# pkmcal machine file (kind: {kind}); lengths in mm, angles in degrees\n{body}"
+    raise PkmcalError(f"cannot save machine '{machine.name}': no file format for {type(machine).__name__}")
+
+
+def save_machine(machine: Mechanism, path: str | os.PathLike) -> None:
+    """Write ``machine`` to the YAML file ``path`` atomically.
+
+    Before writing, the text is loaded back and compared with ``machine`` (``==`` and the
+    metadata); a machine whose file would not load (e.g. a covariance that is not positive
+    semi-definite) raises :class:`PkmcalError` and nothing is written.
+    """
+    try:
+        text = machine_to_text(machine)
+    except yaml.YAMLError as exc:
+        raise PkmcalError(f"cannot save machine '{machine.name}': its metadata holds a value YAML cannot "
+                          f"store ({exc}); use text, numbers, lists and mappings") from None
+    try:
+        back = machine_from_text(text, path)
+    except InputFileError as exc:
+        raise PkmcalError(f"cannot save machine '{machine.name}': {exc}") from None
+    if back != machine:
+        raise RuntimeError(f"machine file of '{machine.name}' does not load back to the same machine")
+    if getattr(back, "metadata", {}) != getattr(machine, "metadata", {}):
+        raise PkmcalError(f"cannot save machine '{machine.name}': its metadata does not survive YAML "
+                          "unchanged; use text, numbers, lists and mappings with text keys")
+    atomic_write_text(path, text)
+
+
+__all__ = [
+    "HexapodFile",
+    "load_machine",
+    "machine_from_text",
+    "machine_to_text",
+    "read_machine_file",
+    "register_machine_kind",
+    "save_machine",
+]

@@ -1,0 +1,201 @@
+"""Measurement files (CSV): one row per measured pose.
+
+Columns (names case-insensitive, aliases and ``# units:`` line as in :mod:`pkmcal.io.tables`;
+extra columns are ignored):
+
+* actuators: ``lambda1..lambda6`` (actuator readings λ_i, mm), or ``l1..l6`` (leg lengths
+  L_i, mm), converted to readings with the machine's leg offsets, λ_i = L_i − L0_i
+  (paper 2 eq. 2);
+* the sensor's readings: ``x,y,z,a,b,c`` (full-pose; mm, degrees), ``px,py,pz``
+  (position; mm) or ``d1..dK`` (indicators; mm);
+* optional commanded pose ``cmd_x..cmd_c`` (mm, degrees).
+
+Inside, angles are radians (:mod:`pkmcal.conventions`). Files are written with a units
+line, the header and every float as its shortest round-trip text, so the same data always
+give the same bytes, atomically.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from pkmcal.conventions import POSE_COLUMNS
+from pkmcal.errors import InputFileError, PkmcalError
+from pkmcal.io.tables import DEFAULT_ALIASES, canonical_name, read_table, write_table
+from pkmcal.mechanisms.base import Mechanism
+from pkmcal.sensors.base import MeasurementSetup
+
+#: Commanded-pose columns of a 6-DOF machine (in general ``cmd_`` + the machine's pose names).
+COMMAND_COLUMNS = tuple(f"cmd_{c}" for c in POSE_COLUMNS)
+
+
+def command_columns(machine: Mechanism) -> tuple[str, ...]:
+    return tuple(f"cmd_{c}" for c in machine.pose_names)
+
+
+@dataclass(frozen=True)
+class Measurements:
+    """Measured poses, internal units (mm, rad).
+
+    ``actuators`` (N, l) actuator readings; ``readings`` (N, m) sensor readings;
+    ``commanded`` (N, n) commanded poses or None; ``source`` the file they came from (None
+    when simulated); ``lines`` (N,) 1-based line of each row in ``source`` (None if not read);
+    ``notes`` what the loader did that the user should know (e.g. leg lengths converted).
+    """
+
+    actuators: np.ndarray
+    readings: np.ndarray
+    commanded: np.ndarray | None = None
+    source: str | None = None
+    lines: np.ndarray | None = None
+    notes: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        a = np.asarray(self.actuators, dtype=float)
+        r = np.asarray(self.readings, dtype=float)
+        if a.ndim != 2 or r.ndim != 2 or a.shape[0] != r.shape[0]:
+            raise PkmcalError(f"measurements need actuator readings (N, l) and sensor readings (N, m) with the same N; "
+                              f"got shapes {a.shape} and {r.shape}")
+        object.__setattr__(self, "actuators", a)
+        object.__setattr__(self, "readings", r)
+        if self.commanded is not None:
+            c = np.asarray(self.commanded, dtype=float)
+            if c.ndim != 2 or c.shape[0] != a.shape[0]:
+                raise PkmcalError(f"commanded poses must have shape ({a.shape[0]}, n); got {c.shape}")
+            object.__setattr__(self, "commanded", c)
+
+    def __len__(self) -> int:
+        return self.actuators.shape[0]
+
+    def where(self, k: int) -> str:
+        """Where pose ``k`` (0-based) comes from, for error messages: 'file, line 12' or 'pose 3'."""
+        if self.source is not None and self.lines is not None:
+            return f"{self.source}, line {int(self.lines[k])}"
+        return f"pose {k + 1}"
+
+
+def _kinds(names, is_angle) -> dict[str, str]:
+    return {n: ("angle" if a else "length") for n, a in zip(names, is_angle)}
+
+
+def _leg_offsets(machine: Mechanism, path) -> np.ndarray:
+    offset = getattr(machine, "offset", None)
+    if offset is None:
+        raise InputFileError(path, f"has leg lengths l1.. but machine '{machine.name}' has no leg offsets; "
+                                   f"give the actuator readings {machine.actuator_names[0]}.. instead")
+    return np.asarray(offset, dtype=float)
+
+
+def load_measurements(path: str | os.PathLike, machine: Mechanism, setup: MeasurementSetup) -> Measurements:
+    """Read a measurement CSV for ``machine`` measured with ``setup`` (see module docstring).
+
+    Raises :class:`~pkmcal.errors.InputFileError` naming the file, the missing columns and
+    what the setup expects, or the line and column of a bad cell.
+    """
+    src = os.fspath(path)
+    sensor = setup.sensor
+    act = tuple(machine.actuator_names)
+    legs = tuple(f"l{i + 1}" for i in range(machine.n_actuators))
+    reading_cols = tuple(sensor.reading_names)
+    cmd_cols = command_columns(machine)
+    kinds = {**_kinds(act, (False,) * len(act)), **_kinds(legs, (False,) * len(legs)),
+             **_kinds(reading_cols, sensor.reading_is_angle),
+             **_kinds(cmd_cols, machine.pose_is_angle)}
+    try:
+        with open(src, "rb") as fh:
+            text = fh.read().decode("utf-8-sig")
+    except OSError as exc:
+        raise InputFileError(src, f"cannot read the measurement file: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise InputFileError(src, f"not a UTF-8 text file (byte {exc.start}); save it as UTF-8 CSV") from None
+    header = _header(text)
+    with_cmd = [c for c in cmd_cols if c in header]
+    if with_cmd and len(with_cmd) != len(cmd_cols):
+        missing = [c for c in cmd_cols if c not in header]
+        raise InputFileError(src, f"has commanded-pose columns {', '.join(with_cmd)} but not {', '.join(missing)}; "
+                                  f"give all of {', '.join(cmd_cols)} (mm, deg) or none")
+    columns = reading_cols + (cmd_cols if with_cmd else ())
+    try:
+        table = read_table(src, columns, either=[act, legs], kinds=kinds, text=text)
+    except InputFileError as exc:
+        if "missing column" in str(exc):
+            where = f"{exc.path}" + (f", line {exc.line}" if exc.line is not None else "") + ": "
+            raise InputFileError(
+                src, str(exc)[len(where):] + "; "
+                f"the '{sensor.kind}' setup expects columns {', '.join(reading_cols)} "
+                f"({_units(sensor)}) and {act[0]}..{act[-1]} (actuator readings, mm) or "
+                f"{legs[0]}..{legs[-1]} (leg lengths, mm), optionally cmd_x..cmd_c",
+                line=exc.line) from None
+        raise
+    readings = table[list(reading_cols)]
+    ang = np.array(sensor.reading_is_angle, dtype=bool)
+    readings[:, ang] = np.deg2rad(readings[:, ang])
+    notes: tuple[str, ...] = ()
+    if all(c in table.columns for c in act):
+        actuators = table[list(act)]
+    else:
+        actuators = table[list(legs)] - _leg_offsets(machine, src)
+        notes = (f"{src}: columns {legs[0]}..{legs[-1]} are leg lengths; converted to actuator readings "
+                 f"lambda_i = l_i - L0_i with the leg offsets of machine '{machine.name}'",)
+    commanded = None
+    if with_cmd:
+        commanded = table[list(cmd_cols)]
+        ang = np.array(machine.pose_is_angle, dtype=bool)
+        commanded[:, ang] = np.deg2rad(commanded[:, ang])
+    return Measurements(actuators=actuators, readings=readings, commanded=commanded, source=src, lines=table.lines,
+                        notes=notes)
+
+
+def _units(sensor) -> str:
+    if any(sensor.reading_is_angle):
+        return "mm and degrees"
+    return "mm"
+
+
+def _header(text: str) -> set[str]:
+    """Canonical names of the header row (first non-blank, non-comment line)."""
+    for line in text.splitlines():
+        s = line.strip()
+        if s and not s.startswith("#"):
+            return {canonical_name(c.strip().strip('"'), DEFAULT_ALIASES) for c in s.split(",")}
+    return set()
+
+
+def measurement_columns(measurements: Measurements, machine: Mechanism, setup: MeasurementSetup) -> dict:
+    """The columns of a measurement file (file units: mm, degrees), in order."""
+    sensor = setup.sensor
+    if measurements.actuators.shape[1] != machine.n_actuators:
+        raise PkmcalError(f"{measurements.actuators.shape[1]} actuator readings per pose, but machine "
+                          f"'{machine.name}' has {machine.n_actuators} actuators")
+    if measurements.readings.shape[1] != sensor.n_readings:
+        raise PkmcalError(f"{measurements.readings.shape[1]} sensor readings per pose, but the '{sensor.kind}' "
+                          f"sensor gives {sensor.n_readings}")
+    cols: dict[str, np.ndarray] = {}
+    for j, name in enumerate(machine.actuator_names):
+        cols[name] = measurements.actuators[:, j]
+    for j, (name, ang) in enumerate(zip(sensor.reading_names, sensor.reading_is_angle)):
+        v = measurements.readings[:, j]
+        cols[name] = np.rad2deg(v) if ang else v
+    if measurements.commanded is not None:
+        if measurements.commanded.shape[1] != machine.n_dof:
+            raise PkmcalError(f"commanded poses have {measurements.commanded.shape[1]} coordinates, but machine "
+                              f"'{machine.name}' has {machine.n_dof}")
+        for j, (name, ang) in enumerate(zip(command_columns(machine), machine.pose_is_angle)):
+            v = measurements.commanded[:, j]
+            cols[name] = np.rad2deg(v) if ang else v
+    return cols
+
+
+def save_measurements(
+    path: str | os.PathLike,
+    measurements: Measurements,
+    machine: Mechanism,
+    setup: MeasurementSetup,
+    comments: tuple[str, ...] = (),
+) -> None:
+    """Write ``measurements`` as a measurement CSV (atomic, deterministic bytes, full precision)."""
+    write_table(path, measurement_columns(measurements, machine, setup),
+                comments=(f"pkmcal measurements: machine {machine.name}, sensor {setup.sensor.kind}",) + tuple(comments))

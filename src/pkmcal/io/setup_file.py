@@ -1,0 +1,400 @@
+"""Measurement setup files (YAML): which sensor, where it is, and how noisy everything is.
+
+A setup file describes a :class:`~pkmcal.sensors.base.MeasurementSetup`. Lengths in mm,
+angles of transforms in degrees; noise values are standard deviations, or half-widths
+with ``distribution: uniform`` (converted to std = h/√3, the std of U(−h, h)).
+
+Dial indicators (paper 2 §2.3, eqs. 4–6)::
+
+    sensor: indicators
+    indicators: [[40, 0], [-20, 34.641], [-20, -34.641]]   # x, y in the base frame, mm
+    plane_offset: 10.0            # platform origin above its lower plane, mm
+    zero: [0, 0, 0]               # optional indicator zero offsets, mm
+    free: [zero1, zero2, zero3]   # optional: sensor parameters to estimate
+    noise: {reading: 0.01, actuator: 0.005}               # std, mm
+
+Full pose (paper 1 §III), with optional world→base and platform→target transforms::
+
+    sensor: full-pose
+    world: {x: 0, y: 0, z: 0, a: 0, b: 0, c: 0}    # pose of the base in the sensor frame, mm/deg
+    tool: {x: 0, y: 0, z: 25}                      # target frame on the platform, mm/deg
+    noise: {distribution: uniform, position: 0.025, orientation: 0.001, actuator: 0.01}
+
+``orientation`` is in radians (``orientation_deg`` in degrees); ``reading``, ``position``,
+``orientation`` and ``actuator`` take one value or one per reading/actuator. A 3D tracker::
+
+    sensor: position
+    target: {x: 0, y: 0, z: 30}   # initial target offset on the platform, mm (free by default)
+    noise: {reading: 0.01, actuator: 0.005}
+
+Built-in setups (:data:`BUILTIN_SETUPS`) are usable by name wherever a setup file is.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import Literal, Union
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, ValidationError, field_validator
+
+from pkmcal.errors import InputFileError, PkmcalError
+from pkmcal.io._yaml import FlowList, RawFloat, YamlSyntaxError, deg_to_rad, dump_yaml, parse_yaml, rad_to_deg_text
+from pkmcal.io.atomic import atomic_write_text
+from pkmcal.sensors import FullPoseSensor, IndicatorSensor, MeasurementSetup, NoiseModel, PositionSensor
+
+Number = float
+Values = Union[float, list[float]]
+SQRT3 = math.sqrt(3.0)
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class _Transform(_Strict):
+    """A pose x, y, z (mm), a, b, c (degrees); missing coordinates are 0."""
+
+    x: Number = 0.0
+    y: Number = 0.0
+    z: Number = 0.0
+    a: Number = 0.0
+    b: Number = 0.0
+    c: Number = 0.0
+
+
+class _Point(_Strict):
+    x: Number = 0.0
+    y: Number = 0.0
+    z: Number = 0.0
+
+
+class _Noise(_Strict):
+    distribution: Literal["gaussian", "uniform"] = "gaussian"
+    reading: Values | None = None
+    position: Values | None = None
+    orientation: Values | None = None
+    orientation_deg: Values | None = None
+    actuator: Values
+
+    @field_validator("reading", "position", "orientation", "orientation_deg", "actuator")
+    @classmethod
+    def _non_negative(cls, v):
+        vals = v if isinstance(v, list) else [v]
+        if v is not None and (not vals or any(not math.isfinite(x) or x < 0 for x in vals)):
+            raise ValueError("must be a non-negative number or a non-empty list of them")
+        return v
+
+
+class _Setup(_Strict):
+    sensor: Literal["full-pose", "position", "indicators"]
+    description: str = ""
+    indicators: list[tuple[Number, Number]] | None = None
+    plane_offset: Number | None = None
+    zero: list[Number] | None = None
+    world: _Transform | None = None
+    tool: _Transform | None = None
+    target: _Point | None = None
+    free: list[str] | None = None
+    noise: _Noise
+
+
+#: Keys allowed for each sensor kind (besides sensor, description, free, noise).
+_SENSOR_KEYS = {
+    "full-pose": ("world", "tool"),
+    "position": ("target", "world"),
+    "indicators": ("indicators", "plane_offset", "zero"),
+}
+_NOISE_KEYS = {
+    "full-pose": ("position", "orientation", "orientation_deg"),
+    "position": ("reading",),
+    "indicators": ("reading",),
+}
+
+
+# -- built-in setups ---------------------------------------------------------------------
+
+#: Indicator positions of ``indicators-prototype``: radius 40 mm at 0°, 120°, 240° in the
+#: base frame, inside the 70 mm platform-joint radius of paper 2's prototype.
+PROTOTYPE_INDICATORS = np.array([[40.0, 0.0], [-20.0, 20.0 * math.sqrt(3.0)], [-20.0, -20.0 * math.sqrt(3.0)]])
+
+
+def _indicators_prototype() -> MeasurementSetup:
+    return MeasurementSetup(
+        IndicatorSensor(positions=PROTOTYPE_INDICATORS, plane_offset=10.0),
+        NoiseModel(reading_std=np.full(3, 0.01), actuator_std=np.array(0.005)),
+    )
+
+
+def _full_pose_paper1() -> MeasurementSetup:
+    h_pos, h_ori, h_leg = 0.025, 0.001, 0.01
+    return MeasurementSetup(
+        FullPoseSensor(),
+        NoiseModel(reading_std=np.array([h_pos] * 3 + [h_ori] * 3) / SQRT3,
+                   actuator_std=np.array(h_leg / SQRT3), distribution="uniform"),
+    )
+
+
+def _laser_tracker() -> MeasurementSetup:
+    return MeasurementSetup(
+        PositionSensor(),
+        NoiseModel(reading_std=np.full(3, 0.01), actuator_std=np.array(0.005)),
+    )
+
+
+#: Built-in setups by name → (factory, one-line description).
+BUILTIN_SETUPS = {
+    "indicators-prototype": (
+        _indicators_prototype,
+        "paper 2 style: 3 dial indicators at radius 40 mm, 0/120/240 deg, plane_offset 10 mm; "
+        "noise std 0.01 mm (indicators), 0.005 mm (legs)",
+    ),
+    "full-pose-paper1": (
+        _full_pose_paper1,
+        "paper 1 full-pose measurement: uniform noise +-0.025 mm position, +-0.001 rad "
+        "orientation, +-0.01 mm legs",
+    ),
+    "laser-tracker": (
+        _laser_tracker,
+        "3D laser tracker on one target point (offset free, initial 0): noise std 0.01 mm, 0.005 mm (legs)",
+    ),
+}
+
+
+def builtin_setup(name: str) -> MeasurementSetup:
+    try:
+        factory, _ = BUILTIN_SETUPS[name]
+    except KeyError:
+        raise PkmcalError(
+            f"unknown setup '{name}': not a file and not a built-in setup ({', '.join(BUILTIN_SETUPS)})"
+        ) from None
+    return factory()
+
+
+# -- loading -----------------------------------------------------------------------------
+
+
+def _line_of(lines: dict[tuple, int], loc: tuple) -> int | None:
+    """Line of the longest prefix of ``loc`` that is a key path of the document."""
+    path: tuple = ()
+    best = lines.get(())
+    for part in loc:
+        if (path + (part,)) in lines:
+            path = path + (part,)
+            best = lines[path]
+        elif isinstance(part, str) and part in ("float", "list[float]", "tuple[float, float]"):
+            continue  # pydantic names union members in its locations; skip them
+        else:
+            break
+    return best
+
+
+def _key_text(loc: tuple) -> str:
+    parts = [p for p in loc if not (isinstance(p, str) and ("[" in p or p in ("float", "int")))]
+    text = ""
+    for p in parts:
+        text += f"[{p}]" if isinstance(p, int) else (f".{p}" if text else str(p))
+    return text or "(top level)"
+
+
+def _fail(path, lines, loc: tuple, message: str):
+    raise InputFileError(path, f"key '{_key_text(loc)}': {message}", line=_line_of(lines, loc))
+
+
+def _expand(path, lines, value, n: int, loc: tuple, unit: str) -> np.ndarray:
+    """One value or n values → array (n,)."""
+    if isinstance(value, list):
+        if len(value) != n:
+            _fail(path, lines, loc, f"give one value or {n} values ({unit}); got {len(value)}")
+        return np.array(value, dtype=float)
+    return np.full(n, float(value))
+
+
+def load_setup(path: str | os.PathLike) -> MeasurementSetup:
+    """The measurement setup of a YAML file, or of a built-in setup name.
+
+    Raises :class:`~pkmcal.errors.InputFileError` naming the file, line and key.
+    """
+    p = Path(path)
+    if not p.exists():
+        if str(path) in BUILTIN_SETUPS:
+            return builtin_setup(str(path))
+        raise PkmcalError(
+            f"setup file '{path}' does not exist and is not a built-in setup ({', '.join(BUILTIN_SETUPS)})"
+        )
+    try:
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputFileError(path, f"cannot read the setup file: {exc}") from None
+    try:
+        data, lines = parse_yaml(text)
+    except YamlSyntaxError as exc:
+        raise InputFileError(path, str(exc), line=exc.line) from None
+    if not isinstance(data, dict):
+        raise InputFileError(path, "a setup file is a YAML mapping starting with 'sensor: full-pose|position|indicators'")
+    try:
+        spec = _Setup.model_validate(data)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        loc = tuple(err["loc"])
+        if err["type"] == "missing":
+            what = "is missing" + (
+                "; say which sensor: full-pose, position or indicators" if loc == ("sensor",)
+                else "; give the actuator noise (mm), e.g. noise: {reading: 0.01, actuator: 0.005}"
+                if loc == ("noise", "actuator") else "")
+        elif err["type"] == "extra_forbidden":
+            model = {(): _Setup, ("noise",): _Noise, ("world",): _Transform, ("tool",): _Transform,
+                     ("target",): _Point}.get(loc[:-1], _Setup)
+            what = f"is not a setup key here; remove or correct it (allowed: {', '.join(model.model_fields)})"
+        else:
+            what = err["msg"][0].lower() + err["msg"][1:]
+            if err["type"] == "literal_error" and loc == ("sensor",):
+                what = "must be one of full-pose, position, indicators"
+        _fail(path, lines, loc, what)
+    return _build(path, lines, spec)
+
+
+def _build(path, lines, spec: _Setup) -> MeasurementSetup:
+    kind = spec.sensor
+    for key in ("indicators", "plane_offset", "zero", "world", "tool", "target"):
+        if getattr(spec, key) is not None and key not in _SENSOR_KEYS[kind]:
+            _fail(path, lines, (key,), f"does not apply to sensor '{kind}' (its keys: {', '.join(_SENSOR_KEYS[kind])})")
+    noise = spec.noise
+    for key in ("reading", "position", "orientation", "orientation_deg"):
+        if getattr(noise, key) is not None and key not in _NOISE_KEYS[kind]:
+            _fail(path, lines, ("noise", key),
+                  f"does not apply to sensor '{kind}' (its noise keys: {', '.join(_NOISE_KEYS[kind])}, actuator)")
+    free = None if spec.free is None else tuple(spec.free)
+
+    def tf(t: _Transform | None):
+        if t is None:
+            return None
+        return np.array([t.x, t.y, t.z, deg_to_rad(t.a), deg_to_rad(t.b), deg_to_rad(t.c)])
+
+    try:
+        if kind == "indicators":
+            if spec.indicators is None:
+                _fail(path, lines, ("indicators",), "is missing; give the indicator positions [[x, y], ...] in mm "
+                      "(base frame), at least 3")
+            if spec.plane_offset is None:
+                _fail(path, lines, ("plane_offset",), "is missing; give the distance (mm) of the platform origin "
+                      "above the platform's lower plane touched by the indicators")
+            if len(spec.indicators) < 3:
+                _fail(path, lines, ("indicators",), f"needs at least 3 indicators; got {len(spec.indicators)}")
+            k = len(spec.indicators)
+            if spec.zero is not None and len(spec.zero) != k:
+                _fail(path, lines, ("zero",), f"give one zero offset per indicator ({k}); got {len(spec.zero)}")
+            sensor = IndicatorSensor(positions=np.array(spec.indicators, dtype=float),
+                                     plane_offset=spec.plane_offset, zero=spec.zero, free=free)
+            reading = noise.reading
+            if reading is None:
+                _fail(path, lines, ("noise", "reading"), "is missing; give the indicator noise (mm)")
+            reading_std = _expand(path, lines, reading, k, ("noise", "reading"), "mm")
+        elif kind == "position":
+            target = None if spec.target is None else [spec.target.x, spec.target.y, spec.target.z]
+            sensor = PositionSensor(target=target, world=tf(spec.world), free=free)
+            if noise.reading is None:
+                _fail(path, lines, ("noise", "reading"), "is missing; give the tracker noise (mm)")
+            reading_std = _expand(path, lines, noise.reading, 3, ("noise", "reading"), "mm")
+        else:
+            sensor = FullPoseSensor(world=tf(spec.world), tool=tf(spec.tool), free=free)
+            if noise.position is None:
+                _fail(path, lines, ("noise", "position"), "is missing; give the position noise (mm)")
+            if (noise.orientation is None) == (noise.orientation_deg is None):
+                _fail(path, lines, ("noise", "orientation"),
+                      "give exactly one of orientation (rad) or orientation_deg (degrees)")
+            pos = _expand(path, lines, noise.position, 3, ("noise", "position"), "mm")
+            if noise.orientation is not None:
+                ori = _expand(path, lines, noise.orientation, 3, ("noise", "orientation"), "rad")
+            else:
+                ori = np.deg2rad(_expand(path, lines, noise.orientation_deg, 3, ("noise", "orientation_deg"), "deg"))
+            reading_std = np.concatenate([pos, ori])
+    except InputFileError:
+        raise
+    except PkmcalError as exc:  # e.g. an unknown name in free:
+        _fail(path, lines, ("free",) if "no parameter" in str(exc) else (), str(exc))
+    actuator = np.array(noise.actuator, dtype=float)
+    if noise.distribution == "uniform":  # half-widths h → std h/√3
+        reading_std, actuator = reading_std / SQRT3, actuator / SQRT3
+    return MeasurementSetup(
+        sensor=sensor,
+        noise=NoiseModel(reading_std=reading_std, actuator_std=actuator, distribution=noise.distribution),
+    )
+
+
+# -- saving ------------------------------------------------------------------------------
+
+
+def _half_width(std: float) -> float:
+    """The half-width h whose h/√3 is ``std`` exactly when one is within a few ulps, so
+    that a uniform setup reads back bit for bit."""
+    h = std * SQRT3
+    for k in range(5):
+        for direction in (math.inf, -math.inf):
+            w = h
+            for _ in range(k):
+                w = math.nextafter(w, direction)
+            if w / SQRT3 == std:
+                return w
+    return h
+
+
+def _values(std: np.ndarray, uniform: bool):
+    v = np.asarray(std, dtype=float).reshape(-1)
+    if uniform:
+        v = np.array([_half_width(float(x)) for x in v])
+    if v.size == 1 or np.all(v == v[0]):
+        return float(v[0])
+    return FlowList(float(x) for x in v)
+
+
+def _transform_dict(pose: np.ndarray) -> dict:
+    out: dict = {}
+    for name, v, ang in zip("xyzabc", pose, (False,) * 3 + (True,) * 3):
+        out[name] = RawFloat(rad_to_deg_text(v)) if ang else float(v)
+    return out
+
+
+def setup_to_yaml(setup: MeasurementSetup) -> str:
+    """YAML text of a setup (full precision; :func:`load_setup` reads it back)."""
+    s, noise = setup.sensor, setup.noise
+    doc: dict = {"sensor": s.kind}
+    if isinstance(s, IndicatorSensor):
+        doc["indicators"] = [FlowList(float(v) for v in row) for row in s.positions]
+        doc["plane_offset"] = float(s.plane_offset)
+        if np.any(s.zero != 0):
+            doc["zero"] = FlowList(float(v) for v in s.zero)
+    elif isinstance(s, PositionSensor):
+        doc["target"] = {k: float(v) for k, v in zip("xyz", s.target)}
+        if np.any(s.world != 0):
+            doc["world"] = _transform_dict(s.world)
+    elif isinstance(s, FullPoseSensor):
+        if np.any(s.world != 0):
+            doc["world"] = _transform_dict(s.world)
+        if np.any(s.tool != 0):
+            doc["tool"] = _transform_dict(s.tool)
+    else:
+        raise PkmcalError(f"cannot save a setup with a '{s.kind}' sensor")
+    if s.free is not None:
+        doc["free"] = FlowList(s.free)
+    uniform = noise.distribution == "uniform"
+    nd: dict = {"distribution": noise.distribution}
+    std = np.asarray(noise.reading_std, dtype=float).reshape(-1)
+    if isinstance(s, FullPoseSensor):
+        nd["position"] = _values(std[:3], uniform)
+        nd["orientation"] = _values(std[3:], uniform)
+    else:
+        nd["reading"] = _values(std, uniform)
+    nd["actuator"] = _values(noise.actuator_std, uniform)
+    doc["noise"] = nd
+    head = "# pkmcal measurement setup: mm, transform angles in degrees, orientation noise in rad\n"
+    if noise.distribution == "uniform":
+        head += "# uniform noise: values are half-widths h (std = h/sqrt(3))\n"
+    return head + dump_yaml(doc)
+
+
+def save_setup(setup: MeasurementSetup, path: str | os.PathLike) -> None:
+    """Write ``setup`` to ``path`` atomically (see :func:`setup_to_yaml`)."""
+    atomic_write_text(path, setup_to_yaml(setup))

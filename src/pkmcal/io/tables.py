@@ -1,0 +1,340 @@
+"""Numeric CSV tables with named columns: the pose, reading and measurement files of pkmcal.
+
+Format (``docs/file-formats.md``): comma-separated, UTF-8, one header row naming the
+columns, one row per pose. Lines starting with ``#`` are comments; a comment before the
+header of the form ``# units: length=mm, angle=deg`` states the units of the file. Header
+names are matched case-insensitively, through aliases (``λ1``, ``lambda_1`` → ``lambda1``);
+columns a command does not need are ignored. Every cell of a needed column must be a finite
+number. Errors name the file, the 1-based line (as an editor shows it) and the column.
+
+Values are returned in pkmcal's file units (mm, degrees): a table in other units (m, µm,
+inch; rad) is converted on reading for the columns whose ``kinds`` are given.
+:func:`format_table` writes the reverse: header, every float as its shortest round-trip
+``repr``, ``\\n`` line ends, so equal data give identical bytes; :func:`write_table` writes
+it atomically.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+import re
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from pkmcal.errors import InputFileError, PkmcalError
+from pkmcal.io.atomic import atomic_write_text
+
+#: Conversion factors to pkmcal's file units, by quantity.
+LENGTH_UNITS: dict[str, float] = {"mm": 1.0, "m": 1000.0, "cm": 10.0, "um": 1e-3, "µm": 1e-3, "in": 25.4, "inch": 25.4}
+ANGLE_UNITS: dict[str, float] = {"deg": 1.0, "rad": float(np.rad2deg(1.0))}
+UNITS: dict[str, dict[str, float]] = {"length": LENGTH_UNITS, "angle": ANGLE_UNITS}
+#: The units line pkmcal writes (and assumes when a file has none).
+FILE_UNITS = {"length": "mm", "angle": "deg"}
+
+POSE_KINDS: dict[str, str] = {"x": "length", "y": "length", "z": "length", "a": "angle", "b": "angle", "c": "angle"}
+LENGTH_COLUMNS = tuple(f"l{i}" for i in range(1, 7))
+READING_COLUMNS = tuple(f"lambda{i}" for i in range(1, 7))
+
+
+def _default_aliases() -> dict[str, str]:
+    out: dict[str, str] = {}
+    for i in range(1, 13):
+        for alias in (f"λ{i}", f"lambda_{i}", f"λ_{i}", f"q{i}", f"q_{i}"):
+            out[alias] = f"lambda{i}"
+        for alias in (f"l_{i}", f"length{i}", f"length_{i}"):
+            out[alias] = f"l{i}"
+    return out
+
+
+#: Alternative header names (lower case) → canonical column names.
+DEFAULT_ALIASES: dict[str, str] = _default_aliases()
+_UNITS_LINE = re.compile(r"^#\s*units\s*:(.*)$", re.IGNORECASE)
+
+
+@dataclass(frozen=True)
+class Table:
+    """Numeric columns read from a CSV file.
+
+    ``columns`` are the canonical names of the columns read (in the order asked for),
+    ``values`` (N, k) their numbers in file units (mm, degrees), ``lines`` (N,) the 1-based
+    line of each row in the file, ``header`` the file's column names as written, ``units``
+    the file's units line (quantity → unit).
+    """
+
+    path: str
+    columns: tuple[str, ...]
+    values: np.ndarray
+    lines: np.ndarray
+    header: tuple[str, ...] = ()
+    units: dict[str, str] = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return self.values.shape[0]
+
+    def __getitem__(self, names: str | Sequence[str]) -> np.ndarray:
+        """One column (N,) by name, or several (N, k) by a list of names."""
+        if isinstance(names, str):
+            return self.values[:, self._index(names)]
+        return self.values[:, [self._index(n) for n in names]]
+
+    def _index(self, name: str) -> int:
+        try:
+            return self.columns.index(name)
+        except ValueError:
+            raise KeyError(f"table {self.path} has no column '{name}' (it has {', '.join(self.columns)})") from None
+
+
+def canonical_name(header_cell: str, aliases: Mapping[str, str] = DEFAULT_ALIASES) -> str:
+    """The canonical column name of a header cell (stripped, lower case, aliases applied)."""
+    key = header_cell.strip().lower()
+    return aliases.get(key, key)
+
+
+def _split(line: str) -> list[str]:
+    if '"' in line:
+        return [c.strip() for c in next(csv.reader([line]))]
+    return [c.strip() for c in line.split(",")]
+
+
+def _parse_units(path: str, text: str, line: int) -> dict[str, str]:
+    units: dict[str, str] = {}
+    for item in filter(None, (s.strip() for s in text.split(","))):
+        quantity, sep, unit = (s.strip().lower() for s in item.partition("="))
+        if not sep or quantity not in UNITS:
+            raise InputFileError(path, f"units line: '{item}' is not QUANTITY=UNIT with QUANTITY one of "
+                                       f"{', '.join(UNITS)} (e.g. '# units: length=mm, angle=deg')", line=line)
+        if unit not in UNITS[quantity]:
+            raise InputFileError(path, f"units line: unknown {quantity} unit '{unit}'; known: "
+                                       f"{', '.join(UNITS[quantity])}", line=line)
+        units[quantity] = unit
+    return units
+
+
+def _describe_columns(names: Sequence[str]) -> str:
+    names = list(names)
+    m = re.fullmatch(r"([a-z_]+)1", names[0]) if names else None
+    if m and len(names) > 2 and names == [f"{m.group(1)}{i}" for i in range(1, len(names) + 1)]:
+        return f"{names[0]}..{names[-1]}"
+    return ",".join(names)
+
+
+def _looks_numeric(cells: Sequence[str]) -> bool:
+    try:
+        [float(c) for c in cells]
+    except ValueError:
+        return False
+    return True
+
+
+def read_table(
+    path: str | os.PathLike,
+    columns: Sequence[str] = (),
+    *,
+    either: Sequence[Sequence[str]] = (),
+    kinds: Mapping[str, str] | None = None,
+    aliases: Mapping[str, str] = DEFAULT_ALIASES,
+    text: str | None = None,
+) -> Table:
+    """Read the numeric ``columns`` of the CSV file ``path``.
+
+    Parameters
+    ----------
+    columns : canonical names of the columns that must be present.
+    either : groups of columns of which the first group fully present is read too (e.g.
+        ``[READING_COLUMNS, LENGTH_COLUMNS]``); the chosen group follows ``columns`` in
+        :attr:`Table.columns`.
+    kinds : quantity (``"length"`` or ``"angle"``) of columns to convert from the file's
+        units line to mm/degrees; default :data:`POSE_KINDS`. A units line other than
+        mm/deg naming a quantity no column has is accepted (nothing to convert).
+    aliases : lower-case alternative header names → canonical names.
+    text : the file's contents, if already read (``path`` then only names it in errors).
+
+    Raises :class:`InputFileError` naming file, line and column for every malformed input.
+    """
+    src = os.fspath(path)
+    kinds = POSE_KINDS if kinds is None else kinds
+    if text is None:
+        try:
+            with open(src, "rb") as fh:
+                raw = fh.read()
+        except OSError as exc:
+            raise InputFileError(src, f"cannot read the table: {exc.strerror or exc}") from None
+        try:
+            text = raw.decode("utf-8-sig")
+        except UnicodeDecodeError as exc:
+            raise InputFileError(src, f"not a UTF-8 text file (byte {exc.start}); save the table as UTF-8 CSV") from None
+    if "\x00" in text:
+        raise InputFileError(src, "contains NUL bytes: not a text CSV file")
+
+    units: dict[str, str] = {}
+    header: list[str] | None = None
+    header_line = 0
+    rows: list[list[str]] = []
+    row_lines: list[int] = []
+    for number, line in enumerate(text.splitlines(), start=1):
+        stripped = line.strip()
+        if not stripped:
+            continue
+        if stripped.startswith("#"):
+            m = _UNITS_LINE.match(stripped)
+            if m and header is None:
+                units.update(_parse_units(src, m.group(1), number))
+            continue
+        try:
+            cells = _split(line)
+        except csv.Error as exc:
+            raise InputFileError(src, f"not a CSV row: {exc}", line=number) from None
+        if header is None:
+            header, header_line = cells, number
+        else:
+            rows.append(cells)
+            row_lines.append(number)
+    wanted_hint = _describe_columns(list(columns) + (list(either[0]) if either else []))
+    if header is None:
+        raise InputFileError(src, f"the file is empty: expected a header row naming the columns "
+                                  f"(e.g. {wanted_hint}) and one row per pose")
+
+    canon = [canonical_name(h, aliases) for h in header]
+    present: dict[str, int] = {}
+    for i, name in enumerate(canon):
+        if name in present and name:
+            first = header[present[name]]
+            raise InputFileError(src, f"columns '{first}' and '{header[i]}' both name '{name}'; keep one",
+                                 line=header_line, column=header[i])
+        present[name] = i
+
+    def missing_message(missing: Sequence[str], needed: str) -> str:
+        found = ", ".join(repr(h) for h in header) if header != [""] else "none"
+        msg = f"missing column{'s' if len(missing) > 1 else ''} {', '.join(missing)} (needs {needed}); the header has {found}"
+        if _looks_numeric(header):
+            msg += f"; the first row is numbers, not names: add a header row '{wanted_hint}'"
+        elif len(header) == 1 and any(sep in header[0] for sep in (";", "\t", " ")):
+            msg += "; separate the columns with commas"
+        return msg
+
+    missing = [c for c in columns if c not in present]
+    if missing:
+        raise InputFileError(src, missing_message(missing, _describe_columns(columns)), line=header_line)
+    chosen: list[str] = list(columns)
+    if either:
+        group = next((g for g in either if all(c in present for c in g)), None)
+        if group is None:
+            best = min(either, key=lambda g: sum(c not in present for c in g))
+            options = " or ".join(_describe_columns(g) for g in either)
+            raise InputFileError(src, missing_message([c for c in best if c not in present], options),
+                                 line=header_line)
+        chosen += list(group)
+    idx = [present[c] for c in chosen]
+
+    if not rows:
+        raise InputFileError(src, "no data rows after the header; add one row per pose", line=header_line)
+    width = len(header)
+    for cells, number in zip(rows, row_lines):
+        if len(cells) != width:
+            raise InputFileError(src, f"{len(cells)} cells, but the header has {width} columns; every row needs "
+                                      f"one cell per column", line=number)
+
+    values = np.empty((len(rows), len(idx)))
+    bad: tuple[int, int, str] | None = None
+    for k, j in enumerate(idx):
+        cells = [r[j] for r in rows]
+        try:
+            col = np.array(cells, dtype=float)
+        except ValueError:
+            parsed = []
+            for n, cell in enumerate(cells):
+                try:
+                    parsed.append(float(cell))
+                except ValueError:
+                    if bad is None or n < bad[0]:
+                        bad = (n, j, "empty" if cell == "" else f"'{cell[:40]}' is not a number")
+                    break
+            if len(parsed) < len(cells):
+                continue
+            col = np.array(parsed)
+        finite = np.isfinite(col)
+        if not finite.all():
+            n = int(np.argmin(finite))
+            if bad is None or n < bad[0]:
+                bad = (n, j, f"'{cells[n]}' is not a finite number")
+        values[:, k] = col
+    if bad is not None:
+        n, j, what = bad
+        raise InputFileError(src, f"{what}; every cell of column '{header[j]}' must be a finite number",
+                             line=row_lines[n], column=header[j])
+
+    for k, name in enumerate(chosen):
+        quantity = kinds.get(name)
+        if quantity is not None and quantity in units:
+            factor = UNITS[quantity][units[quantity]]
+            if factor != 1.0:
+                values[:, k] = np.rad2deg(values[:, k]) if units[quantity] == "rad" else values[:, k] * factor
+    return Table(path=src, columns=tuple(chosen), values=values, lines=np.array(row_lines, dtype=int),
+                 header=tuple(header), units=units)
+
+
+def _cells(name: str, data) -> list[str]:
+    arr = np.asarray(data)
+    if arr.ndim != 1:
+        raise ValueError(f"column '{name}' must be one-dimensional, got shape {arr.shape}")
+    if arr.dtype.kind == "f":
+        return [repr(v) for v in arr.tolist()]
+    if arr.dtype.kind in "iub":
+        return [str(int(v)) for v in arr.tolist()]
+    out = []
+    for v in arr.tolist():
+        s = str(v)
+        if any(ch in s for ch in ',"\n\r') or s != s.strip():
+            buf = io.StringIO()
+            csv.writer(buf, lineterminator="").writerow([s])
+            s = buf.getvalue()
+        out.append(s)
+    return out
+
+
+def format_table(columns: Mapping[str, Sequence], *, units: Mapping[str, str] | None = FILE_UNITS,
+                 comments: Sequence[str] = ()) -> str:
+    """CSV text of named columns (all the same length): optional ``# units:`` line and
+    comments, a header, then rows. Floats are written as ``repr`` (shortest exact), integers
+    and booleans as integers, anything else as text (quoted only when it must be)."""
+    names = list(columns)
+    if not names:
+        raise ValueError("a table needs at least one column")
+    cols = [_cells(n, columns[n]) for n in names]
+    n_rows = {len(c) for c in cols}
+    if len(n_rows) != 1:
+        raise ValueError(f"columns have different lengths: {sorted(n_rows)}")
+    head = []
+    if units:
+        head.append("# units: " + ", ".join(f"{q}={u}" for q, u in units.items()))
+    head.extend(f"# {c}" for c in comments)
+    head.append(",".join(names))
+    body = [",".join(row) for row in zip(*cols)]
+    return "\n".join(head + body) + "\n"
+
+
+def write_table(path: str | os.PathLike, columns: Mapping[str, Sequence], **kwargs) -> None:
+    """:func:`format_table` written atomically to ``path``."""
+    try:
+        text = format_table(columns, **kwargs)
+    except ValueError as exc:
+        raise PkmcalError(f"cannot write table '{path}': {exc}") from None
+    atomic_write_text(path, text)
+
+
+__all__ = [
+    "DEFAULT_ALIASES",
+    "FILE_UNITS",
+    "LENGTH_COLUMNS",
+    "POSE_KINDS",
+    "READING_COLUMNS",
+    "Table",
+    "canonical_name",
+    "format_table",
+    "read_table",
+    "write_table",
+]

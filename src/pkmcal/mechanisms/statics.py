@@ -1,0 +1,205 @@
+"""Static equilibrium of a redundantly actuated machine (paper 3 §2, eq. 1–3).
+
+The simulation, never the identifier, knows the actuator stiffness K and the load F.
+Each actuator i is a position-controlled spring of stiffness K_i about its commanded
+reading c_i: its generalised force is τ_i = K_i (c_i − q_i(x)), with q(x) = IK(x, ρ) the
+encoder reading at pose x (true actuator position + encoder offset). An external force F
+(gravity, process force; N) acts on the tool point p_t(x). The machine rests where the
+potential energy
+
+    U(x) = ½ Σ_i K_i (q_i(x) − c_i)² − Fᵀ p_t(x)
+
+is stationary, i.e. the force balance in the independent coordinates x = q_u holds:
+
+    g(x) = Γᵀ K (q(x) − c) − J_fᵀ F = 0,      Γ = ∂q/∂x,  J_f = ∂p_t/∂x.
+
+We solve it nonlinearly, batched over poses: Newton steps with the Hessian of U by central
+differences of the analytic g (n ≤ 3 pose coordinates: 2n extra gradient evaluations),
+falling back to the Gauss–Newton Hessian ΓᵀKΓ where that is not positive definite, with a
+backtracking line search on U (so every accepted step lowers the energy). This is a
+per-pose n-dimensional minimisation; a batched Newton is faster than one
+``scipy.optimize.least_squares`` call per pose, and the result is checked by the
+force-balance residual |g| (``force_residual``).
+
+Linearised (paper 3 eq. 1–3, in our sign convention: readings q = θ + dq, load F as a force
+on the tool): with Γ, H, J_f, J_ρ at the commanded pose of the nominal model and Δρ, Δθ the
+mechanism and sensor parameter errors,
+
+    dx   = (ΓᵀKΓ)⁻¹ [ −ΓᵀK H Δρ + J_fᵀ F ]                                     (1)
+    dq_m = Γ dx + H Δρ        (following error = reading − command)            (2), (4)
+    dP_t = J_f dx + J_ρ Δθ                                                     (3)
+
+(paper 3 writes Δq_r − HΔρ; its Δq_r is −dq here and its P the generalised load −J_fᵀF).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pkmcal.errors import PkmcalError
+from pkmcal.mechanisms.base import Mechanism
+
+_TOL = 1e-10
+_MAX_ITER = 50
+
+
+@dataclass(frozen=True)
+class EquilibriumResult:
+    """Static equilibrium of N commanded poses.
+
+    ``poses`` (N, n) the real rest poses; ``readings`` (N, l) the encoder readings there;
+    ``following_error`` (N, l) = readings − commands; ``actuator_force`` (N, l) = K (c − q)
+    (N or N·mm/rad); ``force_residual`` (N,) max |g| of the force balance (N or N·mm);
+    ``converged`` (N,); ``iterations`` (N,).
+    """
+
+    poses: np.ndarray
+    readings: np.ndarray
+    following_error: np.ndarray
+    actuator_force: np.ndarray
+    force_residual: np.ndarray
+    converged: np.ndarray
+    iterations: np.ndarray
+
+
+def _load_terms(load_point, load, x):
+    """(p_t (N, 2) or None, J_f (N, 2, n) or None, F (2,) or None)."""
+    if load is None:
+        return None, None, None
+    if load_point is None:
+        raise PkmcalError("a load needs the point it acts on (load_point: a planar tool sensor)")
+    F = np.asarray(load, dtype=float)
+    return load_point.tool_point(x), load_point.tool_pose_jacobian(x), F
+
+
+def force_balance(mechanism: Mechanism, commands, stiffness, poses, load=None, load_point=None) -> np.ndarray:
+    """g(x) = Γᵀ K (q(x) − c) − J_fᵀ F (N, n): the gradient of U (module docstring)."""
+    x = mechanism.as_pose_array(poses)
+    K = np.broadcast_to(np.asarray(stiffness, dtype=float), (mechanism.n_actuators,))
+    G = mechanism.actuator_pose_jacobian(x)
+    g = np.einsum("nli,nl->ni", G, K * (mechanism.ik(x) - commands))
+    _, Jf, F = _load_terms(load_point, load, x)
+    if F is not None:
+        g = g - np.einsum("nki,k->ni", Jf, F)
+    return g
+
+
+def potential_energy(mechanism: Mechanism, commands, stiffness, poses, load=None, load_point=None) -> np.ndarray:
+    """U(x) (N,) (module docstring), N·mm."""
+    x = mechanism.as_pose_array(poses)
+    K = np.broadcast_to(np.asarray(stiffness, dtype=float), (mechanism.n_actuators,))
+    U = 0.5 * np.sum(K * (mechanism.ik(x) - commands) ** 2, axis=1)
+    pt, _, F = _load_terms(load_point, load, x)
+    if F is not None:
+        U = U - pt @ F
+    return U
+
+
+def equilibrium(
+    mechanism: Mechanism,
+    commands: np.ndarray,
+    stiffness,
+    load=None,
+    load_point=None,
+    guess: np.ndarray | None = None,
+    *,
+    tol: float = _TOL,
+    max_iter: int = _MAX_ITER,
+) -> EquilibriumResult:
+    """Real rest poses of ``mechanism`` (the *real* machine) under ``commands`` (N, l).
+
+    ``stiffness`` K (l,) or scalar (N/mm for linear, N·mm/rad for rotary actuators);
+    ``load`` F (2,) in N on the tool point of ``load_point`` (a
+    :class:`~pkmcal.sensors.planar_tool.PlanarToolSensor` of the real machine, in the
+    base frame); ``guess`` start poses (default: FK of the commands).
+    """
+    c = np.atleast_2d(np.asarray(commands, dtype=float))
+    n = mechanism.n_dof
+    K = np.broadcast_to(np.asarray(stiffness, dtype=float), (mechanism.n_actuators,))
+    if np.any(K <= 0):
+        raise PkmcalError("actuator stiffness must be positive")
+    if guess is None:
+        x = mechanism.fk(c, guess=mechanism.home_pose).poses
+    else:
+        x = np.array(np.broadcast_to(np.asarray(guess, dtype=float), (c.shape[0], n)))
+    args = (load, load_point)
+    scale = np.maximum(np.abs(x).max(axis=1), 1.0)
+    h = 1e-5 * np.maximum(np.abs(x), 1.0)
+    U = potential_energy(mechanism, c, K, x, *args)
+    it = np.zeros(c.shape[0], dtype=int)
+    done = np.zeros(c.shape[0], dtype=bool)
+    ts = 0.5 ** np.arange(10)
+    for _ in range(max_iter):
+        g = force_balance(mechanism, c, K, x, *args)
+        # Hessian by central differences of the analytic gradient (all poses, 2n evaluations)
+        Hs = np.empty((c.shape[0], n, n))
+        for k in range(n):
+            e = np.zeros(n)
+            e[k] = 1.0
+            gp = force_balance(mechanism, c, K, x + h[:, k:k + 1] * e, *args)
+            gm = force_balance(mechanism, c, K, x - h[:, k:k + 1] * e, *args)
+            Hs[:, :, k] = (gp - gm) / (2.0 * h[:, k:k + 1])
+        Hs = 0.5 * (Hs + np.swapaxes(Hs, 1, 2))
+        G = mechanism.actuator_pose_jacobian(x)
+        Hgn = np.einsum("nli,l,nlj->nij", G, K, G)
+        pd = np.all(np.linalg.eigvalsh(Hs) > 0, axis=1)
+        Hs = np.where(pd[:, None, None], Hs, Hgn)
+        dx = -np.linalg.solve(Hs, g[..., None])[..., 0]
+        dx[done] = 0.0
+        xc = x[None] + ts[:, None, None] * dx[None]
+        Uc = potential_energy(mechanism, np.tile(c, (len(ts), 1)), K, xc.reshape(-1, n), *args).reshape(len(ts), -1)
+        Uc = np.where(np.isfinite(Uc), Uc, np.inf)
+        ok = Uc <= U[None] + 1e-12 * np.abs(U[None]) + 1e-18
+        k = np.argmax(ok, axis=0)
+        sel = np.arange(c.shape[0])
+        take = ok.any(axis=0) & ~done
+        x = np.where(take[:, None], xc[k, sel], x)
+        U = np.where(take, Uc[k, sel], U)
+        it += ~done
+        done |= (np.max(np.abs(dx), axis=1) <= tol * scale) | ~ok.any(axis=0)
+        if done.all():
+            break
+    q = mechanism.ik(x)
+    g = force_balance(mechanism, c, K, x, *args)
+    res = np.max(np.abs(g), axis=1)
+    # converged: the displacement a further Gauss–Newton step would make is negligible
+    G = mechanism.actuator_pose_jacobian(x)
+    Hgn = np.einsum("nli,l,nlj->nij", G, K, G)
+    with np.errstate(invalid="ignore"):
+        left = np.max(np.abs(np.linalg.solve(Hgn, g[..., None])[..., 0]), axis=1)
+    conv = done & np.isfinite(res) & (left <= 1e-8 * scale)
+    return EquilibriumResult(poses=x, readings=q, following_error=q - c, actuator_force=K * (c - q),
+                             force_residual=res, converged=conv, iterations=it)
+
+
+def linear_response(
+    nominal: Mechanism,
+    nominal_sensor,
+    poses: np.ndarray,
+    delta_rho: np.ndarray,
+    delta_sensor: np.ndarray,
+    stiffness,
+    load=None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Linearised error propagation (paper 3 eq. 1–3, module docstring) at commanded poses.
+
+    Returns ``(dx, dq_m, dP_t)``: pose deviation (N, n), following error (N, l) and tool
+    point error (N, 2) in the base frame (``nominal_sensor`` with identity world).
+    """
+    x = nominal.as_pose_array(poses)
+    K = np.broadcast_to(np.asarray(stiffness, dtype=float), (nominal.n_actuators,))
+    G = nominal.actuator_pose_jacobian(x)
+    H = nominal.actuator_param_jacobian(x)
+    Jf = nominal_sensor.tool_pose_jacobian(x)
+    Jr = nominal_sensor.param_jacobian(x)
+    Hd = H @ np.asarray(delta_rho, dtype=float)
+    A = np.einsum("nli,l,nlj->nij", G, K, G)
+    b = -np.einsum("nli,l,nl->ni", G, K, Hd)
+    if load is not None:
+        b = b + np.einsum("nki,k->ni", Jf, np.asarray(load, dtype=float))
+    dx = np.linalg.solve(A, b[..., None])[..., 0]
+    dqm = np.einsum("nli,ni->nl", G, dx) + Hd
+    dPt = np.einsum("nki,ni->nk", Jf, dx) + Jr @ np.asarray(delta_sensor, dtype=float)
+    return dx, dqm, dPt

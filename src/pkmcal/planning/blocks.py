@@ -1,0 +1,110 @@
+"""Per-pose identification Jacobian blocks G_j for planning, from the identification engine.
+
+For a machine + measurement setup, candidate pose x_j is simulated as measured at the
+nominal machine (q_j = IK(x_j, ρ₀), y_j = h(x_j, s₀)) and the engine's method
+(:mod:`pkmcal.identification.residuals`: ``ik-residual`` for a full-pose sensor, paper 1;
+``fk-residual`` otherwise, paper 2) gives its residual Jacobian J_j = ∂r_j/∂θ and the
+covariance Σ_j that the noise induces on r_j. The block is
+
+    G_j = W_j J_j[:, free] D,    W_j = L_j⁻¹ (L_j L_jᵀ = Σ_j),    D = diag(d_i)
+
+* **free** — the candidate parameters (:func:`~pkmcal.identification.engine.candidate_parameters`:
+  machine parameters + the sensor's default free ones) less the gauge that
+  :func:`~pkmcal.identification.identifiability.analyse_jacobian` suggests on a
+  *reference* pose set, i.e. the identifiable parameters;
+* **D** — column scaling d_i = 1 / RMS_j ‖W_j J_j[:, i]‖ over the reference poses (unit
+  RMS column norm per pose), so indices do not depend on the parameters' units.
+
+The reference set (256 random reachable, measurable poses of the workspace box, seed 0)
+depends only on the machine and setup, so ``plan`` and ``observability`` use the same
+parameters and scaling and agree on the indices of a pose set.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pkmcal.errors import PkmcalError
+from pkmcal.identification.engine import candidate_parameters
+from pkmcal.identification.identifiability import IdentifiabilityReport, analyse_jacobian
+from pkmcal.identification.residuals import Model, make_method, whitening
+from pkmcal.mechanisms.base import Mechanism
+from pkmcal.planning.indices import blas_single_threaded
+from pkmcal.sensors.base import MeasurementSetup
+
+N_REFERENCE = 256
+
+
+def default_method(setup: MeasurementSetup) -> str:
+    """``ik-residual`` for a full-pose sensor (paper 1), ``fk-residual`` otherwise (paper 2)."""
+    return "ik-residual" if setup.sensor.kind == "full-pose" else "fk-residual"
+
+
+def raw_blocks(mechanism: Mechanism, setup: MeasurementSetup, poses: np.ndarray, method: str
+               ) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+    """Whitened residual Jacobians W_j J_j (N, k, P) of all parameters at the nominal machine,
+    a converged flag (N,) and the parameter names."""
+    poses = mechanism.as_pose_array(poses)
+    model = Model(mechanism, setup.sensor, setup.noise, mechanism.ik(poses), setup.sensor.predict(poses),
+                  commanded=poses)
+    ev = make_method(method, model, weighted=True).evaluate(model.theta0, jac=True, cov=True)
+    W = whitening(ev.cov, f"{method} residual") if method != "projection" else None
+    J = ev.J if W is None else W @ ev.J
+    return J, ev.converged, model.names
+
+
+@dataclass(frozen=True)
+class PlanningModel:
+    """What :meth:`blocks` needs: machine, setup, method, the identifiable parameters
+    ``names`` (their indices ``free_index`` in θ = [ρ; s]), column scales ``scale`` and the
+    identifiability ``report`` of the reference set (module docstring)."""
+
+    mechanism: Mechanism
+    setup: MeasurementSetup
+    method: str
+    names: tuple[str, ...]
+    free_index: np.ndarray
+    scale: np.ndarray
+    report: IdentifiabilityReport
+
+    @property
+    def n_params(self) -> int:
+        return len(self.names)
+
+    @blas_single_threaded
+    def blocks(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """G (N, k, n) of ``poses`` (module docstring) and a flag (N,) of poses whose
+        nuisance pose was solved (FK converged)."""
+        J, ok, _ = raw_blocks(self.mechanism, self.setup, poses, self.method)
+        return J[:, :, self.free_index] * self.scale, ok
+
+
+@blas_single_threaded
+def planning_model(mechanism: Mechanism, setup: MeasurementSetup, *, method: str | None = None,
+                   reference: np.ndarray | None = None, free=None) -> PlanningModel:
+    """The identifiable parameters and their scaling for planning (module docstring).
+
+    ``reference`` poses default to :data:`N_REFERENCE` random checked poses of the
+    workspace box (seed 0); ``free`` restricts the candidate parameters (names/patterns).
+    """
+    from pkmcal.planning.candidates import generate_candidates
+
+    method = method or default_method(setup)
+    if reference is None:
+        reference = generate_candidates(mechanism, setup, kind="random", n=N_REFERENCE,
+                                        rng=np.random.default_rng(0)).poses
+    J, ok, names = raw_blocks(mechanism, setup, reference, method)
+    J = J[ok]
+    model = Model(mechanism, setup.sensor, setup.noise, mechanism.ik(reference[:1]),
+                  setup.sensor.predict(reference[:1]))
+    cand, _ = candidate_parameters(model, free, None)
+    rows = J.reshape(-1, J.shape[-1])[:, cand]
+    report = analyse_jacobian(rows, tuple(names[i] for i in cand), tuple(mechanism.param_names))
+    keep = [i for i in cand if names[i] not in report.fixed and names[i] not in report.unseen]
+    if not keep:
+        raise PkmcalError("no identifiable parameter: the sensor sees none of the machine's parameters")
+    col = np.sqrt(np.sum(J[:, :, keep] ** 2, axis=(0, 1)) / len(J))
+    scale = 1.0 / np.where(col > 0, col, 1.0)
+    return PlanningModel(mechanism, setup, method, tuple(names[i] for i in keep), np.array(keep), scale, report)

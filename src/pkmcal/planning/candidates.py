@@ -1,0 +1,321 @@
+"""Candidate poses for measurement planning, and their reachability and measurability.
+
+Candidates (paper 1 §IV; paper 2 §4):
+
+* ``corners`` — the 2^6 = 64 corners of the workspace box (paper 1: every pose coordinate
+  at its minimum or maximum);
+* ``random`` — uniform in the box; ``grid`` — k points per coordinate (k^6 poses);
+* ``file`` — a user CSV with columns x, y, z, a, b, c (mm, degrees).
+
+**Workspace box.** The machine's ``workspace`` (6, 2) when it has one; otherwise the
+per-axis reach around home: coordinate i spans ``home_i ± t_i·h_i`` with t_i ∈ (0, 1] the
+largest scale (bisection, 24 halvings) at which both poses home ± t_i h_i e_i are
+reachable (with the safety margin) and measurable, for the default shape
+h = (s, s, s/2, s/r, s/r, s/r), s = the mean actuator stroke (mm) and r = the platform
+joint radius (mm) (the angles rotate a platform joint by s). Random and grid candidates
+are drawn in this box and filtered. Corner selection (paper 1) needs all 64 corners
+reachable: :func:`corner_box` shrinks the box about its centre by the largest common scale
+t ∈ (0, 1] whose corners all pass (same bisection).
+
+**Checks** (every candidate, on the nominal machine): the machine's limits with a safety
+margin (:meth:`Mechanism.check_limits`: stroke, U/S-joint tilt, leg collision,
+singularity) and measurability:
+
+* indicators (paper 2 eq. 4–6): the platform plane must face the indicators
+  (n_z ≥ ``MIN_NORMAL_Z``), every reading z_k must lie in the indicator travel [lo, hi]
+  when given, and every touch point must lie on the plate (distance from the platform
+  origin in the plane ≤ plate radius) when a plate radius is given;
+* full-pose / position: optional line-of-sight cone — the angle between the target's z
+  axis (R·R_t·e_z) and the direction from the target to the sensor origin must not exceed
+  the cone's half-angle.
+
+Rejected candidates are counted by reason.
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pkmcal.conventions import POSE_COLUMNS, euler_to_matrix, poses_from_file_units
+from pkmcal.errors import InputFileError, PkmcalError
+from pkmcal.mechanisms.base import Mechanism
+from pkmcal.planning.indices import blas_single_threaded
+from pkmcal.sensors.base import MeasurementSetup
+from pkmcal.sensors.indicators import MIN_NORMAL_Z
+
+CANDIDATE_KINDS = ("random", "grid", "corners", "file")
+#: Default safety margin: mm for stroke and collision, degrees for the joint tilts.
+DEFAULT_MARGIN = 0.1
+
+
+@dataclass(frozen=True)
+class Measurability:
+    """Measurability options (module docstring); ``None`` disables a check.
+
+    ``travel`` (lo, hi) indicator reading range, mm; ``plate_radius`` platform plate
+    radius for the indicator touch points, mm; ``sight_cone`` line-of-sight half-angle,
+    radians (full-pose and position sensors).
+    """
+
+    travel: tuple[float, float] | None = None
+    plate_radius: float | None = None
+    sight_cone: float | None = None
+
+
+@dataclass(frozen=True)
+class CandidateCheck:
+    """Per-pose verdicts: ``violations`` reason → (N,) bool; ``ok`` (N,) all passed."""
+
+    violations: dict[str, np.ndarray]
+
+    @property
+    def ok(self) -> np.ndarray:
+        n = len(next(iter(self.violations.values())))
+        bad = np.zeros(n, dtype=bool)
+        for v in self.violations.values():
+            bad |= v
+        return ~bad
+
+    def counts(self) -> dict[str, int]:
+        """Number of poses violating each reason (a pose may count under several)."""
+        return {k: int(v.sum()) for k, v in self.violations.items() if v.any()}
+
+
+@dataclass(frozen=True)
+class CandidateSet:
+    """Accepted candidate poses (N, 6) (mm, rad), the number tested and rejections by reason."""
+
+    poses: np.ndarray
+    n_tested: int
+    rejected: dict[str, int] = field(default_factory=dict)
+    kind: str = ""
+
+    def describe(self) -> str:
+        rej = ", ".join(f"{k} {v}" for k, v in sorted(self.rejected.items())) or "none"
+        return (f"{len(self.poses)} of {self.n_tested} {self.kind} candidates accepted; "
+                f"rejected by reason: {rej}")
+
+
+# -- measurability ----------------------------------------------------------------------
+
+
+def measurability_violations(setup: MeasurementSetup, poses: np.ndarray,
+                             spec: Measurability = Measurability()) -> dict[str, np.ndarray]:
+    """Reason → (N,) True where the sensor of ``setup`` cannot measure the pose."""
+    poses = np.atleast_2d(np.asarray(poses, dtype=float))
+    sensor = setup.sensor
+    out: dict[str, np.ndarray] = {}
+    R = euler_to_matrix(poses[:, 3:6])
+    if sensor.kind == "indicators":
+        n = R[:, :, 2]
+        facing = n[:, 2] >= MIN_NORMAL_Z
+        out["indicator_plane_tilt"] = ~facing
+        safe = np.where(facing[:, None], poses, np.zeros(6))
+        if spec.travel is not None:
+            z = sensor.predict(safe)
+            lo, hi = spec.travel
+            out["indicator_travel"] = facing & ~np.all((z >= lo) & (z <= hi), axis=1)
+        if spec.plate_radius is not None:
+            # touch point under indicator k: (x_k, y_k, z_k + ζ_k) in {F}; in {P} minus p, Rᵀ.
+            z = sensor.predict(safe) + sensor.params
+            pts = np.stack([np.broadcast_to(sensor.positions[:, 0], z.shape),
+                            np.broadcast_to(sensor.positions[:, 1], z.shape), z], axis=-1)
+            local = np.einsum("nji,nkj->nki", R, pts - poses[:, None, 0:3])
+            out["indicator_off_plate"] = facing & np.any(np.linalg.norm(local[..., :2], axis=-1)
+                                                         > spec.plate_radius, axis=1)
+    elif spec.sight_cone is not None and sensor.kind in ("full-pose", "position"):
+        world = np.asarray(sensor.world, dtype=float)
+        Rw = euler_to_matrix(world[3:6])
+        origin = -Rw.T @ world[0:3]                      # sensor origin in {F}
+        if sensor.kind == "full-pose":
+            tool = np.asarray(sensor.tool, dtype=float)
+            offset, Rt = tool[0:3], euler_to_matrix(tool[3:6])
+        else:
+            offset, Rt = np.asarray(sensor.target, dtype=float), np.eye(3)
+        target = poses[:, 0:3] + R @ offset
+        normal = (R @ Rt)[:, :, 2]
+        sight = origin - target
+        cosang = np.einsum("nk,nk->n", normal, sight) / np.maximum(np.linalg.norm(sight, axis=1), 1e-12)
+        out["line_of_sight"] = cosang < np.cos(spec.sight_cone)
+    return out
+
+
+def check_candidates(mechanism: Mechanism, setup: MeasurementSetup | None, poses: np.ndarray, *,
+                     margin: float = DEFAULT_MARGIN, measurability: Measurability = Measurability()) -> CandidateCheck:
+    """Limits (with ``margin``) and measurability of every pose; see module docstring."""
+    poses = mechanism.as_pose_array(poses)
+    finite = np.all(np.isfinite(poses), axis=1)
+    safe = np.where(finite[:, None], poses, mechanism.home_pose)
+    lim = mechanism.check_limits(safe, margin=margin)
+    viol = {k: v | ~finite for k, v in lim.violations.items()}
+    if setup is not None:
+        viol.update(measurability_violations(setup, safe, measurability))
+    return CandidateCheck(viol)
+
+
+# -- the workspace box ------------------------------------------------------------------
+
+
+def default_box_shape(mechanism: Mechanism) -> np.ndarray:
+    """Half-widths h (6,) of the default box shape (module docstring)."""
+    stroke = np.asarray(getattr(mechanism, "stroke", np.array([[0.0, 50.0]])), dtype=float)
+    s = float(np.mean(stroke[:, 1] - stroke[:, 0]))
+    r = float(getattr(mechanism, "platform_radius", 100.0))
+    return np.array([s, s, s / 2, s / r, s / r, s / r])
+
+
+def corner_poses(box: np.ndarray) -> np.ndarray:
+    """The 2^6 = 64 corners (64, 6) of a box (6, 2) [min, max] (paper 1 §IV)."""
+    box = np.asarray(box, dtype=float).reshape(6, 2)
+    bits = np.array(list(itertools.product((0, 1), repeat=6)))
+    return box[np.arange(6), bits]
+
+
+def _scaled_box(center, half, t):
+    return np.stack([center - t * half, center + t * half], axis=1)
+
+
+def _bisect_scale(ok, t_max: float = 1.0, n_iter: int = 24) -> float:
+    if ok(t_max):
+        return t_max
+    lo, hi = 0.0, t_max
+    for _ in range(n_iter):
+        mid = 0.5 * (lo + hi)
+        if ok(mid):
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+@blas_single_threaded
+def corner_box(mechanism: Mechanism, box: np.ndarray, setup: MeasurementSetup | None = None, *,
+               margin: float = DEFAULT_MARGIN, measurability: Measurability = Measurability()) -> np.ndarray:
+    """The box (6, 2) scaled about its centre by the largest t ∈ (0, 1] whose 64 corners all
+    pass :func:`check_candidates`; error if even tiny boxes fail (home pose unreachable)."""
+    box = np.asarray(box, dtype=float).reshape(6, 2)
+    center, half = box.mean(axis=1), (box[:, 1] - box[:, 0]) / 2
+
+    def ok(t):
+        return bool(check_candidates(mechanism, setup, corner_poses(_scaled_box(center, half, t)),
+                                     margin=margin, measurability=measurability).ok.all())
+
+    t = _bisect_scale(ok)
+    if t <= 1e-6:
+        raise PkmcalError(f"machine '{mechanism.name}': no box around {np.round(center, 3).tolist()} has all its "
+                          "corners reachable and measurable; check the home pose, the workspace, the safety "
+                          "margin and the sensor set-up")
+    return _scaled_box(center, half, t)
+
+
+@blas_single_threaded
+def workspace_box(mechanism: Mechanism, setup: MeasurementSetup | None = None, *,
+                  margin: float = DEFAULT_MARGIN, measurability: Measurability = Measurability()) -> np.ndarray:
+    """The machine's ``workspace`` if set, else the largest reachable box around home (module doc)."""
+    ws = getattr(mechanism, "workspace", None)
+    if ws is not None:
+        return np.array(ws, dtype=float).reshape(6, 2)
+    home = np.asarray(mechanism.home_pose, dtype=float)
+    half = default_box_shape(mechanism)
+    reach = np.empty(6)
+    for i in range(6):
+        e = np.zeros(6)
+        e[i] = half[i]
+
+        def ok(t, e=e):
+            pts = np.stack([home + t * e, home - t * e])
+            return bool(check_candidates(mechanism, setup, pts, margin=margin, measurability=measurability).ok.all())
+
+        reach[i] = _bisect_scale(ok) * half[i]
+    if np.any(reach <= 1e-6 * half):
+        raise PkmcalError(f"machine '{mechanism.name}': the home pose cannot move along "
+                          f"{', '.join(POSE_COLUMNS[i] for i in np.flatnonzero(reach <= 1e-6 * half))} within the "
+                          "limits and the safety margin; check the home pose, the margin and the sensor set-up")
+    return np.stack([home - reach, home + reach], axis=1)
+
+
+# -- generators -------------------------------------------------------------------------
+
+
+def random_poses(box: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+    """``n`` poses uniform in the box (6, 2)."""
+    box = np.asarray(box, dtype=float).reshape(6, 2)
+    return box[:, 0] + rng.random((n, 6)) * (box[:, 1] - box[:, 0])
+
+
+def grid_poses(box: np.ndarray, per_axis: int) -> np.ndarray:
+    """``per_axis``^6 poses on a regular grid including the box faces (per_axis ≥ 2)."""
+    if per_axis < 2:
+        raise PkmcalError("a candidate grid needs at least 2 points per pose coordinate")
+    box = np.asarray(box, dtype=float).reshape(6, 2)
+    axes = [np.linspace(lo, hi, per_axis) for lo, hi in box]
+    return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 6)
+
+
+def read_candidates_csv(path: str | os.PathLike) -> np.ndarray:
+    """Poses (N, 6) (mm, rad) from a CSV file with columns x, y, z, a, b, c (mm, degrees)."""
+    from pkmcal.io.tables import read_table
+
+    table = read_table(path, POSE_COLUMNS)
+    if len(table) == 0:
+        raise InputFileError(path, "no candidate poses (the file has a header but no rows)")
+    return poses_from_file_units(table[list(POSE_COLUMNS)])
+
+
+@blas_single_threaded
+def generate_candidates(mechanism: Mechanism, setup: MeasurementSetup | None, *, kind: str = "random",
+                        n: int = 2000, rng: np.random.Generator | None = None, box: np.ndarray | None = None,
+                        path: str | os.PathLike | None = None, grid_per_axis: int = 4,
+                        margin: float = DEFAULT_MARGIN, measurability: Measurability = Measurability(),
+                        max_rounds: int = 50) -> CandidateSet:
+    """Checked candidate poses of one ``kind`` of :data:`CANDIDATE_KINDS`.
+
+    ``random`` draws in batches until ``n`` poses pass the checks (at most ``max_rounds``
+    batches); the others check a fixed set. ``box`` defaults to :func:`workspace_box`;
+    ``corners`` uses :func:`corner_box` of it so that all 64 corners pass.
+    """
+    rng = np.random.default_rng() if rng is None else rng
+    kw = dict(margin=margin, measurability=measurability)
+    if kind == "file":
+        if path is None:
+            raise PkmcalError("candidate kind 'file' needs a CSV path")
+        poses = read_candidates_csv(path)
+    else:
+        if box is None:
+            box = workspace_box(mechanism, setup, **kw)
+        if kind == "corners":
+            poses = corner_poses(corner_box(mechanism, box, setup, **kw))
+        elif kind == "grid":
+            poses = grid_poses(box, grid_per_axis)
+        elif kind == "random":
+            kept, tested, rejected = [], 0, {}
+            total = 0
+            for _ in range(max_rounds):
+                batch = random_poses(box, max(4 * (n - total), 256), rng)
+                ok = check_candidates(mechanism, setup, batch, **kw).ok
+                need = n - total
+                if ok.sum() >= need:                 # count only up to the last pose used
+                    batch = batch[: int(np.flatnonzero(ok)[need - 1]) + 1]
+                chk = check_candidates(mechanism, setup, batch, **kw)
+                tested += len(batch)
+                for k, v in chk.counts().items():
+                    rejected[k] = rejected.get(k, 0) + v
+                kept.append(batch[chk.ok])
+                total += len(kept[-1])
+                if total >= n:
+                    break
+            if total < n:
+                raise PkmcalError(f"only {total} of {tested} random poses in the workspace box are reachable and "
+                                  f"measurable; ask for fewer candidates or relax the margin/sensor checks")
+            return CandidateSet(np.concatenate(kept), tested, rejected, "random")
+        else:
+            raise PkmcalError(f"unknown candidate kind '{kind}'; use one of {', '.join(CANDIDATE_KINDS)}")
+    chk = check_candidates(mechanism, setup, poses, **kw)
+    if not chk.ok.any():
+        raise PkmcalError(f"none of the {len(poses)} {kind} candidate poses is reachable and measurable "
+                          f"(rejected: {chk.counts()})")
+    return CandidateSet(poses[chk.ok], len(poses), chk.counts(), kind)

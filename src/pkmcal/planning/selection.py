@@ -1,0 +1,468 @@
+"""Pose selection on per-pose Jacobian blocks G (N, m, n) (paper 2 §4; paper 1 §IV).
+
+Every algorithm picks ``n`` of the N candidate poses; it sees only the blocks G_j (each
+candidate's whitened, column-scaled identification Jacobian rows, restricted to the
+identifiable parameters), so it is independent of the machine and sensor. The
+information matrix of a set is M = Σ_j G_jᵀ G_j.
+
+* ``default`` — D-optimal (max log det M, ⇔ O1 at fixed size; for another index, then
+  polished by the add/remove exchange on it): greedy forward selection on M₀ = δI, then
+  DETMAX exchanges (add the best candidate, remove the least useful
+  pose, stop when the removed one is the one just added). Adding/removing pose k is a
+  rank-m update; with S_j = G_j M⁻¹ G_jᵀ,
+
+      det(M ± G_kᵀG_k) = det M · det(I ± S_k)                 (determinant lemma)
+      M⁻¹ ← M⁻¹ ∓ U (I ± S_k)⁻¹ Uᵀ,   U = M⁻¹ G_kᵀ               (Woodbury)
+
+  and S_j ← S_j ∓ A_j (I ± S_k)⁻¹ A_jᵀ with A_j = G_j U for all candidates in one GEMM,
+  each step scores all candidates at once in O(N m² n) (no per-candidate Python loop).
+* ``detmax`` — paper 2 §4 steps (i)–(iv) with an exact add step on any index O1–O5
+  (pruned by an eigenvalue bound, :meth:`_IndexScorer.best_add`):
+  (i) random initial set; (ii) add the candidate maximising the index of the enlarged set;
+  (iii) remove the pose whose removal leaves the best index; (iv) repeat until the removed
+  pose is the one just added.
+* ``cuckoo`` — the same add/remove framework with the add step done by cuckoo search with
+  Lévy flights (Yang & Deb 2009; paper 2 Fig. 4, n = 25 nests, p_a = 0.25) over the
+  candidates' normalised pose coordinates, each cuckoo snapped to its nearest candidate.
+* ``random`` — n distinct candidates drawn uniformly.
+* ``corners`` (paper 1 §IV) is ``random`` applied to the 2^6 workspace-box corners; the
+  corners are built in :mod:`pkmcal.planning.candidates`.
+
+All are seeded through a ``numpy.random.Generator`` and reproducible.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from pkmcal.errors import PkmcalError
+from pkmcal.planning import _selection_kernels as kernels
+from pkmcal.planning.indices import (
+    as_blocks,
+    blas_single_threaded,
+    check_index_name,
+    index_from_eigenvalues,
+    information_matrix,
+    observability_indices,
+)
+
+ALGORITHMS = ("default", "detmax", "cuckoo", "corners", "random")
+#: Which index each algorithm maximises (documented in docs/planning.md and ``--help``).
+OPTIMISED_INDEX = {"default": "O1 (or --index, after the D-optimal start)", "detmax": "any (default O4)", "cuckoo": "any (default O4)",
+                   "corners": "none", "random": "none"}
+Progress = Callable[[int, int], None]
+
+
+@dataclass(frozen=True)
+class Selection:
+    """Result of a selection: ``chosen`` candidate indices (n,), the ``algorithm`` and the
+    ``criterion`` it maximised, O1..O5 of the chosen set (``indices``), and counters."""
+
+    chosen: np.ndarray
+    algorithm: str
+    criterion: str
+    indices: dict[str, float]
+    iterations: int = 0
+    evaluations: int = 0
+    message: str = ""
+    extra: dict = field(default_factory=dict)
+
+
+def _check(G, n: int) -> tuple[np.ndarray, int, int, int]:
+    G = np.ascontiguousarray(as_blocks(G))
+    N, m, p = G.shape
+    if n < 1 or n > N:
+        raise PkmcalError(f"cannot select {n} poses from {N} candidates; ask for 1..{N} poses or give more candidates")
+    return G, N, m, p
+
+
+def _need_rank(n: int, m: int, p: int) -> None:
+    if n * m < p:
+        raise PkmcalError(
+            f"{n} poses give {n * m} readings, fewer than the {p} identifiable parameters; "
+            f"ask for at least {math.ceil(p / m)} poses"
+        )
+
+
+def _batch_logdet(S: np.ndarray, sign: float) -> np.ndarray:
+    """log det(I + sign·S_j) for S (K, m, m); −inf where not positive definite."""
+    m = S.shape[-1]
+    s, ld = np.linalg.slogdet(sign * S + np.eye(m))
+    return np.where(s > 0, ld, -np.inf)
+
+
+def woodbury_update(Minv: np.ndarray, Gk: np.ndarray, sign: float = 1.0) -> tuple[np.ndarray, float]:
+    """(M ± G_kᵀG_k)⁻¹ and log det(M ± G_kᵀG_k) − log det M from M⁻¹ (p, p), G_k (m, p):
+
+        (M ± GᵀG)⁻¹ = M⁻¹ ∓ U (I ± G U)⁻¹ Uᵀ,  U = M⁻¹Gᵀ;   det(M ± GᵀG) = det M · det(I ± G U).
+    """
+    U = Minv @ Gk.T
+    C = np.eye(Gk.shape[0]) + sign * (Gk @ U)
+    s, ld = np.linalg.slogdet(C)
+    return Minv - sign * (U @ np.linalg.solve(C, U.T)), (float(ld) if s > 0 else -np.inf)
+
+
+def _all_S(flatF: np.ndarray, N: int, m: int, M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """M⁻¹ and S_j = G_j M⁻¹ G_jᵀ (N, m, m) for all candidates (one GEMM)."""
+    try:
+        L = np.linalg.cholesky(M)
+    except np.linalg.LinAlgError:
+        raise PkmcalError("the candidate poses do not identify every parameter (singular information matrix); "
+                          "use more poses or more varied candidates") from None
+    Linv = np.linalg.inv(L)
+    W = (flatF @ Linv.T).reshape(N, m, -1)
+    return Linv.T @ Linv, np.einsum("nip,njp->nij", W, W, optimize=True)
+
+
+class _DState:
+    """M, M⁻¹ and S_j = G_j M⁻¹ G_jᵀ of all candidates, kept by rank-m updates (Woodbury)."""
+
+    def __init__(self, G: np.ndarray, M: np.ndarray, flatF: np.ndarray | None = None):
+        self.G = G
+        self.N, self.m, self.p = G.shape
+        self.flatF = np.asfortranarray(G.reshape(self.N * self.m, self.p)) if flatF is None else flatF
+        self.M = np.array(M, dtype=float)
+        self.updates = 0
+        self.refresh()
+
+    def refresh(self) -> None:
+        """Exact M⁻¹, S and gains from M (bounds the drift of the updates)."""
+        self.Minv, self.S = _all_S(self.flatF, self.N, self.m, self.M)
+        self.S = np.ascontiguousarray(self.S)
+        self.gain = np.empty(self.N)
+        kernels.gains_of(self.S, self.gain)
+
+    def update(self, k: int, sign: float) -> None:
+        """M ← M ± G_kᵀG_k: M⁻¹ ∓= U C⁻¹ Uᵀ, S_j ∓= A_j C⁻¹ A_jᵀ, U = M⁻¹G_kᵀ, C = I ± S_k,
+        A_j = G_j U, and the gains, for all j (compiled loop, :mod:`._selection_kernels`)."""
+        Gk = self.G[k]
+        U = self.Minv @ Gk.T
+        Cinv = np.linalg.inv(np.eye(self.m) + sign * self.S[k])
+        self.Minv -= sign * (U @ Cinv @ U.T)
+        kernels.update_and_gain(self.G, np.ascontiguousarray(U.T), Cinv, self.S, sign, self.gain)
+        self.M += sign * (Gk.T @ Gk)
+        self.updates += 1
+        if self.updates % 50 == 0:
+            self.refresh()
+
+    def gains(self) -> np.ndarray:
+        """log det(M + G_jᵀG_j) − log det M for every candidate (N,) (a copy; NaN → −∞)."""
+        return np.where(np.isnan(self.gain), -np.inf, self.gain)
+
+
+@blas_single_threaded
+def select_default(G: np.ndarray, n: int, *, index: str = "O1", pool: int | None = None,
+                   max_exchanges: int | None = None, progress: Progress | None = None) -> Selection:
+    """D-optimal selection (max log det M ⇔ O1 at fixed size); deterministic.
+
+    1. Pool: when N > ``pool`` (default max(2000, 20n)), the ``pool`` candidates of largest
+       leverage tr(G_j M_all⁻¹ G_jᵀ) (M_all: all candidates) — D-optimal designs sit on
+       high-leverage points; the exchange below still sees every candidate.
+    2. Greedy forward selection in the pool on M₀ = δI (δ = 1e-9 · mean per-pose
+       information per parameter): add argmax_j log det(I + S_j), S_j = G_j M⁻¹ G_jᵀ, all
+       candidates updated by one rank-m update per step (module docstring); while the
+       chosen rows do not yet span the parameters (S_j ~ 1/δ, updates would cancel
+       digits) S is recomputed exactly from the Cholesky factor of M instead.
+    3. DETMAX exchange on the exact M of the chosen set over *all* N candidates: add the
+       candidate of largest gain, remove the pose of least loss log det(I − S_i); stop
+       when that is the one just added (paper 2 §4 iv) or nothing improves.
+    4. For ``index`` O2..O5: paper 2's add/remove exchange on that index started from the
+       D-optimal set, the add step scoring exactly the (at most 256) candidates of largest
+       eigenvalue bound (:meth:`_IndexScorer.best_add`).
+    """
+    G, N, m, p = _check(G, n)
+    _need_rank(n, m, p)
+    flatF = np.asfortranarray(G.reshape(N * m, p))
+    K = max(2000, 20 * n) if pool is None else max(int(pool), n)
+    evaluations = 0
+    if K < N:
+        _, S_all = _all_S(flatF, N, m, information_matrix(G))
+        lev = np.trace(S_all, axis1=1, axis2=2)
+        pool_idx = np.sort(np.argpartition(-lev, K - 1)[:K])
+        evaluations += N
+    else:
+        pool_idx = np.arange(N)
+    Gp = np.ascontiguousarray(G[pool_idx])
+    delta = 1e-9 * float(np.einsum("nip,nip->", Gp, Gp)) / (len(Gp) * p) + np.finfo(float).tiny
+    state = _DState(Gp, delta * np.eye(p))
+    in_pool = np.zeros(len(Gp), dtype=bool)
+    max_ex = 4 * n if max_exchanges is None else max_exchanges
+    total = n + max_ex
+    for step in range(n):
+        gain = state.gains()
+        gain[in_pool] = -np.inf
+        k = int(np.argmax(gain))
+        state.update(k, 1.0)
+        if (step + 1) * m <= p + m:
+            # while δ dominates some directions S_j ~ 1/δ and the update cancels digits:
+            # recompute exactly until the chosen rows span the parameter space
+            state.refresh()
+        in_pool[k] = True
+        evaluations += len(Gp)
+        if progress is not None:
+            progress(step + 1, total)
+    chosen = [int(i) for i in pool_idx[np.flatnonzero(in_pool)]]
+    in_set = np.zeros(N, dtype=bool)
+    in_set[chosen] = True
+    state = _DState(G, information_matrix(G, np.array(chosen)), flatF)
+    exchanges = 0
+    for it in range(max_ex):
+        gain = state.gains()
+        evaluations += N
+        gain[in_set] = -np.inf
+        k = int(np.argmax(gain))
+        if not np.isfinite(gain[k]):
+            break
+        state.update(k, 1.0)
+        cand = np.array(chosen + [k])
+        loss = _batch_logdet(state.S[cand], -1.0)
+        r = int(np.argmax(loss))
+        if cand[r] == k or gain[k] + loss[r] <= 1e-10:
+            state.update(k, -1.0)
+            break
+        state.update(int(cand[r]), -1.0)
+        in_set[k] = True
+        in_set[cand[r]] = False
+        chosen[chosen.index(int(cand[r]))] = k
+        exchanges += 1
+        if progress is not None:
+            progress(n + it + 1, total)
+    out = np.array(sorted(chosen))
+    message = f"greedy D-optimal start ({len(Gp)} pool) + {exchanges} DETMAX exchanges"
+    index = check_index_name(index)
+    if index != "O1":
+        polish = select_detmax(G, n, index=index, initial=out, max_exact=256, progress=progress)
+        return Selection(polish.chosen, "default", index, polish.indices, iterations=exchanges + polish.iterations,
+                         evaluations=evaluations + polish.evaluations,
+                         message=f"{message}, then {polish.iterations} add/remove iterations on {index}")
+    return Selection(out, "default", "O1", observability_indices(G, out), iterations=exchanges,
+                     evaluations=evaluations, message=message)
+
+
+# -- generic index: exhaustive and cuckoo add steps ------------------------------------
+
+
+class _IndexScorer:
+    """Index of M + G_jᵀG_j (or M − G_jᵀG_j) for batches of candidates, by eigenvalues."""
+
+    def __init__(self, G: np.ndarray, index: str, chunk: int = 512):
+        self.G = G
+        self.index = check_index_name(index)
+        self.chunk = chunk
+        self.evaluations = 0
+
+    def score(self, M: np.ndarray, idx: np.ndarray, sign: float, n_rows: int) -> np.ndarray:
+        """(index, tie-break) arrays for the sets M + sign·G_jᵀG_j, j in ``idx``.
+
+        The tie-break is log det(M' + δI): it ranks rank-deficient sets (index 0)."""
+        idx = np.asarray(idx, dtype=int)
+        val = np.empty(len(idx))
+        tie = np.empty(len(idx))
+        p = M.shape[0]
+        delta = 1e-9 * max(np.trace(M), 1e-300) / p
+        for s in range(0, len(idx), self.chunk):
+            Gs = self.G[idx[s:s + self.chunk]]
+            Ms = M[None] + sign * np.einsum("kip,kiq->kpq", Gs, Gs)
+            ev = np.linalg.eigvalsh(Ms)
+            val[s:s + len(Gs)] = index_from_eigenvalues(self.index, ev, n_rows)
+            tie[s:s + len(Gs)] = np.sum(np.log(np.maximum(ev, 0.0) + delta), axis=1)
+        self.evaluations += len(idx)
+        return val, tie
+
+    def best_add(self, M: np.ndarray, free: np.ndarray, n_rows: int, batch: int = 64,
+                 max_exact: int | None = None) -> int:
+        """The candidate of ``free`` maximising the index of M + G_jᵀG_j, exactly, scoring
+        few candidates: with V_k the k = m + 2 smallest eigenvectors of M (eigenvalues Λ_k),
+        Courant–Fischer gives μ_j = λ_min(Λ_k + (G_j V_k)ᵀ(G_j V_k)) ≥ λ_min(M + G_jᵀG_j),
+        and λ_max(M + G_jᵀG_j) ≥ λ_max(M), so
+
+            O2 ≤ √(μ_j/λ_max),   O3 ≤ √μ_j,   O4 ≤ μ_j/√λ_max;
+
+        candidates are scored exactly in order of that bound until the best exact value
+        reaches the next bound (or ``max_exact`` were scored: then the result is the best
+        of the most promising). O1 and O5 (and a singular M) are scored exhaustively."""
+        free = np.asarray(free, dtype=int)
+        ev, V = np.linalg.eigh(M)
+        lmin, lmax = ev[0], ev[-1]
+        if self.index in ("O1", "O5") or not (lmax > 0 and lmin > 1e-12 * lmax):
+            val, tie = self.score(M, free, 1.0, n_rows)
+            return int(free[_best(val, tie)])
+        k = min(M.shape[0], self.G.shape[1] + 2)
+        P = np.einsum("nip,pk->nik", self.G[free], V[:, :k])          # G_j V_k
+        top = np.linalg.eigvalsh(np.diag(ev[:k])[None] + np.einsum("nik,nil->nkl", P, P))[:, 0]
+        ub = {"O2": np.sqrt(top / lmax), "O3": np.sqrt(top), "O4": top / np.sqrt(lmax)}[self.index]
+        order = np.argsort(-ub, kind="stable")
+        best_val, best_j = -np.inf, -1
+        for s in range(0, len(order), batch):
+            cand = order[s:s + batch]
+            val, _ = self.score(M, free[cand], 1.0, n_rows)
+            b = int(np.argmax(val))
+            if val[b] > best_val:
+                best_val, best_j = float(val[b]), int(free[cand[b]])
+            if s + batch >= len(order) or best_val >= ub[order[s + batch]]:
+                break
+            if max_exact is not None and s + batch >= max_exact:
+                break
+        return best_j
+
+
+def _best(val: np.ndarray, tie: np.ndarray) -> int:
+    """Position of the largest ``val``, ties (e.g. all zero) broken by ``tie``."""
+    return int(np.lexsort((tie, val))[-1])
+
+
+def _add_remove(G, n, index, rng, add_step, initial, max_iter, progress, name) -> Selection:
+    """Paper 2 §4 steps (i)–(iv) with a pluggable add step ``add_step(M, in_set, n_rows)``."""
+    G, N, m, p = _check(G, n)
+    _need_rank(n, m, p)
+    scorer = _IndexScorer(G, index)
+    if initial is None:
+        chosen = [int(i) for i in rng.choice(N, size=n, replace=False)]        # step (i)
+    else:
+        chosen = [int(i) for i in np.asarray(initial, dtype=int)]
+        if len(chosen) != n or len(set(chosen)) != n:
+            raise PkmcalError(f"the initial set must hold {n} distinct candidate indices")
+    in_set = np.zeros(N, dtype=bool)
+    in_set[chosen] = True
+    M = information_matrix(G, np.array(chosen))
+    it = 0
+    for it in range(1, max_iter + 1):
+        k = add_step(M, in_set, (n + 1) * m, scorer)                          # step (ii)
+        if k is None:
+            break
+        M_plus = M + G[k].T @ G[k]
+        cand = np.array(chosen + [k])
+        val, tie = scorer.score(M_plus, cand, -1.0, n * m)                     # step (iii)
+        r = _best(val, tie)
+        if cand[r] == k:                                                       # step (iv)
+            break
+        M = M_plus - G[cand[r]].T @ G[cand[r]]
+        in_set[k] = True
+        in_set[cand[r]] = False
+        chosen[chosen.index(int(cand[r]))] = k
+        if progress is not None:
+            progress(it, max_iter)
+    out = np.array(sorted(chosen))
+    return Selection(out, name, scorer.index, observability_indices(G, out), iterations=it,
+                     evaluations=scorer.evaluations, message=f"{it} add/remove iterations")
+
+
+@blas_single_threaded
+def select_detmax(G: np.ndarray, n: int, *, index: str = "O4", rng: np.random.Generator | None = None,
+                  initial: np.ndarray | None = None, max_iter: int | None = None, max_exact: int | None = None,
+                  progress: Progress | None = None) -> Selection:
+    """Paper 2 §4 add/remove exchange with an exact add step on index O1..O5 (steps i–iv)."""
+    rng = np.random.default_rng() if rng is None else rng
+    G = as_blocks(G)
+
+    def add_step(M, in_set, n_rows, scorer):
+        free = np.flatnonzero(~in_set)
+        if len(free) == 0:
+            return None
+        return scorer.best_add(M, free, n_rows, max_exact=max_exact)
+
+    return _add_remove(G, n, index, rng, add_step, initial, max_iter or 10 * n, progress, "detmax")
+
+
+def levy_steps(rng: np.random.Generator, shape, beta: float = 1.5) -> np.ndarray:
+    """Lévy-stable steps by Mantegna's algorithm: u / |v|^(1/β), u ~ N(0, σ_u²), v ~ N(0, 1),
+    σ_u = [Γ(1+β) sin(πβ/2) / (Γ((1+β)/2) β 2^((β−1)/2))]^(1/β) (Yang & Deb 2009)."""
+    sigma = (math.gamma(1 + beta) * math.sin(math.pi * beta / 2)
+             / (math.gamma((1 + beta) / 2) * beta * 2 ** ((beta - 1) / 2))) ** (1 / beta)
+    u = rng.standard_normal(shape) * sigma
+    v = rng.standard_normal(shape)
+    return u / np.abs(v) ** (1 / beta)
+
+
+@blas_single_threaded
+def select_cuckoo(G: np.ndarray, n: int, *, positions: np.ndarray, index: str = "O4",
+                  rng: np.random.Generator | None = None, n_nests: int = 25, pa: float = 0.25,
+                  generations: int = 20, alpha: float = 0.05, initial: np.ndarray | None = None,
+                  max_iter: int | None = None, progress: Progress | None = None) -> Selection:
+    """Paper 2 §4: add/remove framework whose add step is a cuckoo search (Fig. 4).
+
+    Nests are candidates; a cuckoo from nest x_i flies to x_i + α·Lévy(1.5) in the
+    candidates' pose coordinates normalised to [0, 1] (``positions`` (N, d)) and lands on
+    the nearest candidate not yet in the set; it replaces a random nest if fitter; each
+    generation the fraction ``pa`` of worst nests is abandoned for random candidates.
+    Fitness (eq. 9) = index of the set with the candidate added.
+    """
+    rng = np.random.default_rng() if rng is None else rng
+    G = as_blocks(G)
+    X = np.asarray(positions, dtype=float)
+    if X.ndim != 2 or X.shape[0] != G.shape[0]:
+        raise PkmcalError(f"cuckoo search needs one position per candidate; got {X.shape} for {G.shape[0]} candidates")
+    lo, hi = X.min(axis=0), X.max(axis=0)
+    Xn = (X - lo) / np.where(hi > lo, hi - lo, 1.0)
+    tree = cKDTree(Xn)
+    n_abandon = max(1, int(round(pa * n_nests)))
+    k_near = min(len(Xn), n + 8)
+
+    def snap(points, in_set):
+        _, nb = tree.query(points, k=k_near)
+        nb = np.atleast_2d(nb)
+        ok = ~in_set[nb]
+        first = np.argmax(ok, axis=1)
+        got = nb[np.arange(len(nb)), first]
+        return np.where(ok.any(axis=1), got, -1)
+
+    def add_step(M, in_set, n_rows, scorer):
+        free = np.flatnonzero(~in_set)
+        if len(free) == 0:
+            return None
+        nests = rng.choice(free, size=min(n_nests, len(free)), replace=False)
+        fit, tie = scorer.score(M, nests, 1.0, n_rows)
+        for _ in range(generations):
+            new = snap(Xn[nests] + alpha * levy_steps(rng, (len(nests), Xn.shape[1])), in_set)
+            valid = new >= 0
+            if valid.any():
+                f_new, t_new = scorer.score(M, new[valid], 1.0, n_rows)
+                tgt = rng.integers(0, len(nests), size=int(valid.sum()))
+                for c, f, t, j in zip(new[valid], f_new, t_new, tgt):
+                    if (f, t) > (fit[j], tie[j]):
+                        nests[j], fit[j], tie[j] = c, f, t
+            worst = np.lexsort((tie, fit))[:n_abandon]
+            fresh = rng.choice(free, size=len(worst), replace=len(free) < len(worst))
+            keep_best = _best(fit, tie)
+            worst = worst[worst != keep_best]
+            fresh = fresh[: len(worst)]
+            nests[worst] = fresh
+            fit[worst], tie[worst] = scorer.score(M, fresh, 1.0, n_rows)
+        return int(nests[_best(fit, tie)])
+
+    return _add_remove(G, n, index, rng, add_step, initial, max_iter or 10 * n, progress, "cuckoo")
+
+
+def select_random(n_candidates: int, n: int, rng: np.random.Generator | None = None) -> np.ndarray:
+    """``n`` distinct candidate indices drawn uniformly (sorted)."""
+    rng = np.random.default_rng() if rng is None else rng
+    if n < 1 or n > n_candidates:
+        raise PkmcalError(f"cannot select {n} poses from {n_candidates} candidates; ask for 1..{n_candidates} poses")
+    return np.sort(rng.choice(n_candidates, size=n, replace=False))
+
+
+def select(G: np.ndarray, n: int, *, algorithm: str = "default", index: str | None = None,
+           rng: np.random.Generator | None = None, positions: np.ndarray | None = None,
+           progress: Progress | None = None) -> Selection:
+    """Dispatch to one algorithm of :data:`ALGORITHMS` (``corners``: random choice among
+    the given candidates, which the caller makes the box corners)."""
+    algorithm = str(algorithm).lower()
+    rng = np.random.default_rng() if rng is None else rng
+    G = as_blocks(G)
+    if algorithm == "default":
+        return select_default(G, n, index=index or "O1", progress=progress)
+    if algorithm == "detmax":
+        return select_detmax(G, n, index=index or "O4", rng=rng, progress=progress)
+    if algorithm == "cuckoo":
+        if positions is None:
+            raise PkmcalError("cuckoo search needs the candidates' pose coordinates")
+        return select_cuckoo(G, n, positions=positions, index=index or "O4", rng=rng, progress=progress)
+    if algorithm in ("random", "corners"):
+        chosen = select_random(G.shape[0], n, rng)
+        return Selection(chosen, algorithm, "none", observability_indices(G, chosen))
+    raise PkmcalError(f"unknown selection algorithm '{algorithm}'; use one of {', '.join(ALGORITHMS)}")

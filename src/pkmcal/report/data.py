@@ -1,0 +1,255 @@
+"""The input of the calibration report: typed, self-contained, independent of the engine.
+
+The report (:mod:`pkmcal.report.html`, :mod:`pkmcal.report.figures`) reads only these
+dataclasses, so it does not depend on the internals of planning, sensors or identification;
+whoever produces a calibration (``pkmcal demo``, ``pkmcal identify --report``) fills them in.
+
+Units: lengths in mm and angles in radians, as everywhere inside pkmcal
+(:mod:`pkmcal.conventions`); the report converts angles to degrees (or arc-seconds) for
+display. The summaries of held-out errors are
+
+    rms = sqrt(mean(e_j²)),   max = max_j e_j,   p95 = 95th percentile of e_j
+
+over the held-out poses j, e_j being the position error ‖p_real − p_target‖ (mm) or the
+orientation error angle(R_real R_targetᵀ) (rad).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pkmcal.errors import PkmcalError
+from pkmcal.mechanisms.base import Mechanism
+
+
+def _array(value, name: str, ndim: int | None = None) -> np.ndarray:
+    arr = np.array(value, dtype=float)
+    if ndim is not None and arr.ndim != ndim:
+        raise PkmcalError(f"report: '{name}' must be a {ndim}-D array; got shape {arr.shape}")
+    arr.setflags(write=False)
+    return arr
+
+
+@dataclass(frozen=True, eq=False)
+class Identifiability:
+    """Rank report of the identification Jacobian (paper 2 §4, paper 3 §3).
+
+    ``singular_values`` (k,) of the column-scaled identification Jacobian, descending;
+    ``rank`` its numerical rank; ``fixed`` parameters held at nominal (gauge fixing and
+    user choice); ``weak`` parameters (or combinations) that the data barely determine;
+    ``null_space`` human-readable descriptions of the unidentifiable directions.
+    """
+
+    rank: int
+    n_params: int
+    singular_values: np.ndarray
+    fixed: tuple[str, ...] = ()
+    weak: tuple[str, ...] = ()
+    null_space: tuple[str, ...] = ()
+    condition_number: float | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "singular_values", _array(self.singular_values, "singular_values", 1))
+        for attr in ("fixed", "weak", "null_space"):
+            object.__setattr__(self, attr, tuple(str(s) for s in getattr(self, attr)))
+        if self.condition_number is None and self.singular_values.size:
+            s = self.singular_values[self.singular_values > 0]
+            if s.size:
+                object.__setattr__(self, "condition_number", float(s.max() / s.min()))
+
+    @classmethod
+    def from_mapping(cls, d: dict) -> "Identifiability":
+        """From a plain dict with keys rank, n_params, singular_values, fixed, weak,
+        null_space (and optionally condition_number); unknown keys are an error."""
+        allowed = {"rank", "n_params", "singular_values", "fixed", "weak", "null_space", "condition_number"}
+        unknown = set(d) - allowed
+        if unknown:
+            raise PkmcalError(f"report: unknown identifiability keys {sorted(unknown)}; allowed {sorted(allowed)}")
+        return cls(**d)
+
+
+@dataclass(frozen=True, eq=False)
+class ParameterTable:
+    """Identified parameters against nominal: one entry per parameter of the machine.
+
+    ``std`` is the 1σ standard uncertainty (NaN for parameters held fixed); ``free`` marks
+    the estimated parameters; ``true`` (optional) the simulation's ground truth.
+    """
+
+    names: tuple[str, ...]
+    nominal: np.ndarray
+    identified: np.ndarray
+    std: np.ndarray
+    free: np.ndarray
+    true: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "names", tuple(self.names))
+        n = len(self.names)
+        for attr in ("nominal", "identified", "std", "true"):
+            if attr == "true" and self.true is None:
+                continue
+            arr = _array(getattr(self, attr), attr, 1)
+            if arr.shape != (n,):
+                raise PkmcalError(f"report: parameter table '{attr}' has {arr.size} values for {n} names")
+            object.__setattr__(self, attr, arr)
+        free = np.array(self.free, dtype=bool).reshape(-1)
+        if free.shape != (n,):
+            raise PkmcalError(f"report: parameter table 'free' has {free.size} values for {n} names")
+        free.setflags(write=False)
+        object.__setattr__(self, "free", free)
+
+    @property
+    def deviation(self) -> np.ndarray:
+        return self.identified - self.nominal
+
+
+@dataclass(frozen=True, eq=False)
+class Residuals:
+    """Residuals of the final fit, measured − predicted, per pose and per reading.
+
+    ``values`` (N, m) in display-ready internal units (mm, or rad for ``unit == "rad"``);
+    ``names`` (m,) the reading names (e.g. "d1", or "lambda3" for actuator residuals);
+    ``units`` (m,) "mm" or "rad".
+    """
+
+    values: np.ndarray
+    names: tuple[str, ...]
+    units: tuple[str, ...]
+
+    def __post_init__(self) -> None:
+        values = _array(self.values, "residuals", 2)
+        object.__setattr__(self, "values", values)
+        object.__setattr__(self, "names", tuple(self.names))
+        object.__setattr__(self, "units", tuple(self.units))
+        if len(self.names) != values.shape[1] or len(self.units) != values.shape[1]:
+            raise PkmcalError(
+                f"report: residuals have {values.shape[1]} columns but {len(self.names)} names, {len(self.units)} units"
+            )
+        bad = set(self.units) - {"mm", "rad"}
+        if bad:
+            raise PkmcalError(f"report: residual units must be 'mm' or 'rad'; got {sorted(bad)}")
+
+
+@dataclass(frozen=True, eq=False)
+class HeldOutErrors:
+    """Errors at held-out poses (not used for identification), before and after.
+
+    Each array (N,): position error (mm) and orientation error (rad) of the real machine
+    when commanded with the nominal model (before) and the identified model (after).
+    """
+
+    position_before: np.ndarray
+    position_after: np.ndarray
+    orientation_before: np.ndarray
+    orientation_after: np.ndarray
+
+    def __post_init__(self) -> None:
+        n = None
+        for attr in ("position_before", "position_after", "orientation_before", "orientation_after"):
+            arr = _array(getattr(self, attr), attr, 1)
+            if n is not None and arr.shape != (n,):
+                raise PkmcalError(f"report: held-out '{attr}' has {arr.size} values, expected {n}")
+            n = arr.size
+            object.__setattr__(self, attr, arr)
+
+    @property
+    def n_poses(self) -> int:
+        return int(self.position_before.size)
+
+    def summary(self) -> dict[str, dict[str, float]]:
+        """``{"position_before": {"rms", "mean", "p95", "max"}, ...}`` (mm and rad)."""
+        out: dict[str, dict[str, float]] = {}
+        for attr in ("position_before", "position_after", "orientation_before", "orientation_after"):
+            e = getattr(self, attr)
+            out[attr] = summarise(e)
+        return out
+
+
+def summarise(e: np.ndarray) -> dict[str, float]:
+    """rms, mean, 95th percentile and max of an error sample (module docstring)."""
+    e = np.asarray(e, dtype=float)
+    if e.size == 0:
+        return {"rms": float("nan"), "mean": float("nan"), "p95": float("nan"), "max": float("nan")}
+    return {
+        "rms": float(np.sqrt(np.mean(e**2))),
+        "mean": float(np.mean(e)),
+        "p95": float(np.percentile(e, 95)),
+        "max": float(np.max(e)),
+    }
+
+
+@dataclass(frozen=True, eq=False)
+class ErrorMap:
+    """Position error over a grid of target positions, before and after calibration.
+
+    ``x`` (nx,), ``y`` (ny,) grid coordinates (mm) at height ``z`` (mm) and orientation
+    ``abc`` (rad); ``before`` and ``after`` (ny, nx) position errors (mm), NaN where the
+    pose is unreachable.
+    """
+
+    x: np.ndarray
+    y: np.ndarray
+    z: float
+    before: np.ndarray
+    after: np.ndarray
+    abc: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        x, y = _array(self.x, "x", 1), _array(self.y, "y", 1)
+        object.__setattr__(self, "x", x)
+        object.__setattr__(self, "y", y)
+        for attr in ("before", "after"):
+            arr = _array(getattr(self, attr), attr, 2)
+            if arr.shape != (y.size, x.size):
+                raise PkmcalError(f"report: error map '{attr}' has shape {arr.shape}, expected {(y.size, x.size)}")
+            object.__setattr__(self, attr, arr)
+
+
+@dataclass(frozen=True, eq=False)
+class ReportData:
+    """Everything the calibration report shows (see :func:`pkmcal.report.write_report`).
+
+    ``poses`` (N, 6) the measured (planned) poses, internal units; ``correlation`` (k, k)
+    correlation matrix of the free parameters named ``correlation_names``; ``facts`` are
+    extra (label, value) lines for the summary table (method, seed, setup, ...).
+    """
+
+    title: str
+    machine_summary: str
+    nominal: Mechanism
+    identified: Mechanism
+    poses: np.ndarray
+    identifiability: Identifiability
+    parameters: ParameterTable
+    correlation: np.ndarray
+    correlation_names: tuple[str, ...]
+    residuals: Residuals
+    held_out: HeldOutErrors | None = None
+    error_map: ErrorMap | None = None
+    setup_summary: str = ""
+    facts: tuple[tuple[str, str], ...] = field(default_factory=tuple)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "poses", _array(self.poses, "poses", 2))
+        corr = _array(self.correlation, "correlation", 2)
+        names = tuple(self.correlation_names)
+        if corr.shape != (len(names), len(names)):
+            raise PkmcalError(f"report: correlation matrix {corr.shape} does not match {len(names)} names")
+        object.__setattr__(self, "correlation", corr)
+        object.__setattr__(self, "correlation_names", names)
+        object.__setattr__(self, "facts", tuple((str(k), str(v)) for k, v in self.facts))
+        if isinstance(self.identifiability, dict):
+            object.__setattr__(self, "identifiability", Identifiability.from_mapping(self.identifiability))
+
+
+def correlation_from_covariance(cov: np.ndarray) -> np.ndarray:
+    """Correlation ρ_ij = C_ij / sqrt(C_ii C_jj); rows of zero variance give NaN."""
+    cov = np.asarray(cov, dtype=float)
+    d = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        corr = cov / np.outer(d, d)
+    corr[np.outer(d, d) == 0] = np.nan
+    return corr

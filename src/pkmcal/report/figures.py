@@ -1,0 +1,343 @@
+"""The report's figures, drawn with matplotlib (Agg) and rendered to deterministic bytes.
+
+Every figure function takes plain data (arrays, :mod:`pkmcal.report.data` dataclasses) and
+returns a :class:`matplotlib.figure.Figure`; :func:`render` turns one into SVG and PNG bytes
+that are identical from run to run (``svg.hashsalt`` fixed, no creation date in the
+metadata, fixed rcParams, no clock or random state involved).
+
+Figures: the hexapod in a few poses (legs l_i = p + R a_i − b_i, paper 2 eq. 1, via
+:meth:`~pkmcal.mechanisms.hexapod.Hexapod.leg_vectors`); the pose cloud coloured by tilt
+(angle between the platform and base z axes, arccos R₃₃); the singular values of the
+identification Jacobian (log scale); parameter deviations ρ̂ − ρ₀ with ±2σ bars; the
+parameter correlation matrix; residuals per pose and per reading; histograms of held-out
+errors before and after; error maps before and after.
+"""
+
+from __future__ import annotations
+
+import io
+from contextlib import contextmanager
+from dataclasses import dataclass
+
+import matplotlib
+
+matplotlib.use("Agg", force=False)
+
+import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.ticker  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+
+from pkmcal.report.data import ErrorMap, HeldOutErrors, ParameterTable, Residuals  # noqa: E402
+
+#: Fixed style: the same bytes on every run and every machine with the same matplotlib.
+RC = {
+    "svg.hashsalt": "pkmcal-report",
+    "svg.fonttype": "path",
+    "font.family": "DejaVu Sans",
+    "font.size": 9.0,
+    "axes.titlesize": 10.0,
+    "axes.labelsize": 9.0,
+    "figure.dpi": 100.0,
+    "savefig.dpi": 100.0,
+    "axes.grid": True,
+    "grid.alpha": 0.3,
+    "image.cmap": "viridis",
+    "path.simplify": False,
+    "axes.prop_cycle": matplotlib.cycler(color=["#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b"]),
+}
+BEFORE_COLOUR = "#d62728"
+AFTER_COLOUR = "#1f77b4"
+ARCSEC_PER_RAD = 180.0 / np.pi * 3600.0
+
+
+@contextmanager
+def style():
+    """Context in which all report figures are created and saved."""
+    with matplotlib.rc_context(RC):
+        yield
+
+
+@dataclass(frozen=True)
+class RenderedFigure:
+    """A figure as bytes: ``name`` (file stem), ``caption``, ``svg`` and ``png``."""
+
+    name: str
+    caption: str
+    svg: bytes
+    png: bytes | None
+
+
+def render(fig: Figure, name: str, caption: str, png: bool = True) -> RenderedFigure:
+    """SVG (and PNG) bytes of ``fig``, deterministic; closes the figure."""
+    with style():
+        buf = io.BytesIO()
+        fig.savefig(buf, format="svg", metadata={"Date": None, "Creator": "pkmcal (matplotlib)"})
+        svg = buf.getvalue()
+        png_bytes = None
+        if png:
+            buf = io.BytesIO()
+            fig.savefig(buf, format="png", metadata={"Software": "pkmcal (matplotlib)"})
+            png_bytes = buf.getvalue()
+    plt.close(fig)
+    return RenderedFigure(name=name, caption=caption, svg=svg, png=png_bytes)
+
+
+def _new(figsize, **kw) -> Figure:
+    with style():
+        return plt.figure(figsize=figsize, **kw)
+
+
+def _tilt(poses: np.ndarray) -> np.ndarray:
+    """Tilt of the platform (rad): angle between its z axis and the base z axis, arccos R₃₃
+    with R₃₃ = cos a cos b for R = Rz(c) Ry(b) Rx(a)."""
+    return np.arccos(np.clip(np.cos(poses[:, 3]) * np.cos(poses[:, 4]), -1.0, 1.0))
+
+
+def pick_display_poses(poses: np.ndarray, home: np.ndarray, k: int = 3) -> np.ndarray:
+    """Up to ``k`` representative poses: home, the most tilted, the farthest from home."""
+    poses = np.asarray(poses, dtype=float)
+    chosen = [np.asarray(home, dtype=float)]
+    if len(poses):
+        chosen.append(poses[int(np.argmax(_tilt(poses)))])
+        d = np.linalg.norm(poses[:, :3] - home[:3], axis=1)
+        chosen.append(poses[int(np.argmax(d))])
+    return np.array(chosen[:k])
+
+
+def machine_poses_figure(machine, poses: np.ndarray, titles: list[str] | None = None) -> Figure:
+    """The hexapod drawn in each of a few poses: base and platform polygons (joint centres in
+    leg order) and the six legs b_i → p + R a_i (:meth:`Hexapod.leg_vectors`)."""
+    poses = np.atleast_2d(np.asarray(poses, dtype=float))
+    _, Ra, legs = machine.leg_vectors(poses)
+    base = np.asarray(machine.base)
+    tops = base[None] + legs
+    n = len(poses)
+    with style():
+        fig = _new((3.4 * n, 3.6))
+        lo = np.minimum(base.min(axis=0), tops.reshape(-1, 3).min(axis=0))
+        hi = np.maximum(base.max(axis=0), tops.reshape(-1, 3).max(axis=0))
+        centre, half = (lo + hi) / 2, (hi - lo).max() / 2
+        for k in range(n):
+            ax = fig.add_subplot(1, n, k + 1, projection="3d")
+            b = np.vstack([base, base[:1]])
+            t = np.vstack([tops[k], tops[k, :1]])
+            ax.plot(b[:, 0], b[:, 1], b[:, 2], color="0.35", lw=1.5)
+            ax.plot(t[:, 0], t[:, 1], t[:, 2], color=AFTER_COLOUR, lw=1.8)
+            for i in range(base.shape[0]):
+                ax.plot([base[i, 0], tops[k, i, 0]], [base[i, 1], tops[k, i, 1]], [base[i, 2], tops[k, i, 2]],
+                        color=BEFORE_COLOUR, lw=1.2)
+            p = poses[k, :3]
+            ax.scatter([p[0]], [p[1]], [p[2]], color="k", s=8)
+            for dim, setter in enumerate((ax.set_xlim, ax.set_ylim, ax.set_zlim)):
+                setter(centre[dim] - half, centre[dim] + half)
+            ax.set_box_aspect((1, 1, 1))
+            ax.view_init(elev=22, azim=-60)
+            ax.set_xlabel("x (mm)", labelpad=-6)
+            ax.set_ylabel("y (mm)", labelpad=-6)
+            ax.set_zlabel("z (mm)", labelpad=-6)
+            ax.tick_params(labelsize=6, pad=-2)
+            if titles is not None:
+                ax.set_title(titles[k], fontsize=8)
+        fig.tight_layout()
+    return fig
+
+
+def pose_cloud_figure(poses: np.ndarray, held_out: np.ndarray | None = None) -> Figure:
+    """Measured pose positions in 3D, coloured by platform tilt (deg); held-out poses as
+    crosses."""
+    poses = np.atleast_2d(np.asarray(poses, dtype=float))
+    with style():
+        fig = _new((6.4, 4.6))
+        ax = fig.add_subplot(1, 1, 1, projection="3d")
+        tilt = np.rad2deg(_tilt(poses))
+        sc = ax.scatter(poses[:, 0], poses[:, 1], poses[:, 2], c=tilt, cmap="viridis", s=16, depthshade=False,
+                        label=f"measured ({len(poses)})")
+        if held_out is not None and len(held_out):
+            h = np.atleast_2d(held_out)
+            ax.scatter(h[:, 0], h[:, 1], h[:, 2], marker="x", color="0.4", s=14, depthshade=False,
+                       label=f"held out ({len(h)})")
+        ax.set_xlabel("x (mm)")
+        ax.set_ylabel("y (mm)")
+        ax.set_zlabel("z (mm)")
+        ax.tick_params(labelsize=7)
+        for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
+            axis.set_major_locator(matplotlib.ticker.MaxNLocator(5))
+        ax.view_init(elev=22, azim=-60)
+        cb = fig.colorbar(sc, ax=ax, shrink=0.7, pad=0.12)
+        cb.set_label("platform tilt (deg)")
+        ax.legend(loc="upper left", fontsize=7)
+        ax.set_title("Measurement poses")
+    return fig
+
+
+def singular_values_figure(singular_values: np.ndarray, rank: int) -> Figure:
+    """Singular values of the (column-scaled) identification Jacobian, log scale; the ones
+    beyond the numerical rank in grey."""
+    s = np.asarray(singular_values, dtype=float)
+    idx = np.arange(1, s.size + 1)
+    with style():
+        fig = _new((6.4, 3.2))
+        ax = fig.add_subplot(1, 1, 1)
+        pos = np.where(s > 0, s, np.nan)
+        ax.semilogy(idx[:rank], pos[:rank], "o-", color=AFTER_COLOUR, ms=4, label=f"rank {rank}")
+        if rank < s.size:
+            ax.semilogy(idx[rank:], pos[rank:], "o", color="0.6", ms=4, label="beyond rank")
+        ax.set_xlabel("index")
+        ax.set_ylabel("singular value")
+        ax.set_title("Identification Jacobian: singular values")
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+    return fig
+
+
+def parameter_figure(table: ParameterTable) -> Figure:
+    """Deviation from nominal ρ̂ − ρ₀ of every parameter with ±2σ error bars; the true
+    deviation (simulation) as open circles; fixed parameters in grey."""
+    dev = table.deviation
+    idx = np.arange(len(table.names))
+    free = table.free
+    with style():
+        fig = _new((max(6.4, 0.16 * len(idx) + 1.5), 3.6))
+        ax = fig.add_subplot(1, 1, 1)
+        err = np.where(free & np.isfinite(table.std), 2.0 * table.std, 0.0)
+        ax.errorbar(idx[free], dev[free], yerr=err[free], fmt="o", ms=3.5, color=AFTER_COLOUR, ecolor=AFTER_COLOUR,
+                    elinewidth=1, capsize=2, label="identified ± 2σ")
+        if (~free).any():
+            ax.plot(idx[~free], dev[~free], "s", ms=3.5, color="0.6", label="fixed")
+        if table.true is not None:
+            ax.plot(idx, table.true - table.nominal, "o", mfc="none", mec=BEFORE_COLOUR, ms=6, label="true (simulation)")
+        ax.axhline(0.0, color="0.3", lw=0.8)
+        ax.set_xticks(idx)
+        ax.set_xticklabels(table.names, rotation=90, fontsize=6)
+        ax.set_xlim(-0.8, len(idx) - 0.2)
+        ax.set_ylabel("deviation from nominal (mm)")
+        ax.set_title("Identified parameters")
+        ax.legend(fontsize=8, loc="best")
+        fig.tight_layout()
+    return fig
+
+
+def correlation_figure(corr: np.ndarray, names: tuple[str, ...]) -> Figure:
+    """Heat map of the parameter correlation matrix ρ_ij = C_ij / sqrt(C_ii C_jj)."""
+    corr = np.asarray(corr, dtype=float)
+    n = len(names)
+    size = min(9.0, max(4.5, 0.16 * n + 2.0))
+    with style():
+        fig = _new((size + 1.0, size))
+        ax = fig.add_subplot(1, 1, 1)
+        im = ax.imshow(np.ma.masked_invalid(corr), cmap="RdBu_r", vmin=-1.0, vmax=1.0, interpolation="nearest")
+        ax.set_xticks(np.arange(n))
+        ax.set_yticks(np.arange(n))
+        fs = 6 if n > 20 else 8
+        ax.set_xticklabels(names, rotation=90, fontsize=fs)
+        ax.set_yticklabels(names, fontsize=fs)
+        ax.grid(False)
+        cb = fig.colorbar(im, ax=ax, shrink=0.8)
+        cb.set_label("correlation")
+        ax.set_title("Correlation of the identified parameters")
+        fig.tight_layout()
+    return fig
+
+
+def _unit_groups(res: Residuals):
+    """Residual columns grouped by unit: (label, scale, column indices)."""
+    groups = []
+    units = np.array(res.units)
+    for unit, label, scale in (("mm", "residual (µm)", 1000.0), ("rad", "residual (arcsec)", ARCSEC_PER_RAD)):
+        cols = np.flatnonzero(units == unit)
+        if cols.size:
+            groups.append((label, scale, cols))
+    return groups
+
+
+def residual_pose_figure(res: Residuals) -> Figure:
+    """Residual of every reading against the pose index (one marker series per reading)."""
+    groups = _unit_groups(res)
+    n = res.values.shape[0]
+    idx = np.arange(1, n + 1)
+    with style():
+        fig = _new((7.2, 2.8 * len(groups) + 0.4))
+        for g, (label, scale, cols) in enumerate(groups):
+            ax = fig.add_subplot(len(groups), 1, g + 1)
+            for c in cols:
+                ax.plot(idx, res.values[:, c] * scale, ".", ms=4, label=res.names[c])
+            ax.axhline(0.0, color="0.3", lw=0.8)
+            ax.set_ylabel(label)
+            ax.legend(fontsize=7, ncol=min(6, len(cols)), loc="upper right")
+            if g == len(groups) - 1:
+                ax.set_xlabel("pose")
+            if g == 0:
+                ax.set_title("Residuals after identification, per pose")
+        fig.tight_layout()
+    return fig
+
+
+def residual_sensor_figure(res: Residuals) -> Figure:
+    """Distribution of the residuals of each reading (box plots) and their RMS."""
+    groups = _unit_groups(res)
+    with style():
+        fig = _new((7.2, 2.8 * len(groups) + 0.4))
+        for g, (label, scale, cols) in enumerate(groups):
+            ax = fig.add_subplot(len(groups), 1, g + 1)
+            data = [res.values[:, c] * scale for c in cols]
+            ax.boxplot(data, showfliers=True, widths=0.5,
+                       flierprops={"markersize": 3})
+            ax.set_xticks(np.arange(1, len(cols) + 1))
+            rms = [np.sqrt(np.mean(d**2)) for d in data]
+            ax.set_xticklabels([f"{res.names[c]}\nrms {r:.3g}" for c, r in zip(cols, rms)], fontsize=7)
+            ax.axhline(0.0, color="0.3", lw=0.8)
+            ax.set_ylabel(label)
+            if g == 0:
+                ax.set_title("Residuals after identification, per reading")
+        fig.tight_layout()
+    return fig
+
+
+def held_out_figure(err: HeldOutErrors) -> Figure:
+    """Histograms of the held-out position (µm) and orientation (arcsec) errors, before
+    (nominal model) and after (identified model), on log-spaced bins."""
+    with style():
+        fig = _new((7.2, 3.0))
+        for k, (attr, label, scale) in enumerate(
+            (("position", "position error (µm)", 1000.0), ("orientation", "orientation error (arcsec)", ARCSEC_PER_RAD))
+        ):
+            ax = fig.add_subplot(1, 2, k + 1)
+            before = getattr(err, f"{attr}_before") * scale
+            after = getattr(err, f"{attr}_after") * scale
+            both = np.concatenate([before, after])
+            both = both[np.isfinite(both) & (both > 0)]
+            lo, hi = (float(both.min()), float(both.max())) if both.size else (1e-3, 1.0)
+            # Errors before and after differ by orders of magnitude: log-spaced bins, log axis.
+            bins = np.geomspace(lo / 1.2, hi * 1.2, 41)
+            ax.hist(before, bins=bins, color=BEFORE_COLOUR, alpha=0.6, label="before (nominal)")
+            ax.hist(after, bins=bins, color=AFTER_COLOUR, alpha=0.75, label="after (identified)")
+            ax.set_xscale("log")
+            ax.set_xlabel(label)
+            ax.set_ylabel("held-out poses")
+            ax.legend(fontsize=7)
+        fig.suptitle(f"Held-out verification ({err.n_poses} poses)", fontsize=10)
+        fig.tight_layout()
+    return fig
+
+
+def error_map_figure(em: ErrorMap) -> Figure:
+    """Position error (µm) over an x–y grid at height z, before and after, on a shared
+    colour scale of the 'before' map and on its own scale for 'after'."""
+    with style():
+        fig = _new((7.6, 3.3))
+        extent = (em.x[0], em.x[-1], em.y[0], em.y[-1])
+        for k, (grid, label) in enumerate(((em.before, "before (nominal)"), (em.after, "after (identified)"))):
+            ax = fig.add_subplot(1, 2, k + 1)
+            im = ax.imshow(np.ma.masked_invalid(grid * 1000.0), origin="lower", extent=extent, cmap="magma",
+                           interpolation="nearest", aspect="equal")
+            ax.set_xlabel("x (mm)")
+            ax.set_ylabel("y (mm)")
+            ax.grid(False)
+            ax.set_title(label, fontsize=9)
+            cb = fig.colorbar(im, ax=ax, shrink=0.85)
+            cb.set_label("position error (µm)")
+        a, b, c = np.rad2deg(em.abc)
+        fig.suptitle(f"Error map at z = {em.z:.1f} mm, a b c = {a:.1f} {b:.1f} {c:.1f}°", fontsize=10)
+        fig.tight_layout()
+    return fig

@@ -1,0 +1,113 @@
+"""Build a :class:`~pkmcal.report.data.ReportData` from the engine's and the verifier's results.
+
+This is the only module of :mod:`pkmcal.report` that knows the identification and
+verification result types; ``pkmcal demo`` and ``pkmcal identify --report`` both use it.
+Held-out errors are taken over the poses that both models bring the real machine to
+(:attr:`~pkmcal.identification.verification.VerificationReport.common`); the error map is
+e_p = ‖p_real − p_cmd‖ of :func:`~pkmcal.identification.verification.pose_errors` on an
+x–y grid at the home height and orientation.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pkmcal.identification.identifiability import format_direction
+from pkmcal.mechanisms.base import Mechanism
+from pkmcal.report.data import ErrorMap, HeldOutErrors, Identifiability, ParameterTable, ReportData, Residuals
+from pkmcal.sensors.base import MeasurementSetup
+
+
+def identifiability_from_report(report, fixed: tuple[str, ...]) -> Identifiability:
+    """Report view of an :class:`~pkmcal.identification.identifiability.IdentifiabilityReport`."""
+    weak = tuple(f"{format_direction(w['direction'])} (σ/σ₁ = {w['ratio']:.1e})" for w in report.weak)
+    null = tuple(format_direction(d) for d in report.null_space)
+    return Identifiability(rank=int(report.rank), n_params=int(report.n_params),
+                           singular_values=np.asarray(report.singular_values, dtype=float),
+                           fixed=tuple(fixed), weak=weak, null_space=null)
+
+
+def residual_units(names: tuple[str, ...], setup: MeasurementSetup) -> tuple[str, ...]:
+    """"rad" for residual rows that are angle readings of the sensor, "mm" otherwise."""
+    angle = dict(zip(setup.sensor.reading_names, setup.sensor.reading_is_angle))
+    return tuple("rad" if angle.get(n, False) else "mm" for n in names)
+
+
+def held_out_from_verification(verification) -> HeldOutErrors | None:
+    """Before/after errors on the poses both models reach; None without a 'before'."""
+    if verification.before is None:
+        return None
+    m = verification.common
+    b, a = verification.before, verification.after
+    return HeldOutErrors(b.position[m], a.position[m], b.orientation[m], a.orientation[m])
+
+
+def error_map(nominal: Mechanism, calibrated: Mechanism, real: Mechanism, x: np.ndarray, y: np.ndarray,
+              z: float, abc=(0.0, 0.0, 0.0)) -> ErrorMap:
+    """Position error of ``real`` commanded through ``nominal`` (before) and ``calibrated``
+    (after) on the grid x × y at height z and orientation abc (NaN where unreachable)."""
+    from pkmcal.identification.verification import pose_errors
+
+    X, Y = np.meshgrid(np.asarray(x, float), np.asarray(y, float))
+    grid = np.column_stack([X.ravel(), Y.ravel(), np.full(X.size, float(z)), np.tile(np.asarray(abc, float), (X.size, 1))])
+    reach = nominal.check_limits(grid).ok
+    before = pose_errors(nominal, real, grid).position
+    after = pose_errors(calibrated, real, grid).position
+    before = np.where(reach, before, np.nan).reshape(X.shape)
+    after = np.where(reach, after, np.nan).reshape(X.shape)
+    return ErrorMap(np.asarray(x, float), np.asarray(y, float), float(z), before, after, tuple(float(v) for v in abc))
+
+
+def report_data_from_results(
+    nominal: Mechanism,
+    result,
+    setup: MeasurementSetup,
+    poses: np.ndarray,
+    *,
+    verification=None,
+    identified: Mechanism | None = None,
+    true_machine: Mechanism | None = None,
+    error_map: ErrorMap | None = None,
+    title: str | None = None,
+    setup_summary: str = "",
+    facts: tuple[tuple[str, str], ...] = (),
+) -> ReportData:
+    """The report of an :class:`~pkmcal.identification.engine.IdentificationResult`.
+
+    ``poses`` (N, 6): the poses measured (commanded or planned); ``verification`` a
+    :class:`~pkmcal.identification.verification.VerificationReport` with a 'before'
+    column; ``identified`` the calibrated machine as exported (default ``result.mechanism``);
+    ``true_machine`` the simulation's real machine, shown beside the estimates.
+    """
+    p = len(nominal.param_names)
+    names = tuple(result.names[:p])
+    free_set = {n: k for k, n in enumerate(result.free)}
+    std = np.array([result.std[free_set[n]] if n in free_set else np.nan for n in names])
+    free = np.array([n in free_set for n in names])
+    table = ParameterTable(names, result.initial[:p], result.estimate[:p], std, free,
+                           true=None if true_machine is None else true_machine.params)
+    corr = np.asarray(result.correlation, dtype=float)
+    res_names = tuple(result.residual_names)
+    facts = (("identification method", f"{result.method} ({'noise-weighted' if result.weighted else 'plain'} "
+                                        "least squares)"),
+             ("solver", f"{result.message} ({result.nfev} evaluations)"),
+             ("poses used", f"{len(result.used_poses)} (dropped {len(result.dropped)})"),
+             ("reduced χ²", f"{result.uncertainty.reduced_chi2:.3f}"),
+             *facts,
+             *(("note", w) for w in result.warnings))
+    return ReportData(
+        title=title or f"pkmcal calibration report: {nominal.name}",
+        machine_summary=nominal.summary() if hasattr(nominal, "summary") else nominal.name,
+        nominal=nominal,
+        identified=result.mechanism if identified is None else identified,
+        poses=np.asarray(poses, dtype=float),
+        identifiability=identifiability_from_report(result.identifiability, result.fixed),
+        parameters=table,
+        correlation=corr,
+        correlation_names=tuple(result.free),
+        residuals=Residuals(np.asarray(result.residuals, dtype=float), res_names, residual_units(res_names, setup)),
+        held_out=None if verification is None else held_out_from_verification(verification),
+        error_map=error_map,
+        setup_summary=setup_summary,
+        facts=facts,
+    )

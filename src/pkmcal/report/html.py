@@ -1,0 +1,304 @@
+"""The calibration report: one self-contained HTML file, plus its figures beside it.
+
+:func:`write_report` draws the figures of :mod:`pkmcal.report.figures` from a
+:class:`~pkmcal.report.data.ReportData`, writes each as ``<name>.svg`` and ``<name>.png``
+into the output folder, and writes ``report.html`` with inline CSS and every figure
+embedded as inline SVG (element ids prefixed per figure so they cannot collide): no
+JavaScript, no external URL, one file to mail or archive. Same input → same bytes.
+
+Sections: machine and setup; pose plan (machine in a few poses, pose cloud);
+identifiability (rank, singular values, fixed gauge, weak directions, paper 2 §4 /
+paper 3 §3); identified parameters ± 1σ against nominal (and the simulation's truth when
+known) with the correlation matrix ρ_ij = C_ij/√(C_ii C_jj); residuals per pose and per
+reading; held-out errors before/after (rms = √(mean e²), p95, max); error maps.
+"""
+
+from __future__ import annotations
+
+import html
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from pkmcal import __version__
+from pkmcal.errors import PkmcalError
+from pkmcal.io.atomic import atomic_write_bytes
+from pkmcal.report import figures as F
+from pkmcal.report.data import ReportData, summarise
+
+REPORT_NAME = "report.html"
+
+CSS = """
+body { font-family: "DejaVu Sans", Helvetica, Arial, sans-serif; font-size: 14px; color: #222;
+       max-width: 1100px; margin: 0 auto; padding: 16px 24px 48px; line-height: 1.45; background: #fff; }
+h1 { font-size: 24px; border-bottom: 2px solid #1f77b4; padding-bottom: 6px; }
+h2 { font-size: 19px; margin-top: 34px; border-bottom: 1px solid #ccc; padding-bottom: 3px; }
+h3 { font-size: 15px; margin-top: 20px; }
+pre { background: #f5f5f5; padding: 8px 10px; overflow-x: auto; font-size: 12px; }
+table { border-collapse: collapse; margin: 8px 0 14px; font-size: 12.5px; }
+th, td { border: 1px solid #ccc; padding: 3px 8px; text-align: right; }
+th { background: #eef3f8; }
+td.l, th.l { text-align: left; }
+tr.fixed td { color: #888; }
+figure { margin: 14px 0 22px; }
+figure svg { max-width: 100%; height: auto; display: block; }
+figcaption { font-size: 12.5px; color: #555; margin-top: 4px; }
+.headline { font-size: 16px; background: #eef6ee; border-left: 4px solid #2ca02c; padding: 8px 12px; }
+.warn { background: #fff4e5; border-left: 4px solid #ff7f0e; padding: 6px 10px; }
+.muted { color: #777; font-size: 12px; }
+nav a { margin-right: 12px; }
+"""
+
+ARCSEC = F.ARCSEC_PER_RAD
+
+
+@dataclass(frozen=True)
+class ReportFiles:
+    """What :func:`write_report` wrote: the HTML file and the figure files (SVG, PNG)."""
+
+    html: Path
+    figures: tuple[Path, ...]
+
+
+def _esc(s: object) -> str:
+    return html.escape(str(s), quote=True)
+
+
+def _fmt(v: float, spec: str = ".4f") -> str:
+    return "—" if v is None or not np.isfinite(v) else format(float(v), spec)
+
+
+_ID = re.compile(r'\bid="([^"]+)"')
+_HREF = re.compile(r'(href=")#([^"]+)"')
+_URL = re.compile(r"url\(#([^)]+)\)")
+
+
+def inline_svg(svg: bytes, prefix: str) -> str:
+    """Matplotlib SVG bytes as an inline ``<svg>`` element: XML prologue removed, every id
+    and reference to it prefixed with ``prefix`` so that several figures can share a page."""
+    text = svg.decode("utf-8")
+    start = text.find("<svg")
+    if start < 0:
+        raise PkmcalError(f"report: figure '{prefix}' is not an SVG document")
+    text = text[start:]
+    seen: dict[str, int] = {}
+
+    def new_id(m: re.Match) -> str:
+        # matplotlib names images by a hash of their pixels, so two identical colour bars
+        # share an id; later duplicates (never referenced) get a suffix.
+        k = seen[m.group(1)] = seen.get(m.group(1), 0) + 1
+        return f'id="{prefix}-{m.group(1)}"' if k == 1 else f'id="{prefix}-{m.group(1)}-{k}"'
+
+    text = _ID.sub(new_id, text)
+    text = _HREF.sub(lambda m: f'{m.group(1)}#{prefix}-{m.group(2)}"', text)
+    text = _URL.sub(lambda m: f"url(#{prefix}-{m.group(1)})", text)
+    return text.replace("<svg ", f'<svg role="img" aria-label="{prefix}" class="figure" ', 1)
+
+
+def build_figures(data: ReportData, png: bool = True) -> list[F.RenderedFigure]:
+    """All figures of the report, rendered (deterministic bytes)."""
+    out: list[F.RenderedFigure] = []
+    nominal = data.nominal
+    if hasattr(nominal, "leg_vectors") and hasattr(nominal, "base"):
+        shown = F.pick_display_poses(data.poses, np.asarray(nominal.home_pose))
+        titles = ["home", "most tilted", "farthest from home"][: len(shown)]
+        out.append(F.render(F.machine_poses_figure(nominal, shown, titles), "machine-poses",
+                            f"{nominal.name} drawn in {len(shown)} of its poses: base (grey), platform (blue), "
+                            "legs (red).", png))
+    if data.poses.shape[1] == 6:
+        out.append(F.render(F.pose_cloud_figure(data.poses), "pose-cloud",
+                            f"The {len(data.poses)} measurement poses, coloured by platform tilt.", png))
+    ident = data.identifiability
+    if ident.singular_values.size:
+        out.append(F.render(F.singular_values_figure(ident.singular_values, ident.rank), "singular-values",
+                            "Singular values of the column-scaled identification Jacobian.", png))
+    out.append(F.render(F.parameter_figure(data.parameters), "parameters",
+                        "Identified deviation from nominal, ±2σ; open circles: the true deviation "
+                        "(simulation only).", png))
+    if len(data.correlation_names) > 1:
+        out.append(F.render(F.correlation_figure(data.correlation, data.correlation_names), "correlation",
+                            "Correlation of the identified parameters (from their covariance).", png))
+    if data.residuals.values.size:
+        out.append(F.render(F.residual_pose_figure(data.residuals), "residuals-per-pose",
+                            "Residuals (measured − predicted) of every reading, per pose.", png))
+        out.append(F.render(F.residual_sensor_figure(data.residuals), "residuals-per-reading",
+                            "Residual distribution of each reading (box: quartiles; whiskers: 1.5 IQR).", png))
+    if data.held_out is not None and data.held_out.n_poses:
+        out.append(F.render(F.held_out_figure(data.held_out), "held-out",
+                            "Errors at held-out poses with the nominal (before) and identified (after) model.",
+                            png))
+    if data.error_map is not None:
+        out.append(F.render(F.error_map_figure(data.error_map), "error-map",
+                            "Position error over the workspace, before and after calibration.", png))
+    return out
+
+
+def _figure_html(fig: F.RenderedFigure) -> str:
+    return (f'<figure id="fig-{fig.name}">\n{inline_svg(fig.svg, fig.name)}\n'
+            f"<figcaption>{_esc(fig.caption)} <span class=\"muted\">(file: {_esc(fig.name)}.svg)</span>"
+            "</figcaption>\n</figure>")
+
+
+def _table(header: list[str], rows: list[list[str]], left: int = 1, row_class: list[str] | None = None) -> str:
+    th = "".join(f'<th class="l">{_esc(h)}</th>' if i < left else f"<th>{_esc(h)}</th>" for i, h in enumerate(header))
+    body = []
+    for r, row in enumerate(rows):
+        cls = f' class="{row_class[r]}"' if row_class and row_class[r] else ""
+        tds = "".join(f'<td class="l">{c}</td>' if i < left else f"<td>{c}</td>" for i, c in enumerate(row))
+        body.append(f"<tr{cls}>{tds}</tr>")
+    return f"<table>\n<tr>{th}</tr>\n" + "\n".join(body) + "\n</table>"
+
+
+def _held_out_rows(data: ReportData) -> tuple[str, list[list[str]]]:
+    s = data.held_out.summary()
+    rows = []
+    for what, unit, scale in (("position", "µm", 1000.0), ("orientation", "arcsec", ARCSEC)):
+        b, a = s[f"{what}_before"], s[f"{what}_after"]
+        ratio = b["rms"] / a["rms"] if a["rms"] > 0 else float("inf")
+        rows.append([f"{what} ({unit})", _fmt(b["rms"] * scale, ".2f"), _fmt(b["p95"] * scale, ".2f"),
+                     _fmt(b["max"] * scale, ".2f"), _fmt(a["rms"] * scale, ".2f"), _fmt(a["p95"] * scale, ".2f"),
+                     _fmt(a["max"] * scale, ".2f"), _fmt(ratio, ".1f") + "×"])
+    pb, pa = s["position_before"], s["position_after"]
+    headline = (f"Held-out position error (rms): {pb['rms'] * 1000:.1f} µm before → {pa['rms'] * 1000:.2f} µm after "
+                f"calibration; max {pb['max'] * 1000:.1f} → {pa['max'] * 1000:.2f} µm "
+                f"({data.held_out.n_poses} poses not used for identification).")
+    return headline, rows
+
+
+def render_html(data: ReportData, figs: list[F.RenderedFigure]) -> str:
+    """The report page (a string) for ``data`` with the rendered figures ``figs``."""
+    by_name = {f.name: f for f in figs}
+    fig = lambda name: _figure_html(by_name[name]) if name in by_name else ""  # noqa: E731
+    parts: list[str] = []
+    add = parts.append
+    add("<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
+        "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n"
+        f"<title>{_esc(data.title)}</title>\n<style>{CSS}</style>\n</head>\n<body>")
+    add(f"<h1>{_esc(data.title)}</h1>")
+    add('<nav><a href="#machine">Machine</a><a href="#plan">Pose plan</a><a href="#identifiability">'
+        'Identifiability</a><a href="#parameters">Parameters</a><a href="#residuals">Residuals</a>'
+        '<a href="#verification">Verification</a></nav>')
+    if data.held_out is not None and data.held_out.n_poses:
+        headline, held_rows = _held_out_rows(data)
+        add(f'<p class="headline">{_esc(headline)}</p>')
+
+    # -- machine -----------------------------------------------------------------------
+    add('<h2 id="machine">Machine and measurement setup</h2>')
+    facts = [("pkmcal version", __version__), ("nominal machine", data.nominal.name),
+             ("identified machine", data.identified.name), ("measured poses", str(len(data.poses)))]
+    facts += list(data.facts)
+    add(_table(["item", "value"], [[_esc(k), _esc(v)] for k, v in facts], left=2))
+    add(f"<pre>{_esc(data.machine_summary)}</pre>")
+    if data.setup_summary:
+        add(f"<h3>Measurement setup</h3>\n<pre>{_esc(data.setup_summary)}</pre>")
+
+    # -- plan --------------------------------------------------------------------------
+    add('<h2 id="plan">Pose plan</h2>')
+    p = data.poses
+    if p.shape[1] == 6 and len(p):
+        tilt = np.rad2deg(F._tilt(p))
+        add(f"<p>{len(p)} poses; x {p[:, 0].min():.1f}…{p[:, 0].max():.1f} mm, y {p[:, 1].min():.1f}…"
+            f"{p[:, 1].max():.1f} mm, z {p[:, 2].min():.1f}…{p[:, 2].max():.1f} mm; tilt up to "
+            f"{tilt.max():.1f}°, yaw {np.rad2deg(p[:, 5]).min():.1f}…{np.rad2deg(p[:, 5]).max():.1f}°.</p>")
+    add(fig("machine-poses"))
+    add(fig("pose-cloud"))
+
+    # -- identifiability ---------------------------------------------------------------
+    ident = data.identifiability
+    add('<h2 id="identifiability">Identifiability</h2>')
+    rows = [["rank", f"{ident.rank} of {ident.n_params} candidate parameters"],
+            ["condition number", _fmt(ident.condition_number, ".4g") if ident.condition_number else "—"],
+            ["fixed (gauge and user)", _esc(", ".join(ident.fixed) or "none")],
+            ["weak directions", _esc("; ".join(ident.weak) or "none")],
+            ["null space", _esc("; ".join(ident.null_space) or "none (full rank)")]]
+    add(_table(["", ""], rows, left=2))
+    if ident.rank < ident.n_params:
+        add(f'<p class="warn">The data determine only {ident.rank} of {ident.n_params} parameter directions. '
+            "The combinations listed under null space cannot be seen by this sensor and pose set; a gauge "
+            "of parameters (listed as fixed) was held at nominal so that the rest is identifiable.</p>")
+    add(fig("singular-values"))
+
+    # -- parameters --------------------------------------------------------------------
+    t = data.parameters
+    add('<h2 id="parameters">Identified parameters</h2>')
+    header = ["parameter", "nominal (mm)", "identified (mm)", "deviation (mm)", "± 1σ (mm)"]
+    if t.true is not None:
+        header += ["true (mm)", "error (µm)"]
+    prow, pclass = [], []
+    for i, name in enumerate(t.names):
+        row = [_esc(name), _fmt(t.nominal[i]), _fmt(t.identified[i]), _fmt(t.deviation[i], "+.4f"),
+               _fmt(t.std[i], ".4f") if t.free[i] else "fixed"]
+        if t.true is not None:
+            row += [_fmt(t.true[i]), _fmt((t.identified[i] - t.true[i]) * 1000.0, "+.2f")]
+        prow.append(row)
+        pclass.append("" if t.free[i] else "fixed")
+    add(fig("parameters"))
+    add(_table(header, prow, row_class=pclass))
+    if len(data.correlation_names) > 1:
+        c = np.array(data.correlation, dtype=float)
+        iu = np.triu_indices(len(data.correlation_names), k=1)
+        vals = np.abs(c[iu])
+        order = np.lexsort((iu[1], iu[0], -np.nan_to_num(vals, nan=-1.0)))[:8]
+        strong = [[_esc(data.correlation_names[iu[0][k]]), _esc(data.correlation_names[iu[1][k]]),
+                   _fmt(c[iu][k], "+.3f")] for k in order if np.isfinite(vals[k])]
+        add(fig("correlation"))
+        if strong:
+            add("<h3>Strongest correlations</h3>")
+            add(_table(["parameter", "parameter", "correlation"], strong, left=2))
+
+    # -- residuals ---------------------------------------------------------------------
+    r = data.residuals
+    add('<h2 id="residuals">Residuals</h2>')
+    if r.values.size:
+        rrows = []
+        for k, name in enumerate(r.names):
+            scale, unit = (1000.0, "µm") if r.units[k] == "mm" else (ARCSEC, "arcsec")
+            s = summarise(np.abs(r.values[:, k]))
+            rrows.append([_esc(name), unit, _fmt(s["rms"] * scale, ".3f"), _fmt(s["p95"] * scale, ".3f"),
+                          _fmt(s["max"] * scale, ".3f")])
+        add(_table(["reading", "unit", "rms", "p95 |r|", "max |r|"], rrows, left=2))
+        worst = np.argsort(-np.sqrt(np.mean(np.where(np.array(r.units) == "mm", r.values * 1000.0,
+                                                            r.values * ARCSEC) ** 2, axis=1)), kind="stable")[:3]
+        add(f"<p>Poses with the largest residuals: {', '.join(str(int(w) + 1) for w in worst)}.</p>")
+    add(fig("residuals-per-pose"))
+    add(fig("residuals-per-reading"))
+
+    # -- verification ------------------------------------------------------------------
+    add('<h2 id="verification">Verification on held-out poses</h2>')
+    if data.held_out is not None and data.held_out.n_poses:
+        add(_table(["error", "before rms", "before p95", "before max", "after rms", "after p95", "after max",
+                    "rms ratio"], held_rows))
+        add(fig("held-out"))
+    else:
+        add("<p>No held-out poses were given.</p>")
+    if data.error_map is not None:
+        add("<h3>Error map</h3>")
+        add(fig("error-map"))
+    add(f'<p class="muted">Written by pkmcal {_esc(__version__)}. Figures are also saved beside this file as SVG '
+        "and PNG.</p>\n</body>\n</html>\n")
+    return "\n".join(x for x in parts if x)
+
+
+def write_report(data: ReportData, out_dir: str | os.PathLike, png: bool = True) -> ReportFiles:
+    """Write ``report.html`` and its figures (``<name>.svg``, ``<name>.png``) into
+    ``out_dir`` (created if needed); every file is written atomically."""
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise PkmcalError(f"report folder '{out}' exists and is not a folder; choose another --out/--report path")
+    out.mkdir(parents=True, exist_ok=True)
+    figs = build_figures(data, png=png)
+    written = []
+    for f in figs:
+        path = out / f"{f.name}.svg"
+        atomic_write_bytes(path, f.svg)
+        written.append(path)
+        if f.png is not None:
+            path = out / f"{f.name}.png"
+            atomic_write_bytes(path, f.png)
+            written.append(path)
+    page = out / REPORT_NAME
+    atomic_write_bytes(page, render_html(data, figs).encode("utf-8"))
+    return ReportFiles(html=page, figures=tuple(written))

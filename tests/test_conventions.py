@@ -1,0 +1,133 @@
+"""pkmcal.conventions against independent references: scipy's Rotation, finite differences."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+from scipy.spatial.transform import Rotation
+
+from pkmcal.conventions import (
+    euler_rate_matrix,
+    euler_to_matrix,
+    matrix_to_euler,
+    poses_from_file_units,
+    poses_to_file_units,
+    rotation_error,
+    rotation_vector_to_matrix,
+)
+
+angle = st.floats(-np.pi, np.pi, allow_nan=False)
+angles = arrays(float, (3,), elements=angle)
+# pitch away from ±90° (gimbal lock), where the Euler angles are not unique
+regular_angles = st.tuples(angle, st.floats(-1.5, 1.5), angle).map(np.array)
+
+
+def _elementary(axis: int, t: float) -> np.ndarray:
+    c, s = np.cos(t), np.sin(t)
+    i, j = [(1, 2), (2, 0), (0, 1)][axis]
+    R = np.eye(3)
+    R[i, i], R[i, j], R[j, i], R[j, j] = c, -s, s, c
+    return R
+
+
+@settings(max_examples=300, deadline=None)
+@given(angles)
+def test_euler_to_matrix_is_scipy_extrinsic_xyz(abc):
+    ref = Rotation.from_euler("xyz", abc).as_matrix()
+    np.testing.assert_allclose(euler_to_matrix(abc), ref, atol=1e-14)
+
+
+@settings(max_examples=100, deadline=None)
+@given(angles)
+def test_euler_to_matrix_is_rz_ry_rx_product(abc):
+    a, b, c = abc
+    ref = _elementary(2, c) @ _elementary(1, b) @ _elementary(0, a)
+    np.testing.assert_allclose(euler_to_matrix(abc), ref, atol=1e-14)
+
+
+def test_euler_to_matrix_broadcasts():
+    abc = np.random.default_rng(1).uniform(-3, 3, (4, 5, 3))
+    R = euler_to_matrix(abc)
+    assert R.shape == (4, 5, 3, 3)
+    np.testing.assert_allclose(R[2, 3], euler_to_matrix(abc[2, 3]), atol=0)
+
+
+@settings(max_examples=300, deadline=None)
+@given(regular_angles)
+def test_matrix_to_euler_round_trip(abc):
+    back = matrix_to_euler(euler_to_matrix(abc))
+    wrapped = (back - abc + np.pi) % (2 * np.pi) - np.pi  # a, c = ±π are the same angle
+    np.testing.assert_allclose(wrapped, 0.0, atol=1e-9)
+    assert -np.pi / 2 <= back[1] <= np.pi / 2
+    # a, c lie in [−π, π] (both ends occur: scipy's atan2 returns −π for a −0.0 argument)
+    assert np.all(np.abs(back[[0, 2]]) <= np.pi)
+
+
+@settings(max_examples=100, deadline=None)
+@given(angles)
+def test_matrix_to_euler_gives_the_same_rotation_anywhere(abc):
+    # near gimbal lock the angles differ but the rotation must not
+    R = euler_to_matrix(abc)
+    assert rotation_error(euler_to_matrix(matrix_to_euler(R)), R) < 1e-7
+
+
+@settings(max_examples=200, deadline=None)
+@given(regular_angles, arrays(float, (3,), elements=st.floats(-1, 1)))
+def test_euler_rate_matrix_against_finite_differences(abc, rate):
+    # ω from (dR/dt) Rᵀ = [ω]×, dR/dt by central differences along abc(t) = abc + t·rate
+    h = 1e-6
+    dR = (euler_to_matrix(abc + h * rate) - euler_to_matrix(abc - h * rate)) / (2 * h)
+    W = dR @ euler_to_matrix(abc).T
+    np.testing.assert_allclose(W, -W.T, atol=1e-8)  # skew: the derivative is a rotation rate
+    omega = np.array([W[2, 1], W[0, 2], W[1, 0]])
+    np.testing.assert_allclose(euler_rate_matrix(abc) @ rate, omega, atol=1e-8)
+
+
+@settings(max_examples=200, deadline=None)
+@given(arrays(float, (3,), elements=st.floats(-3, 3)))
+def test_rotation_vector_to_matrix_is_exp(w):
+    th = np.linalg.norm(w)
+    K = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])
+    # matrix exponential by scaling and squaring of a Taylor series, independent of Rodrigues
+    s = 2 ** 10
+    A, term, E = K / s, np.eye(3), np.eye(3)
+    for k in range(1, 20):
+        term = term @ A / k
+        E = E + term
+    for _ in range(10):
+        E = E @ E
+    np.testing.assert_allclose(rotation_vector_to_matrix(w), E, atol=1e-10)
+    if th < np.pi:
+        assert rotation_error(rotation_vector_to_matrix(w), np.eye(3)) == pytest.approx(th, abs=1e-12)
+
+
+@settings(max_examples=200, deadline=None)
+@given(angles, st.tuples(st.floats(-1, 1), st.floats(-1, 1), st.floats(-1, 1)).map(np.array),
+       st.floats(1e-9, np.pi - 1e-6))
+def test_rotation_error_is_the_angle_between(abc, axis, angle_):
+    if np.linalg.norm(axis) < 1e-3:
+        axis = np.array([0.0, 0.0, 1.0])
+    axis = axis / np.linalg.norm(axis)
+    R_b = euler_to_matrix(abc)
+    R_a = Rotation.from_rotvec(angle_ * axis).as_matrix() @ R_b
+    assert rotation_error(R_a, R_b) == pytest.approx(angle_, rel=1e-7, abs=1e-12)
+    assert rotation_error(R_b, R_a) == pytest.approx(angle_, rel=1e-7, abs=1e-12)
+
+
+def test_rotation_error_small_angles_are_accurate():
+    # arccos would lose everything below ~1e-8 rad; the skew-part formula must not
+    for t in (1e-12, 1e-10, 1e-8):
+        R = Rotation.from_rotvec([0.0, t, 0.0]).as_matrix()
+        assert rotation_error(R, np.eye(3)) == pytest.approx(t, rel=1e-6)
+
+
+def test_file_units_round_trip():
+    poses = np.array([[1.0, 2.0, 3.0, 10.0, -20.0, 180.0]])
+    internal = poses_from_file_units(poses)
+    np.testing.assert_allclose(internal[0, 3:], np.deg2rad([10.0, -20.0, 180.0]))
+    np.testing.assert_allclose(internal[0, :3], [1.0, 2.0, 3.0])
+    np.testing.assert_allclose(poses_to_file_units(internal), poses)
+    assert poses[0, 3] == 10.0  # input not modified

@@ -1,0 +1,420 @@
+"""The identification engine: recovery, analytic Jacobians, weighting, errors.
+
+Data are simulated here (commanded poses → nominal IK → real FK → sensor), independent of
+the engine's own residual code, so recovery checks the whole chain.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from pkmcal.errors import PkmcalError
+from pkmcal.identification.engine import identify, measurement_arrays
+from pkmcal.identification.residuals import Model, make_method, whitening
+from pkmcal.mechanisms import builtin_machine
+from pkmcal.sensors.base import MeasurementSetup, NoiseModel
+from pkmcal.sensors.full_pose import FullPoseSensor
+from pkmcal.sensors.indicators import IndicatorSensor
+from pkmcal.sensors.position import PositionSensor
+
+HALF = np.array([20.0, 20.0, 10.0, *np.deg2rad([8.0, 8.0, 8.0])])
+
+
+@pytest.fixture(scope="module")
+def nominal():
+    return builtin_machine("stewart-prototype")
+
+
+@pytest.fixture(scope="module")
+def real():
+    return builtin_machine("stewart-prototype-real")
+
+
+def commanded(machine, n, seed=0):
+    rng = np.random.default_rng(seed)
+    return machine.home_pose + rng.uniform(-1.0, 1.0, (n, 6)) * HALF
+
+
+def simulate(nominal, real, sensor, cmd, noise=None, seed=1):
+    """Readings of the real machine driven with the nominal machine's commands."""
+    q = nominal.ik(cmd)
+    fk = real.fk(q, guess=cmd)
+    assert fk.all_converged
+    y = sensor.predict(fk.poses)
+    if noise is not None:
+        e_y, e_q = noise.sample(np.random.default_rng(seed), y.shape, q.shape)
+        y, q = y + e_y, q + e_q
+    return q, y
+
+
+NOISE_FULL = NoiseModel(reading_std=np.array([0.01] * 3 + [1e-4] * 3), actuator_std=np.full(6, 0.005))
+NOISE_3 = NoiseModel(reading_std=np.full(3, 0.01), actuator_std=np.full(6, 0.005))
+INDICATOR_XY = np.array([[40.0, 0.0], [-20.0, 34.64], [-20.0, -34.64]])
+
+
+def setups():
+    return {
+        "full-pose": MeasurementSetup(FullPoseSensor(), NOISE_FULL),
+        "position": MeasurementSetup(PositionSensor(target=[5.0, -3.0, 20.0]), NOISE_3),
+        "indicators": MeasurementSetup(IndicatorSensor(positions=INDICATOR_XY, plane_offset=10.0), NOISE_3),
+    }
+
+
+CASES = [
+    ("full-pose", "ik-residual", 20),
+    ("full-pose", "fk-residual", 20),
+    ("full-pose", "projection", 20),
+    ("position", "fk-residual", 40),
+    ("position", "projection", 40),
+    ("indicators", "fk-residual", 60),
+    ("indicators", "projection", 60),
+]
+
+
+@pytest.mark.parametrize("setup_name,method,n", CASES)
+def test_noise_free_recovery(nominal, real, setup_name, method, n):
+    """Noise-free data → the real machine (in the chosen gauge): every reading predicted
+    to ≤ 1e-6 mm at the measured poses and at fresh validation poses."""
+    setup = setups()[setup_name]
+    cmd = commanded(nominal, n)
+    q, y = simulate(nominal, real, setup.sensor, cmd)
+    res = identify(nominal, setup, q=q, y=y, commanded=cmd, method=method)
+    assert res.success
+    for c in (cmd, commanded(nominal, 10, seed=7)):
+        qv, yv = simulate(nominal, real, setup.sensor, c)
+        fk = res.mechanism.fk(qv, guess=c)
+        assert fk.all_converged
+        assert np.max(np.abs(res.sensor.predict(fk.poses) - yv)) <= 1e-6
+    if setup_name == "full-pose":
+        # no gauge freedom: the parameters themselves are recovered
+        assert res.gauge == ()
+        np.testing.assert_allclose(res.estimate[:42], real.params, atol=1e-6)
+    else:
+        assert len(res.gauge) == 42 + len(setup.sensor.default_free) - res.identifiability.rank > 0
+        assert any("gauge" in w for w in res.warnings)
+        # fixed parameters stay at their nominal values
+        for name in res.gauge:
+            i = res.names.index(name)
+            assert res.estimate[i] == res.initial[i]
+
+
+def test_ik_residual_squared_form_recovers(nominal, real):
+    setup = setups()["full-pose"]
+    cmd = commanded(nominal, 15)
+    q, y = simulate(nominal, real, setup.sensor, cmd)
+    for weighted in (True, False):
+        res = identify(nominal, setup, q=q, y=y, method="ik-residual", form="squared", weighted=weighted)
+        np.testing.assert_allclose(res.estimate[:42], real.params, atol=1e-6)
+
+
+def test_free_sensor_parameters_recovered(nominal, real):
+    """A full-pose sensor whose world and tool transforms are unknown: with the machine's
+    leg-1/2 joints as the gauge (paper 2 §2.2) the world and tool are recovered."""
+    truth = FullPoseSensor(world=[10.0, -5.0, 2.0, 0.01, -0.02, 0.03], tool=[1.0, 2.0, 30.0, 0.0, 0.01, 0.0])
+    start = FullPoseSensor(free=tuple(truth.param_names))
+    setup = MeasurementSetup(start, NOISE_FULL)
+    cmd = commanded(nominal, 25)
+    q, y = simulate(nominal, real, truth, cmd)
+    for method in ("ik-residual", "fk-residual"):
+        res = identify(nominal, setup, q=q, y=y, commanded=cmd, method=method)
+        assert len(res.gauge) == 12
+        # predictions of the calibrated machine + sensor match the data
+        fk = res.mechanism.fk(q, guess=cmd)
+        assert np.max(np.abs(res.sensor.reading_residual(y, res.sensor.predict(fk.poses)))) <= 1e-6
+
+
+# -- analytic Jacobians against finite differences ----------------------------------------
+
+
+def _fd_jacobian(meth, theta, h=1e-6):
+    P = len(theta)
+    r0 = meth.evaluate(theta, jac=False, cov=False).r
+    J = np.zeros(r0.shape + (P,))
+    for i in range(P):
+        step = h * max(1.0, abs(theta[i]))
+        tp, tm = theta.copy(), theta.copy()
+        tp[i] += step
+        tm[i] -= step
+        J[..., i] = (meth.evaluate(tp, jac=False, cov=False).r - meth.evaluate(tm, jac=False, cov=False).r) / (2 * step)
+    return J
+
+
+JAC_CASES = [
+    ("full-pose", "ik-residual", "plain"),
+    ("full-pose", "ik-residual", "squared"),
+    ("full-pose", "fk-residual", "plain"),
+    ("position", "fk-residual", "plain"),
+    ("indicators", "fk-residual", "plain"),
+]
+
+
+def _jacobian_setup(name):
+    s = setups()[name]
+    if name == "full-pose":
+        sensor = FullPoseSensor(world=[3.0, -2.0, 1.0, 0.01, 0.02, -0.01], tool=[0.5, 1.0, 25.0, 0.0, 0.02, 0.01])
+    elif name == "position":
+        sensor = PositionSensor(target=[5.0, -3.0, 20.0], world=[1.0, 2.0, 3.0, 0.01, 0.0, 0.02])
+    else:
+        sensor = IndicatorSensor(positions=INDICATOR_XY, plane_offset=10.0, zero=[0.1, -0.2, 0.3])
+    return replace(s, sensor=sensor)
+
+
+@pytest.mark.parametrize("setup_name,method,form", JAC_CASES)
+def test_jacobian_matches_finite_differences(nominal, real, setup_name, method, form):
+    """Every column (machine and sensor parameters), at a perturbed machine with noisy data."""
+    setup = _jacobian_setup(setup_name)
+    cmd = commanded(nominal, 6)
+    q, y = simulate(nominal, real, setup.sensor, cmd, noise=setup.noise)
+    model = Model(nominal, setup.sensor, setup.noise, q, y, cmd)
+    meth = make_method(method, model, form=form)
+    theta = model.theta0 + np.random.default_rng(3).normal(0, 0.3, model.theta0.size) * np.r_[
+        np.ones(42), 0.01 * np.ones(len(setup.sensor.param_names))]
+    J = meth.evaluate(theta).J
+    # h = 1e-4: the FK stops at 1e-9 mm, so smaller steps measure its round-off
+    Jfd = _fd_jacobian(meth, theta, h=1e-4)
+    scale = np.max(np.abs(Jfd))
+    np.testing.assert_allclose(J, Jfd, atol=1e-5 * scale, rtol=1e-4)
+
+
+@pytest.mark.parametrize("setup_name", ["full-pose", "position", "indicators"])
+def test_projection_jacobian(nominal, real, setup_name):
+    """Projection: at a noise-free solution the Jacobian is exact; with noise, the cost
+    gradient Jᵀr is exact (variable projection, derivative of U⊥ dropped)."""
+    setup = _jacobian_setup(setup_name)
+    cmd = commanded(nominal, 6)
+    q, y = simulate(nominal, nominal, setup.sensor, cmd)
+    model = Model(nominal, setup.sensor, setup.noise, q, y, cmd)
+    meth = make_method("projection", model)
+    theta = model.theta0
+    ev = meth.evaluate(theta)
+    assert np.max(np.abs(ev.r)) < 1e-8
+    Jfd = _fd_jacobian(meth, theta)
+    # the basis U⊥ is only defined up to a rotation: compare the projectors' actions
+    np.testing.assert_allclose(np.einsum("nkp,nkq->pq", ev.J, ev.J), np.einsum("nkp,nkq->pq", Jfd, Jfd),
+                               rtol=1e-5, atol=1e-6 * np.max(np.abs(Jfd)) ** 2)
+    # noisy data, perturbed machine: gradient of ½‖r‖² against finite differences of the cost
+    q, y = simulate(nominal, real, setup.sensor, cmd, noise=setup.noise)
+    model = Model(nominal, setup.sensor, setup.noise, q, y, cmd)
+    meth = make_method("projection", model)
+    ev = meth.evaluate(theta)
+    grad = np.einsum("nkp,nk->p", ev.J, ev.r)
+
+    def cost(t):
+        return 0.5 * np.sum(meth.evaluate(t, jac=False, cov=False).r ** 2)
+
+    fd = np.array([(cost(theta + h) - cost(theta - h)) / 2e-6 for h in np.eye(theta.size) * 1e-6])
+    np.testing.assert_allclose(grad, fd, rtol=1e-4, atol=1e-6 * np.max(np.abs(fd)))
+
+
+def test_covariance_of_residuals_matches_sampling(nominal):
+    """Σ_j of the fk-residual (first-order noise propagation) against the sample covariance
+    of residuals of many noisy copies of one pose."""
+    setup = setups()["indicators"]
+    cmd = commanded(nominal, 1)
+    q0, y0 = simulate(nominal, nominal, setup.sensor, cmd)
+    e_y, e_q = setup.noise.sample(np.random.default_rng(5), (4000, 3), (4000, 6))
+    model = Model(nominal, setup.sensor, setup.noise, q0 + e_q, y0 + e_y, np.repeat(cmd, 4000, axis=0))
+    ev = make_method("fk-residual", model).evaluate(model.theta0)
+    sample = np.cov(ev.r.T)
+    np.testing.assert_allclose(sample, ev.cov[0], rtol=0.1, atol=0.05 * np.max(ev.cov[0]))
+
+
+# -- weighting ------------------------------------------------------------------------------
+
+
+def test_weighted_and_unweighted(nominal, real):
+    """Both fits recover noise-free data; at the same solution the GLS covariance is no
+    larger than the unweighted (sandwich) covariance in the Loewner order (Gauss–Markov)."""
+    setup = setups()["full-pose"]
+    cmd = commanded(nominal, 15)
+    q, y = simulate(nominal, real, setup.sensor, cmd)
+    fits = {}
+    for w in (True, False):
+        fits[w] = identify(nominal, setup, q=q, y=y, method="ik-residual", weighted=w)
+        np.testing.assert_allclose(fits[w].estimate[:42], real.params, atol=1e-6)
+    diff = fits[False].uncertainty.covariance_prior - fits[True].uncertainty.covariance_prior
+    assert np.min(np.linalg.eigvalsh(diff)) > -1e-9 * np.max(np.abs(diff))
+    assert np.all(fits[True].uncertainty.std_prior <= fits[False].uncertainty.std_prior * (1 + 1e-9))
+    assert np.trace(diff) > 0.05 * np.trace(fits[True].uncertainty.covariance_prior)
+    # on noisy data both fits end near the truth and differ from each other
+    q, y = simulate(nominal, real, setup.sensor, cmd, noise=setup.noise)
+    rw = identify(nominal, setup, q=q, y=y, method="ik-residual", weighted=True)
+    ru = identify(nominal, setup, q=q, y=y, method="ik-residual", weighted=False)
+    assert not np.allclose(rw.estimate, ru.estimate)
+    for r in (rw, ru):
+        assert np.all(np.abs(r.estimate[:42] - real.params) < 6 * rw.uncertainty.std_prior[:42] + 1e-3)
+
+
+def test_whitening_gives_unit_covariance():
+    rng = np.random.default_rng(0)
+    A = rng.normal(size=(5, 4, 4))
+    cov = A @ np.swapaxes(A, 1, 2) + 0.1 * np.eye(4)
+    W = whitening(cov)
+    np.testing.assert_allclose(W @ cov @ np.swapaxes(W, 1, 2), np.broadcast_to(np.eye(4), cov.shape), atol=1e-10)
+    with pytest.raises(PkmcalError, match="unweighted"):
+        whitening(np.zeros((2, 3, 3)))
+
+
+def test_zero_noise_weighted_is_a_clear_error(nominal, real):
+    setup = MeasurementSetup(IndicatorSensor(positions=INDICATOR_XY), NoiseModel(np.zeros(3), np.zeros(6)))
+    cmd = commanded(nominal, 40)
+    q, y = simulate(nominal, real, setup.sensor, cmd)
+    with pytest.raises(PkmcalError, match="noise"):
+        identify(nominal, setup, q=q, y=y, commanded=cmd)
+    res = identify(nominal, setup, q=q, y=y, commanded=cmd, weighted=False)
+    assert res.success and not res.weighted
+
+
+# -- results, covariance in the machine, bad input ----------------------------------------
+
+
+def test_result_contents(nominal, real):
+    setup = setups()["indicators"]
+    cmd = commanded(nominal, 60)
+    q, y = simulate(nominal, real, setup.sensor, cmd, noise=setup.noise)
+    res = identify(nominal, setup, (q, y, cmd))
+    cov = res.mechanism.covariance
+    assert cov.shape == (42, 42)
+    fixed_idx = [res.names.index(n) for n in res.gauge]
+    assert np.all(cov[fixed_idx] == 0) and np.all(cov[:, fixed_idx] == 0)
+    free_idx = res.free_index
+    np.testing.assert_allclose(cov[np.ix_(free_idx, free_idx)], res.covariance)
+    np.testing.assert_allclose(np.sqrt(np.diag(res.covariance)), res.std)
+    np.testing.assert_allclose(np.diag(res.correlation), 1.0)
+    assert res.residuals.shape == (60, 3) and res.residuals_weighted.shape == (60, 3)
+    assert res.residual_names == setup.sensor.reading_names
+    # the file covariance is the a-priori one inflated by the Birge ratio when above 1
+    f = max(1.0, res.uncertainty.reduced_chi2)
+    np.testing.assert_allclose(res.covariance, f * res.uncertainty.covariance_prior)
+    d = res.to_dict()
+    assert d["identifiability"]["rank"] == res.identifiability.rank
+    assert set(d["parameters"]) == set(res.names)
+    # weighted residuals ~ unit variance on correctly modelled noise
+    assert 0.6 < res.uncertainty.reduced_chi2 < 1.5
+
+
+def test_unidentifiable_request_is_an_error(nominal, real):
+    setup = setups()["indicators"]
+    cmd = commanded(nominal, 60)
+    q, y = simulate(nominal, real, setup.sensor, cmd)
+    with pytest.raises(PkmcalError, match=r"not identifiable.*(a1|a2)\.") as exc:
+        identify(nominal, setup, q=q, y=y, free=["b*", "a*", "L0_*"])
+    assert "fix" in str(exc.value)
+    with pytest.raises(PkmcalError, match="not identifiable"):
+        identify(nominal, setup, q=q, y=y, fix=["b1.x"])
+    # fixing the suggested gauge works
+    res = identify(nominal, setup, q=q, y=y, fix=["a1.x", "a1.y", "a2.x"])
+    assert res.success and res.identifiability.identifiable
+
+
+def test_bad_input_messages(nominal, real):
+    setup = setups()["indicators"]
+    cmd = commanded(nominal, 10)
+    q, y = simulate(nominal, real, setup.sensor, cmd)
+    with pytest.raises(PkmcalError, match="full-pose"):
+        identify(nominal, setup, q=q, y=y, method="ik-residual")
+    with pytest.raises(PkmcalError, match="unknown identification method"):
+        identify(nominal, setup, q=q, y=y, method="magic")
+    with pytest.raises(PkmcalError, match=r"\(10, 3\)"):
+        identify(nominal, setup, q=q, y=y[:, :2])
+    with pytest.raises(PkmcalError, match="no parameter matches 'zz'"):
+        identify(nominal, setup, q=q, y=y, free=["zz"])
+    bad = q.copy()
+    bad[4, 0] = np.nan
+    with pytest.raises(PkmcalError, match="pose 5"):
+        identify(nominal, setup, q=bad, y=y)
+    with pytest.raises(PkmcalError, match="measurements"):
+        measurement_arrays({"q": q})
+
+
+def test_unsolvable_poses_dropped_or_rejected(nominal, real):
+    setup = setups()["indicators"]
+    cmd = commanded(nominal, 60)
+    q, y = simulate(nominal, real, setup.sensor, cmd)
+    q_bad = q.copy()
+    q_bad[[3, 17]] = [400.0, -300.0, 400.0, -300.0, 400.0, -300.0]  # no assembly exists
+    res = identify(nominal, setup, q=q_bad, y=y, commanded=cmd)
+    assert list(res.dropped) == [3, 17]
+    assert any("pose(s)" in w and "4, 18" in w for w in res.warnings)
+    q_bad[:20] = q_bad[3]
+    with pytest.raises(PkmcalError, match="could not be solved for 20 of 60 poses"):
+        identify(nominal, setup, q=q_bad, y=y, commanded=cmd)
+
+
+# -- command line ---------------------------------------------------------------------------
+
+
+def _cli(args):
+    from click.testing import CliRunner
+
+    from pkmcal.cli.main import cli
+
+    return CliRunner().invoke(cli, args, catch_exceptions=False)
+
+
+@pytest.fixture(scope="module")
+def cli_files(tmp_path_factory, nominal):
+    d = tmp_path_factory.mktemp("identify")
+    poses = commanded(nominal, 60)
+    poses[:, 3:] = np.rad2deg(poses[:, 3:])
+    pose_csv = d / "poses.csv"
+    np.savetxt(pose_csv, poses, delimiter=",", header="x,y,z,a,b,c", comments="", fmt="%.9f")
+    meas = d / "meas.csv"
+    res = _cli(["simulate", "stewart-prototype", "--real", "stewart-prototype-real", "--setup",
+                "indicators-prototype", "--poses", str(pose_csv), "--seed", "3", "-o", str(meas)])
+    assert res.exit_code == 0, res.output
+    return d, pose_csv, meas
+
+
+def test_cli_identify_writes_calibrated_machine(cli_files, real):
+    import json
+
+    from pkmcal.io.machine_file import load_machine
+
+    d, _, meas = cli_files
+    out = d / "cal.yaml"
+    res = _cli(["identify", "stewart-prototype", str(meas), "--setup", "indicators-prototype", "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "gauge (fixed)" in res.output and "a1.x" in res.output and "chi2/dof" in res.output
+    cal = load_machine(str(out))
+    assert cal.covariance.shape == (42, 42)
+    i = list(cal.param_names).index("a1.x")
+    assert cal.covariance[i, i] == 0.0 and cal.covariance[0, 0] > 0
+    out2 = d / "cal2.yaml"
+    res = _cli(["identify", "stewart-prototype", str(meas), "--setup", "indicators-prototype", "--unweighted",
+                "--method", "projection", "-o", str(out2), "--json"])
+    assert res.exit_code == 0, res.output
+    data = json.loads(res.output)
+    assert data["method"] == "projection" and data["weighted"] is False
+    assert data["gauge"] == ["a1.x", "a1.y", "a2.x"] and data["identifiability"]["rank"] == 39
+
+
+def test_cli_identify_unidentifiable_is_exit_2(cli_files):
+    d, _, meas = cli_files
+    out = d / "never.yaml"
+    from click.testing import CliRunner
+
+    from pkmcal.cli.main import cli
+
+    res = CliRunner().invoke(cli, ["identify", "stewart-prototype", str(meas), "--setup", "indicators-prototype",
+                                   "--free", "b*,a*,L0_*", "-o", str(out)])
+    assert res.exit_code == 2
+    assert "not identifiable" in res.output and "a1." in res.output
+    assert not out.exists()
+
+
+def test_cli_identifiability_json(cli_files):
+    import json
+
+    _, pose_csv, _ = cli_files
+    res = _cli(["identifiability", "stewart-prototype", "--setup", "indicators-prototype", "--poses",
+                str(pose_csv), "--json"])
+    assert res.exit_code == 0, res.output
+    data = json.loads(res.output)
+    assert data["n_params"] == 42 and data["rank"] == 39 and len(data["null_space"]) == 3
+    assert data["fixed"] == ["a1.x", "a1.y", "a2.x"]
+    res = _cli(["identifiability", "stewart-prototype", "--setup", "indicators-prototype", "--poses", str(pose_csv)])
+    assert "rank 39 of 42" in res.output and "suggested gauge" in res.output

@@ -1,0 +1,399 @@
+"""Hexapod IK, FK and Jacobians against independent checks.
+
+* IK → FK round trips on thousands of random poses per machine (stewart-prototype and
+  random symmetric hexapods), cold-started from the home pose.
+* FK reports converged=False for every input it cannot solve (unreachable or inconsistent
+  lengths, NaN, a singular guess) and a converged pose always reproduces the lengths.
+* Large yaw: the multiplicative SO(3) update converges where a genhexkins-style Newton
+  (twist Jacobian with an additive roll-pitch-yaw update) does not.
+* Analytic Jacobians against central finite differences.
+* 3-fold rotational and mirror symmetry of symmetric hexapods permute the leg lengths.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
+
+from pkmcal.conventions import euler_rate_matrix, euler_to_matrix, matrix_to_euler, rotation_error
+from pkmcal.errors import PkmcalError
+from pkmcal.mechanisms import builtin_machine, symmetric_hexapod
+from pkmcal.mechanisms.hexapod import FK_TOL_MM, HEXAPOD_PARAM_NAMES
+
+PROTOTYPE = builtin_machine("stewart-prototype")
+REAL = builtin_machine("stewart-prototype-real")
+
+# Workspace around home used throughout: x, y ±30 mm, z ±15 mm, roll/pitch/yaw ±20°.
+HALF_BOX = np.array([30.0, 30.0, 15.0, *np.deg2rad([20.0, 20.0, 20.0])])
+
+symmetric_machines = st.builds(
+    symmetric_hexapod,
+    base_radius=st.floats(100.0, 250.0),
+    platform_radius=st.floats(50.0, 120.0),
+    base_separation=st.floats(8.0, 60.0),
+    platform_separation=st.floats(8.0, 60.0),
+    phase=st.floats(0.0, 360.0),
+    offset=st.floats(250.0, 500.0),
+)
+machines = st.one_of(st.just(PROTOTYPE), st.just(REAL), symmetric_machines)
+seeds = st.integers(0, 2**32 - 1)
+
+
+def box_poses(machine, n, seed, scale=1.0):
+    rng = np.random.default_rng(seed)
+    return machine.home_pose + scale * rng.uniform(-1.0, 1.0, (n, 6)) * HALF_BOX
+
+
+def pose_error(a, b):
+    """max over poses of (position error mm, rotation error rad)."""
+    dp = np.abs(a[:, :3] - b[:, :3]).max()
+    dr = rotation_error(euler_to_matrix(a[:, 3:]), euler_to_matrix(b[:, 3:])).max()
+    return dp, dr
+
+
+def assert_converged_poses_reproduce(machine, lengths, fk, tol=FK_TOL_MM):
+    """The FK contract: converged ⇔ the returned pose's IK matches within tol."""
+    back = machine.leg_lengths(fk.poses)
+    err = np.max(np.abs(back - lengths), axis=1)
+    # rounding in the final Euler-angle extraction is ~1e-13 mm on these machines
+    assert np.all(err[fk.converged] <= tol + 1e-11)
+    assert np.all(~(fk.residual[fk.converged] > tol))
+    assert np.all(~(fk.residual[~fk.converged] <= tol))
+
+
+# -- IK -------------------------------------------------------------------------------------
+
+
+@settings(max_examples=20, deadline=None)
+@given(machines, seeds)
+def test_ik_is_the_norm_of_the_leg_vector(machine, seed):
+    poses = box_poses(machine, 200, seed)
+    R = euler_to_matrix(poses[:, 3:])
+    legs = poses[:, None, :3] + np.einsum("nrc,ic->nir", R, machine.platform) - machine.base
+    np.testing.assert_allclose(machine.leg_lengths(poses), np.linalg.norm(legs, axis=2), rtol=1e-14)
+    np.testing.assert_allclose(machine.ik(poses), np.linalg.norm(legs, axis=2) - machine.offset, atol=1e-11)
+
+
+def test_ik_accepts_one_pose_and_rejects_wrong_shapes():
+    assert PROTOTYPE.ik(PROTOTYPE.home_pose).shape == (1, 6)
+    with pytest.raises(PkmcalError, match="6 coordinates"):
+        PROTOTYPE.ik(np.zeros((3, 5)))
+
+
+# -- IK/FK round trips ---------------------------------------------------------------------
+
+
+@settings(max_examples=25, deadline=None)
+@given(machines, seeds)
+def test_fk_inverts_ik_from_home(machine, seed):
+    poses = box_poses(machine, 2000, seed)
+    lengths = machine.leg_lengths(poses)
+    fk = machine.fk_lengths(lengths)
+    assert_converged_poses_reproduce(machine, lengths, fk)
+    # "not singular": inverse condition number of the length-scaled Jacobian ≥ 0.02 (twice
+    # the default singularity margin). Designs with both pair separations near 60° (base
+    # and platform hexagons nearly similar, an architecture singularity) have most of the
+    # box below that; there the convergence contract above is all that is claimed.
+    inv_cond = machine.check_limits(poses).margins["singularity"] + machine.limits.singularity_margin
+    regular = inv_cond >= 0.02
+    assume(regular.sum() >= 200)
+    assert np.all(fk.converged[regular])
+    assert fk.iterations[regular].max() <= 6
+    dp, dr = pose_error(fk.poses[regular], poses[regular])
+    assert dp < 1e-8 and dr < 1e-8
+
+
+@settings(max_examples=10, deadline=None)
+@given(seeds)
+def test_fk_from_readings_matches_fk_from_lengths(seed):
+    # ... and on the prototype the whole ±20° box is regular
+    poses = box_poses(REAL, 500, seed)
+    inv_cond = REAL.check_limits(poses).margins["singularity"] + REAL.limits.singularity_margin
+    assert np.all(inv_cond >= 0.02)
+    a = REAL.fk(REAL.ik(poses))
+    assert a.all_converged and a.iterations.max() <= 6
+    dp, dr = pose_error(a.poses, poses)
+    assert dp < 1e-8 and dr < 1e-8
+
+
+def test_fk_per_pose_guesses_and_warm_start():
+    poses = box_poses(PROTOTYPE, 300, 7)
+    lengths = PROTOTYPE.leg_lengths(poses)
+    # a per-pose guess at the answer converges in zero iterations
+    fk = PROTOTYPE.fk_lengths(lengths, poses)
+    assert fk.all_converged and np.all(fk.iterations == 0)
+    # mixed guesses: half home, half near the answer — both paths give the same poses
+    guesses = np.where(np.arange(300)[:, None] % 2 == 0, PROTOTYPE.home_pose, poses + 1e-3)
+    fk2 = PROTOTYPE.fk_lengths(lengths, guesses)
+    assert fk2.all_converged
+    np.testing.assert_allclose(fk2.poses, poses, atol=1e-8)
+
+
+def test_fk_iteration_count_is_per_pose():
+    home = PROTOTYPE.home_pose
+    poses = np.array([home, home + [0.0, 0.0, 1e-3, 0, 0, 0], home + [20.0, -10.0, 5.0, 0.2, -0.1, 0.3]])
+    fk = PROTOTYPE.fk_lengths(PROTOTYPE.leg_lengths(poses))
+    assert fk.iterations[0] == 0
+    assert fk.iterations[1] < fk.iterations[2]
+    assert fk.all_converged
+
+
+# -- FK failures are reported --------------------------------------------------------------
+
+
+def test_fk_reports_nan_and_inf_input():
+    lengths = PROTOTYPE.leg_lengths(box_poses(PROTOTYPE, 4, 1))
+    lengths[1, 3] = np.nan
+    lengths[2, 0] = np.inf
+    fk = PROTOTYPE.fk_lengths(lengths)
+    assert fk.converged.tolist() == [True, False, False, True]
+    assert not np.isfinite(fk.residual[1]) and not np.isfinite(fk.residual[2])
+
+
+def test_fk_reports_nan_guess():
+    lengths = PROTOTYPE.leg_lengths(PROTOTYPE.home_pose)
+    guess = PROTOTYPE.home_pose.copy()
+    guess[4] = np.nan
+    assert not PROTOTYPE.fk_lengths(lengths, guess).converged[0]
+
+
+@settings(max_examples=30, deadline=None)
+@given(machines, seeds)
+def test_fk_reports_lengths_no_pose_satisfies(machine, seed):
+    # |L_i − L_j| ≤ ‖l_i − l_j‖ = ‖R(a_i − a_j) − (b_i − b_j)‖ ≤ ‖a_i − a_j‖ + ‖b_i − b_j‖:
+    # lengths violating this for some pair (i, j) have no pose at all.
+    rng = np.random.default_rng(seed)
+    lengths = machine.leg_lengths(box_poses(machine, 50, seed))
+    i, j = 0, 3
+    gap = np.linalg.norm(machine.platform[i] - machine.platform[j]) + np.linalg.norm(machine.base[i] - machine.base[j])
+    lengths[:, j] = lengths[:, i] + gap * rng.uniform(1.01, 2.0, 50)
+    fk = machine.fk_lengths(lengths)
+    assert not np.any(fk.converged)
+    assert_converged_poses_reproduce(machine, lengths, fk)
+
+
+@settings(max_examples=30, deadline=None)
+@given(machines, seeds, st.floats(0.0, 1.0))
+def test_fk_contract_on_arbitrary_lengths(machine, seed, spread):
+    # readings anywhere, far outside the stroke too: whatever FK says must be true
+    rng = np.random.default_rng(seed)
+    lengths = machine.offset + rng.uniform(-300.0 * spread, 300.0 * spread + 50.0, (300, 6))
+    lengths = np.abs(lengths)
+    fk = machine.fk_lengths(lengths, max_iter=12)
+    assert_converged_poses_reproduce(machine, lengths, fk)
+    assert np.all(fk.iterations <= 12)
+
+
+def test_fk_reports_a_singular_guess():
+    # planar base and platform: with the platform in the base plane (z = 0) every u_i and
+    # R a_i lie in that plane, so the z column of J is zero and J is singular.
+    lengths = PROTOTYPE.leg_lengths(PROTOTYPE.home_pose)
+    guess = PROTOTYPE.home_pose * [1, 1, 0, 1, 1, 1]
+    J = PROTOTYPE.twist_jacobian(guess)[0]
+    assert np.allclose(J[:, 2], 0.0)
+    fk = PROTOTYPE.fk_lengths(lengths, guess)
+    assert not fk.converged[0] and fk.iterations[0] == 0
+    # the same lengths from home are fine
+    assert PROTOTYPE.fk_lengths(lengths).converged[0]
+
+
+def test_fk_reports_iteration_cap():
+    poses = box_poses(PROTOTYPE, 100, 3)
+    lengths = PROTOTYPE.leg_lengths(poses)
+    fk = PROTOTYPE.fk_lengths(lengths, max_iter=1)
+    assert not np.any(fk.converged[fk.residual > FK_TOL_MM])
+    assert np.all(fk.iterations <= 1)
+    assert not fk.all_converged
+    assert_converged_poses_reproduce(PROTOTYPE, lengths, fk)
+
+
+def test_fk_of_zero_poses():
+    fk = PROTOTYPE.fk_lengths(np.empty((0, 6)))
+    assert fk.poses.shape == (0, 6) and fk.converged.shape == (0,)
+
+
+# -- large yaw: multiplicative update vs an additive-Euler Newton --------------------------
+
+
+def _additive_rpy_newton(machine, lengths, guess, max_iter=30, tol=FK_TOL_MM):
+    """Counter-example, genhexkins-style: the twist Jacobian ∂L/∂(δp, δω) used as if it
+    were ∂L/∂(x, y, z, a, b, c), with the step added to the roll-pitch-yaw angles."""
+    x = np.array(guess, dtype=float)
+    for _ in range(max_iter):
+        r = lengths - machine.leg_lengths(x)[0]
+        if not np.all(np.isfinite(r)):
+            return False
+        if np.max(np.abs(r)) <= tol:
+            return True
+        try:
+            x = x + np.linalg.solve(machine.twist_jacobian(x)[0], r)
+        except np.linalg.LinAlgError:
+            return False
+    return False
+
+
+@pytest.mark.parametrize("yaw_range, guess_yaw", [((100.0, 170.0), 135.0), ((60.0, 80.0), 40.0),
+                                                   ((-170.0, -100.0), -135.0)])
+def test_fk_converges_at_large_yaw(yaw_range, guess_yaw):
+    # The level-platform yaw ±90° is a singular configuration of this 6-6 design: it
+    # separates FK solution branches, so the guess is on the target's side of it.
+    rng = np.random.default_rng(11)
+    n = 400
+    poses = PROTOTYPE.home_pose + np.column_stack([
+        rng.uniform(-10, 10, (n, 2)), rng.uniform(-5, 5, n),
+        np.deg2rad(rng.uniform(-10, 10, (n, 2))), np.deg2rad(rng.uniform(*yaw_range, n)),
+    ])
+    lengths = PROTOTYPE.leg_lengths(poses)
+    guess = PROTOTYPE.home_pose + [0, 0, 0, 0, 0, np.deg2rad(guess_yaw)]
+    fk = PROTOTYPE.fk_lengths(lengths, guess)
+    assert fk.all_converged
+    assert fk.iterations.max() <= 10
+    dp, dr = pose_error(fk.poses, poses)
+    assert dp < 1e-8 and dr < 1e-8
+    additive = [_additive_rpy_newton(PROTOTYPE, lengths[k], guess) for k in range(40)]
+    assert sum(additive) <= 8  # the additive update mostly stalls or diverges here
+
+
+def test_additive_counter_example_works_near_zero_yaw():
+    # ... so its failure above is the large-yaw effect, not a broken counter-example
+    poses = box_poses(PROTOTYPE, 20, 5, scale=0.25)
+    lengths = PROTOTYPE.leg_lengths(poses)
+    assert all(_additive_rpy_newton(PROTOTYPE, lengths[k], PROTOTYPE.home_pose) for k in range(20))
+
+
+# -- analytic Jacobians against central finite differences ---------------------------------
+
+
+def _skew_exp(w):
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_rotvec(w).as_matrix()
+
+
+@settings(max_examples=20, deadline=None)
+@given(machines, seeds)
+def test_twist_jacobian_against_finite_differences(machine, seed):
+    pose = box_poses(machine, 1, seed)[0]
+    R0 = euler_to_matrix(pose[3:])
+    J = machine.twist_jacobian(pose)[0]
+    h = 1e-6
+    num = np.empty((6, 6))
+    for k in range(6):
+        d = np.zeros(6)
+        d[k] = h
+        out = []
+        for sgn in (1.0, -1.0):
+            p = pose[:3] + sgn * d[:3]
+            R = _skew_exp(sgn * d[3:]) @ R0
+            out.append(np.concatenate([p, matrix_to_euler(R)]))
+        num[:, k] = (machine.leg_lengths(out[0]) - machine.leg_lengths(out[1]))[0] / (2 * h)
+    np.testing.assert_allclose(J, num, atol=1e-6)
+
+
+@settings(max_examples=20, deadline=None)
+@given(machines, seeds)
+def test_actuator_pose_jacobian_against_finite_differences(machine, seed):
+    pose = box_poses(machine, 1, seed)[0]
+    J = machine.actuator_pose_jacobian(pose)[0]
+    h = 1e-6
+    num = np.column_stack([
+        (machine.ik(pose + h * e) - machine.ik(pose - h * e))[0] / (2 * h) for e in np.eye(6)
+    ])
+    np.testing.assert_allclose(J, num, atol=1e-6)
+    # and the chain rule with E: δω = E d(a, b, c)
+    Jt = machine.twist_jacobian(pose)[0]
+    np.testing.assert_allclose(J[:, 3:], Jt[:, 3:] @ euler_rate_matrix(pose[3:]), atol=1e-12)
+
+
+@settings(max_examples=15, deadline=None)
+@given(machines, seeds)
+def test_param_jacobians_against_finite_differences(machine, seed):
+    poses = box_poses(machine, 3, seed)
+    J = machine.actuator_param_jacobian(poses)
+    JL = machine.length_param_jacobian(poses)
+    assert J.shape == (3, 6, len(HEXAPOD_PARAM_NAMES))
+    rho = machine.params
+    h = 1e-6
+    for k in range(len(rho)):
+        e = np.zeros_like(rho)
+        e[k] = h
+        plus, minus = machine.with_params(rho + e), machine.with_params(rho - e)
+        num = (plus.ik(poses) - minus.ik(poses)) / (2 * h)
+        numL = (plus.leg_lengths(poses) - minus.leg_lengths(poses)) / (2 * h)
+        np.testing.assert_allclose(J[:, :, k], num, atol=1e-7, err_msg=HEXAPOD_PARAM_NAMES[k])
+        np.testing.assert_allclose(JL[:, :, k], numL, atol=1e-7, err_msg=HEXAPOD_PARAM_NAMES[k])
+
+
+def test_param_jacobian_is_block_diagonal_per_leg():
+    J = PROTOTYPE.actuator_param_jacobian(box_poses(PROTOTYPE, 5, 2)).reshape(5, 6, 6, 7)
+    off = ~np.eye(6, dtype=bool)
+    assert np.all(J[:, off] == 0.0)
+    assert np.all(J[:, np.arange(6), np.arange(6), 6] == -1.0)
+
+
+# -- symmetry -------------------------------------------------------------------------------
+
+
+def _rotz(t):
+    c, s = np.cos(t), np.sin(t)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _transform_poses(poses, Q):
+    """(p, R) → (Q p, Q R Qᵀ); for Q a reflection this is still a rotation."""
+    R = euler_to_matrix(poses[:, 3:])
+    R2 = Q @ R @ Q.T
+    return np.column_stack([poses[:, :3] @ Q.T, matrix_to_euler(R2)])
+
+
+symmetric_or_prototype = st.one_of(st.just(PROTOTYPE), symmetric_machines)
+
+
+@settings(max_examples=25, deadline=None)
+@given(symmetric_or_prototype, seeds)
+def test_rotation_by_120_degrees_permutes_legs_by_two(machine, seed):
+    # b_{i+2} = Q b_i and a_{i+2} = Q a_i with Q = Rz(120°), so for the pose
+    # (Q p, Q R Qᵀ):  L_i = ‖p + R Qᵀa_i − Qᵀb_i‖ = L_{i−2}(p, R).
+    Q = _rotz(np.deg2rad(120.0))
+    np.testing.assert_allclose(machine.base @ Q.T, np.roll(machine.base, -2, axis=0), atol=2e-3)
+    poses = box_poses(machine, 500, seed)
+    L = machine.leg_lengths(poses)
+    L_rot = machine.leg_lengths(_transform_poses(poses, Q))
+    # Table 3 is rounded to 3 decimals, so the prototype is symmetric to ~1e-3 mm only
+    atol = 5e-3 if machine is PROTOTYPE else 1e-9
+    np.testing.assert_allclose(L_rot, np.roll(L, 2, axis=1), atol=atol)
+
+
+@settings(max_examples=25, deadline=None)
+@given(symmetric_or_prototype, seeds)
+def test_mirror_about_a_pair_bisector_swaps_legs(machine, seed):
+    # Reflection M across the vertical plane through the bisector of pair 1 (angle = phase;
+    # 195° for the prototype) maps legs 1↔2, 3↔6, 4↔5; for the pose (M p, M R M):
+    # L_i = L_σ(i)(p, R).
+    phase = np.arctan2(*(machine.base[0, :2] + machine.base[1, :2])[::-1])
+    n = np.array([-np.sin(phase), np.cos(phase), 0.0])  # normal of the mirror plane
+    M = np.eye(3) - 2.0 * np.outer(n, n)
+    sigma = [1, 0, 5, 4, 3, 2]
+    np.testing.assert_allclose(machine.base @ M.T, machine.base[sigma], atol=2e-3)
+    np.testing.assert_allclose(machine.platform @ M.T, machine.platform[sigma], atol=2e-3)
+    poses = box_poses(machine, 500, seed)
+    L = machine.leg_lengths(poses)
+    L_mir = machine.leg_lengths(_transform_poses(poses, M))
+    atol = 5e-3 if machine is PROTOTYPE else 1e-9
+    np.testing.assert_allclose(L_mir, L[:, sigma], atol=atol)
+
+
+def test_fk_respects_the_symmetry():
+    # FK (from home, which the rotation maps to itself) of cyclically permuted lengths is
+    # the rotated pose
+    Q = _rotz(np.deg2rad(120.0))
+    m = symmetric_hexapod()
+    np.testing.assert_allclose(_transform_poses(m.home_pose[None], Q)[0], m.home_pose, atol=1e-12)
+    poses = box_poses(m, 200, 9, scale=0.5)
+    rotated = _transform_poses(poses, Q)
+    fk = m.fk_lengths(np.roll(m.leg_lengths(poses), 2, axis=1))
+    assert fk.all_converged
+    dp, dr = pose_error(fk.poses, rotated)
+    assert dp < 1e-8 and dr < 1e-8

@@ -1,0 +1,229 @@
+"""Hexapod.check_limits: every limit triggered by a constructed pose, each margin checked
+against an independent computation; segment_distance against brute-force sampling."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+from scipy.optimize import brentq, minimize_scalar
+
+from pkmcal.mechanisms import builtin_machine, symmetric_hexapod
+from pkmcal.mechanisms.hexapod import segment_distance
+
+M = builtin_machine("stewart-prototype")
+HOME = M.home_pose
+DEG = np.pi / 180.0
+
+
+def pose(x=0.0, y=0.0, z=None, a=0.0, b=0.0, c=0.0):
+    return np.array([x, y, HOME[2] if z is None else z, a, b, c])
+
+
+def explicit_legs(machine, p):
+    """Leg vectors by hand: p + Rz(c) Ry(b) Rx(a) a_i − b_i, elementary rotations spelled out."""
+    x, y, z, a, b, c = p
+    Rx = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+    Ry = np.array([[np.cos(b), 0, np.sin(b)], [0, 1, 0], [-np.sin(b), 0, np.cos(b)]])
+    Rz = np.array([[np.cos(c), -np.sin(c), 0], [np.sin(c), np.cos(c), 0], [0, 0, 1]])
+    R = Rz @ Ry @ Rx
+    return np.array([x, y, z]) + machine.platform @ R.T - machine.base, R
+
+
+# -- stroke ----------------------------------------------------------------------------------
+
+
+def test_stroke_by_hand_computed_leg_lengths():
+    # Level platform at (0, 0, z): L_i = sqrt(h_i² + z²), h_i = horizontal |a_i − b_i|
+    # (planar base and platform). Solve for the z at which the longest leg reaches the end
+    # of the stroke, L0 + 50 mm.
+    h = np.linalg.norm((M.platform - M.base)[:, :2], axis=1)
+    z_top = np.sqrt((M.offset + 50.0) ** 2 - h**2).min()
+    z_bottom = np.sqrt((M.offset + 0.0) ** 2 - h**2).max()
+    poses = np.array([pose(z=z_top - 0.01), pose(z=z_top + 0.01), pose(z=z_bottom + 0.01), pose(z=z_bottom - 0.01)])
+    rep = M.check_limits(poses)
+    assert rep.violations["stroke"].tolist() == [False, True, False, True]
+    lam = np.sqrt(h**2 + poses[:, 2:3] ** 2) - M.offset
+    expected = np.minimum(lam, 50.0 - lam).min(axis=1)
+    np.testing.assert_allclose(rep.margins["stroke"], expected, atol=1e-9)
+    # only the stroke is violated at the top (level, centred: tilts and singularity fine)
+    assert rep.reasons(1) == ["stroke"]
+    # margin shrinks the stroke: 0.01 mm inside is violated with a 0.02 mm safety margin
+    assert M.check_limits(poses[:1], margin=0.02).violations["stroke"][0]
+
+
+# -- joint tilts ------------------------------------------------------------------------------
+
+
+def _tilts(machine, p):
+    legs, R = explicit_legs(machine, p)
+    # U joint: angle between the leg and the base z axis, atan2(horizontal, vertical)
+    u_tilt = np.arctan2(np.linalg.norm(legs[:, :2], axis=1), legs[:, 2])
+    # S joint: angle between the leg and the platform z axis R e_z, atan2(|l × n|, l·n)
+    n = R[:, 2]
+    s_tilt = np.arctan2(np.linalg.norm(np.cross(legs, n), axis=1), legs @ n)
+    return u_tilt, s_tilt
+
+
+@pytest.mark.parametrize("p", [pose(x=40.0, z=290.0), pose(y=-35.0, a=0.3), pose(x=10.0, b=-0.25, c=0.2),
+                               pose(z=330.0, c=0.35)])
+def test_tilt_margins_are_the_explicit_angles(p):
+    u_tilt, s_tilt = _tilts(M, p)
+    rep = M.check_limits(p)
+    assert rep.margins["u_joint_tilt"][0] == pytest.approx(45 * DEG - u_tilt.max(), abs=1e-12)
+    assert rep.margins["s_joint_tilt"][0] == pytest.approx(29 * DEG - s_tilt.max(), abs=1e-12)
+    # the margin option shrinks the angle limits by that many degrees
+    rep2 = M.check_limits(p, margin=2.0)
+    assert rep2.margins["u_joint_tilt"][0] == pytest.approx(43 * DEG - u_tilt.max(), abs=1e-12)
+
+
+def test_u_joint_tilt_triggered_alone():
+    # U tilt rises with a sideways shift and a low platform. Find the x at which the worst U
+    # tilt is exactly 45° with the 'explicit' angle, at a z keeping the legs in stroke.
+    m = builtin_machine("symmetric:platform_radius=140,offset=150,stroke=300,s_joint_tilt=off")
+    z = 200.0
+    x45 = brentq(lambda x: _tilts(m, pose(x=x, z=z))[0].max() - 45 * DEG, 0.0, 400.0)
+    rep = m.check_limits(np.array([pose(x=x45 - 0.5, z=z), pose(x=x45 + 0.5, z=z)]))
+    assert rep.violations["u_joint_tilt"].tolist() == [False, True]
+    assert rep.reasons(1) == ["u_joint_tilt"], rep.margins
+
+
+def test_s_joint_tilt_triggered_alone():
+    # A pure roll tilts the legs relative to the platform axis.
+    a29 = brentq(lambda a: _tilts(M, pose(a=a))[1].max() - 29 * DEG, 0.0, 0.6)
+    rep = M.check_limits(np.array([pose(a=a29 - 1e-3), pose(a=a29 + 1e-3)]))
+    assert rep.violations["s_joint_tilt"].tolist() == [False, True]
+    assert rep.reasons(1) == ["s_joint_tilt"], rep.margins
+
+
+def test_tilt_limits_can_be_disabled():
+    m = builtin_machine("symmetric:u_joint_tilt=off,s_joint_tilt=off")
+    rep = m.check_limits(pose(a=0.5))
+    assert "u_joint_tilt" not in rep.margins and "s_joint_tilt" not in rep.margins
+
+
+# -- segment distance and leg collision ------------------------------------------------------
+
+
+def _brute_segment_distance(p1, q1, p2, q2, n=401):
+    s = np.linspace(0.0, 1.0, n)
+    a = p1 + s[:, None] * (q1 - p1)
+    b = p2 + s[:, None] * (q2 - p2)
+    d = np.linalg.norm(a[:, None] - b[None], axis=2)
+    i, j = np.unravel_index(np.argmin(d), d.shape)
+    # refine locally on a finer grid around the coarse minimum
+    s_loc = np.clip(s[i] + np.linspace(-2, 2, 201) / (n - 1), 0, 1)
+    t_loc = np.clip(s[j] + np.linspace(-2, 2, 201) / (n - 1), 0, 1)
+    a = p1 + s_loc[:, None] * (q1 - p1)
+    b = p2 + t_loc[:, None] * (q2 - p2)
+    return np.linalg.norm(a[:, None] - b[None], axis=2).min()
+
+
+point = arrays(float, (3,), elements=st.floats(-100, 100))
+
+
+@settings(max_examples=150, deadline=None)
+@given(point, point, point, point)
+def test_segment_distance_against_brute_force(p1, q1, p2, q2):
+    if min(np.linalg.norm(q1 - p1), np.linalg.norm(q2 - p2)) < 1e-3:
+        q1 = q1 + [1.0, 0.0, 0.0]
+        q2 = q2 + [0.0, 1.0, 0.0]
+    exact = segment_distance(p1, q1, p2, q2)
+    brute = _brute_segment_distance(p1, q1, p2, q2)
+    # the sampled distance can only be larger; fine grid spacing ≤ 2·350 mm/(400·100)
+    assert exact <= brute + 1e-9
+    assert brute - exact <= 0.02
+
+
+@settings(max_examples=60, deadline=None)
+@given(point, point, arrays(float, (3,), elements=st.floats(-50, 50)), st.floats(-2, 2))
+def test_segment_distance_parallel_and_collinear(p1, q1, shift, scale):
+    if np.linalg.norm(q1 - p1) < 1e-3:
+        q1 = p1 + [0.0, 0.0, 5.0]
+    p2 = p1 + shift
+    q2 = p2 + scale * (q1 - p1) if abs(scale) > 1e-3 else p2 + (q1 - p1)
+    exact = segment_distance(p1, q1, p2, q2)
+    brute = _brute_segment_distance(p1, q1, p2, q2)
+    assert exact <= brute + 1e-9 and brute - exact <= 0.02
+
+
+def test_segment_distance_broadcasts_and_closed_forms():
+    # crossing at right angles, 3 mm apart; and end-to-end collinear with a 2 mm gap
+    p1 = np.array([[-1.0, 0, 0], [0, 0, 0]])
+    q1 = np.array([[1.0, 0, 0], [1, 0, 0]])
+    p2 = np.array([[0.0, -1, 3], [3, 0, 0]])
+    q2 = np.array([[0.0, 1, 3], [5, 0, 0]])
+    np.testing.assert_allclose(segment_distance(p1, q1, p2, q2), [3.0, 2.0], atol=1e-12)
+
+
+def _brute_min_leg_distance(machine, p, skip=()):
+    legs, _ = explicit_legs(machine, p)
+    tops = machine.base + legs
+    best = np.inf
+    for i in range(6):
+        for j in range(i + 1, 6):
+            if (i, j) not in skip:
+                best = min(best, _brute_segment_distance(machine.base[i], tops[i], machine.base[j], tops[j], n=201))
+    return best
+
+
+def test_leg_collision_margin_against_brute_force():
+    for p in (HOME, pose(x=20.0, c=0.3), pose(c=-0.35, a=0.1), pose(y=15.0, b=0.2, c=0.2)):
+        rep = M.check_limits(p)
+        brute = _brute_min_leg_distance(M, p)
+        assert rep.margins["leg_collision"][0] == pytest.approx(brute - 36.1, abs=0.05)
+
+
+def test_leg_collision_triggered_on_a_path():
+    # On the prototype the closest legs at home are 6 and 1, 36.23 mm apart at their
+    # platform joints (0.13 mm more than the 36.1 mm diameter). Along this combined
+    # shift-and-tilt direction two legs swing into each other: find, with the brute-force
+    # distance, where they touch, and check the limit flips there.
+    d = np.array([-29.29, -26.50, 11.15, -0.281, 0.328, 0.314])
+    t0 = brentq(lambda t: _brute_min_leg_distance(M, HOME + t * d) - 36.1, 0.0, 1.0, xtol=1e-6)
+    assert 0.3 < t0 < 0.9
+    rep = M.check_limits(np.array([HOME + (t0 - 0.01) * d, HOME + (t0 + 0.01) * d]))
+    assert rep.violations["leg_collision"].tolist() == [False, True]
+    assert rep.margins["leg_collision"][0] > 0 > rep.margins["leg_collision"][1]
+
+
+# -- singularity ------------------------------------------------------------------------------
+
+
+def test_singularity_at_the_yaw_90_configuration():
+    # Level 6-6 platform yawed by 90°: find the yaw minimising the smallest singular value
+    # of the (unscaled) twist Jacobian numerically, then check det J changes sign across it.
+    def inv_cond(c):
+        s = np.linalg.svd(M.twist_jacobian(pose(c=c))[0], compute_uv=False)
+        return s[-1] / s[0]
+
+    res = minimize_scalar(inv_cond, bounds=(60 * DEG, 120 * DEG), method="bounded", options={"xatol": 1e-10})
+    c_sing = res.x
+    assert res.fun < 1e-8
+    det = lambda c: np.linalg.det(M.twist_jacobian(pose(c=c))[0])  # noqa: E731
+    assert det(c_sing - 0.01) * det(c_sing + 0.01) < 0
+    rep = M.check_limits(np.array([pose(c=c_sing), pose(), pose(c=c_sing - 0.3)]))
+    assert rep.violations["singularity"].tolist() == [True, False, False]
+    assert rep.margins["singularity"][0] == pytest.approx(-M.limits.singularity_margin, abs=1e-6)
+
+
+def test_singularity_margin_is_scaled_inverse_condition_number():
+    p = pose(x=5.0, a=0.1, c=0.4)
+    J = M.twist_jacobian(p)[0]
+    r = np.mean(np.linalg.norm(M.platform, axis=1))
+    s = np.linalg.svd(J @ np.diag([1, 1, 1, 1 / r, 1 / r, 1 / r]), compute_uv=False)
+    assert M.check_limits(p).margins["singularity"][0] == pytest.approx(s[-1] / s[0] - 0.01, rel=1e-10)
+
+
+def test_limit_report_bookkeeping():
+    poses = np.array([HOME, pose(a=0.5), pose(z=500.0)])
+    rep = M.check_limits(poses)
+    assert rep.ok.tolist() == [True, False, False]
+    verdicts = rep.verdicts()
+    assert verdicts[0] == "ok" and "s_joint_tilt" in verdicts[1] and "stroke" in verdicts[2]
+
+
+def test_symmetric_machine_without_diameter_has_no_collision_check():
+    assert "leg_collision" not in symmetric_hexapod().check_limits(symmetric_hexapod().home_pose).margins

@@ -1,0 +1,197 @@
+"""Planar redundant machines (paper 3 §3) and the planar tool-point sensor: analytic
+Jacobians against finite differences, FK round trips, IK continuity, limits, registry."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pkmcal.errors import PkmcalError
+from pkmcal.mechanisms import builtin_machine
+from pkmcal.mechanisms import planar as PL
+from pkmcal.sensors.planar_tool import PlanarToolSensor
+
+MACHINES = {"planar-2dof-3act": PL.planar_2dof_3act(), "planar-3dof-4act": PL.planar_3dof_4act()}
+
+
+def _unit_poses(m, u):
+    """Map points of [0, 1]^n into the workspace box."""
+    lo, hi = m.workspace[:, 0], m.workspace[:, 1]
+    return lo + np.asarray(u) * (hi - lo)
+
+
+def _perturbed(m, seed, size=0.5):
+    rng = np.random.default_rng(seed)
+    ang = np.array([n.startswith("alpha") or (n.startswith("dq") and m.n_dof == 2) for n in m.param_names])
+    return m.with_params(m.params + rng.normal(size=len(m.params)) * size * np.where(ang, 1e-2, 1.0))
+
+
+unit = st.lists(st.floats(0.0, 1.0), min_size=3, max_size=3)
+
+
+@pytest.mark.parametrize("name", list(MACHINES))
+@settings(max_examples=25, deadline=None)
+@given(u=unit, seed=st.integers(0, 2**16))
+def test_pose_jacobian_matches_finite_differences(name, u, seed):
+    m = _perturbed(MACHINES[name], seed)
+    x = _unit_poses(m, u[: m.n_dof])[None]
+    h = 1e-6
+    fd = np.stack([(m.ik(x + h * e) - m.ik(x - h * e)) / (2 * h) for e in np.eye(m.n_dof)], axis=-1)
+    np.testing.assert_allclose(m.actuator_pose_jacobian(x), fd, atol=1e-7 * max(1.0, np.abs(fd).max()))
+
+
+@pytest.mark.parametrize("name", list(MACHINES))
+@settings(max_examples=20, deadline=None)
+@given(u=unit, seed=st.integers(0, 2**16))
+def test_param_jacobian_matches_finite_differences(name, u, seed):
+    m = _perturbed(MACHINES[name], seed)
+    x = _unit_poses(m, u[: m.n_dof])[None]
+    h = 1e-6
+    p = m.params
+    fd = np.stack([(m.with_params(p + h * e).ik(x) - m.with_params(p - h * e).ik(x)) / (2 * h)
+                   for e in np.eye(len(p))], axis=-1)
+    np.testing.assert_allclose(m.actuator_param_jacobian(x), fd, atol=1e-7 * max(1.0, np.abs(fd).max()))
+
+
+@pytest.mark.parametrize("name", list(MACHINES))
+@settings(max_examples=25, deadline=None)
+@given(u=unit, du=unit, seed=st.integers(0, 2**16))
+def test_fk_round_trip_from_a_nearby_guess(name, u, du, seed):
+    m = _perturbed(MACHINES[name], seed)
+    x = _unit_poses(m, u[: m.n_dof])[None]
+    step = (np.asarray(du[: m.n_dof]) - 0.5) * np.array([20.0, 20.0, 0.1])[: m.n_dof]
+    fk = m.fk(m.ik(x), guess=x[0] + step)
+    assert fk.all_converged
+    np.testing.assert_allclose(fk.poses, x, atol=1e-8)
+
+
+@pytest.mark.parametrize("name", list(MACHINES))
+def test_fk_from_home_never_reports_a_wrong_pose(name):
+    m = MACHINES[name]
+    x = m.sample_poses(400, np.random.default_rng(5))
+    fk = m.fk(m.ik(x))
+    wrong = np.max(np.abs(fk.poses - x), axis=1) > 1e-6
+    assert not np.any(wrong & fk.converged)
+    assert fk.converged.mean() > 0.95
+
+
+@pytest.mark.parametrize("name", list(MACHINES))
+def test_fk_of_inconsistent_redundant_readings_is_least_squares(name):
+    """With l > n the FK minimises ‖q − IK(x)‖: at its answer Γᵀ(q − IK(x)) = 0."""
+    m = MACHINES[name]
+    rng = np.random.default_rng(2)
+    x = m.sample_poses(20, rng)
+    q = m.ik(x) + rng.normal(size=(20, m.n_actuators)) * 1e-4
+    fk = m.fk(q, guess=x)
+    G = m.actuator_pose_jacobian(fk.poses)
+    grad = np.einsum("nli,nl->ni", G, q - m.ik(fk.poses))
+    grad0 = np.einsum("nli,nl->ni", m.actuator_pose_jacobian(x), q - m.ik(x))
+    assert fk.all_converged
+    assert np.abs(grad).max() < 1e-3 * np.abs(grad0).max()
+
+
+@pytest.mark.parametrize("name", list(MACHINES))
+def test_ik_is_continuous_over_the_workspace(name):
+    """No 2π branch jumps: neighbouring poses give neighbouring readings."""
+    m = MACHINES[name]
+    x = m.sample_poses(2000, np.random.default_rng(3))
+    d = np.zeros(m.n_dof)
+    d[0] = 0.01
+    jump = np.abs(m.ik(x + d) - m.ik(x)).max()
+    assert jump < 0.01 * np.abs(m.actuator_pose_jacobian(x)).max() * 1.5
+    assert m.check_limits(x).ok.all()
+
+
+def test_limits_flag_unreachable_poses():
+    m = MACHINES["planar-2dof-3act"]
+    rep = m.check_limits(np.array([[0.0, 205.0], [0.0, 600.0]]))
+    assert rep.ok.tolist() == [True, False]
+    assert "workspace" in rep.reasons(1)
+    m3 = MACHINES["planar-3dof-4act"]
+    rep = m3.check_limits(np.array([[0.0, 230.0, 0.0], [0.0, 420.0, 0.0]]))
+    assert rep.ok.tolist() == [True, False] and "reach" in rep.reasons(1)
+
+
+def test_registry_names_and_parameters():
+    for name, m in MACHINES.items():
+        assert builtin_machine(name) == m
+        assert len(set(m.param_names)) == len(m.param_names)
+        assert m.actuator_param_jacobian(m.home).shape == (1, m.n_actuators, len(m.param_names))
+    m = MACHINES["planar-2dof-3act"]
+    assert set(PL.P2_PAPER_FREE) <= set(m.param_names)
+    assert set(PL.P3_PAPER_FREE) <= set(MACHINES["planar-3dof-4act"].param_names)
+    assert m.p("l11") == 280.0 and m.p("B3.y") == 420.0 and m.p("D2") == 215.0
+    assert MACHINES["planar-3dof-4act"].p("L3") == 230.0
+    moved = m.with_deltas({"l11": 0.089})
+    assert moved.p("l11") == pytest.approx(280.089) and moved != m
+    with pytest.raises(PkmcalError, match="no parameter 'l99'"):
+        m.param_index(["l99"])
+    with pytest.raises(PkmcalError, match="2 coordinates"):
+        m.ik(np.zeros((1, 3)))
+
+
+def test_encoder_offset_sign_convention():
+    """reading = true actuator position + dq: raising dq raises the reading by dq."""
+    for m in MACHINES.values():
+        shifted = m.with_deltas({"dq1": 0.01})
+        dq = shifted.ik(m.home) - m.ik(m.home)
+        np.testing.assert_allclose(dq, [[0.01] + [0.0] * (m.n_actuators - 1)], atol=1e-12)
+
+
+def test_2dof_matches_closed_form_geometry():
+    """Independent check of chain 1: elbow A = B + l11 e(θ) is at l12 from the plate joint."""
+    m = MACHINES["planar-2dof-3act"]
+    x = m.sample_poses(50, np.random.default_rng(4))
+    th = m.ik(x)
+    for i in range(3):
+        B = np.array([m.p(f"B{i + 1}.x"), m.p(f"B{i + 1}.y")])
+        C = x + m.p(f"D{i + 1}") * np.array([np.cos(PL.P2_BETA[i]), np.sin(PL.P2_BETA[i])])
+        A = B + m.p(f"l{i + 1}1") * np.stack([np.cos(th[:, i]), np.sin(th[:, i])], axis=1)
+        np.testing.assert_allclose(np.linalg.norm(C - A, axis=1), m.p(f"l{i + 1}2"), atol=1e-9)
+
+
+def test_3dof_matches_closed_form_geometry():
+    m = _perturbed(MACHINES["planar-3dof-4act"], 7)
+    x = m.sample_poses(50, np.random.default_rng(4))
+    s = m.ik(x) - m.params[9:13]
+    L3 = m.p("L3")
+    e = np.stack([np.cos(x[:, 2]), np.sin(x[:, 2])], axis=1)
+    C = [x[:, :2] - 0.5 * L3 * e, x[:, :2] + 0.5 * L3 * e]
+    for j, (way, leg) in enumerate([(0, "rho11"), (0, "rho12"), (1, "rho21"), (1, "rho22")]):
+        a = m.p(f"alpha{way + 1}")
+        A = np.array([0.0, m.p(f"y{way + 1}")]) + s[:, j:j + 1] * np.array([np.cos(a), np.sin(a)])
+        np.testing.assert_allclose(np.linalg.norm(C[way] - A, axis=1), m.p(leg), atol=1e-9)
+
+
+# -- sensor ------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("n", [2, 3])
+@settings(max_examples=20, deadline=None)
+@given(u=unit, v=st.lists(st.floats(-1.0, 1.0), min_size=5, max_size=5))
+def test_tool_sensor_jacobians_match_finite_differences(n, u, v):
+    m = MACHINES["planar-2dof-3act" if n == 2 else "planar-3dof-4act"]
+    s = PlanarToolSensor(n_pose=n, target=np.array(v[:2]) * 20, world=np.array([v[2] * 50, v[3] * 50, v[4] * 0.5]))
+    x = _unit_poses(m, u[:n])[None]
+    h = 1e-6
+    fd = np.stack([(s.predict(x + h * e) - s.predict(x - h * e)) / (2 * h) for e in np.eye(n)], axis=-1)
+    np.testing.assert_allclose(s.pose_jacobian(x), fd, atol=1e-7)
+    p = s.params
+    fd = np.stack([(s.with_params(p + h * e).predict(x) - s.with_params(p - h * e).predict(x)) / (2 * h)
+                   for e in np.eye(5)], axis=-1)
+    np.testing.assert_allclose(s.param_jacobian(x), fd, atol=1e-6)
+    fdt = np.stack([(s.tool_point(x + h * e) - s.tool_point(x - h * e)) / (2 * h) for e in np.eye(n)], axis=-1)
+    np.testing.assert_allclose(s.tool_pose_jacobian(x), fdt, atol=1e-7)
+    back = s.poses_for_readings(s.predict(x), x[:, 2] if n == 3 else None)
+    np.testing.assert_allclose(back, x, atol=1e-9)
+
+
+def test_tool_sensor_rejects_bad_input():
+    with pytest.raises(PkmcalError, match="n_pose"):
+        PlanarToolSensor(n_pose=6)
+    with pytest.raises(PkmcalError, match="no parameter"):
+        PlanarToolSensor(n_pose=2, free=("target.z",))
+    with pytest.raises(PkmcalError, match="plate angle"):
+        PlanarToolSensor(n_pose=3).poses_for_readings(np.zeros((1, 2)))

@@ -1,0 +1,239 @@
+"""The HTML calibration report: self-contained, deterministic, faithful to its input.
+
+The input is a small but genuine calibration, computed here without the engine: the leg
+offsets and platform joints of ``stewart-prototype`` are fitted by Gauss–Newton to the
+simulated leg readings of ``stewart-prototype-real`` at full-pose measured poses
+(paper 1's ik-residual model r = q − IK(x, ρ)).
+"""
+
+from __future__ import annotations
+
+import re
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+
+from pkmcal.conventions import euler_to_matrix, rotation_error
+from pkmcal.errors import PkmcalError
+from pkmcal.mechanisms.library import stewart_prototype, stewart_prototype_real
+from pkmcal.report import (
+    ErrorMap,
+    HeldOutErrors,
+    Identifiability,
+    ParameterTable,
+    ReportData,
+    Residuals,
+    correlation_from_covariance,
+    write_report,
+)
+from pkmcal.report.data import summarise
+from pkmcal.report.html import inline_svg
+
+SPAN = np.array([20.0, 20.0, 10.0, 0.08, 0.08, 0.08])
+
+
+def _commanded_errors(real, model, targets):
+    """Position (mm) and orientation (rad) error of ``real`` commanded by ``model``."""
+    reached = real.fk(model.ik(targets), targets).poses
+    pos = np.linalg.norm(reached[:, :3] - targets[:, :3], axis=1)
+    ori = rotation_error(euler_to_matrix(reached[:, 3:]), euler_to_matrix(targets[:, 3:]))
+    return pos, ori
+
+
+def make_report_data(n_poses: int = 24, seed: int = 3, rank_deficient: bool = False) -> ReportData:
+    nominal, real = stewart_prototype(), stewart_prototype_real()
+    rng = np.random.default_rng(seed)
+    poses = nominal.home + rng.uniform(-1, 1, (3 * n_poses, 6)) * SPAN
+    poses = poses[real.check_limits(poses).ok][:n_poses]
+    q = real.ik(poses) + rng.normal(0.0, 0.002, (len(poses), 6))
+    free_names = tuple(n for n in nominal.param_names if n.startswith(("a", "L0")))
+    free = np.isin(nominal.param_names, free_names)
+    rho = nominal.params.copy()
+    for _ in range(6):
+        J = nominal.with_params(rho).actuator_param_jacobian(poses).reshape(-1, 42)[:, free]
+        r = (q - nominal.with_params(rho).ik(poses)).ravel()
+        rho[free] += np.linalg.lstsq(J, r, rcond=None)[0]
+    identified = nominal.with_params(rho, name="stewart-prototype-identified")
+    res = q - identified.ik(poses)
+    J = identified.actuator_param_jacobian(poses).reshape(-1, 42)[:, free]
+    sigma2 = np.sum(res**2) / (res.size - free.sum())
+    cov_free = sigma2 * np.linalg.inv(J.T @ J)
+    std = np.full(42, np.nan)
+    std[free] = np.sqrt(np.diag(cov_free))
+    s = np.linalg.svd(J / np.linalg.norm(J, axis=0), compute_uv=False)
+    rank = int(free.sum()) - (2 if rank_deficient else 0)
+    held = nominal.home + rng.uniform(-1, 1, (20, 6)) * SPAN
+    pb, ob = _commanded_errors(real, nominal, held)
+    pa, oa = _commanded_errors(real, identified, held)
+    x = nominal.home[0] + np.linspace(-20, 20, 7)
+    y = nominal.home[1] + np.linspace(-20, 20, 6)
+    grid = np.array([[xx, yy, nominal.home[2], 0, 0, 0] for yy in y for xx in x])
+    eb = _commanded_errors(real, nominal, grid)[0].reshape(6, 7)
+    ea = _commanded_errors(real, identified, grid)[0].reshape(6, 7)
+    return ReportData(
+        title="pkmcal test report",
+        machine_summary=nominal.summary(),
+        nominal=nominal,
+        identified=identified,
+        poses=poses,
+        identifiability=Identifiability(
+            rank=rank, n_params=int(free.sum()), singular_values=s,
+            fixed=tuple(n for n in nominal.param_names if n not in free_names),
+            weak=("a1.z (σ/σ₁ = 3e-5)",), null_space=("L0_1 + a1.z",) if rank_deficient else (),
+        ),
+        parameters=ParameterTable(nominal.param_names, nominal.params, rho, std, free, true=real.params),
+        correlation=correlation_from_covariance(cov_free),
+        correlation_names=free_names,
+        residuals=Residuals(res, nominal.actuator_names, ("mm",) * 6),
+        held_out=HeldOutErrors(pb, pa, ob, oa),
+        error_map=ErrorMap(x, y, float(nominal.home[2]), eb, ea),
+        setup_summary="full pose, leg noise 0.002 mm",
+        facts=(("seed", str(seed)), ("method", "ik-residual (test)")),
+    )
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory):
+    data = make_report_data()
+    out = tmp_path_factory.mktemp("report")
+    files = write_report(data, out)
+    return data, files, files.html.read_text(encoding="utf-8")
+
+
+def test_report_writes_page_and_figure_files(report):
+    data, files, page = report
+    names = {p.stem for p in files.figures}
+    assert names == {"machine-poses", "pose-cloud", "singular-values", "parameters", "correlation",
+                     "residuals-per-pose", "residuals-per-reading", "held-out", "error-map"}
+    for p in files.figures:
+        assert p.exists() and p.stat().st_size > 1000
+        assert p.parent == files.html.parent
+    for p in files.figures:
+        if p.suffix == ".svg":
+            ET.parse(p)  # well-formed XML
+        else:
+            assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    for name in names:
+        block = re.search(rf'<figure id="fig-{name}">(.*?)</figure>', page, re.S)
+        assert block is not None and "<svg " in block.group(1)
+
+
+def test_report_is_self_contained(report):
+    _, _, page = report
+    lowered = page.lower()
+    assert "<script" not in lowered and "<link" not in lowered and "@import" not in lowered
+    assert "<img" not in lowered  # every figure is inline
+    # The only URLs allowed are XML namespace names, which are never fetched.
+    urls = set(re.findall(r'(?:src|href)\s*=\s*"([^"#][^"]*)"', page))
+    assert all(u.startswith("data:image/png;base64,") for u in urls)  # images inside the SVGs
+    assert set(re.findall(r"https?://[^\s\"')]+", page)) <= {
+        "http://www.w3.org/2000/svg", "http://www.w3.org/1999/xlink", "http://purl.org/dc/elements/1.1/",
+        "http://creativecommons.org/ns#", "http://www.w3.org/1999/02/22-rdf-syntax-ns#",
+        "http://purl.org/dc/dcmitype/StillImage",
+    }
+
+
+def test_inline_svg_ids_are_unique_and_references_resolve(report):
+    _, _, page = report
+    ids = re.findall(r'\bid="([^"]+)"', page)
+    assert len(ids) == len(set(ids))
+    refs = set(re.findall(r'href="#([^"]+)"', page)) | set(re.findall(r"url\(#([^)]+)\)", page))
+    assert refs and refs <= set(ids)
+
+
+def test_inline_svg_prefixes_ids():
+    svg = (b'<?xml version="1.0"?>\n<svg xmlns="http://www.w3.org/2000/svg" width="1pt"><defs>'
+           b'<path id="a1"/></defs><use xlink:href="#a1"/><g clip-path="url(#a1)"/></svg>')
+    out = inline_svg(svg, "fig")
+    assert out.startswith("<svg ")
+    twice = inline_svg(svg.replace(b"<use", b"<image id=\"a1\"/><use"), "f")
+    assert twice.count('id="f-a1"') == 1 and 'id="f-a1-2"' in twice
+    assert 'id="fig-a1"' in out and 'href="#fig-a1"' in out and "url(#fig-a1)" in out
+    assert 'id="a1"' not in out
+
+
+def test_report_is_byte_identical_on_rerun(tmp_path):
+    data = make_report_data(n_poses=12)
+    a = write_report(data, tmp_path / "a")
+    b = write_report(make_report_data(n_poses=12), tmp_path / "b")
+    assert [p.name for p in a.figures] == [p.name for p in b.figures]
+    for pa, pb in zip(a.figures + (a.html,), b.figures + (b.html,)):
+        assert pa.read_bytes() == pb.read_bytes(), pa.name
+
+
+def test_report_numbers_match_input(report):
+    data, _, page = report
+    h = data.held_out
+    rms_before = np.sqrt(np.mean(h.position_before**2)) * 1000
+    rms_after = np.sqrt(np.mean(h.position_after**2)) * 1000
+    assert f"{rms_before:.1f} µm before → {rms_after:.2f} µm after" in page
+    assert rms_after < rms_before / 5  # the fitted machine is genuinely better
+    t = data.parameters
+    for i in (0, 6, 41):
+        assert f"<td>{t.identified[i]:.4f}</td>" in page
+    assert page.count("<tr class=\"fixed\">") == int((~t.free).sum())
+    assert f"{data.identifiability.rank} of {data.identifiability.n_params} candidate parameters" in page
+
+
+def test_rank_deficiency_is_flagged(tmp_path):
+    data = make_report_data(n_poses=12, rank_deficient=True)
+    page = write_report(data, tmp_path, png=False).html.read_text(encoding="utf-8")
+    assert 'class="warn"' in page and "L0_1 + a1.z" in page
+    assert not list(tmp_path.glob("*.png"))
+
+
+def test_summaries_closed_form():
+    s = summarise(np.array([3.0, 4.0]))
+    assert s["rms"] == pytest.approx(np.sqrt(12.5)) and s["max"] == 4.0 and s["mean"] == 3.5
+    cov = np.array([[4.0, 2.0, 0.0], [2.0, 9.0, 0.0], [0.0, 0.0, 0.0]])
+    c = correlation_from_covariance(cov)
+    assert c[0, 1] == pytest.approx(2.0 / 6.0) and c[0, 0] == pytest.approx(1.0)
+    assert np.isnan(c[2, 2]) and np.isnan(c[0, 2])
+
+
+def test_report_input_is_validated():
+    with pytest.raises(PkmcalError, match="identified"):
+        ParameterTable(("p1", "p2"), [0, 0], [0, 0, 0], [0, 0], [True, True])
+    with pytest.raises(PkmcalError, match="units"):
+        Residuals(np.zeros((3, 2)), ("d1", "d2"), ("mm", "deg"))
+    with pytest.raises(PkmcalError, match="expected"):
+        HeldOutErrors([1.0, 2.0], [1.0], [0.0, 0.0], [0.0, 0.0])
+    with pytest.raises(PkmcalError, match="error map"):
+        ErrorMap([0, 1], [0, 1, 2], 0.0, np.zeros((2, 2)), np.zeros((3, 2)))
+    with pytest.raises(PkmcalError, match="unknown identifiability keys"):
+        Identifiability.from_mapping({"rank": 1, "n_params": 1, "singular_values": [1.0], "colour": 2})
+
+
+def test_report_refuses_a_file_as_folder(tmp_path):
+    f = tmp_path / "taken"
+    f.write_text("x")
+    with pytest.raises(PkmcalError, match="not a folder"):
+        write_report(make_report_data(n_poses=12), f)
+
+
+def test_report_from_an_engine_result_without_verification(tmp_path):
+    """What ``pkmcal identify --report`` writes: paper 2's indicators, fk-residual, the
+    engine's automatic gauge, no held-out poses."""
+    from pkmcal.identification.engine import identify
+    from pkmcal.identification.simulation import simulate_campaign
+    from pkmcal.io.setup_file import builtin_setup
+    from pkmcal.planning.candidates import generate_candidates
+    from pkmcal.report.from_results import report_data_from_results
+
+    nominal, real = stewart_prototype(), stewart_prototype_real()
+    setup = builtin_setup("indicators-prototype")
+    poses = generate_candidates(nominal, setup, kind="random", n=60, rng=np.random.default_rng(4)).poses
+    sim = simulate_campaign(nominal, real, setup, poses, rng=5)
+    result = identify(nominal, setup, sim.measurements, method="fk-residual")
+    data = report_data_from_results(nominal, result, setup, sim.commanded[sim.kept])
+    assert data.residuals.names == ("d1", "d2", "d3") and data.residuals.units == ("mm",) * 3
+    assert data.identifiability.rank < data.identifiability.n_params  # indicators see 39 of 42
+    assert set(result.gauge) <= set(data.identifiability.fixed)
+    assert data.parameters.free.sum() == len(result.free)
+    page = write_report(data, tmp_path, png=False).html.read_text(encoding="utf-8")
+    assert "No held-out poses were given." in page and 'class="warn"' in page
+    for name in result.gauge:
+        assert f'<tr class="fixed"><td class="l">{name}</td>' in page
+    rms = np.sqrt(np.mean(result.residuals[:, 0] ** 2)) * 1000
+    assert f"<td>{rms:.3f}</td>" in page

@@ -1,0 +1,189 @@
+"""Pose selection: low-rank updates against direct recomputation, optimality, reproducibility,
+and planned poses checked against the machine's limits independently of the planner."""
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from pkmcal.cli.main import cli
+from pkmcal.errors import PkmcalError
+from pkmcal.io.setup_file import load_setup
+from pkmcal.io.tables import read_table
+from pkmcal.mechanisms.library import stewart_prototype
+from pkmcal.planning import _selection_kernels as kernels
+from pkmcal.planning.indices import information_matrix, log_det_information, observability_indices
+from pkmcal.planning.plan import plan_poses, pose_set_indices
+from pkmcal.planning.selection import (
+    _DState,
+    levy_steps,
+    select,
+    select_cuckoo,
+    select_default,
+    select_detmax,
+    select_random,
+    woodbury_update,
+)
+
+
+def blocks(seed=0, N=60, m=2, p=6):
+    rng = np.random.default_rng(seed)
+    return rng.standard_normal((N, m, p)) * rng.uniform(0.2, 1.0, (N, 1, 1))
+
+
+def test_woodbury_matches_direct():
+    G = blocks(1)
+    M = information_matrix(G, np.arange(10))
+    Minv = np.linalg.inv(M)
+    for sign, k in ((1.0, 20), (-1.0, 3)):
+        new_inv, dld = woodbury_update(Minv, G[k], sign)
+        M2 = M + sign * G[k].T @ G[k]
+        assert np.allclose(new_inv, np.linalg.inv(M2), rtol=1e-9, atol=1e-12)
+        assert dld == pytest.approx(np.linalg.slogdet(M2)[1] - np.linalg.slogdet(M)[1], abs=1e-10)
+
+
+def test_rank_updates_of_all_candidates_match_recomputation():
+    G = np.ascontiguousarray(blocks(2))
+    state = _DState(G, information_matrix(G, np.arange(8)))
+    for k, sign in ((30, 1.0), (41, 1.0), (2, -1.0), (30, -1.0), (55, 1.0)):
+        state.update(k, sign)
+    M = information_matrix(G, [0, 1, 3, 4, 5, 6, 7, 41, 55])
+    assert np.allclose(state.M, M)
+    Minv = np.linalg.inv(M)
+    S = np.einsum("nip,pq,njq->nij", G, Minv, G)
+    assert np.allclose(state.S, S, rtol=1e-8, atol=1e-11)
+    gains = np.array([np.linalg.slogdet(M + g.T @ g)[1] for g in G]) - np.linalg.slogdet(M)[1]
+    assert np.allclose(state.gains(), gains, rtol=1e-8, atol=1e-10)
+
+
+def test_kernel_gain_is_minus_inf_when_not_positive_definite():
+    S = np.zeros((2, 2, 2))
+    S[1] = -2.0 * np.eye(2)
+    gain = np.empty(2)
+    kernels.gains_of(S, gain)
+    assert gain[0] == 0.0 and gain[1] == -np.inf
+
+
+def test_default_is_a_local_optimum_and_beats_random():
+    """No single swap (chosen ↔ unchosen) raises log det M: the DETMAX fixed point."""
+    G = blocks(3)
+    sel = select_default(G, 8)
+    assert len(set(sel.chosen.tolist())) == 8
+    best = log_det_information(G, sel.chosen)
+    for i in sel.chosen:
+        for j in np.setdiff1d(np.arange(len(G)), sel.chosen):
+            trial = np.where(sel.chosen == i, j, sel.chosen)
+            assert log_det_information(G, trial) <= best + 1e-8
+    rng = np.random.default_rng(0)
+    rand = [log_det_information(G, select_random(len(G), 8, rng)) for _ in range(50)]
+    assert best > max(rand)
+    assert sel.indices == observability_indices(G, sel.chosen)
+
+
+def test_default_pool_path_and_determinism():
+    G = blocks(4, N=400, m=3, p=8)
+    a = select_default(G, 10, pool=50)
+    b = select_default(G, 10, pool=50)
+    full = select_default(G, 10)
+    assert np.array_equal(a.chosen, b.chosen)
+    # the exchange over all candidates repairs a small pool: within 1 % of the full run
+    assert log_det_information(G, a.chosen) >= log_det_information(G, full.chosen) - 0.01 * abs(
+        log_det_information(G, full.chosen))
+
+
+def test_default_at_least_as_good_as_cuckoo_and_detmax_on_O1():
+    G = blocks(5, N=80, m=2, p=6)
+    X = np.random.default_rng(0).random((80, 6))
+    d = select_default(G, 7).indices["O1"]
+    c = select_cuckoo(G, 7, positions=X, index="O1", rng=np.random.default_rng(1), generations=5).indices["O1"]
+    m = select_detmax(G, 7, index="O1", rng=np.random.default_rng(1)).indices["O1"]
+    assert d >= c - 1e-12
+    assert d >= m - 1e-9
+
+
+def test_detmax_and_cuckoo_are_seeded_and_improve_their_index():
+    G = blocks(6, N=70, m=2, p=5)
+    X = np.random.default_rng(0).random((70, 6))
+    a = select_detmax(G, 6, index="O4", rng=np.random.default_rng(9))
+    b = select_detmax(G, 6, index="O4", rng=np.random.default_rng(9))
+    assert np.array_equal(a.chosen, b.chosen)
+    start = np.random.default_rng(9).choice(70, size=6, replace=False)  # its initial set (step i)
+    assert a.indices["O4"] >= observability_indices(G, start)["O4"]
+    c1 = select_cuckoo(G, 6, positions=X, rng=np.random.default_rng(2), generations=4)
+    c2 = select_cuckoo(G, 6, positions=X, rng=np.random.default_rng(2), generations=4)
+    assert np.array_equal(c1.chosen, c2.chosen) and c1.criterion == "O4"
+
+
+def test_levy_steps_heavy_tailed():
+    s = levy_steps(np.random.default_rng(0), 200_000)
+    # Lévy-stable with β = 1.5: far more mass beyond 10 scale units than a Gaussian (P ≈ 0)
+    assert 0.005 < np.mean(np.abs(s) > 10) < 0.1
+
+
+def test_selection_errors():
+    G = blocks(7, N=10, m=1, p=4)
+    with pytest.raises(PkmcalError, match="cannot select"):
+        select(G, 11)
+    with pytest.raises(PkmcalError, match="at least 4 poses"):
+        select_default(G, 3)
+    with pytest.raises(PkmcalError, match="unknown selection algorithm"):
+        select(G, 5, algorithm="magic")
+    with pytest.raises(PkmcalError, match="maximises O1"):
+        select(G, 5, index="O4")
+
+
+# -- end to end on paper 2's prototype -------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def machine():
+    return stewart_prototype()
+
+
+@pytest.mark.parametrize("setup_name,algorithm", [("indicators-prototype", "default"),
+                                                  ("full-pose-paper1", "corners"),
+                                                  ("laser-tracker", "random")])
+def test_planned_poses_are_reachable_and_measurable(machine, setup_name, algorithm):
+    setup = load_setup(setup_name)
+    plan = plan_poses(machine, setup, 16, algorithm=algorithm, n_candidates=300, seed=3, margin=0.1)
+    assert plan.poses.shape == (16, 6)
+    # independent of the planner: the machine's own limit check, with the margin
+    assert machine.check_limits(plan.poses, margin=0.1).ok.all()
+    assert np.allclose(plan.commands, machine.ik(plan.poses))
+    assert np.all((plan.commands >= machine.stroke[:, 0]) & (plan.commands <= machine.stroke[:, 1]))
+    fk = machine.fk(plan.commands, guess=plan.poses)
+    assert fk.all_converged and np.allclose(fk.poses, plan.poses, atol=1e-8)
+    readings = setup.sensor.predict(plan.poses)            # raises if the sensor cannot read a pose
+    assert np.all(np.isfinite(readings))
+    assert pose_set_indices(machine, setup, plan.poses, model=plan.model) == pytest.approx(plan.indices)
+
+
+def test_plan_is_reproducible(machine):
+    setup = load_setup("indicators-prototype")
+    a = plan_poses(machine, setup, 12, algorithm="random", n_candidates=200, seed=11)
+    b = plan_poses(machine, setup, 12, algorithm="random", n_candidates=200, seed=11)
+    assert np.array_equal(a.poses, b.poses)
+
+
+def test_cli_plan_and_observability(machine, tmp_path):
+    out = tmp_path / "poses.csv"
+    runner = CliRunner()
+    res = runner.invoke(cli, ["plan", "stewart-prototype", "--setup", "full-pose-paper1", "--n", "14",
+                              "--n-candidates", "300", "--seed", "2", "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    table = read_table(out, ["x", "y", "z", "a", "b", "c"] + [f"lambda{i}" for i in range(1, 7)])
+    poses = table[["x", "y", "z", "a", "b", "c"]].copy()
+    poses[:, 3:] = np.deg2rad(poses[:, 3:])
+    assert machine.check_limits(poses, margin=0.1).ok.all()
+    assert np.allclose(table[[f"lambda{i}" for i in range(1, 7)]], machine.ik(poses), atol=1e-9)
+    res = runner.invoke(cli, ["observability", "stewart-prototype", "--setup", "full-pose-paper1", str(out), "--json"])
+    assert res.exit_code == 0, res.output
+    ind = json.loads(res.output)
+    assert set(ind) >= {"O1", "O2", "O3", "O4", "O5"} and ind["O1"] > 0
+    # the indices printed by plan are those of the written poses
+    assert f"O1 = {ind['O1']:.6g}" in out.read_text()
+    # user errors: one line, exit code 2
+    res = runner.invoke(cli, ["plan", "stewart-prototype", "--setup", "full-pose-paper1", "--n", "99",
+                              "--algorithm", "corners", "-o", str(tmp_path / "x.csv")])
+    assert res.exit_code == 2 and "only 64 candidates" in res.output

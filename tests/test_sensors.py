@@ -1,0 +1,206 @@
+"""Sensor models: analytic Jacobians vs central finite differences, and the readings vs
+independent constructions (homogeneous transforms with scipy; plane through three
+transformed platform points intersected with each indicator's vertical line)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+from scipy.spatial.transform import Rotation
+
+from pkmcal.errors import PkmcalError
+from pkmcal.mechanisms.hexapod import HEXAPOD_PARAM_NAMES
+from pkmcal.sensors import SENSOR_KINDS, FullPoseSensor, IndicatorSensor, PositionSensor
+
+H = 1e-6
+
+
+def _floats(lo, hi):
+    return st.floats(lo, hi, allow_nan=False, allow_infinity=False)
+
+
+def _pose_array(n):
+    lo = np.array([-60, -60, 200, -0.5, -0.5, -1.0])
+    hi = np.array([60, 60, 400, 0.5, 0.5, 1.0])
+    return arrays(float, (n, 6), elements=_floats(0, 1)).map(lambda u: lo + u * (hi - lo))
+
+
+def _transform(lo_t, hi_t, ang):
+    return st.tuples(*([_floats(lo_t, hi_t)] * 3 + [_floats(-ang, ang)] * 3)).map(np.array)
+
+
+def _fd(f, x0, wrap=None):
+    """Central differences of f (N, m) w.r.t. each column of x0 (N, k) → (N, m, k)."""
+    cols = []
+    for j in range(x0.shape[1]):
+        xp, xm = x0.copy(), x0.copy()
+        xp[:, j] += H
+        xm[:, j] -= H
+        d = f(xp) - f(xm)
+        if wrap is not None:
+            d[:, wrap] = (d[:, wrap] + np.pi) % (2 * np.pi) - np.pi
+        cols.append(d / (2 * H))
+    return np.stack(cols, axis=2)
+
+
+def _fd_params(sensor, poses, wrap=None):
+    theta = sensor.params
+    cols = []
+    for j in range(theta.size):
+        tp, tm = theta.copy(), theta.copy()
+        tp[j] += H
+        tm[j] -= H
+        d = sensor.with_params(tp).predict(poses) - sensor.with_params(tm).predict(poses)
+        if wrap is not None:
+            d[:, wrap] = (d[:, wrap] + np.pi) % (2 * np.pi) - np.pi
+        cols.append(d / (2 * H))
+    return np.stack(cols, axis=2)
+
+
+def _homogeneous(pose):
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_euler("xyz", pose[3:]).as_matrix()
+    T[:3, 3] = pose[:3]
+    return T
+
+
+ANG = np.array([False, False, False, True, True, True])
+
+
+# -- full pose ---------------------------------------------------------------------------
+
+
+@settings(max_examples=40, deadline=None)
+@given(poses=_pose_array(4), world=_transform(-300, 300, 0.6), tool=_transform(-80, 80, 0.6))
+def test_full_pose_jacobians_match_finite_differences(poses, world, tool):
+    s = FullPoseSensor(world=world, tool=tool)
+    y = s.predict(poses)
+    # stay away from gimbal lock of the measured angles, where E⁻¹ blows up
+    assume(np.max(np.abs(y[:, 4])) < np.deg2rad(75))
+    Jx = s.pose_jacobian(poses)
+    Jp = s.param_jacobian(poses)
+    np.testing.assert_allclose(Jx, _fd(s.predict, poses, wrap=ANG), atol=1e-5, rtol=1e-6)
+    np.testing.assert_allclose(Jp, _fd_params(s, poses, wrap=ANG), atol=1e-5, rtol=1e-6)
+
+
+@settings(max_examples=40, deadline=None)
+@given(poses=_pose_array(3), world=_transform(-300, 300, 1.0), tool=_transform(-80, 80, 1.0))
+def test_full_pose_reading_is_world_base_platform_tool_composition(poses, world, tool):
+    s = FullPoseSensor(world=world, tool=tool)
+    y = s.predict(poses)
+    for k, pose in enumerate(poses):
+        T = _homogeneous(world) @ _homogeneous(pose) @ _homogeneous(tool)
+        np.testing.assert_allclose(y[k, :3], T[:3, 3], atol=1e-9)
+        R_read = Rotation.from_euler("xyz", y[k, 3:]).as_matrix()
+        np.testing.assert_allclose(R_read, T[:3, :3], atol=1e-12)
+
+
+def test_full_pose_identity_reads_the_pose():
+    poses = np.array([[1.0, -2.0, 300.0, 0.1, -0.2, 0.3], [0, 0, 250, 0, 0, 0]])
+    s = FullPoseSensor()
+    np.testing.assert_allclose(s.predict(poses), poses, atol=1e-12)
+    np.testing.assert_allclose(s.pose_jacobian(poses), np.broadcast_to(np.eye(6), (2, 6, 6)), atol=1e-12)
+    assert s.reading_is_angle == (False, False, False, True, True, True)
+    assert s.default_free == ()
+    assert FullPoseSensor(free=("world.x",)).default_free == ("world.x",)
+
+
+# -- position ----------------------------------------------------------------------------
+
+
+@settings(max_examples=40, deadline=None)
+@given(poses=_pose_array(4), target=_transform(-80, 80, 0).map(lambda v: v[:3]), world=_transform(-300, 300, 1.0))
+def test_position_jacobians_match_finite_differences(poses, target, world):
+    s = PositionSensor(target=target, world=world)
+    np.testing.assert_allclose(s.pose_jacobian(poses), _fd(s.predict, poses), atol=1e-5, rtol=1e-6)
+    np.testing.assert_allclose(s.param_jacobian(poses), _fd_params(s, poses), atol=1e-5, rtol=1e-6)
+    for k, pose in enumerate(poses):
+        expected = (_homogeneous(world) @ _homogeneous(pose) @ np.r_[target, 1.0])[:3]
+        np.testing.assert_allclose(s.predict(poses)[k], expected, atol=1e-9)
+
+
+def test_position_defaults():
+    s = PositionSensor(target=[1.0, 2.0, 3.0])
+    assert s.reading_names == ("px", "py", "pz")
+    assert s.default_free == ("target.x", "target.y", "target.z")
+    np.testing.assert_allclose(s.predict([10, 20, 300, 0, 0, 0]), [[11, 22, 303]])
+
+
+# -- indicators --------------------------------------------------------------------------
+
+
+def _indicator_positions(k):
+    return arrays(float, (k, 2), elements=_floats(-70, 70))
+
+
+def _plane_construction(positions, plane_offset, pose):
+    """Independent geometry: three points of the lower plane z_P = −d_off mapped to {F};
+    intersect each indicator's vertical line x = x_k, y = y_k with the plane through them."""
+    T = _homogeneous(pose)
+    pts = (T @ np.array([[0, 0, -plane_offset, 1], [50, 0, -plane_offset, 1], [0, 50, -plane_offset, 1]]).T).T[:, :3]
+    u, v = pts[1] - pts[0], pts[2] - pts[0]
+    out = []
+    for xk, yk in positions:
+        # pts0 + s u + t v has (x, y) = (x_k, y_k): a 2×2 system for s, t.
+        s, t = np.linalg.solve(np.array([[u[0], v[0]], [u[1], v[1]]]), [xk - pts[0, 0], yk - pts[0, 1]])
+        out.append(pts[0, 2] + s * u[2] + t * v[2])
+    return np.array(out)
+
+
+@settings(max_examples=40, deadline=None)
+@given(poses=_pose_array(3), k=st.integers(3, 6), data=st.data(), d_off=_floats(-20, 40))
+def test_indicator_model_matches_plane_construction_and_fd(poses, k, data, d_off):
+    positions = data.draw(_indicator_positions(k))
+    zero = data.draw(arrays(float, (k,), elements=_floats(-5, 5)))
+    s = IndicatorSensor(positions=positions, plane_offset=d_off, zero=zero)
+    y = s.predict(poses)
+    assert y.shape == (3, k)
+    for j, pose in enumerate(poses):
+        np.testing.assert_allclose(y[j] + zero, _plane_construction(positions, d_off, pose), atol=1e-8)
+    np.testing.assert_allclose(s.pose_jacobian(poses), _fd(s.predict, poses), atol=1e-5, rtol=1e-6)
+    np.testing.assert_allclose(s.param_jacobian(poses), _fd_params(s, poses), atol=1e-7)
+
+
+def test_indicator_level_platform_reads_height_minus_offset():
+    s = IndicatorSensor(positions=[[40, 0], [-20, 34.641], [-20, -34.641]], plane_offset=10.0, zero=[1, 2, 3])
+    np.testing.assert_allclose(s.predict([5, -3, 300, 0, 0, 0]), [[289, 288, 287]])
+    assert s.reading_names == ("d1", "d2", "d3")
+    assert s.param_names == ("zero1", "zero2", "zero3")
+    assert s.default_free == ()
+
+
+def test_indicator_vertical_plane_names_the_pose():
+    s = IndicatorSensor(positions=[[40, 0], [-20, 34.641], [-20, -34.641]], plane_offset=10.0)
+    poses = np.array([[0, 0, 300, 0, 0, 0], [0, 0, 300, np.pi / 2, 0, 0]])
+    with pytest.raises(PkmcalError, match=r"pose 1 .*near vertical"):
+        s.predict(poses)
+
+
+def test_indicator_needs_three():
+    with pytest.raises(PkmcalError, match="at least 3"):
+        IndicatorSensor(positions=[[0, 0], [1, 1]])
+
+
+# -- common ------------------------------------------------------------------------------
+
+
+def test_param_names_do_not_collide_with_hexapod():
+    sensors = [FullPoseSensor(), PositionSensor(), IndicatorSensor(positions=np.zeros((4, 2)))]
+    for s in sensors:
+        assert not set(s.param_names) & set(HEXAPOD_PARAM_NAMES)
+        assert len(set(s.param_names)) == len(s.param_names)
+        assert s.with_params(s.params) == s
+        assert SENSOR_KINDS[s.kind] is type(s)
+
+
+def test_unknown_free_parameter_is_rejected():
+    with pytest.raises(PkmcalError, match="no parameter 'world.q'"):
+        FullPoseSensor(free=("world.q",))
+
+
+def test_with_params_checks_length():
+    with pytest.raises(PkmcalError, match="12 parameters"):
+        FullPoseSensor().with_params(np.zeros(3))
