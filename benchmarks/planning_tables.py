@@ -30,7 +30,7 @@ from pkmcal.io.setup_file import load_setup
 from pkmcal.mechanisms.library import stewart_prototype
 from pkmcal.planning.blocks import planning_model
 from pkmcal.planning.candidates import generate_candidates
-from pkmcal.planning.indices import indices_from_singular_values, observability_indices, singular_values
+from pkmcal.planning.indices import indices_from_singular_values, observability_indices
 from pkmcal.planning.selection import select_default, select_random
 
 SIZES = (14, 28, 42, 56, 70, 84, 98, 112)

@@ -217,3 +217,41 @@ def test_single_axis_ranges_are_the_limits():
     end[0] = ranges[0, 1]
     q = m.ik(end)[0]
     assert min(abs(q.min()), abs(q.max() - 50.0)) < 1e-5
+
+
+def test_limit_verdicts_match_the_per_pose_definition():
+    from pkmcal.cli.kinematics_cmds import limit_verdicts
+
+    m = stewart_prototype()
+    rng = np.random.default_rng(5)
+    poses = m.home + rng.uniform(-1, 1, (2000, 6)) * np.array([90, 90, 40, 0.4, 0.4, 1.0])
+    report = m.check_limits(poses)
+    fast = limit_verdicts(report)
+    assert fast.tolist() == report.verdicts()
+    assert len(set(fast.tolist())) > 3  # several different combinations were exercised
+
+
+def test_planar_machine_ik_fk_round_trip(tmp_path):
+    """The commands work for any Mechanism: paper 3's redundant planar machine (x, y, phi; q1..q4)."""
+    (tmp_path / "p.csv").write_text("x,y,phi\n0,230,0\n10,200,5\n")
+    ik = run("ik", "planar-3dof-4act", str(tmp_path / "p.csv"), "-o", str(tmp_path / "q.csv"))
+    assert ik.exit_code == 0, ik.output
+    assert (tmp_path / "q.csv").read_text().splitlines()[1] == "x,y,phi,q1,q2,q3,q4,reachable"
+    fk = run("fk", "planar-3dof-4act", str(tmp_path / "q.csv"))
+    assert fk.exit_code == 0, fk.output
+    back = read_table("fk", ("x", "y", "phi", "converged"), text=fk.stdout)
+    np.testing.assert_allclose(back[["x", "y", "phi"]], [[0, 230, 0], [10, 200, 5]], atol=1e-8)
+    assert back["converged"].tolist() == [1, 1]
+
+
+def test_rotary_actuators_are_degrees_in_files(tmp_path):
+    m = load_machine("planar-2dof-3act")
+    (tmp_path / "p.csv").write_text("x,y\n0,200\n10,220\n")
+    ik = run("ik", "planar-2dof-3act", str(tmp_path / "p.csv"), "-o", str(tmp_path / "q.csv"))
+    assert ik.exit_code == 0, ik.output
+    q = read_table(tmp_path / "q.csv", ("q1", "q2", "q3"))
+    np.testing.assert_allclose(q.values, np.rad2deg(m.ik(np.array([[0, 200.0], [10, 220.0]]))), rtol=1e-15)
+    assert np.all(np.abs(q.values) > 10)  # degrees, not radians
+    fk = run("fk", "planar-2dof-3act", str(tmp_path / "q.csv"))
+    back = read_table("fk", ("x", "y"), text=fk.stdout)
+    np.testing.assert_allclose(back.values, [[0, 200], [10, 220]], atol=1e-8)

@@ -50,6 +50,10 @@ structures = st.recursive(scalars, lambda inner: st.one_of(
     st.lists(inner, max_size=7), st.dictionaries(keys, inner, max_size=6)), max_leaves=30)
 
 
+def _dump(data) -> str:
+    return yaml.dump(data, Dumper=getattr(yaml, "CSafeDumper", yaml.SafeDumper), allow_unicode=True, sort_keys=False)
+
+
 def _check_machine_text(text: str) -> None:
     try:
         m = machine_from_text(text, "fuzz.yaml")
@@ -104,13 +108,13 @@ def test_valid_fuzz_base_loads():
 @FUZZ
 @given(structures)
 def test_random_yaml_structures(data):
-    _check_machine_text(yaml.safe_dump(data, allow_unicode=True))
+    _check_machine_text(_dump(data))
 
 
 @FUZZ
 @given(mutated_machines())
 def test_mutated_machine_files(data):
-    _check_machine_text(yaml.safe_dump(data, allow_unicode=True, sort_keys=False))
+    _check_machine_text(_dump(data))
 
 
 @FUZZ

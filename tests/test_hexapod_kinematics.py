@@ -92,13 +92,17 @@ def test_fk_inverts_ik_from_home(machine, seed):
     lengths = machine.leg_lengths(poses)
     fk = machine.fk_lengths(lengths)
     assert_converged_poses_reproduce(machine, lengths, fk)
-    # "not singular": inverse condition number of the length-scaled Jacobian ≥ 0.02 (twice
-    # the default singularity margin). Designs with both pair separations near 60° (base
-    # and platform hexagons nearly similar, an architecture singularity) have most of the
-    # box below that; there the convergence contract above is all that is claimed.
-    inv_cond = machine.check_limits(poses).margins["singularity"] + machine.limits.singularity_margin
-    regular = inv_cond >= 0.02
-    assume(regular.sum() >= 200)
+    # "Not singular": the inverse condition number of the length-scaled Jacobian (what
+    # check_limits' singularity margin measures) stays ≥ 0.03 on the straight path from
+    # home to the pose (9 samples). Near-singular stretches on that path are where Newton
+    # from home can leave for another assembly mode; designs with a pair separation near
+    # 60° (base or platform nearly a regular hexagon, close to an architecture singularity)
+    # have most of the box there, and for them the contract above is all that is claimed.
+    ts = np.linspace(0.0, 1.0, 9)
+    path = machine.home_pose + ts[:, None, None] * (poses - machine.home_pose)[None]
+    margin = machine.check_limits(path.reshape(-1, 6)).margins["singularity"].reshape(9, -1)
+    regular = margin.min(axis=0) + machine.limits.singularity_margin >= 0.03
+    assume(regular.sum() >= 100)
     assert np.all(fk.converged[regular])
     assert fk.iterations[regular].max() <= 6
     dp, dr = pose_error(fk.poses[regular], poses[regular])

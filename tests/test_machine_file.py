@@ -347,3 +347,14 @@ def test_file_errors(tmp_path):
         load_machine(str(bad))
     with pytest.raises(PkmcalError, match="unknown machine 'nonesuch'"):
         load_machine("nonesuch")
+
+
+def test_anchors_allowed_but_alias_bombs_and_cycles_rejected():
+    text = MINIMAL.replace("stroke: [0, 50]}", "stroke: &s [0, 50]}", 1)
+    text = text.replace("platform: [0, -70, 0], offset: 305.0, stroke: [0, 50]}",
+                        "platform: [0, -70, 0], offset: 305.0, stroke: *s}")
+    assert machine_from_text(text) == machine_from_text(MINIMAL)
+    bomb = "a: &a [x, x, x, x, x, x, x, x, x]\n" + "".join(
+        f"{chr(98 + i)}: &{chr(98 + i)} [{', '.join(['*' + chr(97 + i)] * 9)}]\n" for i in range(8))
+    assert "aliases expand to more than 1000000 values" in str(_error(bomb + "calibration: {z: *i}\n"))
+    assert "recursive structure" in str(_error("a: &a [*a]\n"))

@@ -195,3 +195,11 @@ def test_tool_sensor_rejects_bad_input():
         PlanarToolSensor(n_pose=2, free=("target.z",))
     with pytest.raises(PkmcalError, match="plate angle"):
         PlanarToolSensor(n_pose=3).poses_for_readings(np.zeros((1, 2)))
+
+
+def test_angle_parameters_and_summary():
+    m2, m3 = MACHINES["planar-2dof-3act"], MACHINES["planar-3dof-4act"]
+    assert [n for n, a in zip(m2.param_names, m2.param_is_angle) if a] == ["dq1", "dq2", "dq3"]
+    assert [n for n, a in zip(m3.param_names, m3.param_is_angle) if a] == ["alpha1", "alpha2"]
+    assert "18 kinematic parameters" in m2.summary() and "l11=280" in m2.summary()
+    assert "phi -25..25" in m3.summary()

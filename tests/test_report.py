@@ -90,6 +90,7 @@ def make_report_data(n_poses: int = 24, seed: int = 3, rank_deficient: bool = Fa
         error_map=ErrorMap(x, y, float(nominal.home[2]), eb, ea),
         setup_summary="full pose, leg noise 0.002 mm",
         facts=(("seed", str(seed)), ("method", "ik-residual (test)")),
+        held_out_poses=held,
     )
 
 
@@ -153,10 +154,9 @@ def test_inline_svg_prefixes_ids():
     assert 'id="a1"' not in out
 
 
-def test_report_is_byte_identical_on_rerun(tmp_path):
-    data = make_report_data(n_poses=12)
-    a = write_report(data, tmp_path / "a")
-    b = write_report(make_report_data(n_poses=12), tmp_path / "b")
+def test_report_is_byte_identical_on_rerun(report, tmp_path):
+    _, a, _ = report
+    b = write_report(make_report_data(), tmp_path / "b")
     assert [p.name for p in a.figures] == [p.name for p in b.figures]
     for pa, pb in zip(a.figures + (a.html,), b.figures + (b.html,)):
         assert pa.read_bytes() == pb.read_bytes(), pa.name
@@ -173,6 +173,7 @@ def test_report_numbers_match_input(report):
     for i in (0, 6, 41):
         assert f"<td>{t.identified[i]:.4f}</td>" in page
     assert page.count("<tr class=\"fixed\">") == int((~t.free).sum())
+    assert f"crosses: the {len(data.held_out_poses)} held-out poses" in page
     assert f"{data.identifiability.rank} of {data.identifiability.n_params} candidate parameters" in page
 
 

@@ -129,8 +129,16 @@ def test_selection_errors():
         select_default(G, 3)
     with pytest.raises(PkmcalError, match="unknown selection algorithm"):
         select(G, 5, algorithm="magic")
-    with pytest.raises(PkmcalError, match="maximises O1"):
-        select(G, 5, index="O4")
+    with pytest.raises(PkmcalError, match="unknown observability index"):
+        select(G, 5, index="O7")
+
+
+def test_default_with_another_index_polishes_the_d_optimal_set():
+    G = blocks(8, N=90, m=2, p=5)
+    d = select(G, 6)
+    d4 = select(G, 6, index="O4")
+    assert d.criterion == "O1" and d4.criterion == "O4"
+    assert d4.indices["O4"] >= d.indices["O4"]
 
 
 # -- end to end on paper 2's prototype -------------------------------------------------------
@@ -187,3 +195,25 @@ def test_cli_plan_and_observability(machine, tmp_path):
     res = runner.invoke(cli, ["plan", "stewart-prototype", "--setup", "full-pose-paper1", "--n", "99",
                               "--algorithm", "corners", "-o", str(tmp_path / "x.csv")])
     assert res.exit_code == 2 and "only 64 candidates" in res.output
+
+
+def test_grid_candidates_plan(machine):
+    setup = load_setup("full-pose-paper1")
+    plan = plan_poses(machine, setup, 10, grid=3, seed=0)
+    assert plan.candidates.kind == "grid" and plan.candidates.n_tested == 3**6
+    assert machine.check_limits(plan.poses, margin=0.1).ok.all()
+    assert sum(plan.candidates.rejected.values()) >= 3**6 - len(plan.candidates.poses)
+
+
+def test_planar_redundant_machine_plans_with_the_projection_method():
+    from pkmcal.mechanisms.planar import planar_3dof_4act
+    from pkmcal.sensors import MeasurementSetup, NoiseModel
+    from pkmcal.sensors.planar_tool import PlanarToolSensor
+
+    mech = planar_3dof_4act()
+    setup = MeasurementSetup(PlanarToolSensor(n_pose=3), NoiseModel(np.full(2, 0.005), np.array(0.001)))
+    plan = plan_poses(mech, setup, 8, n_candidates=200, seed=0)
+    rand = plan_poses(mech, setup, 8, algorithm="random", n_candidates=200, seed=0)
+    assert plan.model.method == "projection" and plan.poses.shape == (8, 3)
+    assert mech.check_limits(plan.poses).ok.all()
+    assert plan.indices["O1"] > rand.indices["O1"] > 0

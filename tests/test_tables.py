@@ -47,7 +47,7 @@ def test_bom_crlf_and_quotes(tmp_path):
 
 def test_aliases_and_either():
     t = read_table("t.csv", either=[READING_COLUMNS, LENGTH_COLUMNS],
-                   text="λ1,Lambda_2,lambda3,LAMBDA4,q5,q_6\n1,2,3,4,5,6\n")
+                   text="λ1,Lambda_2,lambda3,LAMBDA4,λ_5,lambda6\n1,2,3,4,5,6\n")
     assert t.columns == READING_COLUMNS
     t = read_table("t.csv", either=[READING_COLUMNS, LENGTH_COLUMNS], text="L1,l_2,l3,l4,length5,l6\n1,2,3,4,5,6\n")
     assert t.columns == LENGTH_COLUMNS

@@ -290,6 +290,7 @@ def run_demo(config: DemoConfig = DemoConfig(), progress: Progress | None = None
     data = report_data_from_results(
         nominal, result, setup, sim.commanded[sim.kept],
         verification=verification, identified=calibrated, true_machine=real, error_map=emap,
+        held_out_poses=held[m],
         title=f"pkmcal demo: calibration of {nominal.name}",
         setup_summary=setup_to_yaml(setup),
         facts=(("real machine (simulated)", real.name), ("seed", str(config.seed)),

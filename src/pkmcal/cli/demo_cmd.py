@@ -31,8 +31,9 @@ def demo(out, seed, n_poses, n_held_out, setup, machine, real, no_png, quiet) ->
     """Calibrate the built-in prototype end to end on a simulated 'real' machine.
 
     Plans the measurement poses (D-optimal), simulates the campaign on REAL, identifies the
-    42 parameters, verifies on held-out poses, exports the calibrated machine (YAML,
-    LinuxCNC HAL, JSON) and writes an HTML report into DIR/report.html.
+    kinematic parameters, verifies on held-out poses, exports the calibrated machine (YAML,
+    LinuxCNC HAL, JSON) and writes an HTML report into DIR/report.html. The default setup
+    measures the full pose (paper 1); indicators-prototype is paper 2's three dial indicators.
     """
     t0 = time.perf_counter()
     config = DemoConfig(machine=machine, real=real, setup=setup, out=out, seed=seed, n_poses=n_poses,

@@ -2,7 +2,7 @@
 
 1. The machine summary (:meth:`Hexapod.summary`).
 2. Single-axis workspace: from the home pose, each pose coordinate is moved alone (the others
-   stay at home) over a grid of 2001 values; the reachable interval around home (every limit of
+   stay at home) over a grid of 1001 values; the reachable interval around home (every limit of
    ``check_limits`` satisfied) is then refined at both ends by bisection to 1e-6 mm/deg. This is
    the "travel range" of hexapod data sheets. The limit that stops each end is named.
 3. Box occupancy: the fraction of uniform random poses in the box of those ranges that are
@@ -24,9 +24,9 @@ from pkmcal.io.machine_file import load_machine
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.mechanisms.library import DEFAULT_MACHINE
 
-GRID_POINTS = 2001
+GRID_POINTS = 1001
 BISECTION_TOL = 1e-6
-BOX_SAMPLES = 20_000
+BOX_SAMPLES = 10_000
 
 
 def _half_widths(mech: Mechanism) -> np.ndarray:
@@ -159,10 +159,13 @@ def info_cmd(machine: str, n_poses: int, seed: int) -> None:
         pos_err = float(np.max(np.linalg.norm(p[:, lin] - q[:, lin], axis=1)))
         if mech.pose_names == ("x", "y", "z", "a", "b", "c"):
             rot_err = float(np.max(rotation_error(euler_to_matrix(p[:, 3:]), euler_to_matrix(q[:, 3:]))))
-        else:
+        elif angle.any():
             d = np.angle(np.exp(1j * (p[:, angle] - q[:, angle])))
-            rot_err = float(np.max(np.abs(d))) if d.size else 0.0
-        click.echo(f"  max position error {pos_err:.3g} mm, max orientation error {rot_err:.3g} rad")
+            rot_err = float(np.max(np.abs(d)))
+        else:
+            rot_err = None
+        click.echo(f"  max position error {pos_err:.3g} mm"
+                   + ("" if rot_err is None else f", max orientation error {rot_err:.3g} rad"))
 
 
 def register(group: click.Group) -> None:

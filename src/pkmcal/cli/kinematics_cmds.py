@@ -18,7 +18,7 @@ from pkmcal.errors import PkmcalError
 from pkmcal.io.atomic import atomic_write_text, check_output_path
 from pkmcal.io.machine_file import load_machine
 from pkmcal.io.tables import LENGTH_COLUMNS, format_table, read_table
-from pkmcal.mechanisms.base import Mechanism
+from pkmcal.mechanisms.base import LimitReport, Mechanism
 
 _MAX_LISTED = 20
 
@@ -66,7 +66,8 @@ def ik_cmd(machine: str, poses: str, output: str | None) -> None:
     MACHINE is a built-in name (see 'pkmcal machines') or a machine YAML file. POSES.csv has
     columns x,y,z (mm) and a,b,c (degrees); other columns are ignored. The output repeats
     x..c and adds l1..l6 (leg lengths, mm), lambda1..lambda6 (actuator readings, mm) and
-    'reachable': 'ok' or the violated limits joined by '+'.
+    'reachable': 'ok' or the violated limits joined by '+'. (Other machines: their pose
+    columns, their actuator columns; rotary actuators in degrees.)
     """
     if output is not None:
         check_output_path(output, [poses, machine])
@@ -77,18 +78,44 @@ def ik_cmd(machine: str, poses: str, output: str | None) -> None:
     internal = _to_internal(mech, file_poses)
     with np.errstate(all="ignore"):
         readings = mech.ik(internal)
-        verdicts = mech.check_limits(internal).verdicts()
+        verdicts = limit_verdicts(mech.check_limits(internal))
         lengths = mech.leg_lengths(internal) if hasattr(mech, "leg_lengths") else None
     columns: dict[str, np.ndarray] = {n: file_poses[:, k] for k, n in enumerate(mech.pose_names)}
     if lengths is not None:
         columns.update({f"l{i + 1}": lengths[:, i] for i in range(lengths.shape[1])})
+    readings = np.where(actuator_is_angle(mech), np.rad2deg(readings), readings)
     columns.update({n: readings[:, i] for i, n in enumerate(mech.actuator_names)})
-    columns["reachable"] = np.array(verdicts, dtype=object)
+    columns["reachable"] = verdicts
     text = format_table(columns)
     _emit(text, output)
-    n_bad = sum(v != "ok" for v in verdicts)
+    n_bad = int(np.count_nonzero(verdicts != "ok"))
     _note(f"ik: {len(table)} poses, {len(table) - n_bad} reachable"
           + (f"; {n_bad} violate limits (column 'reachable')" if n_bad else ""))
+
+
+def limit_verdicts(report: LimitReport) -> np.ndarray:
+    """:meth:`LimitReport.verdicts` vectorised: one string per pose, ``"ok"`` or the violated
+    limits joined by ``+``, built once per distinct combination of violations (N,) object."""
+    names = list(report.violations)
+    if not names:
+        return np.array([], dtype=object)
+    bits = np.stack([np.asarray(report.violations[n], dtype=bool) for n in names], axis=1)
+    codes = bits.astype(np.int64) @ (np.int64(1) << np.arange(len(names), dtype=np.int64))
+    uniq, inverse = np.unique(codes, return_inverse=True)
+    labels = np.array(["+".join(n for j, n in enumerate(names) if (int(u) >> j) & 1) or "ok" for u in uniq],
+                      dtype=object)
+    return labels[inverse.reshape(-1)]
+
+
+def actuator_is_angle(mech: Mechanism) -> np.ndarray:
+    """Which actuator readings are angles (radians inside, degrees in files): the mechanism's
+    ``actuator_is_angle`` if it defines one; else its ``_actuator_unit`` ("rotary, rad" →
+    all angles); else none (hexapod legs are mm)."""
+    flags = getattr(mech, "actuator_is_angle", None)
+    if flags is None:
+        rotary = str(getattr(mech, "_actuator_unit", "")).startswith("rotary")
+        flags = (rotary,) * mech.n_actuators
+    return np.array(flags, dtype=bool)
 
 
 def _to_internal(mech: Mechanism, values: np.ndarray) -> np.ndarray:
@@ -127,10 +154,14 @@ def fk_cmd(machine: str, legs: str, output: str | None, guess: str | None) -> No
     groups = [mech.actuator_names]
     if hasattr(mech, "fk_lengths"):
         groups.append(LENGTH_COLUMNS[: mech.n_actuators])
-    # Hexapod readings and lengths are mm; other machines' actuators may be angles: no conversion.
-    kinds = {c: "length" for g in groups for c in g} if hasattr(mech, "fk_lengths") else {}
+    rotary = actuator_is_angle(mech)
+    kinds = {c: ("angle" if a else "length") for c, a in zip(mech.actuator_names, rotary)}
+    if len(groups) > 1:
+        kinds.update({c: "length" for c in groups[1]})
     table = read_table(legs, either=groups, kinds=kinds)
     values = table.values
+    if table.columns == tuple(mech.actuator_names):
+        values = np.where(rotary, np.deg2rad(values), values)
     with np.errstate(all="ignore"):
         if table.columns == tuple(mech.actuator_names):
             result = mech.fk(values, guess=start)
@@ -158,4 +189,4 @@ def register(group: click.Group) -> None:
     group.add_command(fk_cmd)
 
 
-__all__ = ["fk_cmd", "ik_cmd", "parse_pose_option", "register"]
+__all__ = ["actuator_is_angle", "fk_cmd", "ik_cmd", "limit_verdicts", "parse_pose_option", "register"]

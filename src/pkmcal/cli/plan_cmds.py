@@ -17,7 +17,6 @@ import time
 import click
 import numpy as np
 
-from pkmcal.conventions import poses_to_file_units
 from pkmcal.io.atomic import check_output_path
 from pkmcal.io.machine_file import load_machine
 from pkmcal.io.setup_file import BUILTIN_SETUPS, load_setup
@@ -69,8 +68,11 @@ def _format_indices(ind: dict[str, float]) -> str:
               help="Candidate poses: columns x,y,z (mm), a,b,c (deg). Default: random poses in the workspace box.")
 @click.option("--n-candidates", type=click.IntRange(min=1), default=2000, show_default=True,
               help="Number of random candidates (reachable and measurable) when no --candidates file.")
+@click.option("--grid", type=click.IntRange(min=2, max=8), metavar="K",
+              help="Instead of random candidates: a K^6 grid of the workspace box (checked like the others).")
 @click.option("--index", type=click.Choice(INDEX_NAMES, case_sensitive=False), default=None,
-              help="Index to maximise (detmax, cuckoo; default O4). The default algorithm maximises O1.")
+              help="Index to maximise: detmax and cuckoo (default O4); the default algorithm maximises O1, "
+                   "then polishes the set on this index if given.")
 @click.option("--algorithm", type=click.Choice(ALGORITHMS, case_sensitive=False), default="default", show_default=True,
               help="default: D-optimal exchange (O1); detmax / cuckoo: paper 2 add/remove search on --index; "
                    "corners: random corners of the workspace box (paper 1); random.")
@@ -84,7 +86,7 @@ def _format_indices(ind: dict[str, float]) -> str:
 @click.option("--sight-cone", type=click.FloatRange(min=0.0, max=180.0), metavar="DEG",
               help="Full-pose/position: half-angle of the target's line-of-sight cone.")
 @click.option("-o", "--output", required=True, metavar="POSES.csv", help="Output CSV of the chosen poses.")
-def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, index, algorithm, seed, margin,
+def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, index, algorithm, seed, margin,
              indicator_travel, plate_radius, sight_cone, output) -> None:
     """Choose N poses of MACHINE to measure with SETUP (paper 2 §4, paper 1 §IV).
 
@@ -95,16 +97,18 @@ def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, index,
     mech = load_machine(machine)
     setup = load_setup(setup_spec)
     check_output_path(output, [candidates_path, setup_spec, machine])
-    candidates = read_candidates_csv(candidates_path) if candidates_path else None
+    candidates = read_candidates_csv(candidates_path, mech) if candidates_path else None
     progress = _Progress(f"plan ({algorithm})")
     try:
         plan = plan_poses(mech, setup, n_poses, algorithm=algorithm, index=index.upper() if index else None,
-                          candidates=candidates, n_candidates=n_candidates, seed=seed, margin=margin,
+                          candidates=candidates, n_candidates=n_candidates, grid=grid, seed=seed, margin=margin,
                           measurability=_measurability(indicator_travel, plate_radius, sight_cone),
                           progress=progress)
     finally:
         progress.close()
-    poses = poses_to_file_units(plan.poses)
+    poses = plan.poses.copy()
+    angle = np.array(mech.pose_is_angle, dtype=bool)
+    poses[:, angle] = np.rad2deg(poses[:, angle])
     cols = {name: poses[:, i] for i, name in enumerate(mech.pose_names)}
     cols.update({name: plan.commands[:, i] for i, name in enumerate(mech.actuator_names)})
     sel = plan.selection
@@ -133,7 +137,7 @@ def observability_cmd(machine, poses, setup_spec, as_json) -> None:
     """
     mech = load_machine(machine)
     setup = load_setup(setup_spec)
-    pose_arr = read_candidates_csv(poses)
+    pose_arr = read_candidates_csv(poses, mech)
     ind = pose_set_indices(mech, setup, pose_arr)
     if as_json:
         click.echo(json.dumps({**ind, "n_poses": int(len(pose_arr))}))

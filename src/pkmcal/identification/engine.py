@@ -230,6 +230,14 @@ class _Objective:
         return J.reshape(-1, J.shape[-1])
 
 
+def _where(measurements, idx) -> str:
+    """' [file, line 12; ...]' for poses ``idx`` when the measurements know their source."""
+    where = getattr(measurements, "where", None)
+    if where is None or getattr(measurements, "source", None) is None or len(idx) == 0:
+        return ""
+    return " [" + "; ".join(where(int(k)) for k in idx[:5]) + (" ..." if len(idx) > 5 else "") + "]"
+
+
 def _solver_args(solver: str, m: int, n: int) -> str:
     if solver == "auto":
         return "lm" if m >= n else "trf"
@@ -324,11 +332,12 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
         if len(bad) > max_dropped_fraction * n_total:
             raise PkmcalError(
                 f"the pose could not be solved for {len(bad)} of {n_total} poses at the nominal machine "
-                f"(poses {', '.join(str(i + 1) for i in bad[:10])}{' ...' if len(bad) > 10 else ''}): "
+                f"(poses {', '.join(str(i + 1) for i in bad[:10])}{' ...' if len(bad) > 10 else ''}"
+                f"{_where(measurements, bad[:3])}): "
                 "check that the measurements belong to this machine and setup, or give commanded poses"
             )
         notes.append(f"dropped {len(bad)} pose(s) whose pose could not be solved at the nominal machine: "
-                     + ", ".join(str(i + 1) for i in bad))
+                     + ", ".join(str(i + 1) for i in bad) + _where(measurements, bad))
         used = np.flatnonzero(ev0.converged)
         model = model.subset(used)
         meth = make_method(method, model, weighted, form=form)
@@ -359,6 +368,7 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
         raise PkmcalError(f"{model.n_poses} poses give {M} residuals for {len(free_idx)} free parameters: "
                           "measure more poses or fix parameters")
 
+    meth.sensor_columns = bool(np.any(free_idx >= model.n_mech))
     obj = _Objective(meth, theta0, free_idx, W, analytic=jac == "analytic")
     lsq_method = _solver_args(solver, M, len(free_idx))
     with warnings.catch_warnings():
@@ -368,11 +378,12 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
             x_scale="jac", ftol=ftol, xtol=xtol, gtol=gtol, max_nfev=max_nfev,
         )
     theta = obj.theta(sol.x)
+    meth.sensor_columns = True
     ev = meth.evaluate(theta, jac=True, cov=True)
     if not ev.converged.all():
         bad = used[np.flatnonzero(~ev.converged)]
         notes.append("the pose could not be solved at the identified machine for pose(s) "
-                     + ", ".join(str(i + 1) for i in bad) + "; their residuals are unreliable")
+                     + ", ".join(str(i + 1) for i in bad) + _where(measurements, bad) + "; their residuals are unreliable")
 
     # covariance with weights recomputed at the solution (module docstring)
     if method == "projection" and weighted:

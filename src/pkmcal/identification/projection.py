@@ -169,7 +169,9 @@ def identify_redundant(
     poses = model.start_poses()
     report = None
     it = 0
-    message = "converged"
+    message = "converged" if linearisation == "iterated" else "single linearisation at the commanded poses (eq. 10)"
+    theta_prev = d_prev = None
+    halvings = 0
     for it in range(1, (1 if linearisation == "single" else max_iter) + 1):
         if linearisation == "single":
             r, J = single_linearisation(model, weighted)
@@ -180,10 +182,19 @@ def identify_redundant(
                 raise PkmcalError(f"projection: the pose solve of pose {bad} did not converge; check its readings")
             r, J, poses = ev.r, ev.J, ev.poses
         r = r.reshape(-1)
+        c_now = 0.5 * float(r @ r)
+        if cost and c_now > cost[-1] * (1.0 + 1e-9) and halvings < 10:
+            # the Gauss–Newton step overshot (large errors): halve it and re-evaluate
+            d_prev = 0.5 * d_prev
+            theta[idx] = theta_prev + d_prev
+            halvings += 1
+            continue
+        halvings = 0
+        cost.append(c_now)
         Jf = J.reshape(r.size, -1)[:, idx]
-        cost.append(0.5 * float(r @ r))
         report = analyse_jacobian(Jf, free, tuple(mechanism.param_names))
         d = _step(Jf, r, report.rank)
+        theta_prev, d_prev = theta[idx].copy(), d
         theta[idx] += d
         # stop when the step is negligible or cannot lower the cost any more (the decrease
         # a Gauss–Newton step predicts is ½‖J d‖²)

@@ -21,7 +21,13 @@ with, per pose, A = ∂IK/∂x (l×n), B = ∂IK/∂ρ (l×p), H = ∂h/∂x (m�
 ``fk-residual`` (paper 2 §3, eq. 3; x from the forward kinematics)
     x_j = FK(q_j, ρ);  r_j = y_j − h(x_j, s);  implicit differentiation of IK(x, ρ) = q:
     ∂x/∂ρ = −A⁻¹B, so ∂r/∂ρ = H A⁻¹ B and ∂r/∂s = −G (one batched solve over the poses);
-    Σ_j = Σ_y + H A⁻¹ Σ_q A⁻ᵀ Hᵀ.  Poses whose FK does not converge are flagged.
+    Σ_j = Σ_y + H A⁻¹ Σ_q A⁻ᵀ Hᵀ.  Poses whose FK does not converge are flagged
+    (``converged``); the engine drops those that fail at the nominal machine (error if
+    more than 10 %) and reports those failing at the solution. At a trial point where
+    a pose's FK fails, its residual is taken at the last converged pose (finite, and
+    typically larger than at the accepted iterate, so the solver shortens the step).
+    FK is warm-started from the previous evaluation's poses (initially the commanded
+    poses, else home).
 
 ``projection`` (paper 3 §2, eq. 4–10; general errors-in-variables)
     e_j(x, θ) = W [y_j − h(x, s); q_j − IK(x, ρ)] with W = Σ_e^{-1/2} (identity if
@@ -239,9 +245,14 @@ def invert_sensor(sensor: Sensor, y: np.ndarray, start: np.ndarray) -> tuple[np.
 
 
 class Method(ABC):
-    """One elimination strategy; subclasses implement :meth:`evaluate`."""
+    """One elimination strategy; subclasses implement :meth:`evaluate`.
+
+    ``sensor_columns``: when False (set by the engine when no sensor parameter is free),
+    a method may skip the sensor-parameter columns of J and fill them with NaN.
+    """
 
     name: str
+    sensor_columns: bool = True
 
     def __init__(self, model: Model, weighted: bool = True):
         self.model = model
@@ -303,11 +314,12 @@ class IKResidual(Method):
         x, conv, Hinv, HinvG = self._measured_poses(sensor)
         q_model = mech.ik(x)
         r = m.q - q_model
-        A = mech.actuator_pose_jacobian(x) if (jac or cov) else None
+        need_Js = jac and self.sensor_columns
+        A = mech.actuator_pose_jacobian(x) if (need_Js or cov) else None
         J = C = None
         if jac:
             B = mech.actuator_param_jacobian(x)
-            Js = A @ HinvG
+            Js = A @ HinvG if need_Js else np.full(HinvG.shape[:1] + (B.shape[1], HinvG.shape[2]), np.nan)
             J = np.concatenate([-B, Js], axis=2)
         if cov:
             AH = A @ Hinv
@@ -321,7 +333,7 @@ class IKResidual(Method):
                 dL = mech.length_param_jacobian(x)                     # ∂L/∂ρ
                 dL0 = dL - mech.actuator_param_jacobian(x)              # ∂L0/∂ρ
                 Jr = 2.0 * Lq[..., None] * dL0 - 2.0 * L[..., None] * dL
-                Js = 2.0 * L[..., None] * (A @ HinvG)
+                Js = 2.0 * L[..., None] * Js
                 J = np.concatenate([Jr, Js], axis=2)
             if cov:
                 AH = A @ Hinv
@@ -365,12 +377,12 @@ class FKResidual(Method):
         if jac or cov:
             A = mech.actuator_pose_jacobian(x)
             H = sensor.pose_jacobian(x)
+            # H A⁻¹ (m×n per pose) by one batched solve with m right-hand sides (m ≪ p)
+            HAi = np.swapaxes(np.linalg.solve(np.swapaxes(A, 1, 2), np.swapaxes(H, 1, 2)), 1, 2)
         if jac:
             B = mech.actuator_param_jacobian(x)
-            dx = np.linalg.solve(A, B)                                   # A⁻¹B = −∂x/∂ρ
-            J = np.concatenate([H @ dx, -sensor.param_jacobian(x)], axis=2)
+            J = np.concatenate([HAi @ B, -sensor.param_jacobian(x)], axis=2)   # ∂r/∂ρ = H A⁻¹ B
         if cov:
-            HAi = H @ np.linalg.inv(A)
             C = _diag_cov(m.sigma_y, m.n_poses) + _sandwich(HAi, m.sigma_q)
         return Evaluation(r=r, J=J, cov=C, converged=ok, poses=x)
 

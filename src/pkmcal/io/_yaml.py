@@ -62,22 +62,54 @@ def _construct_float(loader: yaml.SafeLoader, node: yaml.ScalarNode) -> float:
 _Loader.add_constructor(_FLOAT_TAG, _construct_float)
 
 
-def _walk(node: yaml.Node, path: tuple, lines: dict[tuple, int], line: int | None = None) -> None:
-    lines[path] = node.start_mark.line + 1 if line is None else line
+_MAX_EXPANDED_NODES = 1_000_000
+
+
+def _expanded_size(node: yaml.Node, memo: dict[int, int], stack: set[int]) -> int:
+    """Number of nodes once aliases are expanded; :class:`YamlSyntaxError` for a recursive
+    alias or an expansion beyond :data:`_MAX_EXPANDED_NODES` ("billion laughs")."""
+    key = id(node)
+    if key in memo:
+        return memo[key]
+    if key in stack:
+        raise YamlSyntaxError("an alias refers to the node that contains it (recursive structure)",
+                              node.start_mark.line + 1)
+    stack.add(key)
+    size = 1
     if isinstance(node, yaml.MappingNode):
-        seen: dict[Any, int] = {}
+        size += sum(_expanded_size(k, memo, stack) + _expanded_size(v, memo, stack) for k, v in node.value)
+    elif isinstance(node, yaml.SequenceNode):
+        size += sum(_expanded_size(v, memo, stack) for v in node.value)
+    stack.discard(key)
+    if size > _MAX_EXPANDED_NODES:
+        raise YamlSyntaxError(f"aliases expand to more than {_MAX_EXPANDED_NODES} values; this is not a "
+                              "machine description", node.start_mark.line + 1)
+    memo[key] = size
+    return size
+
+
+def _walk(node: yaml.Node, path: tuple, lines: dict[tuple, int], line: int | None = None,
+          seen: set[int] | None = None) -> None:
+    """Fill ``lines`` with the line of every key path; an aliased node is walked once."""
+    seen = set() if seen is None else seen
+    lines[path] = node.start_mark.line + 1 if line is None else line
+    if id(node) in seen:
+        return
+    seen.add(id(node))
+    if isinstance(node, yaml.MappingNode):
+        first: dict[Any, int] = {}
         for knode, vnode in node.value:
             key = knode.value if isinstance(knode, yaml.ScalarNode) else None
             if key is not None:
-                if key in seen:
+                if key in first:
                     raise YamlSyntaxError(
-                        f"key {key!r} appears twice (lines {seen[key]} and {knode.start_mark.line + 1}); "
+                        f"key {key!r} appears twice (lines {first[key]} and {knode.start_mark.line + 1}); "
                         "keep only one", knode.start_mark.line + 1)
-                seen[key] = knode.start_mark.line + 1
-            _walk(vnode, path + (key,), lines, knode.start_mark.line + 1)
+                first[key] = knode.start_mark.line + 1
+            _walk(vnode, path + (key,), lines, knode.start_mark.line + 1, seen)
     elif isinstance(node, yaml.SequenceNode):
         for i, item in enumerate(node.value):
-            _walk(item, path + (i,), lines)
+            _walk(item, path + (i,), lines, None, seen)
 
 
 def parse_yaml(text: str) -> tuple[Any, dict[tuple, int]]:
@@ -88,6 +120,7 @@ def parse_yaml(text: str) -> tuple[Any, dict[tuple, int]]:
         node = loader.get_single_node()
         if node is None:
             return None, {}
+        _expanded_size(node, {}, set())
         lines: dict[tuple, int] = {}
         _walk(node, (), lines)
         data = loader.construct_document(node)

@@ -43,7 +43,8 @@ READING_COLUMNS = tuple(f"lambda{i}" for i in range(1, 7))
 def _default_aliases() -> dict[str, str]:
     out: dict[str, str] = {}
     for i in range(1, 13):
-        for alias in (f"λ{i}", f"lambda_{i}", f"λ_{i}", f"q{i}", f"q_{i}"):
+        # Not q1..: planar machines name their actuators q1..qn.
+        for alias in (f"λ{i}", f"lambda_{i}", f"λ_{i}"):
             out[alias] = f"lambda{i}"
         for alias in (f"l_{i}", f"length{i}", f"length_{i}"):
             out[alias] = f"l{i}"

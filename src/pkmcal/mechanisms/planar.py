@@ -32,12 +32,20 @@ carries a leg of length ρ_ij to the revolute joint C_i; the tool plate joins C_
 (distance L3). Pose x = (x, y, φ) of the plate: C_1,2 = (x, y) ∓ (L3/2) e(φ). Closure
 ‖C_i − O_i − s_ij d_i‖ = ρ_ij, with a = (C_i − O_i)·d_i, b = (C_i − O_i)·n_i:
 
-    s_ij = a + τ_j √(ρ_ij² − b²),  τ = (−1, +1);  ∂s/∂C = (d_i − τ b/√(·) n_i)ᵀ ... (analytic below)
+    s_ij = a + τ_j √(ρ_ij² − b²),  τ = (−1, +1),  reading q_ij = s_ij + dq_ij,
+
+    ∂s/∂C_i = d_i − τ_j (b/√) n_i,   ∂s/∂ρ_ij = τ_j ρ_ij/√,   ∂s/∂y_i = −∂s/∂C_i · e_y,
+    ∂s/∂α_i = b + τ_j (b/√) a,       ∂C_{1,2}/∂L3 = ∓ e(φ)/2,  ∂C_{1,2}/∂φ = ∓ (L3/2) e'(φ).
+
+IK returns NaN outside a chain's reach (no clipping: a clipped arccos/sqrt would create
+false FK minima). Case 1's actuator angles are kept on one continuous branch
+θ ∈ (−π/2, 3π/2] (the proximal links point upward in the workspace).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import ClassVar
 
 import numpy as np
 
@@ -72,7 +80,8 @@ class PlanarMechanism(Mechanism):
     description: str = ""
     covariance: np.ndarray | None = None
 
-    _names: tuple[str, ...] = ()
+    #: Parameter names, in the order of ``rho`` (set by each machine class).
+    _names: ClassVar[tuple[str, ...]] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "rho", _frozen(self.rho, (len(self._names),)))
@@ -162,6 +171,29 @@ class PlanarMechanism(Mechanism):
         ok = done & np.isfinite(res) & (res <= res_tol)
         return FKResult(poses=x, converged=ok, iterations=it, residual=res)
 
+    @property
+    def param_is_angle(self) -> tuple[bool, ...]:
+        """True for parameters that are angles (rad inside, degrees in files): the way
+        directions α_i and the encoder offsets of rotary actuators."""
+        return tuple(n.startswith("alpha") or (n.startswith("dq") and "rad" in self._actuator_unit)
+                     for n in self._names)
+
+    def summary(self) -> str:
+        """A few human-readable lines describing the machine."""
+        ang = self.param_is_angle
+        vals = ", ".join(f"{n}={np.rad2deg(v) if a else v:.4g}{'°' if a else ''}"
+                         for n, v, a in zip(self._names, self.rho, ang))
+        box = ", ".join(f"{p} {np.rad2deg(lo) if a else lo:g}..{np.rad2deg(hi) if a else hi:g}"
+                        for p, a, (lo, hi) in zip(self.pose_names, self.pose_is_angle, self.workspace))
+        return "\n".join([
+            f"{self.name}: {self.n_dof}-dof planar machine, {self.n_actuators} actuators ({self._actuator_unit}), "
+            f"{len(self._names)} kinematic parameters" + (f" — {self.description}" if self.description else ""),
+            f"  parameters (mm, deg): {vals}",
+            f"  workspace: {box}",
+        ])
+
+    _actuator_unit: ClassVar[str] = "mm"
+
     def sample_poses(self, n: int, rng: np.random.Generator, shrink: float = 1.0) -> np.ndarray:
         """``n`` poses uniform in the workspace box (shrunk about its centre by ``shrink``)."""
         c = self.workspace.mean(axis=1)
@@ -182,12 +214,14 @@ P2_ELBOW = np.array([1.0, -1.0, -1.0])
 class Planar2Dof3Act(PlanarMechanism):
     """Paper 3 case 1: 2-d.o.f. translating tool plate, three rotary actuators (module doc)."""
 
-    _names: tuple[str, ...] = _P2_NAMES
+    _names: ClassVar[tuple[str, ...]] = _P2_NAMES
     min_transmission: float = np.deg2rad(15.0)
 
     pose_names = ("x", "y")
     pose_is_angle = (False, False)
     actuator_names = ("q1", "q2", "q3")
+    _actuator_unit: ClassVar[str] = "rotary, rad"
+
 
     def _unpack(self):
         r = self.rho
@@ -294,12 +328,14 @@ _WAY = np.array([0, 0, 1, 1])              # guide-way of each actuator
 class Planar3Dof4Act(PlanarMechanism):
     """Paper 3 case 2: 3-d.o.f. tool plate on two guide-ways with four linear actuators."""
 
-    _names: tuple[str, ...] = _P3_NAMES
+    _names: ClassVar[tuple[str, ...]] = _P3_NAMES
     min_leg_angle: float = np.deg2rad(15.0)
 
     pose_names = ("x", "y", "phi")
     pose_is_angle = (False, False, True)
     actuator_names = ("q1", "q2", "q3", "q4")
+    _actuator_unit: ClassVar[str] = "linear, mm"
+
 
     def _unpack(self):
         r = self.rho

@@ -3,7 +3,7 @@
 For a machine + measurement setup, candidate pose x_j is simulated as measured at the
 nominal machine (q_j = IK(x_j, ρ₀), y_j = h(x_j, s₀)) and the engine's method
 (:mod:`pkmcal.identification.residuals`: ``ik-residual`` for a full-pose sensor, paper 1;
-``fk-residual`` otherwise, paper 2) gives its residual Jacobian J_j = ∂r_j/∂θ and the
+``fk-residual`` otherwise, paper 2; ``projection`` for redundantly actuated machines, paper 3) gives its residual Jacobian J_j = ∂r_j/∂θ and the
 covariance Σ_j that the noise induces on r_j. The block is
 
     G_j = W_j J_j[:, free] D,    W_j = L_j⁻¹ (L_j L_jᵀ = Σ_j),    D = diag(d_i)
@@ -37,8 +37,11 @@ from pkmcal.sensors.base import MeasurementSetup
 N_REFERENCE = 256
 
 
-def default_method(setup: MeasurementSetup) -> str:
-    """``ik-residual`` for a full-pose sensor (paper 1), ``fk-residual`` otherwise (paper 2)."""
+def default_method(setup: MeasurementSetup, mechanism: Mechanism | None = None) -> str:
+    """``projection`` for a redundantly actuated machine (paper 3), else ``ik-residual`` for
+    a full-pose sensor (paper 1) and ``fk-residual`` otherwise (paper 2)."""
+    if mechanism is not None and mechanism.n_actuators != mechanism.n_dof:
+        return "projection"
     return "ik-residual" if setup.sensor.kind == "full-pose" else "fk-residual"
 
 
@@ -91,7 +94,7 @@ def planning_model(mechanism: Mechanism, setup: MeasurementSetup, *, method: str
     """
     from pkmcal.planning.candidates import generate_candidates
 
-    method = method or default_method(setup)
+    method = method or default_method(setup, mechanism)
     if reference is None:
         reference = generate_candidates(mechanism, setup, kind="random", n=N_REFERENCE,
                                         rng=np.random.default_rng(0)).poses

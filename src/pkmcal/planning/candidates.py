@@ -3,9 +3,12 @@
 Candidates (paper 1 §IV; paper 2 §4):
 
 * ``corners`` — the 2^6 = 64 corners of the workspace box (paper 1: every pose coordinate
-  at its minimum or maximum);
+  at its minimum or maximum; 2^n for a machine with n pose coordinates);
 * ``random`` — uniform in the box; ``grid`` — k points per coordinate (k^6 poses);
-* ``file`` — a user CSV with columns x, y, z, a, b, c (mm, degrees).
+* ``file`` — a user CSV with the machine's pose columns (x, y, z, a, b, c: mm, degrees).
+
+Machines other than the hexapod (e.g. the planar ones) use their ``workspace`` box; limits
+that take no safety margin are checked without one.
 
 **Workspace box.** The machine's ``workspace`` (6, 2) when it has one; otherwise the
 per-axis reach around home: coordinate i spans ``home_i ± t_i·h_i`` with t_i ∈ (0, 1] the
@@ -40,7 +43,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pkmcal.conventions import POSE_COLUMNS, euler_to_matrix, poses_from_file_units
+from pkmcal.conventions import POSE_COLUMNS, euler_to_matrix
 from pkmcal.errors import InputFileError, PkmcalError
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.planning.indices import blas_single_threaded
@@ -109,8 +112,8 @@ def measurability_violations(setup: MeasurementSetup, poses: np.ndarray,
     poses = np.atleast_2d(np.asarray(poses, dtype=float))
     sensor = setup.sensor
     out: dict[str, np.ndarray] = {}
-    R = euler_to_matrix(poses[:, 3:6])
     if sensor.kind == "indicators":
+        R = euler_to_matrix(poses[:, 3:6])
         n = R[:, :, 2]
         facing = n[:, 2] >= MIN_NORMAL_Z
         out["indicator_plane_tilt"] = ~facing
@@ -128,6 +131,7 @@ def measurability_violations(setup: MeasurementSetup, poses: np.ndarray,
             out["indicator_off_plate"] = facing & np.any(np.linalg.norm(local[..., :2], axis=-1)
                                                          > spec.plate_radius, axis=1)
     elif spec.sight_cone is not None and sensor.kind in ("full-pose", "position"):
+        R = euler_to_matrix(poses[:, 3:6])
         world = np.asarray(sensor.world, dtype=float)
         Rw = euler_to_matrix(world[3:6])
         origin = -Rw.T @ world[0:3]                      # sensor origin in {F}
@@ -150,7 +154,10 @@ def check_candidates(mechanism: Mechanism, setup: MeasurementSetup | None, poses
     poses = mechanism.as_pose_array(poses)
     finite = np.all(np.isfinite(poses), axis=1)
     safe = np.where(finite[:, None], poses, mechanism.home_pose)
-    lim = mechanism.check_limits(safe, margin=margin)
+    try:
+        lim = mechanism.check_limits(safe, margin=margin)
+    except TypeError:                      # a mechanism whose limits take no safety margin
+        lim = mechanism.check_limits(safe)
     viol = {k: v | ~finite for k, v in lim.violations.items()}
     if setup is not None:
         viol.update(measurability_violations(setup, safe, measurability))
@@ -169,10 +176,11 @@ def default_box_shape(mechanism: Mechanism) -> np.ndarray:
 
 
 def corner_poses(box: np.ndarray) -> np.ndarray:
-    """The 2^6 = 64 corners (64, 6) of a box (6, 2) [min, max] (paper 1 §IV)."""
-    box = np.asarray(box, dtype=float).reshape(6, 2)
-    bits = np.array(list(itertools.product((0, 1), repeat=6)))
-    return box[np.arange(6), bits]
+    """The 2^n corners (2^n, n) of a box (n, 2) [min, max]; 64 for a hexapod (paper 1 §IV)."""
+    box = np.asarray(box, dtype=float).reshape(-1, 2)
+    n = box.shape[0]
+    bits = np.array(list(itertools.product((0, 1), repeat=n)))
+    return box[np.arange(n), bits]
 
 
 def _scaled_box(center, half, t):
@@ -195,9 +203,9 @@ def _bisect_scale(ok, t_max: float = 1.0, n_iter: int = 24) -> float:
 @blas_single_threaded
 def corner_box(mechanism: Mechanism, box: np.ndarray, setup: MeasurementSetup | None = None, *,
                margin: float = DEFAULT_MARGIN, measurability: Measurability = Measurability()) -> np.ndarray:
-    """The box (6, 2) scaled about its centre by the largest t ∈ (0, 1] whose 64 corners all
+    """The box (n, 2) scaled about its centre by the largest t ∈ (0, 1] whose 2^n corners all
     pass :func:`check_candidates`; error if even tiny boxes fail (home pose unreachable)."""
-    box = np.asarray(box, dtype=float).reshape(6, 2)
+    box = np.asarray(box, dtype=float).reshape(-1, 2)
     center, half = box.mean(axis=1), (box[:, 1] - box[:, 0]) / 2
 
     def ok(t):
@@ -218,7 +226,9 @@ def workspace_box(mechanism: Mechanism, setup: MeasurementSetup | None = None, *
     """The machine's ``workspace`` if set, else the largest reachable box around home (module doc)."""
     ws = getattr(mechanism, "workspace", None)
     if ws is not None:
-        return np.array(ws, dtype=float).reshape(6, 2)
+        return np.array(ws, dtype=float).reshape(mechanism.n_dof, 2)
+    if mechanism.n_dof != 6:
+        raise PkmcalError(f"machine '{mechanism.name}' has no workspace box; give candidate poses (--candidates)")
     home = np.asarray(mechanism.home_pose, dtype=float)
     half = default_box_shape(mechanism)
     reach = np.empty(6)
@@ -242,28 +252,33 @@ def workspace_box(mechanism: Mechanism, setup: MeasurementSetup | None = None, *
 
 
 def random_poses(box: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
-    """``n`` poses uniform in the box (6, 2)."""
-    box = np.asarray(box, dtype=float).reshape(6, 2)
-    return box[:, 0] + rng.random((n, 6)) * (box[:, 1] - box[:, 0])
+    """``n`` poses uniform in the box (d, 2)."""
+    box = np.asarray(box, dtype=float).reshape(-1, 2)
+    return box[:, 0] + rng.random((n, box.shape[0])) * (box[:, 1] - box[:, 0])
 
 
 def grid_poses(box: np.ndarray, per_axis: int) -> np.ndarray:
-    """``per_axis``^6 poses on a regular grid including the box faces (per_axis ≥ 2)."""
+    """``per_axis``^d poses on a regular grid of the box (d, 2), faces included (per_axis ≥ 2)."""
     if per_axis < 2:
         raise PkmcalError("a candidate grid needs at least 2 points per pose coordinate")
-    box = np.asarray(box, dtype=float).reshape(6, 2)
+    box = np.asarray(box, dtype=float).reshape(-1, 2)
     axes = [np.linspace(lo, hi, per_axis) for lo, hi in box]
-    return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 6)
+    return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, box.shape[0])
 
 
-def read_candidates_csv(path: str | os.PathLike) -> np.ndarray:
-    """Poses (N, 6) (mm, rad) from a CSV file with columns x, y, z, a, b, c (mm, degrees)."""
+def read_candidates_csv(path: str | os.PathLike, mechanism: Mechanism | None = None) -> np.ndarray:
+    """Poses (N, n) (mm, rad) from a CSV file with the machine's pose columns (default
+    x, y, z, a, b, c; lengths mm, angles degrees)."""
     from pkmcal.io.tables import read_table
 
-    table = read_table(path, POSE_COLUMNS)
+    names = tuple(mechanism.pose_names) if mechanism is not None else POSE_COLUMNS
+    is_angle = tuple(mechanism.pose_is_angle) if mechanism is not None else (False,) * 3 + (True,) * 3
+    table = read_table(path, names, kinds={nm: ("angle" if a else "length") for nm, a in zip(names, is_angle)})
     if len(table) == 0:
         raise InputFileError(path, "no candidate poses (the file has a header but no rows)")
-    return poses_from_file_units(table[list(POSE_COLUMNS)])
+    poses = np.array(table[list(names)], dtype=float)
+    poses[:, np.array(is_angle, dtype=bool)] = np.deg2rad(poses[:, np.array(is_angle, dtype=bool)])
+    return poses
 
 
 @blas_single_threaded

@@ -56,6 +56,9 @@ def error_slices(nominal: Mechanism, box: np.ndarray, *, magnitude: float = 0.1,
 
     ``real`` defaults to ``nominal`` with U(−magnitude, magnitude) errors on every parameter.
     """
+    if nominal.n_dof != 6:
+        raise PkmcalError(f"error maps are drawn for 6-coordinate machines (hexapods); '{nominal.name}' has "
+                          f"{nominal.n_dof} pose coordinates")
     rng = np.random.default_rng() if rng is None else rng
     box = np.asarray(box, dtype=float).reshape(6, 2)
     if real is None:

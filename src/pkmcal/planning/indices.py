@@ -16,8 +16,9 @@ Scaling laws (tested): duplicating every row multiplies σ by √2, so O1 and O2
 unchanged, O3 grows by √2, O4 by √2 and O5 by 2.
 
 Which algorithm optimises which (:mod:`pkmcal.planning.selection`): the default exchange
-maximises log det M (D-optimality ⇔ O1 at fixed size); ``detmax`` and ``cuckoo`` maximise
-any of O1–O5 (default O4, as paper 2); ``random`` and ``corners`` optimise nothing.
+maximises log det M (D-optimality ⇔ O1 at fixed size; given another index it then polishes
+the set on that index); ``detmax`` and ``cuckoo`` maximise any of O1–O5 (default O4, as
+paper 2); ``random`` and ``corners`` optimise nothing.
 """
 
 from __future__ import annotations

@@ -23,7 +23,6 @@ from pkmcal.planning.candidates import (
     Measurability,
     check_candidates,
     corner_box,
-    corner_poses,
     generate_candidates,
     read_candidates_csv,
     workspace_box,
@@ -52,13 +51,15 @@ class Plan:
 
 def plan_poses(mechanism: Mechanism, setup: MeasurementSetup, n: int, *, algorithm: str = "default",
                index: str | None = None, candidates: np.ndarray | str | os.PathLike | None = None,
-               n_candidates: int = 2000, seed: int | None = None, margin: float = DEFAULT_MARGIN,
+               n_candidates: int = 2000, grid: int | None = None, seed: int | None = None,
+               margin: float = DEFAULT_MARGIN,
                measurability: Measurability = Measurability(), method: str | None = None,
                model: PlanningModel | None = None, progress: Progress | None = None) -> Plan:
     """Choose ``n`` poses to measure (paper 2 §4, paper 1 §IV).
 
     ``candidates``: an array (N, 6) (mm, rad) or a CSV path (x, y, z, a, b, c in mm, deg);
-    default ``n_candidates`` random poses of the workspace box. ``algorithm="corners"``
+    default ``n_candidates`` random poses of the workspace box, or with ``grid=k`` the k^6
+    grid of the box. ``algorithm="corners"``
     ignores them and draws among the 64 corners of the largest all-reachable box. Every
     candidate is checked (limits with ``margin``, measurability) before selection.
     """
@@ -76,9 +77,12 @@ def plan_poses(mechanism: Mechanism, setup: MeasurementSetup, n: int, *, algorit
         box = corner_box(mechanism, box, setup, **kw)
     elif candidates is None:
         box = workspace_box(mechanism, setup, **kw)
-        cand = generate_candidates(mechanism, setup, kind="random", n=n_candidates, rng=rng, box=box, **kw)
+        if grid is not None:
+            cand = generate_candidates(mechanism, setup, kind="grid", grid_per_axis=grid, box=box, **kw)
+        else:
+            cand = generate_candidates(mechanism, setup, kind="random", n=n_candidates, rng=rng, box=box, **kw)
     else:
-        poses = candidates if isinstance(candidates, np.ndarray) else read_candidates_csv(candidates)
+        poses = candidates if isinstance(candidates, np.ndarray) else read_candidates_csv(candidates, mechanism)
         chk = check_candidates(mechanism, setup, poses, **kw)
         if not chk.ok.any():
             raise PkmcalError(f"none of the {len(poses)} candidate poses is reachable and measurable "

@@ -14,8 +14,9 @@ information matrix of a set is M = Σ_j G_jᵀ G_j.
       det(M ± G_kᵀG_k) = det M · det(I ± S_k)                 (determinant lemma)
       M⁻¹ ← M⁻¹ ∓ U (I ± S_k)⁻¹ Uᵀ,   U = M⁻¹ G_kᵀ               (Woodbury)
 
-  and S_j ← S_j ∓ A_j (I ± S_k)⁻¹ A_jᵀ with A_j = G_j U for all candidates in one GEMM,
-  each step scores all candidates at once in O(N m² n) (no per-candidate Python loop).
+  and S_j ← S_j ∓ A_j (I ± S_k)⁻¹ A_jᵀ with A_j = G_j U for all candidates in one
+  compiled pass (:mod:`._selection_kernels`), each step scores all candidates at once in
+  O(N m² n) (no per-candidate Python loop).
 * ``detmax`` — paper 2 §4 steps (i)–(iv) with an exact add step on any index O1–O5
   (pruned by an eigenvalue bound, :meth:`_IndexScorer.best_add`):
   (i) random initial set; (ii) add the candidate maximising the index of the enlarged set;
@@ -27,6 +28,9 @@ information matrix of a set is M = Σ_j G_jᵀ G_j.
 * ``random`` — n distinct candidates drawn uniformly.
 * ``corners`` (paper 1 §IV) is ``random`` applied to the 2^6 workspace-box corners; the
   corners are built in :mod:`pkmcal.planning.candidates`.
+
+``select`` and the ``select_*`` functions run with BLAS limited to one thread
+(:func:`~pkmcal.planning.indices.single_threaded_blas`).
 
 All are seeded through a ``numpy.random.Generator`` and reproducible.
 """
@@ -53,9 +57,13 @@ from pkmcal.planning.indices import (
 
 ALGORITHMS = ("default", "detmax", "cuckoo", "corners", "random")
 #: Which index each algorithm maximises (documented in docs/planning.md and ``--help``).
-OPTIMISED_INDEX = {"default": "O1 (or --index, after the D-optimal start)", "detmax": "any (default O4)", "cuckoo": "any (default O4)",
-                   "corners": "none", "random": "none"}
+OPTIMISED_INDEX = {"default": "O1 (or --index, after the D-optimal start)", "detmax": "any (default O4)",
+                   "cuckoo": "any (default O4)", "corners": "none", "random": "none"}
 Progress = Callable[[int, int], None]
+#: Greedy start of the default algorithm: M₀ = δI with δ = _DELTA_REL · mean per-pose
+#: information per parameter, and whether S is recomputed exactly while M₀ dominates.
+_DELTA_REL = 1e-9
+_EARLY_REFRESH = True
 
 
 @dataclass(frozen=True)
@@ -89,10 +97,12 @@ def _need_rank(n: int, m: int, p: int) -> None:
         )
 
 
-def _batch_logdet(S: np.ndarray, sign: float) -> np.ndarray:
-    """log det(I + sign·S_j) for S (K, m, m); −inf where not positive definite."""
+def _batch_logdet(S: np.ndarray, sign: float, identity: bool = True) -> np.ndarray:
+    """log det(I + sign·S_j) (or log det(sign·S_j) without the identity) for S (K, m, m);
+    −inf where not positive definite."""
     m = S.shape[-1]
-    s, ld = np.linalg.slogdet(sign * S + np.eye(m))
+    A = sign * S + np.eye(m) if identity else sign * S
+    s, ld = np.linalg.slogdet(A)
     return np.where(s > 0, ld, -np.inf)
 
 
@@ -164,10 +174,12 @@ def select_default(G: np.ndarray, n: int, *, index: str = "O1", pool: int | None
        leverage tr(G_j M_all⁻¹ G_jᵀ) (M_all: all candidates) — D-optimal designs sit on
        high-leverage points; the exchange below still sees every candidate.
     2. Greedy forward selection in the pool on M₀ = δI (δ = 1e-9 · mean per-pose
-       information per parameter): add argmax_j log det(I + S_j), S_j = G_j M⁻¹ G_jᵀ, all
-       candidates updated by one rank-m update per step (module docstring); while the
-       chosen rows do not yet span the parameters (S_j ~ 1/δ, updates would cancel
-       digits) S is recomputed exactly from the Cholesky factor of M instead.
+       information per parameter): add argmax_j log det(I + S_j), S_j = G_j M⁻¹ G_jᵀ.
+       For the first ⌊n/m⌋ picks this is taken in its δ → 0 limit, argmax_j
+       log det(R_j R_jᵀ) with R_j = G_j projected off the span of the chosen rows (a
+       block pivoted QR, no 1/δ round-off); then all candidates are updated by one rank-m
+       update per step (module docstring), recomputing S exactly while a direction is
+       still held only by δ.
     3. DETMAX exchange on the exact M of the chosen set over *all* N candidates: add the
        candidate of largest gain, remove the pose of least loss log det(I − S_i); stop
        when that is the one just added (paper 2 §4 iv) or nothing improves.
@@ -188,18 +200,34 @@ def select_default(G: np.ndarray, n: int, *, index: str = "O1", pool: int | None
     else:
         pool_idx = np.arange(N)
     Gp = np.ascontiguousarray(G[pool_idx])
-    delta = 1e-9 * float(np.einsum("nip,nip->", Gp, Gp)) / (len(Gp) * p) + np.finfo(float).tiny
-    state = _DState(Gp, delta * np.eye(p))
+    delta = _DELTA_REL * float(np.einsum("nip,nip->", Gp, Gp)) / (len(Gp) * p) + np.finfo(float).tiny
     in_pool = np.zeros(len(Gp), dtype=bool)
     max_ex = 4 * n if max_exchanges is None else max_exchanges
     total = n + max_ex
-    for step in range(n):
+    # 2a. while every pick can add m new directions: the δ → 0 limit of the greedy step,
+    #     argmax_j log det(R_j R_jᵀ) with R_j = G_j projected off the chosen rows' span
+    #     (log det(I + G_j M⁻¹ G_jᵀ) = m log(1/δ) + log det(R_j R_jᵀ) + O(δ)); exact, no 1/δ.
+    R = Gp.copy()
+    n_span = min(n, p // m)
+    for step in range(n_span):
+        gain = _batch_logdet(R @ R.transpose(0, 2, 1), 1.0, identity=False)
+        gain[in_pool] = -np.inf
+        k = int(np.argmax(gain))
+        q, _ = np.linalg.qr(R[k].T)                             # new orthonormal directions (p, m)
+        R -= ((R.reshape(-1, p) @ q) @ q.T).reshape(R.shape)
+        in_pool[k] = True
+        evaluations += len(Gp)
+        if progress is not None:
+            progress(step + 1, total)
+    # 2b. the rest of the greedy phase by rank-m updates of all candidates
+    state = _DState(Gp, delta * np.eye(p) + information_matrix(Gp, np.flatnonzero(in_pool)))
+    for step in range(n_span, n):
         gain = state.gains()
         gain[in_pool] = -np.inf
         k = int(np.argmax(gain))
         state.update(k, 1.0)
-        if (step + 1) * m <= p + m:
-            # while δ dominates some directions S_j ~ 1/δ and the update cancels digits:
+        if _EARLY_REFRESH and (step + 1) * m <= p + m:
+            # while δ still dominates a direction S_j ~ 1/δ and the update cancels digits:
             # recompute exactly until the chosen rows span the parameter space
             state.refresh()
         in_pool[k] = True

@@ -214,7 +214,8 @@ class ReportData:
 
     ``poses`` (N, 6) the measured (planned) poses, internal units; ``correlation`` (k, k)
     correlation matrix of the free parameters named ``correlation_names``; ``facts`` are
-    extra (label, value) lines for the summary table (method, seed, setup, ...).
+    extra (label, value) lines for the summary table (method, seed, setup, ...);
+    ``held_out_poses`` (K, 6) the verification poses, drawn in the pose cloud.
     """
 
     title: str
@@ -231,9 +232,12 @@ class ReportData:
     error_map: ErrorMap | None = None
     setup_summary: str = ""
     facts: tuple[tuple[str, str], ...] = field(default_factory=tuple)
+    held_out_poses: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "poses", _array(self.poses, "poses", 2))
+        if self.held_out_poses is not None:
+            object.__setattr__(self, "held_out_poses", _array(self.held_out_poses, "held_out_poses", 2))
         corr = _array(self.correlation, "correlation", 2)
         names = tuple(self.correlation_names)
         if corr.shape != (len(names), len(names)):

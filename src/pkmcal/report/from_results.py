@@ -71,6 +71,7 @@ def report_data_from_results(
     title: str | None = None,
     setup_summary: str = "",
     facts: tuple[tuple[str, str], ...] = (),
+    held_out_poses: np.ndarray | None = None,
 ) -> ReportData:
     """The report of an :class:`~pkmcal.identification.engine.IdentificationResult`.
 
@@ -110,4 +111,5 @@ def report_data_from_results(
         error_map=error_map,
         setup_summary=setup_summary,
         facts=facts,
+        held_out_poses=held_out_poses,
     )

@@ -109,8 +109,10 @@ def build_figures(data: ReportData, png: bool = True) -> list[F.RenderedFigure]:
                             f"{nominal.name} drawn in {len(shown)} of its poses: base (grey), platform (blue), "
                             "legs (red).", png))
     if data.poses.shape[1] == 6:
-        out.append(F.render(F.pose_cloud_figure(data.poses), "pose-cloud",
-                            f"The {len(data.poses)} measurement poses, coloured by platform tilt.", png))
+        held = data.held_out_poses
+        out.append(F.render(F.pose_cloud_figure(data.poses, held), "pose-cloud",
+                            f"The {len(data.poses)} measurement poses, coloured by platform tilt"
+                            + ("" if held is None else f"; crosses: the {len(held)} held-out poses") + ".", png))
     ident = data.identifiability
     if ident.singular_values.size:
         out.append(F.render(F.singular_values_figure(ident.singular_values, ident.rank), "singular-values",
