@@ -203,7 +203,7 @@ def cpu_model() -> str:
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=100_000)
-    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--repeats", type=int, default=15)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--loop-n", type=int, default=2000, help="poses for the pose-by-pose loop")
     args = ap.parse_args(argv)

@@ -358,3 +358,93 @@ def test_anchors_allowed_but_alias_bombs_and_cycles_rejected():
         f"{chr(98 + i)}: &{chr(98 + i)} [{', '.join(['*' + chr(97 + i)] * 9)}]\n" for i in range(8))
     assert "aliases expand to more than 1000000 values" in str(_error(bomb + "calibration: {z: *i}\n"))
     assert "recursive structure" in str(_error("a: &a [*a]\n"))
+
+
+# -- planar machines (kinds planar-2dof-3act, planar-3dof-4act) ---------------------------
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(kind=st.sampled_from(["planar-2dof-3act", "planar-3dof-4act"]),
+       seed=st.integers(0, 2**31 - 1), scale=st.sampled_from([1e-9, 1e-3, 0.3]), with_cov=st.booleans())
+def test_planar_machine_file_round_trip_is_exact(kind, seed, scale, with_cov):
+    from pkmcal.mechanisms.library import builtin_machine
+
+    m = builtin_machine(kind)
+    rng = np.random.default_rng(seed)
+    p = m.params + rng.normal(size=m.params.shape) * scale
+    cov = None
+    if with_cov:
+        A = rng.normal(size=(len(p), len(p))) * scale
+        cov = A @ A.T
+        cov[1, :] = cov[:, 1] = 0.0          # a fixed (gauge) parameter
+    m2 = replace(m.with_params(p, name="rt", covariance=cov), metadata={"calibration": {"method": "projection"}})
+    back = machine_from_text(machine_to_text(m2))
+    assert type(back) is type(m2) and back == m2
+    assert np.array_equal(back.params, p)
+    assert (back.covariance is None) == (cov is None)
+    if cov is not None:
+        assert np.array_equal(back.covariance, cov)
+    assert back.metadata == m2.metadata
+
+
+def test_planar_machine_file_angles_are_degrees(tmp_path):
+    from pkmcal.mechanisms.library import builtin_machine
+
+    m = builtin_machine("planar-2dof-3act")
+    m2 = m.with_deltas({"dq1": np.deg2rad(0.5), "l11": 0.25})
+    text = machine_to_text(m2)
+    assert "dq1: 0.5\n" in text and "l11: 280.25\n" in text
+    m4 = builtin_machine("planar-3dof-4act").with_deltas({"alpha2": np.deg2rad(-0.065), "dq3": 0.5})
+    text4 = machine_to_text(m4)
+    assert "alpha2: -0.065\n" in text4 and "dq3: 0.5\n" in text4      # linear encoder offsets stay mm
+    path = tmp_path / "m.yaml"
+    save_machine(m2, path)
+    assert load_machine(path) == m2
+
+
+def test_planar_machine_file_hand_written_defaults():
+    text = """kind: planar-3dof-4act
+name: hand
+parameters: {L3: 230, y1: 0, y2: 460, alpha1: 0, alpha2: 0.5, rho11: 340, rho12: 340, rho21: 340,
+             rho22: 340, dq1: 0, dq2: 0, dq3: 0, dq4: 0}
+limits: {min_leg_angle: 20}
+"""
+    m = machine_from_text(text)
+    assert m.name == "hand" and m.p("alpha2") == np.deg2rad(0.5)
+    assert m.min_leg_angle == np.deg2rad(20.0)
+    ref = load_machine("planar-3dof-4act")
+    assert np.array_equal(m.home, ref.home) and np.array_equal(m.workspace, ref.workspace)
+
+
+@pytest.mark.parametrize("body, where, words", [
+    ("parameters: {l11: 280}", "parameters", "missing l12"),
+    ("parameters: {l11: 280, l12: 280, l21: 280, l22: 280, l31: 280, l32: 280, B1.x: -300, B1.y: 0, B2.x: 300, "
+     "B2.y: 0, B3.x: 150, B3.y: 420, D1: 215, D2: 215, D3: 215, dq1: 0, dq2: 0, dq3: 0, D4: 1}", "parameters.D4",
+     "unknown parameter"),
+    ("parameters: {l11: x}", "parameters", "expected a number"),
+    ("limits: {min_leg_angle: 10}\nparameters: {l11: 280, l12: 280, l21: 280, l22: 280, l31: 280, l32: 280, "
+     "B1.x: -300, B1.y: 0, B2.x: 300, B2.y: 0, B3.x: 150, B3.y: 420, D1: 215, D2: 215, D3: 215, dq1: 0, dq2: 0, "
+     "dq3: 0}", "limits.min_leg_angle", "min_transmission"),
+])
+def test_planar_machine_file_errors(body, where, words):
+    with pytest.raises(InputFileError) as exc:
+        machine_from_text("kind: planar-2dof-3act\n" + body + "\n", "bad.yaml")
+    msg = str(exc.value)
+    assert "bad.yaml" in msg and words in msg and where.split(".")[0] in msg
+
+
+def test_planar_machine_file_uncertainty_std_in_degrees():
+    from pkmcal.mechanisms.library import builtin_machine
+
+    m = builtin_machine("planar-2dof-3act")
+    cov = np.zeros((18, 18))
+    cov[15, 15] = np.deg2rad(0.01) ** 2       # dq1: 0.01 deg
+    cov[0, 0] = 0.02 ** 2                    # l11: 0.02 mm
+    text = machine_to_text(m.with_params(m.params, covariance=cov))
+    data, _ = parse_yaml(text)
+    assert math.isclose(data["uncertainty"]["std"]["dq1"], 0.01, rel_tol=1e-12)
+    assert math.isclose(data["uncertainty"]["std"]["l11"], 0.02, rel_tol=1e-12)
+    # std and correlation alone (no covariance) rebuild it in internal units
+    hand = text.split("  covariance:")[0]
+    back = machine_from_text(hand)
+    np.testing.assert_allclose(back.covariance, cov, rtol=1e-12, atol=0)

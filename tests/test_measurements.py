@@ -117,3 +117,29 @@ def test_lengths_round_trip_exactly(tmp_path_factory, a):
     back = load_measurements(p, MACHINE, setup)
     assert back.actuators.tobytes() == meas.actuators.tobytes()
     assert back.readings.tobytes() == meas.readings.tobytes()
+
+
+def test_planar_rotary_encoders_are_degrees_in_files(tmp_path):
+    from pkmcal.mechanisms.library import builtin_machine
+
+    m = builtin_machine("planar-2dof-3act")
+    setup = load_setup("planar-tracker", m)
+    poses = np.array([[0.0, 205.0], [-30.0, 180.0], [40.0, 230.0]])
+    q = m.ik(poses)
+    meas = Measurements(actuators=q, readings=setup.sensor.predict(poses), commanded=poses)
+    path = tmp_path / "m.csv"
+    save_measurements(path, meas, m, setup)
+    text = path.read_text()
+    assert "q1,q2,q3,px,py,cmd_x,cmd_y" in text
+    first = [float(v) for v in text.splitlines()[-3].split(",")]
+    np.testing.assert_allclose(first[:3], np.rad2deg(q[0]), rtol=0, atol=1e-12)
+    back = load_measurements(path, m, setup)
+    np.testing.assert_allclose(back.actuators, q, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(back.commanded, poses)
+    # linear encoders of planar-3dof-4act stay mm
+    m4 = builtin_machine("planar-3dof-4act")
+    s4 = load_setup("planar-tracker", m4)
+    p4 = np.array([[0.0, 230.0, 0.1]])
+    save_measurements(path, Measurements(m4.ik(p4), s4.sensor.predict(p4), p4), m4, s4)
+    assert float(path.read_text().splitlines()[-1].split(",")[0]) == m4.ik(p4)[0, 0]
+    assert np.array_equal(load_measurements(path, m4, s4).actuators, m4.ik(p4))

@@ -203,3 +203,11 @@ def test_angle_parameters_and_summary():
     assert [n for n, a in zip(m3.param_names, m3.param_is_angle) if a] == ["alpha1", "alpha2"]
     assert "18 kinematic parameters" in m2.summary() and "l11=280" in m2.summary()
     assert "phi -25..25" in m3.summary()
+
+
+def test_actuator_is_angle_flags():
+    from pkmcal.mechanisms.library import builtin_machine
+
+    assert builtin_machine("planar-2dof-3act").actuator_is_angle == (True, True, True)
+    assert builtin_machine("planar-3dof-4act").actuator_is_angle == (False,) * 4
+    assert builtin_machine("stewart-prototype").actuator_is_angle == (False,) * 6

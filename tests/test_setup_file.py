@@ -78,7 +78,8 @@ def test_builtin_setups():
     assert p1.noise.distribution == "uniform"
     np.testing.assert_allclose(p1.noise.reading_std * math.sqrt(3), [0.025] * 3 + [0.001] * 3)
     assert isinstance(load_setup("laser-tracker").sensor, PositionSensor)
-    assert set(BUILTIN_SETUPS) == {"indicators-prototype", "full-pose-paper1", "laser-tracker"}
+    assert set(BUILTIN_SETUPS) == {"indicators-prototype", "full-pose-paper1", "laser-tracker", "planar-tracker",
+                                   "planar-tracker-rotary", "planar-tracker-linear"}
 
 
 @settings(max_examples=25, deadline=None)
@@ -150,3 +151,71 @@ def test_error_messages_name_file_line_and_key(tmp_path, text, pattern):
 def test_unknown_name_lists_builtins():
     with pytest.raises(PkmcalError, match="not a built-in setup.*indicators-prototype"):
         load_setup("no-such-setup.yaml")
+
+
+# -- planar-tool setups (paper 3) ----------------------------------------------------------
+
+
+def test_planar_tool_setup_round_trip_and_binding(tmp_path):
+    from pkmcal.io.setup_file import bind_setup
+    from pkmcal.mechanisms.library import builtin_machine
+    from pkmcal.sensors import PlanarToolSensor
+
+    p = tmp_path / "s.yaml"
+    p.write_text("sensor: planar-tool\ntarget: {x: 1.5, y: -2}\nworld: {x: 10, y: 5, c: 30}\n"
+                 "free: [target.x, target.y, world.x, world.y, world.c]\n"
+                 "noise: {reading: 0.01, actuator: [1.0e-5, 2.0e-5, 3.0e-5]}\n"
+                 "simulation: {stiffness: [5.0e7, 4.0e7, 3.0e7], load: [0, -30]}\n")
+    m2 = builtin_machine("planar-2dof-3act")
+    s = load_setup(p, m2)
+    assert isinstance(s.sensor, PlanarToolSensor) and s.sensor.n_pose == 2
+    np.testing.assert_array_equal(s.sensor.params, [1.5, -2.0, 10.0, 5.0, np.deg2rad(30.0)])
+    np.testing.assert_array_equal(s.simulation.stiffness_for(m2), [5e7, 4e7, 3e7])
+    np.testing.assert_array_equal(s.simulation.load, [0.0, -30.0])
+    q = tmp_path / "s2.yaml"
+    save_setup(s, q)
+    back = load_setup(q, m2)
+    assert np.array_equal(back.sensor.params, s.sensor.params) and back.sensor.free == s.sensor.free
+    assert np.array_equal(back.noise.actuator_std, s.noise.actuator_std)
+    assert np.array_equal(back.simulation.stiffness, s.simulation.stiffness)
+    assert np.array_equal(back.simulation.load, s.simulation.load)
+    # bound to a 3-dof machine the sensor takes 3 pose coordinates; the 3 stiffnesses do not fit 4 actuators
+    with pytest.raises(PkmcalError, match="4 actuators"):
+        load_setup(p, builtin_machine("planar-3dof-4act"))
+    with pytest.raises(PkmcalError, match="cannot measure"):
+        bind_setup(s, stewart_prototype())
+    with pytest.raises(PkmcalError, match="cannot measure"):
+        load_setup("laser-tracker", m2)
+
+
+def test_planar_builtin_setups_match_the_benchmark():
+    from pkmcal.mechanisms.library import builtin_machine
+
+    rot = load_setup("planar-tracker", builtin_machine("planar-2dof-3act"))
+    lin = load_setup("planar-tracker", builtin_machine("planar-3dof-4act"))
+    assert rot.sensor.n_pose == 2 and lin.sensor.n_pose == 3
+    np.testing.assert_array_equal(rot.noise.reading_std, [0.010, 0.010])
+    assert float(rot.noise.actuator_std) == 1e-5 and float(lin.noise.actuator_std) == 1e-3
+    assert float(rot.simulation.stiffness) == 5e7 and float(lin.simulation.stiffness) == 2e4
+    np.testing.assert_array_equal(lin.simulation.load, [0.0, -30.0])
+    with pytest.raises(PkmcalError, match="planar-tracker-rotary"):
+        load_setup("planar-tracker")
+    assert load_setup("planar-tracker-linear").sensor.kind == "planar-tool"
+
+
+@pytest.mark.parametrize("text, key", [
+    ("sensor: planar-tool\ntarget: {x: 0, y: 0, z: 1}\nnoise: {reading: 0.01, actuator: 0}\n", "target.z"),
+    ("sensor: planar-tool\nworld: {a: 1}\nnoise: {reading: 0.01, actuator: 0}\n", "world.a"),
+    ("sensor: planar-tool\nnoise: {reading: 0.01, actuator: 0}\nsimulation: {stiffness: -1}\n", "simulation.stiffness"),
+    ("sensor: planar-tool\nnoise: {reading: 0.01, actuator: 0}\nsimulation: {stiffness: 1, load: [1, 2, 3]}\n",
+     "simulation.load"),
+    ("sensor: planar-tool\nnoise: {reading: 0.01, actuator: 0}\nsimulation: {stifness: 1}\n", "simulation.stifness"),
+    ("sensor: position\nnoise: {reading: 0.01, actuator: 0}\nsimulation: {stiffness: 1}\n", "simulation"),
+    ("sensor: planar-tool\nnoise: {actuator: 0}\n", "noise.reading"),
+])
+def test_planar_tool_setup_errors(tmp_path, text, key):
+    p = tmp_path / "bad.yaml"
+    p.write_text(text)
+    with pytest.raises(InputFileError) as exc:
+        load_setup(p)
+    assert f"key '{key}'" in str(exc.value) and "bad.yaml" in str(exc.value) and "line" in str(exc.value)

@@ -6,6 +6,10 @@
 * ``verify``: pose errors of the real machine commanded through the calibrated (and the
   nominal) model on held-out poses (:mod:`pkmcal.identification.verification`).
 
+Redundantly actuated machines (more actuators than pose coordinates, paper 3) are simulated
+at static equilibrium under the setup's actuator stiffness and tool load
+(:mod:`pkmcal.identification.redundant_campaign`), in ``simulate`` and in ``verify``.
+
 Everything is read, validated and computed before any output is written (atomically); on
 a user error nothing is written and the exit code is 2.
 """
@@ -18,20 +22,31 @@ import click
 import numpy as np
 
 from pkmcal.errors import PkmcalError
+from pkmcal.identification.redundant_campaign import (
+    is_redundant,
+    perturb_planar,
+    simulate_redundant_campaign,
+    verify_redundant,
+)
 from pkmcal.identification.simulation import perturb_machine, simulate_campaign
 from pkmcal.identification.verification import verify
+from pkmcal.cli.import_options import import_options
 from pkmcal.io.atomic import atomic_write_text, check_output_path
+from pkmcal.io.import_mapping import ImportMapping
 from pkmcal.io.machine_file import load_machine, machine_to_text
 from pkmcal.io.measurements import measurement_columns
 from pkmcal.io.setup_file import BUILTIN_SETUPS, load_setup
 from pkmcal.io.tables import format_table, read_table
 from pkmcal.mechanisms.base import Mechanism
+from pkmcal.mechanisms.planar import PlanarMechanism
 
 
-def read_poses(path: str, machine: Mechanism) -> np.ndarray:
-    """Poses of a CSV with the machine's pose columns (x,y,z mm; a,b,c deg) → internal units."""
+def read_poses(path: str, machine: Mechanism, mapping: ImportMapping | None = None) -> np.ndarray:
+    """Poses of a CSV with the machine's pose columns (x,y,z mm; a,b,c deg) → internal units;
+    ``mapping``: column renaming and units of a file from another tool."""
     table = read_table(path, machine.pose_names,
-                       kinds={n: ("angle" if a else "length") for n, a in zip(machine.pose_names, machine.pose_is_angle)})
+                       kinds={n: ("angle" if a else "length") for n, a in zip(machine.pose_names, machine.pose_is_angle)},
+                       mapping=mapping)
     poses = table.values.copy()
     ang = np.array(machine.pose_is_angle, dtype=bool)
     poses[:, ang] = np.deg2rad(poses[:, ang])
@@ -42,19 +57,22 @@ def read_poses(path: str, machine: Mechanism) -> np.ndarray:
 @click.argument("machine")
 @click.option("--real", "real_spec", metavar="REAL", help="The 'real' machine: a machine file or built-in name.")
 @click.option("--random-errors", type=float, metavar="MM",
-              help="Instead of --real: every parameter of MACHINE plus a random error of this size (mm).")
+              help="Instead of --real: every parameter of MACHINE plus a random error of this size (mm; "
+                   "angle parameters of planar machines MM/1000 rad).")
 @click.option("--error-distribution", type=click.Choice(["uniform", "gaussian"]), default="uniform",
               show_default=True, help="With --random-errors: U(-MM, MM) (paper 1) or N(0, MM^2).")
 @click.option("--save-real", metavar="REAL.yaml", help="With --random-errors: write the drawn real machine here.")
 @click.option("--setup", "setup_spec", required=True, metavar="SETUP.yaml",
               help=f"Measurement setup file or built-in ({', '.join(BUILTIN_SETUPS)}).")
-@click.option("--poses", required=True, metavar="POSES.csv", help="Commanded poses: columns x,y,z (mm), a,b,c (deg).")
+@click.option("--poses", required=True, metavar="POSES.csv",
+              help="Commanded poses: columns x,y,z (mm), a,b,c (deg); planar machines: their pose names (x,y[,phi]).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed (same seed, same bytes).")
 @click.option("--ignore-limit", "ignore_limits", multiple=True, metavar="NAME",
               help="A limit of the real machine not to check (e.g. leg_collision); repeatable.")
 @click.option("-o", "--output", metavar="MEAS.csv", help="Measurement CSV (default: standard output).")
+@import_options
 def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_real, setup_spec, poses, seed,
-                 ignore_limits, output) -> None:
+                 ignore_limits, output, mapping) -> None:
     """Simulate measuring POSES.csv on a real machine commanded with the nominal MACHINE.
 
     The actuators are commanded by MACHINE's inverse kinematics; the real machine goes where
@@ -62,6 +80,12 @@ def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_rea
     noise on the sensor and on the actuator readings. Poses the real machine cannot reach
     (FK not converged, its limits) are dropped and listed. The output has lambda1..lambda6,
     the sensor's columns and the commanded pose cmd_x..cmd_c (mm, deg).
+
+    A redundantly actuated MACHINE (e.g. planar-3dof-4act) cannot follow FK: the real
+    machine settles at the static equilibrium of its actuator springs (commanded by
+    MACHINE's IK) and the tool load, both from the setup's 'simulation:' block. The output
+    has the encoder readings q1..ql at equilibrium (mm, or deg for rotary actuators; the
+    following error is q - IK(cmd)), the tracker's px, py and the commanded pose cmd_<pose>.
     """
     if (real_spec is None) == (random_errors is None):
         raise PkmcalError("give the real machine with --real REAL, or draw one with --random-errors MM")
@@ -74,15 +98,20 @@ def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_rea
     if output is not None and save_real is not None and output == save_real:
         raise PkmcalError("-o and --save-real name the same file; choose two paths")
     nominal = load_machine(machine)
-    setup = load_setup(setup_spec)
-    commanded = read_poses(poses, nominal)
+    setup = load_setup(setup_spec, nominal)
+    commanded = read_poses(poses, nominal, mapping)
     rng = np.random.default_rng(seed)
     if random_errors is not None:
-        real = perturb_machine(nominal, random_errors, rng, distribution=error_distribution,
-                               name=f"{nominal.name}-random-{random_errors:g}mm-seed{seed}")
+        perturb = perturb_planar if isinstance(nominal, PlanarMechanism) else perturb_machine
+        real = perturb(nominal, random_errors, rng, distribution=error_distribution,
+                       name=f"{nominal.name}-random-{random_errors:g}mm-seed{seed}")
     else:
         real = load_machine(real_spec)
-    result = simulate_campaign(nominal, real, setup, commanded, rng, ignore_limits=tuple(ignore_limits))
+    if type(real) is not type(nominal):
+        raise PkmcalError(f"the real machine '{real.name}' is not of the kind of '{nominal.name}' "
+                          f"({type(real).__name__} vs {type(nominal).__name__})")
+    simulate = simulate_redundant_campaign if is_redundant(nominal) else simulate_campaign
+    result = simulate(nominal, real, setup, commanded, rng, ignore_limits=tuple(ignore_limits))
     if len(result.kept) == 0:
         raise PkmcalError(f"the real machine '{real.name}' reaches none of the {len(commanded)} poses of "
                           f"'{poses}' ({'; '.join(sorted(set(result.dropped.values())))}); nothing written")
@@ -110,13 +139,18 @@ def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_rea
 @click.command("verify")
 @click.argument("calibrated")
 @click.option("--real", "real_spec", required=True, metavar="REAL", help="The real machine (file or built-in name).")
-@click.option("--poses", required=True, metavar="HELDOUT.csv", help="Held-out poses: x,y,z (mm), a,b,c (deg).")
+@click.option("--poses", required=True, metavar="HELDOUT.csv",
+              help="Held-out poses: x,y,z (mm), a,b,c (deg); planar machines: their pose names (x,y[,phi]).")
 @click.option("--nominal", metavar="NOMINAL", help="The nominal machine, for the 'before' column.")
+@click.option("--setup", "setup_spec", metavar="SETUP.yaml",
+              help="Redundant machines only (required there): the tracker setup with the 'simulation:' "
+                   "stiffness and load the real machine settles under.")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
 @click.option("--ignore-limit", "ignore_limits", multiple=True, metavar="NAME",
               help="A limit of the real machine not to check (e.g. leg_collision); repeatable.")
 @click.option("-o", "--output", metavar="FILE", help="Write the table/JSON here (default: standard output).")
-def verify_cmd(calibrated, real_spec, poses, nominal, as_json, ignore_limits, output) -> None:
+@import_options
+def verify_cmd(calibrated, real_spec, poses, nominal, setup_spec, as_json, ignore_limits, output, mapping) -> None:
     """Pose errors of the REAL machine commanded through CALIBRATED (and NOMINAL) on held-out poses.
 
     For each pose the actuators are commanded by the model's inverse kinematics and the real
@@ -124,13 +158,35 @@ def verify_cmd(calibrated, real_spec, poses, nominal, as_json, ignore_limits, ou
     platform-plane tilt and height error at the platform centre (what indicators see).
     JSON keys: before/after: {position_mean_mm, position_max_mm, position_rms_mm,
     orientation_mean_rad, ..., tilt_*_rad, height_*_mm}.
+
+    Redundantly actuated machines (planar-2dof-3act, planar-3dof-4act): the tool point
+    should read the tracker value of each held-out pose; each model commands it (the
+    calibrated one with the tracker parameters identified with it), the REAL machine
+    settles at static equilibrium under the --setup's stiffness and load, and the tool
+    error |reading - target| (mm; plate angle error in deg for 3-dof) is reported. JSON
+    keys: before/after: {poses, tool_mean_mm, tool_max_mm, tool_rms_mm[, angle_*_deg]},
+    improvement_pct, dropped.
     """
     if output is not None:
-        check_output_path(output, [calibrated, real_spec, poses, nominal])
+        check_output_path(output, [calibrated, real_spec, poses, nominal, setup_spec])
     cal = load_machine(calibrated)
     real = load_machine(real_spec)
     nom = None if nominal is None else load_machine(nominal)
-    report = verify(cal, real, read_poses(poses, cal), nominal=nom, ignore_limits=tuple(ignore_limits))
+    for other in (real, nom):
+        if other is not None and type(other) is not type(cal):
+            raise PkmcalError(f"machine '{other.name}' is not of the kind of '{cal.name}' "
+                              f"({type(other).__name__} vs {type(cal).__name__})")
+    if is_redundant(cal):
+        if setup_spec is None:
+            raise PkmcalError(f"machine '{cal.name}' is redundantly actuated: give --setup SETUP with the "
+                              "'simulation:' stiffness and load the real machine settles under")
+        setup = load_setup(setup_spec, cal)
+        report = verify_redundant(cal, real, setup, read_poses(poses, cal, mapping), nominal=nom,
+                                  ignore_limits=tuple(ignore_limits))
+    else:
+        if setup_spec is not None:
+            raise PkmcalError("--setup applies to redundantly actuated machines only; remove it")
+        report = verify(cal, real, read_poses(poses, cal, mapping), nominal=nom, ignore_limits=tuple(ignore_limits))
     text = json.dumps(report.to_dict(), indent=2, allow_nan=False) + "\n" if as_json else report.format_table() + "\n"
     if output is None:
         click.echo(text, nl=False)

@@ -20,7 +20,15 @@ import numpy as np
 from pkmcal.errors import PkmcalError
 from pkmcal.identification.engine import identify
 from pkmcal.identification.identifiability import format_direction, identifiability
+from pkmcal.identification.redundant_campaign import (
+    BASELINES,
+    baseline_inputs,
+    baseline_result,
+    is_redundant,
+    sensor_calibration_block,
+)
 from pkmcal.identification.residuals import METHODS
+from pkmcal.cli.import_options import import_options
 from pkmcal.io.atomic import atomic_write_text, check_output_path
 from pkmcal.io.machine_file import load_machine, machine_to_text
 from pkmcal.io.measurements import load_measurements
@@ -42,6 +50,8 @@ def _angle_names(result) -> set[str]:
     for n in sensor.param_names:
         if n.split(".")[-1] in ("a", "b", "c") and n.split(".")[0] in ("world", "tool"):
             angles.add(n)
+    mech = result.mechanism
+    angles.update(n for n, a in zip(mech.param_names, getattr(mech, "param_is_angle", ())) if a)
     return angles
 
 
@@ -87,9 +97,13 @@ def fit_summary(result) -> str:
 @click.argument("measurements", metavar="MEAS.csv")
 @click.option("--setup", "setup_spec", required=True, metavar="SETUP.yaml",
               help=f"Measurement setup file or built-in ({', '.join(BUILTIN_SETUPS)}).")
-@click.option("--method", type=click.Choice(METHODS), default=None,
+@click.option("--method", type=click.Choice(METHODS + BASELINES), default=None,
               help="ik-residual (full-pose sensor, paper 1), fk-residual (paper 2) or projection (paper 3). "
-                   "Default: ik-residual for a full-pose sensor, else fk-residual.")
+                   "Default: ik-residual for a full-pose sensor, projection for redundantly actuated machines, "
+                   "else fk-residual. Baselines for redundant machines (paper 3 §1): ignore-redundancy "
+                   "(encoders assumed at their commands), actuator-subset (only the --keep actuators).")
+@click.option("--keep", metavar="I,J", help="With --method actuator-subset: the actuators used, 1-based "
+                                            "(default: the first n, n = pose coordinates).")
 @click.option("--unweighted", is_flag=True, help="Plain least squares (the papers' fits) instead of noise-weighted.")
 @click.option("--form", type=click.Choice(["plain", "squared"]), default="plain", show_default=True,
               help="ik-residual: q - IK(x) or paper 1's squared-length residual.")
@@ -99,36 +113,116 @@ def fit_summary(result) -> str:
               help="Parameters to estimate (default: all machine parameters and the sensor's free ones).")
 @click.option("-o", "--output", required=True, metavar="CALIBRATED.yaml", help="Calibrated machine file to write.")
 @click.option("--json", "as_json", is_flag=True, help="Print the fit as JSON instead of a table.")
-def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fix, free, output, as_json) -> None:
+@click.option("--report", "report_dir", metavar="DIR",
+              help="Also write the HTML calibration report (report.html and its figures) into folder DIR.")
+@import_options
+def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fix, free, output, as_json,
+                 report_dir=None, mapping=None, keep=None) -> None:
     """Identify MACHINE's kinematic parameters from MEAS.csv and write CALIBRATED.yaml.
 
     Units: mm, degrees in files and tables. Unidentifiable combinations are fixed
     automatically (the gauge, shown in the table) unless --free/--fix say otherwise, in
     which case an unidentifiable request is an error naming the combination.
     """
-    check_output_path(output, [machine, measurements, setup_spec])
+    inputs = [machine, measurements, setup_spec]
+    check_output_path(output, inputs)
+    if report_dir is not None:
+        _check_report_dir(report_dir, inputs)
     nominal = load_machine(machine)
-    setup = load_setup(setup_spec)
-    meas = load_measurements(measurements, nominal, setup)
+    setup = load_setup(setup_spec, nominal)
+    meas = load_measurements(measurements, nominal, setup, mapping)
     if method is None:
-        method = "ik-residual" if setup.sensor.kind == "full-pose" else "fk-residual"
+        method = ("projection" if is_redundant(nominal) else
+                  "ik-residual" if setup.sensor.kind == "full-pose" else "fk-residual")
+    if keep is not None and method != "actuator-subset":
+        raise PkmcalError("--keep selects the actuators of --method actuator-subset; use them together")
+    baseline = method if method in BASELINES else None
+    fit_machine, fit_setup, fit_meas = nominal, setup, meas
+    if baseline is not None:
+        parts = _names((keep,)) if keep is not None else None
+        if parts is not None and not all(k.isdigit() for k in parts):
+            raise PkmcalError(f"--keep '{keep}': give actuator numbers separated by commas, e.g. 1,2")
+        keep_idx = None if parts is None else [int(k) - 1 for k in parts]
+        fit_machine, fit_setup, fit_meas = baseline_inputs(baseline, nominal, setup, meas, keep_idx)
+        method = "projection"
     fix_names = _names(fix)
     if fix_names == ["auto"]:
         fix_names = "auto"
-    result = identify(nominal, setup, meas, method=method, free=_names(free), fix=fix_names,
+    result = identify(fit_machine, fit_setup, fit_meas, method=method, free=_names(free), fix=fix_names,
                       weighted=not unweighted, form=form)
+    if baseline is not None:
+        result = baseline_result(result, nominal, baseline)
     if not result.success:
         raise PkmcalError(f"the fit did not converge ({result.message}); nothing written")
-    text = machine_to_text(result.mechanism)
+    text = machine_to_text(_with_calibration_record(result, measurements, setup_spec))
+    report = None if report_dir is None else _report_data(nominal, result, setup, meas, measurements, output)
     atomic_write_text(output, text)
+    if report is not None:
+        from pkmcal.report import write_report
+
+        written = write_report(report, report_dir)
     if as_json:
         d = result.to_dict()
         d["output"] = output
+        if report is not None:
+            d["report"] = str(written.html)
         click.echo(json.dumps(d, indent=2, allow_nan=False))
     else:
         click.echo(result_table(result))
         click.echo(fit_summary(result))
-        click.echo(f"wrote {output}")
+        click.echo(f"wrote {output}" + (f" and {written.html}" if report is not None else ""))
+
+
+def _with_calibration_record(result, measurements: str, setup_spec: str):
+    """The identified machine with a ``calibration`` record in its metadata (kept in the
+    machine file; ``pkmcal export --format json`` shows it). No date: same inputs, same bytes."""
+    import dataclasses
+
+    mech = result.mechanism
+    if not dataclasses.is_dataclass(mech) or "metadata" not in {f.name for f in dataclasses.fields(mech)}:
+        return mech
+    u = result.uncertainty
+    record = {
+        "method": result.method, "weighted": bool(result.weighted), "measurements": str(measurements),
+        "setup": str(setup_spec), "n_poses": int(len(result.used_poses)), "n_free": int(len(result.free)),
+        "gauge": list(result.gauge), "rms_residual": float(result.rms_residual),
+        "reduced_chi2": float(u.reduced_chi2), "std": "a-priori (noise model) x max(1, chi2/dof)",
+    }
+    if getattr(result.sensor, "kind", "") == "planar-tool":  # read back by 'pkmcal verify'
+        record["sensor"] = sensor_calibration_block(result.sensor)
+    return dataclasses.replace(mech, metadata={**dict(mech.metadata), "calibration": record})
+
+
+def _check_report_dir(report_dir: str, inputs) -> None:
+    """The report folder must not be an input file, nor hold one under a report file's name."""
+    import os
+
+    from pkmcal.report import REPORT_NAME
+
+    if os.path.exists(report_dir) and not os.path.isdir(report_dir):
+        raise PkmcalError(f"--report '{report_dir}' exists and is not a folder; give a folder for the report")
+    check_output_path(os.path.join(report_dir, REPORT_NAME), inputs)
+
+
+def _report_data(nominal, result, setup, meas, meas_path: str, output: str):
+    """The report of ``pkmcal identify``: the measured poses are the commanded ones of the
+    file (cmd_x..), else the nominal machine's FK of the actuator readings."""
+    from pkmcal.io.setup_file import setup_to_yaml
+    from pkmcal.report.from_results import report_data_from_results
+
+    if meas.commanded is not None:
+        poses = meas.commanded
+    else:
+        with np.errstate(all="ignore"):
+            fk = nominal.fk(meas.actuators)
+        poses = np.asarray(fk.poses)[np.asarray(fk.converged, dtype=bool)]
+    try:
+        setup_text = setup_to_yaml(setup)
+    except PkmcalError:
+        setup_text = setup.sensor.kind
+    return report_data_from_results(
+        nominal, result, setup, poses, setup_summary=setup_text,
+        facts=(("measurement file", str(meas_path)), ("calibrated machine file", str(output))))
 
 
 @click.command("identifiability")
@@ -141,7 +235,8 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
 @click.option("--fix", "fix", multiple=True, metavar="NAMES", help="Parameters held (removed from the analysis).")
 @click.option("--free", "free", multiple=True, metavar="NAMES", help="Candidate parameters (default: all + sensor's free).")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON.")
-def identifiability_cmd(machine, setup_spec, poses, method, fix, free, as_json) -> None:
+@import_options
+def identifiability_cmd(machine, setup_spec, poses, method, fix, free, as_json, mapping=None) -> None:
     """Which parameters of MACHINE the SETUP can identify from POSES.csv.
 
     Prints the rank of the column-scaled, noise-weighted identification Jacobian, its
@@ -152,8 +247,8 @@ def identifiability_cmd(machine, setup_spec, poses, method, fix, free, as_json) 
     from pkmcal.cli.campaign_cmds import read_poses
 
     nominal = load_machine(machine)
-    setup = load_setup(setup_spec)
-    x = read_poses(poses, nominal)
+    setup = load_setup(setup_spec, nominal)
+    x = read_poses(poses, nominal, mapping)
     fix_names = _names(fix)
     rep = identifiability(nominal, setup, x, method=method, free=_names(free),
                           fix=None if fix_names == ["auto"] else fix_names)

@@ -15,6 +15,7 @@ import click
 import numpy as np
 
 from pkmcal.errors import PkmcalError
+from pkmcal.cli.import_options import import_options
 from pkmcal.io.atomic import atomic_write_text, check_output_path
 from pkmcal.io.machine_file import load_machine
 from pkmcal.io.tables import LENGTH_COLUMNS, format_table, read_table
@@ -60,7 +61,8 @@ def parse_pose_option(text: str, mech: Mechanism, option: str) -> np.ndarray:
 @click.argument("machine")
 @click.argument("poses")
 @click.option("-o", "--output", metavar="LEGS.csv", help="Output CSV (default: standard output).")
-def ik_cmd(machine: str, poses: str, output: str | None) -> None:
+@import_options
+def ik_cmd(machine: str, poses: str, output: str | None, mapping=None) -> None:
     """Inverse kinematics: leg lengths and readings of the poses in POSES.csv.
 
     MACHINE is a built-in name (see 'pkmcal machines') or a machine YAML file. POSES.csv has
@@ -73,7 +75,7 @@ def ik_cmd(machine: str, poses: str, output: str | None) -> None:
         check_output_path(output, [poses, machine])
     mech = load_machine(machine)
     kinds = {n: ("angle" if a else "length") for n, a in zip(mech.pose_names, mech.pose_is_angle)}
-    table = read_table(poses, mech.pose_names, kinds=kinds)
+    table = read_table(poses, mech.pose_names, kinds=kinds, mapping=mapping)
     file_poses = table.values
     internal = _to_internal(mech, file_poses)
     with np.errstate(all="ignore"):
@@ -108,14 +110,9 @@ def limit_verdicts(report: LimitReport) -> np.ndarray:
 
 
 def actuator_is_angle(mech: Mechanism) -> np.ndarray:
-    """Which actuator readings are angles (radians inside, degrees in files): the mechanism's
-    ``actuator_is_angle`` if it defines one; else its ``_actuator_unit`` ("rotary, rad" →
-    all angles); else none (hexapod legs are mm)."""
-    flags = getattr(mech, "actuator_is_angle", None)
-    if flags is None:
-        rotary = str(getattr(mech, "_actuator_unit", "")).startswith("rotary")
-        flags = (rotary,) * mech.n_actuators
-    return np.array(flags, dtype=bool)
+    """Which actuator readings are angles (radians inside, degrees in files): the
+    mechanism's :attr:`~pkmcal.mechanisms.base.Mechanism.actuator_is_angle`."""
+    return np.array(mech.actuator_is_angle, dtype=bool)
 
 
 def _to_internal(mech: Mechanism, values: np.ndarray) -> np.ndarray:
@@ -138,7 +135,8 @@ def _to_file(mech: Mechanism, values: np.ndarray) -> np.ndarray:
 @click.option("-o", "--output", metavar="POSES.csv", help="Output CSV (default: standard output).")
 @click.option("--guess", metavar="X,Y,Z,A,B,C", help="Start pose of the Newton iteration (mm, deg); "
               "default: the machine's home pose.")
-def fk_cmd(machine: str, legs: str, output: str | None, guess: str | None) -> None:
+@import_options
+def fk_cmd(machine: str, legs: str, output: str | None, guess: str | None, mapping=None) -> None:
     """Forward kinematics: the poses that give the readings in LEGS.csv.
 
     LEGS.csv has columns lambda1..lambda6 (actuator readings, mm) or l1..l6 (leg lengths,
@@ -158,7 +156,7 @@ def fk_cmd(machine: str, legs: str, output: str | None, guess: str | None) -> No
     kinds = {c: ("angle" if a else "length") for c, a in zip(mech.actuator_names, rotary)}
     if len(groups) > 1:
         kinds.update({c: "length" for c in groups[1]})
-    table = read_table(legs, either=groups, kinds=kinds)
+    table = read_table(legs, either=groups, kinds=kinds, mapping=mapping)
     values = table.values
     if table.columns == tuple(mech.actuator_names):
         values = np.where(rotary, np.deg2rad(values), values)

@@ -51,6 +51,10 @@ def _register() -> None:
     plan_cmds.register(cli)
     from pkmcal.cli import identify_cmds
     identify_cmds.register(cli)
+    from pkmcal.cli import export_cmd
+    export_cmd.register(cli)
+    from pkmcal.cli import reproduce_cmd
+    reproduce_cmd.register(cli)
 
 
 _register()

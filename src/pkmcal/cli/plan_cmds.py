@@ -17,6 +17,7 @@ import time
 import click
 import numpy as np
 
+from pkmcal.cli.import_options import import_options
 from pkmcal.io.atomic import check_output_path
 from pkmcal.io.machine_file import load_machine
 from pkmcal.io.setup_file import BUILTIN_SETUPS, load_setup
@@ -86,8 +87,9 @@ def _format_indices(ind: dict[str, float]) -> str:
 @click.option("--sight-cone", type=click.FloatRange(min=0.0, max=180.0), metavar="DEG",
               help="Full-pose/position: half-angle of the target's line-of-sight cone.")
 @click.option("-o", "--output", required=True, metavar="POSES.csv", help="Output CSV of the chosen poses.")
+@import_options
 def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, index, algorithm, seed, margin,
-             indicator_travel, plate_radius, sight_cone, output) -> None:
+             indicator_travel, plate_radius, sight_cone, output, mapping=None) -> None:
     """Choose N poses of MACHINE to measure with SETUP (paper 2 §4, paper 1 §IV).
 
     Every candidate is checked on the nominal machine (stroke, joint tilts, leg collision,
@@ -97,7 +99,7 @@ def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, 
     mech = load_machine(machine)
     setup = load_setup(setup_spec)
     check_output_path(output, [candidates_path, setup_spec, machine])
-    candidates = read_candidates_csv(candidates_path, mech) if candidates_path else None
+    candidates = read_candidates_csv(candidates_path, mech, mapping) if candidates_path else None
     progress = _Progress(f"plan ({algorithm})")
     try:
         plan = plan_poses(mech, setup, n_poses, algorithm=algorithm, index=index.upper() if index else None,
@@ -129,7 +131,8 @@ def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, 
 @click.argument("poses", metavar="POSES.csv", type=click.Path(dir_okay=False))
 @click.option("--setup", "setup_spec", required=True, metavar="SETUP.yaml", help=_SETUP_HELP)
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object (keys O1..O5, n_poses, parameters).")
-def observability_cmd(machine, poses, setup_spec, as_json) -> None:
+@import_options
+def observability_cmd(machine, poses, setup_spec, as_json, mapping=None) -> None:
     """Observability indices O1..O5 of the poses in POSES.csv (columns x,y,z mm, a,b,c deg).
 
     On the scaled, noise-weighted identification Jacobian restricted to the identifiable
@@ -137,7 +140,7 @@ def observability_cmd(machine, poses, setup_spec, as_json) -> None:
     """
     mech = load_machine(machine)
     setup = load_setup(setup_spec)
-    pose_arr = read_candidates_csv(poses, mech)
+    pose_arr = read_candidates_csv(poses, mech, mapping)
     ind = pose_set_indices(mech, setup, pose_arr)
     if as_json:
         click.echo(json.dumps({**ind, "n_poses": int(len(pose_arr))}))

@@ -287,19 +287,24 @@ def _validation_error(path: object, exc: ValidationError, lines: dict[tuple, int
 
 # -- hexapod <-> file ---------------------------------------------------------------------
 
-def _covariance_from_spec(path: object, spec: UncertaintySpec, lines: dict[tuple, int]) -> np.ndarray:
+def _covariance_from_spec(path: object, spec: UncertaintySpec, lines: dict[tuple, int],
+                          param_names: tuple[str, ...] = HEXAPOD_PARAM_NAMES,
+                          is_angle: tuple[bool, ...] | None = None) -> np.ndarray:
+    """The full covariance (p, p) in internal units. ``is_angle`` marks parameters whose
+    ``std`` is written in degrees (the exact ``covariance`` is always internal: mm, rad)."""
     def fail(loc: tuple, message: str) -> InputFileError:
         return InputFileError(path, f"{_key_path(('uncertainty',) + loc)}: {message}",
                               line=_line_of(("uncertainty",) + loc, lines))
 
     names = list(spec.parameters) if spec.parameters is not None else list(spec.std)
     for i, name in enumerate(names):
-        if name not in HEXAPOD_PARAM_NAMES:
-            close = difflib.get_close_matches(name, HEXAPOD_PARAM_NAMES, n=1)
+        if name not in param_names:
+            close = difflib.get_close_matches(name, param_names, n=1)
             hint = f" (did you mean '{close[0]}'?)" if close else ""
+            known = ("b1.x, b1.y, b1.z, a1.x, a1.y, a1.z, L0_1, ..., L0_6" if param_names is HEXAPOD_PARAM_NAMES
+                     else ", ".join(param_names))
             raise fail(("parameters", i) if spec.parameters is not None else ("std", name),
-                       f"unknown parameter {name!r}{hint}; hexapod parameters are b1.x, b1.y, b1.z, "
-                       "a1.x, a1.y, a1.z, L0_1, ..., L0_6")
+                       f"unknown parameter {name!r}{hint}; the machine's parameters are {known}")
         if name in names[:i]:
             raise fail(("parameters", i), f"parameter {name!r} is listed twice")
     if set(spec.std) != set(names):
@@ -309,6 +314,8 @@ def _covariance_from_spec(path: object, spec: UncertaintySpec, lines: dict[tuple
                 else f"{', '.join(extra)} not in 'parameters'")
         raise fail(("std",), f"{what}; give one std per entry of 'parameters'")
     std = np.array([spec.std[n] for n in names], dtype=float)
+    if is_angle is not None:
+        std = np.array([np.deg2rad(s) if is_angle[param_names.index(n_)] else s for s, n_ in zip(std, names)])
     if np.any(std < 0):
         bad = names[int(np.argmax(std < 0))]
         raise fail(("std", bad), "a standard deviation cannot be negative")
@@ -324,7 +331,7 @@ def _covariance_from_spec(path: object, spec: UncertaintySpec, lines: dict[tuple
                 raise fail((key, i), f"{len(row)} numbers, need {n} (one per parameter)")
         return np.array(rows, dtype=float).reshape(n, n)
 
-    full = np.zeros((len(HEXAPOD_PARAM_NAMES),) * 2)
+    full = np.zeros((len(param_names),) * 2)
     if n == 0:
         return full
     corr = square("correlation", spec.correlation)
@@ -358,7 +365,7 @@ def _covariance_from_spec(path: object, spec: UncertaintySpec, lines: dict[tuple
         raise fail(("std",), "the covariance overflows; give standard deviations in mm")
     if n and scale > 0 and np.min(np.linalg.eigvalsh((cov + cov.T) / 2)) < -1e-9 * scale:
         raise fail(("correlation",), "the covariance is not positive semi-definite; check the correlations")
-    idx = np.array([HEXAPOD_PARAM_NAMES.index(n_) for n_ in names], dtype=int)
+    idx = np.array([param_names.index(n_) for n_ in names], dtype=int)
     full[np.ix_(idx, idx)] = cov
     return full
 
@@ -575,6 +582,10 @@ def machine_to_text(machine: Mechanism) -> str:
     raise PkmcalError(f"cannot save machine '{machine.name}': no file format for {type(machine).__name__}")
 
 
+def _register_planar_kinds() -> None:
+    from pkmcal.io import planar_machine_file  # noqa: F401  (registers the planar kinds)
+
+
 def save_machine(machine: Mechanism, path: str | os.PathLike) -> None:
     """Write ``machine`` to the YAML file ``path`` atomically.
 
@@ -598,6 +609,8 @@ def save_machine(machine: Mechanism, path: str | os.PathLike) -> None:
                           "unchanged; use text, numbers, lists and mappings with text keys")
     atomic_write_text(path, text)
 
+
+_register_planar_kinds()
 
 __all__ = [
     "HexapodFile",

@@ -5,7 +5,8 @@ extra columns are ignored):
 
 * actuators: ``lambda1..lambda6`` (actuator readings λ_i, mm), or ``l1..l6`` (leg lengths
   L_i, mm), converted to readings with the machine's leg offsets, λ_i = L_i − L0_i
-  (paper 2 eq. 2);
+  (paper 2 eq. 2); planar machines: ``q1..ql`` (encoder readings, mm, or degrees for
+  rotary actuators, :attr:`Mechanism.actuator_is_angle`);
 * the sensor's readings: ``x,y,z,a,b,c`` (full-pose; mm, degrees), ``px,py,pz``
   (position; mm) or ``d1..dK`` (indicators; mm);
 * optional commanded pose ``cmd_x..cmd_c`` (mm, degrees).
@@ -24,7 +25,8 @@ import numpy as np
 
 from pkmcal.conventions import POSE_COLUMNS
 from pkmcal.errors import InputFileError, PkmcalError
-from pkmcal.io.tables import DEFAULT_ALIASES, canonical_name, read_table, write_table
+from pkmcal.io.import_mapping import ImportMapping
+from pkmcal.io.tables import DEFAULT_ALIASES, mapped_name, read_table, write_table
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.sensors.base import MeasurementSetup
 
@@ -89,8 +91,11 @@ def _leg_offsets(machine: Mechanism, path) -> np.ndarray:
     return np.asarray(offset, dtype=float)
 
 
-def load_measurements(path: str | os.PathLike, machine: Mechanism, setup: MeasurementSetup) -> Measurements:
-    """Read a measurement CSV for ``machine`` measured with ``setup`` (see module docstring).
+def load_measurements(path: str | os.PathLike, machine: Mechanism, setup: MeasurementSetup,
+                      mapping: ImportMapping | None = None) -> Measurements:
+    """Read a measurement CSV for ``machine`` measured with ``setup`` (see module docstring);
+    ``mapping`` renames the columns and sets the units of a file from another tool
+    (:mod:`pkmcal.io.import_mapping`).
 
     Raises :class:`~pkmcal.errors.InputFileError` naming the file, the missing columns and
     what the setup expects, or the line and column of a bad cell.
@@ -101,7 +106,7 @@ def load_measurements(path: str | os.PathLike, machine: Mechanism, setup: Measur
     legs = tuple(f"l{i + 1}" for i in range(machine.n_actuators))
     reading_cols = tuple(sensor.reading_names)
     cmd_cols = command_columns(machine)
-    kinds = {**_kinds(act, (False,) * len(act)), **_kinds(legs, (False,) * len(legs)),
+    kinds = {**_kinds(act, machine.actuator_is_angle), **_kinds(legs, (False,) * len(legs)),
              **_kinds(reading_cols, sensor.reading_is_angle),
              **_kinds(cmd_cols, machine.pose_is_angle)}
     try:
@@ -111,7 +116,7 @@ def load_measurements(path: str | os.PathLike, machine: Mechanism, setup: Measur
         raise InputFileError(src, f"cannot read the measurement file: {exc.strerror or exc}") from None
     except UnicodeDecodeError as exc:
         raise InputFileError(src, f"not a UTF-8 text file (byte {exc.start}); save it as UTF-8 CSV") from None
-    header = _header(text)
+    header = _header(text, mapping)
     with_cmd = [c for c in cmd_cols if c in header]
     if with_cmd and len(with_cmd) != len(cmd_cols):
         missing = [c for c in cmd_cols if c not in header]
@@ -119,7 +124,7 @@ def load_measurements(path: str | os.PathLike, machine: Mechanism, setup: Measur
                                   f"give all of {', '.join(cmd_cols)} (mm, deg) or none")
     columns = reading_cols + (cmd_cols if with_cmd else ())
     try:
-        table = read_table(src, columns, either=[act, legs], kinds=kinds, text=text)
+        table = read_table(src, columns, either=[act, legs], kinds=kinds, text=text, mapping=mapping)
     except InputFileError as exc:
         if "missing column" in str(exc):
             where = f"{exc.path}" + (f", line {exc.line}" if exc.line is not None else "") + ": "
@@ -136,6 +141,8 @@ def load_measurements(path: str | os.PathLike, machine: Mechanism, setup: Measur
     notes: tuple[str, ...] = ()
     if all(c in table.columns for c in act):
         actuators = table[list(act)]
+        rot = np.array(machine.actuator_is_angle, dtype=bool)   # rotary encoders: degrees in files
+        actuators[:, rot] = np.deg2rad(actuators[:, rot])
     else:
         actuators = table[list(legs)] - _leg_offsets(machine, src)
         notes = (f"{src}: columns {legs[0]}..{legs[-1]} are leg lengths; converted to actuator readings "
@@ -155,12 +162,12 @@ def _units(sensor) -> str:
     return "mm"
 
 
-def _header(text: str) -> set[str]:
+def _header(text: str, mapping: ImportMapping | None = None) -> set[str]:
     """Canonical names of the header row (first non-blank, non-comment line)."""
     for line in text.splitlines():
         s = line.strip()
         if s and not s.startswith("#"):
-            return {canonical_name(c.strip().strip('"'), DEFAULT_ALIASES) for c in s.split(",")}
+            return {mapped_name(c.strip().strip('"'), mapping, DEFAULT_ALIASES) for c in s.split(",")}
     return set()
 
 
@@ -175,7 +182,8 @@ def measurement_columns(measurements: Measurements, machine: Mechanism, setup: M
                           f"sensor gives {sensor.n_readings}")
     cols: dict[str, np.ndarray] = {}
     for j, name in enumerate(machine.actuator_names):
-        cols[name] = measurements.actuators[:, j]
+        v = measurements.actuators[:, j]
+        cols[name] = np.rad2deg(v) if machine.actuator_is_angle[j] else v
     for j, (name, ang) in enumerate(zip(sensor.reading_names, sensor.reading_is_angle)):
         v = measurements.readings[:, j]
         cols[name] = np.rad2deg(v) if ang else v

@@ -27,7 +27,21 @@ Full pose (paper 1 §III), with optional world→base and platform→target tran
     target: {x: 0, y: 0, z: 30}   # initial target offset on the platform, mm (free by default)
     noise: {reading: 0.01, actuator: 0.005}
 
-Built-in setups (:data:`BUILTIN_SETUPS`) are usable by name wherever a setup file is.
+A tracker on the tool point of a planar machine (paper 3 §3), with the physics that only
+``pkmcal simulate`` / ``pkmcal verify`` use (the identifier never sees them)::
+
+    sensor: planar-tool
+    target: {x: 0, y: 0}          # tool point P_t in the plate frame, mm (free by default)
+    world: {x: 0, y: 0, c: 0}     # optional: base frame in the tracker frame, mm / deg
+    free: [target.x, target.y, world.x, world.y, world.c]   # optional: unknown tracker frame
+    noise: {reading: 0.010, actuator: 1.0e-5}    # tracker mm; encoders mm (linear) or rad (rotary)
+    simulation:
+      stiffness: 5.0e7            # actuator stiffness K: N/mm (linear) or N·mm/rad (rotary); one or one per actuator
+      load: [0, -30]              # in-plane force on the tool point, N (base frame)
+
+Built-in setups (:data:`BUILTIN_SETUPS`) are usable by name wherever a setup file is. A
+planar-tool setup is bound to its machine's pose dimension (2 or 3) by :func:`bind_setup`
+(``load_setup(path, machine)`` does it).
 """
 
 from __future__ import annotations
@@ -43,11 +57,14 @@ from pydantic import BaseModel, ConfigDict, ValidationError, field_validator
 from pkmcal.errors import InputFileError, PkmcalError
 from pkmcal.io._yaml import FlowList, RawFloat, YamlSyntaxError, deg_to_rad, dump_yaml, parse_yaml, rad_to_deg_text
 from pkmcal.io.atomic import atomic_write_text
-from pkmcal.sensors import FullPoseSensor, IndicatorSensor, MeasurementSetup, NoiseModel, PositionSensor
+from pkmcal.mechanisms.statics import StaticsModel
+from pkmcal.sensors import FullPoseSensor, IndicatorSensor, MeasurementSetup, NoiseModel, PlanarToolSensor, PositionSensor
 
 Number = float
 Values = Union[float, list[float]]
 SQRT3 = math.sqrt(3.0)
+#: Largest accepted noise value (mm, rad, deg): beyond it the weights 1/σ² underflow.
+MAX_NOISE_STD = 1e6
 
 
 class _Strict(BaseModel):
@@ -83,13 +100,18 @@ class _Noise(_Strict):
     @classmethod
     def _non_negative(cls, v):
         vals = v if isinstance(v, list) else [v]
-        if v is not None and (not vals or any(not math.isfinite(x) or x < 0 for x in vals)):
-            raise ValueError("must be a non-negative number or a non-empty list of them")
+        if v is not None and (not vals or any(not math.isfinite(x) or x < 0 or x > MAX_NOISE_STD for x in vals)):
+            raise ValueError(f"must be a non-negative number (at most {MAX_NOISE_STD:g}) or a non-empty list of them")
         return v
 
 
+class _Simulation(_Strict):
+    stiffness: Values
+    load: tuple[Number, Number] | None = None
+
+
 class _Setup(_Strict):
-    sensor: Literal["full-pose", "position", "indicators"]
+    sensor: Literal["full-pose", "position", "indicators", "planar-tool"]
     description: str = ""
     indicators: list[tuple[Number, Number]] | None = None
     plane_offset: Number | None = None
@@ -99,6 +121,7 @@ class _Setup(_Strict):
     target: _Point | None = None
     free: list[str] | None = None
     noise: _Noise
+    simulation: _Simulation | None = None
 
 
 #: Keys allowed for each sensor kind (besides sensor, description, free, noise).
@@ -106,11 +129,13 @@ _SENSOR_KEYS = {
     "full-pose": ("world", "tool"),
     "position": ("target", "world"),
     "indicators": ("indicators", "plane_offset", "zero"),
+    "planar-tool": ("target", "world"),
 }
 _NOISE_KEYS = {
     "full-pose": ("position", "orientation", "orientation_deg"),
     "position": ("reading",),
     "indicators": ("reading",),
+    "planar-tool": ("reading",),
 }
 
 
@@ -144,6 +169,28 @@ def _laser_tracker() -> MeasurementSetup:
     )
 
 
+#: Built-in planar tracker setups (benchmarks/redundant.py, paper 3 §3): tracker σ 0.010 mm
+#: per axis (Leica AT901), load [0, −30] N on the tool point, and per actuator type
+#: (encoder σ, stiffness K): rotary 1e-5 rad, 5e7 N·mm/rad; linear 0.001 mm, 2e4 N/mm.
+PLANAR_TRACKER_STD = 0.010
+PLANAR_LOAD = (0.0, -30.0)
+PLANAR_ACTUATORS = {"rotary": (1e-5, 5e7), "linear": (1e-3, 2e4)}
+
+
+def _planar_tracker(kind: str, machine=None) -> MeasurementSetup:
+    if kind == "auto":
+        if machine is None:
+            raise PkmcalError("the built-in setup 'planar-tracker' depends on the machine's actuators; use "
+                              "planar-tracker-rotary or planar-tracker-linear here")
+        kind = "rotary" if any(machine.actuator_is_angle) else "linear"
+    enc, k = PLANAR_ACTUATORS[kind]
+    return MeasurementSetup(
+        PlanarToolSensor(n_pose=2 if machine is None else machine.n_dof),
+        NoiseModel(reading_std=np.full(2, PLANAR_TRACKER_STD), actuator_std=np.array(enc)),
+        simulation=StaticsModel(stiffness=np.array(k), load=np.array(PLANAR_LOAD)),
+    )
+
+
 #: Built-in setups by name → (factory, one-line description).
 BUILTIN_SETUPS = {
     "indicators-prototype": (
@@ -160,17 +207,62 @@ BUILTIN_SETUPS = {
         _laser_tracker,
         "3D laser tracker on one target point (offset free, initial 0): noise std 0.01 mm, 0.005 mm (legs)",
     ),
+    "planar-tracker": (
+        lambda machine=None: _planar_tracker("auto", machine),
+        "planar machines (paper 3): planar-tracker-rotary or -linear by the machine's actuators",
+    ),
+    "planar-tracker-rotary": (
+        lambda machine=None: _planar_tracker("rotary", machine),
+        "planar tool-point tracker (target free, initial 0): std 0.010 mm, encoders 1e-5 rad; "
+        "simulation: K 5e7 N*mm/rad, load [0, -30] N",
+    ),
+    "planar-tracker-linear": (
+        lambda machine=None: _planar_tracker("linear", machine),
+        "planar tool-point tracker (target free, initial 0): std 0.010 mm, encoders 0.001 mm; "
+        "simulation: K 2e4 N/mm, load [0, -30] N",
+    ),
 }
 
+_PLANAR_BUILTINS = ("planar-tracker", "planar-tracker-rotary", "planar-tracker-linear")
 
-def builtin_setup(name: str) -> MeasurementSetup:
+
+def builtin_setup(name: str, machine=None) -> MeasurementSetup:
+    """The built-in setup ``name``; bound to ``machine`` (:func:`bind_setup`) when given."""
     try:
         factory, _ = BUILTIN_SETUPS[name]
     except KeyError:
         raise PkmcalError(
             f"unknown setup '{name}': not a file and not a built-in setup ({', '.join(BUILTIN_SETUPS)})"
         ) from None
-    return factory()
+    setup = factory(machine) if name in _PLANAR_BUILTINS else factory()
+    return setup if machine is None else bind_setup(setup, machine, name)
+
+
+def bind_setup(setup: MeasurementSetup, machine, source: object = "setup") -> MeasurementSetup:
+    """``setup`` for ``machine``: a planar-tool sensor takes the machine's pose dimension
+    (2 or 3); a sensor that cannot measure the machine, or a ``simulation:`` stiffness list
+    of the wrong length, is a :class:`PkmcalError` naming ``source``."""
+    import dataclasses
+
+    planar_machine = machine.n_dof in (2, 3)
+    sensor = setup.sensor
+    if isinstance(sensor, PlanarToolSensor) != planar_machine:
+        want = "planar-tool" if planar_machine else "full-pose, position or indicators"
+        raise PkmcalError(f"{source}: a '{sensor.kind}' sensor cannot measure machine '{machine.name}' "
+                          f"({machine.n_dof} pose coordinates); use a '{want}' setup")
+    if isinstance(sensor, PlanarToolSensor) and sensor.n_pose != machine.n_dof:
+        sensor = dataclasses.replace(sensor, n_pose=machine.n_dof)
+        setup = dataclasses.replace(setup, sensor=sensor)
+    a = np.asarray(setup.noise.actuator_std, dtype=float)
+    if a.ndim and a.size not in (1, machine.n_actuators):
+        raise PkmcalError(f"{source}: {a.size} actuator noise values but machine '{machine.name}' has "
+                          f"{machine.n_actuators} actuators; give one value or one per actuator")
+    if setup.simulation is not None:
+        try:
+            setup.simulation.stiffness_for(machine)
+        except PkmcalError as exc:
+            raise PkmcalError(f"{source}: simulation.stiffness: {exc}") from None
+    return setup
 
 
 # -- loading -----------------------------------------------------------------------------
@@ -195,6 +287,7 @@ def _key_text(loc: tuple) -> str:
     parts = [p for p in loc if not (isinstance(p, str) and ("[" in p or p in ("float", "int")))]
     text = ""
     for p in parts:
+        p = p if isinstance(p, int) or str(p).isprintable() else repr(p)[1:-1]  # one line, even for 'a\nb'
         text += f"[{p}]" if isinstance(p, int) else (f".{p}" if text else str(p))
     return text or "(top level)"
 
@@ -212,15 +305,16 @@ def _expand(path, lines, value, n: int, loc: tuple, unit: str) -> np.ndarray:
     return np.full(n, float(value))
 
 
-def load_setup(path: str | os.PathLike) -> MeasurementSetup:
-    """The measurement setup of a YAML file, or of a built-in setup name.
+def load_setup(path: str | os.PathLike, machine=None) -> MeasurementSetup:
+    """The measurement setup of a YAML file, or of a built-in setup name; bound to
+    ``machine`` (:func:`bind_setup`) when one is given.
 
     Raises :class:`~pkmcal.errors.InputFileError` naming the file, line and key.
     """
     p = Path(path)
     if not p.exists():
         if str(path) in BUILTIN_SETUPS:
-            return builtin_setup(str(path))
+            return builtin_setup(str(path), machine)
         raise PkmcalError(
             f"setup file '{path}' does not exist and is not a built-in setup ({', '.join(BUILTIN_SETUPS)})"
         )
@@ -237,23 +331,27 @@ def load_setup(path: str | os.PathLike) -> MeasurementSetup:
     try:
         spec = _Setup.model_validate(data)
     except ValidationError as exc:
-        err = exc.errors()[0]
+        errs = exc.errors()
+        err = next((e for e in errs if e["type"] == "extra_forbidden"), errs[0])  # a misspelt key first
         loc = tuple(err["loc"])
         if err["type"] == "missing":
             what = "is missing" + (
                 "; say which sensor: full-pose, position or indicators" if loc == ("sensor",)
                 else "; give the actuator noise (mm), e.g. noise: {reading: 0.01, actuator: 0.005}"
-                if loc == ("noise", "actuator") else "")
+                if loc == ("noise", "actuator") else
+                "; give the actuator stiffness, e.g. simulation: {stiffness: 2.0e4, load: [0, -30]} "
+                "(N/mm or N*mm/rad; N)" if loc == ("simulation", "stiffness") else "")
         elif err["type"] == "extra_forbidden":
             model = {(): _Setup, ("noise",): _Noise, ("world",): _Transform, ("tool",): _Transform,
-                     ("target",): _Point}.get(loc[:-1], _Setup)
+                     ("target",): _Point, ("simulation",): _Simulation}.get(loc[:-1], _Setup)
             what = f"is not a setup key here; remove or correct it (allowed: {', '.join(model.model_fields)})"
         else:
             what = err["msg"][0].lower() + err["msg"][1:]
             if err["type"] == "literal_error" and loc == ("sensor",):
-                what = "must be one of full-pose, position, indicators"
+                what = "must be one of full-pose, position, indicators, planar-tool"
         _fail(path, lines, loc, what)
-    return _build(path, lines, spec)
+    setup = _build(path, lines, spec)
+    return setup if machine is None else bind_setup(setup, machine, path)
 
 
 def _build(path, lines, spec: _Setup) -> MeasurementSetup:
@@ -292,6 +390,19 @@ def _build(path, lines, spec: _Setup) -> MeasurementSetup:
             if reading is None:
                 _fail(path, lines, ("noise", "reading"), "is missing; give the indicator noise (mm)")
             reading_std = _expand(path, lines, reading, k, ("noise", "reading"), "mm")
+        elif kind == "planar-tool":
+            if spec.target is not None and spec.target.z != 0:
+                _fail(path, lines, ("target", "z"), "a planar tool point has no z; give target: {x, y} (mm)")
+            if spec.world is not None:
+                for key in ("z", "a", "b"):
+                    if getattr(spec.world, key) != 0:
+                        _fail(path, lines, ("world", key), "a planar tracker frame has only x, y (mm) and c (deg)")
+            target = None if spec.target is None else [spec.target.x, spec.target.y]
+            world = None if spec.world is None else [spec.world.x, spec.world.y, deg_to_rad(spec.world.c)]
+            sensor = PlanarToolSensor(n_pose=2, target=target, world=world, free=free)
+            if noise.reading is None:
+                _fail(path, lines, ("noise", "reading"), "is missing; give the tracker noise (mm)")
+            reading_std = _expand(path, lines, noise.reading, 2, ("noise", "reading"), "mm")
         elif kind == "position":
             target = None if spec.target is None else [spec.target.x, spec.target.y, spec.target.z]
             sensor = PositionSensor(target=target, world=tf(spec.world), free=free)
@@ -318,9 +429,20 @@ def _build(path, lines, spec: _Setup) -> MeasurementSetup:
     actuator = np.array(noise.actuator, dtype=float)
     if noise.distribution == "uniform":  # half-widths h → std h/√3
         reading_std, actuator = reading_std / SQRT3, actuator / SQRT3
+    simulation = None
+    if spec.simulation is not None:
+        if kind != "planar-tool":
+            _fail(path, lines, ("simulation",), "applies to redundantly actuated planar machines (sensor: planar-tool) "
+                  "only; remove it")
+        try:
+            simulation = StaticsModel(stiffness=np.array(spec.simulation.stiffness, dtype=float),
+                                      load=None if spec.simulation.load is None else np.array(spec.simulation.load))
+        except PkmcalError as exc:
+            _fail(path, lines, ("simulation", "stiffness" if "stiffness" in str(exc) else "load"), str(exc))
     return MeasurementSetup(
         sensor=sensor,
         noise=NoiseModel(reading_std=reading_std, actuator_std=actuator, distribution=noise.distribution),
+        simulation=simulation,
     )
 
 
@@ -370,6 +492,10 @@ def setup_to_yaml(setup: MeasurementSetup) -> str:
         doc["target"] = {k: float(v) for k, v in zip("xyz", s.target)}
         if np.any(s.world != 0):
             doc["world"] = _transform_dict(s.world)
+    elif isinstance(s, PlanarToolSensor):
+        doc["target"] = {k: float(v) for k, v in zip("xy", s.target)}
+        if np.any(s.world != 0):
+            doc["world"] = {"x": float(s.world[0]), "y": float(s.world[1]), "c": RawFloat(rad_to_deg_text(s.world[2]))}
     elif isinstance(s, FullPoseSensor):
         if np.any(s.world != 0):
             doc["world"] = _transform_dict(s.world)
@@ -389,6 +515,11 @@ def setup_to_yaml(setup: MeasurementSetup) -> str:
         nd["reading"] = _values(std, uniform)
     nd["actuator"] = _values(noise.actuator_std, uniform)
     doc["noise"] = nd
+    if setup.simulation is not None:
+        sim: dict = {"stiffness": _values(setup.simulation.stiffness, False)}
+        if setup.simulation.load is not None:
+            sim["load"] = FlowList(float(v) for v in setup.simulation.load)
+        doc["simulation"] = sim
     head = "# pkmcal measurement setup: mm, transform angles in degrees, orientation noise in rad\n"
     if noise.distribution == "uniform":
         head += "# uniform noise: values are half-widths h (std = h/sqrt(3))\n"

@@ -21,12 +21,15 @@ import io
 import os
 import re
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
+from typing import TYPE_CHECKING, Mapping, Sequence
 
 import numpy as np
 
 from pkmcal.errors import InputFileError, PkmcalError
 from pkmcal.io.atomic import atomic_write_text
+
+if TYPE_CHECKING:
+    from pkmcal.io.import_mapping import ImportMapping
 
 #: Conversion factors to pkmcal's file units, by quantity.
 LENGTH_UNITS: dict[str, float] = {"mm": 1.0, "m": 1000.0, "cm": 10.0, "um": 1e-3, "µm": 1e-3, "in": 25.4, "inch": 25.4}
@@ -95,6 +98,24 @@ def canonical_name(header_cell: str, aliases: Mapping[str, str] = DEFAULT_ALIASE
     return aliases.get(key, key)
 
 
+def mapped_name(header_cell: str, mapping: "ImportMapping | None" = None,
+                aliases: Mapping[str, str] = DEFAULT_ALIASES) -> str:
+    """The canonical column name of a header cell after ``mapping``'s renaming (if any)."""
+    if mapping is not None and mapping.rename:
+        header_cell = mapping.rename.get(header_cell.strip().lower(), header_cell)
+    return canonical_name(header_cell, aliases)
+
+
+def _check_renamed(src: str, header: Sequence[str], mapping: "ImportMapping", line: int) -> None:
+    have = {h.strip().lower() for h in header}
+    missing = [old for old in mapping.rename if old not in have]
+    if missing:
+        found = ", ".join(repr(h) for h in header)
+        raise InputFileError(src, f"--columns renames {', '.join(repr(m) for m in missing)}, but the header has no "
+                                  f"such column (it has {found}); use the file's column names on the left of '='",
+                             line=line)
+
+
 def _split(line: str) -> list[str]:
     if '"' in line:
         return [c.strip() for c in next(csv.reader([line]))]
@@ -139,6 +160,7 @@ def read_table(
     kinds: Mapping[str, str] | None = None,
     aliases: Mapping[str, str] = DEFAULT_ALIASES,
     text: str | None = None,
+    mapping: "ImportMapping | None" = None,
 ) -> Table:
     """Read the numeric ``columns`` of the CSV file ``path``.
 
@@ -153,6 +175,9 @@ def read_table(
         mm/deg naming a quantity no column has is accepted (nothing to convert).
     aliases : lower-case alternative header names → canonical names.
     text : the file's contents, if already read (``path`` then only names it in errors).
+    mapping : an :class:`~pkmcal.io.import_mapping.ImportMapping` for files from other tools:
+        header cells renamed before the aliases apply (every renamed column must exist), and
+        units that replace the file's units line.
 
     Raises :class:`InputFileError` naming file, line and column for every malformed input.
     """
@@ -199,7 +224,10 @@ def read_table(
         raise InputFileError(src, f"the file is empty: expected a header row naming the columns "
                                   f"(e.g. {wanted_hint}) and one row per pose")
 
-    canon = [canonical_name(h, aliases) for h in header]
+    if mapping is not None:
+        _check_renamed(src, header, mapping, header_line)
+        units.update(mapping.units)
+    canon = [mapped_name(h, mapping, aliases) for h in header]
     present: dict[str, int] = {}
     for i, name in enumerate(canon):
         if name in present and name:
@@ -336,6 +364,7 @@ __all__ = [
     "Table",
     "canonical_name",
     "format_table",
+    "mapped_name",
     "read_table",
     "write_table",
 ]

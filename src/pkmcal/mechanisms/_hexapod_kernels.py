@@ -2,9 +2,11 @@
 
 Why numba: batched NumPy needs one LAPACK call per 6×6 Newton system; measured on the
 2-core reference machine, ``np.linalg.solve`` on 100,000 stacked 6×6 systems alone costs
-0.49 µs/pose per iteration, so a NumPy FK cannot meet the 1 µs/pose target
-(``benchmarks/kinematics.py``). These kernels loop over poses in parallel (``prange``),
-do the 6×6 elimination in registers and allocate nothing per pose.
+0.5–0.9 µs/pose per iteration (0.49 as first measured; 0.91 re-measured with the other
+core busy), so a NumPy FK
+cannot meet the 1 µs/pose target (``benchmarks/kinematics.py``). These kernels loop over
+poses in parallel (``prange``), do the 6×6 elimination in registers and allocate nothing
+per pose.
 
 Conventions (see :mod:`pkmcal.conventions`): pose = (x, y, z, a, b, c), R = Rz(c)Ry(b)Rx(a),
 leg vector l_i = p + R a_i − b_i (paper 1 eq. 1; paper 2 eq. 1 with its Rᵀ read as R),
@@ -14,7 +16,23 @@ leg length L_i = ‖l_i‖. FK is Newton–Raphson on the twist (δp, δω):
     p ← p + δp,   R ← exp([δω]×) R          (multiplicative SO(3) update)
 
 A pose is reported converged only when max_i |L_i − L_target,i| ≤ tol, i.e. only when its
-IK reproduces the input lengths.
+IK reproduces the input lengths; NaN/inf lengths or guesses and singular systems are
+reported not converged.
+
+Where the FK time goes (one thread, stewart-prototype, 100,000 poses cold-started from
+home, ±20° box, ~4 Newton steps per pose): the 6×6 solve dominated (~0.35 µs per solve
+with variable-bound loops, ~0.08 µs per IK + Jacobian evaluation). Kept, because measured
+faster: loops with constant trip counts that LLVM unrolls, and reciprocal pivots (solve
+~0.12 µs); hoisting the first step from a guess shared by the batch (:func:`fk_newton`);
+a serial kernel for small batches. FK, before → after, same iterates and iteration
+counts (mean 3.99, all converged): 1.19 → 0.47–0.49 µs/pose on 2 threads in a quiet
+window (2.47 → 0.87–0.91 on one thread); interleaved A/B runs with other jobs on the
+machine: 1.18–1.27 → 0.71–0.73 (2.35–2.38 → 1.37–1.39). Cost: the first call compiles
+the FK kernels (parallel, serial) for ~23 s and the IK ones for ~2 s
+on this machine, then loads from numba's on-disk cache in ~0.02 s.
+Tried and dropped: fastmath on the solve (no measurable gain); a second-order first
+step from the guess's leg-length Hessians (−0.36 iterations per pose, no net time saved);
+plain (non-inlined) helpers (compile 9 s instead of 23 s, but FK 15–25 % slower).
 """
 
 from __future__ import annotations
@@ -28,6 +46,8 @@ _OPTS = dict(cache=True, nogil=True, error_model="numpy")
 _CHUNK = 512
 #: Batches smaller than this run on one thread (no thread-pool start-up).
 _SERIAL_BELOW = 64
+#: The shared-guess first step (see :func:`fk_newton`) is hoisted from this batch size on.
+_HOIST_FROM = 8
 
 
 @nb.njit(inline="always", **_OPTS)
@@ -293,7 +313,10 @@ def _fk_serial(lengths, guesses, base, platform, tol, max_iter):
     converged = np.zeros(n, dtype=np.bool_)
     iterations = np.zeros(n, dtype=np.int64)
     residual = np.empty(n)
-    shared_ok, Lg, Jinv = _shared_guess_step(guesses[0], base, platform)
+    if n >= _HOIST_FROM:
+        shared_ok, Lg, Jinv = _shared_guess_step(guesses[0], base, platform)
+    else:  # J_g⁻¹ costs 6 solves: not worth it for a handful of poses
+        shared_ok, Lg, Jinv = False, np.empty(6), np.empty((6, 6))
     _fk_rows(lengths, guesses, base, platform, tol, max_iter, poses, converged, iterations, residual,
              shared_ok, Lg, Jinv, 0, n)
     return poses, converged, iterations, residual

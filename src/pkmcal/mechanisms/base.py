@@ -84,6 +84,12 @@ class Mechanism(ABC):
     actuator_names: tuple[str, ...]
 
     @property
+    def actuator_is_angle(self) -> tuple[bool, ...]:
+        """True for actuator readings that are angles (rotary actuators: radians inside,
+        degrees in files and on the command line); all False (linear, mm) by default."""
+        return (False,) * self.n_actuators
+
+    @property
     def n_dof(self) -> int:
         return len(self.pose_names)
 

@@ -44,7 +44,7 @@ false FK minima). Case 1's actuator angles are kept on one continuous branch
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import ClassVar
 
 import numpy as np
@@ -79,6 +79,8 @@ class PlanarMechanism(Mechanism):
     workspace: np.ndarray
     description: str = ""
     covariance: np.ndarray | None = None
+    #: Free-form information kept in the machine file (e.g. the ``calibration`` block).
+    metadata: dict = field(default_factory=dict)
 
     #: Parameter names, in the order of ``rho`` (set by each machine class).
     _names: ClassVar[tuple[str, ...]] = ()
@@ -170,6 +172,12 @@ class PlanarMechanism(Mechanism):
             res = np.max(np.abs(q - self.ik(x)), axis=1)
         ok = done & np.isfinite(res) & (res <= res_tol)
         return FKResult(poses=x, converged=ok, iterations=it, residual=res)
+
+    @property
+    def actuator_is_angle(self) -> tuple[bool, ...]:
+        """True for every actuator of a machine with rotary actuators (readings in rad inside,
+        degrees in files)."""
+        return (self._actuator_unit.startswith("rotary"),) * self.n_actuators
 
     @property
     def param_is_angle(self) -> tuple[bool, ...]:

@@ -64,6 +64,36 @@ class EquilibriumResult:
     iterations: np.ndarray
 
 
+@dataclass(frozen=True)
+class StaticsModel:
+    """What a simulation of a redundantly actuated machine needs besides the kinematics:
+    actuator stiffness K (one value or one per actuator; N/mm for linear, N·mm/rad for
+    rotary actuators) and the in-plane load F (2,) on the tool point (N, base frame; None
+    for no load). Written in the ``simulation:`` block of a setup file."""
+
+    stiffness: np.ndarray
+    load: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        k = np.array(self.stiffness, dtype=float).reshape(-1)
+        if k.size == 0 or not np.all(np.isfinite(k)) or np.any(k <= 0):
+            raise PkmcalError("actuator stiffness must be positive numbers (N/mm or N·mm/rad)")
+        object.__setattr__(self, "stiffness", k if k.size > 1 else k.reshape(()))
+        if self.load is not None:
+            f = np.array(self.load, dtype=float).reshape(-1)
+            if f.shape != (2,) or not np.all(np.isfinite(f)):
+                raise PkmcalError(f"the tool load is an in-plane force [Fx, Fy] in N; got {self.load!r}")
+            object.__setattr__(self, "load", f)
+
+    def stiffness_for(self, mechanism: Mechanism) -> np.ndarray:
+        """K (l,) for ``mechanism``; a clear error when the count does not match."""
+        k = np.asarray(self.stiffness, dtype=float)
+        if k.ndim and k.size != mechanism.n_actuators:
+            raise PkmcalError(f"the setup gives {k.size} actuator stiffnesses but machine '{mechanism.name}' has "
+                              f"{mechanism.n_actuators} actuators; give one value or one per actuator")
+        return np.broadcast_to(k, (mechanism.n_actuators,)).copy()
+
+
 def _load_terms(load_point, load, x):
     """(p_t (N, 2) or None, J_f (N, 2, n) or None, F (2,) or None)."""
     if load is None:

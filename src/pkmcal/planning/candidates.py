@@ -266,14 +266,16 @@ def grid_poses(box: np.ndarray, per_axis: int) -> np.ndarray:
     return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, box.shape[0])
 
 
-def read_candidates_csv(path: str | os.PathLike, mechanism: Mechanism | None = None) -> np.ndarray:
+def read_candidates_csv(path: str | os.PathLike, mechanism: Mechanism | None = None, mapping=None) -> np.ndarray:
     """Poses (N, n) (mm, rad) from a CSV file with the machine's pose columns (default
-    x, y, z, a, b, c; lengths mm, angles degrees)."""
+    x, y, z, a, b, c; lengths mm, angles degrees); ``mapping`` an optional
+    :class:`~pkmcal.io.import_mapping.ImportMapping` for files from other tools."""
     from pkmcal.io.tables import read_table
 
     names = tuple(mechanism.pose_names) if mechanism is not None else POSE_COLUMNS
     is_angle = tuple(mechanism.pose_is_angle) if mechanism is not None else (False,) * 3 + (True,) * 3
-    table = read_table(path, names, kinds={nm: ("angle" if a else "length") for nm, a in zip(names, is_angle)})
+    table = read_table(path, names, kinds={nm: ("angle" if a else "length") for nm, a in zip(names, is_angle)},
+                       mapping=mapping)
     if len(table) == 0:
         raise InputFileError(path, "no candidate poses (the file has a header but no rows)")
     poses = np.array(table[list(names)], dtype=float)

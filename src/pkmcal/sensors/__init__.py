@@ -3,21 +3,24 @@
 * :class:`FullPoseSensor` (``full-pose``): x, y, z, a, b, c of a target frame (paper 1)
 * :class:`PositionSensor` (``position``): one target point, 3D laser tracker
 * :class:`IndicatorSensor` (``indicators``): K ≥ 3 dial indicators under the platform (paper 2)
+* :class:`PlanarToolSensor` (``planar-tool``): tracker on the tool point of a planar machine (paper 3)
 """
 
 from pkmcal.sensors.base import MeasurementSetup, NoiseModel, Sensor
 from pkmcal.sensors.full_pose import FullPoseSensor
 from pkmcal.sensors.indicators import IndicatorSensor
+from pkmcal.sensors.planar_tool import PlanarToolSensor
 from pkmcal.sensors.position import PositionSensor
 
 #: Sensor classes by the ``kind`` written in setup files.
-SENSOR_KINDS = {cls.kind: cls for cls in (FullPoseSensor, PositionSensor, IndicatorSensor)}
+SENSOR_KINDS = {cls.kind: cls for cls in (FullPoseSensor, PositionSensor, IndicatorSensor, PlanarToolSensor)}
 
 __all__ = [
     "FullPoseSensor",
     "IndicatorSensor",
     "MeasurementSetup",
     "NoiseModel",
+    "PlanarToolSensor",
     "PositionSensor",
     "SENSOR_KINDS",
     "Sensor",

@@ -16,8 +16,12 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from pkmcal.mechanisms.statics import StaticsModel
 
 
 class Sensor(ABC):
@@ -109,7 +113,11 @@ class NoiseModel:
 
 @dataclass(frozen=True)
 class MeasurementSetup:
-    """A sensor and the noise of its readings and of the actuators."""
+    """A sensor and the noise of its readings and of the actuators; optionally the physics
+    that only a simulation uses (``simulation``: a
+    :class:`~pkmcal.mechanisms.statics.StaticsModel`, actuator stiffness and tool load of a
+    redundantly actuated machine; the identifier never reads it)."""
 
     sensor: Sensor
     noise: NoiseModel
+    simulation: "StaticsModel | None" = None

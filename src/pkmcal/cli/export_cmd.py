@@ -1,0 +1,147 @@
+"""``pkmcal export``: a calibrated machine file → controller settings or a JSON record.
+
+* ``--format linuxcnc``: LinuxCNC ``genhexkins`` HAL ``setp`` lines for the base and
+  platform joints and the leg offsets / joint limits homing needs
+  (:func:`pkmcal.io.export_linuxcnc.linuxcnc_hal`; strut length L_i = ‖p + R a_i − b_i‖,
+  paper 1 eq. 1, paper 2 eq. 1).
+* ``--format json``: the identified parameters ρ with their standard deviations σ_i and
+  correlations ρ_ij = Σ_ij / (σ_i σ_j) from the machine file's covariance Σ, units,
+  conventions and calibration metadata (:func:`calibration_json`).
+
+Both are deterministic: the same machine file gives the same bytes. Written atomically;
+the output may not be the input file.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+
+import click
+import numpy as np
+
+from pkmcal import __version__
+from pkmcal.errors import PkmcalError
+from pkmcal.io.atomic import atomic_write_text, check_output_path
+from pkmcal.io.machine_file import load_machine
+from pkmcal.mechanisms.base import Mechanism
+
+#: Version of the JSON layout written by :func:`calibration_json`.
+JSON_FORMAT_VERSION = 1
+
+CONVENTIONS = {
+    "pose": "x y z (mm) a b c (deg): the platform frame {P} in the base frame {F}; R = Rz(c) Ry(b) Rx(a) "
+            "(roll a, pitch b, yaw c about the fixed base axes; scipy extrinsic 'xyz'; = LinuxCNC genhexkins)",
+    "hexapod_parameters": "per leg i = 1..6: bi.x, bi.y, bi.z = base joint b_i in {F}; ai.x, ai.y, ai.z = platform "
+                          "joint a_i in {P}; L0_i = leg offset: leg length L_i = |p + R a_i - b_i| = L0_i + lambda_i, "
+                          "lambda_i the actuator reading",
+    "uncertainty": "std = square root of the diagonal of the parameter covariance of the machine file; correlation = "
+                   "covariance_ij / (std_i std_j); parameters without std were held fixed (e.g. the gauge)",
+}
+
+
+def _angle_flags(machine: Mechanism) -> np.ndarray:
+    flags = getattr(machine, "param_is_angle", None)
+    if flags is None:
+        flags = (False,) * len(machine.param_names)
+    return np.array(flags, dtype=bool)
+
+
+def _finite(v: float) -> float:
+    v = float(v)
+    if not np.isfinite(v):
+        raise PkmcalError(f"cannot export a non-finite value ({v}) to JSON")
+    return v + 0.0  # -0.0 → 0.0
+
+
+def calibration_json(machine: Mechanism, source: str | None = None) -> dict:
+    """The JSON-ready record of a (calibrated) machine: parameters in file units (mm, deg)
+    with σ (None where the covariance has a zero row: not identified), the correlation
+    matrix over the identified parameters, units, conventions and calibration metadata."""
+    names = list(machine.param_names)
+    angle = _angle_flags(machine)
+    scale = np.where(angle, np.rad2deg(1.0), 1.0)
+    values = np.asarray(machine.params, dtype=float) * scale
+    cov = getattr(machine, "covariance", None)
+    std = np.full(len(names), np.nan)
+    correlation = None
+    if cov is not None:
+        cov = np.asarray(cov, dtype=float) * np.outer(scale, scale)
+        used = np.flatnonzero(np.any(cov != 0, axis=0) | np.any(cov != 0, axis=1))
+        sub = cov[np.ix_(used, used)]
+        s = np.sqrt(np.maximum(np.diag(sub), 0.0))
+        std[used] = s
+        with np.errstate(divide="ignore", invalid="ignore"):
+            corr = np.where(np.outer(s, s) > 0, sub / np.outer(s, s), 0.0)
+        np.fill_diagonal(corr, 1.0)
+        correlation = {"parameters": [names[i] for i in used],
+                       "matrix": [[_finite(v) for v in row] for row in np.clip(corr, -1.0, 1.0)]}
+    params = [{"name": n, "value": _finite(v), "unit": "deg" if a else "mm",
+               "std": None if np.isnan(s) else _finite(s)}
+              for n, v, a, s in zip(names, values, angle, std)]
+    home = np.asarray(machine.home_pose, dtype=float)
+    pose_angle = np.array(machine.pose_is_angle, dtype=bool)
+    home = np.where(pose_angle, np.rad2deg(home), home)
+    meta = dict(getattr(machine, "metadata", {}) or {})
+    out = {
+        "format": "pkmcal-calibration",
+        "format_version": JSON_FORMAT_VERSION,
+        "pkmcal": __version__,
+        "source": source,
+        "machine": {"name": machine.name, "kind": type(machine).__name__,
+                    "description": getattr(machine, "description", "") or ""},
+        "units": {"length": "mm", "angle": "deg", "covariance": "mm^2 (deg^2, mm*deg for angle parameters)"},
+        "conventions": CONVENTIONS,
+        "parameters": params,
+        "n_identified": int(np.count_nonzero(~np.isnan(std))),
+        "correlation": correlation,
+        "home_pose": {n: _finite(v) for n, v in zip(machine.pose_names, home)},
+        "calibration": meta.pop("calibration", None),
+        "metadata": meta or None,
+    }
+    if hasattr(machine, "stroke"):
+        out["actuator_stroke"] = {a: [_finite(v) for v in row]
+                                  for a, row in zip(machine.actuator_names, np.asarray(machine.stroke, dtype=float))}
+    return out
+
+
+def format_calibration_json(machine: Mechanism, source: str | None = None) -> str:
+    """:func:`calibration_json` as text: 2-space indent, shortest exact floats, ``\\n`` ending."""
+    return json.dumps(calibration_json(machine, source), indent=2, ensure_ascii=False, allow_nan=False,
+                      default=str) + "\n"
+
+
+@click.command("export")
+@click.argument("calibrated", metavar="CALIBRATED.yaml")
+@click.option("--format", "fmt", type=click.Choice(["linuxcnc", "json"]), required=True,
+              help="linuxcnc: genhexkins HAL setp lines (hexapods); json: parameters with std and correlation.")
+@click.option("-o", "--output", metavar="FILE", help="File to write (default: standard output).")
+def export_cmd(calibrated: str, fmt: str, output: str | None) -> None:
+    """Export the machine in CALIBRATED.yaml (a machine file or built-in name) for a controller.
+
+    linuxcnc: 'setp genhexkins.base.N.x|y|z' and 'setp genhexkins.platform.N.x|y|z'
+    (N = 0..5 = leg N+1, mm) and comment lines with each joint's leg offset L0 (HOME_OFFSET),
+    joint limits and home strut length. json: every parameter (mm, deg) with its std, the
+    correlation matrix, units, conventions and the file's calibration metadata.
+    """
+    if output is not None:
+        check_output_path(output, [calibrated])
+    machine = load_machine(calibrated)
+    if fmt == "linuxcnc":
+        from pkmcal.io.export_linuxcnc import linuxcnc_hal
+
+        text = linuxcnc_hal(machine)
+    else:
+        text = format_calibration_json(machine, source=os.fspath(calibrated))
+    if output is None:
+        click.echo(text, nl=False)
+    else:
+        atomic_write_text(output, text)
+        click.echo(f"wrote {output} ({fmt})", err=True)
+
+
+def register(group: click.Group) -> None:
+    group.add_command(export_cmd)
+
+
+__all__ = ["calibration_json", "export_cmd", "format_calibration_json", "register"]

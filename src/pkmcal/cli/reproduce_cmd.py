@@ -1,0 +1,48 @@
+"""``pkmcal reproduce NAME``: regenerate a paper's table, ours beside the paper's
+(:mod:`pkmcal.reproduce`)."""
+
+from __future__ import annotations
+
+import json
+
+import click
+
+from pkmcal.errors import PkmcalError
+
+
+@click.command("reproduce")
+@click.argument("name", required=False, metavar="NAME")
+@click.option("--list", "list_", is_flag=True, help="List the reproductions and exit.")
+@click.option("--quick", is_flag=True, help="Few Monte Carlo runs (seconds; for tests and a first look).")
+@click.option("--seed", type=int, default=0, show_default=True, help="Random seed (same seed, same numbers).")
+@click.option("--json", "as_json", is_flag=True, help="Print the table as JSON instead of text.")
+@click.option("-o", "--output", type=click.Path(dir_okay=False, writable=True), default=None, metavar="FILE",
+              help="Also write the output (text, or JSON with --json) to FILE (atomically).")
+def reproduce(name, list_, quick, seed, as_json, output) -> None:
+    """Regenerate paper table NAME with our numbers beside the published ones.
+
+    Each reproduction states its setup (machine, noise, poses, seeds, Monte Carlo count)
+    and explains every difference in its notes. Run with --list to see the names.
+    """
+    from pkmcal.reproduce import REPRODUCTIONS, run_reproduction
+
+    if list_:
+        for key, (_, text) in REPRODUCTIONS.items():
+            click.echo(f"{key:<16}{text}")
+        return
+    if not name:
+        raise PkmcalError(f"give a reproduction NAME ({', '.join(REPRODUCTIONS)}) or --list")
+    result = run_reproduction(name, seed=seed, quick=quick)
+    text = json.dumps(result.to_dict(), indent=2) if as_json else result.format()
+    click.echo(text)
+    if output:
+        from pkmcal.io.atomic import atomic_write_text
+
+        try:
+            atomic_write_text(output, text + "\n")
+        except OSError as exc:
+            raise PkmcalError(f"cannot write '{output}': {exc.strerror or exc}") from None
+
+
+def register(group: click.Group) -> None:
+    group.add_command(reproduce)

@@ -1,0 +1,305 @@
+"""Simulated campaigns and held-out verification of redundantly actuated machines (paper 3 §2–3).
+
+A redundant machine (l actuators > n pose coordinates) commanded with readings c is
+over-constrained: the real machine does not go to FK(c) but settles where its actuator
+springs and the tool load balance (:func:`pkmcal.mechanisms.statics.equilibrium`,
+paper 3 eq. 1–3 solved nonlinearly)
+
+    Γᵀ K (q(x) − c) − J_fᵀ F = 0,   c = IK(x_c, ρ_nom),
+
+with K and F from the setup's ``simulation:`` block (:class:`~pkmcal.mechanisms.statics.StaticsModel`),
+never seen by the identifier. The encoders then read q(x) + e_q (following error
+q(x) − c ≠ 0) and the tracker y = h(x, θ) + e_y, with the setup's noise.
+
+Verification (paper 3 §3, Fig. 5/8): the tracker reading each held-out commanded pose x_c
+should give is y* = h(x_c, θ_setup). A model (mechanism M, sensor S_M) commands it as
+c = IK(S_M⁻¹(y*), ρ_M) (:func:`~pkmcal.identification.projection.commands_for_targets`;
+for n = 3 at the commanded plate angle); the real machine settles under the setup's
+stiffness and load, and the tool error is e = ‖h(x_eq, θ_setup) − y*‖ (mm). "Before" is
+the nominal machine with the setup's sensor, "after" the calibrated machine with the
+sensor parameters identified with it (stored in its file's ``calibration.sensor`` block).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pkmcal.errors import PkmcalError
+from pkmcal.identification.projection import commands_for_targets
+from pkmcal.identification.simulation import SimulationResult, as_rng
+from pkmcal.mechanisms.base import Mechanism
+from pkmcal.mechanisms.statics import StaticsModel, equilibrium
+from pkmcal.sensors.base import MeasurementSetup
+
+
+def is_redundant(machine: Mechanism) -> bool:
+    """True for a redundantly actuated machine (more actuators than pose coordinates)."""
+    return machine.n_actuators > machine.n_dof
+
+
+def _statics(setup: MeasurementSetup, machine: Mechanism) -> tuple[np.ndarray, np.ndarray | None]:
+    sim: StaticsModel | None = setup.simulation
+    if sim is None:
+        raise PkmcalError(f"machine '{machine.name}' is redundantly actuated: simulating it needs the actuator "
+                          "stiffness (and the tool load) in the setup's 'simulation:' block, e.g. "
+                          "simulation: {stiffness: 2.0e4, load: [0, -30]} (N/mm or N*mm/rad; N)")
+    return sim.stiffness_for(machine), sim.load
+
+
+def _settle(real, setup, commands, guess, ignore_limits):
+    """Equilibrium of ``real`` under ``commands`` (N, l): (poses, readings, ok, reasons)."""
+    K, F = _statics(setup, real)
+    n = len(commands)
+    finite = np.all(np.isfinite(commands), axis=1) & np.all(np.isfinite(guess), axis=1)
+    reasons: dict[int, str] = {int(k): "nominal-ik-failed" for k in np.flatnonzero(~finite)}
+    poses = np.array(guess, dtype=float)
+    readings = np.full((n, real.n_actuators), np.nan)
+    ok = finite.copy()
+    if finite.any():
+        eq = equilibrium(real, commands[finite], K, F, setup.sensor, guess=guess[finite])
+        idx = np.flatnonzero(finite)
+        poses[idx] = eq.poses
+        readings[idx] = eq.readings
+        for j in np.flatnonzero(~eq.converged):
+            reasons[int(idx[j])] = f"equilibrium-not-converged (force residual {eq.force_residual[j]:.3g})"
+        ok[idx[~eq.converged]] = False
+    with np.errstate(invalid="ignore"):
+        report = real.check_limits(np.where(ok[:, None], poses, real.home_pose))
+    unknown = [name for name in ignore_limits if name not in report.violations]
+    if unknown:
+        raise PkmcalError(f"machine '{real.name}' has no limit {', '.join(unknown)}; "
+                          f"its limits are {', '.join(report.violations)}")
+    for k in np.flatnonzero(ok):
+        bad = [name for name, v in report.violations.items() if v[k] and name not in ignore_limits]
+        if bad:
+            reasons[int(k)] = "real-limits: " + "+".join(bad)
+            ok[k] = False
+    return poses, readings, ok, dict(sorted(reasons.items()))
+
+
+def simulate_redundant_campaign(
+    nominal: Mechanism,
+    real: Mechanism,
+    setup: MeasurementSetup,
+    commanded_poses: np.ndarray,
+    rng: np.random.Generator | int | None = None,
+    ignore_limits: tuple[str, ...] = (),
+) -> SimulationResult:
+    """Measure ``commanded_poses`` (N, n; mm, rad) on the redundant ``real`` machine commanded
+    with ``nominal``'s IK (module docstring). ``actuator_true`` are the noise-free encoder
+    readings at equilibrium (commands + following errors), ``real_poses`` the rest poses.
+    Noise is drawn for all N poses before any is dropped (same seed, same bytes)."""
+    commanded = nominal.as_pose_array(commanded_poses)
+    if not np.all(np.isfinite(commanded)):
+        raise PkmcalError("a commanded pose is not a finite number")
+    if nominal.n_actuators != real.n_actuators or nominal.n_dof != real.n_dof:
+        raise PkmcalError(f"nominal machine '{nominal.name}' and real machine '{real.name}' are not the same kind")
+    gen = as_rng(rng)
+    sensor = setup.sensor
+    n = len(commanded)
+    e_y, e_q = setup.noise.sample(gen, (n, sensor.n_readings), (n, real.n_actuators))
+    with np.errstate(invalid="ignore"):
+        commands = nominal.ik(commanded)
+    poses, readings, ok, dropped = _settle(real, setup, commands, commanded, ignore_limits)
+    kept = np.flatnonzero(ok)
+    q_true = readings[kept]
+    y_true = sensor.predict(poses[kept]) if len(kept) else np.zeros((0, sensor.n_readings))
+    return SimulationResult(commanded=commanded, kept=kept, dropped=dropped, real_poses=poses[kept],
+                            actuator_true=q_true, sensor_true=y_true, actuator_readings=q_true + e_q[kept],
+                            sensor_readings=y_true + e_y[kept], setup=setup)
+
+
+def perturb_planar(machine, magnitude_mm: float, rng, distribution: str = "uniform", name: str | None = None,
+                   radius_mm: float = 1000.0):
+    """A random real machine: lengths (and linear encoder offsets) plus errors of size
+    ``magnitude_mm``, angle parameters (way directions, rotary encoder offsets) plus
+    ``magnitude_mm / radius_mm`` rad (the same displacement at ``radius_mm`` = 1 m)."""
+    if not np.isfinite(magnitude_mm) or magnitude_mm < 0:
+        raise PkmcalError(f"parameter error magnitude must be a non-negative number of mm; got {magnitude_mm}")
+    gen = as_rng(rng)
+    p = machine.params
+    if distribution == "uniform":
+        delta = gen.uniform(-magnitude_mm, magnitude_mm, size=p.shape)
+    elif distribution == "gaussian":
+        delta = gen.standard_normal(size=p.shape) * magnitude_mm
+    else:
+        raise PkmcalError(f"unknown error distribution '{distribution}'; use uniform or gaussian")
+    delta = np.where(np.array(machine.param_is_angle, dtype=bool), delta / radius_mm, delta)
+    return machine.with_params(p + delta, name=name or f"{machine.name}-perturbed")
+
+
+def calibrated_sensor(machine: Mechanism, sensor):
+    """``sensor`` with the parameters identified together with ``machine`` (its file's
+    ``calibration.sensor`` block: names → values, mm and degrees for ``world.c``), or
+    ``sensor`` itself when the machine has none."""
+    cal = (getattr(machine, "metadata", {}) or {}).get("calibration") or {}
+    values = cal.get("sensor") if isinstance(cal, dict) else None
+    if not values:
+        return sensor
+    p = sensor.params.copy()
+    for k, v in values.items():
+        if k not in sensor.param_names:
+            raise PkmcalError(f"machine '{machine.name}': calibration.sensor.{k} is not a parameter of a "
+                              f"'{sensor.kind}' sensor ({', '.join(sensor.param_names)})")
+        p[sensor.param_names.index(k)] = np.deg2rad(float(v)) if k == "world.c" else float(v)
+    return sensor.with_params(p)
+
+
+def sensor_calibration_block(sensor) -> dict:
+    """The ``calibration.sensor`` block (file units) of an identified planar-tool sensor."""
+    return {k: float(np.rad2deg(v)) if k == "world.c" else float(v) for k, v in zip(sensor.param_names, sensor.params)}
+
+
+@dataclass(frozen=True)
+class ToolErrors:
+    """Per held-out pose: tool-point error (mm), plate-angle error (rad; NaN for n = 2),
+    ``valid`` where the real machine settled within its limits (``dropped`` the others)."""
+
+    model: str
+    tool: np.ndarray
+    angle: np.ndarray
+    valid: np.ndarray
+    dropped: dict[int, str] = field(default_factory=dict)
+
+    def summary(self, mask: np.ndarray) -> dict:
+        out: dict = {"poses": int(np.count_nonzero(mask))}
+        for key, v, unit in (("tool", self.tool, "mm"), ("angle", np.rad2deg(np.abs(self.angle)), "deg")):
+            v = np.abs(v[mask])
+            if key == "angle" and np.all(np.isnan(self.angle)):
+                continue
+            stats = (float(np.mean(v)), float(np.max(v)), float(np.sqrt(np.mean(v**2)))) if v.size else (float("nan"),) * 3
+            out.update({f"{key}_{s}_{unit}": x for s, x in zip(("mean", "max", "rms"), stats)})
+        return out
+
+
+def tool_errors(model: Mechanism, model_sensor, real: Mechanism, setup: MeasurementSetup, poses: np.ndarray,
+                name: str = "model", ignore_limits: tuple[str, ...] = ()) -> ToolErrors:
+    """Tool errors of ``real`` commanded through (``model``, ``model_sensor``) at the
+    held-out ``poses`` (module docstring)."""
+    x_c = model.as_pose_array(poses)
+    targets = setup.sensor.predict(x_c)
+    angles = x_c[:, 2] if model.n_dof == 3 else None
+    with np.errstate(invalid="ignore"):
+        x_m, commands = commands_for_targets(model, model_sensor, targets, angles)
+    x_eq, _, ok, dropped = _settle(real, setup, commands, x_m, ignore_limits)
+    y = setup.sensor.predict(x_eq)
+    tool = np.where(ok, np.linalg.norm(y - targets, axis=1), np.nan)
+    angle = np.where(ok, x_eq[:, 2] - x_c[:, 2], np.nan) if model.n_dof == 3 else np.full(len(x_c), np.nan)
+    return ToolErrors(model=name, tool=tool, angle=angle, valid=ok, dropped=dropped)
+
+
+@dataclass(frozen=True)
+class RedundantVerification:
+    """Held-out tool errors of the calibrated machine ("after") and of the nominal one
+    ("before", when given); summaries over the poses both reach."""
+
+    after: ToolErrors
+    before: ToolErrors | None = None
+
+    @property
+    def common(self) -> np.ndarray:
+        return self.after.valid if self.before is None else self.after.valid & self.before.valid
+
+    def to_dict(self) -> dict:
+        out = {"after": self.after.summary(self.common),
+               "dropped": {str(k + 1): v for k, v in {**(self.before.dropped if self.before else {}),
+                                                      **self.after.dropped}.items()}}
+        if self.before is not None:
+            out["before"] = self.before.summary(self.common)
+            b, a = out["before"]["tool_mean_mm"], out["after"]["tool_mean_mm"]
+            out["improvement_pct"] = float(100.0 * (1.0 - a / b)) if b > 0 else float("nan")
+        return out
+
+    def format_table(self) -> str:
+        d = self.to_dict()
+        cols = [k for k in ("before", "after") if k in d]
+        keys = [k for k in d["after"] if k != "poses"]
+        rows = [("measure",) + tuple(cols)] + [(k,) + tuple(f"{d[c][k]:.6g}" for c in cols) for k in keys]
+        w = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+        lines = [f"{d['after']['poses']} held-out poses (tool error = |tracker reading - target|; real machine at "
+                 "equilibrium under the setup's stiffness and load)"]
+        lines += ["  ".join(f"{c:<{w[i]}}" if i == 0 else f"{c:>{w[i]}}" for i, c in enumerate(r)) for r in rows]
+        if "improvement_pct" in d:
+            lines.append(f"improvement of the mean tool error: {d['improvement_pct']:.1f} %")
+        for k, v in d["dropped"].items():
+            lines.append(f"pose {k} not reached: {v}")
+        return "\n".join(lines)
+
+
+def verify_redundant(calibrated: Mechanism, real: Mechanism, setup: MeasurementSetup, poses: np.ndarray,
+                     nominal: Mechanism | None = None, ignore_limits: tuple[str, ...] = ()) -> RedundantVerification:
+    """Held-out verification of a calibrated redundant machine (module docstring)."""
+    for m in (calibrated, nominal):
+        if m is not None and (m.n_dof != real.n_dof or m.n_actuators != real.n_actuators):
+            raise PkmcalError(f"machine '{m.name}' and the real machine '{real.name}' are not the same kind")
+    after = tool_errors(calibrated, calibrated_sensor(calibrated, setup.sensor), real, setup, poses, "after",
+                        ignore_limits)
+    before = None
+    if nominal is not None:
+        before = tool_errors(nominal, setup.sensor, real, setup, poses, "before", ignore_limits)
+    return RedundantVerification(after=after, before=before)
+
+
+# -- baselines of paper 3 §1 through the engine ------------------------------------------
+
+#: Identification baselines for redundant machines (``pkmcal identify --method``).
+BASELINES = ("ignore-redundancy", "actuator-subset")
+
+
+def baseline_inputs(method: str, nominal: Mechanism, setup: MeasurementSetup, meas, keep=None):
+    """``(machine, setup, measurements)`` that turn the engine's ``projection`` fit into the
+    baseline ``method`` of :mod:`pkmcal.identification.projection`:
+
+    * ``ignore-redundancy``: the encoder readings replaced by the commands IK(x_c, ρ_nom)
+      of the commanded poses (following errors ignored; needs the cmd_ columns);
+    * ``actuator-subset``: only the actuators ``keep`` (0-based; default the first n) are
+      used (:class:`~pkmcal.identification.projection.ActuatorSubset`), a non-redundant fit.
+    """
+    import dataclasses
+
+    from pkmcal.identification.projection import ActuatorSubset
+    from pkmcal.sensors.base import NoiseModel
+
+    if method not in BASELINES:
+        raise PkmcalError(f"unknown baseline '{method}'; use one of {', '.join(BASELINES)}")
+    if not is_redundant(nominal):
+        raise PkmcalError(f"--method {method} is a baseline for redundantly actuated machines; machine "
+                          f"'{nominal.name}' has {nominal.n_actuators} actuators for {nominal.n_dof} pose coordinates")
+    if method == "ignore-redundancy":
+        if meas.commanded is None:
+            raise PkmcalError("--method ignore-redundancy replaces the encoder readings by the commands, which come "
+                              "from the commanded poses: the measurement file needs the cmd_ columns")
+        with np.errstate(invalid="ignore"):
+            commands = nominal.ik(meas.commanded)
+        return nominal, setup, dataclasses.replace(meas, actuators=commands)
+    keep = tuple(range(nominal.n_dof)) if keep is None else tuple(int(k) for k in keep)
+    if len(keep) != nominal.n_dof or len(set(keep)) != len(keep) or not all(0 <= k < nominal.n_actuators for k in keep):
+        raise PkmcalError(f"--keep: give {nominal.n_dof} different actuator numbers of 1..{nominal.n_actuators} "
+                          f"(e.g. {','.join(str(i + 1) for i in range(nominal.n_dof))}); got "
+                          f"{','.join(str(k + 1) for k in keep)}")
+    act = np.broadcast_to(np.asarray(setup.noise.actuator_std, dtype=float), (nominal.n_actuators,))[list(keep)]
+    sub_setup = dataclasses.replace(setup, noise=NoiseModel(setup.noise.reading_std, act, setup.noise.distribution))
+    return (ActuatorSubset(nominal, keep), sub_setup,
+            dataclasses.replace(meas, actuators=np.asarray(meas.actuators)[:, list(keep)]))
+
+
+def baseline_result(result, nominal: Mechanism, method: str):
+    """The engine's result of a baseline fit as a result of ``nominal``'s kind (covariance
+    kept; ``method`` named)."""
+    import dataclasses
+
+    from pkmcal.identification.uncertainty import embed
+
+    mech = result.mechanism
+    notes = result.warnings
+    base = getattr(mech, "base", None)
+    if base is not None:
+        names = tuple(nominal.param_names)
+        sel = [i for i, n in enumerate(result.free) if n in names]
+        idx = np.array([names.index(result.free[i]) for i in sel], dtype=int)
+        cov = embed(np.asarray(result.covariance)[np.ix_(sel, sel)], idx, len(names)) if sel else None
+        mech = base.with_params(base.params, covariance=cov)
+        notes = tuple(w for w in notes if "does not store a covariance" not in w)
+    return dataclasses.replace(result, mechanism=mech, method=method, warnings=notes)

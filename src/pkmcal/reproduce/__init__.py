@@ -1,0 +1,45 @@
+"""Reproductions of the papers' tables: our numbers beside the published ones.
+
+One module per paper (:mod:`.paper1`, :mod:`.paper2`, :mod:`.paper3`); each reproduction
+is a function ``f(seed=0, quick=False) -> Reproduction`` (:mod:`.table`), deterministic
+for a seed, with a ``quick`` mode (few Monte Carlo runs) for tests. :data:`REPRODUCTIONS`
+is the registry behind ``pkmcal reproduce NAME``; :func:`run_reproduction` runs one by name.
+
+Paper 2 Tables 1–2 (observability indices of random and optimal pose sets) are reproduced
+by ``benchmarks/planning_tables.py`` (docs/planning.md); the planning package has no
+library function for them, so they are not registered here.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+from pkmcal.errors import PkmcalError
+from pkmcal.reproduce.paper1 import paper1_table1
+from pkmcal.reproduce.paper2 import paper2_table5
+from pkmcal.reproduce.paper3 import paper3_case1, paper3_case2
+from pkmcal.reproduce.table import Reproduction, Row
+
+#: name → (function, one-line description)
+REPRODUCTIONS: dict[str, tuple[Callable[..., Reproduction], str]] = {
+    "paper1-table1": (paper1_table1, "paper 1 Table I (parameter errors, boundary vs interior poses) and its "
+                                     "verification claims, with the Gauss-Markov bound"),
+    "paper2-table5": (paper2_table5, "paper 2 Table 5 (3 indicators, Table 4 real machine, four noise levels), "
+                                     "gauge evidence, Table 7 evidence"),
+    "paper3-case1": (paper3_case1, "paper 3 case 1 (2-dof, 3 rotary actuators): held-out improvement"),
+    "paper3-case2": (paper3_case2, "paper 3 case 2 (3-dof, 4 linear actuators): held-out improvement"),
+}
+
+
+def run_reproduction(name: str, seed: int = 0, quick: bool = False) -> Reproduction:
+    """Run the reproduction ``name`` (see :data:`REPRODUCTIONS`)."""
+    try:
+        fn, _ = REPRODUCTIONS[name]
+    except KeyError:
+        raise PkmcalError(f"unknown reproduction '{name}'; available: {', '.join(REPRODUCTIONS)} "
+                          "(run 'pkmcal reproduce --list')") from None
+    return fn(seed=seed, quick=quick)
+
+
+__all__ = ["REPRODUCTIONS", "Reproduction", "Row", "run_reproduction", "paper1_table1", "paper2_table5",
+           "paper3_case1", "paper3_case2"]

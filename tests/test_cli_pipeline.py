@@ -1,0 +1,134 @@
+"""The measurement-day pipeline on the command line: ``simulate`` → ``identify --report`` →
+``export``; same seed, same bytes; an output never replaces an input; a killed ``identify``
+leaves no output file behind (outputs are written atomically, after the computation)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from pkmcal.cli.main import cli
+from pkmcal.identification.simulation import simulate_campaign
+from pkmcal.io import load_machine
+from pkmcal.io.measurements import save_measurements
+from pkmcal.io.setup_file import builtin_setup
+from pkmcal.io.tables import format_table
+
+POSE_NAMES = ("x", "y", "z", "a", "b", "c")
+HALF = np.array([8.0, 8.0, 4.0, 2.0, 2.0, 4.0])  # mm, deg: all reachable by both machines
+
+
+def run(*args):
+    return CliRunner().invoke(cli, [str(a) for a in args])
+
+
+def ok(res):
+    assert res.exit_code == 0, res.output
+    return res
+
+
+def write_poses(path, n, seed):
+    rng = np.random.default_rng(seed)
+    p = rng.uniform(-1, 1, (n, 6)) * HALF
+    p[:, :3] += load_machine("stewart-prototype").home_pose[:3]
+    path.write_text(format_table({k: p[:, i] for i, k in enumerate(POSE_NAMES)}))
+
+
+SIM = ("simulate", "stewart-prototype", "--real", "stewart-prototype-real", "--setup", "indicators-prototype")
+IDENT = ("identify", "stewart-prototype", "--setup", "indicators-prototype")
+
+
+def test_same_seed_same_bytes_and_report(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # relative paths: they are written into the outputs' comments
+    write_poses(tmp_path / "poses.csv", 30, 1)
+    ok(run(*SIM, "--poses", "poses.csv", "--seed", "7", "-o", "m1.csv"))
+    ok(run(*SIM, "--poses", "poses.csv", "--seed", "7", "-o", "m2.csv"))
+    ok(run(*SIM, "--poses", "poses.csv", "--seed", "8", "-o", "m3.csv"))
+    m1 = (tmp_path / "m1.csv").read_bytes()
+    assert m1 == (tmp_path / "m2.csv").read_bytes()
+    assert m1 != (tmp_path / "m3.csv").read_bytes()  # the seed matters
+    outs = []
+    for k in (1, 2):
+        res = ok(run(*IDENT, "m1.csv", "-o", "cal.yaml", "--report", f"rep{k}"))
+        assert f"wrote cal.yaml and rep{k}/report.html" in res.stdout
+        outs.append((tmp_path / "cal.yaml").read_bytes())
+    assert outs[0] == outs[1]
+    names = sorted(os.listdir(tmp_path / "rep1"))
+    assert "report.html" in names and any(n.endswith(".svg") for n in names)
+    assert names == sorted(os.listdir(tmp_path / "rep2"))
+    for n in names:
+        assert (tmp_path / "rep1" / n).read_bytes() == (tmp_path / "rep2" / n).read_bytes(), n
+    page = (tmp_path / "rep1" / "report.html").read_text(encoding="utf-8")
+    assert "stewart-prototype" in page and "m1.csv" in page and "fk-residual" in page
+    for fmt in ("linuxcnc", "json"):
+        ok(run("export", "cal.yaml", "--format", fmt, "-o", f"a.{fmt}"))
+        ok(run("export", "cal.yaml", "--format", fmt, "-o", f"b.{fmt}"))
+        assert (tmp_path / f"a.{fmt}").read_bytes() == (tmp_path / f"b.{fmt}").read_bytes()
+
+
+def test_outputs_never_replace_inputs(tmp_path):
+    write_poses(tmp_path / "poses.csv", 20, 2)
+    ok(run(*SIM, "--poses", tmp_path / "poses.csv", "-o", tmp_path / "meas.csv"))
+    before = {p: (tmp_path / p).read_bytes() for p in ("poses.csv", "meas.csv")}
+    cases = [
+        (*SIM, "--poses", tmp_path / "poses.csv", "-o", tmp_path / "poses.csv"),
+        (*IDENT, tmp_path / "meas.csv", "-o", tmp_path / "meas.csv"),
+        (*IDENT, tmp_path / "meas.csv", "-o", tmp_path / "cal.yaml", "--report", tmp_path / "meas.csv"),
+        ("verify", "stewart-prototype", "--real", "stewart-prototype-real", "--poses", tmp_path / "poses.csv",
+         "-o", tmp_path / "poses.csv"),
+        ("ik", "stewart-prototype", tmp_path / "poses.csv", "-o", tmp_path / "poses.csv"),
+    ]
+    for args in cases:
+        res = run(*args)
+        assert res.exit_code == 2, (args, res.output)
+        err = res.stderr.strip()
+        assert err.startswith("pkmcal: error: ") and "\n" not in err
+        assert "never overwrites" in err or "not a folder" in err, err
+        assert not (tmp_path / "cal.yaml").exists()
+    assert {p: (tmp_path / p).read_bytes() for p in before} == before
+
+
+def test_killed_identify_leaves_no_output(tmp_path):
+    """SIGKILL during a long identification (20 000 poses, a few seconds on 2 cores): no
+    calibrated file, no report, no temporary file. (Files are written after the fit, each to
+    a temporary file renamed over the target.)"""
+    nominal, real = load_machine("stewart-prototype"), load_machine("stewart-prototype-real")
+    setup = builtin_setup("indicators-prototype")
+    rng = np.random.default_rng(5)
+    p = rng.uniform(-1, 1, (20000, 6)) * HALF
+    p[:, :3] += nominal.home_pose[:3]
+    p[:, 3:] = np.deg2rad(p[:, 3:])
+    sim = simulate_campaign(nominal, real, setup, p, rng=6)
+    save_measurements(tmp_path / "meas.csv", sim.measurements, nominal, setup)
+    before = sorted(os.listdir(tmp_path))
+    cmd = [sys.executable, "-m", "pkmcal.cli.main", *IDENT, str(tmp_path / "meas.csv"), "-o",
+           str(tmp_path / "cal.yaml"), "--report", str(tmp_path / "rep")]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
+    try:
+        time.sleep(3.0)
+        assert proc.poll() is None, f"identify finished before it was killed: {proc.stderr.read()!r}"
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+    finally:
+        if proc.poll() is None:
+            os.kill(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == -signal.SIGKILL
+    assert sorted(os.listdir(tmp_path)) == before  # no cal.yaml, no .cal.yaml.*.tmp, no rep/
+
+
+@pytest.mark.parametrize("bad", ["rep_file"])
+def test_report_folder_must_be_a_folder(tmp_path, bad):
+    write_poses(tmp_path / "poses.csv", 20, 3)
+    ok(run(*SIM, "--poses", tmp_path / "poses.csv", "-o", tmp_path / "meas.csv"))
+    (tmp_path / bad).write_text("x")
+    res = run(*IDENT, tmp_path / "meas.csv", "-o", tmp_path / "cal.yaml", "--report", tmp_path / bad)
+    assert res.exit_code == 2 and "is not a folder" in res.stderr
+    assert not (tmp_path / "cal.yaml").exists() and (tmp_path / bad).read_text() == "x"
