@@ -97,7 +97,7 @@ def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, 
     Writes x,y,z,a,b,c and the nominal commands lambda1..; prints O1..O5 of the chosen set.
     """
     mech = load_machine(machine)
-    setup = load_setup(setup_spec)
+    setup = load_setup(setup_spec, mech)
     check_output_path(output, [candidates_path, setup_spec, machine])
     candidates = read_candidates_csv(candidates_path, mech, mapping) if candidates_path else None
     progress = _Progress(f"plan ({algorithm})")
@@ -139,7 +139,7 @@ def observability_cmd(machine, poses, setup_spec, as_json, mapping=None) -> None
     parameters (as 'pkmcal plan'). O1 is D-optimality, O4 the noise amplification index.
     """
     mech = load_machine(machine)
-    setup = load_setup(setup_spec)
+    setup = load_setup(setup_spec, mech)
     pose_arr = read_candidates_csv(poses, mech, mapping)
     ind = pose_set_indices(mech, setup, pose_arr)
     if as_json:

@@ -28,7 +28,7 @@ def reproduce(name, list_, quick, seed, as_json, output) -> None:
 
     if list_:
         for key, (_, text) in REPRODUCTIONS.items():
-            click.echo(f"{key:<16}{text}")
+            click.echo(f"{key:<18}{text}")
         return
     if not name:
         raise PkmcalError(f"give a reproduction NAME ({', '.join(REPRODUCTIONS)}) or --list")

@@ -3,10 +3,9 @@
 Why numba: batched NumPy needs one LAPACK call per 6×6 Newton system; measured on the
 2-core reference machine, ``np.linalg.solve`` on 100,000 stacked 6×6 systems alone costs
 0.5–0.9 µs/pose per iteration (0.49 as first measured; 0.91 re-measured with the other
-core busy), so a NumPy FK
-cannot meet the 1 µs/pose target (``benchmarks/kinematics.py``). These kernels loop over
-poses in parallel (``prange``), do the 6×6 elimination in registers and allocate nothing
-per pose.
+core busy), so a NumPy FK cannot meet the 1 µs/pose target (``benchmarks/kinematics.py``).
+These kernels loop over poses in parallel (``prange``), do the 6×6 elimination in
+registers and allocate nothing per pose.
 
 Conventions (see :mod:`pkmcal.conventions`): pose = (x, y, z, a, b, c), R = Rz(c)Ry(b)Rx(a),
 leg vector l_i = p + R a_i − b_i (paper 1 eq. 1; paper 2 eq. 1 with its Rᵀ read as R),
@@ -27,9 +26,9 @@ faster: loops with constant trip counts that LLVM unrolls, and reciprocal pivots
 a serial kernel for small batches. FK, before → after, same iterates and iteration
 counts (mean 3.99, all converged): 1.19 → 0.47–0.49 µs/pose on 2 threads in a quiet
 window (2.47 → 0.87–0.91 on one thread); interleaved A/B runs with other jobs on the
-machine: 1.18–1.27 → 0.71–0.73 (2.35–2.38 → 1.37–1.39). Cost: the first call compiles
-the FK kernels (parallel, serial) for ~23 s and the IK ones for ~2 s
-on this machine, then loads from numba's on-disk cache in ~0.02 s.
+machine: 1.18–1.27 → 0.71–0.73 (2.35–2.38 → 1.37–1.39). Cost: the first call compiles the
+FK kernels (parallel, serial) for ~23 s and the IK ones for ~2 s on this machine; later
+processes load them from numba's on-disk cache in ~0.02 s.
 Tried and dropped: fastmath on the solve (no measurable gain); a second-order first
 step from the guess's leg-length Hessians (−0.36 iterations per pose, no net time saved);
 plain (non-inlined) helpers (compile 9 s instead of 23 s, but FK 15–25 % slower).

@@ -1,13 +1,13 @@
 """Reproductions of the papers' tables: our numbers beside the published ones.
 
-One module per paper (:mod:`.paper1`, :mod:`.paper2`, :mod:`.paper3`); each reproduction
-is a function ``f(seed=0, quick=False) -> Reproduction`` (:mod:`.table`), deterministic
-for a seed, with a ``quick`` mode (few Monte Carlo runs) for tests. :data:`REPRODUCTIONS`
+One module per paper table (:mod:`.paper1`, :mod:`.paper2`, :mod:`.paper2_planning`,
+:mod:`.paper3`); each reproduction is a function ``f(seed=0, quick=False) -> Reproduction``
+(:mod:`.table`), deterministic for a seed, with a ``quick`` mode (few Monte Carlo runs)
+for tests. :data:`REPRODUCTIONS`
 is the registry behind ``pkmcal reproduce NAME``; :func:`run_reproduction` runs one by name.
 
-Paper 2 Tables 1–2 (observability indices of random and optimal pose sets) are reproduced
-by ``benchmarks/planning_tables.py`` (docs/planning.md); the planning package has no
-library function for them, so they are not registered here.
+Paper 2 Tables 1–2 (observability indices of random and optimal pose sets) are in
+:mod:`.paper2_planning`; ``benchmarks/planning_tables.py`` prints them (docs/planning.md).
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from typing import Callable
 from pkmcal.errors import PkmcalError
 from pkmcal.reproduce.paper1 import paper1_table1
 from pkmcal.reproduce.paper2 import paper2_table5
+from pkmcal.reproduce.paper2_planning import paper2_tables1_2
 from pkmcal.reproduce.paper3 import paper3_case1, paper3_case2
 from pkmcal.reproduce.table import Reproduction, Row
 
@@ -26,6 +27,8 @@ REPRODUCTIONS: dict[str, tuple[Callable[..., Reproduction], str]] = {
                                      "verification claims, with the Gauss-Markov bound"),
     "paper2-table5": (paper2_table5, "paper 2 Table 5 (3 indicators, Table 4 real machine, four noise levels), "
                                      "gauge evidence, Table 7 evidence"),
+    "paper2-tables1-2": (paper2_tables1_2, "paper 2 Tables 1-2 (observability indices O1-O4 of random and "
+                                           "optimal sets of 14-112 poses)"),
     "paper3-case1": (paper3_case1, "paper 3 case 1 (2-dof, 3 rotary actuators): held-out improvement"),
     "paper3-case2": (paper3_case2, "paper 3 case 2 (3-dof, 4 linear actuators): held-out improvement"),
 }
@@ -42,4 +45,4 @@ def run_reproduction(name: str, seed: int = 0, quick: bool = False) -> Reproduct
 
 
 __all__ = ["REPRODUCTIONS", "Reproduction", "Row", "run_reproduction", "paper1_table1", "paper2_table5",
-           "paper3_case1", "paper3_case2"]
+           "paper2_tables1_2", "paper3_case1", "paper3_case2"]
