@@ -57,16 +57,8 @@ from pkmcal.identification.simulation import perturb_machine, simulate_campaign
 from pkmcal.io.setup_file import builtin_setup
 from pkmcal.mechanisms import builtin_machine
 
-
-def cpu_model() -> str:
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from kinematics import cpu_model  # noqa: E402  (benchmarks/kinematics.py)
 
 
 def best_ms(fn, repeats: int) -> tuple[float, float]:

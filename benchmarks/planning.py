@@ -68,28 +68,16 @@ def main(argv: list[str]) -> dict:
     rng = np.random.default_rng(args.seed + 1)
     r30 = [observability_indices(G2000, select_random(2000, 30, rng)) for _ in range(20)]
 
-    result = {
-        "setup": args.setup,
-        "identifiable_parameters": model.n_params,
-        "rows_per_pose": int(G.shape[1]),
-        "default_30_of_2000_s": t_d30,
-        "default_30_of_2000_cpu_s": CPU[id(d30)],
-        "default_110_of_10000_cpu_s": CPU[id(d110)],
-        "cuckoo_30_of_2000_cpu_s": CPU[id(c30)],
-        "default_30_of_2000_O1": d30.indices["O1"],
-        "default_30_of_2000_O4": d30.indices["O4"],
-        "default_110_of_10000_s": t_d110,
-        "default_110_of_10000_O1": d110.indices["O1"],
-        "default_110_of_10000_O4": d110.indices["O4"],
-        "cuckoo_30_of_2000_s": t_c30,
-        "cuckoo_30_of_2000_O1": c30.indices["O1"],
-        "cuckoo_30_of_2000_O4": c30.indices["O4"],
-        "cuckoo_O1_30_of_2000_s": t_c30_o1,
-        "cuckoo_O1_30_of_2000_O1": c30_o1.indices["O1"],
-        "cuckoo_O1_30_of_2000_O4": c30_o1.indices["O4"],
-        "default_O4_30_of_2000_s": t_d30_o4,
-        "default_O4_30_of_2000_O1": d30_o4.indices["O1"],
-        "default_O4_30_of_2000_O4": d30_o4.indices["O4"],
+    runs = [("default_30_of_2000", "default (D-optimal)", "30 of 2000", t_d30, d30),
+            ("default_110_of_10000", "default (D-optimal)", "110 of 10000", t_d110, d110),
+            ("cuckoo_30_of_2000", "cuckoo on O4 (paper 2)", "30 of 2000", t_c30, c30),
+            ("cuckoo_O1_30_of_2000", "cuckoo on O1", "30 of 2000", t_c30_o1, c30_o1),
+            ("default_O4_30_of_2000", "default --index O4", "30 of 2000", t_d30_o4, d30_o4)]
+    result = {"setup": args.setup, "identifiable_parameters": model.n_params, "rows_per_pose": int(G.shape[1])}
+    for key, _, _, t, sel in runs:
+        result.update({f"{key}_s": t, f"{key}_cpu_s": CPU[id(sel)], f"{key}_O1": sel.indices["O1"],
+                       f"{key}_O4": sel.indices["O4"]})
+    result.update({
         "random_30_of_2000_mean_O1": float(np.mean([r["O1"] for r in r30])),
         "random_30_of_2000_mean_O4": float(np.mean([r["O4"] for r in r30])),
         "warmup_s": t_warm,
@@ -97,15 +85,12 @@ def main(argv: list[str]) -> dict:
         "cores": os.cpu_count(),
         "python": platform.python_version(),
         "numpy": np.__version__,
-    }
+    })
     print(f"machine stewart-prototype, setup {args.setup}: {model.n_params} identifiable parameters, "
           f"{G.shape[1]} rows per pose; {len(cand.poses)} candidates ({cand.describe()})")
     print(f"warm-up (numba compile or cache load): {t_warm:.3f} s; load average {result['load_average_1min']:.2f} "
           f"on {result['cores']} cores")
-    rows = [("default (D-optimal)", "30 of 2000", t_d30, d30), ("default (D-optimal)", "110 of 10000", t_d110, d110),
-            ("cuckoo on O4 (paper 2)", "30 of 2000", t_c30, c30), ("cuckoo on O1", "30 of 2000", t_c30_o1, c30_o1),
-            ("default --index O4", "30 of 2000", t_d30_o4, d30_o4)]
-    for name, case, t, sel in rows:
+    for _, name, case, t, sel in runs:
         print(f"{name:<24} {case:<13} {t:8.3f} s ({CPU[id(sel)]:.3f} s CPU)   O1 = {sel.indices['O1']:.5g}   O4 = {sel.indices['O4']:.5g}   "
               f"({sel.message})")
     print(f"{'random (mean of 20)':<24} {'30 of 2000':<13} {'':>10}   O1 = {result['random_30_of_2000_mean_O1']:.5g}   "

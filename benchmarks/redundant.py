@@ -7,7 +7,7 @@ For each machine (``planar-2dof-3act``, ``planar-3dof-4act``):
    poses and 8 (case 1) / 6 (case 2) held-out poses, uniform in the workspace (seeded);
    tracker noise σ = 0.010 mm per axis (AT901: ±10 µm + 5 µm/m), encoder noise σ = 1e-5 rad
    (rotary) / 1 µm (linear); actuator stiffness and in-plane tool load as stated in
-   ``SETUPS`` (the identifier never sees them).
+   :data:`pkmcal.reproduce.paper3.CASES` (the identifier never sees them).
 2. *Monte Carlo*: ``--machines`` random real machines (parameter errors σ = 0.2 mm for
    lengths, 0.05° for angles and rotary encoder offsets, 0.2 mm for linear encoder
    offsets, 0.1 mm for the tool point; stiffness of each actuator ×U(0.5, 2)), each with
@@ -30,40 +30,16 @@ import time
 import numpy as np
 
 from pkmcal.identification.projection import calibration_experiment
-from pkmcal.mechanisms import planar as PL
-from pkmcal.sensors.base import NoiseModel
-from pkmcal.sensors.planar_tool import PlanarToolSensor
+from pkmcal.reproduce.paper3 import CASES, LOAD_N, METHODS, N_CALIB, TRACKER_STD, case_models, table_experiment
 
-METHODS = ("projection", "projection-single", "projection-unweighted", "ignore-redundancy", "actuator-subset")
 
-SETUPS = {
-    "planar-2dof-3act": dict(
-        factory=PL.planar_2dof_3act, n_check=8, stiffness=5e7, stiffness_unit="N·mm/rad", load=np.array([0.0, -30.0]),
-        actuator_std=1e-5, table=PL.P2_TABLE1_ERRORS, table_tool=PL.P2_TABLE1_TOOL,
-        # paper set minus the gauge our identifiability analysis asks for (D1, D3)
-        paper_free=tuple(n for n in PL.P2_PAPER_FREE if n not in ("D1", "D3")) + ("target.x", "target.y"),
-        frame=("B1.x", "B1.y", "B2.y"), gauge=("D1", "D3"),
-        paper=dict(improvement_pct=78.4, max_before_mm=0.740, max_after_mm=0.141),
-    ),
-    "planar-3dof-4act": dict(
-        factory=PL.planar_3dof_4act, n_check=6, stiffness=2e4, stiffness_unit="N/mm", load=np.array([0.0, -30.0]),
-        actuator_std=1e-3, table=PL.P3_TABLE2_ERRORS, table_tool=PL.P3_TABLE2_TOOL,
-        paper_free=PL.P3_PAPER_FREE + ("target.x", "target.y"),
-        frame=(), gauge=(),
-        paper=dict(improvement_pct=92.4, max_before_mm=1.006, max_after_mm=0.097),
-    ),
-}
-TRACKER_STD = 0.010
+def _is_angle(name, mech):
+    """Joint angles and rotary encoder offsets (rad); the rest are lengths (mm)."""
+    return name.startswith("alpha") or (name.startswith("dq") and mech.n_dof == 2)
 
 
 def _random_errors(mech, rng):
-    out = {}
-    for n in mech.param_names:
-        if n.startswith("alpha") or (n.startswith("dq") and mech.n_dof == 2):
-            out[n] = rng.normal() * np.deg2rad(0.05)
-        else:
-            out[n] = rng.normal() * 0.2
-    return out
+    return {n: rng.normal() * (np.deg2rad(0.05) if _is_angle(n, mech) else 0.2) for n in mech.param_names}
 
 
 def _summ(res):
@@ -75,18 +51,12 @@ def _summ(res):
     return row
 
 
-def run(name, setup, n_machines, seed):
-    nominal = setup["factory"]()
-    sensor = PlanarToolSensor(n_pose=nominal.n_dof)
-    noise = NoiseModel(np.full(2, TRACKER_STD), np.full(nominal.n_actuators, setup["actuator_std"]))
+def run(case, n_machines, seed):
+    setup = CASES[case]
+    nominal, sensor, noise, _, _ = models = case_models(case)
     rng = np.random.default_rng(seed)
     # 1. reproduction with the paper's identified errors as the real machine
-    real = nominal.with_deltas(setup["table"], name=name + "-table")
-    real_sensor = sensor.with_deltas(setup["table_tool"])
-    calib = nominal.sample_poses(30, rng)
-    check = nominal.sample_poses(setup["n_check"], rng)
-    repro = calibration_experiment(nominal, sensor, real, real_sensor, calib, check, setup["stiffness"],
-                                   setup["load"], noise, rng, free=setup["paper_free"], methods=METHODS)
+    repro = table_experiment(case, rng, models)
     # 2. Monte Carlo over random machines, all parameters in error, identifiable set free
     free = tuple(n for n in nominal.param_names if n not in setup["frame"] + setup["gauge"]) + ("target.x", "target.y")
     rows = []
@@ -98,9 +68,9 @@ def run(name, setup, n_machines, seed):
         real = nominal.with_deltas(err)
         real_sensor = sensor.with_deltas({"target.x": rng.normal() * 0.1, "target.y": rng.normal() * 0.1})
         K = setup["stiffness"] * rng.uniform(0.5, 2.0, size=nominal.n_actuators)
-        calib = nominal.sample_poses(30, rng)
+        calib = nominal.sample_poses(N_CALIB, rng)
         check = nominal.sample_poses(setup["n_check"], rng)
-        res = calibration_experiment(nominal, sensor, real, real_sensor, calib, check, K, setup["load"], noise, rng,
+        res = calibration_experiment(nominal, sensor, real, real_sensor, calib, check, K, np.array(LOAD_N), noise, rng,
                                      free=free, methods=METHODS)
         rows.append(_summ(res))
     dt = time.perf_counter() - t0
@@ -115,12 +85,13 @@ def run(name, setup, n_machines, seed):
         mc[m] = {"improvement_mean_pct": float(imp[m].mean()), "improvement_worst_pct": float(imp[m].min()),
                  "max_after_mm_mean": float(np.mean([r[m]["max_after_mm"] for r in rows])),
                  "max_after_mm_worst": float(np.max([r[m]["max_after_mm"] for r in rows]))}
-    truth = _gauge_equivalent(nominal, sensor, calib, noise, dict(setup["table"], **setup["table_tool"]),
-                              setup["paper_free"], setup["gauge"])
+    gauge_poses = nominal.sample_poses(N_CALIB, np.random.default_rng([seed, 7]))
+    truth = _gauge_equivalent(nominal, sensor, gauge_poses, noise, dict(setup["table"], **setup["table_tool"]),
+                              setup["free"], setup["gauge"])
     fit = repro.fits["projection"]
     ident = []
     for name_, d, sd in zip(fit.free, fit.delta, fit.std):
-        ang = name_.startswith("alpha") or (name_.startswith("dq") and nominal.n_dof == 2)
+        ang = _is_angle(name_, nominal)
         f = np.rad2deg if ang else float
         ident.append((name_, float(f(setup["table"].get(name_, setup["table_tool"].get(name_, 0.0)))),
                       float(f(truth[name_])), float(f(d)), float(f(sd)), "deg" if ang else "mm"))
@@ -147,11 +118,12 @@ def main():
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args()
     out = {}
-    for name, setup in SETUPS.items():
-        repro, mc, ident = run(name, setup, args.machines, args.seed)
+    for case, setup in CASES.items():
+        name = setup["machine"]
+        repro, mc, ident = run(case, args.machines, args.seed)
         paper = setup["paper"]
         print(f"\n== {name}: K = {setup['stiffness']:g} {setup['stiffness_unit']} per actuator, "
-              f"load F = {setup['load'].tolist()} N on the tool, tracker σ = {TRACKER_STD} mm")
+              f"load F = {list(LOAD_N)} N on the tool, tracker σ = {TRACKER_STD} mm")
         print(f"reproduction (paper's identified errors as the real machine): held-out max before "
               f"{repro['max_before_mm']:.3f} mm (paper {paper['max_before_mm']:.3f})")
         print(f"{'method':<20}{'improvement %':>14}{'max after mm':>14}   paper: {paper['improvement_pct']}%, "
@@ -181,7 +153,7 @@ def main():
                              "max_after_mm": round(repro["projection"]["max_after_mm"], 4),
                              "paper": paper},
             "stiffness": f"{setup['stiffness']:g} {setup['stiffness_unit']}",
-            "load_N": setup["load"].tolist(),
+            "load_N": list(LOAD_N),
             "machines": mc["machines"],
         }
     print(json.dumps(out))

@@ -132,3 +132,23 @@ def test_report_folder_must_be_a_folder(tmp_path, bad):
     res = run(*IDENT, tmp_path / "meas.csv", "-o", tmp_path / "cal.yaml", "--report", tmp_path / bad)
     assert res.exit_code == 2 and "is not a folder" in res.stderr
     assert not (tmp_path / "cal.yaml").exists() and (tmp_path / bad).read_text() == "x"
+
+
+def test_report_without_commanded_poses(tmp_path):
+    """A measurement file without cmd_x..cmd_c (as from a real data logger): the report's
+    pose cloud is the nominal FK of the leg readings, one pose per row."""
+    write_poses(tmp_path / "poses.csv", 25, 4)
+    ok(run(*SIM, "--poses", tmp_path / "poses.csv", "-o", tmp_path / "meas.csv"))
+    lines = (tmp_path / "meas.csv").read_text().splitlines()
+    header = lines[[k for k, s in enumerate(lines) if not s.startswith("#")][0]].split(",")
+    keep = [k for k, h in enumerate(header) if not h.startswith("cmd_")]
+    (tmp_path / "legs_dials.csv").write_text("\n".join(
+        s if s.startswith("#") else ",".join(s.split(",")[k] for k in keep) for s in lines) + "\n")
+    res = ok(run(*IDENT, tmp_path / "legs_dials.csv", "-o", tmp_path / "cal.yaml", "--report", tmp_path / "rep",
+                 "--json"))
+    import json
+
+    j = json.loads(res.stdout)
+    assert j["report"] == str(tmp_path / "rep" / "report.html") and j["n_poses"] == 25
+    page = (tmp_path / "rep" / "report.html").read_text(encoding="utf-8")
+    assert "legs_dials.csv</td>" in page and 'poses used</td><td class="l">25 (dropped 0)' in page

@@ -53,11 +53,20 @@ def euler_to_matrix(abc: np.ndarray) -> np.ndarray:
 
 def matrix_to_euler(R: np.ndarray) -> np.ndarray:
     """Angles ``(a, b, c)`` (radians) of rotation matrices ``R`` (..., 3, 3); inverse of
-    :func:`euler_to_matrix` with ``b`` in [-π/2, π/2] and ``a, c`` in (-π, π]."""
+    :func:`euler_to_matrix` with ``b`` in [-π/2, π/2] and ``a, c`` in [-π, π].
+
+    Closed form (fast path, no per-call overhead), from the last row and first column of R:
+    b = atan2(−R₂₀, √(R₀₀² + R₁₀²)), c = atan2(R₁₀, R₀₀); ``a`` from the second row of
+    Rz(c)ᵀR = Ry(b)Rx(a), a = atan2(s_c R₀₂ − c_c R₁₂, c_c R₁₁ − s_c R₀₁), which stays
+    accurate near gimbal lock (there c → 0 when R₀₀ = R₁₀ = 0). ``tests/test_conventions.py``
+    checks it against scipy and by round trips.
+    """
     R = np.asarray(R, dtype=float)
-    shape = R.shape[:-2]
-    angles = Rotation.from_matrix(R.reshape(-1, 3, 3)).as_euler(EULER_SEQUENCE)
-    return angles.reshape(shape + (3,))
+    c = np.arctan2(R[..., 1, 0], R[..., 0, 0])
+    b = np.arctan2(-R[..., 2, 0], np.hypot(R[..., 0, 0], R[..., 1, 0]))
+    cc, sc = np.cos(c), np.sin(c)
+    a = np.arctan2(sc * R[..., 0, 2] - cc * R[..., 1, 2], cc * R[..., 1, 1] - sc * R[..., 0, 1])
+    return np.stack([a, b, c], axis=-1)
 
 
 def euler_rate_matrix(abc: np.ndarray) -> np.ndarray:

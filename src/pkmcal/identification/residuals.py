@@ -128,14 +128,20 @@ class Model:
         return np.concatenate([self.mechanism.params, self.sensor.params])
 
     def split(self, theta: np.ndarray) -> tuple[Mechanism, Sensor]:
-        """The machine and sensor at θ = [ρ; s] (the sensor object is reused while s is unchanged)."""
+        """The machine and sensor at θ = [ρ; s]; each object is reused while its own
+        parameters are unchanged (a finite-difference column moves only one of them)."""
+        theta = np.asarray(theta, dtype=float)
         p = self.n_mech
-        s = np.asarray(theta[p:], dtype=float)
-        cached = getattr(self, "_sensor_cache", None)
-        if cached is None or not np.array_equal(cached[0], s):
-            cached = (s.copy(), self.sensor.with_params(s))
-            self._sensor_cache = cached
-        return self.mechanism.with_params(theta[:p]), cached[1]
+        rho, s = theta[:p], theta[p:]
+        mech = getattr(self, "_mech_cache", None)
+        if mech is None or not np.array_equal(mech[0], rho):
+            mech = (rho.copy(), self.mechanism.with_params(rho))
+            self._mech_cache = mech
+        sens = getattr(self, "_sensor_cache", None)
+        if sens is None or not np.array_equal(sens[0], s):
+            sens = (s.copy(), self.sensor.with_params(s))
+            self._sensor_cache = sens
+        return mech[1], sens[1]
 
     def subset(self, keep: np.ndarray) -> "Model":
         """The same model on the poses ``keep`` (boolean or index array)."""

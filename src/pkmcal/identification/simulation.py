@@ -125,18 +125,7 @@ def simulate_campaign(
         dropped[int(k)] = f"fk-not-converged (residual {fk.residual[k]:.3g})"
     ok = finite & fk.converged
     poses = np.where(ok[:, None], fk.poses, commanded)   # placeholders where not ok, never kept
-    report = real.check_limits(poses)
-    unknown = [n for n in ignore_limits if n not in report.violations]
-    if unknown:
-        raise PkmcalError(f"machine '{real.name}' has no limit {', '.join(unknown)}; "
-                          f"its limits are {', '.join(report.violations)}")
-    violated = {n: v for n, v in report.violations.items() if n not in ignore_limits}
-    bad = np.zeros(len(ok), dtype=bool)
-    for v in violated.values():
-        bad |= v
-    for k in np.flatnonzero(ok & bad):
-        dropped[int(k)] = "real-limits: " + "+".join(n for n, v in violated.items() if v[k])
-    ok &= ~bad
+    ok = drop_limit_violations(real, poses, ok, ignore_limits, dropped)
     unread = ok & _unreadable(sensor, poses)
     for k in np.flatnonzero(unread):
         dropped[int(k)] = "not-readable-by-sensor"
@@ -171,14 +160,47 @@ def perturb_machine(
     ``distribution="uniform"``: errors U(−m, m) (paper 1 §IV: ±5 mm); ``"gaussian"``: N(0, m²).
     The home pose is kept, so the real machine is commanded as the nominal one is.
     """
+    delta = parameter_errors(len(machine.params), magnitude_mm, rng, distribution)
+    return machine.with_params(machine.params + delta, name=name or f"{machine.name}-perturbed")
+
+
+def parameter_errors(
+    n: int,
+    magnitude_mm: float,
+    rng: np.random.Generator | int | None = None,
+    distribution: str = "uniform",
+) -> np.ndarray:
+    """``n`` random parameter errors: U(−m, m) for ``"uniform"`` (paper 1 §IV: ±5 mm),
+    N(0, m²) for ``"gaussian"``, m = ``magnitude_mm``."""
     if not np.isfinite(magnitude_mm) or magnitude_mm < 0:
         raise PkmcalError(f"parameter error magnitude must be a non-negative number of mm; got {magnitude_mm}")
     gen = as_rng(rng)
-    p = machine.params
     if distribution == "uniform":
-        delta = gen.uniform(-magnitude_mm, magnitude_mm, size=p.shape)
-    elif distribution == "gaussian":
-        delta = gen.standard_normal(size=p.shape) * magnitude_mm
-    else:
-        raise PkmcalError(f"unknown error distribution '{distribution}'; use uniform or gaussian")
-    return machine.with_params(p + delta, name=name or f"{machine.name}-perturbed")
+        return gen.uniform(-magnitude_mm, magnitude_mm, size=n)
+    if distribution == "gaussian":
+        return gen.standard_normal(size=n) * magnitude_mm
+    raise PkmcalError(f"unknown error distribution '{distribution}'; use uniform or gaussian")
+
+
+def drop_limit_violations(
+    real: Mechanism,
+    poses: np.ndarray,
+    ok: np.ndarray,
+    ignore_limits: tuple[str, ...],
+    dropped: dict[int, str],
+) -> np.ndarray:
+    """``ok`` (N,) with the poses outside ``real``'s limits (all but ``ignore_limits``) turned
+    False; each such pose that was ok gets the reason ``"real-limits: name+name"`` in
+    ``dropped`` (updated in place). An ignored name that is not a limit is a user error."""
+    report = real.check_limits(poses)
+    unknown = [n for n in ignore_limits if n not in report.violations]
+    if unknown:
+        raise PkmcalError(f"machine '{real.name}' has no limit {', '.join(unknown)}; "
+                          f"its limits are {', '.join(report.violations)}")
+    violated = {n: v for n, v in report.violations.items() if n not in ignore_limits}
+    bad = np.zeros(len(ok), dtype=bool)
+    for v in violated.values():
+        bad |= v
+    for k in np.flatnonzero(ok & bad):
+        dropped[int(k)] = "real-limits: " + "+".join(n for n, v in violated.items() if v[k])
+    return ok & ~bad

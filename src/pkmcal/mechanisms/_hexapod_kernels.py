@@ -2,10 +2,9 @@
 
 Why numba: batched NumPy needs one LAPACK call per 6×6 Newton system; measured on the
 2-core reference machine, ``np.linalg.solve`` on 100,000 stacked 6×6 systems alone costs
-0.5–0.9 µs/pose per iteration (0.49 as first measured; 0.91 re-measured with the other
-core busy), so a NumPy FK cannot meet the 1 µs/pose target (``benchmarks/kinematics.py``).
-These kernels loop over poses in parallel (``prange``), do the 6×6 elimination in
-registers and allocate nothing per pose.
+0.5–0.9 µs/pose per iteration, so a NumPy FK cannot meet the 1 µs/pose target
+(``benchmarks/kinematics.py``). These kernels do the 6×6 elimination in registers and
+allocate nothing per pose.
 
 Conventions (see :mod:`pkmcal.conventions`): pose = (x, y, z, a, b, c), R = Rz(c)Ry(b)Rx(a),
 leg vector l_i = p + R a_i − b_i (paper 1 eq. 1; paper 2 eq. 1 with its Rᵀ read as R),
@@ -18,38 +17,96 @@ A pose is reported converged only when max_i |L_i − L_target,i| ≤ tol, i.e. 
 IK reproduces the input lengths; NaN/inf lengths or guesses and singular systems are
 reported not converged.
 
-Where the FK time goes (one thread, stewart-prototype, 100,000 poses cold-started from
-home, ±20° box, ~4 Newton steps per pose): the 6×6 solve dominated (~0.35 µs per solve
-with variable-bound loops, ~0.08 µs per IK + Jacobian evaluation). Kept, because measured
-faster: loops with constant trip counts that LLVM unrolls, and reciprocal pivots (solve
-~0.12 µs); hoisting the first step from a guess shared by the batch (:func:`fk_newton`);
-a serial kernel for small batches. FK, before → after, same iterates and iteration
-counts (mean 3.99, all converged): 1.19 → 0.47–0.49 µs/pose on 2 threads in a quiet
-window (2.47 → 0.87–0.91 on one thread); interleaved A/B runs with other jobs on the
-machine: 1.18–1.27 → 0.71–0.73 (2.35–2.38 → 1.37–1.39). Cost: the first call compiles the
-FK kernels (parallel, serial) for ~23 s and the IK ones for ~2 s on this machine; later
-processes load them from numba's on-disk cache in ~0.02 s.
-Tried and dropped: fastmath on the solve (no measurable gain); a second-order first
-step from the guess's leg-length Hessians (−0.36 iterations per pose, no net time saved);
-plain (non-inlined) helpers (compile 9 s instead of 23 s, but FK 15–25 % slower).
+Structure, chosen for compile time: ONE serial ``@njit(nogil=True, cache=True)`` kernel per
+function, working on a row range [start, stop). Large batches are split into row chunks
+run by a small Python thread pool (:mod:`concurrent.futures`, ``numba.get_num_threads()``
+workers, the caller working too); the kernels release the GIL, so the chunks run in
+parallel without numba's ``parallel=True`` (parfor) machinery, which had to be compiled
+in addition to a serial variant. Every input is made C-contiguous, writable float64 before
+the call, so each kernel is compiled for exactly one signature.
+
+Measured on the 2-core reference machine (``benchmarks/kinematics.py``; another job was
+using about one core throughout, so absolute figures are pessimistic; A/B runs interleaved):
+cold-cache compile (fresh process, empty NUMBA_CACHE_DIR) of IK + FK went from 4.6 + 58 s
+(parallel + serial variants, inlined helpers; ~2 + 23 s on an idle machine) to the figure
+in the module constant below; FK µs/pose on 2 threads stayed within noise. See the report
+in the benchmark's JSON (``compile_s``) for the current numbers.
+
+Kept, because measured faster: loops with constant trip counts that LLVM unrolls, and
+reciprocal pivots (solve ~0.12 µs instead of ~0.35); hoisting the first Newton step from a
+guess shared by the batch (see :func:`fk_newton`).
+Tried and dropped: fastmath on the solve (no measurable gain); a second-order first step
+from the guess's leg-length Hessians (−0.36 iterations per pose, no net time saved).
 """
 
 from __future__ import annotations
 
+import itertools
 import math
+import threading
+from concurrent.futures import ThreadPoolExecutor
 
 import numba as nb
 import numpy as np
 
+#: Helpers are inlined by numba (``inline="always"``) only where it pays; see the docstring.
 _OPTS = dict(cache=True, nogil=True, error_model="numpy")
-_CHUNK = 512
-#: Batches smaller than this run on one thread (no thread-pool start-up).
-_SERIAL_BELOW = 64
-#: The shared-guess first step (see :func:`fk_newton`) is hoisted from this batch size on.
+#: Rows per thread below which a batch runs on the calling thread only (a thread hand-off
+#: costs ~20–50 µs; IK is ~0.1 µs/pose, FK ~1 µs/pose on one thread).
+_IK_GRAIN = 20_000
+_FK_GRAIN = 500
+#: Chunks per worker thread, for load balance when a core is busy with something else.
+_CHUNKS_PER_THREAD = 4
+#: The shared-guess first step (see :func:`fk_newton`) is hoisted from this many rows on.
 _HOIST_FROM = 8
 
+import os
+_EXP = os.environ.get("PKMCAL_KIN_INLINE", "")
+def _inl(name):
+    return "always" if name in _EXP else "never"
 
-@nb.njit(inline="always", **_OPTS)
+_POOL: ThreadPoolExecutor | None = None
+_POOL_LOCK = threading.Lock()
+
+
+def _pool(workers: int) -> ThreadPoolExecutor:
+    global _POOL
+    with _POOL_LOCK:
+        if _POOL is None or _POOL._max_workers < workers:
+            _POOL = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="pkmcal-kin")
+        return _POOL
+
+
+def _run_rows(kernel, n: int, grain: int, args: tuple) -> None:
+    """Run ``kernel(*args, start, stop)`` over rows [0, n): in the calling thread for small
+    n, else in chunks shared by the calling thread and ``numba.get_num_threads() − 1`` pool
+    threads (the kernels release the GIL)."""
+    workers = min(nb.get_num_threads(), n // grain) if n >= 2 * grain else 1
+    if workers <= 1:
+        kernel(*args, 0, n)
+        return
+    n_chunks = workers * _CHUNKS_PER_THREAD
+    bounds = [n * i // n_chunks for i in range(n_chunks + 1)]
+    nxt = itertools.count().__next__  # atomic under the GIL
+
+    def work():
+        while (i := nxt()) < n_chunks:
+            kernel(*args, bounds[i], bounds[i + 1])
+
+    pool = _pool(workers - 1)
+    futures = [pool.submit(work) for _ in range(workers - 1)]
+    work()
+    for f in futures:
+        f.result()
+
+
+def _f64(a) -> np.ndarray:
+    """C-contiguous, writable float64 (one compiled signature per kernel)."""
+    a = np.ascontiguousarray(a, dtype=np.float64)
+    return a if a.flags.writeable else a.copy()
+
+
+@nb.njit(inline=_inl("euler"), **_OPTS)
 def _euler_matrix(a, b, c, R):
     ca, cb, cc = math.cos(a), math.cos(b), math.cos(c)
     sa, sb, sc = math.sin(a), math.sin(b), math.sin(c)
@@ -64,8 +121,9 @@ def _euler_matrix(a, b, c, R):
     R[2, 2] = cb * ca
 
 
-@nb.njit(inline="always", **_OPTS)
-def _ik_rows(poses, base, platform, out, start, stop):
+@nb.njit(**_OPTS)
+def _ik_range(poses, base, platform, out, start, stop):
+    """out[k, i] = ‖p_k + R_k a_i − b_i‖ for rows k in [start, stop)."""
     R = np.empty((3, 3))
     for k in range(start, stop):
         _euler_matrix(poses[k, 3], poses[k, 4], poses[k, 5], R)
@@ -79,35 +137,19 @@ def _ik_rows(poses, base, platform, out, start, stop):
             out[k, i] = math.sqrt(s)
 
 
-@nb.njit(parallel=True, **_OPTS)
-def _ik_parallel(poses, base, platform):
-    n = poses.shape[0]
-    out = np.empty((n, 6))
-    n_chunks = (n + _CHUNK - 1) // _CHUNK
-    for chunk in nb.prange(n_chunks):
-        _ik_rows(poses, base, platform, out, chunk * _CHUNK, min(n, (chunk + 1) * _CHUNK))
-    return out
-
-
-@nb.njit(**_OPTS)
-def _ik_serial(poses, base, platform):
-    out = np.empty((poses.shape[0], 6))
-    _ik_rows(poses, base, platform, out, 0, poses.shape[0])
-    return out
-
-
 def ik_lengths(poses, base, platform):
     """Leg lengths L (N, 6) of poses (N, 6) [mm, rad]; base, platform (6, 3).
 
-    L_i = ‖p + R a_i − b_i‖. Below ``_SERIAL_BELOW`` poses a serial kernel is used: starting
-    the thread pool costs more than the work (measured ~10 µs per call).
+    L_i = ‖p + R a_i − b_i‖. Batches of 2 × ``_IK_GRAIN`` poses or more are split over
+    threads.
     """
-    if poses.shape[0] < _SERIAL_BELOW:
-        return _ik_serial(poses, base, platform)
-    return _ik_parallel(poses, base, platform)
+    poses, base, platform = _f64(poses), _f64(base), _f64(platform)
+    out = np.empty((poses.shape[0], 6))
+    _run_rows(_ik_range, poses.shape[0], _IK_GRAIN, (poses, base, platform, out))
+    return out
 
 
-@nb.njit(inline="always", **_OPTS)
+@nb.njit(inline=_inl("solve"), **_OPTS)
 def _solve6(J, rhs, d):
     """Solve J d = rhs (6×6) by Gaussian elimination with partial pivoting, in place.
 
@@ -161,7 +203,7 @@ def _solve6(J, rhs, d):
     return True
 
 
-@nb.njit(inline="always", **_OPTS)
+@nb.njit(inline=_inl("res"), **_OPTS)
 def _residual_jacobian(target, p, R, base, platform, J, rhs, ra):
     """rhs_i = target_i − L_i and row i of J = [u_iᵀ, ((R a_i) × u_i)ᵀ] at (p, R);
     returns max_i |rhs_i| (NaN/inf propagate, so a non-finite pose is never converged)."""
@@ -188,7 +230,7 @@ def _residual_jacobian(target, p, R, base, platform, J, rhs, ra):
     return err
 
 
-@nb.njit(inline="always", **_OPTS)
+@nb.njit(inline=_inl("step"), **_OPTS)
 def _apply_step(d, p, R, Rn):
     """p ← p + δp,  R ← exp([δω]×) R (Rodrigues), δ = (δp, δω) = d."""
     for r in range(3):
@@ -218,66 +260,10 @@ def _apply_step(d, p, R, Rn):
 
 
 @nb.njit(**_OPTS)
-def _shared_guess_step(guess, base, platform):
-    """For the guess shared by many poses: its leg lengths L_g (6,) and J_g⁻¹ (6, 6).
-
-    Returns ``(ok, L_g, Jinv)``; ``ok`` is False when J_g is singular or the guess is not
-    finite, in which case every pose takes the generic path.
-    """
-    R = np.empty((3, 3))
-    J = np.empty((6, 6))
-    Jc = np.empty((6, 6))
-    rhs = np.empty(6)
-    d = np.empty(6)
-    p = np.empty(3)
-    ra = np.empty(3)
-    zero = np.zeros(6)
-    Lg = np.empty(6)
-    Jinv = np.empty((6, 6))
-    _euler_matrix(guess[3], guess[4], guess[5], R)
-    for r in range(3):
-        p[r] = guess[r]
-    err = _residual_jacobian(zero, p, R, base, platform, J, rhs, ra)
-    if not math.isfinite(err):
-        return False, Lg, Jinv
-    for i in range(6):
-        Lg[i] = -rhs[i]
-    for col in range(6):
-        for r in range(6):
-            rhs[r] = 1.0 if r == col else 0.0
-            for c in range(6):
-                Jc[r, c] = J[r, c]
-        if not _solve6(Jc, rhs, d):
-            return False, Lg, Jinv
-        for r in range(6):
-            Jinv[r, col] = d[r]
-    return True, Lg, Jinv
-
-
-def fk_newton(lengths, guesses, base, platform, tol, max_iter):
-    """Newton–Raphson FK for N sets of leg lengths (N, 6) from guesses (N, 6).
-
-    Returns poses (N, 6) [mm, rad], converged (N,) bool, iterations (N,) int and the final
-    max |L − L_target| (N,) in mm.
-
-    Hoisted work: poses whose guess equals ``guesses[0]`` (the usual cold start from the
-    home pose) share the guess's leg lengths L_g and J_g⁻¹, computed once; their first
-    Newton step is then δ = J_g⁻¹ (L_target − L_g), a 6×6 product instead of an IK
-    evaluation plus a factorisation. It is the same step, so iterates and iteration counts
-    are those of plain Newton up to rounding. Small batches run on one thread.
-    """
-    n = lengths.shape[0]
-    if n == 0:
-        return np.empty((0, 6)), np.zeros(0, dtype=np.bool_), np.zeros(0, dtype=np.int64), np.empty(0)
-    if n < _SERIAL_BELOW:
-        return _fk_serial(lengths, guesses, base, platform, float(tol), int(max_iter))
-    return _fk_parallel(lengths, guesses, base, platform, float(tol), int(max_iter))
-
-
-@nb.njit(inline="always", **_OPTS)
-def _fk_rows(lengths, guesses, base, platform, tol, max_iter, poses, converged, iterations, residual,
-             shared_ok, Lg, Jinv, start, stop):
-    # scratch space allocated once per call/chunk, not per pose
+def _fk_range(lengths, guesses, base, platform, tol, max_iter, poses, converged, iterations, residual,
+              start, stop):
+    """Newton FK of rows [start, stop) (see :func:`fk_newton`); ``guesses`` is (1, 6), one
+    guess for every row, or (N, 6)."""
     R = np.empty((3, 3))
     Rn = np.empty((3, 3))
     J = np.empty((6, 6))
@@ -285,95 +271,110 @@ def _fk_rows(lengths, guesses, base, platform, tol, max_iter, poses, converged, 
     d = np.empty(6)
     p = np.empty(3)
     ra = np.empty(3)
-    for k in range(start, stop):
-        _fk_one(k, lengths, guesses, base, platform, tol, max_iter, poses, converged, iterations, residual,
-                shared_ok, Lg, Jinv, R, Rn, J, rhs, d, p, ra)
-
-
-@nb.njit(parallel=True, **_OPTS)
-def _fk_parallel(lengths, guesses, base, platform, tol, max_iter):
-    n = lengths.shape[0]
-    poses = np.empty((n, 6))
-    converged = np.zeros(n, dtype=np.bool_)
-    iterations = np.zeros(n, dtype=np.int64)
-    residual = np.empty(n)
-    shared_ok, Lg, Jinv = _shared_guess_step(guesses[0], base, platform)
-    n_chunks = (n + _CHUNK - 1) // _CHUNK
-    for chunk in nb.prange(n_chunks):
-        _fk_rows(lengths, guesses, base, platform, tol, max_iter, poses, converged, iterations, residual,
-                 shared_ok, Lg, Jinv, chunk * _CHUNK, min(n, (chunk + 1) * _CHUNK))
-    return poses, converged, iterations, residual
-
-
-@nb.njit(**_OPTS)
-def _fk_serial(lengths, guesses, base, platform, tol, max_iter):
-    n = lengths.shape[0]
-    poses = np.empty((n, 6))
-    converged = np.zeros(n, dtype=np.bool_)
-    iterations = np.zeros(n, dtype=np.int64)
-    residual = np.empty(n)
-    if n >= _HOIST_FROM:
-        shared_ok, Lg, Jinv = _shared_guess_step(guesses[0], base, platform)
-    else:  # J_g⁻¹ costs 6 solves: not worth it for a handful of poses
-        shared_ok, Lg, Jinv = False, np.empty(6), np.empty((6, 6))
-    _fk_rows(lengths, guesses, base, platform, tol, max_iter, poses, converged, iterations, residual,
-             shared_ok, Lg, Jinv, 0, n)
-    return poses, converged, iterations, residual
-
-
-@nb.njit(inline="always", **_OPTS)
-def _fk_one(k, lengths, guesses, base, platform, tol, max_iter, poses, converged, iterations, residual,
-            shared_ok, Lg, Jinv, R, Rn, J, rhs, d, p, ra):
-    target = lengths[k]
-    _euler_matrix(guesses[k, 3], guesses[k, 4], guesses[k, 5], R)
-    for r in range(3):
-        p[r] = guesses[k, r]
-    it = 0
-    err = np.inf
-    first = False
-    if shared_ok and max_iter > 0:
-        first = True
-        for c in range(6):
-            if guesses[k, c] != guesses[0, c]:
-                first = False
-    if first:
-        # iteration 0 at the shared guess: residual and step from the hoisted L_g, J_g⁻¹
-        err = 0.0
+    Lg = np.zeros(6)
+    Jg = np.empty((6, 6))
+    Jinv = np.empty((6, 6))
+    per_row = guesses.shape[0] > 1
+    g0 = start if per_row else 0
+    # hoisted: leg lengths L_g and J_g⁻¹ at the chunk's first guess (6 solves)
+    shared_ok = False
+    if stop - start >= _HOIST_FROM and max_iter > 0:
+        _euler_matrix(guesses[g0, 3], guesses[g0, 4], guesses[g0, 5], R)
+        for r in range(3):
+            p[r] = guesses[g0, r]
+        shared_ok = math.isfinite(_residual_jacobian(Lg, p, R, base, platform, Jg, rhs, ra))
         for i in range(6):
-            rhs[i] = target[i] - Lg[i]
-            a = abs(rhs[i])
-            if not a <= err:
-                err = a
-        if math.isfinite(err) and err > tol:
+            Lg[i] = -rhs[i]
+        for col in range(6):
+            if not shared_ok:
+                break
             for r in range(6):
-                s = 0.0
+                rhs[r] = 1.0 if r == col else 0.0
                 for c in range(6):
-                    s += Jinv[r, c] * rhs[c]
-                d[r] = s
+                    J[r, c] = Jg[r, c]
+            shared_ok = _solve6(J, rhs, d)
+            for r in range(6):
+                Jinv[r, col] = d[r]
+    for k in range(start, stop):
+        g = k if per_row else 0
+        target = lengths[k]
+        _euler_matrix(guesses[g, 3], guesses[g, 4], guesses[g, 5], R)
+        for r in range(3):
+            p[r] = guesses[g, r]
+        it = 0
+        err = np.inf
+        first = shared_ok
+        if first and per_row:
+            for c in range(6):
+                if guesses[k, c] != guesses[g0, c]:
+                    first = False
+        if first:
+            # iteration 0 at the shared guess: residual and step from the hoisted L_g, J_g⁻¹
+            err = 0.0
+            for i in range(6):
+                rhs[i] = target[i] - Lg[i]
+                a = abs(rhs[i])
+                if not a <= err:
+                    err = a
+            if math.isfinite(err) and err > tol:
+                for r in range(6):
+                    s = 0.0
+                    for c in range(6):
+                        s += Jinv[r, c] * rhs[c]
+                    d[r] = s
+                _apply_step(d, p, R, Rn)
+                it = 1
+        while True:
+            if not (first and it == 0):  # else: converged at the guess, or non-finite input
+                err = _residual_jacobian(target, p, R, base, platform, J, rhs, ra)
+            first = False
+            if not math.isfinite(err):
+                break
+            if err <= tol:
+                converged[k] = True
+                break
+            if it >= max_iter:
+                break
+            if not _solve6(J, rhs, d):
+                break
+            it += 1
             _apply_step(d, p, R, Rn)
-            it = 1
-    while True:
-        if first and it == 0:
-            pass  # converged at the guess, or non-finite input: err already set
-        else:
-            err = _residual_jacobian(target, p, R, base, platform, J, rhs, ra)
-        first = False
-        if not math.isfinite(err):
-            break
-        if err <= tol:
-            converged[k] = True
-            break
-        if it >= max_iter:
-            break
-        if not _solve6(J, rhs, d):
-            break
-        it += 1
-        _apply_step(d, p, R, Rn)
-    iterations[k] = it
-    residual[k] = err
-    for r in range(3):
-        poses[k, r] = p[r]
-    # Euler angles of R = Rz(c) Ry(b) Rx(a); |b| < 90° on any hexapod workspace.
-    poses[k, 4] = -math.asin(min(1.0, max(-1.0, R[2, 0])))
-    poses[k, 3] = math.atan2(R[2, 1], R[2, 2])
-    poses[k, 5] = math.atan2(R[1, 0], R[0, 0])
+        iterations[k] = it
+        residual[k] = err
+        for r in range(3):
+            poses[k, r] = p[r]
+        # Euler angles of R = Rz(c) Ry(b) Rx(a); |b| < 90° on any hexapod workspace.
+        poses[k, 4] = -math.asin(min(1.0, max(-1.0, R[2, 0])))
+        poses[k, 3] = math.atan2(R[2, 1], R[2, 2])
+        poses[k, 5] = math.atan2(R[1, 0], R[0, 0])
+
+
+def fk_newton(lengths, guesses, base, platform, tol, max_iter):
+    """Newton–Raphson FK for N sets of leg lengths (N, 6) from guesses (N, 6) or one guess
+    for all, (1, 6) or (6,).
+
+    Returns poses (N, 6) [mm, rad], converged (N,) bool, iterations (N,) int and the final
+    max |L − L_target| (N,) in mm.
+
+    Hoisted work: in each chunk of rows, poses whose guess equals the chunk's first guess
+    (the usual cold start from the home pose) share that guess's leg lengths L_g and J_g⁻¹,
+    computed once; their first Newton step is then δ = J_g⁻¹ (L_target − L_g), a 6×6
+    product instead of an IK evaluation plus a factorisation. It is the same step, so
+    iterates and iteration counts are those of plain Newton up to rounding. Batches of
+    2 × ``_FK_GRAIN`` poses or more are split over threads.
+    """
+    lengths = _f64(lengths)
+    guesses = _f64(np.atleast_2d(guesses))
+    n = lengths.shape[0]
+    if lengths.ndim != 2 or lengths.shape[1] != 6 or guesses.shape[1:] != (6,) or guesses.shape[0] not in (1, n):
+        raise ValueError(f"fk_newton: lengths (N, 6) and guesses (1 or N, 6) expected; got {lengths.shape}, "
+                         f"{guesses.shape}")
+    poses = np.empty((n, 6))
+    converged = np.zeros(n, dtype=np.bool_)
+    iterations = np.zeros(n, dtype=np.int64)
+    residual = np.empty(n)
+    if n:
+        args = (lengths, guesses, _f64(base), _f64(platform), float(tol), int(max_iter),
+                poses, converged, iterations, residual)
+        _run_rows(_fk_range, n, _FK_GRAIN, args)
+    return poses, converged, iterations, residual

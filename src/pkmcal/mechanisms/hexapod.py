@@ -191,8 +191,7 @@ class Hexapod(Mechanism):
 
     def leg_lengths(self, poses: np.ndarray) -> np.ndarray:
         """Leg lengths L (N, 6), mm (compiled kernel)."""
-        poses = np.ascontiguousarray(self.as_pose_array(poses))
-        return kernels.ik_lengths(poses, self.base, self.platform)
+        return kernels.ik_lengths(self.as_pose_array(poses), self.base, self.platform)
 
     def ik(self, poses: np.ndarray) -> np.ndarray:
         """Actuator readings λ = L − L0 (N, 6), mm."""
@@ -255,7 +254,9 @@ class Hexapod(Mechanism):
         if lengths.ndim != 2 or lengths.shape[1] != N_LEGS:
             raise PkmcalError(f"FK needs 6 leg lengths per pose; got an array of shape {lengths.shape}")
         g = self.home if guess is None else np.asarray(guess, dtype=float)
-        guesses = np.ascontiguousarray(np.broadcast_to(g, lengths.shape))
+        guesses = np.broadcast_to(g, lengths.shape)
+        if g.ndim == 1 or g.shape[0] == 1:
+            guesses = guesses[:1]  # one guess for all: the kernel broadcasts it
         poses, conv, iters, res = kernels.fk_newton(lengths, guesses, self.base, self.platform, tol, max_iter)
         return FKResult(poses=poses, converged=conv, iterations=iters, residual=res)
 

@@ -22,6 +22,27 @@ _OPTS = dict(cache=True, nogil=True, error_model="numpy", fastmath={"reassoc", "
 
 
 @nb.njit(**_OPTS)
+def _logdet_i_plus(S, j, L):  # pragma: no cover - compiled
+    """log det(I + S_j) = Σ_i log L_ii² from the Cholesky factor L (workspace, m × m) of
+    I + S_j; −∞ when I + S_j is not positive definite."""
+    m = S.shape[1]
+    ld = 0.0
+    for i in range(m):
+        for k in range(i + 1):
+            s = S[j, i, k] + (1.0 if i == k else 0.0)
+            for q in range(k):
+                s -= L[i, q] * L[k, q]
+            if i == k:
+                if not (s > 0.0):
+                    return -np.inf
+                L[i, i] = math.sqrt(s)
+                ld += math.log(s)
+            else:
+                L[i, k] = s / L[k, k]
+    return ld
+
+
+@nb.njit(**_OPTS)
 def update_and_gain(G, UT, Cinv, S, sign, gain):  # pragma: no cover - compiled
     """In place: S (N, m, m) rank-m update and gain (N,) = log det(I + S_j); see module doc.
 
@@ -51,25 +72,7 @@ def update_and_gain(G, UT, Cinv, S, sign, gain):  # pragma: no cover - compiled
                 v = S[j, i, k] - sign * s
                 S[j, i, k] = v
                 S[j, k, i] = v
-        # log det(I + S_j) by Cholesky
-        ld = 0.0
-        ok = True
-        for i in range(m):
-            for k in range(i + 1):
-                s = S[j, i, k] + (1.0 if i == k else 0.0)
-                for q in range(k):
-                    s -= L[i, q] * L[k, q]
-                if i == k:
-                    if not (s > 0.0):
-                        ok = False
-                        break
-                    L[i, i] = math.sqrt(s)
-                    ld += math.log(s)
-                else:
-                    L[i, k] = s / L[k, k]
-            if not ok:
-                break
-        gain[j] = ld if ok else -np.inf
+        gain[j] = _logdet_i_plus(S, j, L)
 
 
 @nb.njit(**_OPTS)
@@ -78,21 +81,4 @@ def gains_of(S, gain):  # pragma: no cover - compiled
     N, m, _ = S.shape
     L = np.empty((m, m))
     for j in range(N):
-        ld = 0.0
-        ok = True
-        for i in range(m):
-            for k in range(i + 1):
-                s = S[j, i, k] + (1.0 if i == k else 0.0)
-                for q in range(k):
-                    s -= L[i, q] * L[k, q]
-                if i == k:
-                    if not (s > 0.0):
-                        ok = False
-                        break
-                    L[i, i] = math.sqrt(s)
-                    ld += math.log(s)
-                else:
-                    L[i, k] = s / L[k, k]
-            if not ok:
-                break
-        gain[j] = ld if ok else -np.inf
+        gain[j] = _logdet_i_plus(S, j, L)

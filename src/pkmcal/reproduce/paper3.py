@@ -16,7 +16,7 @@ import time
 
 import numpy as np
 
-from pkmcal.identification.projection import calibration_experiment
+from pkmcal.identification.projection import HeldOutResult, calibration_experiment
 from pkmcal.mechanisms import planar as PL
 from pkmcal.reproduce.table import Reproduction, Row, mean_sd
 from pkmcal.sensors.base import NoiseModel
@@ -25,39 +25,61 @@ from pkmcal.sensors.planar_tool import PlanarToolSensor
 METHODS = ("projection", "projection-single", "projection-unweighted", "ignore-redundancy", "actuator-subset")
 TRACKER_STD = 0.010
 LOAD_N = (0.0, -30.0)
-#: case → settings (as in benchmarks/redundant.py and docs/redundant-machines.md) and the paper's numbers.
+N_CALIB = 30
+#: case → settings and the paper's numbers: the one definition, also used by
+#: ``benchmarks/redundant.py`` (docs/redundant-machines.md). ``free`` = the paper's identified
+#: set less the ``gauge`` our identifiability analysis asks for, plus the tool point;
+#: ``frame`` = joints that define the measurement frame (held at zero in random machines).
 CASES = {
     "paper3-case1": dict(
-        factory=PL.planar_2dof_3act, n_check=8, stiffness=5e7, stiffness_unit="N·mm/rad", actuator_std=1e-5,
-        table=PL.P2_TABLE1_ERRORS, table_tool=PL.P2_TABLE1_TOOL,
+        machine="planar-2dof-3act", factory=PL.planar_2dof_3act, n_check=8, stiffness=5e7,
+        stiffness_unit="N·mm/rad", actuator_std=1e-5, table=PL.P2_TABLE1_ERRORS, table_tool=PL.P2_TABLE1_TOOL,
         free=tuple(n for n in PL.P2_PAPER_FREE if n not in ("D1", "D3")) + ("target.x", "target.y"),
+        frame=("B1.x", "B1.y", "B2.y"), gauge=("D1", "D3"),
         paper=dict(improvement_pct=78.4, max_before_mm=0.740, max_after_mm=0.141),
         title="Jeon et al., case 1: 2-dof machine with 3 rotary actuators (§3.1, Table 1)"),
     "paper3-case2": dict(
-        factory=PL.planar_3dof_4act, n_check=6, stiffness=2e4, stiffness_unit="N/mm", actuator_std=1e-3,
-        table=PL.P3_TABLE2_ERRORS, table_tool=PL.P3_TABLE2_TOOL,
-        free=PL.P3_PAPER_FREE + ("target.x", "target.y"),
+        machine="planar-3dof-4act", factory=PL.planar_3dof_4act, n_check=6, stiffness=2e4,
+        stiffness_unit="N/mm", actuator_std=1e-3, table=PL.P3_TABLE2_ERRORS, table_tool=PL.P3_TABLE2_TOOL,
+        free=PL.P3_PAPER_FREE + ("target.x", "target.y"), frame=(), gauge=(),
         paper=dict(improvement_pct=92.4, max_before_mm=1.006, max_after_mm=0.097),
         title="Jeon et al., case 2: 3-dof machine with 4 linear actuators (§3.2, Table 2)"),
 }
+
+
+def case_models(name: str):
+    """(nominal, sensor, noise, real, real_sensor) of case ``name`` of :data:`CASES`: the real
+    machine and tool point are nominal + the paper's identified errors (Table 1 / Table 2)."""
+    c = CASES[name]
+    nominal = c["factory"]()
+    sensor = PlanarToolSensor(n_pose=nominal.n_dof)
+    noise = NoiseModel(np.full(2, TRACKER_STD), np.full(nominal.n_actuators, c["actuator_std"]))
+    real = nominal.with_deltas(c["table"], name=name + "-table")
+    return nominal, sensor, noise, real, sensor.with_deltas(c["table_tool"])
+
+
+def table_experiment(name: str, rng: np.random.Generator, models=None) -> HeldOutResult:
+    """One run of case ``name``: :data:`N_CALIB` calibration and ``n_check`` held-out poses
+    uniform in the workspace (drawn from ``rng`` in that order), the paper's errors as the
+    real machine, actuator stiffness and the tool load :data:`LOAD_N` unknown to the fit,
+    all :data:`METHODS` (:func:`~pkmcal.identification.projection.calibration_experiment`).
+    ``models`` = :func:`case_models` ``(name)``, to reuse."""
+    c = CASES[name]
+    nominal, sensor, noise, real, real_sensor = case_models(name) if models is None else models
+    calib = nominal.sample_poses(N_CALIB, rng)
+    check = nominal.sample_poses(c["n_check"], rng)
+    return calibration_experiment(nominal, sensor, real, real_sensor, calib, check, c["stiffness"],
+                                  np.array(LOAD_N), noise, rng, free=c["free"], methods=METHODS)
 
 
 def _run(name: str, seed: int, quick: bool, repeats: int | None) -> Reproduction:
     t0 = time.perf_counter()
     c = CASES[name]
     n_rep = repeats if repeats is not None else (1 if quick else 50)
-    nominal = c["factory"]()
-    sensor = PlanarToolSensor(n_pose=nominal.n_dof)
-    noise = NoiseModel(np.full(2, TRACKER_STD), np.full(nominal.n_actuators, c["actuator_std"]))
-    real = nominal.with_deltas(c["table"], name=name + "-table")
-    real_sensor = sensor.with_deltas(c["table_tool"])
-    results = []
-    for ss in np.random.SeedSequence([seed, 3]).spawn(n_rep):
-        rng = np.random.default_rng(ss)
-        calib = nominal.sample_poses(30, rng)
-        check = nominal.sample_poses(c["n_check"], rng)
-        results.append(calibration_experiment(nominal, sensor, real, real_sensor, calib, check, c["stiffness"],
-                                              np.array(LOAD_N), noise, rng, free=c["free"], methods=METHODS))
+    models = case_models(name)
+    nominal = models[0]
+    results = [table_experiment(name, np.random.default_rng(ss), models)
+               for ss in np.random.SeedSequence([seed, 3]).spawn(n_rep)]
     p = c["paper"]
     rows = []
     m, s = mean_sd([float(r.before.max()) for r in results])
@@ -78,7 +100,7 @@ def _run(name: str, seed: int, quick: bool, repeats: int | None) -> Reproduction
         "noise": f"tracker sigma {TRACKER_STD} mm per axis; encoders sigma {c['actuator_std']:g} "
                  f"({'rad' if nominal.n_dof == 2 else 'mm'})",
         "forces": f"actuator stiffness {c['stiffness']:g} {c['stiffness_unit']}, tool load {LOAD_N} N (unknown to the fit)",
-        "poses": f"30 calibration, {c['n_check']} held-out, uniform in the workspace",
+        "poses": f"{N_CALIB} calibration, {c['n_check']} held-out, uniform in the workspace",
         "free": ", ".join(c["free"]),
         "seeds": f"numpy SeedSequence([{seed}, 3]).spawn({n_rep})",
         "Monte Carlo": f"{n_rep} repetition(s) with fresh poses and noise; mean (sd, range)",
