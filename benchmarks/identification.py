@@ -29,11 +29,32 @@ Workloads (all on ``stewart-prototype``, data from
 
   which is 1 for an unbiased estimator attaining the bound and trace(C⁻¹ C_est)/p < 1 otherwise.
 
-Timings: best of ``--repeats`` after a warm-up call (numba compile / cache load excluded),
-as CPU time of this process (``*_ms``; robust when other jobs share the machine) and as
-wall-clock time (``*_wall_ms``),
-numba set to one thread (15–100 poses are far too few for threads to pay), BLAS limited to
-one thread inside the engine. The last line of output is one JSON object.
+Timings: after a warm-up call of each fit (numba compile / cache load excluded), rounds
+that alternate the analytic and the finite-difference fit (so both see the same machine
+load); the best of ``--repeats`` analytic and of ``max(3, repeats // 4)`` (IK) or 3 (FK)
+finite-difference calls, as CPU time of this process (``*_ms``, the headline; robust when
+other jobs share the machine) and as wall-clock time (``*_wall_ms``); numba set to one
+thread (15–100 poses are far too few for threads to pay), BLAS limited to one thread inside
+the engine. The machine (CPU, cores, versions, load average before and after) is recorded.
+
+The two versions of each fit differ only in the Jacobian: the same residual function
+(same whitening, same warm-started pose solves), the same Levenberg–Marquardt (MINPACK
+``lmder``: ``ftol = xtol = gtol = 1e-12``, ``factor = 100``, Jacobian column scaling, cap
+100·n evaluations), the same start (the nominal machine). The analytic fit calls ``lmder``
+through ``scipy.optimize.leastsq``; the finite-difference fit through
+``scipy.optimize.least_squares(jac="2-point", method="lm")``: scipy's forward differences
+(2-point), step h_i = √ε·max(1, |θ_i|), one residual evaluation per free parameter and
+Jacobian, fed to the same ``lmder``. Each fit's solver counts (``nfev``: residual
+evaluations by the solver, ``njev``: Jacobian evaluations; ``fd_evaluations``: every
+residual evaluation including the finite-difference columns) are reported beside the
+times, so that the speed-up splits into cost per Jacobian and number of iterations: the
+finite-difference Jacobian is only accurate to ~1e-8 relative, so near the 1e-12
+tolerances the finite-difference fit takes more iterations (and may stop at ``xtol`` at a
+slightly higher cost: both costs are reported). ``*_solve_ms`` is the CPU time inside the
+solver call of the fastest run (residuals, Jacobians, MINPACK); the rest of ``*_ms`` is
+the same for both Jacobians: the start evaluation with the noise covariance, the
+identifiability SVD, the end evaluation and the covariance of the estimate.
+The last line of output is one JSON object.
 
 Usage: ``python benchmarks/identification.py [--repeats 20] [--trials 200] [--seed 0]``
 """
@@ -61,16 +82,77 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from kinematics import cpu_model  # noqa: E402  (benchmarks/kinematics.py)
 
 
-def best_ms(fn, repeats: int) -> tuple[float, float]:
-    """Best wall-clock and best CPU (process) time in ms over ``repeats`` calls after a warm-up."""
-    fn()
-    wall = cpu = np.inf
-    for _ in range(repeats):
-        t0, c0 = time.perf_counter(), time.process_time()
-        fn()
-        wall = min(wall, time.perf_counter() - t0)
-        cpu = min(cpu, time.process_time() - c0)
-    return wall * 1e3, cpu * 1e3
+class SolverClock:
+    """CPU time spent inside the engine's least-squares call (``engine._least_squares``)
+    during one ``identify``, so that a fit's time splits into the solve (residuals,
+    Jacobians, MINPACK) and the fixed costs around it (start evaluation with covariance,
+    identifiability SVD, end evaluation, covariance of the estimate)."""
+
+    def __init__(self):
+        from pkmcal.identification import engine
+
+        self._engine, self._orig, self.cpu = engine, engine._least_squares, 0.0
+
+    def __enter__(self):
+        def timed(*args, **kwargs):
+            c0 = time.process_time()
+            try:
+                return self._orig(*args, **kwargs)
+            finally:
+                self.cpu += time.process_time() - c0
+
+        self._engine._least_squares = timed
+        return self
+
+    def __exit__(self, *exc):
+        self._engine._least_squares = self._orig
+
+
+def best_ms_pair(fast, slow, repeats_fast: int, repeats_slow: int) -> tuple[dict, dict]:
+    """Best times of two functions after a warm-up each, over alternating rounds (both see
+    the same load): each round runs ``fast`` ⌈repeats_fast / repeats_slow⌉ times and
+    ``slow`` once. Per function: best ``wall`` and ``cpu`` ms, and ``solve`` the solver's
+    CPU ms in the run with the best CPU time."""
+    fast(), slow()
+    per_round = max(1, -(-repeats_fast // repeats_slow))
+    best = {"fast": {"wall": np.inf, "cpu": np.inf, "solve": np.nan},
+            "slow": {"wall": np.inf, "cpu": np.inf, "solve": np.nan}}
+    with SolverClock() as clock:
+        for _ in range(repeats_slow):
+            for name, fn, n in (("fast", fast, per_round), ("slow", slow, 1)):
+                b = best[name]
+                for _ in range(n):
+                    clock.cpu = 0.0
+                    t0, c0 = time.perf_counter(), time.process_time()
+                    fn()
+                    wall, cpu = (time.perf_counter() - t0) * 1e3, (time.process_time() - c0) * 1e3
+                    b["wall"] = min(b["wall"], wall)
+                    if cpu < b["cpu"]:
+                        b["cpu"], b["solve"] = cpu, clock.cpu * 1e3
+    return best["fast"], best["slow"]
+
+
+def counted(fn):
+    """``fn()`` and how many residual-only and Jacobian evaluations its fit made (every call
+    of the method's ``evaluate``, finite-difference columns included; not timed)."""
+    from pkmcal.identification import residuals
+
+    counts = {"residual": 0, "jacobian": 0}
+    saved = {}
+    for cls in (residuals.IKResidual, residuals.FKResidual):
+        saved[cls] = cls.evaluate
+
+        def evaluate(self, theta, jac=True, cov=True, _orig=cls.evaluate):
+            counts["jacobian" if jac else "residual"] += 1
+            return _orig(self, theta, jac, cov)
+
+        cls.evaluate = evaluate
+    try:
+        result = fn()
+    finally:
+        for cls, orig in saved.items():
+            cls.evaluate = orig
+    return result, counts
 
 
 def boundary_corners(machine):
@@ -107,6 +189,7 @@ def main() -> None:
         "numpy": np.__version__, "scipy": scipy.__version__, "numba": numba.__version__,
         "numba_threads": numba.get_num_threads(),
         "load_average_1min": os.getloadavg()[0],
+        "platform": platform.platform(),
     }
     print("machine:", ", ".join(f"{k}={v}" for k, v in machine_info.items()))
 
@@ -117,12 +200,14 @@ def main() -> None:
     def ik(jac):
         return identify(nominal, setup, q=q, y=y, method="ik-residual", jac=jac)
 
-    r_ik, r_ik_fd = ik("analytic"), ik("2-point")
-    ik_wall, ik_ms = best_ms(lambda: ik("analytic"), args.repeats)
-    ik_fd_wall, ik_fd_ms = best_ms(lambda: ik("2-point"), max(3, args.repeats // 4))
+    (r_ik, n_ik), (r_ik_fd, n_ik_fd) = counted(lambda: ik("analytic")), counted(lambda: ik("2-point"))
+    t_ik, t_ik_fd = best_ms_pair(lambda: ik("analytic"), lambda: ik("2-point"), args.repeats, max(3, args.repeats // 4))
+    ik_wall, ik_ms, ik_fd_wall, ik_fd_ms = t_ik["wall"], t_ik["cpu"], t_ik_fd["wall"], t_ik_fd["cpu"]
     print(f"ik-residual (42 params, 15 poses): analytic {ik_ms:.2f} ms CPU / {ik_wall:.2f} ms wall "
-          f"({r_ik.nfev} evaluations), finite differences {ik_fd_ms:.2f} ms CPU / {ik_fd_wall:.2f} ms wall "
-          f"({r_ik_fd.nfev} evaluations), "
+          f"(nfev {r_ik.nfev}, njev {r_ik.njev}), finite differences {ik_fd_ms:.2f} ms CPU / {ik_fd_wall:.2f} ms "
+          f"wall (nfev {r_ik_fd.nfev}, {n_ik_fd['residual']} residual evaluations with the 2-point columns), "
+          f"speed-up {ik_fd_ms / ik_ms:.1f}x (solver alone {t_ik['solve']:.2f} vs {t_ik_fd['solve']:.2f} ms, "
+          f"{t_ik_fd['solve'] / t_ik['solve']:.1f}x), "
           f"max |estimate difference| {np.max(np.abs(r_ik.estimate - r_ik_fd.estimate)):.2e} mm, "
           f"mean |parameter error| before {np.mean(np.abs(nominal.params - real.params)):.3f} mm, "
           f"after {np.mean(np.abs(r_ik.estimate[:42] - real.params)):.4f} mm")
@@ -142,13 +227,15 @@ def main() -> None:
     def fk(jac):
         return identify(nom2, setup2, q=q2, y=y2, commanded=c2, method="fk-residual", jac=jac)
 
-    r_fk, r_fk_fd = fk("analytic"), fk("2-point")
-    fk_wall, fk_ms = best_ms(lambda: fk("analytic"), max(3, args.repeats // 2))
-    fk_fd_wall, fk_fd_ms = best_ms(lambda: fk("2-point"), 3)
+    (r_fk, n_fk), (r_fk_fd, n_fk_fd) = counted(lambda: fk("analytic")), counted(lambda: fk("2-point"))
+    t_fk, t_fk_fd = best_ms_pair(lambda: fk("analytic"), lambda: fk("2-point"), max(3, args.repeats // 2), 3)
+    fk_wall, fk_ms, fk_fd_wall, fk_fd_ms = t_fk["wall"], t_fk["cpu"], t_fk_fd["wall"], t_fk_fd["cpu"]
     print(f"fk-residual (indicators, {len(q2)} poses, {len(r_fk.free)} free, gauge {', '.join(r_fk.gauge)}): "
-          f"analytic {fk_ms:.2f} ms CPU / {fk_wall:.2f} ms wall ({r_fk.nfev} evaluations), "
+          f"analytic {fk_ms:.2f} ms CPU / {fk_wall:.2f} ms wall (nfev {r_fk.nfev}, njev {r_fk.njev}), "
           f"finite differences {fk_fd_ms:.2f} ms CPU / {fk_fd_wall:.2f} ms wall "
-          f"({r_fk_fd.nfev} evaluations), max |estimate difference| "
+          f"(nfev {r_fk_fd.nfev}, {n_fk_fd['residual']} residual evaluations with the 2-point columns), "
+          f"speed-up {fk_fd_ms / fk_ms:.1f}x (solver alone {t_fk['solve']:.2f} vs {t_fk_fd['solve']:.2f} ms, "
+          f"{t_fk_fd['solve'] / t_fk['solve']:.1f}x), max |estimate difference| "
           f"{np.max(np.abs(r_fk.estimate - r_fk_fd.estimate)):.2e} mm")
 
     # -- efficiency, paper 1 set-up -------------------------------------------------------
@@ -186,6 +273,28 @@ def main() -> None:
         "ik_residual_fd_wall_ms": round(ik_fd_wall, 3),
         "fk_residual_wall_ms": round(fk_wall, 3),
         "fk_residual_fd_wall_ms": round(fk_fd_wall, 3),
+        "fd_jacobian": "scipy least_squares jac='2-point' (forward differences, step sqrt(eps)*max(1,|theta|))",
+        "solver": "MINPACK lmder (Levenberg-Marquardt), ftol=xtol=gtol=1e-12, same start for both Jacobians",
+        "ik_residual_solve_ms": round(t_ik["solve"], 3),
+        "ik_residual_fd_solve_ms": round(t_ik_fd["solve"], 3),
+        "fk_residual_solve_ms": round(t_fk["solve"], 3),
+        "fk_residual_fd_solve_ms": round(t_fk_fd["solve"], 3),
+        "ik_residual_cost": r_ik.cost,
+        "ik_residual_fd_cost": r_ik_fd.cost,
+        "fk_residual_cost": r_fk.cost,
+        "fk_residual_fd_cost": r_fk_fd.cost,
+        "ik_residual_nfev": r_ik.nfev,
+        "ik_residual_njev": r_ik.njev,
+        "ik_residual_evaluations": n_ik,
+        "ik_residual_fd_nfev": r_ik_fd.nfev,
+        "ik_residual_fd_evaluations": n_ik_fd,
+        "fk_residual_nfev": r_fk.nfev,
+        "fk_residual_njev": r_fk.njev,
+        "fk_residual_evaluations": n_fk,
+        "fk_residual_fd_nfev": r_fk_fd.nfev,
+        "fk_residual_fd_evaluations": n_fk_fd,
+        "ik_residual_max_estimate_difference_mm": float(np.max(np.abs(r_ik.estimate - r_ik_fd.estimate))),
+        "fk_residual_max_estimate_difference_mm": float(np.max(np.abs(r_fk.estimate - r_fk_fd.estimate))),
         "efficiency_weighted": round(eff[True], 4),
         "efficiency_unweighted": round(eff[False], 4),
         "efficiency_rms_weighted": round(eff_rms[True], 4),
@@ -194,7 +303,8 @@ def main() -> None:
         "weighted_rms_mm": actual[True],
         "unweighted_rms_mm": actual[False],
         "trials": args.trials,
-        "machine": machine_info,
+        "repeats": args.repeats,
+        "machine": {**machine_info, "load_average_1min_after": os.getloadavg()[0]},
     }
     sys.stdout.flush()
     print(json.dumps(out))

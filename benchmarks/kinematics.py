@@ -5,9 +5,12 @@ z ±15 mm, roll/pitch/yaw ±20°); IK of every pose, then FK of the resulting le
 cold-started from the home pose (the hard case: no previous pose to start from).
 
 Reported: µs/pose (best of ``--repeats`` timed runs after a warm-up run, so numba's compile
-and cache-load time is excluded and printed separately), FK mean iterations, converged
-fraction and non-converged count, peak memory, and the machine (CPU, cores, numba threads
-and threading layer, versions). Also a pose-by-pose loop through the public API (one
+and cache-load time is excluded and printed separately), numba's compile time with an empty
+cache in a fresh process (``compile_s``, IK + FK), FK mean iterations, converged fraction
+and non-converged count, peak memory, and the machine (CPU, cores, threads, versions). The
+kernels are serial and split large batches over a Python thread pool of
+``numba.get_num_threads()`` workers, so ``numba.set_num_threads(1)`` gives the one-thread
+figures. Also a pose-by-pose loop through the public API (one
 ``Hexapod.fk`` call per pose) and the same kernel forced onto one thread, to put a
 "faster than a compiled Newton solver called pose by pose" claim in context.
 
@@ -167,8 +170,8 @@ def best_time(fn, repeats: int) -> float:
 
 
 def compile_times() -> tuple[float, float]:
-    """numba compile time of the IK and FK kernels (parallel and serial variants), measured
-    in a fresh interpreter with an empty, private NUMBA_CACHE_DIR so nothing is loaded from
+    """numba compile time of the IK and FK kernels (one serial kernel each), measured in a
+    fresh interpreter with an empty, private NUMBA_CACHE_DIR so nothing is loaded from
     (or written to) the package's on-disk cache."""
     import subprocess
     import tempfile
@@ -299,6 +302,7 @@ def main(argv=None) -> dict:
         "first_call_fk_s": round(t_fk_first, 3),
         "compile_ik_s": round(t_ik_compile, 3),
         "compile_fk_s": round(t_fk_compile, 3),
+        "compile_s": round(t_ik_compile + t_fk_compile, 3),
         "import_s": round(T_IMPORT, 3),
         "peak_rss_mb": round(peak_rss_mb, 1),
         "tracemalloc_peak_mb": round(traced_peak / 2**20, 2),
@@ -306,6 +310,7 @@ def main(argv=None) -> dict:
         "cores": os.cpu_count(),
         "numba_threads": n_threads,
         "threading_layer": numba.threading_layer(),
+        "parallelism": "serial nogil kernels on a concurrent.futures thread pool",
         "python": platform.python_version(),
         "numpy": np.__version__,
         "numba": numba.__version__,
@@ -315,7 +320,8 @@ def main(argv=None) -> dict:
     print(f"host: {result['cpu']}, {result['cores']} cores, numba {numba.__version__} "
           f"({n_threads} threads, layer '{result['threading_layer']}'), numpy {np.__version__}, "
           f"Python {result['python']}")
-    print(f"numba compile (fresh process, empty cache): IK {t_ik_compile:.3f} s, FK {t_fk_compile:.3f} s; "
+    print(f"numba compile (fresh process, empty cache): IK {t_ik_compile:.3f} s, FK {t_fk_compile:.3f} s, "
+          f"total {t_ik_compile + t_fk_compile:.3f} s; "
           f"first call in this process (cache load or compile): IK {t_ik_first:.3f} s, FK {t_fk_first:.3f} s")
     print(f"IK: {result['ik_us_per_pose']:.4f} µs/pose (best of {args.repeats})")
     print(f"FK (cold start from home): {result['fk_us_per_pose']:.4f} µs/pose, "

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
+from helpers import assert_user_error
 
 from pkmcal.cli.info_cmd import single_axis_ranges
 from pkmcal.cli.main import cli
@@ -38,15 +39,6 @@ def _independent_lengths(machine, poses_deg):
     R = Rotation.from_euler("xyz", poses_deg[:, 3:], degrees=True).as_matrix()
     tops = poses_deg[:, None, :3] + np.einsum("nrc,ic->nir", R, machine.platform)
     return np.linalg.norm(tops - machine.base[None], axis=2)
-
-
-def _assert_user_error(result, *fragments):
-    assert result.exit_code == 2, result.output
-    err = result.stderr.strip()
-    assert err.startswith("pkmcal: error: ")
-    assert "\n" not in err and "Traceback" not in result.output
-    for f in fragments:
-        assert f in err, err
 
 
 def test_ik_values_and_reachability(tmp_path):
@@ -132,30 +124,30 @@ def test_ik_input_errors(tmp_path, content, fragments):
     (tmp_path / "poses.csv").write_text(content)
     out = tmp_path / "out.csv"
     res = run("ik", "stewart-prototype", str(tmp_path / "poses.csv"), "-o", str(out))
-    _assert_user_error(res, *fragments)
+    assert_user_error(res, *fragments)
     assert not out.exists()
 
 
 def test_machine_errors(tmp_path):
     _write_poses(tmp_path / "poses.csv")
     out = tmp_path / "out.csv"
-    _assert_user_error(run("ik", "no-such-machine", str(tmp_path / "poses.csv"), "-o", str(out)),
+    assert_user_error(run("ik", "no-such-machine", str(tmp_path / "poses.csv"), "-o", str(out)),
                        "unknown machine 'no-such-machine'")
     bad = tmp_path / "bad.yaml"
     bad.write_text("name: x\nlegs:\n  - {base: [0, 0, 0], platform: [0, 0, 0], offset: 1, stroke: [0, 1]}\n")
-    _assert_user_error(run("fk", str(bad), str(tmp_path / "poses.csv"), "-o", str(out)),
+    assert_user_error(run("fk", str(bad), str(tmp_path / "poses.csv"), "-o", str(out)),
                        "bad.yaml, line 2", "legs: 1 legs given, a hexapod needs exactly 6")
-    _assert_user_error(run("ik", str(tmp_path / "missing.yaml"), str(tmp_path / "poses.csv")), "no such machine file")
+    assert_user_error(run("ik", str(tmp_path / "missing.yaml"), str(tmp_path / "poses.csv")), "no such machine file")
     assert not out.exists()
 
 
 def test_file_errors(tmp_path):
     out = tmp_path / "out.csv"
-    _assert_user_error(run("ik", "stewart-prototype", str(tmp_path / "none.csv"), "-o", str(out)),
+    assert_user_error(run("ik", "stewart-prototype", str(tmp_path / "none.csv"), "-o", str(out)),
                        "none.csv", "cannot read the table")
-    _assert_user_error(run("ik", "stewart-prototype", str(tmp_path), "-o", str(out)), "cannot read the table")
+    assert_user_error(run("ik", "stewart-prototype", str(tmp_path), "-o", str(out)), "cannot read the table")
     _write_poses(tmp_path / "poses.csv")
-    _assert_user_error(run("ik", "stewart-prototype", str(tmp_path / "poses.csv"), "-o",
+    assert_user_error(run("ik", "stewart-prototype", str(tmp_path / "poses.csv"), "-o",
                            str(tmp_path / "no-dir" / "out.csv")), "cannot write")
     assert sorted(os.listdir(tmp_path)) == ["poses.csv"]
 
@@ -163,22 +155,22 @@ def test_file_errors(tmp_path):
 def test_output_equal_to_input_is_refused(tmp_path):
     _write_poses(tmp_path / "poses.csv")
     before = (tmp_path / "poses.csv").read_bytes()
-    _assert_user_error(run("ik", "stewart-prototype", str(tmp_path / "poses.csv"), "-o", str(tmp_path / "poses.csv")),
+    assert_user_error(run("ik", "stewart-prototype", str(tmp_path / "poses.csv"), "-o", str(tmp_path / "poses.csv")),
                        "is the input file")
     save_machine(stewart_prototype(), tmp_path / "m.yaml")
-    _assert_user_error(run("ik", str(tmp_path / "m.yaml"), str(tmp_path / "poses.csv"), "-o", str(tmp_path / "m.yaml")),
+    assert_user_error(run("ik", str(tmp_path / "m.yaml"), str(tmp_path / "poses.csv"), "-o", str(tmp_path / "m.yaml")),
                        "is the input file")
     assert (tmp_path / "poses.csv").read_bytes() == before
 
 
 def test_fk_errors(tmp_path):
     (tmp_path / "q.csv").write_text("lambda1,lambda2,l3\n1,2,3\n")
-    _assert_user_error(run("fk", "stewart-prototype", str(tmp_path / "q.csv")),
+    assert_user_error(run("fk", "stewart-prototype", str(tmp_path / "q.csv")),
                        "needs lambda1..lambda6 or l1..l6", "missing columns lambda3, lambda4, lambda5, lambda6")
     (tmp_path / "q.csv").write_text(format_table({f"lambda{i}": [25.0] for i in range(1, 7)}))
-    _assert_user_error(run("fk", "stewart-prototype", str(tmp_path / "q.csv"), "--guess", "1,2,3"),
+    assert_user_error(run("fk", "stewart-prototype", str(tmp_path / "q.csv"), "--guess", "1,2,3"),
                        "--guess '1,2,3': needs 6 comma-separated numbers")
-    _assert_user_error(run("fk", "stewart-prototype", str(tmp_path / "q.csv"), "--guess", "0,0,z,0,0,0"),
+    assert_user_error(run("fk", "stewart-prototype", str(tmp_path / "q.csv"), "--guess", "0,0,z,0,0,0"),
                        "not all of x,y,z,a,b,c are numbers")
 
 
@@ -196,7 +188,7 @@ def test_info_default_machine():
 
 
 def test_info_unknown_machine():
-    _assert_user_error(run("info", "nope"), "unknown machine 'nope'")
+    assert_user_error(run("info", "nope"), "unknown machine 'nope'")
 
 
 def test_single_axis_ranges_are_the_limits():

@@ -144,3 +144,30 @@ def test_matrix_to_euler_is_scipy_extrinsic_xyz(quat):
     back = matrix_to_euler(R)
     np.testing.assert_allclose((back - ref + np.pi) % (2 * np.pi) - np.pi, 0.0, atol=1e-10)
     assert matrix_to_euler(np.stack([R, R])).shape == (2, 3)
+
+
+@pytest.mark.parametrize("a", [-np.pi, np.pi, 0.5])
+@pytest.mark.parametrize("c", [-np.pi, np.pi, -2.0])
+@pytest.mark.parametrize("b", [0.0, -0.4, 1.2])
+def test_matrix_to_euler_range_is_half_open_at_pi(a, b, c):
+    # documented range: a, c in (-π, π]; ±π (as computed, R₂₁ = ±1.2e-16) come back as +π
+    R = euler_to_matrix(np.array([a, b, c]))
+    abc = matrix_to_euler(R)
+    assert -np.pi < abc[0] <= np.pi and -np.pi < abc[2] <= np.pi and abs(abc[1]) <= np.pi / 2
+    np.testing.assert_allclose(euler_to_matrix(abc), R, atol=1e-14)
+    expected = [np.pi if abs(a) == np.pi else a, b, np.pi if abs(c) == np.pi else c]
+    np.testing.assert_allclose(abc, expected, atol=1e-12)
+
+
+def test_matrix_to_euler_exact_half_turns_with_signed_zeros():
+    # atan2(−0.0, −1) = −π: exact matrices with negative zeros must still give +π
+    Rx = np.array([[1.0, -0.0, 0.0], [-0.0, -1.0, -0.0], [0.0, -0.0, -1.0]])
+    Rz = np.array([[-1.0, -0.0, 0.0], [-0.0, -1.0, 0.0], [0.0, 0.0, 1.0]])
+    np.testing.assert_array_equal(matrix_to_euler(np.stack([Rx, Rz])), [[np.pi, 0.0, 0.0], [0.0, 0.0, np.pi]])
+
+
+@settings(max_examples=200, deadline=None)
+@given(angles)
+def test_matrix_to_euler_range_everywhere(abc):
+    out = matrix_to_euler(euler_to_matrix(abc))
+    assert np.all(out[[0, 2]] > -np.pi) and np.all(out[[0, 2]] <= np.pi) and abs(out[1]) <= np.pi / 2

@@ -418,3 +418,70 @@ def test_cli_identifiability_json(cli_files):
     assert data["fixed"] == ["a1.x", "a1.y", "a2.x"]
     res = _cli(["identifiability", "stewart-prototype", "--setup", "indicators-prototype", "--poses", str(pose_csv)])
     assert "rank 39 of 42" in res.output and "suggested gauge" in res.output
+
+
+# -- solver paths and evaluation caching ----------------------------------------------------
+
+
+@pytest.mark.parametrize("method,setup_name,n", [("ik-residual", "full-pose", 15), ("fk-residual", "indicators", 40)])
+def test_lm_path_is_least_squares_lm(nominal, real, method, setup_name, n):
+    """The analytic LM fit (MINPACK lmder via leastsq) is the run scipy's
+    least_squares(method="lm") makes with the same objective: same iterate, same counts;
+    and the finite-difference fit starts from the same point with the same tolerances."""
+    from scipy.optimize import least_squares
+
+    from pkmcal.identification.engine import _least_squares, _Objective
+
+    setup = setups()[setup_name]
+    cmd = commanded(nominal, n)
+    q, y = simulate(nominal, real, setup.sensor, cmd, noise=setup.noise)
+    res = identify(nominal, setup, q=q, y=y, commanded=cmd, method=method)
+    free = res.free_index
+    results = []
+    for path in ("engine", "least_squares"):
+        model = Model(nominal, setup.sensor, setup.noise, q, y, cmd)
+        meth = make_method(method, model)
+        W = whitening(meth.evaluate(model.theta0).cov)
+        meth.sensor_columns = False
+        obj = _Objective(meth, model.theta0, free, W)
+        kw = dict(ftol=1e-12, xtol=1e-12, gtol=1e-12)
+        if path == "engine":
+            sol = _least_squares(obj, model.theta0[free], jac="analytic", method="lm", max_nfev=None, **kw)
+            results.append((sol.x, sol.nfev, sol.njev, sol.status))
+        else:
+            sol = least_squares(obj.fun, model.theta0[free], jac=obj.jac, method="lm", x_scale="jac", **kw)
+            results.append((sol.x, sol.nfev, sol.njev, sol.status))
+    (x1, nf1, nj1, st1), (x2, nf2, nj2, st2) = results
+    np.testing.assert_allclose(x1, x2, rtol=0, atol=1e-9)
+    assert (nf1, nj1, st1) == (nf2, nj2, st2)
+    np.testing.assert_allclose(res.estimate[free], x1, rtol=0, atol=1e-9)
+    fd = identify(nominal, setup, q=q, y=y, commanded=cmd, method=method, jac="2-point")
+    assert fd.free == res.free and np.array_equal(fd.initial, res.initial)
+    # the finite-difference fit ends at (about) the same minimum, never a better one
+    assert fd.success and res.cost * (1 - 1e-9) <= fd.cost <= res.cost * (1 + 1e-3)
+
+
+@pytest.mark.parametrize("method", ["ik-residual", "fk-residual", "projection"])
+def test_cached_evaluation_equals_fresh(nominal, real, method):
+    """Residual first, Jacobian second at the same θ (the solver's order, served from the
+    method's cache) gives exactly what a fresh method evaluating the Jacobian at θ gives."""
+    setup = _jacobian_setup("full-pose")
+    cmd = commanded(nominal, 6)
+    q, y = simulate(nominal, real, setup.sensor, cmd, noise=setup.noise)
+    theta = None
+    evs = []
+    for order in ("cached", "fresh"):
+        model = Model(nominal, setup.sensor, setup.noise, q, y, cmd)
+        meth = make_method(method, model)
+        if theta is None:
+            theta = model.theta0 + np.random.default_rng(4).normal(0, 0.2, model.theta0.size) * np.r_[
+                np.ones(42), 0.01 * np.ones(12)]
+        if order == "cached":
+            r = meth.evaluate(theta, jac=False, cov=False).r
+            ev = meth.evaluate(theta.copy(), jac=True, cov=True)
+            np.testing.assert_array_equal(r, ev.r)
+        else:
+            ev = meth.evaluate(theta, jac=True, cov=True)
+        evs.append(ev)
+    for field_ in ("r", "J", "cov", "poses"):
+        np.testing.assert_array_equal(getattr(evs[0], field_), getattr(evs[1], field_))

@@ -12,9 +12,19 @@ import copy
 import numpy as np
 import yaml
 from click.testing import CliRunner
-from hypothesis import HealthCheck, given, settings
+from helpers import (
+    assert_ok_or_user_error,
+    cells,
+    csv_texts,
+    dump_yaml,
+    fuzz_file,
+    fuzz_settings,
+    keys,
+    mutate,
+    structures,
+)
+from hypothesis import given
 from hypothesis import strategies as st
-from test_fuzz_loaders import cells, csv_texts, keys, structures
 
 from pkmcal.cli.main import cli
 from pkmcal.errors import PkmcalError
@@ -23,10 +33,8 @@ from pkmcal.io.setup_file import builtin_setup, load_setup
 from pkmcal.mechanisms.library import stewart_prototype
 from pkmcal.sensors.base import MeasurementSetup
 
-CHEAP = settings(max_examples=500, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture,
-                                                                        HealthCheck.too_slow])
-CLI = settings(max_examples=500, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture,
-                                                                      HealthCheck.too_slow])
+CHEAP = fuzz_settings(500)
+CLI = fuzz_settings(500)
 
 VALID_SETUPS = [yaml.safe_load(t) for t in (
     """
@@ -55,43 +63,11 @@ SETUP_SCALARS = st.sampled_from(["indicators", "full-pose", "position", "planar-
                                  "zero1", "world.x", "tool.c", "nan", ".inf", -1, 0, 1e400, None, True, [], {}])
 
 
-def _paths(obj, prefix=()):
-    yield prefix
-    if isinstance(obj, dict):
-        for k, v in obj.items():
-            yield from _paths(v, prefix + (k,))
-    elif isinstance(obj, list):
-        for i, v in enumerate(obj):
-            yield from _paths(v, prefix + (i,))
-
-
 @st.composite
 def mutated_setups(draw):
     data = copy.deepcopy(draw(st.sampled_from(VALID_SETUPS)))
-    paths = [p for p in _paths(data) if p]
-    for _ in range(draw(st.integers(1, 3))):
-        path = draw(st.sampled_from(paths))
-        parent = data
-        try:
-            for part in path[:-1]:
-                parent = parent[part]
-            action = draw(st.sampled_from(["replace", "replace", "delete", "insert"]))
-            value = draw(st.one_of(structures, SETUP_SCALARS))
-            if action == "replace" or not isinstance(parent, (dict, list)):
-                parent[path[-1]] = value
-            elif action == "delete":
-                del parent[path[-1]]
-            elif isinstance(parent, list):
-                parent.insert(path[-1], value)
-            else:
-                parent[draw(SETUP_KEYS)] = value
-        except (KeyError, IndexError, TypeError):
-            continue  # an earlier mutation removed this path
-    return data
-
-
-def _dump(data) -> str:
-    return yaml.dump(data, Dumper=getattr(yaml, "CSafeDumper", yaml.SafeDumper), allow_unicode=True, sort_keys=False)
+    return mutate(draw, data, st.one_of(structures, SETUP_SCALARS), SETUP_KEYS,
+                  actions=("replace", "replace", "delete", "insert"))
 
 
 def _check_setup_file(path) -> None:
@@ -104,37 +80,25 @@ def _check_setup_file(path) -> None:
     assert isinstance(s, MeasurementSetup)
 
 
-def _assert_cli(res, out) -> None:
-    assert res.exit_code in (0, 2), res.output
-    assert res.exception is None or isinstance(res.exception, SystemExit), repr(res.exception)
-    if res.exit_code == 2:
-        err = res.stderr.strip()
-        assert err.startswith("pkmcal: error: ") and "\n" not in err, err
-        assert "Traceback" not in res.output
-        assert out is None or not out.exists()
-
-
 # -- setup files ---------------------------------------------------------------------------------
 
 def test_valid_setups_load(tmp_path):
     for k, data in enumerate(VALID_SETUPS):
-        (tmp_path / f"s{k}.yaml").write_text(_dump(data))
+        (tmp_path / f"s{k}.yaml").write_text(dump_yaml(data))
         assert isinstance(load_setup(tmp_path / f"s{k}.yaml"), MeasurementSetup)
 
 
 @CHEAP
 @given(st.one_of(mutated_setups(), structures))
 def test_mutated_setup_files(tmp_path_factory, data):
-    path = tmp_path_factory.mktemp("s") / "setup.yaml"
-    path.write_text(_dump(data), encoding="utf-8")
+    path = fuzz_file(tmp_path_factory, "setup.yaml", dump_yaml(data))
     _check_setup_file(path)
 
 
 @CHEAP
 @given(st.one_of(st.binary(max_size=200), st.text(max_size=200).map(lambda t: t.encode("utf-8", "surrogatepass"))))
 def test_random_bytes_setup(tmp_path_factory, blob):
-    path = tmp_path_factory.mktemp("s") / "setup.yaml"
-    path.write_bytes(blob)
+    path = fuzz_file(tmp_path_factory, "setup.yaml", blob)
     _check_setup_file(path)
 
 
@@ -142,11 +106,11 @@ def test_random_bytes_setup(tmp_path_factory, blob):
 @given(mutated_setups())
 def test_cli_on_mutated_setups(tmp_path_factory, data):
     d = tmp_path_factory.mktemp("cli")
-    (d / "setup.yaml").write_text(_dump(data), encoding="utf-8")
+    (d / "setup.yaml").write_text(dump_yaml(data), encoding="utf-8")
     (d / "poses.csv").write_text(POSES_CSV)
     res = CliRunner().invoke(cli, ["identifiability", "stewart-prototype", "--setup", str(d / "setup.yaml"),
                                    "--poses", str(d / "poses.csv"), "--json"])
-    _assert_cli(res, None)
+    assert_ok_or_user_error(res)
 
 
 # -- measurement files ---------------------------------------------------------------------------
@@ -215,16 +179,14 @@ def test_valid_measurement_base_loads(tmp_path):
 @CHEAP
 @given(st.one_of(mutated_measurements(), csv_texts()))
 def test_mutated_measurement_files(tmp_path_factory, text):
-    path = tmp_path_factory.mktemp("m") / "meas.csv"
-    path.write_text(text, encoding="utf-8")
+    path = fuzz_file(tmp_path_factory, "meas.csv", text)
     _check_measurements(path)
 
 
 @CHEAP
 @given(st.binary(max_size=300))
 def test_random_bytes_measurements(tmp_path_factory, blob):
-    path = tmp_path_factory.mktemp("m") / "meas.csv"
-    path.write_bytes(blob)
+    path = fuzz_file(tmp_path_factory, "meas.csv", blob)
     _check_measurements(path)
 
 
@@ -236,6 +198,6 @@ def test_cli_identify_on_mutated_measurements(tmp_path_factory, text):
     out = d / "cal.yaml"
     res = CliRunner().invoke(cli, ["identify", "stewart-prototype", str(d / "meas.csv"), "--setup",
                                    "indicators-prototype", "-o", str(out), "--fix", "auto"])
-    _assert_cli(res, out)
+    assert_ok_or_user_error(res, out)
     if res.exit_code == 0:
         assert out.exists()

@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 from pkmcal.conventions import euler_rate_matrix, euler_to_matrix, matrix_to_euler, rotation_error
 from pkmcal.errors import PkmcalError
 from pkmcal.mechanisms import builtin_machine, symmetric_hexapod
-from pkmcal.mechanisms.hexapod import FK_TOL_MM, HEXAPOD_PARAM_NAMES
+from pkmcal.mechanisms.hexapod import FK_TOL_MM, HEXAPOD_PARAM_NAMES, Hexapod
 
 PROTOTYPE = builtin_machine("stewart-prototype")
 REAL = builtin_machine("stewart-prototype-real")
@@ -401,3 +401,115 @@ def test_fk_respects_the_symmetry():
     assert fk.all_converged
     dp, dr = pose_error(fk.poses, rotated)
     assert dp < 1e-8 and dr < 1e-8
+
+
+# -- threaded batches: the chunked kernels give what one thread gives ------------------------
+
+
+def test_threaded_fk_matches_small_serial_batches():
+    # 3000 poses run in chunks on the thread pool (≥ 2 × _FK_GRAIN rows), against the same
+    # poses solved 5 at a time (below _HOIST_FROM: no hoisted step, plain Newton)
+    from pkmcal.mechanisms import _hexapod_kernels as kernels
+
+    assert 3000 >= 2 * kernels._FK_GRAIN and 5 < kernels._HOIST_FROM
+    poses = box_poses(PROTOTYPE, 3000, 11)
+    lengths = PROTOTYPE.leg_lengths(poses)
+    big = PROTOTYPE.fk_lengths(lengths)
+    parts = [PROTOTYPE.fk_lengths(lengths[k : k + 5]) for k in range(0, 3000, 5)]
+    small_poses = np.concatenate([p.poses for p in parts])
+    assert big.all_converged and all(p.all_converged for p in parts)
+    np.testing.assert_allclose(big.poses, small_poses, atol=1e-9)
+    np.testing.assert_array_equal(big.iterations, np.concatenate([p.iterations for p in parts]))
+    dp, dr = pose_error(big.poses, poses)
+    assert dp < 1e-7 and dr < 1e-9
+    # per-pose guesses, differing across chunk boundaries: warm start from a nearby pose
+    warm = PROTOTYPE.fk_lengths(lengths, poses + 1e-3)
+    assert warm.all_converged and warm.iterations.max() <= 3
+    np.testing.assert_allclose(warm.poses, big.poses, atol=1e-9)
+
+
+def test_threaded_ik_matches_numpy():
+    from pkmcal.mechanisms import _hexapod_kernels as kernels
+
+    n = 2 * kernels._IK_GRAIN + 17
+    poses = box_poses(REAL, n, 5)
+    _, _, legs = REAL.leg_vectors(poses)
+    np.testing.assert_allclose(REAL.leg_lengths(poses), np.linalg.norm(legs, axis=2), rtol=1e-14)
+    # non-contiguous, read-only input takes the same path
+    view = np.asfortranarray(poses)
+    view.setflags(write=False)
+    np.testing.assert_array_equal(REAL.leg_lengths(view), REAL.leg_lengths(poses))
+
+
+def test_fk_newton_rejects_mismatched_guesses():
+    from pkmcal.mechanisms import _hexapod_kernels as kernels
+
+    L = PROTOTYPE.leg_lengths(box_poses(PROTOTYPE, 4, 0))
+    with pytest.raises(ValueError):
+        kernels.fk_newton(L, np.zeros((3, 6)), PROTOTYPE.base, PROTOTYPE.platform, 1e-9, 30)
+
+
+# -- with_params: the fast path builds what dataclasses.replace builds -----------------------
+
+
+def test_with_params_equals_the_validated_constructor():
+    from dataclasses import fields, replace
+
+    rng = np.random.default_rng(3)
+    axes = rng.normal(size=(6, 3))  # not unit: normalised once, by the constructor
+    m = replace(PROTOTYPE, base_axis=axes, platform_axis=-axes, metadata={"k": 1})
+    rho = m.params + rng.normal(0.0, 1e-2, 42)
+    cov = np.diag(rng.uniform(1.0, 2.0, 42))
+    for kwargs in ({}, {"name": "fitted", "covariance": cov}):
+        fast = m.with_params(rho, **kwargs)
+        slow = replace(m, name=kwargs.get("name", m.name), base=rho.reshape(6, 7)[:, :3],
+                       platform=rho.reshape(6, 7)[:, 3:6], offset=rho.reshape(6, 7)[:, 6],
+                       covariance=kwargs.get("covariance"))
+        assert type(fast) is Hexapod
+        for fld in fields(Hexapod):
+            if fld.name not in ("base_axis", "platform_axis"):
+                x, y = getattr(fast, fld.name), getattr(slow, fld.name)
+                same = np.array_equal(x, y) if isinstance(x, np.ndarray) else x == y
+                assert same, fld.name
+        np.testing.assert_array_equal(fast.params, rho)
+        # replace re-normalises the unit axes (1-ulp drift); the fast path keeps them exactly
+        np.testing.assert_allclose(fast.base_axis, slow.base_axis, rtol=0, atol=1e-15)
+        np.testing.assert_allclose(fast.platform_axis, slow.platform_axis, rtol=0, atol=1e-15)
+        assert fast.base_axis is m.base_axis
+        np.testing.assert_array_equal(fast.home, m.home)
+        assert fast.metadata == {"k": 1} and fast.limits == m.limits
+        for attr in ("base", "platform", "offset", "covariance"):
+            arr = getattr(fast, attr)
+            if arr is not None:
+                assert arr.flags.c_contiguous and not arr.flags.writeable and arr.dtype == np.float64
+    assert m.with_params(m.params) == m
+    # the new machine owns its parameters; the old one is unchanged
+    rho2 = m.params.copy()
+    new = m.with_params(rho2)
+    rho2[:] = 0.0
+    np.testing.assert_array_equal(new.params, m.params)
+    with pytest.raises(ValueError):
+        m.with_params(np.zeros(41))
+    with pytest.raises(ValueError):
+        m.with_params(rho, covariance=np.eye(3))
+
+
+def _threaded_fk_in_child(lengths, queue):
+    queue.put(bool(PROTOTYPE.fk_lengths(lengths).all_converged))
+
+
+def test_threaded_fk_works_in_a_forked_child():
+    # the worker pool is per process: a child forked after the parent used it must not wait
+    # for the parent's (absent) worker threads
+    import multiprocessing as mp
+
+    lengths = PROTOTYPE.leg_lengths(box_poses(PROTOTYPE, 2000, 4))
+    assert PROTOTYPE.fk_lengths(lengths).all_converged  # the parent's pool exists now
+    ctx = mp.get_context("fork")
+    queue = ctx.Queue()
+    child = ctx.Process(target=_threaded_fk_in_child, args=(lengths, queue))
+    child.start()
+    child.join(timeout=60)
+    if child.is_alive():
+        child.kill()
+    assert child.exitcode == 0 and queue.get(timeout=5) is True

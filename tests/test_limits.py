@@ -227,3 +227,65 @@ def test_limit_report_bookkeeping():
 
 def test_symmetric_machine_without_diameter_has_no_collision_check():
     assert "leg_collision" not in symmetric_hexapod().check_limits(symmetric_hexapod().home_pose).margins
+
+
+# -- robustness: degenerate segments, non-finite poses ----------------------------------------
+
+
+def _point_segment_distance(x, p, q):
+    """Independent closed form: project x on the line p→q, clamp to the segment."""
+    d = q - p
+    dd = float(d @ d)
+    t = 0.0 if dd == 0.0 else float(np.clip((x - p) @ d / dd, 0.0, 1.0))
+    return float(np.linalg.norm(p + t * d - x))
+
+
+@settings(max_examples=100, deadline=None)
+@given(point, point, point)
+def test_segment_distance_with_a_zero_length_segment(x, p, q):
+    # a zero-length segment is a point: the distance is the point–segment distance, from
+    # either side, and the point–point distance when both segments are points
+    expected = _point_segment_distance(x, p, q)
+    assert segment_distance(x, x, p, q) == pytest.approx(expected, rel=1e-9, abs=1e-9)
+    assert segment_distance(p, q, x, x) == pytest.approx(expected, rel=1e-9, abs=1e-9)
+    assert segment_distance(x, x, p, p) == pytest.approx(np.linalg.norm(x - p), rel=1e-12, abs=1e-12)
+    if np.linalg.norm(q - p) > 1e-3:
+        assert segment_distance(x, x, p, q) <= _brute_segment_distance(x, x + 1e-300, p, q) + 1e-9
+
+
+def test_segment_distance_zero_length_closed_forms():
+    p = np.zeros(3)
+    a, b = np.array([1.0, 1.0, 0.0]), np.array([3.0, 1.0, 0.0])
+    # point beside the segment's start, beyond its end, above its middle; vectorised
+    x = np.array([[0.0, 0, 0], [5.0, 1, 0], [2.0, 4, 0]])
+    got = segment_distance(x, x, np.broadcast_to(a, x.shape), np.broadcast_to(b, x.shape))
+    np.testing.assert_allclose(got, [np.sqrt(2.0), 2.0, 3.0], atol=1e-12)
+    assert np.isfinite(segment_distance(p, p, p, p)) and segment_distance(p, p, p, p) == 0.0
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_check_limits_reports_non_finite_poses(bad):
+    # documented: a NaN/inf pose cannot be evaluated → every limit violated, margins NaN;
+    # the finite poses of the same batch get exactly the margins they get alone
+    good = np.array([pose(), pose(x=40.0, z=290.0), pose(y=-35.0, a=0.3)])
+    poses = np.vstack([good, good[:1], good[:1]])
+    poses[3, 0] = bad  # a position coordinate
+    poses[4, 5] = bad  # an angle
+    for margin in (0.0, 1.5):
+        rep = M.check_limits(poses, margin=margin)
+        ref = M.check_limits(good, margin=margin)
+        assert set(rep.margins) == set(ref.margins) == {"stroke", "u_joint_tilt", "s_joint_tilt",
+                                                         "leg_collision", "singularity"}
+        for name in rep.margins:
+            np.testing.assert_array_equal(rep.margins[name][:3], ref.margins[name])
+            assert np.all(np.isnan(rep.margins[name][3:]))
+            assert rep.violations[name][3:].all()
+        assert rep.ok.tolist() == ref.ok.tolist() + [False, False]
+        assert rep.verdicts()[3] == "+".join(rep.margins)
+
+
+def test_check_limits_on_a_machine_without_optional_limits_and_nan():
+    m = symmetric_hexapod()
+    rep = m.check_limits(np.array([m.home_pose, np.full(6, np.nan)]))
+    assert rep.ok.tolist() == [True, False]
+    assert all(np.isnan(v[1]) for v in rep.margins.values())

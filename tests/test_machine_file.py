@@ -10,6 +10,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import yaml
+from helpers import PROTOTYPE_LEGS_YAML
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -19,17 +20,10 @@ from pkmcal.io._yaml import TextFloat, deg_to_rad, parse_yaml, rad_to_deg_text
 from pkmcal.mechanisms.hexapod import HEXAPOD_PARAM_NAMES, Hexapod, HexapodLimits
 from pkmcal.mechanisms.library import PROTOTYPE_BASE, PROTOTYPE_PLATFORM, stewart_prototype
 
-MINIMAL = """\
-name: my-hexapod
-legs:            # exactly 6 for a hexapod; mm
-  - {base: [-152.5, 0, 0], platform: [-60.622, 35, 0], offset: 305.0, stroke: [0, 50]}
-  - {base: [-132.068, -76.25, 0], platform: [-35, -60.622, 0], offset: 305.0, stroke: [0, 50]}
-  - {base: [76.25, -132.068, 0], platform: [0, -70, 0], offset: 305.0, stroke: [0, 50]}
-  - {base: [132.068, -76.25, 0], platform: [70, 0, 0], offset: 305.0, stroke: [0, 50]}
-  - {base: [76.25, 132.068, 0], platform: [60.622, 35, 0], offset: 305.0, stroke: [0, 50]}
-  - {base: [0, 152.5, 0], platform: [-35, 60.622, 0], offset: 305.0, stroke: [0, 50]}
-limits: {u_joint_tilt: 45, s_joint_tilt: 29, leg_diameter: 36.1}   # degrees, mm; optional
-"""
+MINIMAL = ("name: my-hexapod\n"
+           "legs:            # exactly 6 for a hexapod; mm\n"
+           + PROTOTYPE_LEGS_YAML
+           + "limits: {u_joint_tilt: 45, s_joint_tilt: 29, leg_diameter: 36.1}   # degrees, mm; optional\n")
 
 
 def _error(text: str) -> InputFileError:

@@ -10,6 +10,7 @@ import json
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from helpers import assert_user_error
 
 from pkmcal.cli.main import cli
 from pkmcal.identification.redundant_campaign import calibrated_sensor
@@ -41,15 +42,6 @@ def run(*args):
 def _ok(result):
     assert result.exit_code == 0, result.output + (result.stderr or "")
     return result
-
-
-def _assert_user_error(result, *fragments):
-    assert result.exit_code == 2, result.output
-    err = result.stderr.strip()
-    assert err.startswith("pkmcal: error: ")
-    assert "\n" not in err and "Traceback" not in result.output
-    for f in fragments:
-        assert f in err, err
 
 
 def _write_poses(path, machine, poses):
@@ -201,36 +193,36 @@ def test_planar_error_paths(tmp_path):
     out = tmp_path / "out.csv"
     nosim = tmp_path / "nosim.yaml"
     nosim.write_text("sensor: planar-tool\nnoise: {reading: 0.01, actuator: 0.001}\n")
-    _assert_user_error(run("simulate", nominal.name, "--real", tmp_path / "real.yaml", "--setup", nosim,
+    assert_user_error(run("simulate", nominal.name, "--real", tmp_path / "real.yaml", "--setup", nosim,
                            "--poses", poses, "-o", out), "simulation:", "stiffness")
-    _assert_user_error(run("simulate", nominal.name, "--real", tmp_path / "real.yaml", "--setup", "laser-tracker",
+    assert_user_error(run("simulate", nominal.name, "--real", tmp_path / "real.yaml", "--setup", "laser-tracker",
                            "--poses", poses, "-o", out), "cannot measure", "planar-tool")
-    _assert_user_error(run("simulate", nominal.name, "--real", "planar-2dof-3act", "--setup", setup_path,
+    assert_user_error(run("simulate", nominal.name, "--real", "planar-2dof-3act", "--setup", setup_path,
                            "--poses", poses, "-o", out), "not of the kind")
     bad_poses = tmp_path / "bad.csv"
     bad_poses.write_text("x,y\n0,230\n")
-    _assert_user_error(run("simulate", nominal.name, "--real", tmp_path / "real.yaml", "--setup", setup_path,
+    assert_user_error(run("simulate", nominal.name, "--real", tmp_path / "real.yaml", "--setup", setup_path,
                            "--poses", bad_poses, "-o", out), "phi")
     assert not out.exists()
     _ok(run("simulate", nominal.name, "--real", tmp_path / "real.yaml", "--setup", setup_path, "--poses", poses,
             "-o", out))
     cal = tmp_path / "cal.yaml"
-    _assert_user_error(run("identify", nominal.name, out, "--setup", setup_path, "--method", "actuator-subset",
+    assert_user_error(run("identify", nominal.name, out, "--setup", setup_path, "--method", "actuator-subset",
                            "--keep", "1,2", "-o", cal), "--keep", "3 different actuator numbers")
-    _assert_user_error(run("identify", nominal.name, out, "--setup", setup_path, "--keep", "1,2,3", "-o", cal),
+    assert_user_error(run("identify", nominal.name, out, "--setup", setup_path, "--keep", "1,2,3", "-o", cal),
                        "--keep")
-    _assert_user_error(run("identify", nominal.name, out, "--setup", setup_path, "--method", "actuator-subset",
+    assert_user_error(run("identify", nominal.name, out, "--setup", setup_path, "--method", "actuator-subset",
                            "--keep", "a,b,c", "-o", cal), "actuator numbers")
     nocmd = tmp_path / "nocmd.csv"
     nocmd.write_text("\n".join(",".join(ln.split(",")[:6]) for ln in out.read_text().splitlines()
                                if not ln.startswith("#")) + "\n")
-    _assert_user_error(run("identify", nominal.name, nocmd, "--setup", setup_path, "--method", "ignore-redundancy",
+    assert_user_error(run("identify", nominal.name, nocmd, "--setup", setup_path, "--method", "ignore-redundancy",
                            "-o", cal), "cmd_")
-    _assert_user_error(run("identify", "stewart-prototype", out, "--setup", setup_path, "-o", cal), "cannot measure")
+    assert_user_error(run("identify", "stewart-prototype", out, "--setup", setup_path, "-o", cal), "cannot measure")
     assert not cal.exists()
-    _assert_user_error(run("verify", nominal.name, "--real", tmp_path / "real.yaml", "--poses", held),
+    assert_user_error(run("verify", nominal.name, "--real", tmp_path / "real.yaml", "--poses", held),
                        "--setup")
-    _assert_user_error(run("verify", nominal.name, "--real", tmp_path / "real.yaml", "--poses", held, "--setup",
+    assert_user_error(run("verify", nominal.name, "--real", tmp_path / "real.yaml", "--poses", held, "--setup",
                            nosim), "simulation:")
-    _assert_user_error(run("verify", "stewart-prototype", "--real", "stewart-prototype", "--poses", held,
+    assert_user_error(run("verify", "stewart-prototype", "--real", "stewart-prototype", "--poses", held,
                            "--setup", setup_path), "--setup applies")

@@ -53,7 +53,9 @@ def euler_to_matrix(abc: np.ndarray) -> np.ndarray:
 
 def matrix_to_euler(R: np.ndarray) -> np.ndarray:
     """Angles ``(a, b, c)`` (radians) of rotation matrices ``R`` (..., 3, 3); inverse of
-    :func:`euler_to_matrix` with ``b`` in [-π/2, π/2] and ``a, c`` in [-π, π].
+    :func:`euler_to_matrix` with ``b`` in [-π/2, π/2] and ``a, c`` in (-π, π] (atan2 gives −π
+    for a −0.0 first argument, e.g. R = Rx(−π) as computed; that −π is returned as +π, the
+    same angle, so every rotation has one representation away from gimbal lock).
 
     Closed form (fast path, no per-call overhead), from the last row and first column of R:
     b = atan2(−R₂₀, √(R₀₀² + R₁₀²)), c = atan2(R₁₀, R₀₀); ``a`` from the second row of
@@ -66,6 +68,8 @@ def matrix_to_euler(R: np.ndarray) -> np.ndarray:
     b = np.arctan2(-R[..., 2, 0], np.hypot(R[..., 0, 0], R[..., 1, 0]))
     cc, sc = np.cos(c), np.sin(c)
     a = np.arctan2(sc * R[..., 0, 2] - cc * R[..., 1, 2], cc * R[..., 1, 1] - sc * R[..., 0, 1])
+    a = np.where(a <= -np.pi, a + 2.0 * np.pi, a)
+    c = np.where(c <= -np.pi, c + 2.0 * np.pi, c)
     return np.stack([a, b, c], axis=-1)
 
 

@@ -6,7 +6,8 @@ engine fits them; columns: the candidate parameters) is analysed as follows.
 * **Scaling.** Columns are scaled to unit Euclidean norm, J_s = J D, D = diag(1/‖J_:,i‖),
   so that the rank and the singular values do not depend on the parameters' units (mm,
   rad). A column that is identically zero is a parameter the data do not see at all.
-* **Rank.** Singular values σ_1 ≥ … of J_s; rank = #{σ_i > rtol·σ_1} with
+* **Rank.** Singular values σ_1 ≥ … of J_s (computed as those of R in J_s = QR when J_s
+  is tall); rank = #{σ_i > rtol·σ_1} with
   ``rtol = 1e-8`` (exact gauge freedoms give σ/σ_1 ~ 1e-15; a genuine but weak parameter
   on realistic pose sets is above 1e-6). Directions with rtol < σ_i/σ_1 < ``weak_ratio``
   (1e-4, i.e. noise amplified more than 10⁴ times relative to the best direction) are
@@ -30,6 +31,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 
@@ -110,8 +112,10 @@ def format_direction(direction: dict[str, float], digits: int = 3) -> str:
     return "".join(out)
 
 
-def _fix_priority(names: tuple[str, ...], mechanism_names: tuple[str, ...]) -> list[int]:
-    """Indices of ``names`` in the order they are preferred for fixing (module docstring)."""
+@lru_cache(maxsize=64)
+def _fix_priority(names: tuple[str, ...], mechanism_names: tuple[str, ...]) -> tuple[int, ...]:
+    """Indices of ``names`` in the order they are preferred for fixing (module docstring);
+    memoised, as a fit asks for the same parameter set again and again."""
     mech = set(mechanism_names)
     order = {n: i for i, n in enumerate(mechanism_names)}
 
@@ -125,7 +129,7 @@ def _fix_priority(names: tuple[str, ...], mechanism_names: tuple[str, ...]) -> l
         leg = int(m.group(1)) if m else 0
         return (0, leg, order[n])
 
-    return sorted(range(len(names)), key=key)
+    return tuple(sorted(range(len(names)), key=key))
 
 
 def choose_gauge(null: np.ndarray, priority: list[int]) -> list[int]:
@@ -151,8 +155,11 @@ def choose_gauge(null: np.ndarray, priority: list[int]) -> list[int]:
 
 
 def _clean(vec: np.ndarray, names, drop: float) -> dict[str, float]:
-    big = np.max(np.abs(vec)) if vec.size else 0.0
-    return {names[i]: float(c) for i, c in enumerate(vec) if big > 0 and abs(c) > drop * big}
+    mag = np.abs(vec)
+    big = mag.max() if vec.size else 0.0
+    if not big > 0:
+        return {}
+    return {names[i]: float(vec[i]) for i in np.flatnonzero(mag > drop * big)}
 
 
 def analyse_jacobian(
@@ -175,6 +182,10 @@ def analyse_jacobian(
     unseen = tuple(names[i] for i in np.flatnonzero(col == 0.0))
     scale = np.where(col > 0, 1.0 / np.where(col > 0, col, 1.0), 1.0)
     Js = J * scale
+    if Js.shape[0] > P:
+        # the P×P triangle of Js = Q R has Js's singular values and right singular vectors;
+        # its SVD is cheaper than that of the tall Js (backward stable either way)
+        Js = np.linalg.qr(Js, mode="r")
     _, s, Vt = np.linalg.svd(Js, full_matrices=Js.shape[0] < P)
     s_full = np.zeros(P)
     s_full[: s.size] = s

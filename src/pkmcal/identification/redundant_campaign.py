@@ -28,7 +28,7 @@ import numpy as np
 
 from pkmcal.errors import PkmcalError
 from pkmcal.identification.projection import commands_for_targets
-from pkmcal.identification.simulation import SimulationResult, as_rng
+from pkmcal.identification.simulation import SimulationResult, as_rng, drop_limit_violations, parameter_errors
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.mechanisms.statics import StaticsModel, equilibrium
 from pkmcal.sensors.base import MeasurementSetup
@@ -66,16 +66,7 @@ def _settle(real, setup, commands, guess, ignore_limits):
             reasons[int(idx[j])] = f"equilibrium-not-converged (force residual {eq.force_residual[j]:.3g})"
         ok[idx[~eq.converged]] = False
     with np.errstate(invalid="ignore"):
-        report = real.check_limits(np.where(ok[:, None], poses, real.home_pose))
-    unknown = [name for name in ignore_limits if name not in report.violations]
-    if unknown:
-        raise PkmcalError(f"machine '{real.name}' has no limit {', '.join(unknown)}; "
-                          f"its limits are {', '.join(report.violations)}")
-    for k in np.flatnonzero(ok):
-        bad = [name for name, v in report.violations.items() if v[k] and name not in ignore_limits]
-        if bad:
-            reasons[int(k)] = "real-limits: " + "+".join(bad)
-            ok[k] = False
+        ok = drop_limit_violations(real, np.where(ok[:, None], poses, real.home_pose), ok, ignore_limits, reasons)
     return poses, readings, ok, dict(sorted(reasons.items()))
 
 
@@ -116,16 +107,8 @@ def perturb_planar(machine, magnitude_mm: float, rng, distribution: str = "unifo
     """A random real machine: lengths (and linear encoder offsets) plus errors of size
     ``magnitude_mm``, angle parameters (way directions, rotary encoder offsets) plus
     ``magnitude_mm / radius_mm`` rad (the same displacement at ``radius_mm`` = 1 m)."""
-    if not np.isfinite(magnitude_mm) or magnitude_mm < 0:
-        raise PkmcalError(f"parameter error magnitude must be a non-negative number of mm; got {magnitude_mm}")
-    gen = as_rng(rng)
     p = machine.params
-    if distribution == "uniform":
-        delta = gen.uniform(-magnitude_mm, magnitude_mm, size=p.shape)
-    elif distribution == "gaussian":
-        delta = gen.standard_normal(size=p.shape) * magnitude_mm
-    else:
-        raise PkmcalError(f"unknown error distribution '{distribution}'; use uniform or gaussian")
+    delta = parameter_errors(p.shape, magnitude_mm, rng, distribution)
     delta = np.where(np.array(machine.param_is_angle, dtype=bool), delta / radius_mm, delta)
     return machine.with_params(p + delta, name=name or f"{machine.name}-perturbed")
 

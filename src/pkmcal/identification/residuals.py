@@ -36,12 +36,16 @@ with, per pose, A = ∂IK/∂x (l×n), B = ∂IK/∂ρ (l×p), H = ∂h/∂x (m�
     R = I − Q(QᵀQ)⁻¹Qᵀ = U⊥U⊥ᵀ (eq. 7); r_j = U⊥ᵀ e_j (m + l − n rows, eq. 8–9),
     ∂r/∂θ = U⊥ᵀ ∂e/∂θ (the x-dependence is projected out; the derivative of U⊥ is dropped,
     which leaves the gradient Jᵀr of the cost exact at x*). Weighted, cov = I.
+
+Each method keeps the eliminated poses (and the Jacobian pieces A, B, H A⁻¹ computed from
+them) for the last θ it was evaluated at, so that the residual and the Jacobian at one
+point share one pose solve (``Method._at``).
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from contextlib import contextmanager, nullcontext
+from contextlib import contextmanager
 from dataclasses import dataclass
 from fnmatch import fnmatchcase
 
@@ -170,16 +174,25 @@ def single_threaded_blas():
     Jacobian was measured 30–100× slower than the single-threaded one.
     """
     global _BLAS_CONTROLLER
-    try:
-        if _BLAS_CONTROLLER is None:
+    if _BLAS_CONTROLLER is None:
+        try:
+            import scipy.linalg  # noqa: F401  (load scipy's own BLAS before taking the inventory)
             from threadpoolctl import ThreadpoolController
 
-            _BLAS_CONTROLLER = ThreadpoolController()
-        ctx = _BLAS_CONTROLLER.limit(limits=1, user_api="blas")
-    except ImportError:
-        ctx = nullcontext()
-    with ctx:
+            _BLAS_CONTROLLER = [c for c in ThreadpoolController().lib_controllers if c.user_api == "blas"]
+        except ImportError:
+            _BLAS_CONTROLLER = []
+    # set and restore the thread counts directly: ThreadpoolController.limit re-reads the
+    # library inventory on every call (~0.1–0.4 ms, a fifth of a small fit)
+    libs = [(c, c.get_num_threads()) for c in _BLAS_CONTROLLER]
+    libs = [(c, n) for c, n in libs if isinstance(n, int) and n != 1]
+    for c, _ in libs:
+        c.set_num_threads(1)
+    try:
         yield
+    finally:
+        for c, n in libs:
+            c.set_num_threads(n)
 
 
 # -- parameter selection ---------------------------------------------------------------
@@ -219,6 +232,15 @@ def candidate_parameters(model: Model, free=None, fix=None) -> tuple[list[int], 
 
 def _diag_cov(sigma: np.ndarray, n: int) -> np.ndarray:
     return np.broadcast_to(np.diag(sigma**2), (n, sigma.size, sigma.size))
+
+
+def _full_jacobian(J_mech: np.ndarray, J_sensor: np.ndarray | None, n_sensor: int) -> np.ndarray:
+    """[J_mech, J_sensor] (N, k, p + s); the sensor columns NaN when not computed."""
+    N, k, p = J_mech.shape
+    J = np.empty((N, k, p + n_sensor))
+    J[..., :p] = J_mech
+    J[..., p:] = np.nan if J_sensor is None else J_sensor
+    return J
 
 
 def _sandwich(M: np.ndarray, sigma: np.ndarray) -> np.ndarray:
@@ -263,6 +285,27 @@ class Method(ABC):
     def __init__(self, model: Model, weighted: bool = True):
         self.model = model
         self.weighted = weighted
+        self._last: tuple | None = None
+
+    def _at(self, theta: np.ndarray, solve) -> dict:
+        """``solve(θ)``: a dict of the eliminated poses and what depends on them, kept for
+        the last θ together with the pieces :meth:`_piece` adds. A solver asks for the
+        residual and then for the Jacobian at the same point; both must see the same poses
+        (the fk-residual's warm-started FK would otherwise be re-solved and differ at
+        round-off), and the engine's start and end evaluations reuse the solver's."""
+        theta = np.ascontiguousarray(theta, dtype=float)
+        key = theta.tobytes()
+        if self._last is None or self._last[0] != key:
+            self._last = (key, solve(theta))
+        return self._last[1]
+
+    @staticmethod
+    def _piece(state: dict, name: str, compute):
+        """``state[name]``, computed by ``compute()`` on first use at this θ."""
+        value = state.get(name)
+        if value is None:
+            value = state[name] = compute()
+        return value
 
     @abstractmethod
     def rows_per_pose(self) -> int:
@@ -314,19 +357,23 @@ class IKResidual(Method):
             self._cache = (key, x, conv, Hinv, Hinv @ sensor.param_jacobian(x))
         return self._cache[1:]
 
+    def _solve(self, theta):
+        mech, sensor = self.model.split(theta)
+        x, conv, Hinv, HinvG = self._measured_poses(sensor)
+        return {"mech": mech, "x": x, "conv": conv, "Hinv": Hinv, "HinvG": HinvG, "q": mech.ik(x)}
+
     def evaluate(self, theta, jac=True, cov=True):
         m = self.model
-        mech, sensor = m.split(theta)
-        x, conv, Hinv, HinvG = self._measured_poses(sensor)
-        q_model = mech.ik(x)
+        st = self._at(theta, self._solve)
+        mech, x, conv, Hinv, HinvG, q_model = (st[k] for k in ("mech", "x", "conv", "Hinv", "HinvG", "q"))
         r = m.q - q_model
         need_Js = jac and self.sensor_columns
-        A = mech.actuator_pose_jacobian(x) if (need_Js or cov) else None
+        A = self._piece(st, "A", lambda: mech.actuator_pose_jacobian(x)) if (need_Js or cov) else None
         J = C = None
         if jac:
-            B = mech.actuator_param_jacobian(x)
-            Js = A @ HinvG if need_Js else np.full(HinvG.shape[:1] + (B.shape[1], HinvG.shape[2]), np.nan)
-            J = np.concatenate([-B, Js], axis=2)
+            B = self._piece(st, "B", lambda: mech.actuator_param_jacobian(x))
+            Js = A @ HinvG if need_Js else None
+            J = _full_jacobian(-B, Js, HinvG.shape[2])
         if cov:
             AH = A @ Hinv
             C = _diag_cov(m.sigma_q, m.n_poses) + _sandwich(AH, m.sigma_y)
@@ -337,10 +384,9 @@ class IKResidual(Method):
             r = Lq**2 - L**2
             if jac:
                 dL = mech.length_param_jacobian(x)                     # ∂L/∂ρ
-                dL0 = dL - mech.actuator_param_jacobian(x)              # ∂L0/∂ρ
+                dL0 = dL - B                                            # ∂L0/∂ρ
                 Jr = 2.0 * Lq[..., None] * dL0 - 2.0 * L[..., None] * dL
-                Js = 2.0 * L[..., None] * Js
-                J = np.concatenate([Jr, Js], axis=2)
+                J = _full_jacobian(Jr, None if Js is None else 2.0 * L[..., None] * Js, HinvG.shape[2])
             if cov:
                 AH = A @ Hinv
                 C = _diag_cov(m.sigma_q, m.n_poses) * (2 * Lq)[:, :, None] * (2 * Lq)[:, None, :] \
@@ -369,7 +415,7 @@ class FKResidual(Method):
     def row_names(self) -> tuple[str, ...]:
         return tuple(self.model.sensor.reading_names)
 
-    def evaluate(self, theta, jac=True, cov=True):
+    def _solve(self, theta):
         m = self.model
         mech, sensor = m.split(theta)
         fk = mech.fk(m.q, guess=self._guess)
@@ -378,16 +424,28 @@ class FKResidual(Method):
         # warm start the next evaluation from the converged poses
         self._guess = np.where(ok[:, None], x, self._guess)
         x = np.where(ok[:, None], x, self._guess)
-        r = sensor.reading_residual(m.y, sensor.predict(x))
+        return {"mech": mech, "sensor": sensor, "x": x, "ok": ok,
+                "r": sensor.reading_residual(m.y, sensor.predict(x))}
+
+    @staticmethod
+    def _HAi(mech, sensor, x):
+        """H A⁻¹ (m×n per pose) by one batched solve with m right-hand sides (m ≪ p)."""
+        A = mech.actuator_pose_jacobian(x)
+        H = sensor.pose_jacobian(x)
+        return np.swapaxes(np.linalg.solve(np.swapaxes(A, 1, 2), np.swapaxes(H, 1, 2)), 1, 2)
+
+    def evaluate(self, theta, jac=True, cov=True):
+        m = self.model
+        st = self._at(theta, self._solve)
+        mech, sensor, x, ok, r = (st[k] for k in ("mech", "sensor", "x", "ok", "r"))
         J = C = None
         if jac or cov:
-            A = mech.actuator_pose_jacobian(x)
-            H = sensor.pose_jacobian(x)
-            # H A⁻¹ (m×n per pose) by one batched solve with m right-hand sides (m ≪ p)
-            HAi = np.swapaxes(np.linalg.solve(np.swapaxes(A, 1, 2), np.swapaxes(H, 1, 2)), 1, 2)
+            HAi = self._piece(st, "HAi", lambda: self._HAi(mech, sensor, x))
         if jac:
-            B = mech.actuator_param_jacobian(x)
-            J = np.concatenate([HAi @ B, -sensor.param_jacobian(x)], axis=2)   # ∂r/∂ρ = H A⁻¹ B
+            B = self._piece(st, "B", lambda: mech.actuator_param_jacobian(x))
+            # ∂r/∂ρ = H A⁻¹ B, ∂r/∂s = −G (skipped when no sensor parameter is free)
+            J = _full_jacobian(HAi @ B, -sensor.param_jacobian(x) if self.sensor_columns else None,
+                               len(m.sensor.param_names))
         if cov:
             C = _diag_cov(m.sigma_y, m.n_poses) + _sandwich(HAi, m.sigma_q)
         return Evaluation(r=r, J=J, cov=C, converged=ok, poses=x)
@@ -452,10 +510,15 @@ class Projection(Method):
         self._x = np.where(ok[:, None], x, self._x)
         return x, ok
 
+    def _solve(self, theta):
+        mech, sensor = self.model.split(theta)
+        x, ok = self.solve_poses(mech, sensor)
+        return {"mech": mech, "sensor": sensor, "x": x, "ok": ok}
+
     def evaluate(self, theta, jac=True, cov=True):
         m = self.model
-        mech, sensor = m.split(theta)
-        x, ok = self.solve_poses(mech, sensor)
+        st = self._at(theta, self._solve)
+        mech, sensor, x, ok = st["mech"], st["sensor"], st["x"], st["ok"]
         e = self._stacked(mech, sensor, x)
         Q = self._Q(mech, sensor, x)
         Qfull, _ = np.linalg.qr(Q, mode="complete")

@@ -160,25 +160,26 @@ def perturb_machine(
     ``distribution="uniform"``: errors U(−m, m) (paper 1 §IV: ±5 mm); ``"gaussian"``: N(0, m²).
     The home pose is kept, so the real machine is commanded as the nominal one is.
     """
-    delta = parameter_errors(len(machine.params), magnitude_mm, rng, distribution)
-    return machine.with_params(machine.params + delta, name=name or f"{machine.name}-perturbed")
+    p = machine.params
+    delta = parameter_errors(p.shape, magnitude_mm, rng, distribution)
+    return machine.with_params(p + delta, name=name or f"{machine.name}-perturbed")
 
 
 def parameter_errors(
-    n: int,
+    size: int | tuple[int, ...],
     magnitude_mm: float,
     rng: np.random.Generator | int | None = None,
     distribution: str = "uniform",
 ) -> np.ndarray:
-    """``n`` random parameter errors: U(−m, m) for ``"uniform"`` (paper 1 §IV: ±5 mm),
+    """Random parameter errors of shape ``size``: U(−m, m) for ``"uniform"`` (paper 1 §IV: ±5 mm),
     N(0, m²) for ``"gaussian"``, m = ``magnitude_mm``."""
     if not np.isfinite(magnitude_mm) or magnitude_mm < 0:
         raise PkmcalError(f"parameter error magnitude must be a non-negative number of mm; got {magnitude_mm}")
     gen = as_rng(rng)
     if distribution == "uniform":
-        return gen.uniform(-magnitude_mm, magnitude_mm, size=n)
+        return gen.uniform(-magnitude_mm, magnitude_mm, size=size)
     if distribution == "gaussian":
-        return gen.standard_normal(size=n) * magnitude_mm
+        return gen.standard_normal(size=size) * magnitude_mm
     raise PkmcalError(f"unknown error distribution '{distribution}'; use uniform or gaussian")
 
 

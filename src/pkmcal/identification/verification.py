@@ -24,6 +24,7 @@ import numpy as np
 
 from pkmcal.conventions import POSE_COLUMNS, euler_to_matrix, rotation_error
 from pkmcal.errors import PkmcalError
+from pkmcal.identification.simulation import drop_limit_violations
 from pkmcal.mechanisms.base import Mechanism
 
 #: Error measures: key → (unit, description).
@@ -87,18 +88,7 @@ def pose_errors(model: Mechanism, real: Mechanism, poses: np.ndarray, ignore_lim
         dropped[int(k)] = "fk-not-converged"
     ok = finite & fk.converged
     reached = np.where(ok[:, None], fk.poses, cmd)
-    lim = real.check_limits(reached)
-    unknown = [n for n in ignore_limits if n not in lim.violations]
-    if unknown:
-        raise PkmcalError(f"machine '{real.name}' has no limit {', '.join(unknown)}; "
-                          f"its limits are {', '.join(lim.violations)}")
-    violated = {n: v for n, v in lim.violations.items() if n not in ignore_limits}
-    bad = np.zeros(len(ok), dtype=bool)
-    for v in violated.values():
-        bad |= v
-    for k in np.flatnonzero(ok & bad):
-        dropped[int(k)] = "real-limits: " + "+".join(n for n, v in violated.items() if v[k])
-    ok &= ~bad
+    ok = drop_limit_violations(real, reached, ok, ignore_limits, dropped)
 
     Rc, Rr = euler_to_matrix(cmd[:, 3:6]), euler_to_matrix(reached[:, 3:6])
     e_p = np.linalg.norm(reached[:, 0:3] - cmd[:, 0:3], axis=1)

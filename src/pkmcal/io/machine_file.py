@@ -391,11 +391,7 @@ def _hexapod_from_file(path: object, data: dict, lines: dict[tuple, int]) -> Hex
                               [deg_to_rad(v) for v in w.a], [deg_to_rad(v) for v in w.b],
                               [deg_to_rad(v) for v in w.c]], dtype=float)
     covariance = None if spec.uncertainty is None else _covariance_from_spec(path, spec.uncertainty, lines)
-    metadata: dict = {}
-    if spec.metadata:
-        metadata.update(plain(spec.metadata))
-    if spec.calibration is not None:
-        metadata["calibration"] = plain(spec.calibration)
+    metadata = _metadata_from_spec(spec)
     axes = lambda key: (None if all(getattr(l, key) is None for l in legs)  # noqa: E731,E741
                         else [getattr(l, key) or (0.0, 0.0, 1.0) for l in legs])
     name = spec.name if spec.name is not None else Path(str(path)).stem
@@ -484,21 +480,47 @@ def _hexapod_to_file(m: Hexapod) -> dict:
         ws.update({k: _degs(m.workspace[3 + i]) for i, k in enumerate("abc")})
         out["workspace"] = ws
     if m.covariance is not None:
-        cov = np.asarray(m.covariance)
-        used = [i for i in range(cov.shape[0]) if np.any(cov[i] != 0) or np.any(cov[:, i] != 0)]
-        sub = cov[np.ix_(used, used)]
-        std = np.sqrt(np.maximum(np.diag(sub), 0.0))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            corr = np.where(np.outer(std, std) > 0, sub / np.outer(std, std), 0.0)
-        np.fill_diagonal(corr, 1.0)
-        names = [HEXAPOD_PARAM_NAMES[i] for i in used]
-        out["uncertainty"] = {
-            "parameters": FlowList(names),
-            "std": {n: float(s) for n, s in zip(names, std)},
-            "correlation": [_floats(row) for row in corr],
-            "covariance": [_floats(row) for row in sub],
-        }
-    meta = dict(m.metadata)
+        out["uncertainty"] = _uncertainty_to_file(m.covariance, HEXAPOD_PARAM_NAMES)
+    out.update(_metadata_to_file(m.metadata))
+    return out
+
+
+def _uncertainty_to_file(covariance: np.ndarray, param_names: tuple[str, ...],
+                         is_angle: tuple[bool, ...] | None = None) -> dict:
+    """The ``uncertainty`` block of a machine file (inverse of :func:`_covariance_from_spec`):
+    over the parameters with a non-zero row or column of Σ, σ_i = √Σ_ii (degrees where
+    ``is_angle``), ρ_ij = Σ_ij / (σ_i σ_j) (1 on the diagonal, 0 where σ = 0) and the exact
+    Σ in internal units."""
+    cov = np.asarray(covariance)
+    used = [i for i in range(cov.shape[0]) if np.any(cov[i] != 0) or np.any(cov[:, i] != 0)]
+    sub = cov[np.ix_(used, used)]
+    std = np.sqrt(np.maximum(np.diag(sub), 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        corr = np.where(np.outer(std, std) > 0, sub / np.outer(std, std), 0.0)
+    np.fill_diagonal(corr, 1.0)
+    names = [param_names[i] for i in used]
+    angle = [False] * len(used) if is_angle is None else [bool(is_angle[i]) for i in used]
+    return {
+        "parameters": FlowList(names),
+        "std": {n: float(np.rad2deg(s)) if a else float(s) for n, s, a in zip(names, std, angle)},
+        "correlation": [_floats(row) for row in corr],
+        "covariance": [_floats(row) for row in sub],
+    }
+
+
+def _metadata_from_spec(spec: Any) -> dict:
+    """A machine's metadata from its file: ``metadata:`` plus ``calibration:`` under that key."""
+    metadata: dict = dict(plain(spec.metadata)) if spec.metadata else {}
+    if spec.calibration is not None:
+        metadata["calibration"] = plain(spec.calibration)
+    return metadata
+
+
+def _metadata_to_file(metadata: dict) -> dict:
+    """The ``calibration:`` and ``metadata:`` blocks of a machine file (inverse of
+    :func:`_metadata_from_spec`); empty blocks are left out."""
+    meta = dict(metadata)
+    out: dict[str, Any] = {}
     if "calibration" in meta:
         out["calibration"] = meta.pop("calibration")
     if meta:

@@ -33,15 +33,17 @@ import numpy as np
 from pydantic import StrictStr, ValidationError
 
 from pkmcal.errors import InputFileError, PkmcalError
-from pkmcal.io._yaml import FlowList, RawFloat, deg_to_rad, plain, rad_to_deg_text
+from pkmcal.io._yaml import FlowList, RawFloat, deg_to_rad, rad_to_deg_text
 from pkmcal.io.machine_file import (
     Deg,
     DegRange,
     UncertaintySpec,
     _covariance_from_spec,
-    _floats,
     _line_of,
+    _metadata_from_spec,
+    _metadata_to_file,
     _Model,
+    _uncertainty_to_file,
     _validation_error,
     register_machine_kind,
 )
@@ -123,9 +125,7 @@ def _planar_from_file(path: object, data: dict, lines: dict[tuple, int]) -> Plan
     covariance = None
     if spec.uncertainty is not None:
         covariance = _covariance_from_spec(path, spec.uncertainty, lines, names, p_ang)
-    metadata: dict = dict(plain(spec.metadata)) if spec.metadata else {}
-    if spec.calibration is not None:
-        metadata["calibration"] = plain(spec.calibration)
+    metadata = _metadata_from_spec(spec)
     name = spec.name if spec.name is not None else Path(str(path)).stem
     try:
         machine = cls(name=name, rho=rho, home=home, workspace=workspace,
@@ -158,26 +158,8 @@ def _planar_to_file(m: PlanarMechanism) -> dict:
     if lim != getattr(ref, limit_key):
         out["limits"] = {limit_key: RawFloat(rad_to_deg_text(lim))}
     if m.covariance is not None:
-        cov = np.asarray(m.covariance)
-        used = [i for i in range(cov.shape[0]) if np.any(cov[i] != 0) or np.any(cov[:, i] != 0)]
-        sub = cov[np.ix_(used, used)]
-        std = np.sqrt(np.maximum(np.diag(sub), 0.0))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            corr = np.where(np.outer(std, std) > 0, sub / np.outer(std, std), 0.0)
-        np.fill_diagonal(corr, 1.0)
-        pn = [m.param_names[i] for i in used]
-        ang = [m.param_is_angle[i] for i in used]
-        out["uncertainty"] = {
-            "parameters": FlowList(pn),
-            "std": {n: float(np.rad2deg(s)) if a else float(s) for n, s, a in zip(pn, std, ang)},
-            "correlation": [_floats(row) for row in corr],
-            "covariance": [_floats(row) for row in sub],
-        }
-    meta = dict(m.metadata)
-    if "calibration" in meta:
-        out["calibration"] = meta.pop("calibration")
-    if meta:
-        out["metadata"] = meta
+        out["uncertainty"] = _uncertainty_to_file(m.covariance, m.param_names, m.param_is_angle)
+    out.update(_metadata_to_file(m.metadata))
     return out
 
 

@@ -18,23 +18,34 @@ IK reproduces the input lengths; NaN/inf lengths or guesses and singular systems
 reported not converged.
 
 Structure, chosen for compile time: ONE serial ``@njit(nogil=True, cache=True)`` kernel per
-function, working on a row range [start, stop). Large batches are split into row chunks
-run by a small Python thread pool (:mod:`concurrent.futures`, ``numba.get_num_threads()``
-workers, the caller working too); the kernels release the GIL, so the chunks run in
-parallel without numba's ``parallel=True`` (parfor) machinery, which had to be compiled
-in addition to a serial variant. Every input is made C-contiguous, writable float64 before
-the call, so each kernel is compiled for exactly one signature.
+function (:func:`_ik_range`, :func:`_fk_range`) working on a row range [start, stop).
+Batches of 2 grains or more (``_IK_GRAIN``, ``_FK_GRAIN``) are cut into row chunks that the
+calling thread and a small :mod:`concurrent.futures` pool (``numba.get_num_threads()``
+workers in all, so ``numba.set_num_threads(1)`` still means one thread) take in turn; the
+kernels release the GIL, so the chunks run in parallel without ``parallel=True``, whose
+parfor lowering had to be compiled on top of a serial variant. Helpers are plain ``@njit``
+functions (LLVM inlines them; numba-level ``inline="always"`` only re-types them at every
+call site), and every input is made C-contiguous, writable float64 first, so each kernel
+is compiled for exactly one signature.
 
-Measured on the 2-core reference machine (``benchmarks/kinematics.py``; another job was
-using about one core throughout, so absolute figures are pessimistic; A/B runs interleaved):
-cold-cache compile (fresh process, empty NUMBA_CACHE_DIR) of IK + FK went from 4.6 + 58 s
-(parallel + serial variants, inlined helpers; ~2 + 23 s on an idle machine) to the figure
-in the module constant below; FK µs/pose on 2 threads stayed within noise. See the report
-in the benchmark's JSON (``compile_s``) for the current numbers.
+Measured on the 2-core reference machine while other jobs kept it busy (load average
+1.5–2.7), before → after, interleaved runs:
+
+* cold-cache compile (fresh process, empty NUMBA_CACHE_DIR, as ``benchmarks/kinematics.py``
+  does): IK + FK 3.3–4.6 + 39–58 s → 1.0–1.3 + 3.1–5.6 s (the old kernels took ~2 + 23 s
+  on an idle machine). Variants of the new kernels, same conditions: no
+  ``inline="always"`` 0.7 + 3.6 s; Euler matrix inlined 1.3 + 5.9 s; every helper inlined
+  1.9 + 9.6 s, and neither inlined variant was faster per pose.
+* 100,000 poses, 2 threads (best of 9): IK 0.06–0.24 → 0.05–0.15 µs/pose; FK (cold start
+  from home, 3.99 iterations, same iterates) 0.76–1.77 → 0.66–1.80 µs/pose, the spread
+  being the other jobs (one thread: 1.0–1.7 µs/pose for both).
+* whole commands on a cold cache: ``pkmcal info stewart-prototype`` 31 s → 7.9 s,
+  ``pkmcal demo`` 133 s → 20.5 s (that "before" run shared the machine with a test run
+  and predates other engineers' speed-ups, so it overstates this module's share).
 
 Kept, because measured faster: loops with constant trip counts that LLVM unrolls, and
 reciprocal pivots (solve ~0.12 µs instead of ~0.35); hoisting the first Newton step from a
-guess shared by the batch (see :func:`fk_newton`).
+guess shared by the rows of a chunk (see :func:`fk_newton`).
 Tried and dropped: fastmath on the solve (no measurable gain); a second-order first step
 from the guess's leg-length Hessians (−0.36 iterations per pose, no net time saved).
 """
@@ -43,37 +54,41 @@ from __future__ import annotations
 
 import itertools
 import math
+import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import numba as nb
 import numpy as np
 
-#: Helpers are inlined by numba (``inline="always"``) only where it pays; see the docstring.
+#: No ``inline="always"``: LLVM inlines the small helpers anyway (see the module docstring).
 _OPTS = dict(cache=True, nogil=True, error_model="numpy")
-#: Rows per thread below which a batch runs on the calling thread only (a thread hand-off
-#: costs ~20–50 µs; IK is ~0.1 µs/pose, FK ~1 µs/pose on one thread).
-_IK_GRAIN = 20_000
+#: Rows per thread below which a batch runs on the calling thread only: handing chunks to
+#: the pool costs ~50 µs per call (measured), IK is ~0.1 µs/pose and FK ~1 µs/pose on one
+#: thread, so IK is threaded from 10,000 poses and FK from 1,000.
+_IK_GRAIN = 5_000
 _FK_GRAIN = 500
 #: Chunks per worker thread, for load balance when a core is busy with something else.
 _CHUNKS_PER_THREAD = 4
 #: The shared-guess first step (see :func:`fk_newton`) is hoisted from this many rows on.
 _HOIST_FROM = 8
 
-import os
-_EXP = os.environ.get("PKMCAL_KIN_INLINE", "")
-def _inl(name):
-    return "always" if name in _EXP else "never"
-
 _POOL: ThreadPoolExecutor | None = None
+_POOL_SIZE = 0
+_POOL_PID = 0
 _POOL_LOCK = threading.Lock()
 
 
 def _pool(workers: int) -> ThreadPoolExecutor:
-    global _POOL
+    """The shared worker pool, (re)created when too small or after a fork (a forked child
+    inherits the pool object but not its threads)."""
+    global _POOL, _POOL_SIZE, _POOL_PID
     with _POOL_LOCK:
-        if _POOL is None or _POOL._max_workers < workers:
-            _POOL = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="pkmcal-kin")
+        if _POOL is None or _POOL_SIZE < workers or _POOL_PID != os.getpid():
+            if _POOL is not None and _POOL_PID == os.getpid():
+                _POOL.shutdown(wait=False)
+            _POOL = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="pkmcal-kinematics")
+            _POOL_SIZE, _POOL_PID = workers, os.getpid()
         return _POOL
 
 
@@ -96,8 +111,9 @@ def _run_rows(kernel, n: int, grain: int, args: tuple) -> None:
     pool = _pool(workers - 1)
     futures = [pool.submit(work) for _ in range(workers - 1)]
     work()
-    for f in futures:
-        f.result()
+    for f in futures:  # every chunk is taken; wait only for those a worker started
+        if not f.cancel():
+            f.result()
 
 
 def _f64(a) -> np.ndarray:
@@ -106,7 +122,7 @@ def _f64(a) -> np.ndarray:
     return a if a.flags.writeable else a.copy()
 
 
-@nb.njit(inline=_inl("euler"), **_OPTS)
+@nb.njit(**_OPTS)
 def _euler_matrix(a, b, c, R):
     ca, cb, cc = math.cos(a), math.cos(b), math.cos(c)
     sa, sb, sc = math.sin(a), math.sin(b), math.sin(c)
@@ -149,7 +165,7 @@ def ik_lengths(poses, base, platform):
     return out
 
 
-@nb.njit(inline=_inl("solve"), **_OPTS)
+@nb.njit(**_OPTS)
 def _solve6(J, rhs, d):
     """Solve J d = rhs (6×6) by Gaussian elimination with partial pivoting, in place.
 
@@ -203,7 +219,7 @@ def _solve6(J, rhs, d):
     return True
 
 
-@nb.njit(inline=_inl("res"), **_OPTS)
+@nb.njit(**_OPTS)
 def _residual_jacobian(target, p, R, base, platform, J, rhs, ra):
     """rhs_i = target_i − L_i and row i of J = [u_iᵀ, ((R a_i) × u_i)ᵀ] at (p, R);
     returns max_i |rhs_i| (NaN/inf propagate, so a non-finite pose is never converged)."""
@@ -230,7 +246,7 @@ def _residual_jacobian(target, p, R, base, platform, J, rhs, ra):
     return err
 
 
-@nb.njit(inline=_inl("step"), **_OPTS)
+@nb.njit(**_OPTS)
 def _apply_step(d, p, R, Rn):
     """p ← p + δp,  R ← exp([δω]×) R (Rodrigues), δ = (δp, δω) = d."""
     for r in range(3):

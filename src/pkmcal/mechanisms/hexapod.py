@@ -138,15 +138,35 @@ class Hexapod(Mechanism):
         return np.concatenate([self.base, self.platform, self.offset[:, None]], axis=1).ravel()
 
     def with_params(self, params: np.ndarray, name: str | None = None, covariance=None) -> "Hexapod":
+        """This machine with parameters ρ (42,) (and ``name``, ``covariance``, default none).
+
+        On the identification hot path (one call per residual evaluation), so it does not
+        go through ``dataclasses.replace``: only the changed fields are validated and
+        frozen; the others (axes, stroke, limits, home, workspace, description, metadata)
+        are this machine's already-validated objects, shared. The home pose is kept, not
+        recomputed from the new parameters (as with ``replace``, since home is never None
+        after construction).
+        """
         rho = np.asarray(params, dtype=float).reshape(N_LEGS, PARAMS_PER_LEG)
-        return replace(
-            self,
+        changes = dict(
             name=self.name if name is None else name,
             base=rho[:, 0:3],
             platform=rho[:, 3:6],
             offset=rho[:, 6],
             covariance=covariance,
         )
+        if type(self) is not Hexapod:  # a subclass may validate more in __post_init__
+            return replace(self, **changes)
+        for key in ("base", "platform", "offset"):
+            arr = changes[key].copy()  # C-contiguous float64 (6, 3) / (6,), as _frozen makes
+            arr.flags.writeable = False
+            changes[key] = arr
+        if covariance is not None:
+            changes["covariance"] = _frozen(covariance, (len(HEXAPOD_PARAM_NAMES),) * 2)
+        new = object.__new__(Hexapod)
+        new.__dict__.update(self.__dict__)
+        new.__dict__.update(changes)
+        return new
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, Hexapod):
@@ -266,30 +286,41 @@ class Hexapod(Mechanism):
         """Reachability of N poses against every limit of the machine.
 
         ``margin`` shrinks every limit by that safety margin (mm for stroke and collision,
-        the same number in degrees for the joint tilts).
+        the same number in degrees for the joint tilts). A pose with a NaN or infinite
+        coordinate cannot be evaluated: it violates every limit and all its margins are NaN
+        (likewise any single margin that cannot be evaluated, e.g. a zero-length leg).
         """
         poses = self.as_pose_array(poses)
-        R, Ra, legs = self.leg_vectors(poses)
-        L = np.linalg.norm(legs, axis=2)
-        u = legs / L[..., None]
-        lam = L - self.offset
+        finite = np.all(np.isfinite(poses), axis=1)
         margins: dict[str, np.ndarray] = {}
-        margins["stroke"] = np.min(np.minimum(lam - self.stroke[:, 0], self.stroke[:, 1] - lam), axis=1) - margin
         lim = self.limits
-        if lim.u_joint_tilt is not None:
-            tilt = np.arccos(np.clip(np.einsum("nir,ir->ni", u, self.base_axis), -1, 1))
-            margins["u_joint_tilt"] = lim.u_joint_tilt - np.deg2rad(margin) - tilt.max(axis=1)
-        if lim.s_joint_tilt is not None:
-            axes = np.einsum("nrc,ic->nir", R, self.platform_axis)
-            tilt = np.arccos(np.clip(np.einsum("nir,nir->ni", u, axes), -1, 1))
-            margins["s_joint_tilt"] = lim.s_joint_tilt - np.deg2rad(margin) - tilt.max(axis=1)
-        if lim.leg_diameter is not None:
-            tops = poses[:, None, 0:3] + Ra
-            margins["leg_collision"] = self._min_leg_distance(tops) - lim.leg_diameter - margin
-        Jt = self.twist_jacobian(poses)
-        Jt[:, :, 3:] /= self.platform_radius
-        s = np.linalg.svd(Jt, compute_uv=False)
-        margins["singularity"] = s[:, -1] / s[:, 0] - lim.singularity_margin
+        with np.errstate(invalid="ignore", divide="ignore"):
+            R, Ra, legs = self.leg_vectors(poses)
+            L = np.linalg.norm(legs, axis=2)
+            u = legs / L[..., None]
+            lam = L - self.offset
+            margins["stroke"] = np.min(np.minimum(lam - self.stroke[:, 0], self.stroke[:, 1] - lam), axis=1) - margin
+            if lim.u_joint_tilt is not None:
+                tilt = np.arccos(np.clip(np.einsum("nir,ir->ni", u, self.base_axis), -1, 1))
+                margins["u_joint_tilt"] = lim.u_joint_tilt - np.deg2rad(margin) - tilt.max(axis=1)
+            if lim.s_joint_tilt is not None:
+                axes = np.einsum("nrc,ic->nir", R, self.platform_axis)
+                tilt = np.arccos(np.clip(np.einsum("nir,nir->ni", u, axes), -1, 1))
+                margins["s_joint_tilt"] = lim.s_joint_tilt - np.deg2rad(margin) - tilt.max(axis=1)
+            if lim.leg_diameter is not None:
+                tops = poses[:, None, 0:3] + Ra
+                margins["leg_collision"] = self._min_leg_distance(tops) - lim.leg_diameter - margin
+            Jt = np.concatenate([u, np.cross(Ra, u)], axis=2)  # twist Jacobian
+            Jt[:, :, 3:] /= self.platform_radius
+        # inverse condition number by SVD, only where the Jacobian is finite (LAPACK
+        # rejects NaN/inf)
+        good = np.all(np.isfinite(Jt), axis=(1, 2))
+        margins["singularity"] = np.full(poses.shape[0], np.nan)
+        if np.any(good):
+            sv = np.linalg.svd(Jt[good], compute_uv=False)
+            margins["singularity"][good] = sv[:, -1] / sv[:, 0] - lim.singularity_margin
+        for m in margins.values():
+            m[~finite] = np.nan
         violations = {k: ~(m >= 0.0) for k, m in margins.items()}
         return LimitReport(violations=violations, margins=margins)
 
@@ -340,7 +371,9 @@ def segment_distance(p1, q1, p2, q2) -> np.ndarray:
     """Minimum distance between segments p1→q1 and p2→q2, arrays (..., 3) → (...).
 
     Closed form: minimise ‖p1 + s d1 − p2 − t d2‖ over s, t ∈ [0, 1], clamping s, then t,
-    then s again (Ericson, *Real-Time Collision Detection*, §5.1.9).
+    then s again (Ericson, *Real-Time Collision Detection*, §5.1.9), including its
+    degenerate cases: a zero-length segment is a point (s = 0 or t = 0), so the result is
+    the point–segment (or point–point) distance.
     """
     d1, d2, r = q1 - p1, q2 - p2, p1 - p2
     a = np.einsum("...k,...k->...", d1, d1)
@@ -348,11 +381,19 @@ def segment_distance(p1, q1, p2, q2) -> np.ndarray:
     f = np.einsum("...k,...k->...", d2, r)
     c = np.einsum("...k,...k->...", d1, r)
     b = np.einsum("...k,...k->...", d1, d2)
+    point1 = a <= np.finfo(float).tiny  # segment 1 has zero length
+    point2 = e <= np.finfo(float).tiny
+    a_ = np.where(point1, 1.0, a)
+    e_ = np.where(point2, 1.0, e)
     denom = a * e - b * b
     with np.errstate(divide="ignore", invalid="ignore"):
         s = np.where(denom > 1e-12 * a * e, np.clip((b * f - c * e) / denom, 0.0, 1.0), 0.0)
-        t = (b * s + f) / e
-        s = np.where(t < 0.0, np.clip(-c / a, 0.0, 1.0), np.where(t > 1.0, np.clip((b - c) / a, 0.0, 1.0), s))
+        t = (b * s + f) / e_
+        s = np.where(t < 0.0, np.clip(-c / a_, 0.0, 1.0), np.where(t > 1.0, np.clip((b - c) / a_, 0.0, 1.0), s))
         t = np.clip(t, 0.0, 1.0)
+        # degenerate cases: point 1 → closest point of segment 2 (s = 0, t = f / e);
+        # point 2 → closest point of segment 1 (t = 0, s = −c / a); two points: s = t = 0
+        s = np.where(point1, 0.0, np.where(point2, np.clip(-c / a_, 0.0, 1.0), s))
+        t = np.where(point2, 0.0, np.where(point1, np.clip(f / e_, 0.0, 1.0), t))
     diff = p1 + s[..., None] * d1 - p2 - t[..., None] * d2
     return np.linalg.norm(diff, axis=-1)

@@ -99,9 +99,21 @@ def euler_rate_inverse(abc: np.ndarray) -> np.ndarray:
 
 
 def euler_pose_jacobian(J_twist: np.ndarray, poses: np.ndarray) -> np.ndarray:
-    """Twist Jacobian ∂y/∂(δp, δω) (N, m, 6) → Euler Jacobian ∂y/∂(x, y, z, a, b, c)."""
-    E = euler_rate_matrix(poses[:, 3:6])
-    return np.concatenate([J_twist[:, :, :3], J_twist[:, :, 3:] @ E], axis=2)
+    """Twist Jacobian ∂y/∂(δp, δω) (N, m, 6) → Euler Jacobian ∂y/∂(x, y, z, a, b, c).
+
+    Columns: ∂/∂(x, y, z) = the δp block; ∂/∂(a, b, c) = J_ω E with E's columns
+    (c_b c_c, c_b s_c, −s_b), (−s_c, c_c, 0), (0, 0, 1) (:func:`euler_rate_matrix`),
+    written out so that no (N, 3, 3) matrix product is needed.
+    """
+    cb, sb = np.cos(poses[:, 4])[:, None], np.sin(poses[:, 4])[:, None]
+    cc, sc = np.cos(poses[:, 5])[:, None], np.sin(poses[:, 5])[:, None]
+    wx, wy, wz = J_twist[:, :, 3], J_twist[:, :, 4], J_twist[:, :, 5]
+    out = np.empty(J_twist.shape)
+    out[:, :, :3] = J_twist[:, :, :3]
+    out[:, :, 3] = cb * (cc * wx + sc * wy) - sb * wz
+    out[:, :, 4] = cc * wy - sc * wx
+    out[:, :, 5] = wz
+    return out
 
 
 # -- the sensor -------------------------------------------------------------------------
@@ -130,6 +142,9 @@ class FullPoseSensor(Sensor):
             names = WORLD_PARAM_NAMES if attr == "world" else TOOL_PARAM_NAMES
             object.__setattr__(self, attr, check_params(value, names, self.kind))
         object.__setattr__(self, "free", check_free(self.free, self.param_names, self.kind))
+        # the constant rotations of the two transforms, once per sensor (not per pose batch)
+        object.__setattr__(self, "_Rw", euler_to_matrix(self.world[3:6]))
+        object.__setattr__(self, "_Rt", euler_to_matrix(self.tool[3:6]))
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, FullPoseSensor):
@@ -162,45 +177,59 @@ class FullPoseSensor(Sensor):
         theta = check_params(params, self.param_names, self.kind)
         return replace(self, world=theta[:6], tool=theta[6:])
 
-    def _frames(self, poses):
+    def _frames(self, poses) -> dict:
+        """Poses, R (N, 3, 3), R p_t, the target v = p + R p_t in {F}, R_w R, R_T = R_w R R_t
+        and its Euler angles; kept for the last pose batch, since a fit asks for the
+        readings, ∂y/∂x and ∂y/∂θ at the same poses (the keys of the returned dict)."""
         poses = as_poses(poses, self.kind)
+        key = poses.tobytes()
+        cached = self.__dict__.get("_last_frames")
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        poses = poses.copy()                                         # the cache owns its poses
         R = euler_to_matrix(poses[:, 3:6])
-        Rw = euler_to_matrix(self.world[3:6])
-        Rt = euler_to_matrix(self.tool[3:6])
         Rpt = R @ self.tool[0:3]                                     # R p_t (N, 3)
         v = poses[:, 0:3] + Rpt                                      # target in {F}
-        pos = self.world[0:3] + v @ Rw.T
-        RT = Rw @ R @ Rt
-        return poses, R, Rw, Rpt, v, pos, RT
+        RwR = self._Rw @ R
+        RT = RwR @ self._Rt
+        fr = {"poses": poses, "R": R, "Rpt": Rpt, "v": v, "RwR": RwR, "ang": matrix_to_euler(RT)}
+        object.__setattr__(self, "_last_frames", (key, fr))
+        return fr
+
+    def _Ei(self, fr: dict) -> np.ndarray:
+        """E(y_ang)⁻¹ of the frames ``fr`` (computed once per pose batch)."""
+        if "Ei" not in fr:
+            fr["Ei"] = euler_rate_inverse(fr["ang"])
+        return fr["Ei"]
 
     def predict(self, poses: np.ndarray) -> np.ndarray:
         """Readings (N, 6): target position (mm) and Euler angles (rad) in {W}."""
-        _, _, _, _, _, pos, RT = self._frames(poses)
-        return np.concatenate([pos, matrix_to_euler(RT)], axis=1)
+        fr = self._frames(poses)
+        out = np.empty((fr["poses"].shape[0], 6))
+        out[:, 0:3] = self.world[0:3] + fr["v"] @ self._Rw.T
+        out[:, 3:6] = fr["ang"]
+        return out
 
     def pose_jacobian(self, poses: np.ndarray) -> np.ndarray:
         """∂y/∂(x, y, z, a, b, c) (N, 6, 6) (module docstring)."""
-        poses, R, Rw, Rpt, _, _, RT = self._frames(poses)
-        n = poses.shape[0]
-        Ei = euler_rate_inverse(matrix_to_euler(RT))
-        Jt = np.zeros((n, 6, 6))
+        fr = self._frames(poses)
+        Rw = self._Rw
+        Jt = np.zeros((fr["poses"].shape[0], 6, 6))
         Jt[:, 0:3, 0:3] = Rw
-        Jt[:, 0:3, 3:6] = -Rw @ skew(Rpt)
-        Jt[:, 3:6, 3:6] = Ei @ Rw
-        return euler_pose_jacobian(Jt, poses)
+        Jt[:, 0:3, 3:6] = -Rw @ skew(fr["Rpt"])
+        Jt[:, 3:6, 3:6] = self._Ei(fr) @ Rw
+        return euler_pose_jacobian(Jt, fr["poses"])
 
     def param_jacobian(self, poses: np.ndarray) -> np.ndarray:
         """∂y/∂θ (N, 6, 12), θ = world.x … world.c, tool.x … tool.c (module docstring)."""
-        poses, R, Rw, _, v, _, RT = self._frames(poses)
-        n = poses.shape[0]
-        Ei = euler_rate_inverse(matrix_to_euler(RT))
+        fr = self._frames(poses)
+        Ei, RwR = self._Ei(fr), fr["RwR"]
         Ew = euler_rate_matrix(self.world[3:6])
         Et = euler_rate_matrix(self.tool[3:6])
-        J = np.zeros((n, 6, 12))
+        J = np.zeros((fr["poses"].shape[0], 6, 12))
         J[:, 0:3, 0:3] = np.eye(3)
-        J[:, 0:3, 3:6] = -skew(v @ Rw.T) @ Ew
+        J[:, 0:3, 3:6] = -skew(fr["v"] @ self._Rw.T) @ Ew
         J[:, 3:6, 3:6] = Ei @ Ew
-        RwR = Rw @ R
         J[:, 0:3, 6:9] = RwR
-        J[:, 3:6, 9:12] = Ei @ RwR @ Et
+        J[:, 3:6, 9:12] = Ei @ (RwR @ Et)
         return J

@@ -27,13 +27,25 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from pkmcal.conventions import euler_to_matrix
 from pkmcal.errors import PkmcalError
 from pkmcal.sensors.base import Sensor
 from pkmcal.sensors.full_pose import as_poses, check_free, check_params, euler_pose_jacobian
 
 #: Smallest |n_z| (cosine of the plane tilt) at which the indicators are evaluated (≈ 89.9°).
 MIN_NORMAL_Z = 1e-3
+
+
+def plane_normals(abc: np.ndarray) -> np.ndarray:
+    """n = R e_z (N, 3), the third column of R = Rz(c) Ry(b) Rx(a) (:func:`euler_to_matrix`):
+    (c_c s_b c_a + s_c s_a, s_c s_b c_a − c_c s_a, c_b c_a), without forming R."""
+    c, s = np.cos(abc), np.sin(abc)
+    ca, sa = c[:, 0], s[:, 0]
+    cb_ca, sb_ca = c[:, 1] * ca, s[:, 1] * ca
+    n = np.empty(abc.shape)
+    n[:, 0] = c[:, 2] * sb_ca + s[:, 2] * sa
+    n[:, 1] = s[:, 2] * sb_ca - c[:, 2] * sa
+    n[:, 2] = cb_ca
+    return n
 
 
 @dataclass(frozen=True, eq=False)
@@ -106,7 +118,7 @@ class IndicatorSensor(Sensor):
     def _plane(self, poses):
         """Poses (N, 6), normals n (N, 3), N_k (N, K): numerators of eq. (6)."""
         poses = as_poses(poses, self.kind)
-        n = euler_to_matrix(poses[:, 3:6])[:, :, 2]
+        n = plane_normals(poses[:, 3:6])
         bad = np.abs(n[:, 2]) < MIN_NORMAL_Z
         if bad.any():
             k = int(np.argmax(bad))
@@ -117,7 +129,7 @@ class IndicatorSensor(Sensor):
                 f"its platform plane is tilted {tilt:.3f}° (near vertical); remove the pose"
             )
         num = (np.einsum("nk,nk->n", n, poses[:, 0:3]) - self.plane_offset)[:, None] \
-            - n[:, 0:1] * self.positions[:, 0] - n[:, 1:2] * self.positions[:, 1]
+            - n[:, 0:2] @ self.positions.T
         return poses, n, num
 
     def predict(self, poses: np.ndarray) -> np.ndarray:
@@ -128,15 +140,16 @@ class IndicatorSensor(Sensor):
     def pose_jacobian(self, poses: np.ndarray) -> np.ndarray:
         """∂z/∂(x, y, z, a, b, c) (N, K, 6) (module docstring)."""
         poses, n, num = self._plane(poses)
-        nz = n[:, 2:3]                                                  # (N, 1)
-        K = self.n_indicators
-        g = np.empty(num.shape + (3,))
-        g[..., 0] = (poses[:, 0:1] - self.positions[:, 0]) / nz
-        g[..., 1] = (poses[:, 1:2] - self.positions[:, 1]) / nz
-        g[..., 2] = poses[:, 2:3] / nz - num / nz**2
+        inz = 1.0 / n[:, 2:3]                                           # (N, 1)
+        gx = (poses[:, 0:1] - self.positions[:, 0]) * inz               # g_k, (N, K) each
+        gy = (poses[:, 1:2] - self.positions[:, 1]) * inz
+        gz = (poses[:, 2:3] - num * inz) * inz
+        nx, ny, nz = n[:, 0:1], n[:, 1:2], n[:, 2:3]
         Jt = np.empty(num.shape + (6,))
-        Jt[..., 0:3] = np.broadcast_to((n / nz)[:, None, :], (n.shape[0], K, 3))
-        Jt[..., 3:6] = np.cross(np.broadcast_to(n[:, None, :], g.shape), g)
+        Jt[..., 0:3] = (n * inz)[:, None, :]
+        Jt[..., 3] = ny * gz - nz * gy                                  # n × g_k
+        Jt[..., 4] = nz * gx - nx * gz
+        Jt[..., 5] = nx * gy - ny * gx
         return euler_pose_jacobian(Jt, poses)
 
     def param_jacobian(self, poses: np.ndarray) -> np.ndarray:
