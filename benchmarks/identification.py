@@ -44,16 +44,20 @@ The two versions of each fit differ only in the Jacobian: the same residual func
 through ``scipy.optimize.leastsq``; the finite-difference fit through
 ``scipy.optimize.least_squares(jac="2-point", method="lm")``: scipy's forward differences
 (2-point), step h_i = √ε·max(1, |θ_i|), one residual evaluation per free parameter and
-Jacobian, fed to the same ``lmder``. Each fit's solver counts (``nfev``: residual
-evaluations by the solver, ``njev``: Jacobian evaluations; ``fd_evaluations``: every
-residual evaluation including the finite-difference columns) are reported beside the
-times, so that the speed-up splits into cost per Jacobian and number of iterations: the
+Jacobian, fed to the same ``lmder`` (that wrapper adds ~0.4 ms and one more Jacobian at the
+solution: one of the ~18 (IK) or ~44 (FK) finite-difference Jacobians of these fits).
+
+Reported beside the times, so that a speed-up splits into cost per Jacobian and number of
+iterations: ``nfev`` (residual evaluations by the solver) and ``njev`` (Jacobian
+evaluations); ``*_evaluations``, the calls of the method's ``evaluate``, residual-only and
+with Jacobian (the finite-difference columns and the engine's start and end evaluations
+included, some served from the pose cache); the final cost of both fits. The
 finite-difference Jacobian is only accurate to ~1e-8 relative, so near the 1e-12
-tolerances the finite-difference fit takes more iterations (and may stop at ``xtol`` at a
-slightly higher cost: both costs are reported). ``*_solve_ms`` is the CPU time inside the
-solver call of the fastest run (residuals, Jacobians, MINPACK); the rest of ``*_ms`` is
-the same for both Jacobians: the start evaluation with the noise covariance, the
-identifiability SVD, the end evaluation and the covariance of the estimate.
+tolerances the finite-difference fit takes more iterations, and may stop at ``xtol`` at a
+slightly higher cost. ``*_solve_ms`` is the CPU time inside the solver call of the fastest
+run (residuals, Jacobians, MINPACK); the rest of ``*_ms`` is the same for both Jacobians:
+the start evaluation with the noise covariance, the identifiability SVD, the end
+evaluation and the covariance of the estimate.
 The last line of output is one JSON object.
 
 Usage: ``python benchmarks/identification.py [--repeats 20] [--trials 200] [--seed 0]``

@@ -276,8 +276,8 @@ def _least_squares(obj: "_Objective", x0: np.ndarray, *, jac: str, method: str, 
     evaluation cap (default 100·n) and start. With the analytic Jacobian it is called
     through :func:`scipy.optimize.leastsq`: the same 4-iteration run on a 90 × 42 problem
     took 0.42 ms there and 0.80 ms through ``least_squares(method="lm")``, whose wrapper
-    also evaluates one more Jacobian at the solution (measured on a 2-core Xeon; the
-    paper-1 fit takes ~3–5 ms in all). With ``jac="2-point"`` / ``"3-point"`` it is called
+    also evaluates one more Jacobian at the solution (measured on a 2-core Xeon). With
+    ``jac="2-point"`` / ``"3-point"`` it is called
     through :func:`scipy.optimize.least_squares`, whose finite-difference Jacobian feeds
     the same ``lmder``. ``trf`` / ``dogbox`` always use ``least_squares``.
     """
@@ -291,8 +291,8 @@ def _least_squares(obj: "_Objective", x0: np.ndarray, *, jac: str, method: str, 
                          njev=int(info["njev"]), status=status, message=message)
     sol = least_squares(obj.fun, x0, jac=obj.jac if jac == "analytic" else jac, method=method, x_scale="jac",
                         ftol=ftol, xtol=xtol, gtol=gtol, max_nfev=max_nfev)
-    return _Solution(x=sol.x, cost=float(sol.cost), nfev=int(sol.nfev),
-                     njev=int(sol.njev) if sol.njev is not None else 0, status=int(sol.status), message=str(sol.message))
+    return _Solution(x=sol.x, cost=float(sol.cost), nfev=int(sol.nfev), njev=int(sol.njev or 0),
+                     status=int(sol.status), message=str(sol.message))
 
 
 def _solver_args(solver: str, m: int, n: int) -> str:

@@ -137,13 +137,16 @@ class Model:
         theta = np.asarray(theta, dtype=float)
         p = self.n_mech
         rho, s = theta[:p], theta[p:]
+        # copies: θ is often the caller's scratch buffer, overwritten at the next step
         mech = getattr(self, "_mech_cache", None)
         if mech is None or not np.array_equal(mech[0], rho):
-            mech = (rho.copy(), self.mechanism.with_params(rho))
+            rho = rho.copy()
+            mech = (rho, self.mechanism.with_params(rho))
             self._mech_cache = mech
         sens = getattr(self, "_sensor_cache", None)
         if sens is None or not np.array_equal(sens[0], s):
-            sens = (s.copy(), self.sensor.with_params(s))
+            s = s.copy()
+            sens = (s, self.sensor.with_params(s))
             self._sensor_cache = sens
         return mech[1], sens[1]
 
