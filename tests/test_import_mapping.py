@@ -187,7 +187,11 @@ def test_simulate_identify_verify(tmp_path):
     ok(run(*ident, tmp_path / "meas.csv", "-o", tmp_path / "cal.yaml"))
     ok(run(*ident, tmp_path / "cmm.csv", "-o", tmp_path / "cal2.yaml", "--columns", mapping, "--length-unit", "m"))
     c1, c2 = load_machine(tmp_path / "cal.yaml"), load_machine(tmp_path / "cal2.yaml")
-    np.testing.assert_allclose(c2.params, c1.params, rtol=0, atol=1e-5)
+    # Same data up to unit round-off: the two fits may stop at slightly different points
+    # along the weakly determined direction (3 indicators), so compare against the
+    # parameters' own uncertainty, not an absolute tolerance.
+    std = np.sqrt(np.diag(c1.covariance))
+    assert np.all(np.abs(c2.params - c1.params) <= 1e-2 * std + 1e-9)
     err = user_error(run(*ident, tmp_path / "cmm.csv", "-o", tmp_path / "cal3.yaml"), "cmm.csv, line 2: missing column")
     assert "'Dial A'" in err and not (tmp_path / "cal3.yaml").exists()
 
@@ -213,7 +217,9 @@ def test_identifiability_observability_plan(tmp_path):
     r1 = json.loads(ok(run(*base, "--poses", ref)).stdout)
     r2 = json.loads(ok(run(*base, "--poses", foreign, *FOREIGN_OPTS)).stdout)
     assert r1["rank"] == r2["rank"] == 39 and r1["n_params"] == 42
-    np.testing.assert_allclose(r2["singular_values"], r1["singular_values"], rtol=1e-7)
+    s1, s2 = np.array(r1["singular_values"]), np.array(r2["singular_values"])
+    np.testing.assert_allclose(s2[:39], s1[:39], rtol=1e-7)
+    assert s1[39:].max() < 1e-12 * s1[0] and s2[39:].max() < 1e-12 * s2[0]  # the 3 null directions
 
     obs = ("observability", "stewart-prototype")
     o1 = json.loads(ok(run(*obs, ref, "--setup", "indicators-prototype", "--json")).stdout)
