@@ -44,8 +44,10 @@ The two versions of each fit differ only in the Jacobian: the same residual func
 through ``scipy.optimize.leastsq``; the finite-difference fit through
 ``scipy.optimize.least_squares(jac="2-point", method="lm")``: scipy's forward differences
 (2-point), step h_i = √ε·max(1, |θ_i|), one residual evaluation per free parameter and
-Jacobian, fed to the same ``lmder`` (that wrapper adds ~0.4 ms and one more Jacobian at the
-solution: one of the ~18 (IK) or ~44 (FK) finite-difference Jacobians of these fits).
+Jacobian, fed to the same ``lmder`` (that wrapper added 0.55 ms to the analytic paper-1 fit,
+best of 30, 2026-11-22, and evaluates one more Jacobian at the solution: one of the ~7 (IK)
+or ~17 (FK) finite-difference Jacobians of these fits, measured as residual evaluations per
+free parameter with seed 0 on 2026-11-22).
 
 Reported beside the times, so that a speed-up splits into cost per Jacobian and number of
 iterations: ``nfev`` (residual evaluations by the solver) and ``njev`` (Jacobian

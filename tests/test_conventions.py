@@ -10,6 +10,7 @@ from hypothesis.extra.numpy import arrays
 from scipy.spatial.transform import Rotation
 
 from pkmcal.conventions import (
+    euler_pose_jacobian,
     euler_rate_matrix,
     euler_to_matrix,
     matrix_to_euler,
@@ -84,6 +85,15 @@ def test_euler_rate_matrix_against_finite_differences(abc, rate):
     np.testing.assert_allclose(W, -W.T, atol=1e-8)  # skew: the derivative is a rotation rate
     omega = np.array([W[2, 1], W[0, 2], W[1, 0]])
     np.testing.assert_allclose(euler_rate_matrix(abc) @ rate, omega, atol=1e-8)
+
+
+def test_euler_pose_jacobian_is_twist_jacobian_times_rate_matrix():
+    # the written-out product against diag(I, E(a, b, c)) formed by euler_rate_matrix
+    rng = np.random.default_rng(7)
+    poses = np.concatenate([rng.normal(size=(50, 3)), rng.uniform(-np.pi, np.pi, size=(50, 3))], axis=1)
+    Jt = rng.normal(size=(50, 4, 6))
+    expected = np.concatenate([Jt[:, :, :3], Jt[:, :, 3:] @ euler_rate_matrix(poses[:, 3:6])], axis=2)
+    np.testing.assert_allclose(euler_pose_jacobian(Jt, poses), expected, atol=1e-12)
 
 
 @settings(max_examples=200, deadline=None)

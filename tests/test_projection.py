@@ -229,3 +229,29 @@ def test_relinearisation_handles_large_errors(n_dof):
     np.testing.assert_allclose(fit.mechanism.params, real.params, atol=1e-7)
     assert np.abs(one.mechanism.params - real.params).max() > 1e-3
     assert fit.cost[-1] < 1e-12 * fit.cost[0]
+
+
+@pytest.mark.parametrize("n_dof", [2, 3])
+def test_single_linearisation_jacobian_matches_finite_differences(n_dof):
+    """Eq. 10 at the commanded poses: on consistent data (e = 0 there) the dropped
+    derivative of U⊥ multiplies e, so J must equal central differences of r(θ)."""
+    from pkmcal.identification.projection import single_linearisation
+
+    m, _, _, noise, _ = _case(n_dof)
+    s = PlanarToolSensor(n_pose=n_dof)
+    x = m.sample_poses(6, np.random.default_rng(41))
+    model = Model(m, s, noise, q=m.ik(x), y=s.predict(x), commanded=x)
+    r0, J = single_linearisation(model)
+    assert np.abs(r0).max() < 1e-9
+    theta0 = model.theta0
+    fd = np.empty_like(J)
+    for i in range(theta0.size):
+        h = 1e-6 * max(1.0, abs(theta0[i]))
+        cols = []
+        for sgn in (1.0, -1.0):
+            th = theta0.copy()
+            th[i] += sgn * h
+            mech, sens = model.split(th)
+            cols.append(single_linearisation(Model(mech, sens, noise, q=model.q, y=model.y, commanded=x))[0])
+        fd[..., i] = (cols[0] - cols[1]) / (2 * h)
+    np.testing.assert_allclose(J, fd, atol=1e-6 * np.abs(fd).max())

@@ -9,6 +9,7 @@ from decimal import Decimal
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 from click.testing import CliRunner
 
 from pkmcal.cli.main import cli
@@ -83,7 +84,8 @@ def test_paper1_qualitative(quick):
 
 
 def test_pose_sensitivity_matches_a_direct_perturbation():
-    """G from central differences predicts the pose error of a small parameter change."""
+    """The analytic G predicts the pose error (position and rotation vector) of a small
+    parameter change, computed directly by IK of the model and FK of the real machine."""
     real = builtin_machine("stewart-prototype")
     poses = box_corners(real, np.array([10.0, 10.0, 5.0, 0.05, 0.05, 0.05]))[:6]
     G = pose_sensitivity(real, poses)
@@ -92,6 +94,9 @@ def test_pose_sensitivity_matches_a_direct_perturbation():
     reached = real.fk(model.ik(poses), guess=poses).poses
     dp = reached[:, :3] - poses[:, :3]
     assert np.allclose(dp, (G @ d)[:, :3], atol=1e-7)
+    rv = (Rotation.from_euler("xyz", reached[:, 3:]) * Rotation.from_euler("xyz", poses[:, 3:]).inv()).as_rotvec()
+    assert np.allclose(rv, (G @ d)[:, 3:], atol=1e-8)
+    assert np.abs(G[:, 3:]).max() > 1e-4
     assert np.abs(G).max() > 0.1
 
 

@@ -11,7 +11,17 @@ from hypothesis import strategies as st
 
 from pkmcal.conventions import POSE_COLUMNS
 from pkmcal.errors import InputFileError, PkmcalError
-from pkmcal.io.tables import LENGTH_COLUMNS, READING_COLUMNS, format_table, read_table, write_table
+from pkmcal.io.tables import (
+    LENGTH_COLUMNS,
+    READING_COLUMNS,
+    column_kinds,
+    format_table,
+    from_file_units,
+    read_poses,
+    read_table,
+    to_file_units,
+    write_table,
+)
 
 
 def _read(text: str, columns=POSE_COLUMNS, **kw):
@@ -156,3 +166,26 @@ def test_write_table_atomic(tmp_path):
     with pytest.raises(PkmcalError, match="cannot write table"):
         write_table(path, {"x": [1.0], "y": [1.0, 2.0]})
     assert path.read_text() == "# units: length=mm, angle=deg\nx\n1.0\n2.0\n"  # untouched by the failures
+
+
+def test_file_unit_conversion_closed_form_and_round_trip(tmp_path):
+    """Degrees ↔ radians in the angle columns only; lengths untouched; inputs not modified."""
+    from pkmcal.mechanisms.library import builtin_machine
+
+    file_poses = np.array([[10.0, -20.0, 500.0, 90.0, -45.0, 180.0], [0.0, 0.0, 0.0, 30.0, 60.0, -90.0]])
+    original = file_poses.copy()
+    internal = from_file_units(file_poses, (False,) * 3 + (True,) * 3)
+    np.testing.assert_array_equal(file_poses, original)
+    np.testing.assert_array_equal(internal[:, :3], original[:, :3])
+    np.testing.assert_allclose(internal[:, 3:], [[np.pi / 2, -np.pi / 4, np.pi], [np.pi / 6, np.pi / 3, -np.pi / 2]],
+                               rtol=1e-15)
+    np.testing.assert_allclose(to_file_units(internal, (False,) * 3 + (True,) * 3), original, rtol=1e-14)
+    np.testing.assert_allclose(from_file_units(original[0], (False,) * 3 + (True,) * 3), internal[0], rtol=0)
+    assert column_kinds(("x", "a"), (False, True)) == {"x": "length", "a": "angle"}
+    # read_poses: a file in radians and metres comes back as the same internal poses
+    machine = builtin_machine("stewart-prototype")
+    text = format_table({c: internal[:, k] * (1e-3 if k < 3 else 1.0) for k, c in enumerate(POSE_COLUMNS)},
+                        units={"length": "m", "angle": "rad"})
+    path = tmp_path / "poses.csv"
+    path.write_text(text)
+    np.testing.assert_allclose(read_poses(path, machine), internal, rtol=1e-12, atol=1e-12)

@@ -108,3 +108,20 @@ def test_cli_verify_table_and_json(tmp_path):
     assert r.exit_code == 0 and "position error mean (mm)" in r.output
     r = CliRunner().invoke(cli, ["verify", "nope-machine", "--real", "stewart-prototype-real", "--poses", str(pf)])
     assert r.exit_code == 2 and "unknown machine 'nope-machine'" in r.output
+
+
+def test_redundant_tool_error_summary_against_numpy():
+    """Planar held-out summaries: tool in mm, |angle| in degrees, NaN angles (n = 2) omitted."""
+    from pkmcal.identification.redundant_campaign import ToolErrors
+
+    rng = np.random.default_rng(4)
+    tool, angle = rng.uniform(0.0, 1.0, 6), rng.normal(0.0, 1e-3, 6)
+    mask = np.array([True, True, False, True, True, False])
+    s = ToolErrors("m", tool, angle, np.ones(6, bool)).summary(mask)
+    a = np.rad2deg(np.abs(angle[mask]))
+    assert s["poses"] == 4
+    assert s["tool_mean_mm"] == pytest.approx(tool[mask].mean()) and s["tool_max_mm"] == pytest.approx(tool[mask].max())
+    assert s["tool_rms_mm"] == pytest.approx(np.sqrt(np.mean(tool[mask] ** 2)))
+    assert s["angle_max_deg"] == pytest.approx(a.max()) and s["angle_rms_deg"] == pytest.approx(np.sqrt(np.mean(a**2)))
+    two = ToolErrors("m", tool, np.full(6, np.nan), np.ones(6, bool)).summary(mask)
+    assert not any(k.startswith("angle") for k in two)

@@ -89,6 +89,24 @@ def euler_rate_matrix(abc: np.ndarray) -> np.ndarray:
     return E
 
 
+def euler_pose_jacobian(J_twist: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """Twist Jacobian ∂y/∂(δp, δω) (N, m, 6) → Euler Jacobian ∂y/∂(x, y, z, a, b, c).
+
+    Columns: ∂/∂(x, y, z) = the δp block; ∂/∂(a, b, c) = J_ω E with E's columns
+    (c_b c_c, c_b s_c, −s_b), (−s_c, c_c, 0), (0, 0, 1) (:func:`euler_rate_matrix`),
+    written out so that no (N, 3, 3) matrix product is needed.
+    """
+    cb, sb = np.cos(poses[:, 4])[:, None], np.sin(poses[:, 4])[:, None]
+    cc, sc = np.cos(poses[:, 5])[:, None], np.sin(poses[:, 5])[:, None]
+    wx, wy, wz = J_twist[:, :, 3], J_twist[:, :, 4], J_twist[:, :, 5]
+    out = np.empty(J_twist.shape)
+    out[:, :, :3] = J_twist[:, :, :3]
+    out[:, :, 3] = cb * (cc * wx + sc * wy) - sb * wz
+    out[:, :, 4] = cc * wy - sc * wx
+    out[:, :, 5] = wz
+    return out
+
+
 def poses_from_file_units(poses_deg: np.ndarray) -> np.ndarray:
     """File/CLI poses (mm, degrees) to internal poses (mm, radians)."""
     poses = np.array(poses_deg, dtype=float)

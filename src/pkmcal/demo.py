@@ -231,17 +231,10 @@ def run_demo(config: DemoConfig = DemoConfig(), progress: Progress | None = None
     held = generate_candidates(safe, setup, kind="random", n=config.n_held_out, rng=rng_held).poses
     verification = verify(calibrated, real, held, nominal)
     m = verification.common
-    b, a = verification.before, verification.after
-    headline = {
-        "position_rms_before": float(np.sqrt(np.mean(b.position[m] ** 2))),
-        "position_rms_after": float(np.sqrt(np.mean(a.position[m] ** 2))),
-        "position_max_before": float(np.max(b.position[m])),
-        "position_max_after": float(np.max(a.position[m])),
-        "orientation_rms_before": float(np.sqrt(np.mean(b.orientation[m] ** 2))),
-        "orientation_rms_after": float(np.sqrt(np.mean(a.orientation[m] ** 2))),
-        "orientation_max_before": float(np.max(b.orientation[m])),
-        "orientation_max_after": float(np.max(a.orientation[m])),
-    }
+    summaries = verification.to_dict()  # over the poses both models reach (m)
+    headline = {f"{q}_{stat}_{when}": summaries[when][f"{q}_{stat}_{unit}"]
+                for q, unit in (("position", "mm"), ("orientation", "rad"))
+                for stat in ("rms", "max") for when in ("before", "after")}
     k = config.error_map_points
     lo, hi = pool[:, :2].min(axis=0), pool[:, :2].max(axis=0)
     emap = error_map(nominal, calibrated, real, np.linspace(lo[0], hi[0], k), np.linspace(lo[1], hi[1], k),

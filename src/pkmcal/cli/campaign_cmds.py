@@ -32,25 +32,11 @@ from pkmcal.identification.simulation import perturb_machine, simulate_campaign
 from pkmcal.identification.verification import verify
 from pkmcal.cli.import_options import import_options
 from pkmcal.io.atomic import atomic_write_text, check_output_path
-from pkmcal.io.import_mapping import ImportMapping
 from pkmcal.io.machine_file import load_machine, machine_to_text
 from pkmcal.io.measurements import measurement_columns
 from pkmcal.io.setup_file import BUILTIN_SETUPS, load_setup
-from pkmcal.io.tables import format_table, read_table
-from pkmcal.mechanisms.base import Mechanism
+from pkmcal.io.tables import format_table, read_poses
 from pkmcal.mechanisms.planar import PlanarMechanism
-
-
-def read_poses(path: str, machine: Mechanism, mapping: ImportMapping | None = None) -> np.ndarray:
-    """Poses of a CSV with the machine's pose columns (x,y,z mm; a,b,c deg) → internal units;
-    ``mapping``: column renaming and units of a file from another tool."""
-    table = read_table(path, machine.pose_names,
-                       kinds={n: ("angle" if a else "length") for n, a in zip(machine.pose_names, machine.pose_is_angle)},
-                       mapping=mapping)
-    poses = table.values.copy()
-    ang = np.array(machine.pose_is_angle, dtype=bool)
-    poses[:, ang] = np.deg2rad(poses[:, ang])
-    return poses
 
 
 @click.command("simulate")

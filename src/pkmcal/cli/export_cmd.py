@@ -24,6 +24,7 @@ from pkmcal import __version__
 from pkmcal.errors import PkmcalError
 from pkmcal.io.atomic import atomic_write_text, check_output_path
 from pkmcal.io.machine_file import load_machine
+from pkmcal.io.tables import to_file_units
 from pkmcal.mechanisms.base import Mechanism
 
 #: Version of the JSON layout written by :func:`calibration_json`.
@@ -79,9 +80,7 @@ def calibration_json(machine: Mechanism, source: str | None = None) -> dict:
     params = [{"name": n, "value": _finite(v), "unit": "deg" if a else "mm",
                "std": None if np.isnan(s) else _finite(s)}
               for n, v, a, s in zip(names, values, angle, std)]
-    home = np.asarray(machine.home_pose, dtype=float)
-    pose_angle = np.array(machine.pose_is_angle, dtype=bool)
-    home = np.where(pose_angle, np.rad2deg(home), home)
+    home = to_file_units(machine.home_pose, machine.pose_is_angle)
     meta = dict(getattr(machine, "metadata", {}) or {})
     out = {
         "format": "pkmcal-calibration",

@@ -33,6 +33,7 @@ from pkmcal.io.atomic import atomic_write_text, check_output_path
 from pkmcal.io.machine_file import load_machine, machine_to_text
 from pkmcal.io.measurements import load_measurements
 from pkmcal.io.setup_file import BUILTIN_SETUPS, load_setup
+from pkmcal.io.tables import read_poses
 
 
 def _names(values: tuple[str, ...]) -> list[str] | None:
@@ -244,8 +245,6 @@ def identifiability_cmd(machine, setup_spec, poses, method, fix, free, as_json, 
     directions, and a minimal set of parameters to fix (the gauge). JSON keys: n_params,
     rank, singular_values, null_space, fixed, weak, ...
     """
-    from pkmcal.cli.campaign_cmds import read_poses
-
     nominal = load_machine(machine)
     setup = load_setup(setup_spec, nominal)
     x = read_poses(poses, nominal, mapping)

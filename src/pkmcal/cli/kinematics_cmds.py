@@ -18,7 +18,7 @@ from pkmcal.errors import PkmcalError
 from pkmcal.cli.import_options import import_options
 from pkmcal.io.atomic import atomic_write_text, check_output_path
 from pkmcal.io.machine_file import load_machine
-from pkmcal.io.tables import LENGTH_COLUMNS, format_table, read_table
+from pkmcal.io.tables import LENGTH_COLUMNS, column_kinds, format_table, from_file_units, read_table, to_file_units
 from pkmcal.mechanisms.base import LimitReport, Mechanism
 
 _MAX_LISTED = 20
@@ -52,9 +52,7 @@ def parse_pose_option(text: str, mech: Mechanism, option: str) -> np.ndarray:
         raise PkmcalError(f"{option} '{text}': not all of {','.join(mech.pose_names)} are numbers") from None
     if not np.all(np.isfinite(values)):
         raise PkmcalError(f"{option} '{text}': the pose must be finite")
-    angle = np.array(mech.pose_is_angle)
-    values[angle] = np.deg2rad(values[angle])
-    return values
+    return from_file_units(values, mech.pose_is_angle)
 
 
 @click.command("ik")
@@ -74,10 +72,10 @@ def ik_cmd(machine: str, poses: str, output: str | None, mapping=None) -> None:
     if output is not None:
         check_output_path(output, [poses, machine])
     mech = load_machine(machine)
-    kinds = {n: ("angle" if a else "length") for n, a in zip(mech.pose_names, mech.pose_is_angle)}
-    table = read_table(poses, mech.pose_names, kinds=kinds, mapping=mapping)
+    table = read_table(poses, mech.pose_names, kinds=column_kinds(mech.pose_names, mech.pose_is_angle),
+                       mapping=mapping)
     file_poses = table.values
-    internal = _to_internal(mech, file_poses)
+    internal = from_file_units(file_poses, mech.pose_is_angle)
     with np.errstate(all="ignore"):
         readings = mech.ik(internal)
         verdicts = limit_verdicts(mech.check_limits(internal))
@@ -85,7 +83,7 @@ def ik_cmd(machine: str, poses: str, output: str | None, mapping=None) -> None:
     columns: dict[str, np.ndarray] = {n: file_poses[:, k] for k, n in enumerate(mech.pose_names)}
     if lengths is not None:
         columns.update({f"l{i + 1}": lengths[:, i] for i in range(lengths.shape[1])})
-    readings = np.where(actuator_is_angle(mech), np.rad2deg(readings), readings)
+    readings = to_file_units(readings, mech.actuator_is_angle)
     columns.update({n: readings[:, i] for i, n in enumerate(mech.actuator_names)})
     columns["reachable"] = verdicts
     text = format_table(columns)
@@ -107,26 +105,6 @@ def limit_verdicts(report: LimitReport) -> np.ndarray:
     labels = np.array(["+".join(n for j, n in enumerate(names) if (int(u) >> j) & 1) or "ok" for u in uniq],
                       dtype=object)
     return labels[inverse.reshape(-1)]
-
-
-def actuator_is_angle(mech: Mechanism) -> np.ndarray:
-    """Which actuator readings are angles (radians inside, degrees in files): the
-    mechanism's :attr:`~pkmcal.mechanisms.base.Mechanism.actuator_is_angle`."""
-    return np.array(mech.actuator_is_angle, dtype=bool)
-
-
-def _to_internal(mech: Mechanism, values: np.ndarray) -> np.ndarray:
-    out = np.array(values, dtype=float)
-    angle = np.array(mech.pose_is_angle)
-    out[:, angle] = np.deg2rad(out[:, angle])
-    return out
-
-
-def _to_file(mech: Mechanism, values: np.ndarray) -> np.ndarray:
-    out = np.array(values, dtype=float)
-    angle = np.array(mech.pose_is_angle)
-    out[:, angle] = np.rad2deg(out[:, angle])
-    return out
 
 
 @click.command("fk")
@@ -152,21 +130,18 @@ def fk_cmd(machine: str, legs: str, output: str | None, guess: str | None, mappi
     groups = [mech.actuator_names]
     if hasattr(mech, "fk_lengths"):
         groups.append(LENGTH_COLUMNS[: mech.n_actuators])
-    rotary = actuator_is_angle(mech)
-    kinds = {c: ("angle" if a else "length") for c, a in zip(mech.actuator_names, rotary)}
+    rotary = mech.actuator_is_angle
+    kinds = column_kinds(mech.actuator_names, rotary)
     if len(groups) > 1:
         kinds.update({c: "length" for c in groups[1]})
     table = read_table(legs, either=groups, kinds=kinds, mapping=mapping)
-    values = table.values
-    if table.columns == tuple(mech.actuator_names):
-        values = np.where(rotary, np.deg2rad(values), values)
     with np.errstate(all="ignore"):
         if table.columns == tuple(mech.actuator_names):
-            result = mech.fk(values, guess=start)
+            result = mech.fk(from_file_units(table.values, rotary), guess=start)
         else:
-            result = mech.fk_lengths(values, guess=start)
+            result = mech.fk_lengths(table.values, guess=start)
     conv = np.asarray(result.converged, dtype=bool)
-    poses = _to_file(mech, result.poses)
+    poses = to_file_units(result.poses, mech.pose_is_angle)
     poses[~conv] = np.nan
     columns: dict[str, np.ndarray] = {n: poses[:, k] for k, n in enumerate(mech.pose_names)}
     columns["converged"] = conv.astype(int)
@@ -187,4 +162,4 @@ def register(group: click.Group) -> None:
     group.add_command(fk_cmd)
 
 
-__all__ = ["actuator_is_angle", "fk_cmd", "ik_cmd", "limit_verdicts", "parse_pose_option", "register"]
+__all__ = ["fk_cmd", "ik_cmd", "limit_verdicts", "parse_pose_option", "register"]

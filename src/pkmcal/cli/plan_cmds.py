@@ -130,7 +130,7 @@ def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, 
 @click.argument("machine")
 @click.argument("poses", metavar="POSES.csv", type=click.Path(dir_okay=False))
 @click.option("--setup", "setup_spec", required=True, metavar="SETUP.yaml", help=_SETUP_HELP)
-@click.option("--json", "as_json", is_flag=True, help="Print one JSON object (keys O1..O5, n_poses, parameters).")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object (keys O1..O5, n_poses).")
 @import_options
 def observability_cmd(machine, poses, setup_spec, as_json, mapping=None) -> None:
     """Observability indices O1..O5 of the poses in POSES.csv (columns x,y,z mm, a,b,c deg).

@@ -274,9 +274,10 @@ def _least_squares(obj: "_Objective", x0: np.ndarray, *, jac: str, method: str, 
     Levenberg–Marquardt is MINPACK's ``lmder`` in every case, with the same tolerances,
     ``factor = 100``, Jacobian-based scaling (``x_scale="jac"`` ⇔ MINPACK ``diag=None``),
     evaluation cap (default 100·n) and start. With the analytic Jacobian it is called
-    through :func:`scipy.optimize.leastsq`: the same 4-iteration run on a 90 × 42 problem
-    took 0.42 ms there and 0.80 ms through ``least_squares(method="lm")``, whose wrapper
-    also evaluates one more Jacobian at the solution (measured on a 2-core Xeon). With
+    through :func:`scipy.optimize.leastsq`: the paper-1 ik-residual fit (15 poses, 90 × 42)
+    took 2.7 ms there and 3.3 ms through ``least_squares(method="lm")``, whose wrapper
+    also evaluates one more Jacobian at the solution (best of 30 solver calls, residuals
+    and Jacobians included; 2-core Xeon, 2026-11-22). With
     ``jac="2-point"`` / ``"3-point"`` it is called
     through :func:`scipy.optimize.least_squares`, whose finite-difference Jacobian feeds
     the same ``lmder``. ``trf`` / ``dogbox`` always use ``least_squares``.
@@ -440,23 +441,23 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
         notes.append("the pose could not be solved at the identified machine for pose(s) "
                      + ", ".join(str(i + 1) for i in bad) + _where(measurements, bad) + "; their residuals are unreliable")
 
-    # covariance with weights recomputed at the solution (module docstring)
-    if method == "projection" and weighted:
-        W_end = np.broadcast_to(np.eye(ev.r.shape[1]), ev.cov.shape)
-    elif weighted:
-        W_end = whitening(ev.cov, f"{method} residual")
+    # covariance with weights recomputed at the solution (module docstring); the weighted
+    # projection's residual is already whitened (cov = I)
+    J_free = ev.J[:, :, free_idx]
+    free_names = tuple(names[i] for i in free_idx)
+    if weighted:
+        r_w = ev.r
+        if method != "projection":
+            W_end = whitening(ev.cov, f"{method} residual")
+            J_free, r_w = W_end @ J_free, (W_end @ ev.r[..., None])[..., 0]
+        unc = parameter_uncertainty(free_names, J_free, r_w, weighted=True)
     else:
         try:
             W_end = whitening(ev.cov, f"{method} residual")
         except PkmcalError:  # noise-free noise model: no χ², the sandwich covariance is zero
             W_end = None
-    J_free = ev.J[:, :, free_idx]
-    free_names = tuple(names[i] for i in free_idx)
-    if weighted:
-        unc = parameter_uncertainty(free_names, W_end @ J_free, (W_end @ ev.r[..., None])[..., 0], weighted=True)
-    else:
         unc = parameter_uncertainty(free_names, J_free, ev.r, weighted=False, W=W_end, cov_rows=ev.cov)
-    r_w = (W_end @ ev.r[..., None])[..., 0] if weighted else ev.r
+        r_w = ev.r
 
     mech_cal, sensor_cal = model.split(theta)
     p = model.n_mech

@@ -258,10 +258,9 @@ def _identifiability(machine, setup, poses, *, method, free, fix, weighted) -> I
     y = setup.sensor.predict(poses)
     model = Model(machine, setup.sensor, setup.noise, q, y, poses)
     meth = make_method(method, model, weighted)
-    ev = meth.evaluate(model.theta0, jac=True, cov=True)
-    J = ev.J
-    if weighted and method != "projection":
-        J = whitening(ev.cov, f"{method} residual") @ J
+    whiten = weighted and method != "projection"          # the weighted projection is already whitened
+    ev = meth.evaluate(model.theta0, jac=True, cov=whiten)
+    J = whitening(ev.cov, f"{method} residual") @ ev.J if whiten else ev.J
     cand, _ = candidate_parameters(model, free, None if fix == "auto" else fix)
     names = model.names
     return analyse_jacobian(J.reshape(-1, J.shape[-1])[:, cand], tuple(names[i] for i in cand),

@@ -36,17 +36,18 @@ reading through the identified model; evaluation runs the real machine's equilib
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from pkmcal.errors import PkmcalError
-from pkmcal.identification.identifiability import IdentifiabilityReport, analyse_jacobian
+from pkmcal.identification.identifiability import IdentifiabilityReport, analyse_jacobian, identifiability
 from pkmcal.identification.residuals import Model, Projection
 from pkmcal.mechanisms.base import LimitReport, Mechanism
 from pkmcal.mechanisms.planar import PlanarMechanism
 from pkmcal.mechanisms.statics import equilibrium
-from pkmcal.sensors.base import NoiseModel, Sensor
+from pkmcal.sensors.base import MeasurementSetup, NoiseModel, Sensor
 
 LINEARISATIONS = ("iterated", "single")
 
@@ -82,10 +83,6 @@ class RedundantFit:
         return None if self.covariance is None else np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
 
 
-def _model(mech, sensor, noise, commanded, readings, tool) -> Model:
-    return Model(mech, sensor, noise, q=readings, y=tool, commanded=commanded)
-
-
 def _free_index(names: tuple[str, ...], free) -> np.ndarray:
     out = []
     for f in free:
@@ -95,42 +92,36 @@ def _free_index(names: tuple[str, ...], free) -> np.ndarray:
     return np.array(out, dtype=int)
 
 
-def single_linearisation(model: Model, weighted: bool = True):
+def single_linearisation(model: Model, weighted: bool = True, method: Projection | None = None):
     """Paper 3 eq. 10 at the commanded poses: (r (N, k), J (N, k, P)) with k = m + l − n,
-    r = U⊥ᵀ W e(x_c, θ₀), J = ∂r/∂θ = −U⊥ᵀ W [∂h/∂θ; ∂IK/∂θ]."""
-    mech, sensor = model.mechanism, model.sensor
-    x = model.start_poses()
-    sig = np.concatenate([model.sigma_y, model.sigma_q])
-    w = 1.0 / sig if weighted else np.ones_like(sig)
-    e = np.concatenate([sensor.reading_residual(model.y, sensor.predict(x)), model.q - mech.ik(x)], axis=1) * w
-    Q = np.concatenate([sensor.pose_jacobian(x), mech.actuator_pose_jacobian(x)], axis=1) * w[:, None]
-    U = np.linalg.qr(Q, mode="complete")[0][:, :, mech.n_dof:]
-    Ut = np.swapaxes(U, 1, 2)
-    ms = sensor.n_readings
-    de = np.zeros((x.shape[0], ms + mech.n_actuators, model.n_mech + len(sensor.params)))
-    de[:, :ms, model.n_mech:] = -sensor.param_jacobian(x)
-    de[:, ms:, : model.n_mech] = -mech.actuator_param_jacobian(x)
-    return (Ut @ e[..., None])[..., 0], Ut @ (de * w[:, None])
+    r = U⊥ᵀ W e(x_c, θ₀), J = ∂r/∂θ = −U⊥ᵀ W [∂h/∂θ; ∂IK/∂θ] (:meth:`Projection.project`
+    without the pose solve; ``method`` an existing :class:`Projection` of ``model``)."""
+    method = Projection(model, weighted=weighted) if method is None else method
+    r, J, _ = method.project(model.mechanism, model.sensor, model.start_poses())
+    return r, J
+
+
+def _scaled_svd(J: np.ndarray, rank: int):
+    """SVD of the column-scaled J (unit column norms; zero columns stay zero) truncated to
+    ``rank``: (U (M, k), s (k,), Vt (k, P), scale (P,))."""
+    col = np.linalg.norm(J, axis=0)
+    scale = np.where(col > 0, 1.0 / np.where(col > 0, col, 1.0), 0.0)
+    U, s, Vt = np.linalg.svd(J * scale, full_matrices=False)
+    k = min(rank, int(np.sum(s > 0)))
+    return U[:, :k], s[:k], Vt[:k], scale
 
 
 def _pinv_normal(J: np.ndarray, rank: int) -> np.ndarray:
     """(JᵀJ)⁺ of the column-scaled J truncated to ``rank``, in physical units."""
-    col = np.linalg.norm(J, axis=0)
-    scale = np.where(col > 0, 1.0 / np.where(col > 0, col, 1.0), 0.0)
-    _, s, Vt = np.linalg.svd(J * scale, full_matrices=False)
-    k = min(rank, int(np.sum(s > 0)))
-    V = Vt[:k].T / s[:k]
+    _, s, Vt, scale = _scaled_svd(J, rank)
+    V = Vt.T / s
     return (V @ V.T) * np.outer(scale, scale)
 
 
 def _step(J: np.ndarray, r: np.ndarray, rank: int) -> np.ndarray:
     """Minimum-norm Gauss–Newton step −J⁺r of the column-scaled J truncated to ``rank``."""
-    col = np.linalg.norm(J, axis=0)
-    scale = np.where(col > 0, 1.0 / np.where(col > 0, col, 1.0), 0.0)
-    U, s, Vt = np.linalg.svd(J * scale, full_matrices=False)
-    k = min(rank, int(np.sum(s > 0)))
-    d = Vt[:k].T @ ((U[:, :k].T @ r) / s[:k])
-    return -d * scale
+    U, s, Vt, scale = _scaled_svd(J, rank)
+    return -(Vt.T @ ((U.T @ r) / s)) * scale
 
 
 def identify_redundant(
@@ -157,7 +148,7 @@ def identify_redundant(
     """
     if linearisation not in LINEARISATIONS:
         raise PkmcalError(f"linearisation must be one of {', '.join(LINEARISATIONS)}; got '{linearisation}'")
-    model = _model(mechanism, sensor, noise, commanded, readings, tool)
+    model = Model(mechanism, sensor, noise, q=readings, y=tool, commanded=commanded)
     names = model.names
     if free is None:
         free = tuple(mechanism.param_names) + tuple(sensor.default_free)
@@ -174,7 +165,7 @@ def identify_redundant(
     halvings = 0
     for it in range(1, (1 if linearisation == "single" else max_iter) + 1):
         if linearisation == "single":
-            r, J = single_linearisation(model, weighted)
+            r, J = single_linearisation(model, method=method)
         else:
             ev = method.evaluate(theta, jac=True, cov=False)
             if not ev.converged.all():
@@ -217,13 +208,12 @@ def identify_redundant(
 
 
 def projection_identifiability(mechanism, sensor, poses, noise, free) -> IdentifiabilityReport:
-    """Rank and named null space of the projected Jacobian at ``poses`` (noise-free data)."""
-    q = mechanism.ik(poses)
-    y = sensor.predict(poses)
-    model = _model(mechanism, sensor, noise, poses, q, y)
-    _, J = single_linearisation(model)
-    idx = _free_index(model.names, tuple(free))
-    return analyse_jacobian(J.reshape(-1, J.shape[-1])[:, idx], tuple(free), tuple(mechanism.param_names))
+    """Rank and named null space of the projected Jacobian at ``poses`` (noise-free data):
+    :func:`pkmcal.identification.identifiability.identifiability` with ``method="projection"``
+    (the report lists ``free`` in the machine's then the sensor's parameter order)."""
+    free = tuple(free)
+    _free_index(tuple(mechanism.param_names) + tuple(sensor.param_names), free)
+    return identifiability(mechanism, MeasurementSetup(sensor, noise), poses, method="projection", free=list(free))
 
 
 # -- baselines ---------------------------------------------------------------------------
@@ -282,6 +272,11 @@ class ActuatorSubset(Mechanism):
 
     fk = PlanarMechanism.fk
 
+    def noise(self, noise: NoiseModel) -> NoiseModel:
+        """``noise`` (of the full machine) with the actuator standard deviations of ``keep``."""
+        act = np.broadcast_to(np.asarray(noise.actuator_std, dtype=float), (self.base.n_actuators,))[list(self.keep)]
+        return NoiseModel(noise.reading_std, act, noise.distribution)
+
     def check_limits(self, poses) -> LimitReport:
         return self.base.check_limits(poses)
 
@@ -295,15 +290,12 @@ def identify_ignoring_redundancy(mechanism, sensor, commanded, commands, tool, n
 def identify_actuator_subset(mechanism, sensor, commanded, readings, tool, noise, keep, free=None, **kw) -> RedundantFit:
     """Baseline: a non-redundant calibration with the n actuators ``keep`` only (their
     measured readings); parameters those actuators do not see stay nominal."""
-    keep = tuple(int(k) for k in keep)
-    sub = ActuatorSubset(mechanism, keep)
-    sub_noise = NoiseModel(noise.reading_std, np.broadcast_to(noise.actuator_std, (mechanism.n_actuators,))[list(keep)])
+    sub = ActuatorSubset(mechanism, tuple(int(k) for k in keep))
     if free is None:
         free = tuple(mechanism.param_names) + tuple(sensor.default_free)
-    fit = identify_redundant(sub, sensor, commanded, np.asarray(readings)[:, list(keep)], tool, sub_noise, free, **kw)
-    return RedundantFit(mechanism=fit.mechanism.base, sensor=fit.sensor, free=fit.free, delta=fit.delta,
-                        report=fit.report, cost=fit.cost, poses=fit.poses, iterations=fit.iterations,
-                        message=fit.message, rows_per_pose=fit.rows_per_pose, covariance=fit.covariance)
+    fit = identify_redundant(sub, sensor, commanded, np.asarray(readings)[:, list(sub.keep)], tool, sub.noise(noise),
+                             free, **kw)
+    return dataclasses.replace(fit, mechanism=fit.mechanism.base)
 
 
 # -- compensation and evaluation ---------------------------------------------------------
@@ -316,11 +308,17 @@ def commands_for_targets(mechanism: Mechanism, sensor, targets: np.ndarray, angl
     return poses, mechanism.ik(poses)
 
 
-def tool_errors(real: Mechanism, real_sensor, commands, targets, stiffness, load, guess) -> np.ndarray:
-    """|y_real − target| (N,) of the real machine at equilibrium under ``commands``."""
+def _settled(real, real_sensor, commands, stiffness, load, guess):
+    """The real machine's equilibrium under ``commands``; an error if a pose does not settle."""
     eq = equilibrium(real, commands, stiffness, load, real_sensor, guess=guess)
     if not eq.converged.all():
         raise PkmcalError(f"equilibrium did not converge at pose {int(np.argmax(~eq.converged)) + 1}")
+    return eq
+
+
+def tool_errors(real: Mechanism, real_sensor, commands, targets, stiffness, load, guess) -> np.ndarray:
+    """|y_real − target| (N,) of the real machine at equilibrium under ``commands``."""
+    eq = _settled(real, real_sensor, commands, stiffness, load, guess)
     return np.linalg.norm(real_sensor.predict(eq.poses) - targets, axis=1)
 
 
@@ -328,9 +326,7 @@ def simulate_measurements(real, real_sensor, nominal, poses, stiffness, load, no
     """Commands of the nominal model at ``poses``, the real machine's equilibrium, and noisy
     encoder and tracker readings: ``(commands, readings, tool, equilibrium_result)``."""
     commands = nominal.ik(poses)
-    eq = equilibrium(real, commands, stiffness, load, real_sensor, guess=poses)
-    if not eq.converged.all():
-        raise PkmcalError(f"equilibrium did not converge at pose {int(np.argmax(~eq.converged)) + 1}")
+    eq = _settled(real, real_sensor, commands, stiffness, load, poses)
     e_y, e_q = noise.sample(rng, (len(poses), real_sensor.n_readings), (len(poses), real.n_actuators))
     return commands, eq.readings + e_q, real_sensor.predict(eq.poses) + e_y, eq
 

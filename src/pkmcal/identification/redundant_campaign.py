@@ -28,7 +28,8 @@ import numpy as np
 
 from pkmcal.errors import PkmcalError
 from pkmcal.identification.projection import commands_for_targets
-from pkmcal.identification.simulation import SimulationResult, as_rng, drop_limit_violations, parameter_errors
+from pkmcal.identification.simulation import SimulationResult, campaign_inputs, drop_limit_violations, parameter_errors
+from pkmcal.identification.verification import error_stats
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.mechanisms.statics import StaticsModel, equilibrium
 from pkmcal.sensors.base import MeasurementSetup
@@ -82,15 +83,8 @@ def simulate_redundant_campaign(
     with ``nominal``'s IK (module docstring). ``actuator_true`` are the noise-free encoder
     readings at equilibrium (commands + following errors), ``real_poses`` the rest poses.
     Noise is drawn for all N poses before any is dropped (same seed, same bytes)."""
-    commanded = nominal.as_pose_array(commanded_poses)
-    if not np.all(np.isfinite(commanded)):
-        raise PkmcalError("a commanded pose is not a finite number")
-    if nominal.n_actuators != real.n_actuators or nominal.n_dof != real.n_dof:
-        raise PkmcalError(f"nominal machine '{nominal.name}' and real machine '{real.name}' are not the same kind")
-    gen = as_rng(rng)
+    commanded, e_y, e_q = campaign_inputs(nominal, real, setup, commanded_poses, rng)
     sensor = setup.sensor
-    n = len(commanded)
-    e_y, e_q = setup.noise.sample(gen, (n, sensor.n_readings), (n, real.n_actuators))
     with np.errstate(invalid="ignore"):
         commands = nominal.ik(commanded)
     poses, readings, ok, dropped = _settle(real, setup, commands, commanded, ignore_limits)
@@ -148,12 +142,9 @@ class ToolErrors:
 
     def summary(self, mask: np.ndarray) -> dict:
         out: dict = {"poses": int(np.count_nonzero(mask))}
-        for key, v, unit in (("tool", self.tool, "mm"), ("angle", np.rad2deg(np.abs(self.angle)), "deg")):
-            v = np.abs(v[mask])
-            if key == "angle" and np.all(np.isnan(self.angle)):
-                continue
-            stats = (float(np.mean(v)), float(np.max(v)), float(np.sqrt(np.mean(v**2)))) if v.size else (float("nan"),) * 3
-            out.update({f"{key}_{s}_{unit}": x for s, x in zip(("mean", "max", "rms"), stats)})
+        out.update(error_stats(self.tool[mask], "tool", "mm"))
+        if not np.all(np.isnan(self.angle)):
+            out.update(error_stats(np.rad2deg(self.angle[mask]), "angle", "deg"))
         return out
 
 
@@ -243,7 +234,6 @@ def baseline_inputs(method: str, nominal: Mechanism, setup: MeasurementSetup, me
     import dataclasses
 
     from pkmcal.identification.projection import ActuatorSubset
-    from pkmcal.sensors.base import NoiseModel
 
     if method not in BASELINES:
         raise PkmcalError(f"unknown baseline '{method}'; use one of {', '.join(BASELINES)}")
@@ -262,9 +252,8 @@ def baseline_inputs(method: str, nominal: Mechanism, setup: MeasurementSetup, me
         raise PkmcalError(f"--keep: give {nominal.n_dof} different actuator numbers of 1..{nominal.n_actuators} "
                           f"(e.g. {','.join(str(i + 1) for i in range(nominal.n_dof))}); got "
                           f"{','.join(str(k + 1) for k in keep)}")
-    act = np.broadcast_to(np.asarray(setup.noise.actuator_std, dtype=float), (nominal.n_actuators,))[list(keep)]
-    sub_setup = dataclasses.replace(setup, noise=NoiseModel(setup.noise.reading_std, act, setup.noise.distribution))
-    return (ActuatorSubset(nominal, keep), sub_setup,
+    sub = ActuatorSubset(nominal, keep)
+    return (sub, dataclasses.replace(setup, noise=sub.noise(setup.noise)),
             dataclasses.replace(meas, actuators=np.asarray(meas.actuators)[:, list(keep)]))
 
 

@@ -89,6 +89,22 @@ def _unreadable(sensor: Sensor, poses: np.ndarray) -> np.ndarray:
     return np.zeros(len(poses), dtype=bool)
 
 
+def campaign_inputs(nominal: Mechanism, real: Mechanism, setup: MeasurementSetup, commanded_poses: np.ndarray,
+                    rng: np.random.Generator | int | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Checked commanded poses (N, n) and the sensor and encoder noise (N, m), (N, l) of all
+    N poses, drawn before any pose is dropped (same seed, same noise per pose)."""
+    commanded = nominal.as_pose_array(commanded_poses)
+    if not np.all(np.isfinite(commanded)):
+        raise PkmcalError("a commanded pose is not a finite number")
+    if nominal.n_actuators != real.n_actuators or nominal.n_dof != real.n_dof:
+        raise PkmcalError(f"nominal machine '{nominal.name}' and real machine '{real.name}' are not the same kind "
+                          f"({nominal.n_actuators} and {real.n_actuators} actuators, {nominal.n_dof} and "
+                          f"{real.n_dof} pose coordinates)")
+    n = len(commanded)
+    e_y, e_q = setup.noise.sample(as_rng(rng), (n, setup.sensor.n_readings), (n, real.n_actuators))
+    return commanded, e_y, e_q
+
+
 def simulate_campaign(
     nominal: Mechanism,
     real: Mechanism,
@@ -104,15 +120,8 @@ def simulate_campaign(
     checked (e.g. ``("leg_collision",)``: a parameter perturbation of a few mm can bring
     the modelled legs of a tight design such as ``stewart-prototype`` into contact).
     """
-    commanded = nominal.as_pose_array(commanded_poses)
-    if not np.all(np.isfinite(commanded)):
-        raise PkmcalError("a commanded pose is not a finite number")
-    if nominal.n_actuators != real.n_actuators:
-        raise PkmcalError(f"nominal machine '{nominal.name}' and real machine '{real.name}' differ in actuator count")
-    gen = as_rng(rng)
-    n = len(commanded)
+    commanded, e_y, e_q = campaign_inputs(nominal, real, setup, commanded_poses, rng)
     sensor = setup.sensor
-    e_y, e_q = setup.noise.sample(gen, (n, sensor.n_readings), (n, real.n_actuators))
 
     q = nominal.ik(commanded)
     dropped: dict[int, str] = {}

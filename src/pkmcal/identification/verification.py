@@ -57,14 +57,15 @@ class PoseErrors:
         m = self.valid if mask is None else mask
         out: dict[str, float] = {"poses": int(np.count_nonzero(m))}
         for key, (unit, _) in MEASURES.items():
-            v = np.abs(getattr(self, key)[m])
-            if v.size == 0:
-                stats = (float("nan"),) * 3
-            else:
-                stats = (float(np.mean(v)), float(np.max(v)), float(np.sqrt(np.mean(v**2))))
-            for name, s in zip(("mean", "max", "rms"), stats):
-                out[f"{key}_{name}_{unit}"] = s
+            out.update(error_stats(getattr(self, key)[m], key, unit))
         return out
+
+
+def error_stats(values: np.ndarray, key: str, unit: str) -> dict[str, float]:
+    """``{key_mean_unit, key_max_unit, key_rms_unit}`` of |values| (NaN when empty)."""
+    v = np.abs(values)
+    stats = (float(np.mean(v)), float(np.max(v)), float(np.sqrt(np.mean(v**2)))) if v.size else (float("nan"),) * 3
+    return {f"{key}_{name}_{unit}": x for name, x in zip(("mean", "max", "rms"), stats)}
 
 
 def pose_errors(model: Mechanism, real: Mechanism, poses: np.ndarray, ignore_limits: tuple[str, ...] = ()) -> PoseErrors:

@@ -26,7 +26,7 @@ import numpy as np
 from pkmcal.conventions import POSE_COLUMNS
 from pkmcal.errors import InputFileError, PkmcalError
 from pkmcal.io.import_mapping import ImportMapping
-from pkmcal.io.tables import DEFAULT_ALIASES, mapped_name, read_table, write_table
+from pkmcal.io.tables import DEFAULT_ALIASES, column_kinds, from_file_units, mapped_name, read_table, to_file_units, write_table
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.sensors.base import MeasurementSetup
 
@@ -79,10 +79,6 @@ class Measurements:
         return f"pose {k + 1}"
 
 
-def _kinds(names, is_angle) -> dict[str, str]:
-    return {n: ("angle" if a else "length") for n, a in zip(names, is_angle)}
-
-
 def _leg_offsets(machine: Mechanism, path) -> np.ndarray:
     offset = getattr(machine, "offset", None)
     if offset is None:
@@ -106,9 +102,9 @@ def load_measurements(path: str | os.PathLike, machine: Mechanism, setup: Measur
     legs = tuple(f"l{i + 1}" for i in range(machine.n_actuators))
     reading_cols = tuple(sensor.reading_names)
     cmd_cols = command_columns(machine)
-    kinds = {**_kinds(act, machine.actuator_is_angle), **_kinds(legs, (False,) * len(legs)),
-             **_kinds(reading_cols, sensor.reading_is_angle),
-             **_kinds(cmd_cols, machine.pose_is_angle)}
+    kinds = {**column_kinds(act, machine.actuator_is_angle), **column_kinds(legs, (False,) * len(legs)),
+             **column_kinds(reading_cols, sensor.reading_is_angle),
+             **column_kinds(cmd_cols, machine.pose_is_angle)}
     try:
         with open(src, "rb") as fh:
             text = fh.read().decode("utf-8-sig")
@@ -135,23 +131,17 @@ def load_measurements(path: str | os.PathLike, machine: Mechanism, setup: Measur
                 f"{legs[0]}..{legs[-1]} (leg lengths, mm), optionally cmd_x..cmd_c",
                 line=exc.line) from None
         raise
-    readings = table[list(reading_cols)]
-    ang = np.array(sensor.reading_is_angle, dtype=bool)
-    readings[:, ang] = np.deg2rad(readings[:, ang])
+    readings = from_file_units(table[list(reading_cols)], sensor.reading_is_angle)
     notes: tuple[str, ...] = ()
     if all(c in table.columns for c in act):
-        actuators = table[list(act)]
-        rot = np.array(machine.actuator_is_angle, dtype=bool)   # rotary encoders: degrees in files
-        actuators[:, rot] = np.deg2rad(actuators[:, rot])
+        actuators = from_file_units(table[list(act)], machine.actuator_is_angle)   # rotary encoders: deg in files
     else:
         actuators = table[list(legs)] - _leg_offsets(machine, src)
         notes = (f"{src}: columns {legs[0]}..{legs[-1]} are leg lengths; converted to actuator readings "
                  f"lambda_i = l_i - L0_i with the leg offsets of machine '{machine.name}'",)
     commanded = None
     if with_cmd:
-        commanded = table[list(cmd_cols)]
-        ang = np.array(machine.pose_is_angle, dtype=bool)
-        commanded[:, ang] = np.deg2rad(commanded[:, ang])
+        commanded = from_file_units(table[list(cmd_cols)], machine.pose_is_angle)
     return Measurements(actuators=actuators, readings=readings, commanded=commanded, source=src, lines=table.lines,
                         notes=notes)
 
@@ -180,20 +170,17 @@ def measurement_columns(measurements: Measurements, machine: Mechanism, setup: M
     if measurements.readings.shape[1] != sensor.n_readings:
         raise PkmcalError(f"{measurements.readings.shape[1]} sensor readings per pose, but the '{sensor.kind}' "
                           f"sensor gives {sensor.n_readings}")
-    cols: dict[str, np.ndarray] = {}
-    for j, name in enumerate(machine.actuator_names):
-        v = measurements.actuators[:, j]
-        cols[name] = np.rad2deg(v) if machine.actuator_is_angle[j] else v
-    for j, (name, ang) in enumerate(zip(sensor.reading_names, sensor.reading_is_angle)):
-        v = measurements.readings[:, j]
-        cols[name] = np.rad2deg(v) if ang else v
+    groups = [(machine.actuator_names, machine.actuator_is_angle, measurements.actuators),
+              (sensor.reading_names, sensor.reading_is_angle, measurements.readings)]
     if measurements.commanded is not None:
         if measurements.commanded.shape[1] != machine.n_dof:
             raise PkmcalError(f"commanded poses have {measurements.commanded.shape[1]} coordinates, but machine "
                               f"'{machine.name}' has {machine.n_dof}")
-        for j, (name, ang) in enumerate(zip(command_columns(machine), machine.pose_is_angle)):
-            v = measurements.commanded[:, j]
-            cols[name] = np.rad2deg(v) if ang else v
+        groups.append((command_columns(machine), machine.pose_is_angle, measurements.commanded))
+    cols: dict[str, np.ndarray] = {}
+    for names, is_angle, values in groups:
+        file_values = to_file_units(values, is_angle)
+        cols.update({name: file_values[:, j] for j, name in enumerate(names)})
     return cols
 
 

@@ -346,6 +346,36 @@ def format_table(columns: Mapping[str, Sequence], *, units: Mapping[str, str] | 
     return "\n".join(head + body) + "\n"
 
 
+def column_kinds(names: Sequence[str], is_angle: Sequence[bool]) -> dict[str, str]:
+    """``{column: "angle" | "length"}`` for the ``kinds`` of :func:`read_table`."""
+    return {n: ("angle" if a else "length") for n, a in zip(names, is_angle)}
+
+
+def from_file_units(values, is_angle: Sequence[bool]) -> np.ndarray:
+    """A copy of ``values`` (..., K) with the angle columns (``is_angle``, K) converted from
+    file units (degrees) to internal units (radians); lengths (mm) unchanged."""
+    out = np.array(values, dtype=float)
+    ang = np.asarray(is_angle, dtype=bool)
+    out[..., ang] = np.deg2rad(out[..., ang])
+    return out
+
+
+def to_file_units(values, is_angle: Sequence[bool]) -> np.ndarray:
+    """The inverse of :func:`from_file_units`: radians → degrees in the angle columns."""
+    out = np.array(values, dtype=float)
+    ang = np.asarray(is_angle, dtype=bool)
+    out[..., ang] = np.rad2deg(out[..., ang])
+    return out
+
+
+def read_poses(path: str | os.PathLike, machine, mapping: "ImportMapping | None" = None) -> np.ndarray:
+    """Poses (N, n_dof) of a CSV with the machine's pose columns (mm, deg) in internal units
+    (mm, rad); ``mapping``: column renaming and units of a file from another tool."""
+    table = read_table(path, machine.pose_names, kinds=column_kinds(machine.pose_names, machine.pose_is_angle),
+                       mapping=mapping)
+    return from_file_units(table.values, machine.pose_is_angle)
+
+
 def write_table(path: str | os.PathLike, columns: Mapping[str, Sequence], **kwargs) -> None:
     """:func:`format_table` written atomically to ``path``."""
     try:
@@ -363,8 +393,12 @@ __all__ = [
     "READING_COLUMNS",
     "Table",
     "canonical_name",
+    "column_kinds",
     "format_table",
+    "from_file_units",
     "mapped_name",
+    "read_poses",
     "read_table",
+    "to_file_units",
     "write_table",
 ]

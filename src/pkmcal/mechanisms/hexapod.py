@@ -27,7 +27,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from pkmcal.conventions import POSE_COLUMNS, euler_rate_matrix, euler_to_matrix
+from pkmcal.conventions import POSE_COLUMNS, euler_pose_jacobian, euler_to_matrix
 from pkmcal.errors import PkmcalError
 from pkmcal.mechanisms import _hexapod_kernels as kernels
 from pkmcal.mechanisms.base import FKResult, LimitReport, Mechanism
@@ -230,9 +230,7 @@ class Hexapod(Mechanism):
     def actuator_pose_jacobian(self, poses: np.ndarray) -> np.ndarray:
         """∂λ/∂(x, y, z, a, b, c) (N, 6, 6) = twist Jacobian · diag(I, E(a, b, c))."""
         poses = self.as_pose_array(poses)
-        Jt = self.twist_jacobian(poses)
-        E = euler_rate_matrix(poses[:, 3:6])
-        return np.concatenate([Jt[:, :, :3], Jt[:, :, 3:] @ E], axis=2)
+        return euler_pose_jacobian(self.twist_jacobian(poses), poses)
 
     def actuator_param_jacobian(self, poses: np.ndarray) -> np.ndarray:
         """∂λ/∂ρ (N, 6, 42): for leg i only its 7 columns are non-zero:

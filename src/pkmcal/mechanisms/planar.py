@@ -202,6 +202,10 @@ class PlanarMechanism(Mechanism):
 
     _actuator_unit: ClassVar[str] = "mm"
 
+    def _workspace_margin(self, x: np.ndarray) -> np.ndarray:
+        """Distance (N,) of poses x (N, n) inside the workspace box (negative outside)."""
+        return np.min(np.minimum(x - self.workspace[:, 0], self.workspace[:, 1] - x), axis=1)
+
     def sample_poses(self, n: int, rng: np.random.Generator, shrink: float = 1.0) -> np.ndarray:
         """``n`` poses uniform in the workspace box (shrunk about its centre by ``shrink``)."""
         c = self.workspace.mean(axis=1)
@@ -292,7 +296,7 @@ class Planar2Dof3Act(PlanarMechanism):
         _, _, g, s, cosg = self._chains(x)
         l1, l2, _, _, _ = self._unpack()
         margins = {
-            "workspace": np.min(np.minimum(x - self.workspace[:, 0], self.workspace[:, 1] - x), axis=1),
+            "workspace": self._workspace_margin(x),
             "reach": np.min(1.0 - np.abs(cosg), axis=1),
             "transmission": np.min(np.abs(s) / (l1 * l2), axis=1) - np.sin(self.min_transmission),
         }
@@ -330,6 +334,7 @@ _P3_NAMES = ("L3", "y1", "y2", "alpha1", "alpha2", "rho11", "rho12", "rho21", "r
              "dq1", "dq2", "dq3", "dq4")
 _TAU = np.array([-1.0, 1.0, -1.0, 1.0])   # slider j = 1 on the −d side of C_i, j = 2 on the + side
 _WAY = np.array([0, 0, 1, 1])              # guide-way of each actuator
+_SIDE = 2.0 * _WAY - 1.0                   # C_1 = (x, y) − (L3/2) e(φ), C_2 = … + …: ∓ of each actuator's joint
 
 
 @dataclass(frozen=True, eq=False)
@@ -384,8 +389,7 @@ class Planar3Dof4Act(PlanarMechanism):
         L3 = self._unpack()[0]
         dsdC = self._dsdC(d, nrm, b, root)
         eperp = np.stack([-ephi[:, 1], ephi[:, 0]], axis=-1)
-        sign = np.array([-1.0, -1.0, 1.0, 1.0])
-        dCdphi = (0.5 * L3) * sign[None, :, None] * eperp[:, None, :]
+        dCdphi = (0.5 * L3) * _SIDE[None, :, None] * eperp[:, None, :]
         return np.concatenate([dsdC, np.einsum("nik,nik->ni", dsdC, dCdphi)[..., None]], axis=2)
 
     def actuator_param_jacobian(self, poses: np.ndarray) -> np.ndarray:
@@ -395,8 +399,7 @@ class Planar3Dof4Act(PlanarMechanism):
         N = x.shape[0]
         J = np.zeros((N, 4, len(self._names)))
         dsdC = self._dsdC(d, nrm, b, root)
-        sign = np.array([-1.0, -1.0, 1.0, 1.0])
-        J[:, :, 0] = np.einsum("nik,nik->ni", dsdC, 0.5 * sign[None, :, None] * ephi[:, None, :])
+        J[:, :, 0] = np.einsum("nik,nik->ni", dsdC, 0.5 * _SIDE[None, :, None] * ephi[:, None, :])
         # O_i = (0, y_i): ∂s/∂y_i = −∂s/∂C_i · e_y  (y1 is column 1, y2 column 2)
         way_col = 1 + _WAY
         i = np.arange(4)
@@ -414,7 +417,7 @@ class Planar3Dof4Act(PlanarMechanism):
         x, ephi, d, nrm, a, b, root, s = self._geometry(poses)
         rho = self._unpack()[3]
         margins = {
-            "workspace": np.min(np.minimum(x - self.workspace[:, 0], self.workspace[:, 1] - x), axis=1),
+            "workspace": self._workspace_margin(x),
             "reach": np.min(rho - np.abs(b), axis=1),
             "leg_angle": np.min(np.abs(b) / rho, axis=1) - np.sin(self.min_leg_angle),
         }

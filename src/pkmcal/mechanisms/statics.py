@@ -104,8 +104,8 @@ def _load_terms(load_point, load, x):
     return load_point.tool_point(x), load_point.tool_pose_jacobian(x), F
 
 
-def force_balance(mechanism: Mechanism, commands, stiffness, poses, load=None, load_point=None) -> np.ndarray:
-    """g(x) = Γᵀ K (q(x) − c) − J_fᵀ F (N, n): the gradient of U (module docstring)."""
+def _balance_and_jacobian(mechanism: Mechanism, commands, stiffness, poses, load, load_point):
+    """(g (N, n), Γ (N, l, n)): :func:`force_balance` and the Γ it was computed with."""
     x = mechanism.as_pose_array(poses)
     K = np.broadcast_to(np.asarray(stiffness, dtype=float), (mechanism.n_actuators,))
     G = mechanism.actuator_pose_jacobian(x)
@@ -113,7 +113,12 @@ def force_balance(mechanism: Mechanism, commands, stiffness, poses, load=None, l
     _, Jf, F = _load_terms(load_point, load, x)
     if F is not None:
         g = g - np.einsum("nki,k->ni", Jf, F)
-    return g
+    return g, G
+
+
+def force_balance(mechanism: Mechanism, commands, stiffness, poses, load=None, load_point=None) -> np.ndarray:
+    """g(x) = Γᵀ K (q(x) − c) − J_fᵀ F (N, n): the gradient of U (module docstring)."""
+    return _balance_and_jacobian(mechanism, commands, stiffness, poses, load, load_point)[0]
 
 
 def potential_energy(mechanism: Mechanism, commands, stiffness, poses, load=None, load_point=None) -> np.ndarray:
@@ -162,7 +167,7 @@ def equilibrium(
     done = np.zeros(c.shape[0], dtype=bool)
     ts = 0.5 ** np.arange(10)
     for _ in range(max_iter):
-        g = force_balance(mechanism, c, K, x, *args)
+        g, G = _balance_and_jacobian(mechanism, c, K, x, *args)
         # Hessian by central differences of the analytic gradient (all poses, 2n evaluations)
         Hs = np.empty((c.shape[0], n, n))
         for k in range(n):
@@ -172,7 +177,6 @@ def equilibrium(
             gm = force_balance(mechanism, c, K, x - h[:, k:k + 1] * e, *args)
             Hs[:, :, k] = (gp - gm) / (2.0 * h[:, k:k + 1])
         Hs = 0.5 * (Hs + np.swapaxes(Hs, 1, 2))
-        G = mechanism.actuator_pose_jacobian(x)
         Hgn = np.einsum("nli,l,nlj->nij", G, K, G)
         pd = np.all(np.linalg.eigvalsh(Hs) > 0, axis=1)
         Hs = np.where(pd[:, None, None], Hs, Hgn)
@@ -192,10 +196,9 @@ def equilibrium(
         if done.all():
             break
     q = mechanism.ik(x)
-    g = force_balance(mechanism, c, K, x, *args)
+    g, G = _balance_and_jacobian(mechanism, c, K, x, *args)
     res = np.max(np.abs(g), axis=1)
     # converged: the displacement a further Gauss–Newton step would make is negligible
-    G = mechanism.actuator_pose_jacobian(x)
     Hgn = np.einsum("nli,l,nlj->nij", G, K, G)
     with np.errstate(invalid="ignore"):
         left = np.max(np.abs(np.linalg.solve(Hgn, g[..., None])[..., 0]), axis=1)

@@ -2,8 +2,8 @@
 
 Why numba: the update S_j ← S_j ∓ (G_j U) C⁻¹ (G_j U)ᵀ for all N candidates is a skinny
 product (N·m × n) · (n × m) followed by N small m×m products and N log-determinants.
-Through NumPy that is a GEMM plus batched LAPACK calls; on the 2-core reference machine a
-multi-threaded BLAS slows the skinny GEMM ~10× whenever the other core is busy. Here each
+Through NumPy that is a GEMM plus batched LAPACK calls, and a multi-threaded BLAS slows the
+skinny GEMM whenever the other core is busy. Here each
 candidate is done in registers, serially, with no allocation per candidate.
 
     A_j = G_j U  (m × m),   S_j ← S_j − sign · A_j C⁻¹ A_jᵀ,   gain_j = log det(I + S_j)

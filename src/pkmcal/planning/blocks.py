@@ -45,15 +45,15 @@ def default_method(setup: MeasurementSetup, mechanism: Mechanism | None = None) 
     return "ik-residual" if setup.sensor.kind == "full-pose" else "fk-residual"
 
 
-def raw_blocks(mechanism: Mechanism, setup: MeasurementSetup, poses: np.ndarray, method: str
-               ) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
-    """Whitened residual Jacobians W_j J_j (N, k, P) of all parameters at the nominal machine,
-    a converged flag (N,) and the parameter names."""
+def raw_blocks(mechanism: Mechanism, setup: MeasurementSetup, poses: np.ndarray, method: str,
+               weighted: bool = True) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+    """Whitened residual Jacobians W_j J_j (N, k, P) of all parameters at the nominal machine
+    (J_j itself when not ``weighted``), a converged flag (N,) and the parameter names."""
     poses = mechanism.as_pose_array(poses)
     model = Model(mechanism, setup.sensor, setup.noise, mechanism.ik(poses), setup.sensor.predict(poses),
                   commanded=poses)
-    ev = make_method(method, model, weighted=True).evaluate(model.theta0, jac=True, cov=True)
-    W = whitening(ev.cov, f"{method} residual") if method != "projection" else None
+    ev = make_method(method, model, weighted=weighted).evaluate(model.theta0, jac=True, cov=weighted)
+    W = whitening(ev.cov, f"{method} residual") if weighted and method != "projection" else None
     J = ev.J if W is None else W @ ev.J
     return J, ev.converged, model.names
 

@@ -20,8 +20,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pkmcal.conventions import POSE_COLUMNS, euler_to_matrix, rotation_error
+from pkmcal.conventions import POSE_COLUMNS
 from pkmcal.errors import PkmcalError
+from pkmcal.identification import verification
 from pkmcal.mechanisms.base import Mechanism
 
 
@@ -40,13 +41,13 @@ class ErrorSlices:
 
 def pose_errors(nominal: Mechanism, real: Mechanism, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(e_pos (N,) mm, e_ori (N,) rad) of ``real`` commanded to ``poses`` by ``nominal``
-    (module docstring); NaN where the real machine's FK does not converge."""
+    (module docstring): :func:`pkmcal.identification.verification.pose_errors` with none of
+    the real machine's limits checked (the maps blank poses by the nominal limits); NaN where
+    the real machine's FK does not converge."""
     poses = nominal.as_pose_array(poses)
-    fk = real.fk(nominal.ik(poses), guess=poses)
-    pos = np.linalg.norm(fk.poses[:, :3] - poses[:, :3], axis=1)
-    ori = rotation_error(euler_to_matrix(fk.poses[:, 3:]), euler_to_matrix(poses[:, 3:]))
-    bad = ~fk.converged
-    return np.where(bad, np.nan, pos), np.where(bad, np.nan, ori)
+    every_limit = tuple(real.check_limits(poses[:1]).violations)
+    e = verification.pose_errors(nominal, real, poses, ignore_limits=every_limit)
+    return e.position, e.orientation
 
 
 def error_slices(nominal: Mechanism, box: np.ndarray, *, magnitude: float = 0.1, n_curves: int = 20,

@@ -23,12 +23,12 @@ paper 2); ``random`` and ``corners`` optimise nothing.
 
 from __future__ import annotations
 
-import contextlib
 import functools
 
 import numpy as np
 
 from pkmcal.errors import PkmcalError
+from pkmcal.identification.residuals import single_threaded_blas
 
 INDEX_NAMES = ("O1", "O2", "O3", "O4", "O5")
 INDEX_DESCRIPTIONS = {
@@ -42,20 +42,10 @@ INDEX_DESCRIPTIONS = {
 RANK_RTOL = 1e-10
 
 
-def single_threaded_blas():
-    """Context limiting BLAS to one thread (threadpoolctl). Planning multiplies many small
-    matrices; on the 2-core reference machine a multi-threaded OpenBLAS made them 10–100×
-    slower whenever the other core was busy (measured: a 60000×42 Gram matrix 2.3 s vs
-    14 ms). A no-op when threadpoolctl is missing."""
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - optional
-        return contextlib.nullcontext()
-    return threadpool_limits(limits=1, user_api="blas")
-
-
 def blas_single_threaded(func):
-    """Decorator: run ``func`` inside :func:`single_threaded_blas`."""
+    """Decorator: run ``func`` with one BLAS thread
+    (:func:`pkmcal.identification.residuals.single_threaded_blas`). Planning multiplies many
+    small matrices, where a threaded BLAS only adds synchronisation."""
     @functools.wraps(func)
     def wrapper(*args, **kwargs):
         with single_threaded_blas():

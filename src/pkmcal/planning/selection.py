@@ -30,7 +30,7 @@ information matrix of a set is M = Σ_j G_jᵀ G_j.
   corners are built in :mod:`pkmcal.planning.candidates`.
 
 ``select`` and the ``select_*`` functions run with BLAS limited to one thread
-(:func:`~pkmcal.planning.indices.single_threaded_blas`).
+(:func:`~pkmcal.identification.residuals.single_threaded_blas`).
 
 All are seeded through a ``numpy.random.Generator`` and reproducible.
 """
@@ -61,9 +61,8 @@ OPTIMISED_INDEX = {"default": "O1 (or --index, after the D-optimal start)", "det
                    "cuckoo": "any (default O4)", "corners": "none", "random": "none"}
 Progress = Callable[[int, int], None]
 #: Greedy start of the default algorithm: M₀ = δI with δ = _DELTA_REL · mean per-pose
-#: information per parameter, and whether S is recomputed exactly while M₀ dominates.
+#: information per parameter.
 _DELTA_REL = 1e-9
-_EARLY_REFRESH = True
 
 
 @dataclass(frozen=True)
@@ -104,17 +103,6 @@ def _batch_logdet(S: np.ndarray, sign: float, identity: bool = True) -> np.ndarr
     A = sign * S + np.eye(m) if identity else sign * S
     s, ld = np.linalg.slogdet(A)
     return np.where(s > 0, ld, -np.inf)
-
-
-def woodbury_update(Minv: np.ndarray, Gk: np.ndarray, sign: float = 1.0) -> tuple[np.ndarray, float]:
-    """(M ± G_kᵀG_k)⁻¹ and log det(M ± G_kᵀG_k) − log det M from M⁻¹ (p, p), G_k (m, p):
-
-        (M ± GᵀG)⁻¹ = M⁻¹ ∓ U (I ± G U)⁻¹ Uᵀ,  U = M⁻¹Gᵀ;   det(M ± GᵀG) = det M · det(I ± G U).
-    """
-    U = Minv @ Gk.T
-    C = np.eye(Gk.shape[0]) + sign * (Gk @ U)
-    s, ld = np.linalg.slogdet(C)
-    return Minv - sign * (U @ np.linalg.solve(C, U.T)), (float(ld) if s > 0 else -np.inf)
 
 
 def _all_S(flatF: np.ndarray, N: int, m: int, M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -226,7 +214,7 @@ def select_default(G: np.ndarray, n: int, *, index: str = "O1", pool: int | None
         gain[in_pool] = -np.inf
         k = int(np.argmax(gain))
         state.update(k, 1.0)
-        if _EARLY_REFRESH and (step + 1) * m <= p + m:
+        if (step + 1) * m <= p + m:
             # while δ still dominates a direction S_j ~ 1/δ and the update cancels digits:
             # recompute exactly until the chosen rows span the parameter space
             state.refresh()

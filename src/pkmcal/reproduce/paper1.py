@@ -22,18 +22,17 @@ interior × unweighted as in the paper / noise-weighted GLS, plus the paper's sq
 residual of eq. 3 unweighted). The best any linear unbiased
 estimator can do from the same poses is the Gauss–Markov bound C = (JᵀΣ⁻¹J)⁻¹ at the real
 parameters (the Cramér–Rao bound for Gaussian noise of the same variance); propagated to
-the verification poses through G = ∂(reached pose)/∂(model parameters) (central
-differences of x_r = FK(IK(x_c, ρ_model), ρ_real)), it bounds the achievable pose accuracy:
+the verification poses through G = ∂(reached pose)/∂(model parameters) (analytic
+derivative of x_r = FK(IK(x_c, ρ_model), ρ_real), :func:`pose_sensitivity`), it bounds the
+achievable pose accuracy:
 rms orientation error ≥ sqrt(mean_j tr(G_j,ori C G_j,oriᵀ)).
 """
 
 from __future__ import annotations
 
-import itertools
 import time
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from pkmcal.identification.engine import identify
 from pkmcal.identification.simulation import perturb_machine, simulate_campaign
@@ -41,6 +40,7 @@ from pkmcal.identification.verification import pose_errors
 from pkmcal.io.setup_file import builtin_setup
 from pkmcal.mechanisms import builtin_machine
 from pkmcal.mechanisms.library import symmetric_hexapod
+from pkmcal.planning.candidates import corner_poses
 from pkmcal.reproduce.table import Reproduction, Row, mean_sd
 
 #: Paper 1 Table I: mean parameter error (mm) before, after (15 interior), after (15 boundary).
@@ -69,30 +69,18 @@ MACHINES = {
 
 def box_corners(machine, half: np.ndarray) -> np.ndarray:
     """The 2⁶ = 64 corners of the box home ± half (paper 1 §IV)."""
-    return np.array(list(itertools.product((-1.0, 1.0), repeat=6))) * half + machine.home_pose
+    home = machine.home_pose
+    return corner_poses(np.stack([home - half, home + half], axis=1))
 
 
-def _pose_vector(poses: np.ndarray, cmd: np.ndarray) -> np.ndarray:
-    """[p_r − p_c, rotvec(R_r R_cᵀ)] per pose (N, 6)."""
-    rr = Rotation.from_euler("xyz", poses[:, 3:6]) * Rotation.from_euler("xyz", cmd[:, 3:6]).inv()
-    return np.hstack([poses[:, :3] - cmd[:, :3], rr.as_rotvec()])
+def pose_sensitivity(real, poses: np.ndarray) -> np.ndarray:
+    """G (N, 6, p): ∂[position error, rotation-vector error]/∂(model parameters) at model = real.
 
-
-def pose_sensitivity(real, poses: np.ndarray, h: float = 1e-4) -> np.ndarray:
-    """G (N, 6, p): ∂[position error, rotation-vector error]/∂(model parameters) at model = real,
-    by central differences of x_r = FK(IK(x_c, ρ_model), ρ_real)."""
-    p0 = real.params
-    G = np.empty((len(poses), 6, len(p0)))
-    for k in range(len(p0)):
-        out = []
-        for s in (1.0, -1.0):
-            p = p0.copy()
-            p[k] += s * h
-            model = real.with_params(p)
-            fk = real.fk(model.ik(poses), guess=poses)
-            out.append(_pose_vector(fk.poses, poses))
-        G[:, :, k] = (out[0] - out[1]) / (2 * h)
-    return G
+    x_r = FK(IK(x_c, ρ_model), ρ_real) solves IK(x_r, ρ_real) = IK(x_c, ρ_model); at
+    ρ_model = ρ_real, x_r = x_c and the small (δp, δω) (base frame, = the rotation vector of
+    R_r R_cᵀ to first order) obeys J_twist (δp, δω) = ∂λ/∂ρ δρ, so G = J_twist⁻¹ ∂λ/∂ρ."""
+    poses = real.as_pose_array(poses)
+    return np.linalg.solve(real.twist_jacobian(poses), real.actuator_param_jacobian(poses))
 
 
 def _trial(nominal, half, ignore, setup, rng):

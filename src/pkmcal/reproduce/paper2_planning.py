@@ -28,10 +28,9 @@ import time
 
 import numpy as np
 
-from pkmcal.identification.residuals import Model, make_method
 from pkmcal.io.setup_file import load_setup
 from pkmcal.mechanisms.library import stewart_prototype
-from pkmcal.planning.blocks import planning_model
+from pkmcal.planning.blocks import planning_model, raw_blocks
 from pkmcal.planning.candidates import generate_candidates
 from pkmcal.planning.indices import INDEX_NAMES, observability_indices
 from pkmcal.planning.selection import select_default, select_random
@@ -69,8 +68,7 @@ def paper_like_blocks(machine, setup, poses: np.ndarray) -> np.ndarray:
     """Per-pose blocks (N, 3, 30) of the raw fk-residual Jacobian ∂Y/∂η (paper 2 eq. 7):
     unweighted, unscaled, columns = the parameters left after fixing b1, b2, a1, a2 (§2.2).
     Each pose's rows depend on that pose only, so a set's J is a stack of these blocks."""
-    model = Model(machine, setup.sensor, setup.noise, machine.ik(poses), setup.sensor.predict(poses), commanded=poses)
-    J = make_method("fk-residual", model, weighted=False).evaluate(model.theta0, jac=True, cov=False).J
+    J, _, _ = raw_blocks(machine, setup, poses, "fk-residual", weighted=False)
     cols = [k for k, nm in enumerate(machine.param_names) if nm not in PAPER_GAUGE]
     return J[:, :, cols]
 

@@ -24,7 +24,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from pkmcal.conventions import POSE_COLUMNS, euler_rate_matrix, euler_to_matrix, matrix_to_euler
+from pkmcal.conventions import (
+    POSE_COLUMNS,
+    euler_pose_jacobian,
+    euler_rate_matrix,
+    euler_to_matrix,
+    matrix_to_euler,
+)
 from pkmcal.errors import PkmcalError
 from pkmcal.sensors.base import Sensor
 
@@ -96,24 +102,6 @@ def euler_rate_inverse(abc: np.ndarray) -> np.ndarray:
         Ei[..., 2, 1] = sc * sb / cb
         Ei[..., 2, 2] = 1.0
     return Ei
-
-
-def euler_pose_jacobian(J_twist: np.ndarray, poses: np.ndarray) -> np.ndarray:
-    """Twist Jacobian ∂y/∂(δp, δω) (N, m, 6) → Euler Jacobian ∂y/∂(x, y, z, a, b, c).
-
-    Columns: ∂/∂(x, y, z) = the δp block; ∂/∂(a, b, c) = J_ω E with E's columns
-    (c_b c_c, c_b s_c, −s_b), (−s_c, c_c, 0), (0, 0, 1) (:func:`euler_rate_matrix`),
-    written out so that no (N, 3, 3) matrix product is needed.
-    """
-    cb, sb = np.cos(poses[:, 4])[:, None], np.sin(poses[:, 4])[:, None]
-    cc, sc = np.cos(poses[:, 5])[:, None], np.sin(poses[:, 5])[:, None]
-    wx, wy, wz = J_twist[:, :, 3], J_twist[:, :, 4], J_twist[:, :, 5]
-    out = np.empty(J_twist.shape)
-    out[:, :, :3] = J_twist[:, :, :3]
-    out[:, :, 3] = cb * (cc * wx + sc * wy) - sb * wz
-    out[:, :, 4] = cc * wy - sc * wx
-    out[:, :, 5] = wz
-    return out
 
 
 # -- the sensor -------------------------------------------------------------------------

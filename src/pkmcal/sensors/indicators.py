@@ -27,9 +27,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from pkmcal.conventions import euler_pose_jacobian
 from pkmcal.errors import PkmcalError
 from pkmcal.sensors.base import Sensor
-from pkmcal.sensors.full_pose import as_poses, check_free, check_params, euler_pose_jacobian
+from pkmcal.sensors.full_pose import as_poses, check_free, check_params
 
 #: Smallest |n_z| (cosine of the plane tilt) at which the indicators are evaluated (≈ 89.9°).
 MIN_NORMAL_Z = 1e-3

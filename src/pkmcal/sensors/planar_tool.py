@@ -24,6 +24,7 @@ import numpy as np
 
 from pkmcal.errors import PkmcalError
 from pkmcal.sensors.base import Sensor
+from pkmcal.sensors.full_pose import check_free, check_params
 
 PLANAR_TARGET_NAMES = ("target.x", "target.y")
 PLANAR_WORLD_NAMES = ("world.x", "world.y", "world.c")
@@ -63,16 +64,12 @@ class PlanarToolSensor(Sensor):
     def __post_init__(self) -> None:
         if self.n_pose not in (2, 3):
             raise PkmcalError(f"planar tool sensor: n_pose must be 2 or 3, got {self.n_pose}")
-        t = np.zeros(2) if self.target is None else np.asarray(self.target, dtype=float).reshape(2)
-        w = np.zeros(3) if self.world is None else np.asarray(self.world, dtype=float).reshape(3)
-        object.__setattr__(self, "target", t.copy())
-        object.__setattr__(self, "world", w.copy())
-        free = PLANAR_TARGET_NAMES if self.free is None else tuple(self.free)
-        bad = [f for f in free if f not in self.param_names]
-        if bad:
-            raise PkmcalError(f"planar tool sensor has no parameter {', '.join(bad)}; "
-                              f"its parameters are {', '.join(self.param_names)}")
-        object.__setattr__(self, "free", free)
+        t = np.zeros(2) if self.target is None else self.target
+        w = np.zeros(3) if self.world is None else self.world
+        object.__setattr__(self, "target", check_params(t, PLANAR_TARGET_NAMES, self.kind))
+        object.__setattr__(self, "world", check_params(w, PLANAR_WORLD_NAMES, self.kind))
+        free = PLANAR_TARGET_NAMES if self.free is None else self.free
+        object.__setattr__(self, "free", check_free(free, self.param_names, self.kind))
 
     @property
     def reading_names(self) -> tuple[str, ...]:
@@ -91,7 +88,7 @@ class PlanarToolSensor(Sensor):
         return self.free
 
     def with_params(self, params: np.ndarray) -> "PlanarToolSensor":
-        p = np.asarray(params, dtype=float).reshape(5)
+        p = check_params(params, self.param_names, self.kind)
         return replace(self, target=p[:2], world=p[2:])
 
     def with_deltas(self, deltas: dict[str, float]) -> "PlanarToolSensor":

@@ -20,14 +20,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from pkmcal.conventions import euler_rate_matrix, euler_to_matrix
+from pkmcal.conventions import euler_pose_jacobian, euler_rate_matrix, euler_to_matrix
 from pkmcal.sensors.base import Sensor
 from pkmcal.sensors.full_pose import (
     WORLD_PARAM_NAMES,
     as_poses,
     check_free,
     check_params,
-    euler_pose_jacobian,
     skew,
 )
 
