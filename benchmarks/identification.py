@@ -29,40 +29,46 @@ Workloads (all on ``stewart-prototype``, data from
 
   which is 1 for an unbiased estimator attaining the bound and trace(C⁻¹ C_est)/p < 1 otherwise.
 
-Timings: after a warm-up call of each fit (numba compile / cache load excluded), rounds
-that alternate the analytic and the finite-difference fit (so both see the same machine
-load); the best of ``--repeats`` analytic and of ``max(3, repeats // 4)`` (IK) or 3 (FK)
-finite-difference calls, as CPU time of this process (``*_ms``, the headline; robust when
-other jobs share the machine) and as wall-clock time (``*_wall_ms``); numba set to one
-thread (15–100 poses are far too few for threads to pay), BLAS limited to one thread inside
-the engine. The machine (CPU, cores, versions, load average before and after) is recorded.
+Problems: each fit is timed on ``--problems`` instances (IK: seeds seed … seed+P−1, each
+its own random real machine and 15 corners; FK: P draws of 100 poses). How many
+iterations the finite-difference fit needs changes from instance to instance (its Jacobian
+is accurate to ~1e-8 relative, and the weak directions, σ ratio ~1e-4, amplify that), so
+one instance gives a speed-up that depends on luck; the headline figures are medians over
+the instances, and every instance's figures are in ``*_problems``.
+
+Timings per instance: after a warm-up call of each fit (numba compile / cache load
+excluded), rounds that alternate the analytic and the finite-difference fit (so both see
+the same machine load); the best of ``--repeats`` analytic and of ``max(3, repeats // 4)``
+(IK) or 3 (FK) finite-difference calls, as CPU time of this process (``*_ms``, the
+headline; robust when other jobs share the machine) and as wall-clock time
+(``*_wall_ms``); numba set to one thread (15–100 poses are far too few for threads to pay),
+BLAS limited to one thread inside the engine. The machine (CPU, cores, versions, load
+average before and after) is recorded.
 
 The two versions of each fit differ only in the Jacobian: the same residual function
-(same whitening, same warm-started pose solves), the same Levenberg–Marquardt (MINPACK
-``lmder``: ``ftol = xtol = gtol = 1e-12``, ``factor = 100``, Jacobian column scaling, cap
-100·n evaluations), the same start (the nominal machine). The analytic fit calls ``lmder``
-through ``scipy.optimize.leastsq``; the finite-difference fit through
-``scipy.optimize.least_squares(jac="2-point", method="lm")``: scipy's forward differences
-(2-point), step h_i = √ε·max(1, |θ_i|), one residual evaluation per free parameter and
-Jacobian, fed to the same ``lmder`` (that wrapper added 0.55 ms to the analytic paper-1 fit,
-best of 30, 2026-11-22, and evaluates one more Jacobian at the solution: one of the ~7 (IK)
-or ~17 (FK) finite-difference Jacobians of these fits, measured as residual evaluations per
-free parameter with seed 0 on 2026-11-22).
+(same whitening, same warm-started pose solves, FK polished to rounding), the same
+Levenberg–Marquardt (MINPACK ``lmder``: the engine's tolerances, ``factor = 100``, Jacobian
+column scaling, cap 100·n evaluations), the same start (the nominal machine). The analytic
+fit calls ``lmder`` through ``scipy.optimize.leastsq``; the finite-difference fit through
+``scipy.optimize.least_squares(jac="2-point", method="lm")``: scipy's forward differences,
+step h_i = √ε·max(1, |θ_i|), one residual evaluation per free parameter and Jacobian, fed
+to the same ``lmder``.
 
-Reported beside the times, so that a speed-up splits into cost per Jacobian and number of
-iterations: ``nfev`` (residual evaluations by the solver) and ``njev`` (Jacobian
-evaluations); ``*_evaluations``, the calls of the method's ``evaluate``, residual-only and
-with Jacobian (the finite-difference columns and the engine's start and end evaluations
-included, some served from the pose cache); the final cost of both fits. The
-finite-difference Jacobian is only accurate to ~1e-8 relative, so near the 1e-12
-tolerances the finite-difference fit takes more iterations, and may stop at ``xtol`` at a
-slightly higher cost. ``*_solve_ms`` is the CPU time inside the solver call of the fastest
-run (residuals, Jacobians, MINPACK); the rest of ``*_ms`` is the same for both Jacobians:
-the start evaluation with the noise covariance, the identifiability SVD, the end
-evaluation and the covariance of the estimate.
+Where the time goes (:func:`anatomy`, per instance, medians reported): ``*_solve_ms`` the
+CPU time inside the solver call (residuals, Jacobians, MINPACK); ``*_solver_only_ms``
+MINPACK's own share, measured by replaying the recorded residuals and Jacobians through
+the same call; ``*_jacobian_us`` one analytic Jacobian against ``*_fd_jacobian_us`` = n
+residual evaluations, the forward-difference Jacobian, whose ratio
+``*_jacobian_speedup`` is the speed-up per Jacobian independent of iteration counts. The
+rest of ``*_ms`` is the same for both Jacobians: the start evaluation with the noise
+covariance, the identifiability check, the end evaluation and the covariance of the
+estimate. The fit speed-up is bounded by (time of the finite-difference fit) / (that fixed
+part + MINPACK's share), whatever the Jacobian costs. ``nfev``/``njev`` and
+``*evaluations`` (calls of the method's ``evaluate``, residual-only and with Jacobian)
+split the speed-up into cost per Jacobian and number of iterations.
 The last line of output is one JSON object.
 
-Usage: ``python benchmarks/identification.py [--repeats 20] [--trials 200] [--seed 0]``
+Usage: ``python benchmarks/identification.py [--repeats 20] [--trials 200] [--seed 0] [--problems 5]``
 """
 
 from __future__ import annotations
@@ -161,6 +167,92 @@ def counted(fn):
     return result, counts
 
 
+class _Proxy:
+    """Stands in for the engine's objective inside ``_least_squares``: either records what
+    the real one returns, or replays those records (so the solver retraces the same path
+    at the cost of a list lookup per call)."""
+
+    def __init__(self, obj=None, record=None):
+        self.obj, self.f, self.J = obj, [], []
+        if record is not None:
+            self.f, self.J = iter(record.f), iter(record.J)
+
+    def fun(self, x):
+        if self.obj is None:
+            return next(self.f)
+        r = self.obj.fun(x)
+        self.f.append(r.copy())
+        return r
+
+    def jac(self, x):
+        if self.obj is None:
+            return next(self.J)
+        J = self.obj.jac(x)
+        self.J.append(J.copy())
+        return J
+
+
+def anatomy(fit, repeats: int) -> dict:
+    """Where an analytic fit's time goes: one ``fit()`` is recorded; then, best of
+    ``repeats`` CPU times,
+
+    * ``solver_only_ms``: MINPACK (and scipy's wrapper) replaying the recorded residuals and
+      Jacobians, i.e. the solver's own linear algebra, which no Jacobian can remove;
+    * ``residual_us`` / ``jacobian_us``: one residual evaluation at a new point, and one
+      analytic Jacobian after it (as the solver asks: residual first, then Jacobian at the
+      same point), on the fit's objective;
+    * ``fd_jacobian_us`` = n_free · ``residual_us``: the forward-difference Jacobian's cost
+      (one residual per free parameter), and ``jacobian_speedup`` its ratio to
+      ``jacobian_us``: the speed-up per Jacobian, independent of iteration counts.
+    """
+    from pkmcal.identification import engine
+
+    orig = engine._least_squares
+    seen = {}
+
+    def recording(obj, x0, **kw):
+        proxy = _Proxy(obj)
+        sol = orig(proxy, x0, **kw)
+        seen.update(obj=obj, x0=x0.copy(), kw=kw, record=proxy, x=sol.x.copy())
+        return sol
+
+    engine._least_squares = recording
+    try:
+        fit()
+    finally:
+        engine._least_squares = orig
+    obj, x0, kw, rec = seen["obj"], seen["x0"], seen["kw"], seen["record"]
+
+    def best_cpu_us(fn, n):
+        fn()
+        best = np.inf
+        for _ in range(n):
+            c0 = time.process_time()
+            fn()
+            best = min(best, time.process_time() - c0)
+        return best * 1e6
+
+    solver_only = best_cpu_us(lambda: orig(_Proxy(record=rec), x0, **kw), repeats) / 1e3
+    # two points that alternate, so that every call misses the objective's pose cache
+    xa, xb = seen["x"], seen["x"] + 1e-6 * np.maximum(1.0, np.abs(seen["x"]))
+    flip = itertools.cycle((xa, xb))
+    n_calls = 20
+    t_res = best_cpu_us(lambda: [obj.fun(next(flip)) for _ in range(n_calls)], repeats) / n_calls
+
+    def res_and_jac():
+        for _ in range(n_calls):
+            x = next(flip)
+            obj.fun(x)
+            obj.jac(x)
+
+    t_jac = best_cpu_us(res_and_jac, repeats) / n_calls - t_res
+    n_free = x0.size
+    return {"solver_only_ms": round(solver_only, 3), "residual_us": round(t_res, 2),
+            "jacobian_us": round(t_jac, 2), "fd_jacobian_us": round(n_free * t_res, 2),
+            "jacobian_speedup": round(n_free * t_res / t_jac, 2),
+            "solver_residuals": len(rec.f), "solver_jacobians": len(rec.J)}
+
+
 def boundary_corners(machine):
     """Paper 1 §IV: the 64 corners of a ±box around home (those the nominal machine reaches)."""
     half = np.array([15.0, 15.0, 8.0, *np.deg2rad([6.0, 6.0, 6.0])])
@@ -176,10 +268,7 @@ def paper1_problem(seed: int, n_poses: int = 15):
     real = perturb_machine(nominal, 5.0, rng, name="paper1-real")
     corners = boundary_corners(nominal)
     probe = simulate_campaign(nominal, real, setup, corners, rng, ignore_limits=("leg_collision",))
-    cmd = corners[rng.choice(probe.kept, size=n_poses, replace=False)]
-    sim = simulate_campaign(nominal, real, setup, cmd, rng, ignore_limits=("leg_collision",))
-    assert len(sim.kept) == n_poses
-    return nominal, real, setup, sim
+    return nominal, real, setup, probe.subset(np.sort(rng.choice(len(probe.kept), size=n_poses, replace=False)))
 
 
 def main() -> None:
@@ -187,6 +276,8 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=20)
     ap.add_argument("--trials", type=int, default=200)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--problems", type=int, default=5,
+                    help="problem instances per fit (real machines / pose draws); times are medians over them")
     args = ap.parse_args()
     numba.set_num_threads(1)
 
@@ -199,50 +290,69 @@ def main() -> None:
     }
     print("machine:", ", ".join(f"{k}={v}" for k, v in machine_info.items()))
 
-    # -- IK-residual, 42 parameters, 15 poses -------------------------------------------
-    nominal, real, setup, sim = paper1_problem(args.seed)
-    q, y = sim.actuator_readings, sim.sensor_readings
+    # -- the two fits, each on --problems instances ---------------------------------------
+    def compare(label, problems, fit, repeats_fast, repeats_slow):
+        """Per problem: counts, best times of the analytic and finite-difference fits (in
+        alternating rounds) and the analytic fit's anatomy; then medians over problems."""
+        rows = []
+        for k, prob in enumerate(problems):
+            (r_a, n_a), (r_fd, n_fd) = counted(lambda: fit(prob, "analytic")), counted(lambda: fit(prob, "2-point"))
+            t_a, t_fd = best_ms_pair(lambda: fit(prob, "analytic"), lambda: fit(prob, "2-point"),
+                                     repeats_fast, repeats_slow)
+            parts = anatomy(lambda: fit(prob, "analytic"), repeats_fast)
+            row = {"ms": t_a["cpu"], "fd_ms": t_fd["cpu"], "wall_ms": t_a["wall"], "fd_wall_ms": t_fd["wall"],
+                   "solve_ms": t_a["solve"], "fd_solve_ms": t_fd["solve"], "speedup": t_fd["cpu"] / t_a["cpu"],
+                   "nfev": r_a.nfev, "njev": r_a.njev, "fd_nfev": r_fd.nfev, "evaluations": n_a,
+                   "fd_evaluations": n_fd, "cost": r_a.cost, "fd_cost": r_fd.cost, "free": len(r_a.free),
+                   "max_estimate_difference_mm": float(np.max(np.abs(r_a.estimate - r_fd.estimate))), **parts}
+            rows.append(row)
+            print(f"{label} problem {k}: analytic {row['ms']:.2f} ms CPU (nfev {r_a.nfev}, njev {r_a.njev}; "
+                  f"solver {row['solve_ms']:.2f} ms of which MINPACK alone {parts['solver_only_ms']:.2f} ms; "
+                  f"residual {parts['residual_us']:.1f} us, Jacobian {parts['jacobian_us']:.1f} us), "
+                  f"finite differences {row['fd_ms']:.2f} ms CPU (nfev {r_fd.nfev}, {n_fd['residual']} residual "
+                  f"evaluations; {parts['fd_jacobian_us']:.0f} us per Jacobian = {parts['jacobian_speedup']:.1f}x the "
+                  f"analytic one), speed-up {row['speedup']:.1f}x, cost {r_a.cost:.10g} vs {r_fd.cost:.10g}, "
+                  f"max |estimate difference| {row['max_estimate_difference_mm']:.2e} mm", flush=True)
+        med = {key: float(np.median([r[key] for r in rows]))
+               for key in ("ms", "fd_ms", "wall_ms", "fd_wall_ms", "solve_ms", "fd_solve_ms", "speedup",
+                           "solver_only_ms", "residual_us", "jacobian_us", "fd_jacobian_us", "jacobian_speedup")}
+        print(f"{label}: median over {len(rows)} problems: analytic {med['ms']:.2f} ms, finite differences "
+              f"{med['fd_ms']:.2f} ms, speed-up {med['speedup']:.1f}x (range "
+              f"{min(r['speedup'] for r in rows):.1f}-{max(r['speedup'] for r in rows):.1f}x); per Jacobian "
+              f"{med['jacobian_speedup']:.1f}x", flush=True)
+        return med, rows
 
-    def ik(jac):
-        return identify(nominal, setup, q=q, y=y, method="ik-residual", jac=jac)
+    ik_problems = [paper1_problem(args.seed + k) for k in range(args.problems)]
 
-    (r_ik, n_ik), (r_ik_fd, n_ik_fd) = counted(lambda: ik("analytic")), counted(lambda: ik("2-point"))
-    t_ik, t_ik_fd = best_ms_pair(lambda: ik("analytic"), lambda: ik("2-point"), args.repeats, max(3, args.repeats // 4))
-    ik_wall, ik_ms, ik_fd_wall, ik_fd_ms = t_ik["wall"], t_ik["cpu"], t_ik_fd["wall"], t_ik_fd["cpu"]
-    print(f"ik-residual (42 params, 15 poses): analytic {ik_ms:.2f} ms CPU / {ik_wall:.2f} ms wall "
-          f"(nfev {r_ik.nfev}, njev {r_ik.njev}), finite differences {ik_fd_ms:.2f} ms CPU / {ik_fd_wall:.2f} ms "
-          f"wall (nfev {r_ik_fd.nfev}, {n_ik_fd['residual']} residual evaluations with the 2-point columns), "
-          f"speed-up {ik_fd_ms / ik_ms:.1f}x (solver alone {t_ik['solve']:.2f} vs {t_ik_fd['solve']:.2f} ms, "
-          f"{t_ik_fd['solve'] / t_ik['solve']:.1f}x), "
-          f"max |estimate difference| {np.max(np.abs(r_ik.estimate - r_ik_fd.estimate)):.2e} mm, "
-          f"mean |parameter error| before {np.mean(np.abs(nominal.params - real.params)):.3f} mm, "
-          f"after {np.mean(np.abs(r_ik.estimate[:42] - real.params)):.4f} mm")
+    def ik(prob, jac):
+        nominal, _, setup, sim = prob
+        return identify(nominal, setup, q=sim.actuator_readings, y=sim.sensor_readings, method="ik-residual", jac=jac)
 
-    # -- FK-residual, indicators, 100 poses ---------------------------------------------
+    ik_med, ik_rows = compare("ik-residual (42 params, 15 poses)", ik_problems, ik, args.repeats,
+                              max(3, args.repeats // 4))
+    nominal, real, setup, sim = ik_problems[0]
+
     nom2 = builtin_machine("stewart-prototype")
     real2 = builtin_machine("stewart-prototype-real")
     setup2 = builtin_setup("indicators-prototype")
-    rng = np.random.default_rng(args.seed + 1)
-    half = np.array([20.0, 20.0, 10.0, *np.deg2rad([8.0, 8.0, 8.0])])
-    cmd = nom2.home_pose + rng.uniform(-1.0, 1.0, (130, 6)) * half
-    sim2 = simulate_campaign(nom2, real2, setup2, cmd, rng, ignore_limits=("leg_collision",))
-    keep = sim2.kept[:100]
-    idx = np.searchsorted(sim2.kept, keep)
-    q2, y2, c2 = sim2.actuator_readings[idx], sim2.sensor_readings[idx], sim2.commanded[keep]
 
-    def fk(jac):
+    def fk_problem(seed):
+        """100 random poses (of 130 drawn, those the real machine reaches) within ±20 mm,
+        ±10 mm in z, ±8°."""
+        rng = np.random.default_rng(seed)
+        half = np.array([20.0, 20.0, 10.0, *np.deg2rad([8.0, 8.0, 8.0])])
+        cmd = nom2.home_pose + rng.uniform(-1.0, 1.0, (130, 6)) * half
+        sim2 = simulate_campaign(nom2, real2, setup2, cmd, rng, ignore_limits=("leg_collision",))
+        keep = sim2.kept[:100]
+        idx = np.searchsorted(sim2.kept, keep)
+        return sim2.actuator_readings[idx], sim2.sensor_readings[idx], sim2.commanded[keep]
+
+    def fk(prob, jac):
+        q2, y2, c2 = prob
         return identify(nom2, setup2, q=q2, y=y2, commanded=c2, method="fk-residual", jac=jac)
 
-    (r_fk, n_fk), (r_fk_fd, n_fk_fd) = counted(lambda: fk("analytic")), counted(lambda: fk("2-point"))
-    t_fk, t_fk_fd = best_ms_pair(lambda: fk("analytic"), lambda: fk("2-point"), max(3, args.repeats // 2), 3)
-    fk_wall, fk_ms, fk_fd_wall, fk_fd_ms = t_fk["wall"], t_fk["cpu"], t_fk_fd["wall"], t_fk_fd["cpu"]
-    print(f"fk-residual (indicators, {len(q2)} poses, {len(r_fk.free)} free, gauge {', '.join(r_fk.gauge)}): "
-          f"analytic {fk_ms:.2f} ms CPU / {fk_wall:.2f} ms wall (nfev {r_fk.nfev}, njev {r_fk.njev}), "
-          f"finite differences {fk_fd_ms:.2f} ms CPU / {fk_fd_wall:.2f} ms wall "
-          f"(nfev {r_fk_fd.nfev}, {n_fk_fd['residual']} residual evaluations with the 2-point columns), "
-          f"speed-up {fk_fd_ms / fk_ms:.1f}x (solver alone {t_fk['solve']:.2f} vs {t_fk_fd['solve']:.2f} ms, "
-          f"{t_fk_fd['solve'] / t_fk['solve']:.1f}x), max |estimate difference| "
-          f"{np.max(np.abs(r_fk.estimate - r_fk_fd.estimate)):.2e} mm")
+    fk_problems = [fk_problem(args.seed + 1000 + k) for k in range(args.problems)]
+    fk_med, fk_rows = compare("fk-residual (indicators, 100 poses)", fk_problems, fk, max(3, args.repeats // 2), 3)
 
     # -- efficiency, paper 1 set-up -------------------------------------------------------
     truth = real.params
@@ -268,39 +378,35 @@ def main() -> None:
           f"unweighted rms {actual[False]:.5f} mm (rms efficiency {eff_rms[False]:.3f}, whitened {eff[False]:.3f})")
 
     out = {
-        "ik_residual_ms": round(ik_ms, 3),
-        "ik_residual_fd_ms": round(ik_fd_ms, 3),
-        "ik_residual_speedup": round(ik_fd_ms / ik_ms, 2),
-        "fk_residual_ms": round(fk_ms, 3),
-        "fk_residual_fd_ms": round(fk_fd_ms, 3),
-        "fk_residual_speedup": round(fk_fd_ms / fk_ms, 2),
-        "fk_residual_poses": int(len(q2)),
-        "ik_residual_wall_ms": round(ik_wall, 3),
-        "ik_residual_fd_wall_ms": round(ik_fd_wall, 3),
-        "fk_residual_wall_ms": round(fk_wall, 3),
-        "fk_residual_fd_wall_ms": round(fk_fd_wall, 3),
+        "ik_residual_ms": round(ik_med["ms"], 3),
+        "ik_residual_fd_ms": round(ik_med["fd_ms"], 3),
+        "ik_residual_speedup": round(ik_med["speedup"], 2),
+        "fk_residual_ms": round(fk_med["ms"], 3),
+        "fk_residual_fd_ms": round(fk_med["fd_ms"], 3),
+        "fk_residual_speedup": round(fk_med["speedup"], 2),
+        "fk_residual_poses": 100,
+        "problems": args.problems,
+        "statistic": "median over problems of the best CPU time over repeats",
+        "ik_residual_wall_ms": round(ik_med["wall_ms"], 3),
+        "ik_residual_fd_wall_ms": round(ik_med["fd_wall_ms"], 3),
+        "fk_residual_wall_ms": round(fk_med["wall_ms"], 3),
+        "fk_residual_fd_wall_ms": round(fk_med["fd_wall_ms"], 3),
         "fd_jacobian": "scipy least_squares jac='2-point' (forward differences, step sqrt(eps)*max(1,|theta|))",
-        "solver": "MINPACK lmder (Levenberg-Marquardt), ftol=xtol=gtol=1e-12, same start for both Jacobians",
-        "ik_residual_solve_ms": round(t_ik["solve"], 3),
-        "ik_residual_fd_solve_ms": round(t_ik_fd["solve"], 3),
-        "fk_residual_solve_ms": round(t_fk["solve"], 3),
-        "fk_residual_fd_solve_ms": round(t_fk_fd["solve"], 3),
-        "ik_residual_cost": r_ik.cost,
-        "ik_residual_fd_cost": r_ik_fd.cost,
-        "fk_residual_cost": r_fk.cost,
-        "fk_residual_fd_cost": r_fk_fd.cost,
-        "ik_residual_nfev": r_ik.nfev,
-        "ik_residual_njev": r_ik.njev,
-        "ik_residual_evaluations": n_ik,
-        "ik_residual_fd_nfev": r_ik_fd.nfev,
-        "ik_residual_fd_evaluations": n_ik_fd,
-        "fk_residual_nfev": r_fk.nfev,
-        "fk_residual_njev": r_fk.njev,
-        "fk_residual_evaluations": n_fk,
-        "fk_residual_fd_nfev": r_fk_fd.nfev,
-        "fk_residual_fd_evaluations": n_fk_fd,
-        "ik_residual_max_estimate_difference_mm": float(np.max(np.abs(r_ik.estimate - r_ik_fd.estimate))),
-        "fk_residual_max_estimate_difference_mm": float(np.max(np.abs(r_fk.estimate - r_fk_fd.estimate))),
+        "solver": "MINPACK lmder (Levenberg-Marquardt), ftol=xtol=gtol=engine default, same start for both Jacobians",
+        "ik_residual_solve_ms": round(ik_med["solve_ms"], 3),
+        "ik_residual_fd_solve_ms": round(ik_med["fd_solve_ms"], 3),
+        "fk_residual_solve_ms": round(fk_med["solve_ms"], 3),
+        "fk_residual_fd_solve_ms": round(fk_med["fd_solve_ms"], 3),
+        "ik_residual_solver_only_ms": round(ik_med["solver_only_ms"], 3),
+        "fk_residual_solver_only_ms": round(fk_med["solver_only_ms"], 3),
+        "ik_residual_jacobian_us": round(ik_med["jacobian_us"], 2),
+        "ik_residual_fd_jacobian_us": round(ik_med["fd_jacobian_us"], 2),
+        "ik_residual_jacobian_speedup": round(ik_med["jacobian_speedup"], 2),
+        "fk_residual_jacobian_us": round(fk_med["jacobian_us"], 2),
+        "fk_residual_fd_jacobian_us": round(fk_med["fd_jacobian_us"], 2),
+        "fk_residual_jacobian_speedup": round(fk_med["jacobian_speedup"], 2),
+        "ik_residual_problems": ik_rows,
+        "fk_residual_problems": fk_rows,
         "efficiency_weighted": round(eff[True], 4),
         "efficiency_unweighted": round(eff[False], 4),
         "efficiency_rms_weighted": round(eff_rms[True], 4),

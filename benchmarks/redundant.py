@@ -13,9 +13,13 @@ For each machine (``planar-2dof-3act``, ``planar-3dof-4act``):
    offsets, 0.1 mm for the tool point; stiffness of each actuator ×U(0.5, 2)), each with
    fresh poses and noise.
 
-Methods: ``projection`` (re-linearised, weighted), ``projection-single`` (the paper's one
+Methods (:data:`pkmcal.identification.projection.METHODS`, each a configuration of the
+engine's ``identify(method="projection")``, see :func:`~pkmcal.identification.projection.fit_redundant`):
+``projection`` (re-linearised, weighted), ``projection-single`` (the paper's one
 linearisation, weighted), ``projection-unweighted`` (re-linearised, rows in raw mm and rad),
-baselines ``ignore-redundancy`` and ``actuator-subset`` (first n actuators).
+baselines ``ignore-redundancy`` and ``actuator-subset`` (first n actuators). "rank r/n":
+rank of the requested free set / its size (the engine fixes the rest as the gauge); ± 1σ:
+the engine's reported standard deviation.
 Improvement = 100·(1 − mean held-out error after / before). Last line: one JSON object.
 
 Run: ``python benchmarks/redundant.py [--machines 100] [--seed 0]``
@@ -29,8 +33,10 @@ import time
 
 import numpy as np
 
-from pkmcal.identification.projection import calibration_experiment
-from pkmcal.reproduce.paper3 import CASES, LOAD_N, METHODS, N_CALIB, TRACKER_STD, case_models, table_experiment
+from pkmcal.identification.identifiability import identifiability
+from pkmcal.identification.projection import METHODS, calibration_experiment
+from pkmcal.reproduce.paper3 import CASES, LOAD_N, N_CALIB, TRACKER_STD, case_models, real_setup, table_experiment
+from pkmcal.sensors.base import MeasurementSetup
 
 
 def _is_angle(name, mech):
@@ -46,8 +52,8 @@ def _summ(res):
     row = {"before_mean_mm": float(res.before.mean()), "max_before_mm": float(res.before.max())}
     for m in res.after:
         row[m] = {"improvement_pct": res.improvement_pct(m), "mean_after_mm": float(res.after[m].mean()),
-                  "max_after_mm": float(res.after[m].max()), "rank": res.fits[m].report.rank,
-                  "n_free": len(res.fits[m].free)}
+                  "max_after_mm": float(res.after[m].max()), "rank": res.fits[m].identifiability.rank,
+                  "n_free": res.fits[m].identifiability.n_params}
     return row
 
 
@@ -70,7 +76,7 @@ def run(case, n_machines, seed):
         K = setup["stiffness"] * rng.uniform(0.5, 2.0, size=nominal.n_actuators)
         calib = nominal.sample_poses(N_CALIB, rng)
         check = nominal.sample_poses(setup["n_check"], rng)
-        res = calibration_experiment(nominal, sensor, real, real_sensor, calib, check, K, np.array(LOAD_N), noise, rng,
+        res = calibration_experiment(nominal, sensor, real, real_setup(real_sensor, noise, K), calib, check, rng,
                                      free=free, methods=METHODS)
         rows.append(_summ(res))
     dt = time.perf_counter() - t0
@@ -90,7 +96,7 @@ def run(case, n_machines, seed):
                               setup["free"], setup["gauge"])
     fit = repro.fits["projection"]
     ident = []
-    for name_, d, sd in zip(fit.free, fit.delta, fit.std):
+    for name_, d, sd in zip(fit.free, fit.x - fit.initial[fit.free_index], fit.std):
         ang = _is_angle(name_, nominal)
         f = np.rad2deg if ang else float
         ident.append((name_, float(f(setup["table"].get(name_, setup["table_tool"].get(name_, 0.0)))),
@@ -104,8 +110,7 @@ def _gauge_equivalent(nominal, sensor, poses, noise, deltas, free, gauge):
     names = tuple(free) + tuple(gauge)
     d = np.array([deltas.get(n, 0.0) for n in names])
     if gauge:
-        from pkmcal.identification.projection import projection_identifiability
-        rep = projection_identifiability(nominal, sensor, poses, noise, names)
+        rep = identifiability(nominal, MeasurementSetup(sensor, noise), poses, method="projection", free=list(names))
         N = np.array([[v.get(n, 0.0) for n in names] for v in rep.null_space]).T     # (P, d)
         gi = [names.index(g) for g in gauge]
         d = d - N @ np.linalg.solve(N[gi], d[gi])

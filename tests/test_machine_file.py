@@ -220,6 +220,30 @@ def test_round_trip_through_files(tmp_path):
     assert back.metadata == m.metadata
 
 
+@settings(max_examples=150, deadline=None)
+@given(k=st.integers(1, 8), seed=st.integers(0, 2**32 - 1), log_scale=st.floats(-8, 4))
+def test_written_std_and_correlation_agree_with_the_covariance(k, seed, log_scale):
+    """The file's σ and ρ, against the written Σ computed independently: σ_i = √Σ_ii,
+    ρ_ij = Σ_ij / √(Σ_ii Σ_jj) to 1e-12, exactly symmetric, ones on the diagonal."""
+    rng = np.random.default_rng(seed)
+    idx = rng.choice(42, size=k, replace=False)
+    a = rng.normal(size=(k, k)) * 10.0 ** (log_scale + rng.uniform(-2, 2, (k, 1)))
+    cov = np.zeros((42, 42))
+    cov[np.ix_(idx, idx)] = a @ a.T
+    cov = (cov + cov.T) / 2
+    data = yaml.safe_load(machine_to_text(replace(stewart_prototype(), covariance=cov)))["uncertainty"]
+    names = data["parameters"]
+    assert sorted(names, key=HEXAPOD_PARAM_NAMES.index) == names == [HEXAPOD_PARAM_NAMES[i] for i in sorted(idx)]
+    sub = np.array(data["covariance"], dtype=float)
+    np.testing.assert_array_equal(sub, cov[np.ix_(sorted(idx), sorted(idx))])
+    np.testing.assert_allclose([data["std"][n] for n in names], np.sqrt(np.diag(sub)), rtol=1e-15, atol=0)
+    corr = np.array(data["correlation"], dtype=float)
+    expect = sub / np.sqrt(np.outer(np.diag(sub), np.diag(sub)))
+    np.testing.assert_allclose(corr, expect, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(corr, corr.T)
+    assert np.all(np.diag(corr) == 1.0)
+
+
 # -- errors ----------------------------------------------------------------------------------
 
 def test_five_legs():

@@ -1,36 +1,42 @@
-"""Projection identification (paper 3 eq. 4–10): exact recovery from noise-free data,
-named unidentifiable combinations, the projector's rank, independence from K and the
-load, the encoder sign convention, and the baselines."""
+"""Paper 3 through the one engine (:mod:`pkmcal.identification.projection`): exact recovery
+from noise-free data, agreement with an independent joint (poses + parameters) fit, the
+reported standard deviations against a Monte Carlo, named unidentifiable combinations,
+the projector's rank, independence from K and the load, the encoder sign convention, the
+single linearisation, and the baselines (worse than the projection)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.optimize import least_squares
 
 from pkmcal.errors import PkmcalError
+from pkmcal.identification.identifiability import identifiability
 from pkmcal.identification.projection import (
     ActuatorSubset,
     calibration_experiment,
-    identify_actuator_subset,
-    identify_ignoring_redundancy,
-    identify_redundant,
-    projection_identifiability,
-    simulate_measurements,
+    fit_redundant,
+    single_linearisation,
 )
+from pkmcal.identification.redundant_campaign import simulate_redundant_campaign
 from pkmcal.identification.residuals import Model
 from pkmcal.mechanisms import planar as PL
-from pkmcal.sensors.base import NoiseModel
+from pkmcal.mechanisms.statics import StaticsModel
+from pkmcal.sensors.base import MeasurementSetup, NoiseModel
 from pkmcal.sensors.planar_tool import PlanarToolSensor
 
 NOISE_FREE = {2: NoiseModel(np.zeros(2), np.zeros(3)), 3: NoiseModel(np.zeros(2), np.zeros(4))}
+TOOL = ("target.x", "target.y")
 
 
 def _case(n_dof):
+    """(machine, its tracker, K, F, weights, joints held at zero in random machines)."""
+    s = PlanarToolSensor(n_pose=n_dof)
     if n_dof == 2:
         m = PL.planar_2dof_3act()
-        return m, 5e7, np.array([0.0, -30.0]), NoiseModel(np.full(2, 0.01), np.full(3, 1e-5)), ("B1.x", "B1.y", "B2.y", "D1", "D3")
+        return m, s, 5e7, np.array([0.0, -30.0]), NoiseModel(np.full(2, 0.01), np.full(3, 1e-5)), ("B1.x", "B1.y", "B2.y", "D1", "D3")
     m = PL.planar_3dof_4act()
-    return m, 2e4, np.array([0.0, -30.0]), NoiseModel(np.full(2, 0.01), np.full(4, 1e-3)), ()
+    return m, s, 2e4, np.array([0.0, -30.0]), NoiseModel(np.full(2, 0.01), np.full(4, 1e-3)), ()
 
 
 def _truth(m, fixed, seed, size=0.2):
@@ -44,63 +50,134 @@ def _truth(m, fixed, seed, size=0.2):
     return m.with_deltas(d)
 
 
-def _free(m, fixed, sensor_free=("target.x", "target.y")):
+def _free(m, fixed, sensor_free=TOOL):
     return tuple(n for n in m.param_names if n not in fixed) + tuple(sensor_free)
+
+
+def _measure(m, real, real_sensor, x, K, F, noise, seed=0):
+    """The one redundant simulation: the real machine at equilibrium, noisy readings."""
+    setup = MeasurementSetup(real_sensor, noise, StaticsModel(K, F))
+    sim = simulate_redundant_campaign(m, real, setup, x, np.random.default_rng(seed), ignore_limits=("workspace",))
+    assert len(sim.kept) == len(x)
+    return sim
 
 
 @pytest.mark.parametrize("n_dof", [2, 3])
 def test_noise_free_data_recover_the_parameters_exactly(n_dof):
-    m, K, F, noise, fixed = _case(n_dof)
-    s = PlanarToolSensor(n_pose=n_dof)
+    m, s, K, F, noise, fixed = _case(n_dof)
     real = _truth(m, fixed, seed=1)
     rs = s.with_deltas({"target.x": 0.07, "target.y": -0.10})
     x = m.sample_poses(30, np.random.default_rng(2))
-    _, q, y, eq = simulate_measurements(real, rs, m, x, K, F, NOISE_FREE[n_dof], np.random.default_rng(0))
-    assert np.abs(eq.following_error).max() > 0          # the redundancy is at work
-    fit = identify_redundant(m, s, x, q, y, noise, _free(m, fixed))
-    assert fit.report.identifiable
-    assert fit.rows_per_pose == 2 + m.n_actuators - m.n_dof
+    sim = _measure(m, real, rs, x, K, F, NOISE_FREE[n_dof])
+    assert np.abs(sim.actuator_true - m.ik(x)).max() > 1e-4          # the redundancy is at work
+    fit = fit_redundant("projection", m, MeasurementSetup(s, noise), sim.measurements, _free(m, fixed))
+    assert fit.success and fit.identifiability.identifiable and fit.gauge == ()
+    assert fit.residuals.shape == (30, 2 + m.n_actuators - m.n_dof)
     np.testing.assert_allclose(fit.mechanism.params, real.params, atol=1e-8)
     np.testing.assert_allclose(fit.sensor.params, rs.params, atol=1e-8)
     # the paper's single linearisation is close but not exact (second-order error)
-    one = identify_redundant(m, s, x, q, y, noise, _free(m, fixed), linearisation="single")
+    one = fit_redundant("projection-single", m, MeasurementSetup(s, noise), sim.measurements, _free(m, fixed))
     err1 = np.abs(one.mechanism.params - real.params).max()
     assert 1e-8 < err1 < 0.2 * np.abs(real.params - m.params).max()
 
 
 @pytest.mark.parametrize("n_dof", [2, 3])
 def test_stiffness_and_load_do_not_enter_the_identification(n_dof):
-    m, K, F, noise, fixed = _case(n_dof)
-    s = PlanarToolSensor(n_pose=n_dof)
+    m, s, K, F, noise, fixed = _case(n_dof)
     real = _truth(m, fixed, seed=3)
     x = m.sample_poses(25, np.random.default_rng(4))
-    fits = []
     for k, f in ((K, F), (K * np.array([0.3, 3.0, 1.0, 2.0])[: m.n_actuators], 5 * F)):
-        _, q, y, _ = simulate_measurements(real, s, m, x, k, f, NOISE_FREE[n_dof], np.random.default_rng(0))
-        fits.append(identify_redundant(m, s, x, q, y, noise, _free(m, fixed)).mechanism.params)
-    np.testing.assert_allclose(fits[0], real.params, atol=1e-8)
-    np.testing.assert_allclose(fits[1], real.params, atol=1e-8)
+        sim = _measure(m, real, s, x, k, f, NOISE_FREE[n_dof])
+        fit = fit_redundant("projection", m, MeasurementSetup(s, noise), sim.measurements, _free(m, fixed))
+        np.testing.assert_allclose(fit.mechanism.params, real.params, atol=1e-8)
+
+
+@pytest.mark.parametrize("n_dof", [2, 3])
+def test_agrees_with_an_independent_joint_fit_of_poses_and_parameters(n_dof):
+    """Independent computation: scipy least_squares (finite differences) over the free
+    parameters AND every pose x_j of Σ_j ‖W [y_j − h(x_j); q_j − IK(x_j)]‖² — no projection.
+    At the joint minimum Qᵀe = 0, so ‖U⊥ᵀe‖ = ‖e‖: both fits have the same minimiser."""
+    m, s, K, F, noise, fixed = _case(n_dof)
+    real = _truth(m, fixed, seed=21)
+    x = m.sample_poses(12, np.random.default_rng(22))
+    sim = _measure(m, real, s, x, K, F, noise, seed=23)
+    free = _free(m, fixed)
+    fit = fit_redundant("projection", m, MeasurementSetup(s, noise), sim.measurements, free)
+
+    q, y = sim.actuator_readings, sim.sensor_readings
+    w = 1.0 / np.concatenate([noise.reading_std, noise.actuator_std])
+    model = Model(m, s, noise, q=q, y=y)
+    idx = [model.names.index(n) for n in free]
+    theta0 = model.theta0
+
+    def e(z):
+        th = theta0.copy()
+        th[idx] = z[: len(idx)]
+        mech, sens = model.split(th)
+        xs = z[len(idx):].reshape(x.shape)
+        return (np.concatenate([y - sens.predict(xs), q - mech.ik(xs)], axis=1) * w).ravel()
+
+    sol = least_squares(e, np.concatenate([theta0[idx], x.ravel()]), jac="3-point", x_scale="jac", ftol=1e-15,
+                        xtol=1e-15, gtol=1e-15)
+    # agreement far inside the statistical uncertainty (the weak 2-dof directions make the
+    # solvers' stopping points differ by ~1e-6 of a standard deviation)
+    assert np.all(np.abs(fit.x - sol.x[: len(idx)]) < 1e-4 * fit.std)
+    np.testing.assert_allclose(fit.poses, sol.x[len(idx):].reshape(x.shape), atol=1e-4 * fit.std.min())
+    assert fit.cost == pytest.approx(sol.cost, rel=1e-9)
+
+
+def test_reported_standard_deviations_match_a_monte_carlo():
+    """The engine's a-priori std of the weighted projection fit against the spread of 120
+    fits of noisy copies of one campaign (relative standard error of a sample std with 120
+    trials: 1/√240 = 6.5 %, so 25 % is a ~4σ band); the estimates are unbiased."""
+    m, s, K, F, noise, fixed = _case(3)
+    real = _truth(m, fixed, seed=51)
+    x = m.sample_poses(20, np.random.default_rng(52))
+    setup = MeasurementSetup(s, noise)
+    free = _free(m, fixed)
+    exact = _measure(m, real, s, x, K, F, NOISE_FREE[3])
+    reported = fit_redundant("projection", m, setup, exact.measurements, free).uncertainty.std_prior
+    est = []
+    for k in range(120):
+        sim = _measure(m, real, s, x, K, F, noise, seed=1000 + k)
+        est.append(fit_redundant("projection", m, setup, sim.measurements, free).x)
+    est = np.array(est)
+    truth = np.concatenate([real.params, s.params])[[Model(m, s, noise, exact.actuator_readings,
+                                                           exact.sensor_readings).names.index(n) for n in free]]
+    np.testing.assert_allclose(est.std(axis=0, ddof=1), reported, rtol=0.25)
+    assert np.all(np.abs(est.mean(axis=0) - truth) < 4 * reported / np.sqrt(len(est)))
 
 
 def test_encoder_offset_sign_is_the_same_in_simulation_identification_and_compensation():
-    m, K, F, noise, fixed = _case(2)
-    s = PlanarToolSensor(n_pose=2)
+    m, s, K, F, noise, fixed = _case(2)
     real = m.with_deltas({"dq1": np.deg2rad(0.05)})
     x = m.sample_poses(20, np.random.default_rng(5))
-    _, q, y, _ = simulate_measurements(real, s, m, x, K, None, NOISE_FREE[2], np.random.default_rng(0))
-    fit = identify_redundant(m, s, x, q, y, noise, ("dq1", "dq2", "dq3"))
+    sim = _measure(m, real, s, x, K, None, NOISE_FREE[2])
+    fit = fit_redundant("projection", m, MeasurementSetup(s, noise), sim.measurements, ("dq1", "dq2", "dq3"))
     assert fit.mechanism.p("dq1") == pytest.approx(np.deg2rad(0.05), abs=1e-12)
     # compensation through the fitted model removes the error entirely (no load)
-    res = calibration_experiment(m, s, real, s, x, m.sample_poses(5, np.random.default_rng(6)), K, None,
-                                 NOISE_FREE[2], np.random.default_rng(0), free=("dq1", "dq2", "dq3"),
-                                 methods=("projection",), weights=noise)
+    res = calibration_experiment(m, s, real, MeasurementSetup(s, NOISE_FREE[2], StaticsModel(K)), x,
+                                 m.sample_poses(5, np.random.default_rng(6)), np.random.default_rng(0),
+                                 free=("dq1", "dq2", "dq3"), methods=("projection",), weights=noise)
     assert res.before.max() > 0.05 and res.after["projection"].max() < 1e-9
+
+
+def test_before_includes_the_tool_point_error_in_closed_form():
+    """Real machine = nominal, no load, only the tool point off by d: the 2-dof plate does not
+    rotate, so every held-out 'before' error is exactly |d|; calibrating the tool point
+    removes it."""
+    m, s, K, _, noise, _ = _case(2)
+    rs = s.with_deltas({"target.x": 0.06, "target.y": -0.08})
+    res = calibration_experiment(m, s, m, MeasurementSetup(rs, NOISE_FREE[2], StaticsModel(K)),
+                                 m.sample_poses(10, np.random.default_rng(1)), m.sample_poses(6, np.random.default_rng(2)),
+                                 np.random.default_rng(0), free=TOOL, methods=("projection",), weights=noise)
+    np.testing.assert_allclose(res.before, 0.1, rtol=1e-9)
+    assert res.after["projection"].max() < 1e-9
 
 
 def test_projector_has_rank_m_plus_l_minus_n_and_annihilates_q():
     for n_dof in (2, 3):
-        m, _, _, noise, _ = _case(n_dof)
-        s = PlanarToolSensor(n_pose=n_dof)
+        m, s, _, _, noise, _ = _case(n_dof)
         x = m.sample_poses(10, np.random.default_rng(0))
         model = Model(m, s, noise, q=m.ik(x), y=s.predict(x), commanded=x)
         w = 1.0 / np.concatenate([model.sigma_y, model.sigma_q])
@@ -113,52 +190,59 @@ def test_projector_has_rank_m_plus_l_minus_n_and_annihilates_q():
         assert all(np.linalg.matrix_rank(Rj) == 2 + m.n_actuators - n_dof for Rj in R)
 
 
+def _projection_report(m, s, x, noise, free):
+    return identifiability(m, MeasurementSetup(s, noise), x, method="projection", free=list(free))
+
+
 def test_unidentifiable_combinations_are_named():
-    m, _, _, noise, _ = _case(2)
-    s = PlanarToolSensor(n_pose=2)
+    m, s, _, _, noise, _ = _case(2)
     x = m.sample_poses(30, np.random.default_rng(0))
     # the paper's Table 1 set: in our reconstruction D3 only moves the plate joint along
     # u3 = +y, exactly like B3.y in the opposite sense; a second combination involves D1
-    rep = projection_identifiability(m, s, x, noise, PL.P2_PAPER_FREE + ("target.x", "target.y"))
+    rep = _projection_report(m, s, x, noise, PL.P2_PAPER_FREE + TOOL)
     assert rep.rank == rep.n_params - 2
     dirs = [set(d) for d in rep.null_space]
     assert {"B3.y", "D3"} in dirs
     assert any({"D1", "D2", "B2.x", "target.x"} <= d for d in dirs)
     # 3-dof machine, tracker frame unknown: the three planar rigid motions are the gauge
-    m3, _, _, noise3, _ = _case(3)
-    s3 = PlanarToolSensor(n_pose=3)
+    m3, s3, _, _, noise3, _ = _case(3)
     x3 = m3.sample_poses(30, np.random.default_rng(0))
-    free = tuple(m3.param_names) + ("target.x", "target.y", "world.x", "world.y", "world.c")
-    rep = projection_identifiability(m3, s3, x3, noise3, free)
+    free = tuple(m3.param_names) + TOOL + ("world.x", "world.y", "world.c")
+    rep = _projection_report(m3, s3, x3, noise3, free)
     assert rep.rank == rep.n_params - 3
     assert any(set(d) == {"y1", "y2", "world.y"} for d in rep.null_space)
     assert any({"dq1", "dq2", "world.x"} <= set(d) for d in rep.null_space)
-    assert projection_identifiability(m3, s3, x3, noise3, tuple(n for n in free if n not in rep.fixed)).identifiable
+    assert _projection_report(m3, s3, x3, noise3, tuple(n for n in free if n not in rep.fixed)).identifiable
 
 
 def test_unknown_tracker_frame_is_identified_with_the_gauge_fixed():
-    m, K, F, noise, _ = _case(3)
+    m, s, K, F, noise, _ = _case(3)
     fixed = ("y1", "dq1", "dq3")
-    s = PlanarToolSensor(n_pose=3)
     real = _truth(m, fixed, seed=7)
     rs = s.with_deltas({"target.x": -0.11, "target.y": -0.06, "world.x": 12.0, "world.y": -5.0, "world.c": 0.02})
     x = m.sample_poses(30, np.random.default_rng(8))
-    _, q, y, _ = simulate_measurements(real, rs, m, x, K, F, NOISE_FREE[3], np.random.default_rng(0))
-    fit = identify_redundant(m, s, x, q, y, noise, _free(m, fixed, ("target.x", "target.y", "world.x", "world.y", "world.c")))
-    assert fit.report.identifiable
+    sim = _measure(m, real, rs, x, K, F, NOISE_FREE[3])
+    fit = fit_redundant("projection", m, MeasurementSetup(s, noise), sim.measurements,
+                        _free(m, fixed, TOOL + ("world.x", "world.y", "world.c")))
+    assert fit.identifiability.identifiable
     np.testing.assert_allclose(fit.mechanism.params, real.params, atol=1e-7)
     np.testing.assert_allclose(fit.sensor.params, rs.params, atol=1e-7)
+    # the engine's automatic gauge: with the whole frame free, three parameters are fixed
+    # at their start and the rest identified; the fit still reproduces the noise-free data
+    auto = fit_redundant("projection", m, MeasurementSetup(s, noise), sim.measurements,
+                         _free(m, (), TOOL + ("world.x", "world.y", "world.c")))
+    assert len(auto.gauge) == 3 and auto.rms_residual < 1e-9
 
 
 def test_a_repeatable_load_is_not_absorbed_and_not_removed():
     """Load only, no kinematic error: the projection (which eliminates the deflection)
     identifies no error, and the held-out error after calibration is the load deflection."""
-    m, K, F, noise, fixed = _case(2)
-    s = PlanarToolSensor(n_pose=2)
+    m, s, K, F, noise, fixed = _case(2)
     x = m.sample_poses(30, np.random.default_rng(0))
     check = m.sample_poses(8, np.random.default_rng(1))
-    res = calibration_experiment(m, s, m, s, x, check, K, 10 * F, NOISE_FREE[2], np.random.default_rng(0),
-                                 free=_free(m, fixed), methods=("projection", "ignore-redundancy"), weights=noise)
+    res = calibration_experiment(m, s, m, MeasurementSetup(s, NOISE_FREE[2], StaticsModel(K, 10 * F)), x, check,
+                                 np.random.default_rng(0), free=_free(m, fixed),
+                                 methods=("projection", "ignore-redundancy"), weights=noise)
     np.testing.assert_allclose(res.fits["projection"].mechanism.params, m.params, atol=1e-8)
     np.testing.assert_allclose(res.after["projection"], res.before, rtol=1e-6)
     assert res.before.min() > 0.01
@@ -166,79 +250,78 @@ def test_a_repeatable_load_is_not_absorbed_and_not_removed():
 
 @pytest.mark.parametrize("n_dof", [2, 3])
 def test_baselines(n_dof):
-    m, K, F, noise, fixed = _case(n_dof)
-    s = PlanarToolSensor(n_pose=n_dof)
+    m, s, K, F, noise, fixed = _case(n_dof)
     real = _truth(m, fixed, seed=11)
     x = m.sample_poses(30, np.random.default_rng(12))
-    c, q, y, _ = simulate_measurements(real, s, m, x, K, F, NOISE_FREE[n_dof], np.random.default_rng(0))
-    # n of l actuators: exact for the chains it sees, blind to the others
+    sim = _measure(m, real, s, x, K, F, NOISE_FREE[n_dof])
+    setup = MeasurementSetup(s, noise)
+    # n of l actuators: exact for the chains it sees, blind to the others (fixed by the gauge)
     keep = tuple(range(n_dof))
-    sub = identify_actuator_subset(m, s, x, q, y, noise, keep, _free(m, fixed))
-    unseen = set(sub.report.unseen)
+    sub = fit_redundant("actuator-subset", m, setup, sim.measurements, _free(m, fixed), keep=keep)
+    assert sub.method == "actuator-subset" and type(sub.mechanism) is type(m)
+    unseen = set(sub.identifiability.unseen)
     assert f"dq{m.n_actuators}" in unseen and "dq1" not in unseen
-    assert not sub.report.identifiable
-    # noise-free, the kept actuators' model reproduces the real readings at the real poses
+    assert not sub.identifiability.identifiable and unseen <= set(sub.gauge)
+    # noise-free, the kept actuators' model reproduces the real readings at the fitted poses
+    q = sim.actuator_readings
     np.testing.assert_allclose(ActuatorSubset(sub.mechanism, keep).ik(sub.poses), q[:, list(keep)], atol=1e-8)
-    np.testing.assert_allclose(sub.sensor.predict(sub.poses), y, atol=1e-8)
+    np.testing.assert_allclose(sub.sensor.predict(sub.poses), sim.sensor_readings, atol=1e-8)
     # actuators assumed at their commands: biased (the following errors are real)
-    ign = identify_ignoring_redundancy(m, s, x, c, y, noise, _free(m, fixed))
+    ign = fit_redundant("ignore-redundancy", m, setup, sim.measurements, _free(m, fixed))
+    assert ign.method == "ignore-redundancy"
     assert np.abs(ign.mechanism.params - real.params).max() > 1e-4
 
 
-def test_bad_requests_are_user_errors():
-    m, K, F, noise, fixed = _case(2)
-    s = PlanarToolSensor(n_pose=2)
-    x = m.sample_poses(5, np.random.default_rng(0))
-    with pytest.raises(PkmcalError, match="linearisation"):
-        identify_redundant(m, s, x, m.ik(x), s.predict(x), noise, ("l11",), linearisation="twice")
-    with pytest.raises(PkmcalError, match="no parameter 'l99'"):
-        identify_redundant(m, s, x, m.ik(x), s.predict(x), noise, ("l99",))
-
-
 @pytest.mark.parametrize("n_dof", [2, 3])
-def test_agrees_with_the_engine_projection_method(n_dof):
-    """Independent solver check: our re-linearised Gauss–Newton and the engine's
-    scipy least_squares on the same projected residual reach the same estimate."""
-    from pkmcal.identification.engine import identify
-    from pkmcal.sensors.base import MeasurementSetup
+def test_baselines_are_worse_than_the_projection_on_held_out_poses(n_dof):
+    m, s, K, F, noise, fixed = _case(n_dof)
+    real = _truth(m, fixed, seed=61)
+    rs = s.with_deltas({"target.x": 0.05, "target.y": -0.04})
+    res = calibration_experiment(m, s, real, MeasurementSetup(rs, noise, StaticsModel(K, F)),
+                                 m.sample_poses(30, np.random.default_rng(62)), m.sample_poses(10, np.random.default_rng(63)),
+                                 np.random.default_rng(64), free=_free(m, fixed))
+    proj = res.improvement_pct("projection")
+    assert proj > 80.0
+    assert proj > res.improvement_pct("ignore-redundancy") and proj > res.improvement_pct("actuator-subset")
+    assert abs(res.improvement_pct("projection-single") - proj) < 5.0
 
-    m, K, F, noise, fixed = _case(n_dof)
-    s = PlanarToolSensor(n_pose=n_dof)
-    real = _truth(m, fixed, seed=21)
-    x = m.sample_poses(30, np.random.default_rng(22))
-    _, q, y, _ = simulate_measurements(real, s, m, x, K, F, noise, np.random.default_rng(23))
-    free = _free(m, fixed)
-    ours = identify_redundant(m, s, x, q, y, noise, free)
-    engine = identify(m, MeasurementSetup(s, noise), method="projection", free=free, q=q, y=y, commanded=x)
-    scale = np.abs(ours.mechanism.params - m.params).max()
-    np.testing.assert_allclose(engine.mechanism.params, ours.mechanism.params, atol=1e-6 * scale)
-    np.testing.assert_allclose(engine.sensor.params, ours.sensor.params, atol=1e-6 * scale)
+
+def test_bad_requests_are_user_errors():
+    m, s, K, F, noise, fixed = _case(2)
+    x = m.sample_poses(5, np.random.default_rng(0))
+    setup = MeasurementSetup(s, noise)
+    data = (m.ik(x), s.predict(x), x)
+    with pytest.raises(PkmcalError, match="unknown paper-3 method 'twice'"):
+        fit_redundant("twice", m, setup, data, ("l11",))
+    with pytest.raises(PkmcalError, match="no parameter matches 'l99'"):
+        fit_redundant("projection", m, setup, data, ("l99",))
+    with pytest.raises(PkmcalError, match="commanded poses"):
+        fit_redundant("projection-single", m, setup, data[:2], ("l11",))
+    with pytest.raises(PkmcalError, match="--keep"):
+        fit_redundant("actuator-subset", m, setup, data, ("l11",), keep=(0, 0))
 
 
 @pytest.mark.parametrize("n_dof", [2, 3])
 def test_relinearisation_handles_large_errors(n_dof):
     """Errors of several mm: the single linearisation of eq. 10 is visibly biased, the
-    re-linearised fit still recovers the machine exactly from noise-free data."""
-    m, K, F, noise, fixed = _case(n_dof)
-    s = PlanarToolSensor(n_pose=n_dof)
+    engine's re-linearised fit still recovers the machine exactly from noise-free data."""
+    m, s, K, F, noise, fixed = _case(n_dof)
     real = _truth(m, fixed, seed=31, size=3.0)
     x = m.sample_poses(30, np.random.default_rng(32), shrink=0.8)
-    _, q, y, _ = simulate_measurements(real, s, m, x, K, F, NOISE_FREE[n_dof], np.random.default_rng(0))
-    fit = identify_redundant(m, s, x, q, y, noise, _free(m, fixed))
-    one = identify_redundant(m, s, x, q, y, noise, _free(m, fixed), linearisation="single")
+    sim = _measure(m, real, s, x, K, F, NOISE_FREE[n_dof])
+    setup = MeasurementSetup(s, noise)
+    fit = fit_redundant("projection", m, setup, sim.measurements, _free(m, fixed))
+    one = fit_redundant("projection-single", m, setup, sim.measurements, _free(m, fixed))
     np.testing.assert_allclose(fit.mechanism.params, real.params, atol=1e-7)
     assert np.abs(one.mechanism.params - real.params).max() > 1e-3
-    assert fit.cost[-1] < 1e-12 * fit.cost[0]
+    assert fit.rms_residual < 1e-9
 
 
 @pytest.mark.parametrize("n_dof", [2, 3])
 def test_single_linearisation_jacobian_matches_finite_differences(n_dof):
     """Eq. 10 at the commanded poses: on consistent data (e = 0 there) the dropped
     derivative of U⊥ multiplies e, so J must equal central differences of r(θ)."""
-    from pkmcal.identification.projection import single_linearisation
-
-    m, _, _, noise, _ = _case(n_dof)
-    s = PlanarToolSensor(n_pose=n_dof)
+    m, s, _, _, noise, _ = _case(n_dof)
     x = m.sample_poses(6, np.random.default_rng(41))
     model = Model(m, s, noise, q=m.ik(x), y=s.predict(x), commanded=x)
     r0, J = single_linearisation(model)

@@ -190,7 +190,7 @@ def test_summaries_closed_form():
     cov = np.array([[4.0, 2.0, 0.0], [2.0, 9.0, 0.0], [0.0, 0.0, 0.0]])
     c = correlation_from_covariance(cov)
     assert c[0, 1] == pytest.approx(2.0 / 6.0) and c[0, 0] == pytest.approx(1.0)
-    assert np.isnan(c[2, 2]) and np.isnan(c[0, 2])
+    assert c[2, 2] == 0.0 and c[0, 2] == 0.0 and c[2, 0] == 0.0   # zero variance: row stays zero
 
 
 def test_report_input_is_validated():

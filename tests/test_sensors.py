@@ -1,8 +1,13 @@
 """Sensor models: analytic Jacobians vs central finite differences, and the readings vs
 independent constructions (homogeneous transforms with scipy; plane through three
-transformed platform points intersected with each indicator's vertical line)."""
+transformed platform points intersected with each indicator's vertical line); the
+position sensor against the position part of the full-pose sensor; the angle flags of
+the parameters against 2π-periodicity of the readings; value equality of every sensor."""
 
 from __future__ import annotations
+
+import dataclasses
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -11,9 +16,11 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from scipy.spatial.transform import Rotation
 
+from pkmcal.cli.identify_cmds import _angle_names
 from pkmcal.errors import PkmcalError
 from pkmcal.mechanisms.hexapod import HEXAPOD_PARAM_NAMES
-from pkmcal.sensors import SENSOR_KINDS, FullPoseSensor, IndicatorSensor, PositionSensor
+from pkmcal.mechanisms.library import builtin_machine
+from pkmcal.sensors import SENSOR_KINDS, FullPoseSensor, IndicatorSensor, PlanarToolSensor, PositionSensor
 
 H = 1e-6
 
@@ -122,6 +129,24 @@ def test_position_jacobians_match_finite_differences(poses, target, world):
         np.testing.assert_allclose(s.predict(poses)[k], expected, atol=1e-9)
 
 
+@settings(max_examples=40, deadline=None)
+@given(poses=_pose_array(4), target=_transform(-80, 80, 0).map(lambda v: v[:3]), world=_transform(-300, 300, 1.0),
+       tool_abc=_transform(0, 0, 3.0).map(lambda v: v[3:]))
+def test_position_is_the_position_part_of_full_pose(poses, target, world, tool_abc):
+    """Same frames (world; target = tool origin, any tool rotation): the readings, the pose
+    Jacobian and the derivatives w.r.t. the shared parameters are the full-pose sensor's
+    position rows."""
+    pos = PositionSensor(target=target, world=world)
+    full = FullPoseSensor(world=world, tool=np.r_[target, tool_abc])
+    np.testing.assert_allclose(pos.predict(poses), full.predict(poses)[:, 0:3], rtol=1e-14, atol=1e-12)
+    np.testing.assert_allclose(pos.pose_jacobian(poses), full.pose_jacobian(poses)[:, 0:3], rtol=1e-14, atol=1e-12)
+    Jp, Jf = pos.param_jacobian(poses), full.param_jacobian(poses)
+    col = {n: k for k, n in enumerate(full.param_names)}
+    for k, name in enumerate(pos.param_names):
+        other = col[name.replace("target.", "tool.")]
+        np.testing.assert_allclose(Jp[:, :, k], Jf[:, 0:3, other], rtol=1e-14, atol=1e-12)
+
+
 def test_position_defaults():
     s = PositionSensor(target=[1.0, 2.0, 3.0])
     assert s.reading_names == ("px", "py", "pz")
@@ -204,3 +229,85 @@ def test_unknown_free_parameter_is_rejected():
 def test_with_params_checks_length():
     with pytest.raises(PkmcalError, match="12 parameters"):
         FullPoseSensor().with_params(np.zeros(3))
+
+
+def _all_sensors():
+    return [
+        FullPoseSensor(world=[5, -3, 2, 0.1, -0.2, 0.3], tool=[1, 2, 30, 0.2, 0.1, -0.1]),
+        PositionSensor(target=[10, -5, 20], world=[3, 4, -5, 0.05, 0.1, -0.2]),
+        IndicatorSensor(positions=[[40, 0], [-20, 34.641], [-20, -34.641], [0, 10]], plane_offset=7.0, zero=[1, 2, 3, 4]),
+        PlanarToolSensor(n_pose=2, target=[3, -4], world=[10, -20, 0.3]),
+        PlanarToolSensor(n_pose=3, target=[3, -4], world=[10, -20, 0.3]),
+    ]
+
+
+def _poses_for(sensor):
+    poses = np.array([[10.0, -5.0, 300.0, 0.1, -0.2, 0.3], [-20.0, 15.0, 280.0, -0.15, 0.1, -0.4]])
+    return poses[:, :sensor.n_pose] if isinstance(sensor, PlanarToolSensor) else poses
+
+
+EXPECTED_ANGLES = {
+    "full-pose": {"world.a", "world.b", "world.c", "tool.a", "tool.b", "tool.c"},
+    "position": {"world.a", "world.b", "world.c"},
+    "indicators": set(),
+    "planar-tool": {"world.c"},
+}
+
+
+@pytest.mark.parametrize("sensor", _all_sensors(), ids=lambda s: f"{s.kind}")
+def test_param_is_angle_flags_the_2pi_periodic_parameters(sensor):
+    """An angle parameter moved by 2π leaves every reading unchanged (up to wrapping of angle
+    readings); a length moved by 2π mm changes some reading."""
+    flags = sensor.param_is_angle
+    assert len(flags) == len(sensor.param_names) and all(isinstance(a, bool) for a in flags)
+    assert {n for n, a in zip(sensor.param_names, flags) if a} == EXPECTED_ANGLES[sensor.kind]
+    poses = _poses_for(sensor)
+    y0 = sensor.predict(poses)
+    for k, is_angle in enumerate(flags):
+        theta = sensor.params
+        theta[k] += 2 * np.pi
+        change = np.max(np.abs(sensor.reading_residual(sensor.with_params(theta).predict(poses), y0)))
+        if is_angle:
+            assert change < 1e-9, sensor.param_names[k]
+        else:
+            assert change > 1e-3, sensor.param_names[k]
+
+
+@pytest.mark.parametrize("k", range(len(_all_sensors())))
+def test_sensors_are_equal_by_value(k):
+    sensor = _all_sensors()[k]
+    # a fresh construction with the same values is equal; every other sensor is not
+    assert [sensor == other for other in _all_sensors()] == [j == k for j in range(len(_all_sensors()))]
+    theta = sensor.params
+    assert sensor.with_params(theta) == sensor and sensor.with_params(theta) is not sensor
+    moved = theta.copy()
+    moved[-1] += 1e-9
+    assert sensor.with_params(moved) != sensor
+    assert dataclasses.replace(sensor, free=sensor.param_names[:1]) != dataclasses.replace(sensor, free=())
+    with pytest.raises(TypeError):
+        hash(sensor)
+
+
+def test_equality_compares_geometry_and_kind():
+    ind = IndicatorSensor(positions=[[40, 0], [-20, 34.6], [-20, -34.6]], plane_offset=7.0)
+    assert ind == IndicatorSensor(positions=[[40, 0], [-20, 34.6], [-20, -34.6]], plane_offset=7.0)
+    assert ind != IndicatorSensor(positions=[[40, 0], [-20, 34.6], [-20, -34.6]], plane_offset=7.5)
+    assert ind != IndicatorSensor(positions=[[40, 0], [-20, 34.6], [-20, -34.7]], plane_offset=7.0)
+    assert ind != IndicatorSensor(positions=[[40, 0], [-20, 34.6], [-20, -34.6], [0, 0]], plane_offset=7.0)
+    assert PlanarToolSensor(n_pose=2, target=[1, 2]) == PlanarToolSensor(n_pose=2, target=[1.0, 2.0])
+    assert PlanarToolSensor(n_pose=2, target=[1, 2]) != PlanarToolSensor(n_pose=3, target=[1, 2])
+    # same parameter values, different kinds
+    assert FullPoseSensor() != PositionSensor() and PositionSensor() != FullPoseSensor()
+    assert FullPoseSensor() != "full-pose"
+
+
+def test_identify_table_angles_come_from_the_flags():
+    hexapod = builtin_machine("stewart-prototype")
+    planar = builtin_machine("planar-3dof-4act")
+    for sensor in _all_sensors():
+        result = SimpleNamespace(sensor=sensor, mechanism=hexapod)
+        assert _angle_names(result) == EXPECTED_ANGLES[sensor.kind]
+    planar_angles = {n for n, a in zip(planar.param_names, planar.param_is_angle) if a}
+    assert planar_angles  # the way directions α_i
+    result = SimpleNamespace(sensor=PlanarToolSensor(n_pose=3), mechanism=planar)
+    assert _angle_names(result) == planar_angles | {"world.c"}

@@ -23,7 +23,7 @@ import numpy as np
 from pkmcal import __version__
 from pkmcal.errors import PkmcalError
 from pkmcal.io.atomic import atomic_write_text, check_output_path
-from pkmcal.io.machine_file import load_machine
+from pkmcal.io.machine_file import identified_uncertainty, load_machine
 from pkmcal.io.tables import to_file_units
 from pkmcal.mechanisms.base import Mechanism
 
@@ -65,18 +65,12 @@ def calibration_json(machine: Mechanism, source: str | None = None) -> dict:
     values = np.asarray(machine.params, dtype=float) * scale
     cov = getattr(machine, "covariance", None)
     std = np.full(len(names), np.nan)
-    correlation = None
+    corr_block = None
     if cov is not None:
-        cov = np.asarray(cov, dtype=float) * np.outer(scale, scale)
-        used = np.flatnonzero(np.any(cov != 0, axis=0) | np.any(cov != 0, axis=1))
-        sub = cov[np.ix_(used, used)]
-        s = np.sqrt(np.maximum(np.diag(sub), 0.0))
-        std[used] = s
-        with np.errstate(divide="ignore", invalid="ignore"):
-            corr = np.where(np.outer(s, s) > 0, sub / np.outer(s, s), 0.0)
-        np.fill_diagonal(corr, 1.0)
-        correlation = {"parameters": [names[i] for i in used],
-                       "matrix": [[_finite(v) for v in row] for row in np.clip(corr, -1.0, 1.0)]}
+        used, _, sd, corr = identified_uncertainty(np.asarray(cov, dtype=float) * np.outer(scale, scale))
+        std[used] = sd
+        corr_block = {"parameters": [names[i] for i in used],
+                      "matrix": [[_finite(v) for v in row] for row in np.clip(corr, -1.0, 1.0)]}
     params = [{"name": n, "value": _finite(v), "unit": "deg" if a else "mm",
                "std": None if np.isnan(s) else _finite(s)}
               for n, v, a, s in zip(names, values, angle, std)]
@@ -93,7 +87,7 @@ def calibration_json(machine: Mechanism, source: str | None = None) -> dict:
         "conventions": CONVENTIONS,
         "parameters": params,
         "n_identified": int(np.count_nonzero(~np.isnan(std))),
-        "correlation": correlation,
+        "correlation": corr_block,
         "home_pose": {n: _finite(v) for n, v in zip(machine.pose_names, home)},
         "calibration": meta.pop("calibration", None),
         "metadata": meta or None,

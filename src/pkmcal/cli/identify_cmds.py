@@ -46,12 +46,10 @@ def _fmt(v: float, angle: bool) -> str:
 
 
 def _angle_names(result) -> set[str]:
-    sensor = result.sensor
-    angles = set()
-    for n in sensor.param_names:
-        if n.split(".")[-1] in ("a", "b", "c") and n.split(".")[0] in ("world", "tool"):
-            angles.add(n)
-    mech = result.mechanism
+    """Names of the angle parameters (shown in degrees), from the sensor's ``param_is_angle``
+    and the machine's (a machine without the flags, the hexapod, has only lengths)."""
+    sensor, mech = result.sensor, result.mechanism
+    angles = {n for n, a in zip(sensor.param_names, sensor.param_is_angle) if a}
     angles.update(n for n, a in zip(mech.param_names, getattr(mech, "param_is_angle", ())) if a)
     return angles
 

@@ -19,7 +19,7 @@ from pkmcal.cli.import_options import import_options
 from pkmcal.io.atomic import atomic_write_text, check_output_path
 from pkmcal.io.machine_file import load_machine
 from pkmcal.io.tables import LENGTH_COLUMNS, column_kinds, format_table, from_file_units, read_table, to_file_units
-from pkmcal.mechanisms.base import LimitReport, Mechanism
+from pkmcal.mechanisms.base import Mechanism
 
 _MAX_LISTED = 20
 
@@ -78,33 +78,19 @@ def ik_cmd(machine: str, poses: str, output: str | None, mapping=None) -> None:
     internal = from_file_units(file_poses, mech.pose_is_angle)
     with np.errstate(all="ignore"):
         readings = mech.ik(internal)
-        verdicts = limit_verdicts(mech.check_limits(internal))
+        limits = mech.check_limits(internal)
         lengths = mech.leg_lengths(internal) if hasattr(mech, "leg_lengths") else None
     columns: dict[str, np.ndarray] = {n: file_poses[:, k] for k, n in enumerate(mech.pose_names)}
     if lengths is not None:
         columns.update({f"l{i + 1}": lengths[:, i] for i in range(lengths.shape[1])})
     readings = to_file_units(readings, mech.actuator_is_angle)
     columns.update({n: readings[:, i] for i, n in enumerate(mech.actuator_names)})
-    columns["reachable"] = verdicts
+    columns["reachable"] = limits.verdicts()
     text = format_table(columns)
     _emit(text, output)
-    n_bad = int(np.count_nonzero(verdicts != "ok"))
+    n_bad = int(np.count_nonzero(~limits.ok))
     _note(f"ik: {len(table)} poses, {len(table) - n_bad} reachable"
           + (f"; {n_bad} violate limits (column 'reachable')" if n_bad else ""))
-
-
-def limit_verdicts(report: LimitReport) -> np.ndarray:
-    """:meth:`LimitReport.verdicts` vectorised: one string per pose, ``"ok"`` or the violated
-    limits joined by ``+``, built once per distinct combination of violations (N,) object."""
-    names = list(report.violations)
-    if not names:
-        return np.array([], dtype=object)
-    bits = np.stack([np.asarray(report.violations[n], dtype=bool) for n in names], axis=1)
-    codes = bits.astype(np.int64) @ (np.int64(1) << np.arange(len(names), dtype=np.int64))
-    uniq, inverse = np.unique(codes, return_inverse=True)
-    labels = np.array(["+".join(n for j, n in enumerate(names) if (int(u) >> j) & 1) or "ok" for u in uniq],
-                      dtype=object)
-    return labels[inverse.reshape(-1)]
 
 
 @click.command("fk")
@@ -162,4 +148,4 @@ def register(group: click.Group) -> None:
     group.add_command(fk_cmd)
 
 
-__all__ = ["fk_cmd", "ik_cmd", "limit_verdicts", "parse_pose_option", "register"]
+__all__ = ["fk_cmd", "ik_cmd", "parse_pose_option", "register"]

@@ -3,7 +3,8 @@
 * ``plan``: candidate poses (random in the workspace box, or a CSV), checked against the
   nominal machine's limits with a safety margin and against the sensor's measurability,
   then a selection algorithm (:mod:`pkmcal.planning.selection`) picks N of them; writes
-  x, y, z (mm), a, b, c (deg) and the nominal actuator commands lambda1..lambda6.
+  x, y, z (mm), a, b, c (deg) and the nominal actuator commands lambda1..lambda6 (rotary
+  actuators of other machines in degrees).
 * ``observability``: the indices O1..O5 (:mod:`pkmcal.planning.indices`) of a pose set,
   on the same identifiable parameters and column scaling as ``plan``.
 """
@@ -21,7 +22,7 @@ from pkmcal.cli.import_options import import_options
 from pkmcal.io.atomic import check_output_path
 from pkmcal.io.machine_file import load_machine
 from pkmcal.io.setup_file import BUILTIN_SETUPS, load_setup
-from pkmcal.io.tables import write_table
+from pkmcal.io.tables import to_file_units, write_table
 from pkmcal.planning.candidates import DEFAULT_MARGIN, Measurability, read_candidates_csv
 from pkmcal.planning.indices import INDEX_DESCRIPTIONS, INDEX_NAMES
 from pkmcal.planning.plan import plan_poses, pose_set_indices
@@ -108,11 +109,10 @@ def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, 
                           progress=progress)
     finally:
         progress.close()
-    poses = plan.poses.copy()
-    angle = np.array(mech.pose_is_angle, dtype=bool)
-    poses[:, angle] = np.rad2deg(poses[:, angle])
+    poses = to_file_units(plan.poses, mech.pose_is_angle)
+    commands = to_file_units(plan.commands, mech.actuator_is_angle)
     cols = {name: poses[:, i] for i, name in enumerate(mech.pose_names)}
-    cols.update({name: plan.commands[:, i] for i, name in enumerate(mech.actuator_names)})
+    cols.update({name: commands[:, i] for i, name in enumerate(mech.actuator_names)})
     sel = plan.selection
     write_table(output, cols, comments=[
         f"pkmcal plan {mech.name} --setup {setup_spec} --n {n_poses} --algorithm {sel.algorithm} "

@@ -13,22 +13,27 @@ q(x) − c ≠ 0) and the tracker y = h(x, θ) + e_y, with the setup's noise.
 
 Verification (paper 3 §3, Fig. 5/8): the tracker reading each held-out commanded pose x_c
 should give is y* = h(x_c, θ_setup). A model (mechanism M, sensor S_M) commands it as
-c = IK(S_M⁻¹(y*), ρ_M) (:func:`~pkmcal.identification.projection.commands_for_targets`;
-for n = 3 at the commanded plate angle); the real machine settles under the setup's
-stiffness and load, and the tool error is e = ‖h(x_eq, θ_setup) − y*‖ (mm). "Before" is
-the nominal machine with the setup's sensor, "after" the calibrated machine with the
-sensor parameters identified with it (stored in its file's ``calibration.sensor`` block).
+c = IK(S_M⁻¹(y*), ρ_M) (:func:`commands_for_targets`; for n = 3 at the commanded plate
+angle); the real machine settles under the setup's stiffness and load, and the tool error
+is e = ‖h(x_eq, θ_setup) − y*‖ (mm). "Before" is the nominal machine with the setup's
+sensor, "after" the calibrated machine with the sensor parameters identified with it
+(stored in its file's ``calibration.sensor`` block).
+
+Baselines of paper 3 §1 (:func:`baseline_inputs`), fitted by the engine's ``projection``
+method: ``ignore-redundancy`` (actuators assumed at their commands) and
+``actuator-subset`` (n of the l actuators, a non-redundant calibration).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from pkmcal.errors import PkmcalError
-from pkmcal.identification.projection import commands_for_targets
 from pkmcal.identification.simulation import SimulationResult, campaign_inputs, drop_limit_violations, parameter_errors
+from pkmcal.identification.uncertainty import embed
 from pkmcal.identification.verification import error_stats
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.mechanisms.statics import StaticsModel, equilibrium
@@ -47,6 +52,14 @@ def _statics(setup: MeasurementSetup, machine: Mechanism) -> tuple[np.ndarray, n
                           "stiffness (and the tool load) in the setup's 'simulation:' block, e.g. "
                           "simulation: {stiffness: 2.0e4, load: [0, -30]} (N/mm or N*mm/rad; N)")
     return sim.stiffness_for(machine), sim.load
+
+
+def commands_for_targets(mechanism: Mechanism, sensor, targets: np.ndarray, angles=None) -> tuple[np.ndarray, np.ndarray]:
+    """Poses (N, n) and commanded readings (N, l) that put the tool on ``targets`` (N, 2,
+    tracker frame) according to the model: x = S⁻¹(y*) (``sensor.poses_for_readings``, for
+    n = 3 at the plate ``angles``), c = IK(x, ρ)."""
+    poses = sensor.poses_for_readings(targets, angles)
+    return poses, mechanism.ik(poses)
 
 
 def _settle(real, setup, commands, guess, ignore_limits):
@@ -149,11 +162,14 @@ class ToolErrors:
 
 
 def tool_errors(model: Mechanism, model_sensor, real: Mechanism, setup: MeasurementSetup, poses: np.ndarray,
-                name: str = "model", ignore_limits: tuple[str, ...] = ()) -> ToolErrors:
+                name: str = "model", ignore_limits: tuple[str, ...] = (), target_sensor=None) -> ToolErrors:
     """Tool errors of ``real`` commanded through (``model``, ``model_sensor``) at the
-    held-out ``poses`` (module docstring)."""
+    held-out ``poses`` (module docstring). The targets are y* = h(x_c) of ``target_sensor``
+    (default the setup's): a simulated experiment whose true tool point (the setup's sensor)
+    differs from the nominal one passes the nominal sensor, so that "before" includes the
+    tool-point error, as on a real machine whose tool point is only known nominally."""
     x_c = model.as_pose_array(poses)
-    targets = setup.sensor.predict(x_c)
+    targets = (setup.sensor if target_sensor is None else target_sensor).predict(x_c)
     angles = x_c[:, 2] if model.n_dof == 3 else None
     with np.errstate(invalid="ignore"):
         x_m, commands = commands_for_targets(model, model_sensor, targets, angles)
@@ -224,16 +240,14 @@ BASELINES = ("ignore-redundancy", "actuator-subset")
 
 def baseline_inputs(method: str, nominal: Mechanism, setup: MeasurementSetup, meas, keep=None):
     """``(machine, setup, measurements)`` that turn the engine's ``projection`` fit into the
-    baseline ``method`` of :mod:`pkmcal.identification.projection`:
+    baseline ``method`` (paper 3 §1):
 
     * ``ignore-redundancy``: the encoder readings replaced by the commands IK(x_c, ρ_nom)
       of the commanded poses (following errors ignored; needs the cmd_ columns);
     * ``actuator-subset``: only the actuators ``keep`` (0-based; default the first n) are
       used (:class:`~pkmcal.identification.projection.ActuatorSubset`), a non-redundant fit.
     """
-    import dataclasses
-
-    from pkmcal.identification.projection import ActuatorSubset
+    from pkmcal.identification.projection import ActuatorSubset  # projection imports this module
 
     if method not in BASELINES:
         raise PkmcalError(f"unknown baseline '{method}'; use one of {', '.join(BASELINES)}")
@@ -260,10 +274,6 @@ def baseline_inputs(method: str, nominal: Mechanism, setup: MeasurementSetup, me
 def baseline_result(result, nominal: Mechanism, method: str):
     """The engine's result of a baseline fit as a result of ``nominal``'s kind (covariance
     kept; ``method`` named)."""
-    import dataclasses
-
-    from pkmcal.identification.uncertainty import embed
-
     mech = result.mechanism
     notes = result.warnings
     base = getattr(mech, "base", None)

@@ -16,7 +16,7 @@ pose's noise does not depend on which other poses were dropped.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -67,6 +67,17 @@ class SimulationResult:
             commanded=self.commanded[self.kept],
             source=None,
         )
+
+    def subset(self, positions: np.ndarray | slice) -> "SimulationResult":
+        """This campaign restricted to some of its measured poses: ``positions`` index
+        :attr:`kept` (an index array or a slice); the poses left out are neither kept nor
+        dropped. The readings are those already drawn, so poses chosen among those the real
+        machine reached need no second simulation (the noise of a pose is drawn per
+        commanded pose, before any is dropped)."""
+        take = lambda a: a[positions]  # noqa: E731
+        return replace(self, kept=take(self.kept), real_poses=take(self.real_poses),
+                       actuator_true=take(self.actuator_true), sensor_true=take(self.sensor_true),
+                       actuator_readings=take(self.actuator_readings), sensor_readings=take(self.sensor_readings))
 
     def summary(self) -> str:
         """Lines for the terminal: poses kept, dropped with reasons."""

@@ -64,9 +64,9 @@ class Uncertainty:
 
 def correlation(cov: np.ndarray) -> np.ndarray:
     """Correlation matrix of a covariance (zero rows/columns stay zero, diagonal 1)."""
-    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    sd = standard_deviations(cov)
     inv = np.where(sd > 0, 1.0 / np.where(sd > 0, sd, 1.0), 0.0)
-    C = cov * inv[:, None] * inv[None, :]
+    C = cov * np.outer(inv, inv)      # exactly symmetric when cov is
     np.fill_diagonal(C, np.where(sd > 0, 1.0, 0.0))
     return C
 
@@ -139,3 +139,8 @@ def embed(cov_free: np.ndarray, free_index: np.ndarray, n_total: int) -> np.ndar
     idx = np.asarray(free_index, dtype=int)
     C[np.ix_(idx, idx)] = cov_free
     return C
+
+
+def standard_deviations(cov: np.ndarray) -> np.ndarray:
+    """σ_i = √max(Σ_ii, 0): the standard deviations of a covariance Σ (round-off below zero → 0)."""
+    return np.sqrt(np.clip(np.diag(np.asarray(cov, dtype=float)), 0.0, None))

@@ -26,6 +26,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, StrictFloat, StrictStr, ValidationError, WrapValidator, field_validator
 
 from pkmcal.errors import InputFileError, PkmcalError
+from pkmcal.identification.uncertainty import correlation, standard_deviations
 from pkmcal.io._yaml import (
     FlowList,
     RawFloat,
@@ -346,15 +347,13 @@ def _covariance_from_spec(path: object, spec: UncertaintySpec, lines: dict[tuple
         scale = max(float(np.max(np.abs(cov))), 1e-300)
         if not np.allclose(cov, cov.T, rtol=0, atol=1e-12 * scale):
             raise fail(("covariance",), "the covariance matrix is not symmetric")
-        s_cov = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        s_cov = standard_deviations(cov)
         if np.any(np.diag(cov) < 0) or not np.allclose(s_cov, std, rtol=1e-9, atol=1e-300):
             raise fail(("std",), "disagrees with the square roots of the covariance diagonal; "
                                  "delete 'covariance' to rebuild it from std and correlation")
         if corr is not None:
-            with np.errstate(divide="ignore", invalid="ignore"):
-                implied = cov / np.outer(s_cov, s_cov)
             ok = np.outer(s_cov, s_cov) > 0
-            if not np.allclose(implied[ok], corr[ok], rtol=0, atol=1e-9):
+            if not np.allclose(correlation(cov)[ok], corr[ok], rtol=0, atol=1e-9):
                 raise fail(("correlation",), "disagrees with 'covariance'; delete 'covariance' to rebuild "
                                              "it from std and correlation")
     else:
@@ -485,19 +484,27 @@ def _hexapod_to_file(m: Hexapod) -> dict:
     return out
 
 
+def identified_uncertainty(covariance: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """What a machine file or an export states of a covariance Σ (p, p): the indices ``used``
+    of the parameters with a non-zero row or column (the others were held fixed), their
+    Σ_used, σ_i = √Σ_ii and ρ_ij = Σ_ij / (σ_i σ_j)
+    (:func:`~pkmcal.identification.uncertainty.correlation`), written exactly symmetric and
+    with 1 on the diagonal (the file format's rule, also where σ = 0)."""
+    cov = np.asarray(covariance, dtype=float)
+    used = np.flatnonzero(np.any(cov != 0, axis=0) | np.any(cov != 0, axis=1))
+    sub = cov[np.ix_(used, used)]
+    corr = correlation(sub)
+    corr = 0.5 * (corr + corr.T)
+    np.fill_diagonal(corr, 1.0)
+    return used, sub, standard_deviations(sub), corr
+
+
 def _uncertainty_to_file(covariance: np.ndarray, param_names: tuple[str, ...],
                          is_angle: tuple[bool, ...] | None = None) -> dict:
     """The ``uncertainty`` block of a machine file (inverse of :func:`_covariance_from_spec`):
-    over the parameters with a non-zero row or column of Σ, σ_i = √Σ_ii (degrees where
-    ``is_angle``), ρ_ij = Σ_ij / (σ_i σ_j) (1 on the diagonal, 0 where σ = 0) and the exact
-    Σ in internal units."""
-    cov = np.asarray(covariance)
-    used = [i for i in range(cov.shape[0]) if np.any(cov[i] != 0) or np.any(cov[:, i] != 0)]
-    sub = cov[np.ix_(used, used)]
-    std = np.sqrt(np.maximum(np.diag(sub), 0.0))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        corr = np.where(np.outer(std, std) > 0, sub / np.outer(std, std), 0.0)
-    np.fill_diagonal(corr, 1.0)
+    :func:`identified_uncertainty` with σ in degrees where ``is_angle``, and the exact Σ in
+    internal units."""
+    used, sub, std, corr = identified_uncertainty(covariance)
     names = [param_names[i] for i in used]
     angle = [False] * len(used) if is_angle is None else [bool(is_angle[i]) for i in used]
     return {
@@ -636,6 +643,7 @@ _register_planar_kinds()
 
 __all__ = [
     "HexapodFile",
+    "identified_uncertainty",
     "load_machine",
     "machine_from_text",
     "machine_to_text",

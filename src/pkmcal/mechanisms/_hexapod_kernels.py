@@ -166,6 +166,59 @@ def ik_lengths(poses, base, platform):
 
 
 @nb.njit(**_OPTS)
+def _jacobians_range(poses, base, platform, A, B, start, stop):
+    """For rows k in [start, stop): A[k] = ∂λ/∂(x, y, z, a, b, c) (6×6) and the non-zero
+    entries of B[k] = ∂λ/∂ρ (6×42; B must be zero on entry).
+
+    Leg i: u_i = l_i/‖l_i‖, w_i = (R a_i) × u_i; A row i = [u_iᵀ, w_iᵀ E(a, b, c)] with E
+    the Euler rate matrix (:func:`pkmcal.conventions.euler_rate_matrix`), B row i on leg
+    i's 7 columns = [−u_iᵀ, u_iᵀ R, −1] (paper 1 eq. 1–2: l_i = p + R a_i − b_i,
+    λ_i = ‖l_i‖ − L0_i).
+    """
+    R = np.empty((3, 3))
+    for k in range(start, stop):
+        _euler_matrix(poses[k, 3], poses[k, 4], poses[k, 5], R)
+        cb, sb = math.cos(poses[k, 4]), math.sin(poses[k, 4])
+        cc, sc = math.cos(poses[k, 5]), math.sin(poses[k, 5])
+        for i in range(6):
+            ra0 = R[0, 0] * platform[i, 0] + R[0, 1] * platform[i, 1] + R[0, 2] * platform[i, 2]
+            ra1 = R[1, 0] * platform[i, 0] + R[1, 1] * platform[i, 1] + R[1, 2] * platform[i, 2]
+            ra2 = R[2, 0] * platform[i, 0] + R[2, 1] * platform[i, 1] + R[2, 2] * platform[i, 2]
+            l0 = poses[k, 0] + ra0 - base[i, 0]
+            l1 = poses[k, 1] + ra1 - base[i, 1]
+            l2 = poses[k, 2] + ra2 - base[i, 2]
+            inv = 1.0 / math.sqrt(l0 * l0 + l1 * l1 + l2 * l2)
+            u0, u1, u2 = l0 * inv, l1 * inv, l2 * inv
+            wx = ra1 * u2 - ra2 * u1
+            wy = ra2 * u0 - ra0 * u2
+            wz = ra0 * u1 - ra1 * u0
+            A[k, i, 0] = u0
+            A[k, i, 1] = u1
+            A[k, i, 2] = u2
+            A[k, i, 3] = cb * (cc * wx + sc * wy) - sb * wz
+            A[k, i, 4] = cc * wy - sc * wx
+            A[k, i, 5] = wz
+            c0 = 7 * i
+            B[k, i, c0] = -u0
+            B[k, i, c0 + 1] = -u1
+            B[k, i, c0 + 2] = -u2
+            for c in range(3):
+                B[k, i, c0 + 3 + c] = u0 * R[0, c] + u1 * R[1, c] + u2 * R[2, c]
+            B[k, i, c0 + 6] = -1.0
+
+
+def actuator_jacobians(poses, base, platform):
+    """``(A, B)``: ∂λ/∂pose (N, 6, 6) and ∂λ/∂ρ (N, 6, 42) of poses (N, 6) [mm, rad] in
+    one pass (see :func:`_jacobians_range`); threaded like :func:`ik_lengths`."""
+    poses, base, platform = _f64(poses), _f64(base), _f64(platform)
+    n = poses.shape[0]
+    A = np.empty((n, 6, 6))
+    B = np.zeros((n, 6, 42))
+    _run_rows(_jacobians_range, n, _IK_GRAIN, (poses, base, platform, A, B))
+    return A, B
+
+
+@nb.njit(**_OPTS)
 def _solve6(J, rhs, d):
     """Solve J d = rhs (6×6) by Gaussian elimination with partial pivoting, in place.
 
@@ -276,7 +329,7 @@ def _apply_step(d, p, R, Rn):
 
 
 @nb.njit(**_OPTS)
-def _fk_range(lengths, guesses, base, platform, tol, max_iter, poses, converged, iterations, residual,
+def _fk_range(lengths, guesses, base, platform, tol, max_iter, polish, poses, converged, iterations, residual,
               start, stop):
     """Newton FK of rows [start, stop) (see :func:`fk_newton`); ``guesses`` is (1, 6), one
     guess for every row, or (N, 6)."""
@@ -318,6 +371,7 @@ def _fk_range(lengths, guesses, base, platform, tol, max_iter, poses, converged,
         for r in range(3):
             p[r] = guesses[g, r]
         it = 0
+        extra = 0
         err = np.inf
         first = shared_ok
         if first and per_row:
@@ -341,20 +395,30 @@ def _fk_range(lengths, guesses, base, platform, tol, max_iter, poses, converged,
                 _apply_step(d, p, R, Rn)
                 it = 1
         while True:
-            if not (first and it == 0):  # else: converged at the guess, or non-finite input
+            fresh = not (first and it == 0)  # else: converged at the guess, or non-finite input
+            if fresh:
                 err = _residual_jacobian(target, p, R, base, platform, J, rhs, ra)
             first = False
             if not math.isfinite(err):
                 break
             if err <= tol:
-                converged[k] = True
-                break
+                if extra >= polish:
+                    break
+                # polishing step from the converged pose: the error goes from err to ~err²
+                if not fresh:
+                    err = _residual_jacobian(target, p, R, base, platform, J, rhs, ra)
+                extra += 1
+                if not _solve6(J, rhs, d):
+                    break
+                _apply_step(d, p, R, Rn)
+                continue
             if it >= max_iter:
                 break
             if not _solve6(J, rhs, d):
                 break
             it += 1
             _apply_step(d, p, R, Rn)
+        converged[k] = err <= tol
         iterations[k] = it
         residual[k] = err
         for r in range(3):
@@ -365,9 +429,15 @@ def _fk_range(lengths, guesses, base, platform, tol, max_iter, poses, converged,
         poses[k, 5] = math.atan2(R[1, 0], R[0, 0])
 
 
-def fk_newton(lengths, guesses, base, platform, tol, max_iter):
+def fk_newton(lengths, guesses, base, platform, tol, max_iter, polish=0):
     """Newton–Raphson FK for N sets of leg lengths (N, 6) from guesses (N, 6) or one guess
     for all, (1, 6) or (6,).
+
+    ``polish`` extra Newton steps are taken once a pose has converged (max |ΔL| ≤ tol), each
+    squaring the error, so one step takes a pose converged to 1e-9 mm to rounding level;
+    they are not counted in ``iterations``. Least-squares fits through FK need it: their
+    1e-12 tolerances, and finite-difference Jacobians with steps ~1e-8·|θ|, see an FK
+    error of 1e-10 mm as noise.
 
     Returns poses (N, 6) [mm, rad], converged (N,) bool, iterations (N,) int and the final
     max |L − L_target| (N,) in mm.
@@ -390,7 +460,7 @@ def fk_newton(lengths, guesses, base, platform, tol, max_iter):
     iterations = np.zeros(n, dtype=np.int64)
     residual = np.empty(n)
     if n:
-        args = (lengths, guesses, _f64(base), _f64(platform), float(tol), int(max_iter),
+        args = (lengths, guesses, _f64(base), _f64(platform), float(tol), int(max_iter), int(polish),
                 poses, converged, iterations, residual)
         _run_rows(_fk_range, n, _FK_GRAIN, args)
     return poses, converged, iterations, residual

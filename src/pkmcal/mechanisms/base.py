@@ -68,8 +68,18 @@ class LimitReport:
         return [name for name, v in self.violations.items() if v[k]]
 
     def verdicts(self) -> list[str]:
-        """One string per pose: ``"ok"`` or the violated limits joined by ``+``."""
-        return ["+".join(self.reasons(k)) or "ok" for k in range(len(self.ok))]
+        """One string per pose: ``"ok"`` or the violated limits joined by ``+`` (in the order
+        of :attr:`violations`). Vectorised over poses: pose k's violations v_kj are coded as
+        c_k = Σ_j v_kj 2^j and the text is built once per distinct code."""
+        names = list(self.violations)
+        if not names:
+            return []
+        bits = np.stack([np.asarray(self.violations[n], dtype=bool) for n in names], axis=1)
+        codes = bits @ (1 << np.arange(len(names), dtype=np.int64 if len(names) < 63 else object))
+        uniq, inverse = np.unique(codes, return_inverse=True)
+        labels = np.array(["+".join(n for j, n in enumerate(names) if (int(c) >> j) & 1) or "ok" for c in uniq],
+                          dtype=object)
+        return labels[inverse.reshape(-1)].tolist()
 
 
 class Mechanism(ABC):
@@ -128,9 +138,20 @@ class Mechanism(ABC):
     def actuator_param_jacobian(self, poses: np.ndarray) -> np.ndarray:
         """∂q/∂ρ (N, l, p) at fixed pose."""
 
+    def actuator_jacobians(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(∂q/∂pose, ∂q/∂ρ)`` together; a mechanism overrides this when one pass over the
+        poses computes both more cheaply than two."""
+        return self.actuator_pose_jacobian(poses), self.actuator_param_jacobian(poses)
+
     @abstractmethod
     def fk(self, readings: np.ndarray, guess: np.ndarray | None = None) -> FKResult:
         """Poses (N, n) whose IK reproduces ``readings`` (N, l)."""
+
+    def fk_precise(self, readings: np.ndarray, guess: np.ndarray | None = None) -> FKResult:
+        """FK exact to rounding, not just to the convergence tolerance, for residuals that a
+        least-squares solver evaluates at 1e-12 tolerances or differentiates numerically.
+        Default :meth:`fk`, for mechanisms whose FK already stops at a rounding-level step."""
+        return self.fk(readings, guess)
 
     @abstractmethod
     def check_limits(self, poses: np.ndarray) -> LimitReport:

@@ -227,22 +227,20 @@ class Hexapod(Mechanism):
         _, Ra, u = self._unit_legs(poses)
         return np.concatenate([u, np.cross(Ra, u)], axis=2)
 
+    def actuator_jacobians(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(A, B)`` = (∂λ/∂(x, y, z, a, b, c) (N, 6, 6), ∂λ/∂ρ (N, 6, 42)) in one compiled
+        pass: A = twist Jacobian · diag(I, E(a, b, c)), row i of the twist Jacobian
+        [u_iᵀ, ((R a_i) × u_i)ᵀ]; B row i non-zero only on leg i's 7 columns,
+        [−u_iᵀ, u_iᵀ R, −1]."""
+        return kernels.actuator_jacobians(self.as_pose_array(poses), self.base, self.platform)
+
     def actuator_pose_jacobian(self, poses: np.ndarray) -> np.ndarray:
-        """∂λ/∂(x, y, z, a, b, c) (N, 6, 6) = twist Jacobian · diag(I, E(a, b, c))."""
-        poses = self.as_pose_array(poses)
-        return euler_pose_jacobian(self.twist_jacobian(poses), poses)
+        """∂λ/∂(x, y, z, a, b, c) (N, 6, 6), see :meth:`actuator_jacobians`."""
+        return self.actuator_jacobians(poses)[0]
 
     def actuator_param_jacobian(self, poses: np.ndarray) -> np.ndarray:
-        """∂λ/∂ρ (N, 6, 42): for leg i only its 7 columns are non-zero:
-        [−u_iᵀ, u_iᵀ R, −1]."""
-        R, _, u = self._unit_legs(poses)
-        n = u.shape[0]
-        J = np.zeros((n, N_LEGS, N_LEGS, PARAMS_PER_LEG))
-        legs = np.arange(N_LEGS)
-        J[:, legs, legs, 0:3] = -u
-        J[:, legs, legs, 3:6] = np.einsum("nir,nrc->nic", u, R)
-        J[:, legs, legs, 6] = -1.0
-        return J.reshape(n, N_LEGS, N_LEGS * PARAMS_PER_LEG)
+        """∂λ/∂ρ (N, 6, 42), see :meth:`actuator_jacobians`."""
+        return self.actuator_jacobians(poses)[1]
 
     def length_param_jacobian(self, poses: np.ndarray) -> np.ndarray:
         """∂L/∂ρ (N, 6, 42): as :meth:`actuator_param_jacobian` with the L0 columns zero
@@ -258,15 +256,22 @@ class Hexapod(Mechanism):
         *,
         tol: float = FK_TOL_MM,
         max_iter: int = FK_MAX_ITER,
+        polish: int = 0,
     ) -> FKResult:
         """Poses from actuator readings λ (N, 6) by Newton–Raphson on SO(3).
 
         ``guess`` is one pose (6,) or one per reading (N, 6); default the home pose.
         """
         readings = np.asarray(readings, dtype=float)
-        return self.fk_lengths(readings + self.offset, guess, tol=tol, max_iter=max_iter)
+        return self.fk_lengths(readings + self.offset, guess, tol=tol, max_iter=max_iter, polish=polish)
 
-    def fk_lengths(self, lengths, guess=None, *, tol: float = FK_TOL_MM, max_iter: int = FK_MAX_ITER) -> FKResult:
+    def fk_precise(self, readings: np.ndarray, guess: np.ndarray | None = None) -> FKResult:
+        """:meth:`fk` plus one polishing Newton step per converged pose, so that the poses are
+        exact to rounding (the identification's FK; see ``_hexapod_kernels.fk_newton``)."""
+        return self.fk(readings, guess, polish=1)
+
+    def fk_lengths(self, lengths, guess=None, *, tol: float = FK_TOL_MM, max_iter: int = FK_MAX_ITER,
+                   polish: int = 0) -> FKResult:
         """As :meth:`fk`, from leg lengths L (N, 6) instead of readings."""
         lengths = np.ascontiguousarray(np.atleast_2d(np.asarray(lengths, dtype=float)))
         if lengths.ndim != 2 or lengths.shape[1] != N_LEGS:
@@ -275,7 +280,7 @@ class Hexapod(Mechanism):
         guesses = np.broadcast_to(g, lengths.shape)
         if g.ndim == 1 or g.shape[0] == 1:
             guesses = guesses[:1]  # one guess for all: the kernel broadcasts it
-        poses, conv, iters, res = kernels.fk_newton(lengths, guesses, self.base, self.platform, tol, max_iter)
+        poses, conv, iters, res = kernels.fk_newton(lengths, guesses, self.base, self.platform, tol, max_iter, polish)
         return FKResult(poses=poses, converged=conv, iterations=iters, residual=res)
 
     # -- limits -------------------------------------------------------------------------
@@ -394,4 +399,19 @@ def segment_distance(p1, q1, p2, q2) -> np.ndarray:
         s = np.where(point1, 0.0, np.where(point2, np.clip(-c / a_, 0.0, 1.0), s))
         t = np.where(point2, 0.0, np.where(point1, np.clip(f / e_, 0.0, 1.0), t))
     diff = p1 + s[..., None] * d1 - p2 - t[..., None] * d2
-    return np.linalg.norm(diff, axis=-1)
+    dist = np.linalg.norm(diff, axis=-1)
+    # (near-)parallel segments: s = 0 above is one of the closest points only when the
+    # segments overlap along their common direction; the minimum is attained at an endpoint
+    # of one of them, so take the smallest of the four endpoint-to-segment distances
+    parallel = ~(denom > 1e-12 * a * e) & ~point1 & ~point2
+    if np.any(parallel):
+        ends = np.minimum.reduce([_point_segment(p1, p2, d2, e_), _point_segment(q1, p2, d2, e_),
+                                  _point_segment(p2, p1, d1, a_), _point_segment(q2, p1, d1, a_)])
+        dist = np.where(parallel, np.minimum(dist, ends), dist)
+    return dist
+
+
+def _point_segment(x, p, d, dd):
+    """Distance from points x to segments p + u d, u ∈ [0, 1] (dd = d·d > 0), (..., 3) → (...)."""
+    u = np.clip(np.einsum("...k,...k->...", x - p, d) / dd, 0.0, 1.0)
+    return np.linalg.norm(p + u[..., None] * d - x, axis=-1)

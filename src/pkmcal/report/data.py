@@ -21,6 +21,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pkmcal.errors import PkmcalError
+# ρ_ij = C_ij / √(C_ii C_jj), zero-variance rows 0: the report's name for the one implementation.
+from pkmcal.identification.uncertainty import correlation as correlation_from_covariance  # noqa: F401
 from pkmcal.mechanisms.base import Mechanism
 
 
@@ -247,13 +249,3 @@ class ReportData:
         object.__setattr__(self, "facts", tuple((str(k), str(v)) for k, v in self.facts))
         if isinstance(self.identifiability, dict):
             object.__setattr__(self, "identifiability", Identifiability.from_mapping(self.identifiability))
-
-
-def correlation_from_covariance(cov: np.ndarray) -> np.ndarray:
-    """Correlation ρ_ij = C_ij / sqrt(C_ii C_jj); rows of zero variance give NaN."""
-    cov = np.asarray(cov, dtype=float)
-    d = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        corr = cov / np.outer(d, d)
-    corr[np.outer(d, d) == 0] = np.nan
-    return corr

@@ -91,12 +91,11 @@ def _trial(nominal, half, ignore, setup, rng):
     probe = simulate_campaign(nominal, real, setup, corners, rng, ignore_limits=ignore)
     if len(probe.kept) < N_CALIB + N_VERIFY:
         return None
-    order = rng.permutation(probe.kept)
-    boundary, verify_poses = corners[order[:N_CALIB]], corners[order[N_CALIB:N_CALIB + N_VERIFY]]
+    order = rng.permutation(len(probe.kept))
+    verify_poses = corners[probe.kept[order[N_CALIB:N_CALIB + N_VERIFY]]]
     inner = nominal.home_pose + rng.uniform(-1.0, 1.0, (4 * N_CALIB, 6)) * half
-    sims = {"boundary": simulate_campaign(nominal, real, setup, boundary, rng, ignore_limits=ignore)}
     s_in = simulate_campaign(nominal, real, setup, inner, rng, ignore_limits=ignore)
-    sims["interior"] = simulate_campaign(nominal, real, setup, inner[s_in.kept[:N_CALIB]], rng, ignore_limits=ignore)
+    sims = {"boundary": probe.subset(order[:N_CALIB]), "interior": s_in.subset(slice(N_CALIB))}
     out = {"before": float(np.mean(np.abs(nominal.params - real.params)))}
     before = pose_errors(nominal, real, verify_poses, ignore)
     for kind, sim in sims.items():

@@ -129,9 +129,7 @@ def _metrics(nominal, real, sensor, sim, fitted, verify_poses) -> dict[str, floa
 
 def _campaign(nominal, real, setup, n_poses, n_verify, rng):
     cmd = nominal.home_pose + rng.uniform(-1.0, 1.0, (2 * n_poses, 6)) * BOX_HALF
-    sim = simulate_campaign(nominal, real, setup, cmd, rng, ignore_limits=IGNORE)
-    keep = cmd[sim.kept[:n_poses]]
-    sim = simulate_campaign(nominal, real, setup, keep, rng, ignore_limits=IGNORE)
+    sim = simulate_campaign(nominal, real, setup, cmd, rng, ignore_limits=IGNORE).subset(slice(n_poses))
     verify_poses = nominal.home_pose + rng.uniform(-1.0, 1.0, (n_verify, 6)) * BOX_HALF
     return sim, verify_poses
 
@@ -146,7 +144,9 @@ def paper2_table5(seed: int = 0, quick: bool = False, trials: int | None = None)
     """Paper 2 Table 5 (module docstring); ``trials`` campaigns per noise level and reading."""
     t0 = time.perf_counter()
     n_tr = trials if trials is not None else (1 if quick else 5)
-    n_poses, n_verify = (40, 30) if quick else (100, 50)
+    # Quick mode runs fewer campaigns, not fewer poses: with 40 poses, D_E at N_L = 0.1 fell below
+    # 80 % in 12 of 60 seeded campaigns (none of 60 with 100 poses: lowest 92.6 %).
+    n_poses, n_verify = 100, 50
     nominal, real = builtin_machine("stewart-prototype"), builtin_machine("stewart-prototype-real")
     base = builtin_setup("indicators-prototype")
     sensor = base.sensor

@@ -16,13 +16,13 @@ import time
 
 import numpy as np
 
-from pkmcal.identification.projection import HeldOutResult, calibration_experiment
+from pkmcal.identification.projection import METHODS, HeldOutResult, calibration_experiment
 from pkmcal.mechanisms import planar as PL
+from pkmcal.mechanisms.statics import StaticsModel
 from pkmcal.reproduce.table import Reproduction, Row, mean_sd
-from pkmcal.sensors.base import NoiseModel
+from pkmcal.sensors.base import MeasurementSetup, NoiseModel
 from pkmcal.sensors.planar_tool import PlanarToolSensor
 
-METHODS = ("projection", "projection-single", "projection-unweighted", "ignore-redundancy", "actuator-subset")
 TRACKER_STD = 0.010
 LOAD_N = (0.0, -30.0)
 N_CALIB = 30
@@ -58,6 +58,12 @@ def case_models(name: str):
     return nominal, sensor, noise, real, sensor.with_deltas(c["table_tool"])
 
 
+def real_setup(real_sensor, noise: NoiseModel, stiffness) -> MeasurementSetup:
+    """The simulated truth's setup: the real tool point, the noise drawn, and the actuator
+    ``stiffness`` and tool load :data:`LOAD_N` the real machine settles under."""
+    return MeasurementSetup(real_sensor, noise, StaticsModel(stiffness, np.array(LOAD_N)))
+
+
 def table_experiment(name: str, rng: np.random.Generator, models=None) -> HeldOutResult:
     """One run of case ``name``: :data:`N_CALIB` calibration and ``n_check`` held-out poses
     uniform in the workspace (drawn from ``rng`` in that order), the paper's errors as the
@@ -68,8 +74,8 @@ def table_experiment(name: str, rng: np.random.Generator, models=None) -> HeldOu
     nominal, sensor, noise, real, real_sensor = case_models(name) if models is None else models
     calib = nominal.sample_poses(N_CALIB, rng)
     check = nominal.sample_poses(c["n_check"], rng)
-    return calibration_experiment(nominal, sensor, real, real_sensor, calib, check, c["stiffness"],
-                                  np.array(LOAD_N), noise, rng, free=c["free"], methods=METHODS)
+    return calibration_experiment(nominal, sensor, real, real_setup(real_sensor, noise, c["stiffness"]), calib, check,
+                                  rng, free=c["free"], methods=METHODS)
 
 
 def _run(name: str, seed: int, quick: bool, repeats: int | None) -> Reproduction:

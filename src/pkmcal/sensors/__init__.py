@@ -4,9 +4,14 @@
 * :class:`PositionSensor` (``position``): one target point, 3D laser tracker
 * :class:`IndicatorSensor` (``indicators``): K ≥ 3 dial indicators under the platform (paper 2)
 * :class:`PlanarToolSensor` (``planar-tool``): tracker on the tool point of a planar machine (paper 3)
+
+``base`` holds the interface (θ declared as :class:`ParamGroup` fields, from which names,
+angle flags, ``with_params`` and value equality follow), ``_common`` the shared argument
+checks and 3-D helpers, ``_frames`` the world ← base ← platform ← point chain of the
+full-pose and position sensors; each other module is one sensor.
 """
 
-from pkmcal.sensors.base import MeasurementSetup, NoiseModel, Sensor
+from pkmcal.sensors.base import MeasurementSetup, NoiseModel, ParamGroup, Sensor
 from pkmcal.sensors.full_pose import FullPoseSensor
 from pkmcal.sensors.indicators import IndicatorSensor
 from pkmcal.sensors.planar_tool import PlanarToolSensor
@@ -20,6 +25,7 @@ __all__ = [
     "IndicatorSensor",
     "MeasurementSetup",
     "NoiseModel",
+    "ParamGroup",
     "PlanarToolSensor",
     "PositionSensor",
     "SENSOR_KINDS",

@@ -10,25 +10,49 @@ on the platform, indicator zero offsets). Every sensor supplies analytic derivat
 The actuators are the machine's own sensor: their readings are ``q = IK(x, ρ)``, with the
 noise given by :class:`NoiseModel`. A :class:`MeasurementSetup` bundles a sensor with the
 noise of its readings and of the actuators; it is what a setup YAML file describes.
+
+Concrete sensors are frozen dataclasses that hold θ in the fields listed by
+:attr:`Sensor.param_groups` (θ = their concatenation, each group with its parameter names
+and which of them are angles). From that one declaration the base class derives
+``param_names``, ``param_is_angle``, ``params``, ``with_params`` and value equality (same
+kind and equal fields: geometry, θ and the free names), so no sensor repeats them.
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from dataclasses import dataclass, fields, replace
+from functools import cached_property
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
+
+from pkmcal.sensors._common import check_free, check_params
 
 if TYPE_CHECKING:
     from pkmcal.mechanisms.statics import StaticsModel
 
 
+class ParamGroup(NamedTuple):
+    """One field of a sensor dataclass holding part of θ: the field's name, the names of the
+    parameters it holds and which of them are angles (radians inside, degrees in files)."""
+
+    field: str
+    names: tuple[str, ...]
+    is_angle: tuple[bool, ...]
+
+
 class Sensor(ABC):
-    """Abstract external sensor (see module docstring)."""
+    """Abstract external sensor (see module docstring). A concrete sensor is a frozen
+    dataclass (``eq=False``: equality is :meth:`__eq__` here) with a ``free`` field and the
+    θ fields of :attr:`param_groups`, and calls :meth:`_init_params` in ``__post_init__``."""
 
     #: Sensor kind as written in setup files: "full-pose", "position", "indicators", ...
     kind: str
+    #: Names of the parameters estimated by default; None: :attr:`free_when_unset`.
+    free: tuple[str, ...] | None
+    #: :attr:`default_free` of a sensor whose ``free`` is None.
+    free_when_unset: tuple[str, ...] = ()
 
     @property
     @abstractmethod
@@ -46,22 +70,66 @@ class Sensor(ABC):
 
     @property
     @abstractmethod
+    def param_groups(self) -> tuple[ParamGroup, ...]:
+        """The dataclass fields holding θ, in the order of θ (may be empty)."""
+
+    @cached_property
     def param_names(self) -> tuple[str, ...]:
-        """Names of the sensor's own parameters θ (may be empty)."""
+        """Names of the sensor's own parameters θ (may be empty; computed once per sensor)."""
+        return tuple(n for g in self.param_groups for n in g.names)
+
+    @cached_property
+    def param_is_angle(self) -> tuple[bool, ...]:
+        """True for the parameters of :attr:`param_names` that are angles (radians inside,
+        degrees in files and tables); same meaning as the mechanisms' ``param_is_angle``."""
+        return tuple(a for g in self.param_groups for a in g.is_angle)
 
     @property
-    @abstractmethod
     def params(self) -> np.ndarray:
-        """Current values of θ (s,), internal units."""
+        """Current values of θ (s,), internal units (a fresh, writable array)."""
+        groups = self.param_groups
+        if not groups:
+            return np.zeros(0)
+        return np.concatenate([getattr(self, g.field) for g in groups])
 
     @property
     def default_free(self) -> tuple[str, ...]:
         """Sensor parameters estimated by default (the rest are held at their values)."""
-        return ()
+        return self.free_when_unset if self.free is None else self.free
 
-    @abstractmethod
     def with_params(self, params: np.ndarray) -> "Sensor":
         """A copy of this sensor with θ replaced."""
+        theta = check_params(params, self.param_names, self.kind)
+        parts, i = {}, 0
+        for g in self.param_groups:
+            parts[g.field] = theta[i:i + len(g.names)]
+            i += len(g.names)
+        return replace(self, **parts)
+
+    def _init_params(self) -> None:
+        """For ``__post_init__``: each θ field as a read-only float array of its length
+        (None → zeros) and ``free`` checked against :attr:`param_names`."""
+        for g in self.param_groups:
+            value = getattr(self, g.field)
+            value = np.zeros(len(g.names)) if value is None else value
+            object.__setattr__(self, g.field, check_params(value, g.names, self.kind))
+        object.__setattr__(self, "free", check_free(self.free, self.param_names, self.kind))
+
+    def __eq__(self, other: object) -> bool:
+        """Value equality: the same kind (class) and equal dataclass fields (geometry, θ, free)."""
+        if not isinstance(other, Sensor):
+            return NotImplemented
+        if type(self) is not type(other):
+            return False
+        return all(_same(getattr(self, f.name), getattr(other, f.name)) for f in fields(self))
+
+    __hash__ = None  # type: ignore[assignment]  # equal by array values: not hashable
+
+    @property
+    def is_identity(self) -> bool:
+        """True when the readings are the pose itself (h(x) = x up to angle wrapping, so
+        ∂h/∂x = I): the identification then skips inverting the sensor."""
+        return False
 
     @abstractmethod
     def predict(self, poses: np.ndarray) -> np.ndarray:
@@ -84,6 +152,13 @@ class Sensor(ABC):
         if ang.any():
             r[..., ang] = (r[..., ang] + np.pi) % (2 * np.pi) - np.pi
         return r
+
+
+def _same(a, b) -> bool:
+    """Field equality for :meth:`Sensor.__eq__`: arrays by shape and values, else ``==``."""
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return bool(np.array_equal(a, b))
+    return bool(a == b)
 
 
 @dataclass(frozen=True)

@@ -23,14 +23,14 @@ the Euler pose Jacobian being the twist one times diag(I, E(a, b, c)). A plane t
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from pkmcal.conventions import euler_pose_jacobian
 from pkmcal.errors import PkmcalError
-from pkmcal.sensors.base import Sensor
-from pkmcal.sensors.full_pose import as_poses, check_free, check_params
+from pkmcal.sensors._common import as_poses
+from pkmcal.sensors.base import ParamGroup, Sensor
 
 #: Smallest |n_z| (cosine of the plane tilt) at which the indicators are evaluated (≈ 89.9°).
 MIN_NORMAL_Z = 1e-3
@@ -81,17 +81,7 @@ class IndicatorSensor(Sensor):
         if not np.isfinite(self.plane_offset):
             raise PkmcalError("indicators sensor: plane_offset is not a finite number")
         object.__setattr__(self, "plane_offset", float(self.plane_offset))
-        zero = np.zeros(len(pos)) if self.zero is None else self.zero
-        object.__setattr__(self, "zero", check_params(zero, self.param_names, self.kind))
-        object.__setattr__(self, "free", check_free(self.free, self.param_names, self.kind))
-
-    def __eq__(self, other: object) -> bool:
-        if not isinstance(other, IndicatorSensor):
-            return NotImplemented
-        return bool(np.array_equal(self.positions, other.positions) and self.plane_offset == other.plane_offset
-                    and np.array_equal(self.zero, other.zero) and self.free == other.free)
-
-    __hash__ = None  # type: ignore[assignment]
+        self._init_params()
 
     @property
     def n_indicators(self) -> int:
@@ -102,19 +92,10 @@ class IndicatorSensor(Sensor):
         return tuple(f"d{k + 1}" for k in range(self.n_indicators))
 
     @property
-    def param_names(self) -> tuple[str, ...]:
-        return tuple(f"zero{k + 1}" for k in range(self.n_indicators))
-
-    @property
-    def params(self) -> np.ndarray:
-        return np.array(self.zero)
-
-    @property
-    def default_free(self) -> tuple[str, ...]:
-        return () if self.free is None else self.free
-
-    def with_params(self, params: np.ndarray) -> "IndicatorSensor":
-        return replace(self, zero=check_params(params, self.param_names, self.kind))
+    def param_groups(self) -> tuple[ParamGroup, ...]:
+        """θ = the zero offsets ζ_1 … ζ_K, lengths (mm)."""
+        k = self.n_indicators
+        return (ParamGroup("zero", tuple(f"zero{i + 1}" for i in range(k)), (False,) * k),)
 
     def _plane(self, poses):
         """Poses (N, 6), normals n (N, 3), N_k (N, K): numerators of eq. (6)."""

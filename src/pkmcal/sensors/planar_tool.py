@@ -18,16 +18,17 @@ Pose Jacobians are (N, 2, n) with n = 2 or 3, the mechanism's pose dimension.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from pkmcal.errors import PkmcalError
-from pkmcal.sensors.base import Sensor
-from pkmcal.sensors.full_pose import check_free, check_params
+from pkmcal.sensors.base import ParamGroup, Sensor
 
 PLANAR_TARGET_NAMES = ("target.x", "target.y")
 PLANAR_WORLD_NAMES = ("world.x", "world.y", "world.c")
+_GROUPS = (ParamGroup("target", PLANAR_TARGET_NAMES, (False, False)),
+           ParamGroup("world", PLANAR_WORLD_NAMES, (False, False, True)))
 
 
 def _rot(c):
@@ -64,32 +65,17 @@ class PlanarToolSensor(Sensor):
     def __post_init__(self) -> None:
         if self.n_pose not in (2, 3):
             raise PkmcalError(f"planar tool sensor: n_pose must be 2 or 3, got {self.n_pose}")
-        t = np.zeros(2) if self.target is None else self.target
-        w = np.zeros(3) if self.world is None else self.world
-        object.__setattr__(self, "target", check_params(t, PLANAR_TARGET_NAMES, self.kind))
-        object.__setattr__(self, "world", check_params(w, PLANAR_WORLD_NAMES, self.kind))
-        free = PLANAR_TARGET_NAMES if self.free is None else self.free
-        object.__setattr__(self, "free", check_free(free, self.param_names, self.kind))
+        if self.free is None:                       # stored: the setup file writes it back
+            object.__setattr__(self, "free", PLANAR_TARGET_NAMES)
+        self._init_params()
+
+    @property
+    def param_groups(self) -> tuple[ParamGroup, ...]:
+        return _GROUPS
 
     @property
     def reading_names(self) -> tuple[str, ...]:
         return ("px", "py")
-
-    @property
-    def param_names(self) -> tuple[str, ...]:
-        return PLANAR_TARGET_NAMES + PLANAR_WORLD_NAMES
-
-    @property
-    def params(self) -> np.ndarray:
-        return np.concatenate([self.target, self.world])
-
-    @property
-    def default_free(self) -> tuple[str, ...]:
-        return self.free
-
-    def with_params(self, params: np.ndarray) -> "PlanarToolSensor":
-        p = check_params(params, self.param_names, self.kind)
-        return replace(self, target=p[:2], world=p[2:])
 
     def with_deltas(self, deltas: dict[str, float]) -> "PlanarToolSensor":
         p = self.params

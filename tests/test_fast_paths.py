@@ -1,0 +1,190 @@
+"""The identification hot path's shortcuts, each against the slower computation it replaces.
+
+* ``Hexapod.actuator_jacobians`` (one compiled pass) against the NumPy formulas of the
+  twist Jacobian and ∂λ/∂ρ written out here, and against central differences of IK;
+* ``Hexapod.fk_precise`` (one polishing Newton step) against plain FK: same poses to the
+  FK tolerance, IK reproduced to rounding;
+* ``ScaledJacobian.certainly_full_rank`` against the singular values: never claims full
+  rank when σ_P/σ_1 ≤ rtol, and does claim it for well-conditioned matrices;
+* ``identify``'s deferred identifiability report against ``analyse_jacobian`` on the same
+  Jacobian;
+* ``solve_right`` and ``cholesky_inverse`` (compiled loops over tiny matrices) against
+  NumPy's batched ``linalg``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pkmcal.conventions import euler_pose_jacobian, euler_to_matrix
+from pkmcal.identification._small_linalg import cholesky_inverse, solve_right
+from pkmcal.identification.engine import identify
+from pkmcal.identification.identifiability import RANK_RTOL, ScaledJacobian, analyse_jacobian
+from pkmcal.identification.residuals import Model, make_method, whitening
+from pkmcal.identification.simulation import perturb_machine, simulate_campaign
+from pkmcal.io.setup_file import builtin_setup
+from pkmcal.mechanisms import builtin_machine
+
+HALF = np.array([20.0, 20.0, 10.0, *np.deg2rad([8.0, 8.0, 8.0])])
+
+
+@pytest.fixture(scope="module")
+def machine():
+    return builtin_machine("stewart-prototype")
+
+
+def _poses(machine, seed, n=40):
+    rng = np.random.default_rng(seed)
+    return machine.home_pose + rng.uniform(-1.0, 1.0, (n, 6)) * HALF
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_actuator_jacobians_match_numpy_formulas(machine, seed):
+    poses = _poses(machine, seed)
+    A, B = machine.actuator_jacobians(poses)
+    # reference: l_i = p + R a_i − b_i, u_i = l_i/‖l_i‖; twist row [u_iᵀ, (R a_i × u_i)ᵀ]
+    R = euler_to_matrix(poses[:, 3:6])
+    Ra = np.einsum("nrc,ic->nir", R, machine.platform)
+    legs = poses[:, None, :3] + Ra - machine.base
+    u = legs / np.linalg.norm(legs, axis=2, keepdims=True)
+    A_ref = euler_pose_jacobian(np.concatenate([u, np.cross(Ra, u)], axis=2), poses)
+    B_ref = np.zeros((len(poses), 6, 6, 7))
+    legs_idx = np.arange(6)
+    B_ref[:, legs_idx, legs_idx, 0:3] = -u
+    B_ref[:, legs_idx, legs_idx, 3:6] = np.einsum("nir,nrc->nic", u, R)
+    B_ref[:, legs_idx, legs_idx, 6] = -1.0
+    np.testing.assert_allclose(A, A_ref, rtol=0, atol=1e-12 * np.max(np.abs(A_ref)))
+    np.testing.assert_allclose(B, B_ref.reshape(len(poses), 6, 42), rtol=0, atol=1e-12)
+    assert np.array_equal(machine.actuator_pose_jacobian(poses), A)
+    assert np.array_equal(machine.actuator_param_jacobian(poses), B)
+
+
+def test_actuator_jacobians_against_central_differences(machine):
+    poses = _poses(machine, 7, n=5)
+    A, B = machine.actuator_jacobians(poses)
+    h = 1e-6
+    for j in range(6):
+        d = np.zeros(6)
+        d[j] = h
+        fd = (machine.ik(poses + d) - machine.ik(poses - d)) / (2 * h)
+        np.testing.assert_allclose(A[:, :, j], fd, atol=1e-7)
+    rho = machine.params
+    for j in range(42):
+        d = np.zeros(42)
+        d[j] = h
+        fd = (machine.with_params(rho + d).ik(poses) - machine.with_params(rho - d).ik(poses)) / (2 * h)
+        np.testing.assert_allclose(B[:, :, j], fd, atol=1e-7)
+
+
+def test_fk_precise_polishes_to_rounding(machine):
+    poses = _poses(machine, 3, n=2000)
+    q = machine.ik(poses)
+    guess = poses + np.random.default_rng(4).normal(0.0, 0.5, poses.shape) * np.array([1, 1, 1, 0.01, 0.01, 0.01])
+    plain = machine.fk(q, guess=guess)
+    fine = machine.fk_precise(q, guess=guess)
+    assert plain.converged.all() and fine.converged.all()
+    assert np.array_equal(plain.iterations, fine.iterations)          # polishing is not counted
+    lengths = machine.leg_lengths(fine.poses)
+    scale = np.max(np.abs(lengths))
+    # plain FK stops at 1e-9 mm; one more Newton step leaves only rounding (~1e-13 mm here)
+    assert np.max(np.abs(machine.ik(fine.poses) - q)) <= 16 * np.finfo(float).eps * scale
+    assert np.max(np.abs(fine.poses - plain.poses)) < 1e-6
+    assert np.max(np.abs(fine.poses - poses)) < 1e-9
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), log_cond=st.floats(0.0, 12.0), rank_drop=st.integers(0, 2))
+def test_full_rank_certificate_is_never_wrong(seed, log_cond, rank_drop):
+    rng = np.random.default_rng(seed)
+    M, P = 60, 12
+    U, _ = np.linalg.qr(rng.normal(size=(M, P)))
+    V, _ = np.linalg.qr(rng.normal(size=(P, P)))
+    s = np.logspace(0.0, -log_cond, P)
+    if rank_drop:
+        s[-rank_drop:] = 0.0
+    J = (U * s) @ V.T * rng.uniform(0.1, 100.0, P)      # unscaled columns, as in practice
+    sj = ScaledJacobian(J)
+    sv = np.linalg.svd(J / np.linalg.norm(J, axis=0), compute_uv=False)
+    ok = sj.certainly_full_rank()
+    if ok:
+        assert sv[-1] > RANK_RTOL * sv[0]
+    if sv[-1] > 1e3 * P * RANK_RTOL * sv[0]:               # clearly full rank: must be proven
+        assert ok
+    assert analyse_jacobian(J, tuple(f"p{i}" for i in range(P))).identifiable == (sv[-1] > RANK_RTOL * sv[0])
+
+
+@pytest.mark.parametrize("setup_name, method", [("full-pose-paper1", "ik-residual"),
+                                                ("indicators-prototype", "fk-residual")])
+def test_deferred_report_equals_full_analysis(machine, setup_name, method):
+    setup = builtin_setup(setup_name)
+    rng = np.random.default_rng(11)
+    real = perturb_machine(machine, 0.5, rng)
+    sim = simulate_campaign(machine, real, setup, _poses(machine, 12, n=30), rng, ignore_limits=("leg_collision",))
+    res = identify(machine, setup, q=sim.actuator_readings, y=sim.sensor_readings, commanded=sim.commanded[sim.kept],
+                   method=method)
+    model = Model(machine, setup.sensor, setup.noise, sim.actuator_readings, sim.sensor_readings,
+                  sim.commanded[sim.kept])
+    ev = make_method(method, model).evaluate(model.theta0, jac=True, cov=True)
+    J = (whitening(ev.cov) @ ev.J).reshape(-1, ev.J.shape[-1])[:, :42]
+    ref = analyse_jacobian(J, machine.param_names, machine.param_names)
+    rep = res.identifiability
+    assert rep.rank == ref.rank and rep.fixed == ref.fixed
+    np.testing.assert_allclose(rep.singular_values, ref.singular_values, rtol=1e-10, atol=1e-12)
+    assert res.gauge == (() if ref.identifiable else ref.fixed)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 9), m=st.integers(1, 6), N=st.integers(0, 30))
+def test_small_linalg_against_numpy(seed, n, m, N):
+    rng = np.random.default_rng(seed)
+    A = rng.normal(size=(N, n, n)) + 3.0 * np.eye(n)
+    H = rng.normal(size=(N, m, n))
+    X, ok = solve_right(A, H)
+    assert ok.all()
+    np.testing.assert_allclose(X @ A, H, atol=1e-10 * (1 + np.abs(H).max(initial=0)))
+    S = rng.normal(size=(N, n, n))
+    C = S @ np.swapaxes(S, 1, 2) + 0.1 * np.eye(n)
+    W, bad = cholesky_inverse(C)
+    assert bad == -1
+    np.testing.assert_allclose(W, np.linalg.inv(np.linalg.cholesky(C)), rtol=1e-9, atol=1e-9)
+    assert np.all(np.triu(W, 1) == 0.0)
+
+
+def test_small_linalg_flags_singular_and_indefinite():
+    A = np.stack([np.eye(3), np.diag([1.0, 1.0, 0.0]), np.eye(3)])
+    X, ok = solve_right(A, np.ones((3, 2, 3)))
+    assert ok.tolist() == [True, False, True]
+    assert np.isnan(X[1]).all() and np.allclose(X[[0, 2]], 1.0)
+    C = np.stack([np.eye(2), np.eye(2), np.diag([1.0, -1.0])])
+    assert cholesky_inverse(C)[1] == 2
+    assert cholesky_inverse(np.stack([np.eye(2), np.diag([1.0, np.nan])]))[1] == 1
+
+
+def test_identity_sensor_shortcut_matches_general_path(machine, monkeypatch):
+    """A full-pose sensor without world/tool transforms skips the sensor inversion (x̂ = y,
+    H = I); the general Newton inversion and H⁻¹ must give the same residual, Jacobian
+    (sensor columns included) and covariance."""
+    from pkmcal.sensors.full_pose import FullPoseSensor
+
+    setup = builtin_setup("full-pose-paper1")
+    assert setup.sensor.is_identity and not FullPoseSensor(world=np.array([0, 0, 0, 0, 0, 1e-3])).is_identity
+    rng = np.random.default_rng(5)
+    poses = _poses(machine, 6, n=12)
+    y = setup.sensor.predict(poses) + rng.normal(0.0, 0.01, (12, 6))
+    q = machine.ik(poses) + rng.normal(0.0, 0.005, (12, 6))
+
+    def evaluate():
+        model = Model(machine, setup.sensor, setup.noise, q, y)
+        return make_method("ik-residual", model).evaluate(model.theta0, jac=True, cov=True)
+
+    fast = evaluate()
+    monkeypatch.setattr(FullPoseSensor, "is_identity", property(lambda self: False))
+    slow = evaluate()
+    np.testing.assert_allclose(fast.poses, slow.poses, atol=1e-12)
+    np.testing.assert_allclose(fast.r, slow.r, atol=1e-10)
+    np.testing.assert_allclose(fast.J, slow.J, atol=1e-10)
+    np.testing.assert_allclose(fast.cov, slow.cov, rtol=1e-10, atol=1e-16)
