@@ -274,7 +274,7 @@ def paper1_problem(seed: int, n_poses: int = 15):
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=20)
-    ap.add_argument("--trials", type=int, default=200)
+    ap.add_argument("--trials", type=int, default=1000)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--problems", type=int, default=5,
                     help="problem instances per fit (real machines / pose draws); times are medians over them")

@@ -39,13 +39,14 @@ from pkmcal.reproduce.paper3 import CASES, LOAD_N, N_CALIB, TRACKER_STD, case_mo
 from pkmcal.sensors.base import MeasurementSetup
 
 
-def _is_angle(name, mech):
-    """Joint angles and rotary encoder offsets (rad); the rest are lengths (mm)."""
-    return name.startswith("alpha") or (name.startswith("dq") and mech.n_dof == 2)
+def _angle_flags(mech, sensor) -> dict[str, bool]:
+    """Which parameters of the machine and of its sensor are angles (rad inside, degrees in
+    the table), as both declare them (``param_is_angle``)."""
+    return dict(zip(mech.param_names + sensor.param_names, mech.param_is_angle + sensor.param_is_angle))
 
 
 def _random_errors(mech, rng):
-    return {n: rng.normal() * (np.deg2rad(0.05) if _is_angle(n, mech) else 0.2) for n in mech.param_names}
+    return {n: rng.normal() * (np.deg2rad(0.05) if a else 0.2) for n, a in zip(mech.param_names, mech.param_is_angle)}
 
 
 def _summ(res):
@@ -96,8 +97,9 @@ def run(case, n_machines, seed):
                               setup["free"], setup["gauge"])
     fit = repro.fits["projection"]
     ident = []
+    is_angle = _angle_flags(nominal, sensor)
     for name_, d, sd in zip(fit.free, fit.x - fit.initial[fit.free_index], fit.std):
-        ang = _is_angle(name_, nominal)
+        ang = is_angle[name_]
         f = np.rad2deg if ang else float
         ident.append((name_, float(f(setup["table"].get(name_, setup["table_tool"].get(name_, 0.0)))),
                       float(f(truth[name_])), float(f(d)), float(f(sd)), "deg" if ang else "mm"))

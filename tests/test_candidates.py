@@ -118,3 +118,17 @@ def test_read_candidates_csv(tmp_path):
     bad.write_text("x,y,z,a,b\n1,2,3,4,5\n")
     with pytest.raises(InputFileError, match="bad.csv"):
         read_candidates_csv(bad)
+
+
+def test_read_candidates_csv_planar_converts_the_declared_angle_columns(tmp_path):
+    """A planar machine's pose file: x, y (mm) kept, φ (its ``pose_is_angle``) read in degrees."""
+    from pkmcal.mechanisms import planar as PL
+
+    m3, m2 = PL.planar_3dof_4act(), PL.planar_2dof_3act()
+    p = tmp_path / "p3.csv"
+    p.write_text("x,y,phi\n10,220,12.5\n-3,200,-7\n")
+    np.testing.assert_array_equal(read_candidates_csv(p, m3),
+                                  [[10.0, 220.0, np.deg2rad(12.5)], [-3.0, 200.0, np.deg2rad(-7.0)]])
+    q = tmp_path / "p2.csv"
+    q.write_text("y,x\n220,10\n")
+    np.testing.assert_array_equal(read_candidates_csv(q, m2), [[10.0, 220.0]])

@@ -24,7 +24,7 @@ def _unit_poses(m, u):
 
 def _perturbed(m, seed, size=0.5):
     rng = np.random.default_rng(seed)
-    ang = np.array([n.startswith("alpha") or (n.startswith("dq") and m.n_dof == 2) for n in m.param_names])
+    ang = np.array(m.param_is_angle, dtype=bool)
     return m.with_params(m.params + rng.normal(size=len(m.params)) * size * np.where(ang, 1e-2, 1.0))
 
 

@@ -42,10 +42,9 @@ def _case(n_dof):
 def _truth(m, fixed, seed, size=0.2):
     rng = np.random.default_rng(seed)
     d = {}
-    for n in m.param_names:
+    for n, ang in zip(m.param_names, m.param_is_angle):
         if n in fixed:
             continue
-        ang = n.startswith("alpha") or (n.startswith("dq") and m.n_dof == 2)
         d[n] = rng.normal() * size * (np.deg2rad(0.25) if ang else 1.0)
     return m.with_deltas(d)
 

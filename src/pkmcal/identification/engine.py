@@ -408,7 +408,12 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
     n_total = model.n_poses
     used = np.arange(n_total)
 
+    cand, explicit = candidate_parameters(model, free, fix)
+    if not cand:
+        raise PkmcalError("no free parameters to identify (check --free / --fix)")
+    sensor_free = any(i >= model.n_mech for i in cand)   # else the sensor columns of J are not needed
     meth = make_method(method, model, weighted, form=form)
+    meth.sensor_columns = sensor_free
     theta0 = model.theta0
     ev0 = meth.evaluate(theta0, jac=True, cov=True)
     if not ev0.converged.all():
@@ -425,15 +430,13 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
         used = np.flatnonzero(ev0.converged)
         model = model.subset(used)
         meth = make_method(method, model, weighted, form=form)
+        meth.sensor_columns = sensor_free
         ev0 = meth.evaluate(theta0, jac=True, cov=True)
 
     W = whitening(ev0.cov, f"{method} residual") if weighted and method != "projection" else None
     Jw0 = ev0.J if W is None else W @ ev0.J
 
     names = model.names
-    cand, explicit = candidate_parameters(model, free, fix)
-    if not cand:
-        raise PkmcalError("no free parameters to identify (check --free / --fix)")
     rows = Jw0.reshape(-1, Jw0.shape[-1])
     scaled, cand_names = ScaledJacobian(rows[:, cand]), tuple(names[i] for i in cand)
 
@@ -459,7 +462,6 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
         raise PkmcalError(f"{model.n_poses} poses give {M} residuals for {len(free_idx)} free parameters: "
                           "measure more poses or fix parameters")
 
-    meth.sensor_columns = bool(np.any(free_idx >= model.n_mech))
     obj = _Objective(meth, theta0, free_idx, W)
     lsq_method = _solver_args(solver, M, len(free_idx))
     with warnings.catch_warnings():

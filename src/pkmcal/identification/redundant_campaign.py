@@ -35,6 +35,7 @@ from pkmcal.errors import PkmcalError
 from pkmcal.identification.simulation import SimulationResult, campaign_inputs, drop_limit_violations, parameter_errors
 from pkmcal.identification.uncertainty import embed
 from pkmcal.identification.verification import error_stats
+from pkmcal.io.tables import from_file_units, to_file_units
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.mechanisms.statics import StaticsModel, equilibrium
 from pkmcal.sensors.base import MeasurementSetup
@@ -122,8 +123,9 @@ def perturb_planar(machine, magnitude_mm: float, rng, distribution: str = "unifo
 
 def calibrated_sensor(machine: Mechanism, sensor):
     """``sensor`` with the parameters identified together with ``machine`` (its file's
-    ``calibration.sensor`` block: names → values, mm and degrees for ``world.c``), or
-    ``sensor`` itself when the machine has none."""
+    ``calibration.sensor`` block: names → values in file units, mm and degrees for the
+    parameters the sensor declares angles, ``sensor.param_is_angle``), or ``sensor`` itself
+    when the machine has none."""
     cal = (getattr(machine, "metadata", {}) or {}).get("calibration") or {}
     values = cal.get("sensor") if isinstance(cal, dict) else None
     if not values:
@@ -133,13 +135,16 @@ def calibrated_sensor(machine: Mechanism, sensor):
         if k not in sensor.param_names:
             raise PkmcalError(f"machine '{machine.name}': calibration.sensor.{k} is not a parameter of a "
                               f"'{sensor.kind}' sensor ({', '.join(sensor.param_names)})")
-        p[sensor.param_names.index(k)] = np.deg2rad(float(v)) if k == "world.c" else float(v)
+        i = sensor.param_names.index(k)
+        p[i] = from_file_units(float(v), sensor.param_is_angle[i:i + 1])[0]
     return sensor.with_params(p)
 
 
 def sensor_calibration_block(sensor) -> dict:
-    """The ``calibration.sensor`` block (file units) of an identified planar-tool sensor."""
-    return {k: float(np.rad2deg(v)) if k == "world.c" else float(v) for k, v in zip(sensor.param_names, sensor.params)}
+    """The ``calibration.sensor`` block (file units: mm, degrees for the parameters of
+    ``sensor.param_is_angle``) of an identified sensor; :func:`calibrated_sensor` reads it."""
+    values = to_file_units(sensor.params, sensor.param_is_angle)
+    return {k: float(v) for k, v in zip(sensor.param_names, values)}
 
 
 @dataclass(frozen=True)

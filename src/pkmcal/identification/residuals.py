@@ -115,6 +115,9 @@ class Model:
             raise PkmcalError(f"machine and sensor both have parameters named {', '.join(dup)}")
         self.sigma_q = np.broadcast_to(np.asarray(self.noise.actuator_std, dtype=float), (self.q.shape[1],)).copy()
         self.sigma_y = np.broadcast_to(np.asarray(self.noise.reading_std, dtype=float), (self.y.shape[1],)).copy()
+        # split() at the start parameters returns the given objects themselves
+        self._mech_cache = (np.asarray(self.mechanism.params, dtype=float).tobytes(), self.mechanism)
+        self._sensor_cache = (np.asarray(self.sensor.params, dtype=float).tobytes(), self.sensor)
 
     @property
     def n_poses(self) -> int:
@@ -141,13 +144,13 @@ class Model:
         # keyed by the bytes (a copy: θ is often the caller's scratch buffer, overwritten
         # at the next step); bytes compare in ~0.1 µs, np.array_equal in ~3 µs
         key = rho.tobytes()
-        mech = getattr(self, "_mech_cache", None)
-        if mech is None or mech[0] != key:
+        mech = self._mech_cache
+        if mech[0] != key:
             mech = (key, self.mechanism.with_params(rho.copy()))
             self._mech_cache = mech
         key = s.tobytes()
-        sens = getattr(self, "_sensor_cache", None)
-        if sens is None or sens[0] != key:
+        sens = self._sensor_cache
+        if sens[0] != key:
             sens = (key, self.sensor.with_params(s.copy()))
             self._sensor_cache = sens
         return mech[1], sens[1]

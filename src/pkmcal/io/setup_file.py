@@ -367,9 +367,8 @@ def _build(path, lines, spec: _Setup) -> MeasurementSetup:
     free = None if spec.free is None else tuple(spec.free)
 
     def tf(t: _Transform | None):
-        if t is None:
-            return None
-        return np.array([t.x, t.y, t.z, deg_to_rad(t.a), deg_to_rad(t.b), deg_to_rad(t.c)])
+        """x, y, z, a, b, c as written (mm, degrees); :func:`_from_file_units` converts."""
+        return None if t is None else np.array([t.x, t.y, t.z, t.a, t.b, t.c])
 
     try:
         if kind == "indicators":
@@ -398,7 +397,7 @@ def _build(path, lines, spec: _Setup) -> MeasurementSetup:
                     if getattr(spec.world, key) != 0:
                         _fail(path, lines, ("world", key), "a planar tracker frame has only x, y (mm) and c (deg)")
             target = None if spec.target is None else [spec.target.x, spec.target.y]
-            world = None if spec.world is None else [spec.world.x, spec.world.y, deg_to_rad(spec.world.c)]
+            world = None if spec.world is None else [spec.world.x, spec.world.y, spec.world.c]
             sensor = PlanarToolSensor(n_pose=2, target=target, world=world, free=free)
             if noise.reading is None:
                 _fail(path, lines, ("noise", "reading"), "is missing; give the tracker noise (mm)")
@@ -422,6 +421,7 @@ def _build(path, lines, spec: _Setup) -> MeasurementSetup:
             else:
                 ori = np.deg2rad(_expand(path, lines, noise.orientation_deg, 3, ("noise", "orientation_deg"), "deg"))
             reading_std = np.concatenate([pos, ori])
+        sensor = _from_file_units(sensor)
     except InputFileError:
         raise
     except PkmcalError as exc:  # e.g. an unknown name in free:
@@ -444,6 +444,13 @@ def _build(path, lines, spec: _Setup) -> MeasurementSetup:
         noise=NoiseModel(reading_std=reading_std, actuator_std=actuator, distribution=noise.distribution),
         simulation=simulation,
     )
+
+
+def _from_file_units(sensor):
+    """``sensor``, built with θ as the file gives it (mm, degrees), with the parameters its
+    ``param_is_angle`` declares angles converted to radians (:func:`deg_to_rad`)."""
+    theta = [deg_to_rad(v) if ang else float(v) for v, ang in zip(sensor.params, sensor.param_is_angle)]
+    return sensor.with_params(np.array(theta))
 
 
 # -- saving ------------------------------------------------------------------------------
@@ -472,11 +479,13 @@ def _values(std: np.ndarray, uniform: bool):
     return FlowList(float(x) for x in v)
 
 
-def _transform_dict(pose: np.ndarray) -> dict:
-    out: dict = {}
-    for name, v, ang in zip("xyzabc", pose, (False,) * 3 + (True,) * 3):
-        out[name] = RawFloat(rad_to_deg_text(v)) if ang else float(v)
-    return out
+def _group_dict(sensor, field: str) -> dict:
+    """The mapping written for the θ field ``field`` of ``sensor`` (``world``, ``tool``,
+    ``target``): keys the parameter names after the dot (``world.c`` → ``c``), values in file
+    units, degrees for the parameters the sensor's ``param_groups`` declare angles."""
+    group = next(g for g in sensor.param_groups if g.field == field)
+    return {name.split(".", 1)[1]: RawFloat(rad_to_deg_text(v)) if ang else float(v)
+            for name, v, ang in zip(group.names, getattr(sensor, field), group.is_angle)}
 
 
 def setup_to_yaml(setup: MeasurementSetup) -> str:
@@ -489,18 +498,18 @@ def setup_to_yaml(setup: MeasurementSetup) -> str:
         if np.any(s.zero != 0):
             doc["zero"] = FlowList(float(v) for v in s.zero)
     elif isinstance(s, PositionSensor):
-        doc["target"] = {k: float(v) for k, v in zip("xyz", s.target)}
+        doc["target"] = _group_dict(s, "target")
         if np.any(s.world != 0):
-            doc["world"] = _transform_dict(s.world)
+            doc["world"] = _group_dict(s, "world")
     elif isinstance(s, PlanarToolSensor):
-        doc["target"] = {k: float(v) for k, v in zip("xy", s.target)}
+        doc["target"] = _group_dict(s, "target")
         if np.any(s.world != 0):
-            doc["world"] = {"x": float(s.world[0]), "y": float(s.world[1]), "c": RawFloat(rad_to_deg_text(s.world[2]))}
+            doc["world"] = _group_dict(s, "world")
     elif isinstance(s, FullPoseSensor):
         if np.any(s.world != 0):
-            doc["world"] = _transform_dict(s.world)
+            doc["world"] = _group_dict(s, "world")
         if np.any(s.tool != 0):
-            doc["tool"] = _transform_dict(s.tool)
+            doc["tool"] = _group_dict(s, "tool")
     else:
         raise PkmcalError(f"cannot save a setup with a '{s.kind}' sensor")
     if s.free is not None:

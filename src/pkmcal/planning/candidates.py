@@ -270,17 +270,16 @@ def read_candidates_csv(path: str | os.PathLike, mechanism: Mechanism | None = N
     """Poses (N, n) (mm, rad) from a CSV file with the machine's pose columns (default
     x, y, z, a, b, c; lengths mm, angles degrees); ``mapping`` an optional
     :class:`~pkmcal.io.import_mapping.ImportMapping` for files from other tools."""
-    from pkmcal.io.tables import read_table
+    from pkmcal.io.tables import POSE_KINDS, column_kinds, from_file_units, read_table
 
-    names = tuple(mechanism.pose_names) if mechanism is not None else POSE_COLUMNS
-    is_angle = tuple(mechanism.pose_is_angle) if mechanism is not None else (False,) * 3 + (True,) * 3
-    table = read_table(path, names, kinds={nm: ("angle" if a else "length") for nm, a in zip(names, is_angle)},
-                       mapping=mapping)
+    if mechanism is not None:
+        names, is_angle = tuple(mechanism.pose_names), tuple(mechanism.pose_is_angle)
+    else:
+        names, is_angle = POSE_COLUMNS, tuple(POSE_KINDS[c] == "angle" for c in POSE_COLUMNS)
+    table = read_table(path, names, kinds=column_kinds(names, is_angle), mapping=mapping)
     if len(table) == 0:
         raise InputFileError(path, "no candidate poses (the file has a header but no rows)")
-    poses = np.array(table[list(names)], dtype=float)
-    poses[:, np.array(is_angle, dtype=bool)] = np.deg2rad(poses[:, np.array(is_angle, dtype=bool)])
-    return poses
+    return from_file_units(table[list(names)], is_angle)   # any pose dimension (planar: 2 or 3)
 
 
 @blas_single_threaded

@@ -6,7 +6,7 @@ whoever produces a calibration (``pkmcal demo``, ``pkmcal identify --report``) f
 
 Units: lengths in mm and angles in radians, as everywhere inside pkmcal
 (:mod:`pkmcal.conventions`); the report converts angles to degrees (or arc-seconds) for
-display. The summaries of held-out errors are
+display, parameters by the angle flags of :class:`ParameterTable` (never by their names). The summaries of held-out errors are
 
     rms = sqrt(mean(e_j²)),   max = max_j e_j,   p95 = 95th percentile of e_j
 
@@ -20,10 +20,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from pkmcal.conventions import FILE_ANGLE_UNIT, LENGTH_UNIT
 from pkmcal.errors import PkmcalError
 # ρ_ij = C_ij / √(C_ii C_jj), zero-variance rows 0: the report's name for the one implementation.
 from pkmcal.identification.uncertainty import correlation as correlation_from_covariance  # noqa: F401
+from pkmcal.io.tables import to_file_units
 from pkmcal.mechanisms.base import Mechanism
+
+#: Unit in which the report shows angle parameters (as in files and on the command line).
+DISPLAY_ANGLE_UNIT = FILE_ANGLE_UNIT
 
 
 def _array(value, name: str, ndim: int | None = None) -> np.ndarray:
@@ -74,10 +79,13 @@ class Identifiability:
 
 @dataclass(frozen=True, eq=False)
 class ParameterTable:
-    """Identified parameters against nominal: one entry per parameter of the machine.
+    """Identified parameters against nominal: one entry per parameter of the machine (then
+    the sensor parameters that were estimated, when the producer adds them).
 
     ``std`` is the 1σ standard uncertainty (NaN for parameters held fixed); ``free`` marks
-    the estimated parameters; ``true`` (optional) the simulation's ground truth.
+    the estimated parameters; ``true`` (optional) the simulation's ground truth (NaN where
+    unknown); ``is_angle`` which parameters are angles (rad here, shown in degrees), as the
+    machine's and the sensor's ``param_is_angle`` declare them (None: all lengths, mm).
     """
 
     names: tuple[str, ...]
@@ -86,6 +94,7 @@ class ParameterTable:
     std: np.ndarray
     free: np.ndarray
     true: np.ndarray | None = None
+    is_angle: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "names", tuple(self.names))
@@ -97,15 +106,29 @@ class ParameterTable:
             if arr.shape != (n,):
                 raise PkmcalError(f"report: parameter table '{attr}' has {arr.size} values for {n} names")
             object.__setattr__(self, attr, arr)
-        free = np.array(self.free, dtype=bool).reshape(-1)
-        if free.shape != (n,):
-            raise PkmcalError(f"report: parameter table 'free' has {free.size} values for {n} names")
-        free.setflags(write=False)
-        object.__setattr__(self, "free", free)
+        if self.is_angle is None:
+            object.__setattr__(self, "is_angle", np.zeros(n, dtype=bool))
+        for attr in ("free", "is_angle"):
+            flags = np.array(getattr(self, attr), dtype=bool).reshape(-1)
+            if flags.shape != (n,):
+                raise PkmcalError(f"report: parameter table '{attr}' has {flags.size} values for {n} names")
+            flags.setflags(write=False)
+            object.__setattr__(self, attr, flags)
 
     @property
     def deviation(self) -> np.ndarray:
         return self.identified - self.nominal
+
+    @property
+    def units(self) -> tuple[str, ...]:
+        """Display unit of each parameter: "deg" for angles, "mm" for lengths."""
+        return tuple(DISPLAY_ANGLE_UNIT if a else LENGTH_UNIT for a in self.is_angle)
+
+    def display(self, values: np.ndarray) -> np.ndarray:
+        """``values`` (n,) of this table (nominal, identified, deviation, std, true) in the
+        display units of :attr:`units`: θ_deg = θ_rad · 180/π for angles, mm unchanged
+        (:func:`pkmcal.io.tables.to_file_units`, the conversion of every file)."""
+        return to_file_units(values, self.is_angle)
 
 
 @dataclass(frozen=True, eq=False)

@@ -8,9 +8,9 @@ metadata, fixed rcParams, no clock or random state involved).
 Figures: the hexapod in a few poses (legs l_i = p + R a_i − b_i, paper 2 eq. 1, via
 :meth:`~pkmcal.mechanisms.hexapod.Hexapod.leg_vectors`); the pose cloud coloured by tilt
 (angle between the platform and base z axes, arccos R₃₃); the singular values of the
-identification Jacobian (log scale); parameter deviations ρ̂ − ρ₀ with ±2σ bars; the
-parameter correlation matrix; residuals per pose and per reading; histograms of held-out
-errors before and after; error maps before and after.
+identification Jacobian (log scale); parameter deviations ρ̂ − ρ₀ with ±2σ bars (mm, and
+degrees for the angle parameters); the parameter correlation matrix; residuals per pose and
+per reading; histograms of held-out errors before and after; error maps before and after.
 """
 
 from __future__ import annotations
@@ -193,27 +193,34 @@ def singular_values_figure(singular_values: np.ndarray, rank: int) -> Figure:
 
 def parameter_figure(table: ParameterTable) -> Figure:
     """Deviation from nominal ρ̂ − ρ₀ of every parameter with ±2σ error bars; the true
-    deviation (simulation) as open circles; fixed parameters in grey."""
-    dev = table.deviation
-    idx = np.arange(len(table.names))
-    free = table.free
+    deviation (simulation) as open circles; fixed parameters in grey. One panel per unit:
+    lengths in mm, angles (``table.is_angle``) in degrees."""
+    dev, std = table.display(table.deviation), table.display(table.std)
+    true_dev = None if table.true is None else table.display(table.true - table.nominal)
+    units = np.array(table.units)
+    groups = [(u, np.flatnonzero(units == u)) for u in ("mm", "deg") if np.any(units == u)] or [("mm", np.arange(0))]
     with style():
-        fig = _new((max(6.4, 0.16 * len(idx) + 1.5), 3.6))
-        ax = fig.add_subplot(1, 1, 1)
-        err = np.where(free & np.isfinite(table.std), 2.0 * table.std, 0.0)
-        ax.errorbar(idx[free], dev[free], yerr=err[free], fmt="o", ms=3.5, color=AFTER_COLOUR, ecolor=AFTER_COLOUR,
-                    elinewidth=1, capsize=2, label="identified ± 2σ")
-        if (~free).any():
-            ax.plot(idx[~free], dev[~free], "s", ms=3.5, color="0.6", label="fixed")
-        if table.true is not None:
-            ax.plot(idx, table.true - table.nominal, "o", mfc="none", mec=BEFORE_COLOUR, ms=6, label="true (simulation)")
-        ax.axhline(0.0, color="0.3", lw=0.8)
-        ax.set_xticks(idx)
-        ax.set_xticklabels(table.names, rotation=90, fontsize=6)
-        ax.set_xlim(-0.8, len(idx) - 0.2)
-        ax.set_ylabel("deviation from nominal (mm)")
-        ax.set_title("Identified parameters")
-        ax.legend(fontsize=8, loc="best")
+        width = max(6.4, 0.16 * max(len(cols) for _, cols in groups) + 1.5)
+        fig = _new((width, 3.6 * len(groups)))
+        for g, (unit, cols) in enumerate(groups):
+            ax = fig.add_subplot(len(groups), 1, g + 1)
+            idx = np.arange(len(cols))
+            free = table.free[cols]
+            err = np.where(free & np.isfinite(std[cols]), 2.0 * std[cols], 0.0)
+            ax.errorbar(idx[free], dev[cols][free], yerr=err[free], fmt="o", ms=3.5, color=AFTER_COLOUR,
+                        ecolor=AFTER_COLOUR, elinewidth=1, capsize=2, label="identified ± 2σ")
+            if (~free).any():
+                ax.plot(idx[~free], dev[cols][~free], "s", ms=3.5, color="0.6", label="fixed")
+            if true_dev is not None:
+                ax.plot(idx, true_dev[cols], "o", mfc="none", mec=BEFORE_COLOUR, ms=6, label="true (simulation)")
+            ax.axhline(0.0, color="0.3", lw=0.8)
+            ax.set_xticks(idx)
+            ax.set_xticklabels([table.names[c] for c in cols], rotation=90, fontsize=6)
+            ax.set_xlim(-0.8, len(idx) - 0.2)
+            ax.set_ylabel(f"deviation from nominal ({unit})")
+            if g == 0:
+                ax.set_title("Identified parameters")
+            ax.legend(fontsize=8, loc="best")
         fig.tight_layout()
     return fig
 

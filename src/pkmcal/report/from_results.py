@@ -15,7 +15,7 @@ import numpy as np
 from pkmcal.identification.identifiability import format_direction
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.report.data import ErrorMap, HeldOutErrors, Identifiability, ParameterTable, ReportData, Residuals
-from pkmcal.sensors.base import MeasurementSetup
+from pkmcal.sensors.base import MeasurementSetup, Sensor
 
 
 def identifiability_from_report(report, fixed: tuple[str, ...]) -> Identifiability:
@@ -58,6 +58,37 @@ def error_map(nominal: Mechanism, calibrated: Mechanism, real: Mechanism, x: np.
     return ErrorMap(np.asarray(x, float), np.asarray(y, float), float(z), before, after, tuple(float(v) for v in abc))
 
 
+def param_is_angle(mechanism: Mechanism) -> tuple[bool, ...]:
+    """The mechanism's declared ``param_is_angle``; a mechanism without the declaration
+    (the hexapod) has only lengths."""
+    flags = getattr(mechanism, "param_is_angle", None)
+    return (False,) * len(mechanism.param_names) if flags is None else tuple(bool(a) for a in flags)
+
+
+def parameter_table(nominal: Mechanism, result, true_machine: Mechanism | None = None,
+                    true_sensor: Sensor | None = None) -> ParameterTable:
+    """Every machine parameter, then the sensor parameters the fit estimated (free or gauge),
+    with their angle flags from ``nominal.param_is_angle`` and ``result.sensor.param_is_angle``
+    (result.names is machine then sensor). ``true`` from ``true_machine`` / ``true_sensor``,
+    NaN where not given."""
+    p = len(nominal.param_names)
+    sensor_angle = dict(zip(result.sensor.param_names, result.sensor.param_is_angle))
+    flags = param_is_angle(nominal) + tuple(sensor_angle[n] for n in result.names[p:])
+    free_set = {n: k for k, n in enumerate(result.free)}
+    shown = list(range(p)) + [i for i in range(p, len(result.names))
+                              if result.names[i] in free_set or result.names[i] in result.gauge]
+    names = tuple(result.names[i] for i in shown)
+    std = np.array([result.std[free_set[n]] if n in free_set else np.nan for n in names])
+    true = None
+    if true_machine is not None or true_sensor is not None:
+        t_mech = np.full(p, np.nan) if true_machine is None else np.asarray(true_machine.params, dtype=float)
+        t_sens = dict(zip(true_sensor.param_names, true_sensor.params)) if true_sensor is not None else {}
+        true = np.r_[t_mech, [t_sens.get(n, np.nan) for n in result.names[p:]]][shown]
+    return ParameterTable(names, np.asarray(result.initial)[shown], np.asarray(result.estimate)[shown], std,
+                          np.array([n in free_set for n in names]), true=true,
+                          is_angle=np.array(flags, dtype=bool)[shown])
+
+
 def report_data_from_results(
     nominal: Mechanism,
     result,
@@ -67,6 +98,7 @@ def report_data_from_results(
     verification=None,
     identified: Mechanism | None = None,
     true_machine: Mechanism | None = None,
+    true_sensor: Sensor | None = None,
     error_map: ErrorMap | None = None,
     title: str | None = None,
     setup_summary: str = "",
@@ -78,15 +110,10 @@ def report_data_from_results(
     ``poses`` (N, 6): the poses measured (commanded or planned); ``verification`` a
     :class:`~pkmcal.identification.verification.VerificationReport` with a 'before'
     column; ``identified`` the calibrated machine as exported (default ``result.mechanism``);
-    ``true_machine`` the simulation's real machine, shown beside the estimates.
+    ``true_machine`` (and ``true_sensor``) the simulation's real machine (sensor), shown
+    beside the estimates.
     """
-    p = len(nominal.param_names)
-    names = tuple(result.names[:p])
-    free_set = {n: k for k, n in enumerate(result.free)}
-    std = np.array([result.std[free_set[n]] if n in free_set else np.nan for n in names])
-    free = np.array([n in free_set for n in names])
-    table = ParameterTable(names, result.initial[:p], result.estimate[:p], std, free,
-                           true=None if true_machine is None else true_machine.params)
+    table = parameter_table(nominal, result, true_machine, true_sensor)
     corr = np.asarray(result.correlation, dtype=float)
     res_names = tuple(result.residual_names)
     facts = (("identification method", f"{result.method} ({'noise-weighted' if result.weighted else 'plain'} "

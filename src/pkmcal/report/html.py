@@ -170,6 +170,30 @@ def _held_out_rows(data: ReportData) -> tuple[str, list[list[str]]]:
     return headline, rows
 
 
+#: Per display unit of a parameter: digits of its values, and unit and scale of the
+#: error against the truth (µm for mm, arc-seconds for degrees).
+_PARAM_FORMAT = {"mm": (4, "µm", 1000.0), "deg": (6, "arcsec", 3600.0)}
+
+
+def _parameter_rows(t) -> tuple[list[str], list[list[str]]]:
+    """Header and rows of the identified-parameters table: each row in its own unit (mm, or
+    degrees for the angles of ``t.is_angle``), values, deviation and σ converted alike."""
+    nominal, identified, dev, std = (t.display(v) for v in (t.nominal, t.identified, t.deviation, t.std))
+    header = ["parameter", "unit", "nominal", "identified", "deviation", "± 1σ"]
+    if t.true is not None:
+        true = t.display(t.true)
+        header += ["true", "error (µm; arcsec for deg)"]
+    rows = []
+    for i, (name, unit) in enumerate(zip(t.names, t.units)):
+        digits, err_unit, err_scale = _PARAM_FORMAT[unit]
+        row = [_esc(name), unit, _fmt(nominal[i], f".{digits}f"), _fmt(identified[i], f".{digits}f"),
+               _fmt(dev[i], f"+.{digits}f"), _fmt(std[i], f".{digits}f") if t.free[i] else "fixed"]
+        if t.true is not None:
+            row += [_fmt(true[i], f".{digits}f"), _fmt((identified[i] - true[i]) * err_scale, "+.2f")]
+        rows.append(row)
+    return header, rows
+
+
 def render_html(data: ReportData, figs: list[F.RenderedFigure]) -> str:
     """The report page (a string) for ``data`` with the rendered figures ``figs``."""
     by_name = {f.name: f for f in figs}
@@ -226,19 +250,8 @@ def render_html(data: ReportData, figs: list[F.RenderedFigure]) -> str:
     # -- parameters --------------------------------------------------------------------
     t = data.parameters
     add('<h2 id="parameters">Identified parameters</h2>')
-    header = ["parameter", "nominal (mm)", "identified (mm)", "deviation (mm)", "± 1σ (mm)"]
-    if t.true is not None:
-        header += ["true (mm)", "error (µm)"]
-    prow, pclass = [], []
-    for i, name in enumerate(t.names):
-        row = [_esc(name), _fmt(t.nominal[i]), _fmt(t.identified[i]), _fmt(t.deviation[i], "+.4f"),
-               _fmt(t.std[i], ".4f") if t.free[i] else "fixed"]
-        if t.true is not None:
-            row += [_fmt(t.true[i]), _fmt((t.identified[i] - t.true[i]) * 1000.0, "+.2f")]
-        prow.append(row)
-        pclass.append("" if t.free[i] else "fixed")
     add(fig("parameters"))
-    add(_table(header, prow, row_class=pclass))
+    add(_table(*_parameter_rows(t), left=2, row_class=["" if f else "fixed" for f in t.free]))
     if len(data.correlation_names) > 1:
         c = np.array(data.correlation, dtype=float)
         iu = np.triu_indices(len(data.correlation_names), k=1)

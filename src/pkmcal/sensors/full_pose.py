@@ -57,6 +57,7 @@ class FullPoseSensor(Sensor):
         # the constant parts of the chain, once per sensor (not per pose batch)
         object.__setattr__(self, "_chain", PointChain(self.world, self.tool[0:3], self.kind))
         object.__setattr__(self, "_Rt", euler_to_matrix(self.tool[3:6]))
+        object.__setattr__(self, "_identity", not (np.any(self.world) or np.any(self.tool)))
 
     @property
     def param_groups(self) -> tuple[ParamGroup, ...]:
@@ -65,7 +66,7 @@ class FullPoseSensor(Sensor):
     @property
     def is_identity(self) -> bool:
         """No world or tool transform: the readings are the platform pose (|b| < 90°)."""
-        return not (np.any(self.world) or np.any(self.tool))
+        return self._identity
 
     @property
     def reading_names(self) -> tuple[str, ...]:
