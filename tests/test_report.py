@@ -238,3 +238,98 @@ def test_report_from_an_engine_result_without_verification(tmp_path):
         assert f'<tr class="fixed"><td class="l">{name}</td>' in page
     rms = np.sqrt(np.mean(result.residuals[:, 0] ** 2)) * 1000
     assert f"<td>{rms:.3f}</td>" in page
+
+
+# -- planar machines: angle parameters in degrees, by the declared flags -------------------
+
+
+def _planar_identification(name: str):
+    """A projection fit (paper 3) of a planar machine whose every parameter is off (angles by
+    0.05°, lengths by 0.1 mm), with the tracker frame (world.x, world.y, world.c) free."""
+    import dataclasses
+
+    from pkmcal.identification.engine import identify
+    from pkmcal.identification.redundant_campaign import simulate_redundant_campaign
+    from pkmcal.io.setup_file import builtin_setup
+    from pkmcal.mechanisms.library import builtin_machine
+
+    nominal = builtin_machine(name)
+    errors = {n: (np.deg2rad(0.05) if a else 0.1) * (-1) ** k
+              for k, (n, a) in enumerate(zip(nominal.param_names, nominal.param_is_angle))}
+    real = nominal.with_deltas(errors)
+    setup = builtin_setup("planar-tracker", nominal)
+    sensor = dataclasses.replace(setup.sensor, free=("target.x", "target.y", "world.x", "world.y", "world.c"))
+    setup = dataclasses.replace(setup, sensor=sensor)
+    real_sensor = sensor.with_params(np.array([0.5, -0.2, 1.0, 2.0, np.deg2rad(0.3)]))
+    poses = nominal.sample_poses(20, np.random.default_rng(1))
+    sim = simulate_redundant_campaign(nominal, real, dataclasses.replace(setup, sensor=real_sensor), poses,
+                                      np.random.default_rng(2))
+    result = identify(nominal, setup, sim.measurements, method="projection")
+    assert result.success
+    return nominal, real, real_sensor, setup, sim, result
+
+
+def _parameter_cells(page: str) -> dict[str, list[str]]:
+    """{name: [unit, nominal, identified, deviation, σ, true, error]} of the parameters table."""
+    section = page[page.index('<h2 id="parameters">'):page.index('<h2 id="residuals">')]
+    table = section[section.index("<table>"):section.index("</table>")]
+    rows = re.findall(r"<tr(?: class=\"fixed\")?>(.*?)</tr>", table)
+    cells = [re.findall(r"<t[dh][^>]*>(.*?)</t[dh]>", r) for r in rows]
+    assert cells[0][:6] == ["parameter", "unit", "nominal", "identified", "deviation", "± 1σ"]
+    return {c[0]: c[1:] for c in cells[1:]}
+
+
+@pytest.mark.parametrize("name, angles", [("planar-2dof-3act", {"dq1", "dq2", "dq3", "world.c"}),
+                                          ("planar-3dof-4act", {"alpha1", "alpha2", "world.c"})])
+def test_planar_report_shows_angle_parameters_in_degrees(tmp_path, name, angles):
+    """Angle parameters (way directions alpha*, rotary encoder offsets dq* of the 2-dof machine,
+    the tracker's world.c) in degrees with unit "deg", lengths (the 3-dof machine's linear dq*
+    too) in mm; every number against the engine's radians converted here independently."""
+    from pkmcal.report.from_results import report_data_from_results
+
+    nominal, real, real_sensor, setup, sim, result = _planar_identification(name)
+    data = report_data_from_results(nominal, result, setup, sim.commanded[sim.kept], true_machine=real,
+                                    true_sensor=real_sensor)
+    t = data.parameters
+    assert {n for n, a in zip(t.names, t.is_angle) if a} == angles
+    cells = _parameter_cells(write_report(data, tmp_path, png=False).html.read_text(encoding="utf-8"))
+    free_std = dict(zip(result.free, result.std))
+    truth = dict(zip(nominal.param_names + real_sensor.param_names,
+                     np.r_[real.params, real_sensor.params]))
+    shown = [n for n in result.names if n in nominal.param_names or n in result.free or n in result.gauge]
+    assert list(cells) == shown
+    for n in shown:
+        i = result.names.index(n)
+        a = n in angles
+        conv = (lambda v: v * 180.0 / np.pi) if a else (lambda v: v)   # noqa: E731
+        d = 6 if a else 4
+        unit, nom, ident, dev, sd, true, err = cells[n]
+        assert unit == ("deg" if a else "mm"), n
+        assert nom == f"{conv(result.initial[i]):.{d}f}" and ident == f"{conv(result.estimate[i]):.{d}f}", n
+        assert dev == f"{conv(result.estimate[i] - result.initial[i]):+.{d}f}", n
+        assert sd == (f"{conv(free_std[n]):.{d}f}" if n in free_std else "fixed"), n
+        assert true == f"{conv(truth[n]):.{d}f}", n
+        assert err == f"{conv(result.estimate[i] - truth[n]) * (3600.0 if a else 1000.0):+.2f}", n
+    # the page really is in degrees: an angle's radian value does not appear, its degrees do
+    k = next(n for n in angles if n in free_std)
+    est = result.estimate[result.names.index(k)]
+    assert abs(np.rad2deg(est)) > 0.01 and cells[k][2] != f"{est:.6f}"
+    # the projection's residual rows are whitened combinations of readings (weighted fit)
+    assert data.residuals.units == ("1",) * len(result.residual_names)
+
+
+def test_residual_units_follow_the_declared_reading_flags():
+    """Rows named after readings take the reading's declared unit; the projection's rows are
+    "1" when whitened or mixing mm and rad, else the readings' common unit."""
+    from pkmcal.io.setup_file import builtin_setup
+    from pkmcal.mechanisms.library import builtin_machine
+    from pkmcal.report.from_results import residual_units
+
+    rotary, linear = builtin_machine("planar-2dof-3act"), builtin_machine("planar-3dof-4act")
+    s_rot, s_lin = builtin_setup("planar-tracker", rotary), builtin_setup("planar-tracker", linear)
+    assert residual_units(("px", "q1", "r1"), s_rot, rotary) == ("mm", "rad", "1")        # tracker mm, encoders rad
+    assert residual_units(("px", "q1", "r1"), s_lin, linear) == ("mm", "mm", "mm")
+    assert residual_units(("r1",), s_lin, linear, weighted=True) == ("1",)
+    full = builtin_setup("full-pose-paper1")
+    hexapod = stewart_prototype()
+    assert residual_units(("x", "c", hexapod.actuator_names[0]), full, hexapod) == ("mm", "rad", "mm")

@@ -66,7 +66,8 @@ def correlation(cov: np.ndarray) -> np.ndarray:
     """Correlation matrix of a covariance (zero rows/columns stay zero, diagonal 1)."""
     sd = standard_deviations(cov)
     inv = np.where(sd > 0, 1.0 / np.where(sd > 0, sd, 1.0), 0.0)
-    C = cov * np.outer(inv, inv)      # exactly symmetric when cov is
+    C = cov * inv[:, None] * inv[None, :]     # in this order: no overflow for tiny σ
+    C = 0.5 * (C + C.T)                       # exactly symmetric
     np.fill_diagonal(C, np.where(sd > 0, 1.0, 0.0))
     return C
 

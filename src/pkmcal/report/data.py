@@ -29,6 +29,8 @@ from pkmcal.mechanisms.base import Mechanism
 
 #: Unit in which the report shows angle parameters (as in files and on the command line).
 DISPLAY_ANGLE_UNIT = FILE_ANGLE_UNIT
+#: Units of residual rows (:class:`Residuals`): lengths, angles, none (whitened or mixed).
+RESIDUAL_UNITS = ("mm", "rad", "1")
 
 
 def _array(value, name: str, ndim: int | None = None) -> np.ndarray:
@@ -137,7 +139,8 @@ class Residuals:
 
     ``values`` (N, m) in display-ready internal units (mm, or rad for ``unit == "rad"``);
     ``names`` (m,) the reading names (e.g. "d1", or "lambda3" for actuator residuals);
-    ``units`` (m,) "mm" or "rad".
+    ``units`` (m,) "mm", "rad", or "1" for rows without one physical unit (the projection's
+    combinations of readings r = U⊥ᵀ W e: whitened, or mixing mm and rad), shown as computed.
     """
 
     values: np.ndarray
@@ -153,9 +156,9 @@ class Residuals:
             raise PkmcalError(
                 f"report: residuals have {values.shape[1]} columns but {len(self.names)} names, {len(self.units)} units"
             )
-        bad = set(self.units) - {"mm", "rad"}
+        bad = set(self.units) - set(RESIDUAL_UNITS)
         if bad:
-            raise PkmcalError(f"report: residual units must be 'mm' or 'rad'; got {sorted(bad)}")
+            raise PkmcalError(f"report: residual units must be 'mm', 'rad' or '1'; got {sorted(bad)}")
 
 
 @dataclass(frozen=True, eq=False)

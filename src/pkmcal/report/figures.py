@@ -49,6 +49,8 @@ RC = {
 BEFORE_COLOUR = "#d62728"
 AFTER_COLOUR = "#1f77b4"
 ARCSEC_PER_RAD = 180.0 / np.pi * 3600.0
+#: Residual unit (:class:`~pkmcal.report.data.Residuals`) → (display unit, scale).
+RESIDUAL_DISPLAY = {"mm": ("µm", 1000.0), "rad": ("arcsec", ARCSEC_PER_RAD), "1": ("1", 1.0)}
 
 
 @contextmanager
@@ -251,9 +253,10 @@ def _unit_groups(res: Residuals):
     """Residual columns grouped by unit: (label, scale, column indices)."""
     groups = []
     units = np.array(res.units)
-    for unit, label, scale in (("mm", "residual (µm)", 1000.0), ("rad", "residual (arcsec)", ARCSEC_PER_RAD)):
+    for unit, (shown, scale) in RESIDUAL_DISPLAY.items():
         cols = np.flatnonzero(units == unit)
         if cols.size:
+            label = "residual (whitened or mixed units)" if unit == "1" else f"residual ({shown})"
             groups.append((label, scale, cols))
     return groups
 

@@ -27,10 +27,21 @@ def identifiability_from_report(report, fixed: tuple[str, ...]) -> Identifiabili
                            fixed=tuple(fixed), weak=weak, null_space=null)
 
 
-def residual_units(names: tuple[str, ...], setup: MeasurementSetup) -> tuple[str, ...]:
-    """"rad" for residual rows that are angle readings of the sensor, "mm" otherwise."""
-    angle = dict(zip(setup.sensor.reading_names, setup.sensor.reading_is_angle))
-    return tuple("rad" if angle.get(n, False) else "mm" for n in names)
+def residual_units(names: tuple[str, ...], setup: MeasurementSetup, mechanism: Mechanism | None = None,
+                   weighted: bool = False) -> tuple[str, ...]:
+    """Unit of each residual row. A row named after a reading has that reading's unit, from
+    the declared flags: the sensor's ``reading_is_angle``, the mechanism's
+    ``actuator_is_angle`` ("rad" for angles, "mm" otherwise). Other rows combine readings
+    (the projection's r = U⊥ᵀ W [e_y; e_q], paper 3 eq. 8): "1" when whitened (``weighted``)
+    or when the readings mix lengths and angles, else the readings' common unit."""
+    sensor = setup.sensor
+    flags = tuple(sensor.reading_is_angle)
+    angle = dict(zip(sensor.reading_names, sensor.reading_is_angle))
+    if mechanism is not None:
+        flags += tuple(mechanism.actuator_is_angle)
+        angle.update(zip(mechanism.actuator_names, mechanism.actuator_is_angle))
+    combined = "1" if weighted or (any(flags) and not all(flags)) else ("rad" if flags and all(flags) else "mm")
+    return tuple(("rad" if angle[n] else "mm") if n in angle else combined for n in names)
 
 
 def held_out_from_verification(verification) -> HeldOutErrors | None:
@@ -133,7 +144,8 @@ def report_data_from_results(
         parameters=table,
         correlation=corr,
         correlation_names=tuple(result.free),
-        residuals=Residuals(np.asarray(result.residuals, dtype=float), res_names, residual_units(res_names, setup)),
+        residuals=Residuals(np.asarray(result.residuals, dtype=float), res_names,
+                            residual_units(res_names, setup, nominal, bool(result.weighted))),
         held_out=None if verification is None else held_out_from_verification(verification),
         error_map=error_map,
         setup_summary=setup_summary,

@@ -9,7 +9,7 @@ JavaScript, no external URL, one file to mail or archive. Same input → same by
 Sections: machine and setup; pose plan (machine in a few poses, pose cloud);
 identifiability (rank, singular values, fixed gauge, weak directions, paper 2 §4 /
 paper 3 §3); identified parameters ± 1σ against nominal (and the simulation's truth when
-known) with the correlation matrix ρ_ij = C_ij/√(C_ii C_jj); residuals per pose and per
+known), each in its unit: mm, degrees for the parameters declared angles with the correlation matrix ρ_ij = C_ij/√(C_ii C_jj); residuals per pose and per
 reading; held-out errors before/after (rms = √(mean e²), p95, max); error maps.
 """
 
@@ -270,13 +270,16 @@ def render_html(data: ReportData, figs: list[F.RenderedFigure]) -> str:
     if r.values.size:
         rrows = []
         for k, name in enumerate(r.names):
-            scale, unit = (1000.0, "µm") if r.units[k] == "mm" else (ARCSEC, "arcsec")
+            unit, scale = F.RESIDUAL_DISPLAY[r.units[k]]
             s = summarise(np.abs(r.values[:, k]))
             rrows.append([_esc(name), unit, _fmt(s["rms"] * scale, ".3f"), _fmt(s["p95"] * scale, ".3f"),
                           _fmt(s["max"] * scale, ".3f")])
         add(_table(["reading", "unit", "rms", "p95 |r|", "max |r|"], rrows, left=2))
-        worst = np.argsort(-np.sqrt(np.mean(np.where(np.array(r.units) == "mm", r.values * 1000.0,
-                                                            r.values * ARCSEC) ** 2, axis=1)), kind="stable")[:3]
+        if "1" in r.units:
+            add("<p>Rows of unit 1 combine readings (the projection method, paper 3 eq. 8): divided by the "
+                "noise σ in a weighted fit, else mixing mm and rad; shown as computed.</p>")
+        scales = np.array([F.RESIDUAL_DISPLAY[u][1] for u in r.units])
+        worst = np.argsort(-np.sqrt(np.mean((r.values * scales) ** 2, axis=1)), kind="stable")[:3]
         add(f"<p>Poses with the largest residuals: {', '.join(str(int(w) + 1) for w in worst)}.</p>")
     add(fig("residuals-per-pose"))
     add(fig("residuals-per-reading"))
