@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import yaml
 from hypothesis import HealthCheck, settings
 from hypothesis import strategies as st
@@ -22,6 +23,16 @@ PROTOTYPE_LEGS_YAML = """\
   - {base: [76.25, 132.068, 0], platform: [60.622, 35, 0], offset: 305.0, stroke: [0, 50]}
   - {base: [0, 152.5, 0], platform: [-35, 60.622, 0], offset: 305.0, stroke: [0, 50]}
 """
+
+
+#: Half-widths of the random poses around home the identification tests use (mm, rad).
+POSE_HALF_WIDTHS = np.array([20.0, 20.0, 10.0, *np.deg2rad([8.0, 8.0, 8.0])])
+
+
+def random_poses(machine, n: int, seed: int = 0) -> np.ndarray:
+    """``n`` poses uniform in home ± :data:`POSE_HALF_WIDTHS` (internal units)."""
+    rng = np.random.default_rng(seed)
+    return machine.home_pose + rng.uniform(-1.0, 1.0, (n, 6)) * POSE_HALF_WIDTHS
 
 
 # -- the CLI's user-error contract ---------------------------------------------------------------

@@ -10,6 +10,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from helpers import random_poses
 
 from pkmcal.errors import PkmcalError
 from pkmcal.identification.engine import identify, measurement_arrays
@@ -20,7 +21,6 @@ from pkmcal.sensors.full_pose import FullPoseSensor
 from pkmcal.sensors.indicators import IndicatorSensor
 from pkmcal.sensors.position import PositionSensor
 
-HALF = np.array([20.0, 20.0, 10.0, *np.deg2rad([8.0, 8.0, 8.0])])
 
 
 @pytest.fixture(scope="module")
@@ -34,8 +34,7 @@ def real():
 
 
 def commanded(machine, n, seed=0):
-    rng = np.random.default_rng(seed)
-    return machine.home_pose + rng.uniform(-1.0, 1.0, (n, 6)) * HALF
+    return random_poses(machine, n, seed)
 
 
 def simulate(nominal, real, sensor, cmd, noise=None, seed=1):

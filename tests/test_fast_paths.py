@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from helpers import random_poses
 
 from pkmcal.conventions import euler_pose_jacobian, euler_to_matrix
 from pkmcal.identification._small_linalg import cholesky_inverse, solve_right
@@ -28,8 +29,6 @@ from pkmcal.identification.simulation import perturb_machine, simulate_campaign
 from pkmcal.io.setup_file import builtin_setup
 from pkmcal.mechanisms import builtin_machine
 
-HALF = np.array([20.0, 20.0, 10.0, *np.deg2rad([8.0, 8.0, 8.0])])
-
 
 @pytest.fixture(scope="module")
 def machine():
@@ -37,8 +36,7 @@ def machine():
 
 
 def _poses(machine, seed, n=40):
-    rng = np.random.default_rng(seed)
-    return machine.home_pose + rng.uniform(-1.0, 1.0, (n, 6)) * HALF
+    return random_poses(machine, n, seed)
 
 
 @settings(max_examples=25, deadline=None)

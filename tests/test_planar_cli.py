@@ -226,3 +226,32 @@ def test_planar_error_paths(tmp_path):
                            nosim), "simulation:")
     assert_user_error(run("verify", "stewart-prototype", "--real", "stewart-prototype", "--poses", held,
                            "--setup", setup_path), "--setup applies")
+
+
+@pytest.mark.parametrize("sensor_kind", ["planar-tool", "position"])
+def test_sensor_calibration_block_round_trip_by_declared_angles(tmp_path, sensor_kind):
+    """``calibration.sensor`` of a machine file: the parameters the sensor declares angles
+    (``param_is_angle``: planar world.c; position world.a, b, c) in degrees, the rest in mm;
+    written, saved with the machine, loaded and applied, it gives back the same radians."""
+    import dataclasses
+
+    from pkmcal.identification.redundant_campaign import sensor_calibration_block
+    from pkmcal.sensors import PlanarToolSensor, PositionSensor
+
+    if sensor_kind == "planar-tool":
+        base = PlanarToolSensor(n_pose=3)
+        theta = np.array([0.5, -0.25, 12.0, -3.0, np.deg2rad(0.7)])
+    else:
+        base = PositionSensor()
+        theta = np.array([1.0, 2.0, 30.0, -4.0, 5.0, 6.0, *np.deg2rad([0.3, -1.1, 2.5])])
+    sensor = base.with_params(theta)
+    block = sensor_calibration_block(sensor)
+    assert list(block) == list(sensor.param_names)
+    for name, value, is_angle in zip(sensor.param_names, theta, sensor.param_is_angle):
+        assert block[name] == pytest.approx(value * 180.0 / np.pi if is_angle else value, rel=1e-15), name
+    machine = builtin_machine("planar-3dof-4act")
+    machine = dataclasses.replace(machine, metadata={**dict(machine.metadata), "calibration": {"sensor": block}})
+    save_machine(machine, tmp_path / "cal.yaml")
+    back = calibrated_sensor(load_machine(tmp_path / "cal.yaml"), base)
+    np.testing.assert_allclose(back.params, theta, rtol=1e-15, atol=0)
+    assert calibrated_sensor(builtin_machine("planar-3dof-4act"), base) is base     # no record: unchanged

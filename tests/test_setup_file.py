@@ -219,3 +219,28 @@ def test_planar_tool_setup_errors(tmp_path, text, key):
     with pytest.raises(InputFileError) as exc:
         load_setup(p)
     assert f"key '{key}'" in str(exc.value) and "bad.yaml" in str(exc.value) and "line" in str(exc.value)
+
+
+def test_saved_sensor_parameters_are_in_file_units_by_the_declared_angle_flags(tmp_path):
+    """Every θ value a setup file holds is the sensor's parameter in file units: degrees for
+    the parameters its ``param_is_angle`` declares (transform a, b, c; planar world.c), mm
+    for the rest; reading the file gives back the same radians."""
+    import yaml
+
+    from pkmcal.sensors import PlanarToolSensor
+
+    rad = np.deg2rad([0.3, -1.1, 2.5, 7.0, -0.2, 45.0])
+    sensors = [
+        FullPoseSensor(world=np.r_[1.0, 2.0, 3.0, rad[:3]], tool=np.r_[4.0, 5.0, 6.0, rad[3:]]),
+        PositionSensor(target=[1.0, 2.0, 30.0], world=np.r_[-1.0, 0.5, 2.0, rad[:3]]),
+        PlanarToolSensor(n_pose=3, target=[0.5, -0.25], world=[10.0, 5.0, rad[5]]),
+    ]
+    for k, sensor in enumerate(sensors):
+        setup = MeasurementSetup(sensor, NoiseModel(np.full(sensor.n_readings, 0.01), np.array(0.005)))
+        doc = yaml.safe_load(setup_to_yaml(setup))
+        for name, value, is_angle in zip(sensor.param_names, sensor.params, sensor.param_is_angle):
+            group, key = name.split(".")
+            assert doc[group][key] == pytest.approx(np.rad2deg(value) if is_angle else value, rel=1e-15), name
+        path = tmp_path / f"s{k}.yaml"
+        save_setup(setup, path)
+        np.testing.assert_array_equal(load_setup(path).sensor.params, sensor.params)

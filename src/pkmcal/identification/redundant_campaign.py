@@ -136,7 +136,7 @@ def calibrated_sensor(machine: Mechanism, sensor):
             raise PkmcalError(f"machine '{machine.name}': calibration.sensor.{k} is not a parameter of a "
                               f"'{sensor.kind}' sensor ({', '.join(sensor.param_names)})")
         i = sensor.param_names.index(k)
-        p[i] = from_file_units(float(v), sensor.param_is_angle[i:i + 1])[0]
+        p[i] = from_file_units([float(v)], sensor.param_is_angle[i:i + 1])[0]
     return sensor.with_params(p)
 
 
