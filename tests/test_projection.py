@@ -337,3 +337,23 @@ def test_single_linearisation_jacobian_matches_finite_differences(n_dof):
             cols.append(single_linearisation(Model(mech, sens, noise, q=model.q, y=model.y, commanded=x))[0])
         fd[..., i] = (cols[0] - cols[1]) / (2 * h)
     np.testing.assert_allclose(J, fd, atol=1e-6 * np.abs(fd).max())
+
+
+@pytest.mark.parametrize("n_dof", [2, 3])
+def test_projection_single_is_one_least_squares_step(n_dof):
+    """The engine's ``projection-single`` equals eq. 10 solved once by hand: Δθ = −J_F⁺ r
+    at the commanded poses and the nominal parameters, over the free columns the fit kept
+    (numpy lstsq on the unscaled columns, independent of the engine's column scaling)."""
+    m, s, K, F, noise, fixed = _case(n_dof)
+    real = _truth(m, fixed, seed=41)
+    x = m.sample_poses(25, np.random.default_rng(42))
+    sim = _measure(m, real, s, x, K, F, noise)
+    setup = MeasurementSetup(s, noise)
+    one = fit_redundant("projection-single", m, setup, sim.measurements, _free(m, fixed))
+    assert one.method == "projection-single" and one.nfev == 2 and one.njev == 1 and one.success
+    model = Model(m, s, noise, sim.actuator_readings, sim.sensor_readings, sim.commanded[sim.kept])
+    r, J = single_linearisation(model)
+    idx = one.free_index
+    delta = -np.linalg.lstsq(J.reshape(r.size, -1)[:, idx], r.reshape(-1), rcond=None)[0]
+    np.testing.assert_allclose(one.estimate[idx] - model.theta0[idx], delta, rtol=1e-7, atol=1e-10)
+    np.testing.assert_array_equal(np.delete(one.estimate, idx), np.delete(model.theta0, idx))

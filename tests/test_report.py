@@ -301,15 +301,15 @@ def test_planar_report_shows_angle_parameters_in_degrees(tmp_path, name, angles)
     for n in shown:
         i = result.names.index(n)
         a = n in angles
-        conv = (lambda v: v * 180.0 / np.pi) if a else (lambda v: v)   # noqa: E731
+        scale = 180.0 / np.pi if a else 1.0
         d = 6 if a else 4
         unit, nom, ident, dev, sd, true, err = cells[n]
         assert unit == ("deg" if a else "mm"), n
-        assert nom == f"{conv(result.initial[i]):.{d}f}" and ident == f"{conv(result.estimate[i]):.{d}f}", n
-        assert dev == f"{conv(result.estimate[i] - result.initial[i]):+.{d}f}", n
-        assert sd == (f"{conv(free_std[n]):.{d}f}" if n in free_std else "fixed"), n
-        assert true == f"{conv(truth[n]):.{d}f}", n
-        assert err == f"{conv(result.estimate[i] - truth[n]) * (3600.0 if a else 1000.0):+.2f}", n
+        assert nom == f"{result.initial[i] * scale:.{d}f}" and ident == f"{result.estimate[i] * scale:.{d}f}", n
+        assert dev == f"{(result.estimate[i] - result.initial[i]) * scale:+.{d}f}", n
+        assert sd == (f"{free_std[n] * scale:.{d}f}" if n in free_std else "fixed"), n
+        assert true == f"{truth[n] * scale:.{d}f}", n
+        assert err == f"{(result.estimate[i] - truth[n]) * scale * (3600.0 if a else 1000.0):+.2f}", n
     # the page really is in degrees: an angle's radian value does not appear, its degrees do
     k = next(n for n in angles if n in free_std)
     est = result.estimate[result.names.index(k)]

@@ -322,6 +322,19 @@ def _least_squares(obj: "_Objective", x0: np.ndarray, *, jac: str, method: str, 
                      status=int(sol.status), message=str(sol.message))
 
 
+def _gauss_newton_step(obj: "_Objective", x0: np.ndarray) -> _Solution:
+    """One Gauss–Newton step x = x0 − J⁺ r at the start (paper 3 eq. 10 solved once), by
+    least squares on the column-scaled Jacobian (the free set is identifiable: full rank)."""
+    r = obj.fun(x0)
+    J = obj.jac(x0)
+    col = np.linalg.norm(J, axis=0)
+    d = 1.0 / np.where(col > 0, col, 1.0)
+    x = x0 - np.linalg.lstsq(J * d, r, rcond=None)[0] * d
+    f = obj.fun(x)
+    return _Solution(x=x, cost=0.5 * float(f @ f), nfev=2, njev=1, status=1,
+                     message="one Gauss-Newton step from the start (single linearisation)")
+
+
 def _solver_args(solver: str, m: int, n: int) -> str:
     if solver == "auto":
         return "lm" if m >= n else "trf"
@@ -360,8 +373,10 @@ def identify(
     measurements : a measurements object / mapping / tuple (see :func:`measurement_arrays`);
         or give the arrays ``q`` (N, l) actuator readings, ``y`` (N, m) sensor readings and
         optionally ``commanded`` (N, n) poses (FK / pose-solve starting points).
-    method : ``"ik-residual"`` (full-pose sensor, paper 1), ``"fk-residual"`` (paper 2) or
-        ``"projection"`` (paper 3; any sensor, redundant machines).
+    method : ``"ik-residual"`` (full-pose sensor, paper 1), ``"fk-residual"`` (paper 2),
+        ``"projection"`` (paper 3; any sensor, redundant machines) or ``"projection-single"``
+        (paper 3 eq. 10 as published: linearised once at the commanded poses, one
+        Gauss–Newton step; needs commanded poses).
     free : names or shell patterns of the parameters to estimate (default: all machine
         parameters and the sensor's ``default_free``).
     fix : names/patterns held at their nominal values, or ``"auto"``; default (``None``):
@@ -433,7 +448,7 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
         meth.sensor_columns = sensor_free
         ev0 = meth.evaluate(theta0, jac=True, cov=True)
 
-    W = whitening(ev0.cov, f"{method} residual") if weighted and method != "projection" else None
+    W = whitening(ev0.cov, f"{method} residual") if weighted and not meth.prewhitened else None
     Jw0 = ev0.J if W is None else W @ ev0.J
 
     names = model.names
@@ -466,8 +481,11 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
     lsq_method = _solver_args(solver, M, len(free_idx))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        sol = _least_squares(obj, theta0[free_idx], jac=jac, method=lsq_method, ftol=ftol, xtol=xtol, gtol=gtol,
-                             max_nfev=max_nfev)
+        if meth.single_step:
+            sol = _gauss_newton_step(obj, theta0[free_idx])
+        else:
+            sol = _least_squares(obj, theta0[free_idx], jac=jac, method=lsq_method, ftol=ftol, xtol=xtol,
+                                 gtol=gtol, max_nfev=max_nfev)
     theta = obj.theta(sol.x)
     ev = meth.evaluate(theta, jac=True, cov=True)   # only the free columns of ev.J are used
     if not ev.converged.all():
@@ -481,7 +499,7 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
     free_names = tuple(names[i] for i in free_idx)
     if weighted:
         r_w = ev.r
-        if method != "projection":
+        if not meth.prewhitened:
             W_end = whitening(ev.cov, f"{method} residual")
             J_free, r_w = W_end @ J_free, (W_end @ ev.r[..., None])[..., 0]
         unc = parameter_uncertainty(free_names, J_free, r_w, weighted=True)

@@ -292,7 +292,7 @@ def _identifiability(machine, setup, poses, *, method, free, fix, weighted) -> I
     y = setup.sensor.predict(poses)
     model = Model(machine, setup.sensor, setup.noise, q, y, poses)
     meth = make_method(method, model, weighted)
-    whiten = weighted and method != "projection"          # the weighted projection is already whitened
+    whiten = weighted and not meth.prewhitened            # the weighted projection is already whitened
     ev = meth.evaluate(model.theta0, jac=True, cov=whiten)
     J = whitening(ev.cov, f"{method} residual") @ ev.J if whiten else ev.J
     cand, _ = candidate_parameters(model, free, None if fix == "auto" else fix)

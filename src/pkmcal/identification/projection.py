@@ -19,7 +19,7 @@ start by pivoted QR and named in ``identifiability``):
 * ``projection`` — weighted; the engine re-solves x_j* = argmin ‖e_j‖ at every iterate
   (Gauss–Newton on the errors-in-variables problem with the poses eliminated);
 * ``projection-single`` — the paper's eq. 10: one linear least-squares step, linearised at
-  the commanded poses and the nominal parameters (:func:`identify_single_linearisation`);
+  the commanded poses and the nominal parameters (the engine's ``projection-single``);
 * ``projection-unweighted`` — rows in raw mm and rad (W = I);
 * ``ignore-redundancy``, ``actuator-subset`` — the baselines of paper 3 §1
   (:func:`pkmcal.identification.redundant_campaign.baseline_inputs`).
@@ -37,8 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pkmcal.errors import PkmcalError
-from pkmcal.identification.engine import IdentificationResult, identify, measurement_arrays
-from pkmcal.identification.identifiability import IdentifiabilityReport, analyse_jacobian
+from pkmcal.identification.engine import IdentificationResult, identify
 from pkmcal.identification.redundant_campaign import (
     BASELINES,
     baseline_inputs,
@@ -46,7 +45,7 @@ from pkmcal.identification.redundant_campaign import (
     simulate_redundant_campaign,
     tool_errors,
 )
-from pkmcal.identification.residuals import Model, Projection, candidate_parameters
+from pkmcal.identification.residuals import Model, make_method
 from pkmcal.identification.simulation import SimulationResult
 from pkmcal.mechanisms.base import LimitReport, Mechanism
 from pkmcal.mechanisms.planar import PlanarMechanism
@@ -58,71 +57,24 @@ METHODS = ("projection", "projection-single", "projection-unweighted") + BASELIN
 
 def single_linearisation(model: Model, weighted: bool = True):
     """Paper 3 eq. 10 at the commanded poses: (r (N, k), J (N, k, P)) with k = m + l − n,
-    r = U⊥ᵀ W e(x_c, θ₀), J = ∂r/∂θ = −U⊥ᵀ W [∂h/∂θ; ∂IK/∂θ] (:meth:`Projection.project`
-    without the pose solve)."""
-    r, J, _ = Projection(model, weighted=weighted).project(model.mechanism, model.sensor, model.start_poses())
-    return r, J
-
-
-@dataclass(frozen=True)
-class SingleLinearisationFit:
-    """Result of :func:`identify_single_linearisation` (attribute names as in
-    :class:`~pkmcal.identification.engine.IdentificationResult`): the identified
-    ``mechanism`` and ``sensor``, the ``free`` parameters after the gauge, their change
-    ``delta`` and the ``identifiability`` of the requested set at the commanded poses."""
-
-    mechanism: Mechanism
-    sensor: Sensor
-    free: tuple[str, ...]
-    delta: np.ndarray
-    identifiability: IdentifiabilityReport
-    method: str = "projection-single"
-    success: bool = True
-    message: str = "one linear least-squares step at the commanded poses (paper 3 eq. 10)"
-
-
-def identify_single_linearisation(machine: Mechanism, setup: MeasurementSetup, measurements,
-                                  free=None) -> SingleLinearisationFit:
-    """The paper's one-step solution of eq. 10 (weighted): Δθ = −J_F⁺ r at the commanded
-    poses and nominal parameters, J_F the columns of the free set less the engine's
-    automatic gauge (same candidate selection and identifiability analysis as
-    :func:`~pkmcal.identification.engine.identify`; the step is unique once the gauge is
-    fixed). ``measurements`` must carry the commanded poses (the linearisation points)."""
-    q, y, commanded = measurement_arrays(measurements)
-    if commanded is None:
-        raise PkmcalError("the single linearisation (paper 3 eq. 10) linearises at the commanded poses: "
-                          "the measurements need them (cmd_ columns)")
-    model = Model(machine, setup.sensor, setup.noise, q, y, commanded)
-    r, J = single_linearisation(model)
-    rows = J.reshape(r.size, -1)
-    names = model.names
-    cand, _ = candidate_parameters(model, free, "auto")
-    report = analyse_jacobian(rows[:, cand], tuple(names[i] for i in cand), tuple(machine.param_names))
-    idx = np.array([i for i in cand if names[i] not in report.fixed], dtype=int)
-    A = rows[:, idx]
-    scale = 1.0 / np.linalg.norm(A, axis=0)
-    delta = -np.linalg.lstsq(A * scale, r.reshape(-1), rcond=None)[0] * scale
-    theta = model.theta0.copy()
-    theta[idx] += delta
-    mech, sensor = model.split(theta)
-    return SingleLinearisationFit(mechanism=mech, sensor=sensor, free=tuple(names[i] for i in idx), delta=delta,
-                                  identifiability=report)
+    r = U⊥ᵀ W e(x_c, θ₀), J = ∂r/∂θ = −U⊥ᵀ W [∂h/∂θ; ∂IK/∂θ]: the engine's
+    ``projection-single`` residual at the start."""
+    ev = make_method("projection-single", model, weighted).evaluate(model.theta0, jac=True, cov=False)
+    return ev.r, ev.J
 
 
 def fit_redundant(method: str, machine: Mechanism, setup: MeasurementSetup, measurements, free=None,
-                  keep=None) -> "IdentificationResult | SingleLinearisationFit":
+                  keep=None) -> IdentificationResult:
     """Identify ``machine`` (+ the setup's sensor) from ``measurements`` by the paper-3
     ``method`` (module docstring), through :func:`~pkmcal.identification.engine.identify`
     with the automatic gauge. ``keep``: the actuators (0-based) of ``actuator-subset``."""
     if method not in METHODS:
         raise PkmcalError(f"unknown paper-3 method '{method}'; use one of {', '.join(METHODS)}")
-    if method == "projection-single":
-        return identify_single_linearisation(machine, setup, measurements, free)
     fit_machine, fit_setup, data = machine, setup, measurements
     if method in BASELINES:
         fit_machine, fit_setup, data = baseline_inputs(method, machine, setup, measurements, keep)
-    result = identify(fit_machine, fit_setup, data, method="projection", free=free, fix="auto",
-                      weighted=method != "projection-unweighted")
+    result = identify(fit_machine, fit_setup, data, method="projection-single" if method == "projection-single"
+                      else "projection", free=free, fix="auto", weighted=method != "projection-unweighted")
     return baseline_result(result, machine, method) if method in BASELINES else result
 
 

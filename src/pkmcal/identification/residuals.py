@@ -56,7 +56,7 @@ from pkmcal.identification._small_linalg import cholesky_inverse, solve_right
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.sensors.base import NoiseModel, Sensor
 
-METHODS = ("ik-residual", "fk-residual", "projection")
+METHODS = ("ik-residual", "fk-residual", "projection", "projection-single")
 IK_FORMS = ("plain", "squared")
 
 #: Newton tolerance (mm/rad) and iteration cap for inverting the full-pose sensor and for
@@ -288,10 +288,15 @@ class Method(ABC):
 
     ``sensor_columns``: when False (set by the engine when no sensor parameter is free),
     a method may skip the sensor-parameter columns of J and fill them with NaN.
+    ``prewhitened``: the weighted residual already has unit covariance (the engine applies
+    no whitening). ``single_step``: the engine takes one Gauss–Newton step from the start
+    instead of iterating to convergence.
     """
 
     name: str
     sensor_columns: bool = True
+    prewhitened: bool = False
+    single_step: bool = False
 
     def __init__(self, model: Model, weighted: bool = True):
         self.model = model
@@ -478,12 +483,24 @@ class FKResidual(Method):
 
 
 class Projection(Method):
-    """``projection``: the nuisance pose projected out of the stacked residual (paper 3)."""
+    """``projection``: the nuisance pose projected out of the stacked residual (paper 3).
+
+    ``hold_poses=True`` is ``projection-single``, paper 3 eq. 10 as published: the residual
+    is linearised at the commanded poses (not re-solved for x_j*), and the engine takes one
+    Gauss–Newton step from the nominal parameters (:attr:`single_step`).
+    """
 
     name = "projection"
+    prewhitened = True
 
-    def __init__(self, model: Model, weighted: bool = True):
+    def __init__(self, model: Model, weighted: bool = True, hold_poses: bool = False):
         super().__init__(model, weighted)
+        if hold_poses and model.commanded is None:
+            raise PkmcalError("method 'projection-single' (paper 3 eq. 10) linearises at the commanded poses: "
+                              "the measurements need them (cmd_x ... columns)")
+        self.hold_poses = self.single_step = hold_poses
+        if hold_poses:
+            self.name = "projection-single"
         mech, sensor = model.mechanism, model.sensor
         k = sensor.n_readings + mech.n_actuators - mech.n_dof
         if k <= 0:
@@ -538,7 +555,10 @@ class Projection(Method):
 
     def _solve(self, theta):
         mech, sensor = self.model.split(theta)
-        x, ok = self.solve_poses(mech, sensor)
+        if self.hold_poses:
+            x, ok = self.model.commanded, np.ones(self.model.n_poses, dtype=bool)
+        else:
+            x, ok = self.solve_poses(mech, sensor)
         return {"mech": mech, "sensor": sensor, "x": x, "ok": ok}
 
     def _projector(self, mech, sensor, x):
@@ -583,8 +603,8 @@ def make_method(name: str, model: Model, weighted: bool = True, form: str = "pla
         raise PkmcalError(f"option form='{form}' only applies to method 'ik-residual'")
     if name == "fk-residual":
         return FKResidual(model, weighted)
-    if name == "projection":
-        return Projection(model, weighted)
+    if name in ("projection", "projection-single"):
+        return Projection(model, weighted, hold_poses=name == "projection-single")
     raise PkmcalError(f"unknown identification method '{name}'; use one of {', '.join(METHODS)}")
 
 

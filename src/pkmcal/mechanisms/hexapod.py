@@ -27,7 +27,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from pkmcal.conventions import POSE_COLUMNS, euler_pose_jacobian, euler_to_matrix
+from pkmcal.conventions import POSE_COLUMNS, euler_to_matrix
 from pkmcal.errors import PkmcalError
 from pkmcal.mechanisms import _hexapod_kernels as kernels
 from pkmcal.mechanisms.base import FKResult, LimitReport, Mechanism

@@ -170,9 +170,9 @@ def _held_out_rows(data: ReportData) -> tuple[str, list[list[str]]]:
     return headline, rows
 
 
-#: Per display unit of a parameter: digits of its values, and unit and scale of the
-#: error against the truth (µm for mm, arc-seconds for degrees).
-_PARAM_FORMAT = {"mm": (4, "µm", 1000.0), "deg": (6, "arcsec", 3600.0)}
+#: Per display unit of a parameter: digits of its values, and the scale of its error
+#: against the truth (to µm for mm, to arc-seconds for degrees).
+_PARAM_FORMAT = {"mm": (4, 1000.0), "deg": (6, 3600.0)}
 
 
 def _parameter_rows(t) -> tuple[list[str], list[list[str]]]:
@@ -185,7 +185,7 @@ def _parameter_rows(t) -> tuple[list[str], list[list[str]]]:
         header += ["true", "error (µm; arcsec for deg)"]
     rows = []
     for i, (name, unit) in enumerate(zip(t.names, t.units)):
-        digits, err_unit, err_scale = _PARAM_FORMAT[unit]
+        digits, err_scale = _PARAM_FORMAT[unit]
         row = [_esc(name), unit, _fmt(nominal[i], f".{digits}f"), _fmt(identified[i], f".{digits}f"),
                _fmt(dev[i], f"+.{digits}f"), _fmt(std[i], f".{digits}f") if t.free[i] else "fixed"]
         if t.true is not None:
