@@ -301,9 +301,9 @@ def _least_squares(obj: "_Objective", x0: np.ndarray, *, jac: str, method: str, 
     ``factor = 100``, Jacobian-based scaling (``x_scale="jac"`` ⇔ MINPACK ``diag=None``),
     evaluation cap (default 100·n) and start. With the analytic Jacobian it is called
     through :func:`scipy.optimize.leastsq`: the paper-1 ik-residual fit (15 poses, 90 × 42)
-    took 2.7 ms there and 3.3 ms through ``least_squares(method="lm")``, whose wrapper
+    took 1.15 ms there and 1.44 ms through ``least_squares(method="lm")``, whose wrapper
     also evaluates one more Jacobian at the solution (best of 30 solver calls, residuals
-    and Jacobians included; 2-core Xeon, 2026-11-22). With
+    and Jacobians included; 2-core Xeon, 2026-11-22, second session). With
     ``jac="2-point"`` / ``"3-point"`` it is called
     through :func:`scipy.optimize.least_squares`, whose finite-difference Jacobian feeds
     the same ``lmder``. ``trf`` / ``dogbox`` always use ``least_squares``.
