@@ -327,6 +327,20 @@ def test_bad_input_messages(nominal, real):
         identify(nominal, setup, q=bad, y=y)
     with pytest.raises(PkmcalError, match="measurements"):
         measurement_arrays({"q": q})
+    with pytest.raises(PkmcalError, match="jac must be"):
+        identify(nominal, setup, q=q, y=y, jac="cs")
+
+
+def test_exactly_determined_fit_is_flagged(nominal, real):
+    """As many residuals as free parameters: the fit interpolates (χ² has no degrees of
+    freedom), which the result says, and the file covariance stays the a-priori one."""
+    setup = setups()["full-pose"]
+    cmd = commanded(nominal, 5)
+    q, y = simulate(nominal, real, setup.sensor, cmd)
+    res = identify(nominal, setup, q=q, y=y, method="ik-residual", free=["b*", "a?.x", "a?.y"])
+    assert len(res.free) == 30 and res.uncertainty.dof == 0 and res.gauge == ()
+    assert any("interpolates" in w for w in res.warnings)
+    np.testing.assert_array_equal(res.uncertainty.covariance, res.uncertainty.covariance_prior)
 
 
 def test_unsolvable_poses_dropped_or_rejected(nominal, real):

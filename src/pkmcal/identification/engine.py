@@ -411,7 +411,7 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
               max_nfev, q, y, commanded, max_dropped_fraction) -> IdentificationResult:
     if method not in METHODS:
         raise PkmcalError(f"unknown identification method '{method}'; use one of {', '.join(METHODS)}")
-    if jac not in ("analytic", "2-point", "3-point", "cs"):
+    if jac not in ("analytic", "2-point", "3-point"):
         raise PkmcalError(f"jac must be 'analytic', '2-point' or '3-point'; got '{jac}'")
     if measurements is not None:
         q, y, cmd = measurement_arrays(measurements)
@@ -476,6 +476,10 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
     if M < len(free_idx):
         raise PkmcalError(f"{model.n_poses} poses give {M} residuals for {len(free_idx)} free parameters: "
                           "measure more poses or fix parameters")
+    if M == len(free_idx):
+        notes.append(f"{M} residuals for {M} free parameters: the fit interpolates the data, so nothing checks "
+                     "it (χ² and the a-posteriori covariance are undefined; the file gets the a-priori one); "
+                     "measure more poses")
 
     obj = _Objective(meth, theta0, free_idx, W)
     lsq_method = _solver_args(solver, M, len(free_idx))
