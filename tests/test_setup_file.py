@@ -69,6 +69,7 @@ def test_position_setup_target_free_by_default(tmp_path):
 
 def test_builtin_setups():
     ind = load_setup("indicators-prototype")
+    np.testing.assert_array_equal(ind.sensor.positions, PROTOTYPE_INDICATORS)
     radius = np.linalg.norm(PROTOTYPE_INDICATORS, axis=1)
     np.testing.assert_allclose(radius, 40.0)
     np.testing.assert_allclose(np.rad2deg(np.arctan2(PROTOTYPE_INDICATORS[:, 1], PROTOTYPE_INDICATORS[:, 0])),

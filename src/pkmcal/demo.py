@@ -282,7 +282,8 @@ def run_demo(config: DemoConfig = DemoConfig(), progress: Progress | None = None
     step("report")
     data = report_data_from_results(
         nominal, result, setup, sim.commanded[sim.kept],
-        verification=verification, identified=calibrated, true_machine=real, error_map=emap,
+        verification=verification, identified=calibrated, true_machine=real, true_sensor=setup.sensor,
+        error_map=emap,
         held_out_poses=held[m],
         title=f"pkmcal demo: calibration of {nominal.name}",
         setup_summary=setup_to_yaml(setup),

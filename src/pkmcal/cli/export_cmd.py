@@ -41,13 +41,6 @@ CONVENTIONS = {
 }
 
 
-def _angle_flags(machine: Mechanism) -> np.ndarray:
-    flags = getattr(machine, "param_is_angle", None)
-    if flags is None:
-        flags = (False,) * len(machine.param_names)
-    return np.array(flags, dtype=bool)
-
-
 def _finite(v: float) -> float:
     v = float(v)
     if not np.isfinite(v):
@@ -60,7 +53,7 @@ def calibration_json(machine: Mechanism, source: str | None = None) -> dict:
     with σ (None where the covariance has a zero row: not identified), the correlation
     matrix over the identified parameters, units, conventions and calibration metadata."""
     names = list(machine.param_names)
-    angle = _angle_flags(machine)
+    angle = np.array(machine.param_is_angle, dtype=bool)
     scale = np.where(angle, np.rad2deg(1.0), 1.0)
     values = np.asarray(machine.params, dtype=float) * scale
     cov = getattr(machine, "covariance", None)

@@ -50,7 +50,7 @@ def _angle_names(result) -> set[str]:
     and the machine's (a machine without the flags, the hexapod, has only lengths)."""
     sensor, mech = result.sensor, result.mechanism
     angles = {n for n, a in zip(sensor.param_names, sensor.param_is_angle) if a}
-    angles.update(n for n, a in zip(mech.param_names, getattr(mech, "param_is_angle", ())) if a)
+    angles.update(n for n, a in zip(mech.param_names, mech.param_is_angle) if a)
     return angles
 
 

@@ -113,6 +113,12 @@ class Mechanism(ABC):
         """Names of the kinematic parameters, in the order of :attr:`params`."""
 
     @property
+    def param_is_angle(self) -> tuple[bool, ...]:
+        """Which parameters are angles (rad inside, degrees in files and on screen); default
+        none (the hexapod's are all lengths, mm)."""
+        return (False,) * len(self.param_names)
+
+    @property
     @abstractmethod
     def params(self) -> np.ndarray:
         """The kinematic parameter vector ρ (p,) in internal units."""

@@ -69,13 +69,6 @@ def error_map(nominal: Mechanism, calibrated: Mechanism, real: Mechanism, x: np.
     return ErrorMap(np.asarray(x, float), np.asarray(y, float), float(z), before, after, tuple(float(v) for v in abc))
 
 
-def param_is_angle(mechanism: Mechanism) -> tuple[bool, ...]:
-    """The mechanism's declared ``param_is_angle``; a mechanism without the declaration
-    (the hexapod) has only lengths."""
-    flags = getattr(mechanism, "param_is_angle", None)
-    return (False,) * len(mechanism.param_names) if flags is None else tuple(bool(a) for a in flags)
-
-
 def parameter_table(nominal: Mechanism, result, true_machine: Mechanism | None = None,
                     true_sensor: Sensor | None = None) -> ParameterTable:
     """Every machine parameter, then the sensor parameters the fit estimated (free or gauge),
@@ -84,7 +77,7 @@ def parameter_table(nominal: Mechanism, result, true_machine: Mechanism | None =
     NaN where not given."""
     p = len(nominal.param_names)
     sensor_angle = dict(zip(result.sensor.param_names, result.sensor.param_is_angle))
-    flags = param_is_angle(nominal) + tuple(sensor_angle[n] for n in result.names[p:])
+    flags = tuple(nominal.param_is_angle) + tuple(sensor_angle[n] for n in result.names[p:])
     free_set = {n: k for k, n in enumerate(result.free)}
     shown = list(range(p)) + [i for i in range(p, len(result.names))
                               if result.names[i] in free_set or result.names[i] in result.gauge]
