@@ -8,8 +8,8 @@
   rank when σ_P/σ_1 ≤ rtol, and does claim it for well-conditioned matrices;
 * ``identify``'s deferred identifiability report against ``analyse_jacobian`` on the same
   Jacobian;
-* ``solve_right`` and ``cholesky_inverse`` (compiled loops over tiny matrices) against
-  NumPy's batched ``linalg``.
+* ``solve_right`` and ``cholesky_inverse`` (compiled loops over tiny matrices) and
+  ``qr_triangle`` (LAPACK ``dgeqrf``) against NumPy's ``linalg``.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from hypothesis import strategies as st
 from helpers import random_poses
 
 from pkmcal.conventions import euler_pose_jacobian, euler_to_matrix
-from pkmcal.identification._small_linalg import cholesky_inverse, solve_right
+from pkmcal.identification._small_linalg import cholesky_inverse, qr_triangle, solve_right
 from pkmcal.identification.engine import identify
 from pkmcal.identification.identifiability import RANK_RTOL, ScaledJacobian, analyse_jacobian
 from pkmcal.identification.residuals import Model, make_method, whitening
@@ -150,6 +150,11 @@ def test_small_linalg_against_numpy(seed, n, m, N):
     assert bad == -1
     np.testing.assert_allclose(W, np.linalg.inv(np.linalg.cholesky(C)), rtol=1e-9, atol=1e-9)
     assert np.all(np.triu(W, 1) == 0.0)
+    T = rng.normal(size=(n + m + 3, n))
+    R = qr_triangle(T)
+    assert R.shape == (n, n) and np.all(np.tril(R, -1) == 0.0)
+    np.testing.assert_allclose(R.T @ R, T.T @ T, atol=1e-10 * np.abs(T.T @ T).max())
+    np.testing.assert_allclose(np.abs(R), np.abs(np.linalg.qr(T, mode="r")), atol=1e-10)
 
 
 def test_small_linalg_flags_singular_and_indefinite():

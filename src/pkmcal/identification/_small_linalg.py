@@ -1,4 +1,4 @@
-"""Stacks of tiny dense matrices (one per measured pose), compiled.
+"""Dense linear algebra of the engine: stacks of tiny matrices (compiled), and the R factor.
 
 The engine works on N poses of k ≤ ~9 residual rows each. NumPy's batched ``linalg``
 calls LAPACK once per matrix, ~1 µs of overhead for a 3×3 or 6×6 system: on the 2-core
@@ -10,6 +10,8 @@ Jacobian (the FK residual's H A⁻¹) and twice per fit (the whitening).
 * :func:`solve_right`: X_j = H_j A_j⁻¹ by LU with partial pivoting of A_jᵀ.
 * :func:`cholesky_inverse`: W_j = L_j⁻¹ with L_j L_jᵀ = Σ_j (Cholesky–Banachiewicz, then
   forward substitution), so that W_j r_j has unit covariance.
+* :func:`qr_triangle`: R of A = QR straight from LAPACK ``dgeqrf`` (``numpy.linalg.qr``'s
+  wrapping adds ~25 µs to the 40 µs of a 90 × 42 factorisation).
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import math
 
 import numba as nb
 import numpy as np
+from scipy.linalg.lapack import dgeqrf
 
 _OPTS = dict(cache=True, nogil=True, error_model="numpy")
 
@@ -128,3 +131,11 @@ def cholesky_inverse(C: np.ndarray) -> tuple[np.ndarray, int]:
     W = np.empty(C.shape)
     bad = int(_cholesky_inverse(C, W))
     return W, bad
+
+
+def qr_triangle(A: np.ndarray) -> np.ndarray:
+    """The upper triangle R (n, n) of A = QR for A (m, n), m ≥ n (signs as LAPACK leaves them)."""
+    qr, _, _, info = dgeqrf(np.asarray(A, dtype=np.float64))
+    if info != 0:
+        raise ValueError(f"dgeqrf failed (info={info})")
+    return np.triu(qr[: A.shape[1]])

@@ -36,6 +36,8 @@ from functools import lru_cache
 import numpy as np
 from scipy.linalg.lapack import dtrtri
 
+from pkmcal.identification._small_linalg import qr_triangle
+
 RANK_RTOL = 1e-8
 WEAK_RATIO = 1e-4
 _DROP = 1e-6
@@ -176,7 +178,7 @@ class ScaledJacobian:
         Js = self.J * self.scale
         # the P×P triangle of J_s = Q R has J_s's singular values and right singular vectors;
         # its SVD is cheaper than that of the tall J_s (backward stable either way)
-        self.R = np.linalg.qr(Js, mode="r") if M > P else Js
+        self.R = qr_triangle(Js) if M > P else Js
 
     def certainly_full_rank(self, rtol: float = RANK_RTOL) -> bool:
         """True only if J has rank P in the sense of :meth:`analyse` (σ_P > rtol·σ_1),
@@ -283,7 +285,12 @@ def identifiability(
 
 
 def _identifiability(machine, setup, poses, *, method, free, fix, weighted) -> IdentifiabilityReport:
-    from pkmcal.identification.residuals import Model, candidate_parameters, make_method, whitening
+    from pkmcal.identification.residuals import (
+        Model,
+        candidate_parameters,
+        make_method,
+        whitening,
+    )
 
     poses = machine.as_pose_array(poses)
     if method is None:

@@ -24,6 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg.lapack import dtrtri
 
+from pkmcal.identification._small_linalg import qr_triangle
+
 
 @dataclass(frozen=True)
 class Uncertainty:
@@ -86,7 +88,7 @@ def _inverse_normal(J: np.ndarray) -> np.ndarray:
         return (Vt.T / s**2) @ Vt
     col = np.linalg.norm(J, axis=0)
     d = 1.0 / np.where(col > 0, col, 1.0)
-    R = np.linalg.qr(J * d, mode="r")
+    R = qr_triangle(J * d)
     Ri, info = dtrtri(R, lower=0)                              # R⁻¹ (LAPACK triangular inverse)
     if info != 0:                                              # exactly singular: as the SVD would
         _, s, Vt = np.linalg.svd(J, full_matrices=False)
