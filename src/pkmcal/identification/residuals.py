@@ -556,7 +556,7 @@ class Projection(Method):
     def _solve(self, theta):
         mech, sensor = self.model.split(theta)
         if self.hold_poses:
-            x, ok = self.model.commanded, np.ones(self.model.n_poses, dtype=bool)
+            x, ok = self.model.commanded.copy(), np.ones(self.model.n_poses, dtype=bool)
         else:
             x, ok = self.solve_poses(mech, sensor)
         return {"mech": mech, "sensor": sensor, "x": x, "ok": ok}
