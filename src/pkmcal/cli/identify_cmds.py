@@ -97,7 +97,9 @@ def fit_summary(result) -> str:
 @click.option("--setup", "setup_spec", required=True, metavar="SETUP.yaml",
               help=f"Measurement setup file or built-in ({', '.join(BUILTIN_SETUPS)}).")
 @click.option("--method", type=click.Choice(METHODS + BASELINES), default=None,
-              help="ik-residual (full-pose sensor, paper 1), fk-residual (paper 2) or projection (paper 3). "
+              help="ik-residual (full-pose sensor, paper 1), fk-residual (paper 2), projection (paper 3) or "
+                   "projection-single (paper 3 eq. 10: one step linearised at the commanded poses, which the "
+                   "measurements must give). "
                    "Default: ik-residual for a full-pose sensor, projection for redundantly actuated machines, "
                    "else fk-residual. Baselines for redundant machines (paper 3 §1): ignore-redundancy "
                    "(encoders assumed at their commands), actuator-subset (only the --keep actuators).")
