@@ -11,6 +11,7 @@ import pytest
 from scipy.optimize import least_squares
 
 from pkmcal.errors import PkmcalError
+from pkmcal.identification.engine import identify
 from pkmcal.identification.identifiability import identifiability
 from pkmcal.identification.projection import (
     ActuatorSubset,
@@ -357,3 +358,5 @@ def test_projection_single_is_one_least_squares_step(n_dof):
     delta = -np.linalg.lstsq(J.reshape(r.size, -1)[:, idx], r.reshape(-1), rcond=None)[0]
     np.testing.assert_allclose(one.estimate[idx] - model.theta0[idx], delta, rtol=1e-7, atol=1e-10)
     np.testing.assert_array_equal(np.delete(one.estimate, idx), np.delete(model.theta0, idx))
+    with pytest.raises(PkmcalError, match="analytic Jacobian"):
+        identify(m, setup, sim.measurements, method="projection-single", jac="2-point")

@@ -429,6 +429,8 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
     sensor_free = any(i >= model.n_mech for i in cand)   # else the sensor columns of J are not needed
     meth = make_method(method, model, weighted, form=form)
     meth.sensor_columns = sensor_free
+    if meth.single_step and jac != "analytic":
+        raise PkmcalError(f"method '{method}' takes one step with the analytic Jacobian; jac='{jac}' does not apply")
     theta0 = model.theta0
     ev0 = meth.evaluate(theta0, jac=True, cov=True)
     if not ev0.converged.all():

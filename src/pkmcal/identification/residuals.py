@@ -493,12 +493,16 @@ class Projection(Method):
     name = "projection"
     prewhitened = True
 
+    @property
+    def single_step(self) -> bool:  # type: ignore[override]
+        return self.hold_poses
+
     def __init__(self, model: Model, weighted: bool = True, hold_poses: bool = False):
         super().__init__(model, weighted)
         if hold_poses and model.commanded is None:
             raise PkmcalError("method 'projection-single' (paper 3 eq. 10) linearises at the commanded poses: "
                               "the measurements need them (cmd_x ... columns)")
-        self.hold_poses = self.single_step = hold_poses
+        self.hold_poses = hold_poses
         if hold_poses:
             self.name = "projection-single"
         mech, sensor = model.mechanism, model.sensor

@@ -217,14 +217,11 @@ class Hexapod(Mechanism):
         """Actuator readings λ = L − L0 (N, 6), mm."""
         return self.leg_lengths(poses) - self.offset
 
-    def _unit_legs(self, poses):
-        R, Ra, legs = self.leg_vectors(poses)
-        u = legs / np.linalg.norm(legs, axis=2, keepdims=True)
-        return R, Ra, u
-
     def twist_jacobian(self, poses: np.ndarray) -> np.ndarray:
-        """∂L/∂(δp, δω) (N, 6, 6): row i = [u_iᵀ, ((R a_i) × u_i)ᵀ]."""
-        _, Ra, u = self._unit_legs(poses)
+        """∂L/∂(δp, δω) (N, 6, 6): row i = [u_iᵀ, ((R a_i) × u_i)ᵀ] (NumPy; the compiled
+        :meth:`actuator_jacobians` is tested against it)."""
+        _, Ra, legs = self.leg_vectors(poses)
+        u = legs / np.linalg.norm(legs, axis=2, keepdims=True)
         return np.concatenate([u, np.cross(Ra, u)], axis=2)
 
     def actuator_jacobians(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
