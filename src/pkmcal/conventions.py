@@ -19,7 +19,6 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 #: scipy sequence for R = Rz(c) Ry(b) Rx(a): lower case = extrinsic (fixed axes).
 EULER_SEQUENCE = "xyz"
@@ -123,6 +122,8 @@ def poses_to_file_units(poses_rad: np.ndarray) -> np.ndarray:
 
 def rotation_vector_to_matrix(w: np.ndarray) -> np.ndarray:
     """``exp([w]×)`` for rotation vectors ``w`` of shape (..., 3) (Rodrigues)."""
+    from scipy.spatial.transform import Rotation  # on first use: scipy.spatial takes ~0.4 s to import
+
     return Rotation.from_rotvec(np.asarray(w, dtype=float).reshape(-1, 3)).as_matrix().reshape(
         np.shape(w)[:-1] + (3, 3)
     )

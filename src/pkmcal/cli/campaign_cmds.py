@@ -32,11 +32,10 @@ from pkmcal.identification.simulation import perturb_machine, simulate_campaign
 from pkmcal.identification.verification import verify
 from pkmcal.cli.import_options import import_options
 from pkmcal.io.atomic import atomic_write_text, check_output_path
-from pkmcal.io.machine_file import load_machine, machine_to_text
 from pkmcal.io.measurements import measurement_columns
-from pkmcal.io.setup_file import BUILTIN_SETUPS, load_setup
 from pkmcal.io.tables import format_table, read_poses
 from pkmcal.mechanisms.planar import PlanarMechanism
+from pkmcal.sensors.library import BUILTIN_SETUPS
 
 
 @click.command("simulate")
@@ -83,6 +82,9 @@ def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_rea
             check_output_path(out, inputs)
     if output is not None and save_real is not None and output == save_real:
         raise PkmcalError("-o and --save-real name the same file; choose two paths")
+    from pkmcal.io.machine_file import load_machine, machine_to_text
+    from pkmcal.io.setup_file import load_setup
+
     nominal = load_machine(machine)
     setup = load_setup(setup_spec, nominal)
     commanded = read_poses(poses, nominal, mapping)
@@ -155,6 +157,9 @@ def verify_cmd(calibrated, real_spec, poses, nominal, setup_spec, as_json, ignor
     """
     if output is not None:
         check_output_path(output, [calibrated, real_spec, poses, nominal, setup_spec])
+    from pkmcal.io.machine_file import load_machine
+    from pkmcal.io.setup_file import load_setup
+
     cal = load_machine(calibrated)
     real = load_machine(real_spec)
     nom = None if nominal is None else load_machine(nominal)
@@ -178,8 +183,3 @@ def verify_cmd(calibrated, real_spec, poses, nominal, setup_spec, as_json, ignor
         click.echo(text, nl=False)
     else:
         atomic_write_text(output, text)
-
-
-def register(group: click.Group) -> None:
-    group.add_command(simulate_cmd)
-    group.add_command(verify_cmd)

@@ -56,7 +56,3 @@ def demo(out, seed, n_poses, n_held_out, setup, machine, real, no_png, quiet) ->
     result = run_demo(config, progress)
     click.echo(result.summary())
     click.echo(f"Done in {time.perf_counter() - t0:.1f} s.")
-
-
-def register(group: click.Group) -> None:
-    group.add_command(demo)

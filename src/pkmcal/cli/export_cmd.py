@@ -23,7 +23,6 @@ import numpy as np
 from pkmcal import __version__
 from pkmcal.errors import PkmcalError
 from pkmcal.io.atomic import atomic_write_text, check_output_path
-from pkmcal.io.machine_file import identified_uncertainty, load_machine
 from pkmcal.io.tables import to_file_units
 from pkmcal.mechanisms.base import Mechanism
 
@@ -60,6 +59,8 @@ def calibration_json(machine: Mechanism, source: str | None = None) -> dict:
     std = np.full(len(names), np.nan)
     corr_block = None
     if cov is not None:
+        from pkmcal.io.machine_file import identified_uncertainty
+
         used, _, sd, corr = identified_uncertainty(np.asarray(cov, dtype=float) * np.outer(scale, scale))
         std[used] = sd
         corr_block = {"parameters": [names[i] for i in used],
@@ -112,6 +113,8 @@ def export_cmd(calibrated: str, fmt: str, output: str | None) -> None:
     """
     if output is not None:
         check_output_path(output, [calibrated])
+    from pkmcal.io.machine_file import load_machine
+
     machine = load_machine(calibrated)
     if fmt == "linuxcnc":
         from pkmcal.io.export_linuxcnc import linuxcnc_hal
@@ -126,8 +129,4 @@ def export_cmd(calibrated: str, fmt: str, output: str | None) -> None:
         click.echo(f"wrote {output} ({fmt})", err=True)
 
 
-def register(group: click.Group) -> None:
-    group.add_command(export_cmd)
-
-
-__all__ = ["calibration_json", "export_cmd", "format_calibration_json", "register"]
+__all__ = ["calibration_json", "export_cmd", "format_calibration_json"]

@@ -18,8 +18,7 @@ import click
 import numpy as np
 
 from pkmcal.errors import PkmcalError
-from pkmcal.identification.engine import identify
-from pkmcal.identification.identifiability import format_direction, identifiability
+from pkmcal.identification.identifiability import format_direction
 from pkmcal.identification.redundant_campaign import (
     BASELINES,
     baseline_inputs,
@@ -30,10 +29,9 @@ from pkmcal.identification.redundant_campaign import (
 from pkmcal.identification.residuals import METHODS
 from pkmcal.cli.import_options import import_options
 from pkmcal.io.atomic import atomic_write_text, check_output_path
-from pkmcal.io.machine_file import load_machine, machine_to_text
 from pkmcal.io.measurements import load_measurements
-from pkmcal.io.setup_file import BUILTIN_SETUPS, load_setup
 from pkmcal.io.tables import read_poses
+from pkmcal.sensors.library import BUILTIN_SETUPS
 
 
 def _names(values: tuple[str, ...]) -> list[str] | None:
@@ -129,6 +127,10 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     check_output_path(output, inputs)
     if report_dir is not None:
         _check_report_dir(report_dir, inputs)
+    from pkmcal.identification.engine import identify
+    from pkmcal.io.machine_file import load_machine, machine_to_text
+    from pkmcal.io.setup_file import load_setup
+
     nominal = load_machine(machine)
     setup = load_setup(setup_spec, nominal)
     meas = load_measurements(measurements, nominal, setup, mapping)
@@ -245,6 +247,10 @@ def identifiability_cmd(machine, setup_spec, poses, method, fix, free, as_json, 
     directions, and a minimal set of parameters to fix (the gauge). JSON keys: n_params,
     rank, singular_values, null_space, fixed, weak, ...
     """
+    from pkmcal.identification.identifiability import identifiability
+    from pkmcal.io.machine_file import load_machine
+    from pkmcal.io.setup_file import load_setup
+
     nominal = load_machine(machine)
     setup = load_setup(setup_spec, nominal)
     x = read_poses(poses, nominal, mapping)
@@ -268,8 +274,3 @@ def identifiability_cmd(machine, setup_spec, poses, method, fix, free, as_json, 
         click.echo(f"weak (ratio {w['ratio']:.2g}): {format_direction(w['direction'])}")
     if rep.unseen:
         click.echo(f"not seen at all: {', '.join(rep.unseen)}")
-
-
-def register(group: click.Group) -> None:
-    group.add_command(identify_cmd)
-    group.add_command(identifiability_cmd)

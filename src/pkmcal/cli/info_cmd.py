@@ -20,7 +20,6 @@ import click
 import numpy as np
 
 from pkmcal.conventions import euler_to_matrix, rotation_error
-from pkmcal.io.machine_file import load_machine
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.mechanisms.library import DEFAULT_MACHINE
 
@@ -108,6 +107,8 @@ def _fmt(value: float, is_angle: bool) -> str:
 @click.option("--seed", default=0, show_default=True, type=int, help="Seed of the random poses.")
 def info_cmd(machine: str, n_poses: int, seed: int) -> None:
     """Describe MACHINE (default: stewart-prototype): summary, workspace, IK→FK round trip."""
+    from pkmcal.io.machine_file import load_machine
+
     mech = load_machine(machine)
     summary = mech.summary() if hasattr(mech, "summary") else mech.name
     click.echo(summary)
@@ -168,8 +169,4 @@ def info_cmd(machine: str, n_poses: int, seed: int) -> None:
                    + ("" if rot_err is None else f", max orientation error {rot_err:.3g} rad"))
 
 
-def register(group: click.Group) -> None:
-    group.add_command(info_cmd)
-
-
-__all__ = ["info_cmd", "register", "single_axis_ranges"]
+__all__ = ["info_cmd", "single_axis_ranges"]

@@ -17,7 +17,6 @@ import numpy as np
 from pkmcal.errors import PkmcalError
 from pkmcal.cli.import_options import import_options
 from pkmcal.io.atomic import atomic_write_text, check_output_path
-from pkmcal.io.machine_file import load_machine
 from pkmcal.io.tables import LENGTH_COLUMNS, column_kinds, format_table, from_file_units, read_table, to_file_units
 from pkmcal.mechanisms.base import Mechanism
 
@@ -71,6 +70,8 @@ def ik_cmd(machine: str, poses: str, output: str | None, mapping=None) -> None:
     """
     if output is not None:
         check_output_path(output, [poses, machine])
+    from pkmcal.io.machine_file import load_machine
+
     mech = load_machine(machine)
     table = read_table(poses, mech.pose_names, kinds=column_kinds(mech.pose_names, mech.pose_is_angle),
                        mapping=mapping)
@@ -111,6 +112,8 @@ def fk_cmd(machine: str, legs: str, output: str | None, guess: str | None, mappi
     """
     if output is not None:
         check_output_path(output, [legs, machine])
+    from pkmcal.io.machine_file import load_machine
+
     mech = load_machine(machine)
     start = None if guess is None else parse_pose_option(guess, mech, "--guess")
     groups = [mech.actuator_names]
@@ -143,9 +146,4 @@ def fk_cmd(machine: str, legs: str, output: str | None, guess: str | None, mappi
               f"{_line_list(table.lines[~conv])} of {legs}; try --guess near the expected pose")
 
 
-def register(group: click.Group) -> None:
-    group.add_command(ik_cmd)
-    group.add_command(fk_cmd)
-
-
-__all__ = ["fk_cmd", "ik_cmd", "parse_pose_option", "register"]
+__all__ = ["fk_cmd", "ik_cmd", "parse_pose_option"]

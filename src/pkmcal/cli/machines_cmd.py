@@ -19,7 +19,3 @@ def machines() -> None:
         "platform_radius, base_separation, platform_separation (deg), phase (deg), offset, stroke, "
         "u_joint_tilt, s_joint_tilt (deg), leg_diameter"
     )
-
-
-def register(group: click.Group) -> None:
-    group.add_command(machines)

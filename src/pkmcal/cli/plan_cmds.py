@@ -20,13 +20,11 @@ import numpy as np
 
 from pkmcal.cli.import_options import import_options
 from pkmcal.io.atomic import check_output_path
-from pkmcal.io.machine_file import load_machine
-from pkmcal.io.setup_file import BUILTIN_SETUPS, load_setup
 from pkmcal.io.tables import to_file_units, write_table
 from pkmcal.planning.candidates import DEFAULT_MARGIN, Measurability, read_candidates_csv
 from pkmcal.planning.indices import INDEX_DESCRIPTIONS, INDEX_NAMES
-from pkmcal.planning.plan import plan_poses, pose_set_indices
 from pkmcal.planning.selection import ALGORITHMS
+from pkmcal.sensors.library import BUILTIN_SETUPS
 
 _SETUP_HELP = f"Measurement setup file or built-in ({', '.join(BUILTIN_SETUPS)})."
 
@@ -97,6 +95,10 @@ def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, 
     singularity, with --margin) and for measurability; rejections are counted by reason.
     Writes x,y,z,a,b,c and the nominal commands lambda1..; prints O1..O5 of the chosen set.
     """
+    from pkmcal.io.machine_file import load_machine
+    from pkmcal.io.setup_file import load_setup
+    from pkmcal.planning.plan import plan_poses
+
     mech = load_machine(machine)
     setup = load_setup(setup_spec, mech)
     check_output_path(output, [candidates_path, setup_spec, machine])
@@ -138,6 +140,10 @@ def observability_cmd(machine, poses, setup_spec, as_json, mapping=None) -> None
     On the scaled, noise-weighted identification Jacobian restricted to the identifiable
     parameters (as 'pkmcal plan'). O1 is D-optimality, O4 the noise amplification index.
     """
+    from pkmcal.io.machine_file import load_machine
+    from pkmcal.io.setup_file import load_setup
+    from pkmcal.planning.plan import pose_set_indices
+
     mech = load_machine(machine)
     setup = load_setup(setup_spec, mech)
     pose_arr = read_candidates_csv(poses, mech, mapping)
@@ -148,8 +154,3 @@ def observability_cmd(machine, poses, setup_spec, as_json, mapping=None) -> None
     click.echo(f"{len(pose_arr)} poses")
     for k in INDEX_NAMES:
         click.echo(f"{k} = {ind[k]:.6g}   {INDEX_DESCRIPTIONS[k]}")
-
-
-def register(group: click.Group) -> None:
-    group.add_command(plan_cmd)
-    group.add_command(observability_cmd)

@@ -39,7 +39,3 @@ def reproduce(name, list_, quick, seed, as_json, output) -> None:
         from pkmcal.io.atomic import atomic_write_text
 
         atomic_write_text(output, text + "\n")   # a failed write is a PkmcalError
-
-
-def register(group: click.Group) -> None:
-    group.add_command(reproduce)

@@ -38,7 +38,6 @@ from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
-from scipy.optimize import least_squares, leastsq
 
 from pkmcal.errors import PkmcalError
 from pkmcal.identification.identifiability import (
@@ -308,6 +307,8 @@ def _least_squares(obj: "_Objective", x0: np.ndarray, *, jac: str, method: str, 
     through :func:`scipy.optimize.least_squares`, whose finite-difference Jacobian feeds
     the same ``lmder``. ``trf`` / ``dogbox`` always use ``least_squares``.
     """
+    from scipy.optimize import least_squares, leastsq  # on first use: scipy.optimize takes ~0.3 s to import
+
     n = x0.size
     if method == "lm" and jac == "analytic":
         x, _, info, _, ier = leastsq(obj.fun, x0, Dfun=obj.jac, full_output=True, ftol=ftol, xtol=xtol, gtol=gtol,

@@ -34,9 +34,7 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
-from scipy.linalg.lapack import dtrtri
 
-from pkmcal.identification._small_linalg import qr_triangle
 
 RANK_RTOL = 1e-8
 WEAK_RATIO = 1e-4
@@ -171,6 +169,8 @@ class ScaledJacobian:
     (J_s = Q R) for both the cheap full-rank certificate and the full analysis."""
 
     def __init__(self, J: np.ndarray):
+        from pkmcal.identification._small_linalg import qr_triangle  # compiled: numba on first use
+
         self.J = np.asarray(J, dtype=float)
         M, P = self.J.shape
         self.col = np.linalg.norm(self.J, axis=0)
@@ -193,6 +193,8 @@ class ScaledJacobian:
         M, P = self.J.shape
         if M < P or P == 0 or not np.all(self.col > 0) or not np.all(np.diag(self.R) != 0):
             return False
+        from scipy.linalg.lapack import dtrtri
+
         Rinv, info = dtrtri(self.R, lower=0)
         if info != 0:
             return False

@@ -52,7 +52,6 @@ from fnmatch import fnmatchcase
 import numpy as np
 
 from pkmcal.errors import PkmcalError
-from pkmcal.identification._small_linalg import cholesky_inverse, solve_right
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.sensors.base import NoiseModel, Sensor
 
@@ -390,9 +389,11 @@ class IKResidual(Method):
         return self._piece(poses, "HinvG", compute)
 
     def _solve(self, theta):
+        # IK with its Jacobians in one pass: a solver asks for the Jacobian at most points
         mech, sensor = self.model.split(theta)
         poses = self._measured_poses(sensor)
-        return {"mech": mech, "poses": poses, "q": mech.ik(poses["x"])}
+        q, A, B = mech.ik_and_jacobians(poses["x"])
+        return {"mech": mech, "poses": poses, "q": q, "AB": (A, B)}
 
     def evaluate(self, theta, jac=True, cov=True):
         m = self.model
@@ -463,6 +464,8 @@ class FKResidual(Method):
     def _HAi(A, sensor, x):
         """H A⁻¹ (m×n per pose) by one batched solve with m right-hand sides (m ≪ p); NaN
         where A is singular (never at a converged FK pose, whose Newton steps solved it)."""
+        from pkmcal.identification._small_linalg import solve_right  # compiled: numba on first use
+
         return solve_right(A, sensor.pose_jacobian(x))[0]
 
     def evaluate(self, theta, jac=True, cov=True):
@@ -618,6 +621,8 @@ def whitening(cov: np.ndarray, what: str = "residual") -> np.ndarray:
     A singular Σ_j (a zero noise standard deviation that leaves a residual noise-free) is
     a user error: the weighted fit needs every residual to have some noise.
     """
+    from pkmcal.identification._small_linalg import cholesky_inverse  # compiled: numba on first use
+
     W, bad = cholesky_inverse(cov)
     if bad >= 0:
         raise PkmcalError(

@@ -22,9 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg.lapack import dtrtri
 
-from pkmcal.identification._small_linalg import qr_triangle
 
 
 @dataclass(frozen=True)
@@ -86,6 +84,10 @@ def _inverse_normal(J: np.ndarray) -> np.ndarray:
     if M < p:
         _, s, Vt = np.linalg.svd(J, full_matrices=False)
         return (Vt.T / s**2) @ Vt
+    from scipy.linalg.lapack import dtrtri
+
+    from pkmcal.identification._small_linalg import qr_triangle  # compiled: numba on first use
+
     col = np.linalg.norm(J, axis=0)
     d = 1.0 / np.where(col > 0, col, 1.0)
     R = qr_triangle(J * d)

@@ -39,9 +39,9 @@ A tracker on the tool point of a planar machine (paper 3 §3), with the physics 
       stiffness: 5.0e7            # actuator stiffness K: N/mm (linear) or N·mm/rad (rotary); one or one per actuator
       load: [0, -30]              # in-plane force on the tool point, N (base frame)
 
-Built-in setups (:data:`BUILTIN_SETUPS`) are usable by name wherever a setup file is. A
-planar-tool setup is bound to its machine's pose dimension (2 or 3) by :func:`bind_setup`
-(``load_setup(path, machine)`` does it).
+Built-in setups (:data:`pkmcal.sensors.library.BUILTIN_SETUPS`, re-exported here) are usable by
+name wherever a setup file is. A planar-tool setup is bound to its machine's pose dimension
+(2 or 3) by :func:`bind_setup` (``load_setup(path, machine)`` does it).
 """
 
 from __future__ import annotations
@@ -59,10 +59,19 @@ from pkmcal.io._yaml import FlowList, RawFloat, YamlSyntaxError, deg_to_rad, dum
 from pkmcal.io.atomic import atomic_write_text
 from pkmcal.mechanisms.statics import StaticsModel
 from pkmcal.sensors import FullPoseSensor, IndicatorSensor, MeasurementSetup, NoiseModel, PlanarToolSensor, PositionSensor
+from pkmcal.sensors.library import (  # noqa: F401  (re-exported: the built-ins used to live here)
+    BUILTIN_SETUPS,
+    PLANAR_ACTUATORS,
+    PLANAR_LOAD,
+    PLANAR_TRACKER_STD,
+    PROTOTYPE_INDICATORS,
+    SQRT3,
+    bind_setup,
+    builtin_setup,
+)
 
 Number = float
 Values = Union[float, list[float]]
-SQRT3 = math.sqrt(3.0)
 #: Largest accepted noise value (mm, rad, deg): beyond it the weights 1/σ² underflow.
 MAX_NOISE_STD = 1e6
 
@@ -137,132 +146,6 @@ _NOISE_KEYS = {
     "indicators": ("reading",),
     "planar-tool": ("reading",),
 }
-
-
-# -- built-in setups ---------------------------------------------------------------------
-
-#: Indicator positions of ``indicators-prototype``: radius 40 mm at 0°, 120°, 240° in the
-#: base frame, inside the 70 mm platform-joint radius of paper 2's prototype.
-PROTOTYPE_INDICATORS = np.array([[40.0, 0.0], [-20.0, 20.0 * math.sqrt(3.0)], [-20.0, -20.0 * math.sqrt(3.0)]])
-
-
-def _indicators_prototype() -> MeasurementSetup:
-    return MeasurementSetup(
-        IndicatorSensor(positions=PROTOTYPE_INDICATORS, plane_offset=10.0),
-        NoiseModel(reading_std=np.full(3, 0.01), actuator_std=np.array(0.005)),
-    )
-
-
-def _full_pose_paper1() -> MeasurementSetup:
-    h_pos, h_ori, h_leg = 0.025, 0.001, 0.01
-    return MeasurementSetup(
-        FullPoseSensor(),
-        NoiseModel(reading_std=np.array([h_pos] * 3 + [h_ori] * 3) / SQRT3,
-                   actuator_std=np.array(h_leg / SQRT3), distribution="uniform"),
-    )
-
-
-def _laser_tracker() -> MeasurementSetup:
-    return MeasurementSetup(
-        PositionSensor(),
-        NoiseModel(reading_std=np.full(3, 0.01), actuator_std=np.array(0.005)),
-    )
-
-
-#: Built-in planar tracker setups (benchmarks/redundant.py, paper 3 §3): tracker σ 0.010 mm
-#: per axis (Leica AT901), load [0, −30] N on the tool point, and per actuator type
-#: (encoder σ, stiffness K): rotary 1e-5 rad, 5e7 N·mm/rad; linear 0.001 mm, 2e4 N/mm.
-PLANAR_TRACKER_STD = 0.010
-PLANAR_LOAD = (0.0, -30.0)
-PLANAR_ACTUATORS = {"rotary": (1e-5, 5e7), "linear": (1e-3, 2e4)}
-
-
-def _planar_tracker(kind: str, machine=None) -> MeasurementSetup:
-    if kind == "auto":
-        if machine is None:
-            raise PkmcalError("the built-in setup 'planar-tracker' depends on the machine's actuators; use "
-                              "planar-tracker-rotary or planar-tracker-linear here")
-        kind = "rotary" if any(machine.actuator_is_angle) else "linear"
-    enc, k = PLANAR_ACTUATORS[kind]
-    return MeasurementSetup(
-        PlanarToolSensor(n_pose=2 if machine is None else machine.n_dof),
-        NoiseModel(reading_std=np.full(2, PLANAR_TRACKER_STD), actuator_std=np.array(enc)),
-        simulation=StaticsModel(stiffness=np.array(k), load=np.array(PLANAR_LOAD)),
-    )
-
-
-#: Built-in setups by name → (factory, one-line description).
-BUILTIN_SETUPS = {
-    "indicators-prototype": (
-        _indicators_prototype,
-        "paper 2 style: 3 dial indicators at radius 40 mm, 0/120/240 deg, plane_offset 10 mm; "
-        "noise std 0.01 mm (indicators), 0.005 mm (legs)",
-    ),
-    "full-pose-paper1": (
-        _full_pose_paper1,
-        "paper 1 full-pose measurement: uniform noise +-0.025 mm position, +-0.001 rad "
-        "orientation, +-0.01 mm legs",
-    ),
-    "laser-tracker": (
-        _laser_tracker,
-        "3D laser tracker on one target point (offset free, initial 0): noise std 0.01 mm, 0.005 mm (legs)",
-    ),
-    "planar-tracker": (
-        lambda machine=None: _planar_tracker("auto", machine),
-        "planar machines (paper 3): planar-tracker-rotary or -linear by the machine's actuators",
-    ),
-    "planar-tracker-rotary": (
-        lambda machine=None: _planar_tracker("rotary", machine),
-        "planar tool-point tracker (target free, initial 0): std 0.010 mm, encoders 1e-5 rad; "
-        "simulation: K 5e7 N*mm/rad, load [0, -30] N",
-    ),
-    "planar-tracker-linear": (
-        lambda machine=None: _planar_tracker("linear", machine),
-        "planar tool-point tracker (target free, initial 0): std 0.010 mm, encoders 0.001 mm; "
-        "simulation: K 2e4 N/mm, load [0, -30] N",
-    ),
-}
-
-_PLANAR_BUILTINS = ("planar-tracker", "planar-tracker-rotary", "planar-tracker-linear")
-
-
-def builtin_setup(name: str, machine=None) -> MeasurementSetup:
-    """The built-in setup ``name``; bound to ``machine`` (:func:`bind_setup`) when given."""
-    try:
-        factory, _ = BUILTIN_SETUPS[name]
-    except KeyError:
-        raise PkmcalError(
-            f"unknown setup '{name}': not a file and not a built-in setup ({', '.join(BUILTIN_SETUPS)})"
-        ) from None
-    setup = factory(machine) if name in _PLANAR_BUILTINS else factory()
-    return setup if machine is None else bind_setup(setup, machine, name)
-
-
-def bind_setup(setup: MeasurementSetup, machine, source: object = "setup") -> MeasurementSetup:
-    """``setup`` for ``machine``: a planar-tool sensor takes the machine's pose dimension
-    (2 or 3); a sensor that cannot measure the machine, or a ``simulation:`` stiffness list
-    of the wrong length, is a :class:`PkmcalError` naming ``source``."""
-    import dataclasses
-
-    planar_machine = machine.n_dof in (2, 3)
-    sensor = setup.sensor
-    if isinstance(sensor, PlanarToolSensor) != planar_machine:
-        want = "planar-tool" if planar_machine else "full-pose, position or indicators"
-        raise PkmcalError(f"{source}: a '{sensor.kind}' sensor cannot measure machine '{machine.name}' "
-                          f"({machine.n_dof} pose coordinates); use a '{want}' setup")
-    if isinstance(sensor, PlanarToolSensor) and sensor.n_pose != machine.n_dof:
-        sensor = dataclasses.replace(sensor, n_pose=machine.n_dof)
-        setup = dataclasses.replace(setup, sensor=sensor)
-    a = np.asarray(setup.noise.actuator_std, dtype=float)
-    if a.ndim and a.size not in (1, machine.n_actuators):
-        raise PkmcalError(f"{source}: {a.size} actuator noise values but machine '{machine.name}' has "
-                          f"{machine.n_actuators} actuators; give one value or one per actuator")
-    if setup.simulation is not None:
-        try:
-            setup.simulation.stiffness_for(machine)
-        except PkmcalError as exc:
-            raise PkmcalError(f"{source}: simulation.stiffness: {exc}") from None
-    return setup
 
 
 # -- loading -----------------------------------------------------------------------------

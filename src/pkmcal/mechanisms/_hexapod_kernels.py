@@ -139,16 +139,16 @@ def _euler_matrix(a, b, c, R):
 
 @nb.njit(**_OPTS)
 def _ik_range(poses, base, platform, out, start, stop):
-    """out[k, i] = ‖p_k + R_k a_i − b_i‖ for rows k in [start, stop)."""
+    """out[k, i] = ‖p_k + R_k a_i − b_i‖ for rows k in [start, stop), in the operation order
+    of :func:`_jacobians_range` (so both give the same bits)."""
     R = np.empty((3, 3))
     for k in range(start, stop):
         _euler_matrix(poses[k, 3], poses[k, 4], poses[k, 5], R)
         for i in range(6):
             s = 0.0
             for r in range(3):
-                v = poses[k, r] - base[i, r]
-                for q in range(3):
-                    v += R[r, q] * platform[i, q]
+                v = poses[k, r] + (R[r, 0] * platform[i, 0] + R[r, 1] * platform[i, 1]
+                                   + R[r, 2] * platform[i, 2]) - base[i, r]
                 s += v * v
             out[k, i] = math.sqrt(s)
 
@@ -166,9 +166,10 @@ def ik_lengths(poses, base, platform):
 
 
 @nb.njit(**_OPTS)
-def _jacobians_range(poses, base, platform, A, B, start, stop):
-    """For rows k in [start, stop): A[k] = ∂λ/∂(x, y, z, a, b, c) (6×6) and the non-zero
-    entries of B[k] = ∂λ/∂ρ (6×42; B must be zero on entry).
+def _jacobians_range(poses, base, platform, A, B, L, start, stop):
+    """For rows k in [start, stop): A[k] = ∂λ/∂(x, y, z, a, b, c) (6×6), the non-zero
+    entries of B[k] = ∂λ/∂ρ (6×42; B must be zero on entry) and the leg lengths L[k] (6,)
+    (bit-identical to :func:`_ik_range`).
 
     Leg i: u_i = l_i/‖l_i‖, w_i = (R a_i) × u_i; A row i = [u_iᵀ, w_iᵀ E(a, b, c)] with E
     the Euler rate matrix (:func:`pkmcal.conventions.euler_rate_matrix`), B row i on leg
@@ -187,7 +188,9 @@ def _jacobians_range(poses, base, platform, A, B, start, stop):
             l0 = poses[k, 0] + ra0 - base[i, 0]
             l1 = poses[k, 1] + ra1 - base[i, 1]
             l2 = poses[k, 2] + ra2 - base[i, 2]
-            inv = 1.0 / math.sqrt(l0 * l0 + l1 * l1 + l2 * l2)
+            length = math.sqrt(l0 * l0 + l1 * l1 + l2 * l2)
+            L[k, i] = length
+            inv = 1.0 / length
             u0, u1, u2 = l0 * inv, l1 * inv, l2 * inv
             wx = ra1 * u2 - ra2 * u1
             wy = ra2 * u0 - ra0 * u2
@@ -207,15 +210,22 @@ def _jacobians_range(poses, base, platform, A, B, start, stop):
             B[k, i, c0 + 6] = -1.0
 
 
-def actuator_jacobians(poses, base, platform):
-    """``(A, B)``: ∂λ/∂pose (N, 6, 6) and ∂λ/∂ρ (N, 6, 42) of poses (N, 6) [mm, rad] in
-    one pass (see :func:`_jacobians_range`); threaded like :func:`ik_lengths`."""
+def lengths_and_jacobians(poses, base, platform):
+    """``(L, A, B)``: leg lengths (N, 6), ∂λ/∂pose (N, 6, 6) and ∂λ/∂ρ (N, 6, 42) of poses
+    (N, 6) [mm, rad] in one pass (see :func:`_jacobians_range`); threaded like
+    :func:`ik_lengths`."""
     poses, base, platform = _f64(poses), _f64(base), _f64(platform)
     n = poses.shape[0]
     A = np.empty((n, 6, 6))
     B = np.zeros((n, 6, 42))
-    _run_rows(_jacobians_range, n, _IK_GRAIN, (poses, base, platform, A, B))
-    return A, B
+    L = np.empty((n, 6))
+    _run_rows(_jacobians_range, n, _IK_GRAIN, (poses, base, platform, A, B, L))
+    return L, A, B
+
+
+def actuator_jacobians(poses, base, platform):
+    """``(A, B)`` of :func:`lengths_and_jacobians`."""
+    return lengths_and_jacobians(poses, base, platform)[1:]
 
 
 @nb.njit(**_OPTS)

@@ -149,6 +149,11 @@ class Mechanism(ABC):
         poses computes both more cheaply than two."""
         return self.actuator_pose_jacobian(poses), self.actuator_param_jacobian(poses)
 
+    def ik_and_jacobians(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(q, ∂q/∂pose, ∂q/∂ρ)`` together, for a solver that needs all three at every
+        point; a mechanism overrides this when one pass computes them more cheaply."""
+        return (self.ik(poses), *self.actuator_jacobians(poses))
+
     @abstractmethod
     def fk(self, readings: np.ndarray, guess: np.ndarray | None = None) -> FKResult:
         """Poses (N, n) whose IK reproduces ``readings`` (N, l)."""

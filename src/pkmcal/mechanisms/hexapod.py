@@ -29,14 +29,25 @@ import numpy as np
 
 from pkmcal.conventions import POSE_COLUMNS, euler_to_matrix
 from pkmcal.errors import PkmcalError
-from pkmcal.mechanisms import _hexapod_kernels as kernels
 from pkmcal.mechanisms.base import FKResult, LimitReport, Mechanism
+
+def _kernels():
+    """The compiled kernels (:mod:`._hexapod_kernels`), imported on first use: numba takes
+    ~0.5 s to import, which commands that never run the kinematics (``--help``, listings)
+    should not pay."""
+    from pkmcal.mechanisms import _hexapod_kernels
+
+    return _hexapod_kernels
+
 
 N_LEGS = 6
 PARAMS_PER_LEG = 7
 _LEG_PARAM_SUFFIXES = ("b{i}.x", "b{i}.y", "b{i}.z", "a{i}.x", "a{i}.y", "a{i}.z", "L0_{i}")
 HEXAPOD_PARAM_NAMES = tuple(s.format(i=i + 1) for i in range(N_LEGS) for s in _LEG_PARAM_SUFFIXES)
 
+#: Batches of at least this many poses run the compiled IK kernel (0.08 µs/pose against NumPy's
+#: 1.3 µs/pose at 100,000 poses); below it NumPy's ~40 µs per call is cheaper than importing numba.
+COMPILED_FROM = 64
 #: Default FK tolerance on leg lengths (mm) and iteration cap.
 FK_TOL_MM = 1e-9
 FK_MAX_ITER = 30
@@ -210,8 +221,19 @@ class Hexapod(Mechanism):
         return R, Ra, legs
 
     def leg_lengths(self, poses: np.ndarray) -> np.ndarray:
-        """Leg lengths L (N, 6), mm (compiled kernel)."""
-        return kernels.ik_lengths(self.as_pose_array(poses), self.base, self.platform)
+        """Leg lengths L (N, 6) = ‖p + R a_i − b_i‖, mm.
+
+        Batches of :data:`COMPILED_FROM` poses or more run the compiled kernel; smaller ones
+        NumPy (:meth:`leg_vectors`), so that a command on a few poses does not import numba
+        (~1 s with the SciPy BLAS check it triggers). Same formula; the two agree to a few
+        ulp of the leg length (``tests/test_hexapod_kinematics.py``). Which one runs depends
+        only on the batch size, never on what ran before.
+        """
+        poses = self.as_pose_array(poses)
+        if poses.shape[0] < COMPILED_FROM:
+            legs = self.leg_vectors(poses)[2]
+            return np.sqrt(np.einsum("nik,nik->ni", legs, legs))
+        return _kernels().ik_lengths(poses, self.base, self.platform)
 
     def ik(self, poses: np.ndarray) -> np.ndarray:
         """Actuator readings λ = L − L0 (N, 6), mm."""
@@ -229,7 +251,13 @@ class Hexapod(Mechanism):
         pass: A = twist Jacobian · diag(I, E(a, b, c)), row i of the twist Jacobian
         [u_iᵀ, ((R a_i) × u_i)ᵀ]; B row i non-zero only on leg i's 7 columns,
         [−u_iᵀ, u_iᵀ R, −1]."""
-        return kernels.actuator_jacobians(self.as_pose_array(poses), self.base, self.platform)
+        return _kernels().actuator_jacobians(self.as_pose_array(poses), self.base, self.platform)
+
+    def ik_and_jacobians(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(λ, A, B)`` of :meth:`ik` and :meth:`actuator_jacobians` in one compiled pass,
+        whatever the batch size (the identification's hot path)."""
+        L, A, B = _kernels().lengths_and_jacobians(self.as_pose_array(poses), self.base, self.platform)
+        return L - self.offset, A, B
 
     def actuator_pose_jacobian(self, poses: np.ndarray) -> np.ndarray:
         """∂λ/∂(x, y, z, a, b, c) (N, 6, 6), see :meth:`actuator_jacobians`."""
@@ -277,7 +305,7 @@ class Hexapod(Mechanism):
         guesses = np.broadcast_to(g, lengths.shape)
         if g.ndim == 1 or g.shape[0] == 1:
             guesses = guesses[:1]  # one guess for all: the kernel broadcasts it
-        poses, conv, iters, res = kernels.fk_newton(lengths, guesses, self.base, self.platform, tol, max_iter, polish)
+        poses, conv, iters, res = _kernels().fk_newton(lengths, guesses, self.base, self.platform, tol, max_iter, polish)
         return FKResult(poses=poses, converged=conv, iterations=iters, residual=res)
 
     # -- limits -------------------------------------------------------------------------

@@ -27,9 +27,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from pkmcal.errors import PkmcalError
-from pkmcal.identification.engine import candidate_parameters
 from pkmcal.identification.identifiability import IdentifiabilityReport, analyse_jacobian
-from pkmcal.identification.residuals import Model, make_method, whitening
+from pkmcal.identification.residuals import Model, candidate_parameters, make_method, whitening
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.planning.indices import blas_single_threaded
 from pkmcal.sensors.base import MeasurementSetup

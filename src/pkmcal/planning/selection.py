@@ -42,10 +42,8 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from pkmcal.errors import PkmcalError
-from pkmcal.planning import _selection_kernels as kernels
 from pkmcal.planning.indices import (
     as_blocks,
     blas_single_threaded,
@@ -63,6 +61,14 @@ Progress = Callable[[int, int], None]
 #: Greedy start of the default algorithm: M₀ = δI with δ = _DELTA_REL · mean per-pose
 #: information per parameter.
 _DELTA_REL = 1e-9
+
+
+def _kernels():
+    """The compiled exchange kernels (:mod:`._selection_kernels`), imported on first use
+    (numba takes ~0.5 s to import)."""
+    from pkmcal.planning import _selection_kernels
+
+    return _selection_kernels
 
 
 @dataclass(frozen=True)
@@ -133,7 +139,7 @@ class _DState:
         self.Minv, self.S = _all_S(self.flatF, self.N, self.m, self.M)
         self.S = np.ascontiguousarray(self.S)
         self.gain = np.empty(self.N)
-        kernels.gains_of(self.S, self.gain)
+        _kernels().gains_of(self.S, self.gain)
 
     def update(self, k: int, sign: float) -> None:
         """M ← M ± G_kᵀG_k: M⁻¹ ∓= U C⁻¹ Uᵀ, S_j ∓= A_j C⁻¹ A_jᵀ, U = M⁻¹G_kᵀ, C = I ± S_k,
@@ -142,7 +148,7 @@ class _DState:
         U = self.Minv @ Gk.T
         Cinv = np.linalg.inv(np.eye(self.m) + sign * self.S[k])
         self.Minv -= sign * (U @ Cinv @ U.T)
-        kernels.update_and_gain(self.G, np.ascontiguousarray(U.T), Cinv, self.S, sign, self.gain)
+        _kernels().update_and_gain(self.G, np.ascontiguousarray(U.T), Cinv, self.S, sign, self.gain)
         self.M += sign * (Gk.T @ Gk)
         self.updates += 1
         if self.updates % 50 == 0:
@@ -415,6 +421,8 @@ def select_cuckoo(G: np.ndarray, n: int, *, positions: np.ndarray, index: str = 
         raise PkmcalError(f"cuckoo search needs one position per candidate; got {X.shape} for {G.shape[0]} candidates")
     lo, hi = X.min(axis=0), X.max(axis=0)
     Xn = (X - lo) / np.where(hi > lo, hi - lo, 1.0)
+    from scipy.spatial import cKDTree  # on first use: scipy.spatial takes ~0.4 s to import
+
     tree = cKDTree(Xn)
     n_abandon = max(1, int(round(pa * n_nests)))
     k_near = min(len(Xn), n + 8)
