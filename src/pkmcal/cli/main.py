@@ -55,6 +55,7 @@ def _register() -> None:
     export_cmd.register(cli)
     from pkmcal.cli import reproduce_cmd
     reproduce_cmd.register(cli)
+    from pkmcal.cli import study_cmd; study_cmd.register(cli)  # noqa: E702
 
 
 _register()
