@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from pkmcal.report.figures import RenderedFigure, render, style
-from pkmcal.study.results import median_interval, summary_lookup, t_interval, wilson_interval
+from pkmcal.study.results import summary_lookup, t_interval, wilson_interval
 
 
 def _configs(cols: dict) -> list[tuple[int, str]]:
@@ -93,8 +93,12 @@ def distributions(cols: dict) -> RenderedFigure:
         data = [_finite(cols["heldout_position_rms_mm"][cfg == c]) for c, _ in configs]
         keep = [k for k, d in enumerate(data) if d.size]
         if keep:
-            ax.boxplot([data[k] for k in keep], positions=keep, vert=False, whis=(5, 95), showfliers=False,
-                       widths=0.6)
+            import matplotlib
+
+            horizontal = ({"orientation": "horizontal"} if tuple(int(x) for x in matplotlib.__version__.split(".")[:2])
+                          >= (3, 10) else {"vert": False})
+            ax.boxplot([data[k] for k in keep], positions=keep, whis=(5, 95), showfliers=False, widths=0.6,
+                       **horizontal)
             before = [np.median(_finite(cols["heldout_position_rms_before_mm"][cfg == configs[k][0]]))
                       for k in keep]
             ax.plot(before, keep, "x", color="#d62728", label="median before calibration")
@@ -147,4 +151,4 @@ def study_figures(cols: dict, summary: list) -> list[RenderedFigure]:
     return [f for f in figs if f is not None]
 
 
-__all__ = ["coverage", "distributions", "error_vs_poses", "median_interval", "study_figures"]
+__all__ = ["coverage", "distributions", "error_vs_poses", "study_figures"]

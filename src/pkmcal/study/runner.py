@@ -52,6 +52,7 @@ class StudyRun:
     seconds: float
     backend: str
     workers: int
+    run_seconds: float = float("nan")
 
 
 class _Progress:
@@ -66,6 +67,7 @@ class _Progress:
         if enabled:
             from tqdm import tqdm
 
+            tqdm.monitor_interval = 0   # no monitor thread: the local pool forks this process
             self.bar = tqdm(total=total, initial=done, unit="trial", file=sys.stderr, dynamic_ncols=True,
                             desc="study")
 
@@ -113,6 +115,7 @@ def run_study(study: Study, out: str | Path, *, workers: int | None = None, dask
         bar.update(last - first + 1, lines)
 
     backend, n_workers, own_client, cluster = "inprocess", 1, None, None
+    t_run = time.perf_counter()
     try:
         # pilot: the first missing trial of every campaign, here (times the batches)
         per_trial: dict[int, float] = {}
@@ -149,6 +152,7 @@ def run_study(study: Study, out: str | Path, *, workers: int | None = None, dask
             own_client.close()
         if cluster is not None:
             cluster.close()
+    run_seconds = time.perf_counter() - t_run
     lines = folder.read_parts(study.trials)
     if len(lines) != total * len(study.methods):
         raise PkmcalError(f"'{out}': {len(lines)} result rows for {total * len(study.methods)} expected; the part "
@@ -166,10 +170,11 @@ def run_study(study: Study, out: str | Path, *, workers: int | None = None, dask
     atomic_write_text(out / "run.json", json.dumps({
         "backend": backend, "workers": n_workers, "trials_run": n_todo, "trials_total": total,
         "configurations": total // study.trials * len(study.methods) if study.trials else 0,
-        "seconds": seconds, "trials_per_second": n_todo / seconds if seconds > 0 else None}, indent=2) + "\n")
+        "seconds": seconds, "run_seconds": run_seconds,
+        "trials_per_second": n_todo / run_seconds if run_seconds > 0 else None}, indent=2) + "\n")
     folder.write_manifest(study.name, study.trials, complete=True,
                           extra={"files": ["trials.csv", "summary.csv"] + (["index.html"] if figures else [])})
-    return StudyRun(out, cols, summary, n_todo, seconds, backend, n_workers)
+    return StudyRun(out, cols, summary, n_todo, seconds, backend, n_workers, run_seconds)
 
 
 __all__ = ["StudyRun", "run_study"]

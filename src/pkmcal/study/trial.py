@@ -172,8 +172,8 @@ def _stats(e: np.ndarray, scale: float = 1.0) -> tuple[float, float, float]:
     return float(a.mean()), float(np.sqrt(np.mean(a * a))), float(a.max())
 
 
-def _truth(fit: IdentificationResult, truth_full: np.ndarray, nominal, setup, sim, method: str, weighted: bool):
-    """θ* (module docstring, step 4) and (refit?, rms residual of the refit)."""
+def pseudo_truth(fit: IdentificationResult, truth_full: np.ndarray, nominal, setup, sim, method: str, weighted: bool):
+    """θ* (module docstring, step 4), whether it is a refit, and the refit's rms residual."""
     fixed = np.ones(len(fit.names), dtype=bool)
     fixed[fit.free_index] = False
     if np.array_equal(truth_full[fixed], fit.initial[fixed]):
@@ -186,7 +186,7 @@ def _truth(fit: IdentificationResult, truth_full: np.ndarray, nominal, setup, si
 def evaluate(fit: IdentificationResult, truth_full: np.ndarray, is_angle: np.ndarray, nominal, real, setup, sim,
              method: str, weighted: bool, heldout: np.ndarray, before: PoseErrors, ignore: tuple[str, ...]) -> dict:
     """The metric columns of one fit (module docstring, steps 4–6)."""
-    truth, refit, refit_rms = _truth(fit, truth_full, nominal, setup, sim, method, weighted)
+    truth, refit, refit_rms = pseudo_truth(fit, truth_full, nominal, setup, sim, method, weighted)
     free = fit.free_index
     e = fit.estimate[free] - truth[free]
     ang = is_angle[free]
@@ -256,6 +256,8 @@ def run_trial(ctx: Context, campaign: Campaign, trial: int) -> list[str]:
                                 positions=pool).chosen
             poses = pool[chosen]
         sim = simulate_campaign(nominal, real, setup, poses, rng, ignore_limits=ignore)
+        if len(sim.kept) == 0:
+            raise PkmcalError(f"the real machine reaches none of the {len(poses)} planned poses ({sim.summary()})")
         before = pose_errors(nominal, real, heldout, ignore)
     except PkmcalError as exc:
         for r in rows:
@@ -292,4 +294,4 @@ def run_batch(ctx: Context, campaign: int, first: int, last: int) -> tuple[int, 
     return campaign, first, last, lines, time.perf_counter() - t0
 
 
-__all__ = ["Campaign", "Context", "prepare", "real_machine", "rng_for", "run_batch", "run_trial", "seed_for"]
+__all__ = ["Campaign", "Context", "prepare", "pseudo_truth", "real_machine", "rng_for", "run_batch", "run_trial", "seed_for"]
