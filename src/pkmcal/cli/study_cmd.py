@@ -15,7 +15,8 @@ import click
 @click.option("--seed", type=int, default=None, help="Override the study file's seed (same seed, same results).")
 @click.option("--trials", type=int, default=None, help="Override the number of trials per configuration.")
 @click.option("--workers", type=int, default=None, metavar="N",
-              help="Local worker processes (1 = in this process; default: all local cores).")
+              help="Local worker processes (1 = in this process; default: all local cores); with --dask local, "
+                   "the LocalCluster's workers.")
 @click.option("--dask", "dask_address", default=None, metavar="ADDRESS|local",
               help="Run on a Dask cluster: a scheduler address (tcp://host:8786) or 'local' for a LocalCluster "
                    "(needs pip install 'pkmcal[dask]').")
@@ -32,8 +33,9 @@ def study(study_file, output, seed, trials, workers, dask_address, resume, quiet
     from pkmcal.errors import PkmcalError
     from pkmcal.study import load_study, run_study
 
-    if workers is not None and dask_address is not None and workers < 1:
-        raise PkmcalError("--workers must be at least 1")
+    if workers is not None and dask_address not in (None, "local"):
+        raise PkmcalError("--workers applies to local runs and to --dask local; a Dask scheduler's workers are "
+                          "started with 'dask worker'")
     spec = load_study(study_file)
     if seed is not None:
         spec = spec.with_seed(seed)
@@ -49,10 +51,17 @@ def study(study_file, output, seed, trials, workers, dask_address, resume, quiet
     n_cfg = len({int(c) for c in result.columns["config"]})
     click.echo(f"study '{spec.name}': {n_cfg} configuration(s) x {spec.trials} trials; ran {result.trials_run} "
                f"trial(s) in {result.seconds:.1f} s ({result.backend}, {result.workers} worker(s))")
+    shown = {"heldout_position_rms_mm": ("position", "mm"), "heldout_tilt_rms_deg": ("tilt", "deg"),
+             "heldout_height_rms_mm": ("height", "mm")}
+    by_config: dict[int, dict] = {}
     for row in result.summary:
-        if row["metric"] == "heldout_position_rms_mm" and row["n"]:
-            click.echo(f"  {row['machine']} | {row['setup']} | {row['plan']} {int(row['n_poses'])} | {row['method']}: "
-                       f"held-out position error rms, median {row['median']:.4g} mm")
+        by_config.setdefault(int(row["config"]), {})[row["metric"]] = row
+    for rows in by_config.values():
+        r0 = next(iter(rows.values()))
+        parts = [f"{name} {rows[m]['median']:.4g} {unit}" for m, (name, unit) in shown.items()
+                 if m in rows and rows[m]["n"]]
+        click.echo(f"  {r0['machine']} | {r0['setup']} | {r0['plan']} {int(r0['n_poses'])} | {r0['method']}: "
+                   f"held-out rms after, median: {', '.join(parts) or 'no trial completed'}")
     failed = [r for r in result.summary if r["metric"] == "failed" and r["mean"] > 0]
     for r in failed:
         click.echo(f"  note: {r['mean']:.1%} of the trials of configuration {int(r['config'])} failed "

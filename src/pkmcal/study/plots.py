@@ -1,8 +1,8 @@
 """Study figures (matplotlib, rendered deterministically by :func:`pkmcal.report.figures.render`).
 
-* ``error-vs-poses``: per machine and method, the median held-out position error after
-  calibration (top) and the median rms parameter error (bottom, θ̂ − θ* over the free
-  length parameters) against the number of planned poses, one line per setup × plan, with
+* ``error-vs-poses``: per machine and method, the median held-out position error and tilt
+  error after calibration (the tilt is what dial indicators calibrate) and the median rms
+  parameter error (θ̂ − θ* over the free length parameters) against the number of planned poses, one line per setup × plan, with
   the 95 % intervals of the medians (binomial order statistics) as bars; log-log axes.
   Paper 2 Fig. 6 is this plot for random poses.
 * ``distributions``: box plots of the held-out position error after calibration per
@@ -39,6 +39,7 @@ def _finite(v: np.ndarray) -> np.ndarray:
 def error_vs_poses(cols: dict, summary: list) -> RenderedFigure | None:
     """The ``error-vs-poses`` figure, or None when no plan has several pose counts."""
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     look = summary_lookup(summary)
     cfg = cols["config"].astype(int)
@@ -51,10 +52,11 @@ def error_vs_poses(cols: dict, summary: list) -> RenderedFigure | None:
     if not any(len(pts) > 1 for lines in groups.values() for pts in lines.values()):
         return None
     with style():
-        fig, axes = plt.subplots(2, len(groups), figsize=(4.6 * len(groups), 6.4), squeeze=False, sharex="col")
+        fig, axes = plt.subplots(3, len(groups), figsize=(4.6 * len(groups), 8.4), squeeze=False, sharex="col")
         for k, ((machine, method), lines) in enumerate(sorted(groups.items())):
             for row, metric, label in ((0, "heldout_position_rms_mm", "held-out position error, rms (mm)"),
-                                       (1, "param_error_rms_mm", "parameter error θ̂ − θ*, rms (mm)")):
+                                       (1, "heldout_tilt_rms_deg", "held-out tilt error, rms (deg)"),
+                                       (2, "param_error_rms_mm", "parameter error θ̂ − θ*, rms (mm)")):
                 ax = axes[row, k]
                 for (setup, plan), pts in sorted(lines.items()):
                     pts.sort()
@@ -72,10 +74,13 @@ def error_vs_poses(cols: dict, summary: list) -> RenderedFigure | None:
                 ax.set_xscale("log")
                 ax.set_yscale("log")
                 ax.set_ylabel(label)
+                counts = sorted({n for pts in lines.values() for n, _ in pts})
+                ax.set_xticks(counts, [str(n) for n in counts])
+                ax.xaxis.set_minor_locator(matplotlib.ticker.NullLocator())
                 if row == 0:
                     ax.set_title(f"{machine}, {method}")
                     ax.legend(fontsize=7)
-                else:
+                elif row == 2:
                     ax.set_xlabel("planned poses")
         fig.tight_layout()
     return render(fig, "error-vs-poses", "Median errors after calibration against the number of poses "
