@@ -24,8 +24,10 @@ import click
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar and no summary on stdout.")
 @click.option("--no-figures", is_flag=True, help="Skip the figures and the HTML page.")
 def study(study_file, output, seed, trials, workers, dask_address, resume, quiet, no_figures) -> None:
-    """Run the Monte Carlo study STUDY.yaml into RESULTS/: trials.csv (one row per trial ×
-    configuration), summary.csv (statistics with 95 % intervals), figures/ and index.html.
+    """Run the Monte Carlo study STUDY.yaml (plan, simulate, identify, verify per trial) into RESULTS/.
+
+    RESULTS/ gets trials.csv (one row per trial × configuration), summary.csv (statistics
+    with 95 % intervals), figures/ and index.html.
 
     Same seed, same bits, whatever the number of workers or the backend. The progress bar
     (stderr) shows only on a terminal.
