@@ -180,7 +180,18 @@ def test_interrupted_study_resumes_to_the_same_bits(small_study, reference, tmp_
 def test_resume_extends_a_finished_study(small_study, reference, tmp_path):
     out = tmp_path / "r"
     shutil.copytree(reference, out)
-    res = run_study(small_study.with_trials(6), out, workers=1, resume=True, figures=False)
+    real_run_batch = backends.run_batch
+
+    def check_not_finished(*args):     # while it runs, the folder must not look finished
+        assert not (out / "trials.csv").exists()
+        assert json.loads((out / "manifest.json").read_text())["complete"] is False
+        return real_run_batch(*args)
+
+    backends.run_batch = check_not_finished
+    try:
+        res = run_study(small_study.with_trials(6), out, workers=1, resume=True, figures=False)
+    finally:
+        backends.run_batch = real_run_batch
     assert res.trials_run == 2 * 2
     lines = (out / "trials.csv").read_text().splitlines()
     ref = (reference / "trials.csv").read_text().splitlines()

@@ -187,9 +187,9 @@ class ResultFolder:
         except OSError as exc:
             raise PkmcalError(f"cannot create the output folder '{self.path}': {exc.strerror or exc}") from None
         self.write_manifest(study_name, trials, complete=False)
-        # a study that was complete and is extended must not look complete while it runs
+        # a finished study that is resumed (e.g. extended) must not look finished while it runs
         for name in ("trials.csv", "summary.csv"):
-            if (self.path / name).exists() and man is not None and not man.get("complete"):
+            if man is not None and (self.path / name).exists():
                 os.unlink(self.path / name)
 
     def write_manifest(self, study_name: str, trials: int, complete: bool, extra: dict | None = None) -> None:
