@@ -48,6 +48,8 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
              "Calibrate the built-in prototype end to end on a simulated 'real' machine."),
     "reproduce": ("pkmcal.cli.reproduce_cmd", "reproduce",
                   "Regenerate paper table NAME with our numbers beside the published ones."),
+    "study": ("pkmcal.cli.study_cmd", "study",
+              "Run the Monte Carlo study STUDY.yaml (plan, simulate, identify, verify per trial) into RESULTS/."),
 }
 
 

@@ -1,7 +1,7 @@
 """Reproductions of the papers' tables: our numbers beside the published ones.
 
 One module per paper table (:mod:`.paper1`, :mod:`.paper2`, :mod:`.paper2_planning`,
-:mod:`.paper3`); each reproduction is a function ``f(seed=0, quick=False) -> Reproduction``
+:mod:`.paper2_study` (Table 6 and Fig. 6, run as :mod:`pkmcal.study` studies), :mod:`.paper3`); each reproduction is a function ``f(seed=0, quick=False) -> Reproduction``
 (:mod:`.table`), deterministic for a seed, with a ``quick`` mode (few Monte Carlo runs)
 for tests. :data:`REPRODUCTIONS`
 is the registry behind ``pkmcal reproduce NAME``; :func:`run_reproduction` runs one by name.
@@ -18,6 +18,7 @@ from pkmcal.errors import PkmcalError
 from pkmcal.reproduce.paper1 import paper1_table1
 from pkmcal.reproduce.paper2 import paper2_table5
 from pkmcal.reproduce.paper2_planning import paper2_tables1_2
+from pkmcal.reproduce.paper2_study import paper2_fig6, paper2_table6
 from pkmcal.reproduce.paper3 import paper3_case1, paper3_case2
 from pkmcal.reproduce.table import Reproduction, Row
 
@@ -29,6 +30,9 @@ REPRODUCTIONS: dict[str, tuple[Callable[..., Reproduction], str]] = {
                                      "gauge evidence, Table 7 evidence"),
     "paper2-tables1-2": (paper2_tables1_2, "paper 2 Tables 1-2 (observability indices O1-O4 of random and "
                                            "optimal sets of 14-112 poses)"),
+    "paper2-table6": (paper2_table6, "paper 2 Table 6 (random vs optimally selected poses: D_E, P_Er), as a study"),
+    "paper2-fig6": (paper2_fig6, "paper 2 Fig. 6 (parameter error vs number of random poses, auto and paper "
+                                 "gauge), as a study"),
     "paper3-case1": (paper3_case1, "paper 3 case 1 (2-dof, 3 rotary actuators): held-out improvement"),
     "paper3-case2": (paper3_case2, "paper 3 case 2 (3-dof, 4 linear actuators): held-out improvement"),
 }
@@ -45,4 +49,4 @@ def run_reproduction(name: str, seed: int = 0, quick: bool = False) -> Reproduct
 
 
 __all__ = ["REPRODUCTIONS", "Reproduction", "Row", "run_reproduction", "paper1_table1", "paper2_table5",
-           "paper2_tables1_2", "paper3_case1", "paper3_case2"]
+           "paper2_tables1_2", "paper2_table6", "paper2_fig6", "paper3_case1", "paper3_case2"]

@@ -1,0 +1,459 @@
+"""Study files (YAML): which campaigns to simulate, how often, and how to judge them.
+
+A study is a Monte Carlo experiment over simulated calibration campaigns (paper 1 §IV,
+paper 2 §5): for every combination of machine × setup × pose plan × number of poses, and
+for every trial, a "real" machine is drawn from the parameter-error model, the planned
+poses are measured on it with the setup's noise, each method identifies the parameters
+and the result is verified on held-out poses. Lengths in mm, angles in degrees (as in
+every pkmcal file)::
+
+    name: prototype-indicators            # a label for the study (results, page title)
+    description: how many poses do three dial indicators need?
+    seed: 0                               # same seed, same results, bit for bit
+    trials: 200                           # per configuration
+    machines:
+      - nominal: stewart-prototype        # built-in name or machine file (relative to this file)
+        label: prototype                  # optional (default: the nominal's name)
+        errors:                           # parameter-error model, drawn per trial ...
+          - {parameters: "b*", distribution: uniform, size: 0.5}    # U(-0.5, 0.5) mm
+          - {parameters: "L0_*", distribution: normal, size: 0.2}   # N(0, 0.2²) mm
+        # real: stewart-prototype-real    # ... or one real machine for every trial
+        ignore_limits: [leg_collision]    # limits of the real machine not checked
+    setups:
+      - setup: indicators-prototype       # built-in name or setup file (relative to this file)
+        label: indicators                 # optional
+        reading_noise_scale: 1.0          # optional multipliers of the setup's noise
+        actuator_noise_scale: 1.0
+    plans:
+      - {algorithm: random, poses: [15, 30, 60, 110]}
+      - {algorithm: default, poses: [15, 30, 60, 110], candidates: 2000}
+    methods:
+      - auto                              # the planner's default for the setup
+      - {method: fk-residual, weighted: false, fix: ["b1.*", "b2.*"], label: paper-gauge}
+    heldout: {poses: 50}                  # random reachable poses; or {file: poses.csv}
+
+``errors`` groups match parameter names with shell patterns; every parameter matches at
+most one group; unmatched parameters are exact. ``size`` is the half-width of a uniform
+error and the standard deviation of a normal one (mm; degrees for angle parameters).
+Plans: ``algorithm`` one of :data:`pkmcal.planning.selection.ALGORITHMS`; ``candidates``
+the size of the candidate pool (drawn once per machine × setup × plan); ``resample``
+``trial`` (a new selection from the pool in every trial; the default for ``random`` and
+``corners``) or ``once`` (one selection used in every trial; the default for the
+optimising planners, as an engineer plans once and measures). ``margin`` and ``index`` as
+for ``pkmcal plan``.
+
+:func:`load_study` validates a file with pydantic and resolves it into a :class:`Study`
+(machines and setups loaded); errors name the file, line and key.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import hashlib
+import json
+import os
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Callable, Literal, Union
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from pkmcal.errors import InputFileError, PkmcalError
+from pkmcal.identification.residuals import METHODS
+from pkmcal.io._yaml import YamlSyntaxError, parse_yaml
+from pkmcal.io.machine_file import load_machine, machine_to_text
+from pkmcal.io.setup_file import load_setup, setup_to_yaml
+from pkmcal.mechanisms.base import Mechanism
+from pkmcal.planning.blocks import default_method
+from pkmcal.planning.selection import ALGORITHMS
+from pkmcal.sensors.base import MeasurementSetup, NoiseModel
+
+#: Plans whose selection is cheap and random: re-drawn in every trial by default.
+RESAMPLED_BY_DEFAULT = ("random", "corners")
+#: Largest accepted number of trials per configuration and of poses per plan.
+MAX_TRIALS = 10_000_000
+MAX_POSES = 100_000
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class _ErrorGroup(_Strict):
+    parameters: str
+    distribution: Literal["uniform", "normal"]
+    size: float = Field(ge=0.0, allow_inf_nan=False)
+
+
+class _Machine(_Strict):
+    nominal: str
+    label: str | None = None
+    errors: list[_ErrorGroup] | None = None
+    real: str | None = None
+    ignore_limits: list[str] = []
+
+
+class _Setup(_Strict):
+    setup: str
+    label: str | None = None
+    reading_noise_scale: float = Field(1.0, ge=0.0, allow_inf_nan=False)
+    actuator_noise_scale: float = Field(1.0, ge=0.0, allow_inf_nan=False)
+
+
+class _Plan(_Strict):
+    algorithm: str
+    poses: list[int]
+    candidates: int = Field(2000, ge=1, le=10_000_000)
+    resample: Literal["trial", "once"] | None = None
+    margin: float = Field(0.1, ge=0.0, allow_inf_nan=False)
+    index: Literal["O1", "O2", "O3", "O4", "O5"] | None = None
+    label: str | None = None
+
+    @field_validator("algorithm")
+    @classmethod
+    def _known(cls, v: str) -> str:
+        if v.lower() not in ALGORITHMS:
+            raise ValueError(f"unknown algorithm '{v}'; use one of {', '.join(ALGORITHMS)}")
+        return v.lower()
+
+    @field_validator("poses")
+    @classmethod
+    def _counts(cls, v: list[int]) -> list[int]:
+        if not v or any(n < 1 or n > MAX_POSES for n in v) or len(set(v)) != len(v):
+            raise ValueError(f"give a non-empty list of distinct pose counts between 1 and {MAX_POSES}")
+        return v
+
+
+class _Method(_Strict):
+    method: str
+    weighted: bool = True
+    free: list[str] | None = None
+    fix: list[str] | Literal["auto"] | None = None
+    label: str | None = None
+
+    @field_validator("method")
+    @classmethod
+    def _known(cls, v: str) -> str:
+        if v != "auto" and v not in METHODS:
+            raise ValueError(f"unknown method '{v}'; use auto or one of {', '.join(METHODS)}")
+        return v
+
+
+class _HeldOut(_Strict):
+    poses: int | None = Field(None, ge=1, le=MAX_POSES)
+    file: str | None = None
+
+
+class _Study(_Strict):
+    name: str
+    description: str = ""
+    seed: int = Field(0, ge=0)
+    trials: int = Field(ge=1, le=MAX_TRIALS)
+    machines: list[_Machine] = Field(min_length=1)
+    setups: list[_Setup] = Field(min_length=1)
+    plans: list[_Plan] = Field(min_length=1)
+    methods: list[Union[str, _Method]] = Field(default_factory=lambda: ["auto"], min_length=1)
+    heldout: _HeldOut = _HeldOut(poses=50)
+
+
+# -- the resolved study ------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ErrorGroup:
+    """Parameters matching ``pattern`` get an error U(−size, size) (``uniform``) or
+    N(0, size²) (``normal``); ``size`` in internal units (mm, rad)."""
+
+    pattern: str
+    distribution: str
+    size: float
+
+
+@dataclass(frozen=True)
+class MachineSpec:
+    """A nominal machine and how its real counterpart is made: one fixed ``real`` machine,
+    or random ``errors`` per trial (``real`` None)."""
+
+    label: str
+    nominal: Mechanism
+    real: Mechanism | None = None
+    errors: tuple[ErrorGroup, ...] = ()
+    ignore_limits: tuple[str, ...] = ()
+
+    def error_index(self) -> list[np.ndarray]:
+        """Per error group, the indices of the parameters it perturbs."""
+        return [np.array([i for i, n in enumerate(self.nominal.param_names) if fnmatch.fnmatchcase(n, g.pattern)],
+                         dtype=int) for g in self.errors]
+
+    def describe(self) -> str:
+        if self.real is not None:
+            return f"real machine '{self.real.name}' in every trial"
+        parts = [f"{g.pattern}: {'U(±' if g.distribution == 'uniform' else 'N(0, '}{g.size:g}"
+                 f"{')' if g.distribution == 'uniform' else '²)'}" for g in self.errors]
+        return "random errors per trial (mm, rad): " + ", ".join(parts)
+
+
+@dataclass(frozen=True)
+class SetupSpec:
+    label: str
+    setup: MeasurementSetup
+
+
+@dataclass(frozen=True)
+class PlanSpec:
+    """A pose planner and the pose counts to study; ``resample`` "trial" or "once"."""
+
+    label: str
+    algorithm: str
+    poses: tuple[int, ...]
+    candidates: int = 2000
+    resample: str = "trial"
+    margin: float = 0.1
+    index: str | None = None
+
+
+@dataclass(frozen=True)
+class MethodSpec:
+    """An identification method with its options (``method`` "auto": the planner's
+    default for the setup, :func:`pkmcal.planning.blocks.default_method`)."""
+
+    label: str
+    method: str
+    weighted: bool = True
+    free: tuple[str, ...] | None = None
+    fix: tuple[str, ...] | str | None = None
+
+    def resolved(self, setup: MeasurementSetup, machine: Mechanism) -> str:
+        return default_method(setup, machine) if self.method == "auto" else self.method
+
+
+#: Extra per-trial metrics of a reproduction: ``f(nominal, real, setup, sim, fit, heldout)``
+#: → {column: float}; a module-level function (workers receive it by reference).
+ExtraMetrics = Callable[..., dict]
+
+
+@dataclass(frozen=True)
+class Study:
+    """A validated, resolved study (:func:`load_study`, or built in Python)."""
+
+    name: str
+    trials: int
+    machines: tuple[MachineSpec, ...]
+    setups: tuple[SetupSpec, ...]
+    plans: tuple[PlanSpec, ...]
+    methods: tuple[MethodSpec, ...]
+    heldout_poses: int | None = 50
+    heldout_file: np.ndarray | None = None
+    seed: int = 0
+    description: str = ""
+    source: str = ""
+    extra_metrics: ExtraMetrics | None = None
+    extra_columns: tuple[str, ...] = ()
+
+    def __post_init__(self):
+        _unique("machine", [m.label for m in self.machines])
+        _unique("setup", [s.label for s in self.setups])
+        _unique("plan", [p.label for p in self.plans])
+        _unique("method", [m.label for m in self.methods])
+        for m in self.machines:
+            if m.nominal.n_dof != 6:
+                raise PkmcalError(f"study machine '{m.label}': studies verify 6-DOF pose errors; machine "
+                                  f"'{m.nominal.name}' has {m.nominal.n_dof} pose coordinates")
+
+    def with_seed(self, seed: int) -> "Study":
+        return replace(self, seed=int(seed))
+
+    def with_trials(self, trials: int) -> "Study":
+        return replace(self, trials=int(trials))
+
+    def fingerprint(self) -> str:
+        """A hash of everything the results depend on except the number of trials (so
+        that ``--resume`` can extend a study): machines and setups as their file texts,
+        plans, methods, held-out set, seed, extra metrics and the pkmcal version."""
+        from pkmcal import __version__
+
+        doc = {
+            "version": __version__, "seed": self.seed,
+            "machines": [[m.label, machine_to_text(m.nominal), None if m.real is None else machine_to_text(m.real),
+                          [[g.pattern, g.distribution, repr(g.size)] for g in m.errors], list(m.ignore_limits)]
+                         for m in self.machines],
+            "setups": [[s.label, setup_to_yaml(s.setup)] for s in self.setups],
+            "plans": [[p.label, p.algorithm, list(p.poses), p.candidates, p.resample, repr(p.margin), p.index]
+                      for p in self.plans],
+            "methods": [[m.label, m.method, m.weighted, m.free and list(m.free),
+                         m.fix if isinstance(m.fix, (str, type(None))) else list(m.fix)] for m in self.methods],
+            "heldout": [self.heldout_poses, None if self.heldout_file is None else self.heldout_file.tobytes().hex()],
+            "extra": None if self.extra_metrics is None else
+            f"{self.extra_metrics.__module__}.{self.extra_metrics.__qualname__}",
+        }
+        return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()
+
+
+def _unique(what: str, labels: list[str]) -> None:
+    seen = {x for x in labels if labels.count(x) > 1}
+    if seen:
+        raise PkmcalError(f"two {what}s have the label '{sorted(seen)[0]}'; give each a distinct 'label:'")
+
+
+def scaled_noise(setup: MeasurementSetup, reading: float, actuator: float) -> MeasurementSetup:
+    """``setup`` with its reading and actuator noise multiplied by the given factors."""
+    if reading == 1.0 and actuator == 1.0:
+        return setup
+    n = setup.noise
+    noise = NoiseModel(np.asarray(n.reading_std, float) * reading, np.asarray(n.actuator_std, float) * actuator,
+                       n.distribution)
+    return replace(setup, noise=noise)
+
+
+# -- loading -----------------------------------------------------------------------------
+
+
+def _key_text(loc: tuple) -> str:
+    text = ""
+    for p in loc:
+        if isinstance(p, str) and ("[" in p or p in ("str", "int", "float", "_Method")):
+            continue
+        text += f"[{p}]" if isinstance(p, int) else (f".{p}" if text else str(p))
+    return text or "(top level)"
+
+
+def _line(lines: dict[tuple, int], loc: tuple) -> int | None:
+    best, path = lines.get(()), ()
+    for part in loc:
+        if path + (part,) in lines:
+            path = path + (part,)
+            best = lines[path]
+    return best
+
+
+def _resolve(base: Path, name: str) -> str:
+    """A path relative to the study file's folder when that file exists, else ``name``
+    unchanged (a built-in machine or setup name)."""
+    p = Path(name)
+    candidate = p if p.is_absolute() else base / p
+    return str(candidate) if candidate.exists() else name
+
+
+def load_study(path: str | os.PathLike) -> Study:
+    """The study of a YAML file (module docstring), validated and resolved.
+
+    Raises :class:`~pkmcal.errors.InputFileError` naming the file, the line and the key.
+    """
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise PkmcalError(f"study file '{path}' does not exist") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputFileError(path, f"cannot read the study file: {exc}") from None
+    try:
+        data, lines = parse_yaml(text)
+    except YamlSyntaxError as exc:
+        raise InputFileError(path, str(exc), line=exc.line) from None
+    if not isinstance(data, dict):
+        raise InputFileError(path, "a study file is a YAML mapping with name, trials, machines, setups and plans")
+    try:
+        spec = _Study.model_validate(data)
+    except ValidationError as exc:
+        errs = exc.errors()
+        err = next((e for e in errs if e["type"] == "extra_forbidden"), errs[0])
+        loc = tuple(err["loc"])
+        if err["type"] == "extra_forbidden":
+            msg = "is not a study key here; remove or correct it"
+        elif err["type"] == "missing":
+            msg = "is missing"
+        else:
+            msg = err["msg"][0].lower() + err["msg"][1:]
+        raise InputFileError(path, f"key '{_key_text(loc)}': {msg}", line=_line(lines, loc)) from None
+    return _build(p, spec, lines, text)
+
+
+def _fail(path, lines, loc: tuple, message: str):
+    raise InputFileError(path, f"key '{_key_text(loc)}': {message}", line=_line(lines, loc))
+
+
+def _build(path: Path, spec: _Study, lines: dict, text: str) -> Study:
+    base = path.parent
+
+    def load(loc, fn, name):
+        try:
+            return fn(_resolve(base, name))
+        except PkmcalError as exc:
+            _fail(path, lines, loc, str(exc))
+
+    machines = []
+    for i, m in enumerate(spec.machines):
+        loc = ("machines", i)
+        nominal = load(loc + ("nominal",), load_machine, m.nominal)
+        if (m.errors is None) == (m.real is None):
+            _fail(path, lines, loc, "give exactly one of 'errors' (random errors per trial) or 'real' (one real machine)")
+        real = None if m.real is None else load(loc + ("real",), load_machine, m.real)
+        groups = []
+        if m.errors is not None:
+            names = nominal.param_names
+            owner: dict[str, int] = {}
+            for k, g in enumerate(m.errors):
+                hit = [n for n in names if fnmatch.fnmatchcase(n, g.parameters)]
+                if not hit:
+                    _fail(path, lines, loc + ("errors", k, "parameters"),
+                          f"'{g.parameters}' matches no parameter of '{nominal.name}' (its parameters: "
+                          f"{', '.join(names[:8])}, ...)")
+                for n in hit:
+                    if n in owner:
+                        _fail(path, lines, loc + ("errors", k, "parameters"),
+                              f"parameter '{n}' is already in group {owner[n] + 1}; each parameter in at most one group")
+                    owner[n] = k
+                angle = [nominal.param_is_angle[names.index(n)] for n in hit]
+                if any(angle) and not all(angle):
+                    _fail(path, lines, loc + ("errors", k, "parameters"),
+                          "mixes length and angle parameters; give them separate groups (mm and degrees)")
+                size = float(np.deg2rad(g.size)) if all(angle) else float(g.size)
+                groups.append(ErrorGroup(g.parameters, g.distribution, size))
+        limits = tuple(m.ignore_limits)
+        known = tuple(nominal.check_limits(nominal.home_pose[None, :]).violations)
+        bad = [n for n in limits if n not in known]
+        if bad:
+            _fail(path, lines, loc + ("ignore_limits",), f"'{bad[0]}' is not a limit of '{nominal.name}' "
+                  f"({', '.join(known)})")
+        machines.append(MachineSpec(m.label or nominal.name, nominal, real, tuple(groups), limits))
+
+    setups = []
+    for i, s in enumerate(spec.setups):
+        setup = load(("setups", i, "setup"), load_setup, s.setup)
+        setups.append(SetupSpec(s.label or Path(s.setup).stem,
+                                scaled_noise(setup, s.reading_noise_scale, s.actuator_noise_scale)))
+
+    plans = []
+    for i, pl in enumerate(spec.plans):
+        resample = pl.resample or ("trial" if pl.algorithm in RESAMPLED_BY_DEFAULT else "once")
+        plans.append(PlanSpec(pl.label or pl.algorithm, pl.algorithm, tuple(pl.poses), pl.candidates, resample,
+                              pl.margin, pl.index))
+
+    methods = []
+    for i, me in enumerate(spec.methods):
+        if isinstance(me, str):
+            if me != "auto" and me not in METHODS:
+                _fail(path, lines, ("methods", i), f"unknown method '{me}'; use auto or one of {', '.join(METHODS)}")
+            me = _Method(method=me)
+        fix = me.fix if isinstance(me.fix, (str, type(None))) else tuple(me.fix)
+        methods.append(MethodSpec(me.label or me.method, me.method, me.weighted,
+                                  None if me.free is None else tuple(me.free), fix))
+
+    h = spec.heldout
+    if (h.poses is None) == (h.file is None):
+        _fail(path, lines, ("heldout",), "give exactly one of 'poses' (random reachable poses) or 'file' (a pose CSV)")
+    held = None
+    if h.file is not None:
+        from pkmcal.io.tables import read_poses
+
+        held = load(("heldout", "file"), lambda f: read_poses(f, machines[0].nominal), h.file)
+    try:
+        return Study(name=spec.name, trials=spec.trials, machines=tuple(machines), setups=tuple(setups),
+                     plans=tuple(plans), methods=tuple(methods), heldout_poses=h.poses, heldout_file=held,
+                     seed=spec.seed, description=spec.description, source=text)
+    except PkmcalError as exc:
+        raise InputFileError(path, str(exc)) from None
+
+
+__all__ = ["ErrorGroup", "MachineSpec", "MethodSpec", "PlanSpec", "SetupSpec", "Study", "load_study", "scaled_noise"]

@@ -1,0 +1,297 @@
+"""One trial of a study: draw a real machine, measure the planned poses, identify, verify.
+
+For trial t of campaign c (machine m × setup s × plan p × pose count n):
+
+1. real machine: the study's fixed one, or nominal + the error model drawn from the
+   generator of key (20, m, t) — the same real machine for every setup, plan and method of
+   trial t (paired comparisons: differences between configurations are not blurred by
+   different machines);
+2. poses: the campaign's one selection (plan ``resample: once``) or a new selection from
+   the campaign's candidate pool drawn from the generator of key (21, m, s, p, n, t), which
+   then draws the noise (:func:`pkmcal.identification.simulation.simulate_campaign`);
+3. every method identifies the parameters (:func:`pkmcal.identification.engine.identify`)
+   from the same simulated campaign;
+4. the truth θ* the estimate is compared with: θ_real = [ρ_real; s_setup] when every
+   parameter that was not estimated (gauge or user-fixed) has its true value at the start;
+   otherwise the noise-free fit of the same poses with the same free set (the value the
+   estimator tends to as the noise vanishes: the real machine expressed in the fit's gauge,
+   or the best the fixed model can do — its rms residual is ``truth_refit_rms``);
+5. errors over the free parameters, e = θ̂ − θ*: mean |e|, rms, max (length parameters,
+   mm; angle parameters, degrees); coverage with the *reported* covariance C of the free
+   parameters (the file covariance max(1, χ²_ν)·C_prior, :mod:`pkmcal.identification.uncertainty`):
+   marginal |e_i| ≤ 1.96 σ_i, and the joint ellipsoid eᵀC⁻¹e ≤ χ²_{n_free, 0.95};
+6. held-out pose errors with the nominal and the calibrated model
+   (:func:`pkmcal.identification.verification.pose_errors`), over the poses both reach.
+
+Every generator is ``numpy.random.default_rng(SeedSequence(seed, spawn_key=key))``: a
+trial's numbers depend on the seed and its key only, never on which worker runs it, in
+which batch, or in which order. A :class:`~pkmcal.errors.PkmcalError` in a trial (e.g. no
+held-out pose reachable) makes a row with ``failed = 1`` and the message, not a crash.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from pkmcal.errors import PkmcalError
+from pkmcal.identification.engine import IdentificationResult, identify
+from pkmcal.identification.simulation import parameter_errors, simulate_campaign
+from pkmcal.identification.verification import PoseErrors, pose_errors
+from pkmcal.planning.candidates import generate_candidates
+from pkmcal.planning.plan import plan_poses
+from pkmcal.planning.selection import select, select_random
+from pkmcal.study.results import Z95, column_names, format_row
+from pkmcal.study.schema import MachineSpec, Study
+
+#: Keys of the seed sequences (module docstring).
+KEY_POOL, KEY_ONCE, KEY_HELDOUT, KEY_REAL, KEY_TRIAL = 10, 11, 12, 20, 21
+DEG = float(np.rad2deg(1.0))
+
+
+def rng_for(seed: int, *key: int) -> np.random.Generator:
+    """The generator of ``key`` under the study seed (independent streams per key)."""
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=tuple(int(k) for k in key)))
+
+
+def seed_for(seed: int, *key: int) -> int:
+    """An integer seed for APIs that take one (``plan_poses``), from the same streams."""
+    return int(np.random.SeedSequence(seed, spawn_key=tuple(int(k) for k in key)).generate_state(1, np.uint64)[0])
+
+
+@dataclass(frozen=True)
+class Campaign:
+    """Machine × setup × plan × pose count, with its poses: ``poses`` the one selection of a
+    ``resample: once`` plan, else None (drawn per trial from pool ``pool``)."""
+
+    index: int
+    machine: int
+    setup: int
+    plan: int
+    n_index: int
+    n_poses: int
+    pool: int
+    poses: np.ndarray | None
+
+
+@dataclass(frozen=True)
+class Context:
+    """Everything a worker needs, built once (:func:`prepare`): the study, the campaigns,
+    the candidate pools (poses and, for optimising planners re-run per trial, their
+    planning blocks) and the held-out poses per machine."""
+
+    study: Study
+    campaigns: tuple[Campaign, ...]
+    pools: tuple[np.ndarray, ...]
+    pool_blocks: tuple[np.ndarray | None, ...]
+    heldout: tuple[np.ndarray, ...]
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return column_names(self.study.extra_columns)
+
+    @property
+    def n_methods(self) -> int:
+        return len(self.study.methods)
+
+    def config_index(self, campaign: int, method: int) -> int:
+        return campaign * self.n_methods + method
+
+
+def prepare(study: Study, progress=None) -> Context:
+    """Plan everything that does not change between trials (module docstring of
+    :mod:`pkmcal.study.schema`): per machine × setup × plan one candidate pool (poses
+    checked on the nominal machine by :func:`pkmcal.planning.plan.plan_poses`), per
+    ``once`` plan and pose count one selection, per machine the held-out poses."""
+    pools, blocks, campaigns = [], [], []
+    heldout = []
+    for mi, m in enumerate(study.machines):
+        if study.heldout_file is not None:
+            heldout.append(m.nominal.as_pose_array(study.heldout_file))
+        else:
+            cand = generate_candidates(m.nominal, None, kind="random", n=study.heldout_poses,
+                                       rng=rng_for(study.seed, KEY_HELDOUT, mi))
+            heldout.append(cand.poses)
+    for mi, m in enumerate(study.machines):
+        for si, s in enumerate(study.setups):
+            for pi, p in enumerate(study.plans):
+                pool_kind = "corners" if p.algorithm == "corners" else "random"
+                pool = plan_poses(m.nominal, s.setup, 1, algorithm=pool_kind, n_candidates=p.candidates,
+                                  margin=p.margin, seed=seed_for(study.seed, KEY_POOL, mi, si, pi))
+                poses = pool.candidates.poses
+                need_blocks = p.algorithm not in ("random", "corners")
+                G = pool.model.blocks(poses)[0] if need_blocks else None
+                pool_index = len(pools)
+                pools.append(poses)
+                blocks.append(G if p.resample == "trial" else None)
+                for ni, n in enumerate(p.poses):
+                    if n > len(poses):
+                        raise PkmcalError(f"plan '{p.label}' asks for {n} poses but machine '{m.label}' with setup "
+                                          f"'{s.label}' has only {len(poses)} reachable, measurable candidates; "
+                                          "ask for fewer poses or more candidates")
+                    chosen = None
+                    if p.resample == "once":
+                        rng = rng_for(study.seed, KEY_ONCE, mi, si, pi, ni)
+                        if need_blocks:
+                            sel = select(G, n, algorithm=p.algorithm, index=p.index, rng=rng, positions=poses)
+                            chosen = poses[sel.chosen]
+                        else:
+                            chosen = poses[select_random(len(poses), n, rng)]
+                    campaigns.append(Campaign(len(campaigns), mi, si, pi, ni, n, pool_index, chosen))
+                    if progress is not None:
+                        progress(len(campaigns))
+    return Context(study, tuple(campaigns), tuple(pools), tuple(blocks), tuple(heldout))
+
+
+def real_machine(spec: MachineSpec, seed: int, machine_index: int, trial: int):
+    """The real machine of a trial (module docstring, step 1)."""
+    if spec.real is not None:
+        return spec.real
+    rng = rng_for(seed, KEY_REAL, machine_index, trial)
+    delta = np.zeros(len(spec.nominal.params))
+    for g, idx in zip(spec.errors, spec.error_index()):
+        delta[idx] = parameter_errors(idx.size, g.size, rng, "gaussian" if g.distribution == "normal" else "uniform")
+    return spec.nominal.with_params(spec.nominal.params + delta, name=f"{spec.nominal.name}-real-{trial}")
+
+
+@lru_cache(maxsize=4096)
+def chi2_95(dof: int) -> float:
+    """χ²_{dof}(0.95), the 95 % quantile of the chi-squared distribution."""
+    from scipy.special import chdtri
+
+    return float(chdtri(dof, 0.05))
+
+
+def _stats(e: np.ndarray, scale: float = 1.0) -> tuple[float, float, float]:
+    if e.size == 0:
+        return float("nan"), float("nan"), float("nan")
+    a = np.abs(e) * scale
+    return float(a.mean()), float(np.sqrt(np.mean(a * a))), float(a.max())
+
+
+def pseudo_truth(fit: IdentificationResult, truth_full: np.ndarray, nominal, setup, sim, method: str, weighted: bool):
+    """θ* (module docstring, step 4), whether it is a refit, and the refit's rms residual."""
+    fixed = np.ones(len(fit.names), dtype=bool)
+    fixed[fit.free_index] = False
+    if np.array_equal(truth_full[fixed], fit.initial[fixed]):
+        return truth_full, False, 0.0
+    ref = identify(nominal, setup, q=sim.actuator_true, y=sim.sensor_true, commanded=sim.commanded[sim.kept],
+                   method=method, weighted=weighted, free=fit.free)
+    return ref.estimate, True, ref.rms_residual
+
+
+def evaluate(fit: IdentificationResult, truth_full: np.ndarray, is_angle: np.ndarray, nominal, real, setup, sim,
+             method: str, weighted: bool, heldout: np.ndarray, before: PoseErrors, ignore: tuple[str, ...]) -> dict:
+    """The metric columns of one fit (module docstring, steps 4–6)."""
+    truth, refit, refit_rms = pseudo_truth(fit, truth_full, nominal, setup, sim, method, weighted)
+    free = fit.free_index
+    e = fit.estimate[free] - truth[free]
+    ang = is_angle[free]
+    rep = fit.identifiability
+    u = fit.uncertainty
+    out = {"poses_measured": len(sim.kept), "n_free": len(free), "rank": rep.rank, "n_candidates": rep.n_params,
+           "gauge": " ".join(fit.gauge), "condition": rep.condition_number, "chi2": u.chi2, "dof": u.dof,
+           "reduced_chi2": u.reduced_chi2, "nfev": fit.nfev, "truth_refit": refit, "truth_refit_rms": refit_rms}
+    mean, rms, mx = _stats(e[~ang])
+    out.update(param_error_mean_abs_mm=mean, param_error_rms_mm=rms, param_error_max_abs_mm=mx,
+               param_error_rms_deg=_stats(e[ang], DEG)[1],
+               param_error_before_mean_abs_mm=_stats((fit.initial[free] - truth[free])[~ang])[0],
+               param_error_vs_real_mean_abs_mm=_stats((fit.estimate[free] - truth_full[free])[~ang])[0])
+    C = fit.covariance
+    sd = np.sqrt(np.clip(np.diag(C), 0.0, None))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = np.abs(e) / sd
+    inside = z <= Z95
+    try:
+        d2 = float(e @ np.linalg.solve(C, e))
+    except np.linalg.LinAlgError:
+        d2 = float("nan")
+    out.update(coverage_fraction=float(inside.mean()), all_within_95=bool(inside.all()), ellipsoid_d2=d2,
+               ellipsoid_within_95=None if not np.isfinite(d2) else bool(d2 <= chi2_95(len(free))),
+               error_nsigma_rms=float(np.sqrt(np.mean(z * z))))
+    after = pose_errors(fit.mechanism, real, heldout, ignore)
+    common = after.valid & before.valid
+    out["heldout_used"] = int(common.sum())
+    if common.any():
+        a, b = after.summary(common), before.summary(common)
+        out.update(heldout_position_rms_mm=a["position_rms_mm"], heldout_position_max_mm=a["position_max_mm"],
+                   heldout_orientation_rms_deg=a["orientation_rms_rad"] * DEG,
+                   heldout_orientation_max_deg=a["orientation_max_rad"] * DEG,
+                   heldout_tilt_rms_deg=a["tilt_rms_rad"] * DEG, heldout_height_rms_mm=a["height_rms_mm"],
+                   heldout_position_rms_before_mm=b["position_rms_mm"],
+                   heldout_orientation_rms_before_deg=b["orientation_rms_rad"] * DEG,
+                   heldout_tilt_rms_before_deg=b["tilt_rms_rad"] * DEG, heldout_height_rms_before_mm=b["height_rms_mm"])
+    else:
+        out["message"] = "the real machine reaches none of the held-out poses with both models"
+    return out
+
+
+def run_trial(ctx: Context, campaign: Campaign, trial: int) -> list[str]:
+    """The CSV lines (one per method, in method order) of trial ``trial`` of ``campaign``."""
+    st = ctx.study
+    mspec, sspec, pspec = st.machines[campaign.machine], st.setups[campaign.setup], st.plans[campaign.plan]
+    nominal, setup = mspec.nominal, sspec.setup
+    base = {"machine": mspec.label, "setup": sspec.label, "plan": pspec.label, "algorithm": pspec.algorithm,
+            "n_poses": campaign.n_poses, "plan_resampled": campaign.poses is None, "trial": trial, "failed": False,
+            "message": ""}
+    rows = [dict(base, config=ctx.config_index(campaign.index, k), method=me.label,
+                 identification=me.resolved(setup, nominal), weighted=me.weighted)
+            for k, me in enumerate(st.methods)]
+    ignore = mspec.ignore_limits
+    heldout = ctx.heldout[campaign.machine]
+    try:
+        real = real_machine(mspec, st.seed, campaign.machine, trial)
+        rng = rng_for(st.seed, KEY_TRIAL, campaign.machine, campaign.setup, campaign.plan, campaign.n_index, trial)
+        poses = campaign.poses
+        if poses is None:
+            pool = ctx.pools[campaign.pool]
+            G = ctx.pool_blocks[campaign.pool]
+            if G is None:
+                chosen = select_random(len(pool), campaign.n_poses, rng)
+            else:
+                chosen = select(G, campaign.n_poses, algorithm=pspec.algorithm, index=pspec.index, rng=rng,
+                                positions=pool).chosen
+            poses = pool[chosen]
+        sim = simulate_campaign(nominal, real, setup, poses, rng, ignore_limits=ignore)
+        if len(sim.kept) == 0:
+            raise PkmcalError(f"the real machine reaches none of the {len(poses)} planned poses ({sim.summary()})")
+        before = pose_errors(nominal, real, heldout, ignore)
+    except PkmcalError as exc:
+        for r in rows:
+            r.update(failed=True, message=str(exc))
+        return [format_row(r, ctx.names) for r in rows]
+    truth_full = np.concatenate([real.params, setup.sensor.params])
+    is_angle = np.array(tuple(nominal.param_is_angle) + tuple(setup.sensor.param_is_angle), dtype=bool)
+    for r, me in zip(rows, st.methods):
+        try:
+            fit = identify(nominal, setup, sim.measurements, method=r["identification"], weighted=me.weighted,
+                           free=me.free, fix=me.fix)
+            r.update(evaluate(fit, truth_full, is_angle, nominal, real, setup, sim, r["identification"], me.weighted,
+                              heldout, before, ignore))
+            if st.extra_metrics is not None:
+                r.update(st.extra_metrics(nominal, real, setup, sim, fit, heldout))
+        except PkmcalError as exc:
+            r.update(failed=True, message=str(exc), poses_measured=len(sim.kept))
+        if r.get("message"):
+            r["failed"] = True
+    return [format_row(r, ctx.names) for r in rows]
+
+
+def run_batch(ctx: Context, campaign: int, first: int, last: int) -> tuple[int, int, int, list[str], float]:
+    """Trials ``first``..``last`` (inclusive) of one campaign: ``(campaign, first, last,
+    lines, seconds)`` with the lines in (trial, method) order."""
+    from pkmcal.identification.residuals import single_threaded_blas
+
+    t0 = time.perf_counter()
+    c = ctx.campaigns[campaign]
+    lines: list[str] = []
+    with single_threaded_blas():
+        for t in range(first, last + 1):
+            lines.extend(run_trial(ctx, c, t))
+    return campaign, first, last, lines, time.perf_counter() - t0
+
+
+__all__ = ["Campaign", "Context", "prepare", "pseudo_truth", "real_machine", "rng_for", "run_batch", "run_trial", "seed_for"]
