@@ -464,3 +464,244 @@ def fk_newton(lengths, guesses, base, platform, tol, max_iter, polish=0):
                 poses, converged, iterations, residual)
         _run_rows(_fk_range, n, _FK_GRAIN, args)
     return poses, converged, iterations, residual
+
+
+# -- limits (Hexapod.check_limits) -------------------------------------------------------
+
+#: Columns of :func:`limit_margins`' output, in order.
+LIMIT_NAMES = ("stroke", "u_joint_tilt", "s_joint_tilt", "leg_collision", "singularity")
+#: Rows per thread below which :func:`limit_margins` runs on the calling thread only
+#: (~1 µs/pose; see the IK/FK grains above).
+_LIMIT_GRAIN = 2_000
+#: Slack of the singularity certificate, relative to tr(JᵀJ) ≥ λ_max: 100× the rounding
+#: error of forming JᵀJ and of its 6×6 Cholesky factorisation (≈ 36 ε tr).
+_CERTIFICATE_SLACK = 1e-12
+
+
+@nb.njit(**_OPTS)
+def _clip01(x):
+    """np.clip(x, 0, 1), NaN propagated."""
+    if x < 0.0:
+        return 0.0
+    if x > 1.0:
+        return 1.0
+    return x
+
+
+@nb.njit(**_OPTS)
+def _point_segment(x0, x1, x2, p0, p1, p2, d0, d1, d2, dd):
+    """Distance from the point x to the segment p + u d, u ∈ [0, 1] (dd = d·d > 0)."""
+    u = _clip01(((x0 - p0) * d0 + (x1 - p1) * d1 + (x2 - p2) * d2) / dd)
+    e0, e1, e2 = p0 + u * d0 - x0, p1 + u * d1 - x1, p2 + u * d2 - x2
+    return math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+
+
+@nb.njit(**_OPTS)
+def _segment_distance(P1, i1, Q1, j1, P2, i2, Q2, j2):
+    """Minimum distance between the segments P1[i1]→Q1[j1] and P2[i2]→Q2[j2] (rows of
+    (·, 3) arrays; indices, not slices, so that no array view is built per call) by the
+    formula of :func:`pkmcal.mechanisms.hexapod.segment_distance` (Ericson §5.1.9, with its
+    zero-length and parallel cases), in registers."""
+    p1 = (P1[i1, 0], P1[i1, 1], P1[i1, 2])
+    q1 = (Q1[j1, 0], Q1[j1, 1], Q1[j1, 2])
+    p2 = (P2[i2, 0], P2[i2, 1], P2[i2, 2])
+    q2 = (Q2[j2, 0], Q2[j2, 1], Q2[j2, 2])
+    d10, d11, d12 = q1[0] - p1[0], q1[1] - p1[1], q1[2] - p1[2]
+    d20, d21, d22 = q2[0] - p2[0], q2[1] - p2[1], q2[2] - p2[2]
+    r0, r1, r2 = p1[0] - p2[0], p1[1] - p2[1], p1[2] - p2[2]
+    a = d10 * d10 + d11 * d11 + d12 * d12
+    e = d20 * d20 + d21 * d21 + d22 * d22
+    f = d20 * r0 + d21 * r1 + d22 * r2
+    c = d10 * r0 + d11 * r1 + d12 * r2
+    b = d10 * d20 + d11 * d21 + d12 * d22
+    point1 = a <= 2.2250738585072014e-308  # np.finfo(float).tiny: segment 1 is a point
+    point2 = e <= 2.2250738585072014e-308
+    a_ = 1.0 if point1 else a
+    e_ = 1.0 if point2 else e
+    denom = a * e - b * b
+    skew = denom > 1e-12 * a * e
+    s = _clip01((b * f - c * e) / denom) if skew else 0.0
+    t = (b * s + f) / e_
+    if t < 0.0:
+        s = _clip01(-c / a_)
+    elif t > 1.0:
+        s = _clip01((b - c) / a_)
+    t = _clip01(t)
+    if point1:
+        s = 0.0
+    elif point2:
+        s = _clip01(-c / a_)
+    if point2:
+        t = 0.0
+    elif point1:
+        t = _clip01(f / e_)
+    g0 = r0 + s * d10 - t * d20
+    g1 = r1 + s * d11 - t * d21
+    g2 = r2 + s * d12 - t * d22
+    dist = math.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
+    if not skew and not point1 and not point2:
+        # (near-)parallel: the minimum is also attained at an endpoint of one segment
+        ends = min(_point_segment(p1[0], p1[1], p1[2], p2[0], p2[1], p2[2], d20, d21, d22, e_),
+                   _point_segment(q1[0], q1[1], q1[2], p2[0], p2[1], p2[2], d20, d21, d22, e_),
+                   _point_segment(p2[0], p2[1], p2[2], p1[0], p1[1], p1[2], d10, d11, d12, a_),
+                   _point_segment(q2[0], q2[1], q2[2], p1[0], p1[1], p1[2], d10, d11, d12, a_))
+        if ends < dist:
+            dist = ends
+    return dist
+
+
+@nb.njit(**_OPTS)
+def _cholesky_succeeds(C, shift, L):
+    """True when the Cholesky factorisation of C − shift·I (6×6) has only positive pivots;
+    L (6×6) is workspace."""
+    for i in range(6):
+        for k in range(i + 1):
+            s = C[i, k] - (shift if i == k else 0.0)
+            for q in range(k):
+                s -= L[i, q] * L[k, q]
+            if i == k:
+                if not s > 0.0:
+                    return False
+                L[i, i] = math.sqrt(s)
+            else:
+                L[i, k] = s / L[k, k]
+    return True
+
+
+@nb.njit(**_OPTS)
+def singularity_certificate(J, m, C, L):
+    """Decide σ_min(J)/σ_max(J) ≥ m for a 6×6 J without its singular values: +1.0 when
+    certainly ≥ m, −1.0 when certainly < m, NaN when undecided (then compute the SVD).
+
+    With C = JᵀJ, λ_min(C) = σ_min², and bounds lo = max_i C_ii ≤ λ_max(C) ≤ hi =
+    min(tr C, max_i Σ_k |C_ik|): if C − (m² hi + δ) I has a Cholesky factor then λ_min >
+    m² hi ≥ m² λ_max (≥ m); if C − (m² lo − δ) I has none then λ_min < m² lo ≤ m² λ_max
+    (< m). δ = :data:`_CERTIFICATE_SLACK` · tr C covers the rounding of both steps. C, L
+    (6×6) are workspace.
+    """
+    for i in range(6):
+        for k in range(i + 1):
+            s = 0.0
+            for q in range(6):
+                s += J[q, i] * J[q, k]
+            C[i, k] = s
+            C[k, i] = s
+    tr = 0.0
+    lo = 0.0
+    hi = 0.0
+    for i in range(6):
+        tr += C[i, i]
+        lo = max(lo, C[i, i])
+        row = 0.0
+        for k in range(6):
+            row += abs(C[i, k])
+        hi = max(hi, row)
+    if not (tr > 0.0 and tr < np.inf):  # NaN, inf or J = 0
+        return np.nan
+    hi = min(hi, tr)
+    slack = _CERTIFICATE_SLACK * tr
+    m2 = m * m
+    if _cholesky_succeeds(C, m2 * hi + slack, L):
+        return 1.0
+    shift = m2 * lo - slack
+    if shift > slack and not _cholesky_succeeds(C, shift, L):
+        return -1.0
+    return np.nan
+
+
+@nb.njit(**_OPTS)
+def _limits_range(poses, base, platform, offset, stroke, base_axis, platform_axis, pairs, enabled, limit,
+                  out, start, stop):
+    """out[k] (columns :data:`LIMIT_NAMES`) for rows k in [start, stop): the stroke, tilt
+    and collision margins by the formulas of ``Hexapod._limit_margins_numpy`` and, when
+    ``enabled[4]``, the singularity certificate (:func:`singularity_certificate`) of the
+    length-scaled twist Jacobian; ``limit`` = (U-tilt limit, S-tilt limit, leg diameter,
+    singularity margin, platform radius, safety margin mm, safety margin rad). Disabled
+    columns are NaN."""
+    R = np.empty((3, 3))
+    u = np.empty((6, 3))
+    tops = np.empty((6, 3))
+    Jt = np.empty((6, 6))
+    C = np.empty((6, 6))
+    L = np.empty((6, 6))
+    for k in range(start, stop):
+        _euler_matrix(poses[k, 3], poses[k, 4], poses[k, 5], R)
+        worst = np.inf
+        for i in range(6):
+            s = 0.0
+            for q in range(3):
+                ra = R[q, 0] * platform[i, 0] + R[q, 1] * platform[i, 1] + R[q, 2] * platform[i, 2]
+                Jt[i, 3 + q] = ra
+                tops[i, q] = poses[k, q] + ra
+                u[i, q] = tops[i, q] - base[i, q]
+                s += u[i, q] * u[i, q]
+            length = math.sqrt(s)
+            for q in range(3):
+                u[i, q] /= length
+            lam = length - offset[i]
+            m = min(lam - stroke[i, 0], stroke[i, 1] - lam)
+            if not m >= worst:  # NaN propagates
+                worst = m
+        out[k, 0] = worst - limit[5]
+        for c in range(1, 5):
+            out[k, c] = np.nan
+        if enabled[1]:
+            worst = -np.inf
+            for i in range(6):
+                d = u[i, 0] * base_axis[i, 0] + u[i, 1] * base_axis[i, 1] + u[i, 2] * base_axis[i, 2]
+                t = math.acos(max(-1.0, min(1.0, d))) if d == d else d
+                if not t <= worst:
+                    worst = t
+            out[k, 1] = limit[0] - limit[6] - worst
+        if enabled[2]:
+            worst = -np.inf
+            for i in range(6):
+                d = 0.0
+                for q in range(3):
+                    d += u[i, q] * (R[q, 0] * platform_axis[i, 0] + R[q, 1] * platform_axis[i, 1]
+                                    + R[q, 2] * platform_axis[i, 2])
+                t = math.acos(max(-1.0, min(1.0, d))) if d == d else d
+                if not t <= worst:
+                    worst = t
+            out[k, 2] = limit[1] - limit[6] - worst
+        if enabled[3]:
+            worst = np.inf
+            for q in range(pairs.shape[0]):
+                i, j = pairs[q, 0], pairs[q, 1]
+                d = _segment_distance(base, i, tops, i, base, j, tops, j)
+                if not d >= worst:
+                    worst = d
+            out[k, 3] = worst - limit[2] - limit[5]
+        if enabled[4]:
+            # twist Jacobian row i = [u_iᵀ, ((R a_i) × u_i)ᵀ / r]  (r = platform radius)
+            for i in range(6):
+                ra0, ra1, ra2 = Jt[i, 3], Jt[i, 4], Jt[i, 5]
+                Jt[i, 0], Jt[i, 1], Jt[i, 2] = u[i, 0], u[i, 1], u[i, 2]
+                Jt[i, 3] = (ra1 * u[i, 2] - ra2 * u[i, 1]) / limit[4]
+                Jt[i, 4] = (ra2 * u[i, 0] - ra0 * u[i, 2]) / limit[4]
+                Jt[i, 5] = (ra0 * u[i, 1] - ra1 * u[i, 0]) / limit[4]
+            out[k, 4] = singularity_certificate(Jt, limit[3], C, L)
+
+
+@nb.njit(**_OPTS)
+def segment_distances(p1, q1, p2, q2, out):
+    """out[k] = distance between the segments p1[k]→q1[k] and p2[k]→q2[k], arrays (N, 3):
+    the compiled :func:`_segment_distance`, for testing it against the NumPy formula."""
+    for k in range(p1.shape[0]):
+        out[k] = _segment_distance(p1, k, q1, k, p2, k, q2, k)
+
+
+def limit_margins(poses, base, platform, offset, stroke, base_axis, platform_axis, pairs, enabled, limit):
+    """(N, 5) array, columns :data:`LIMIT_NAMES`, for poses (N, 6) [mm, rad]: margins of
+    the stroke, tilt and collision limits and the singularity certificate (+1 / −1 / NaN
+    undecided), see :func:`_limits_range`; ``pairs`` (P, 2) the leg pairs checked for
+    collision, ``enabled`` (5,) which columns to compute. Batches of 2 × ``_LIMIT_GRAIN``
+    poses or more are split over threads."""
+    poses = _f64(poses)
+    out = np.empty((poses.shape[0], len(LIMIT_NAMES)))
+    pairs = np.ascontiguousarray(pairs, dtype=np.int64).reshape(-1, 2)
+    enabled = np.ascontiguousarray(enabled, dtype=np.bool_).copy()
+    args = (poses, _f64(base), _f64(platform), _f64(offset), _f64(stroke), _f64(base_axis), _f64(platform_axis),
+            pairs, enabled, _f64(limit), out)
+    _run_rows(_limits_range, poses.shape[0], _LIMIT_GRAIN, args)
+    return out
