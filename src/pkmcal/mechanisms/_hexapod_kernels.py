@@ -489,65 +489,72 @@ def _clip01(x):
 
 
 @nb.njit(**_OPTS)
-def _point_segment(x0, x1, x2, p0, p1, p2, d0, d1, d2, dd):
-    """Distance from the point x to the segment p + u d, u ∈ [0, 1] (dd = d·d > 0)."""
-    u = _clip01(((x0 - p0) * d0 + (x1 - p1) * d1 + (x2 - p2) * d2) / dd)
-    e0, e1, e2 = p0 + u * d0 - x0, p1 + u * d1 - x1, p2 + u * d2 - x2
-    return math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+def _point_segment_sq(w0, w1, w2, d0, d1, d2, inv_dd):
+    """Squared distance ‖u d − w‖² from a point to the segment p + u d, u ∈ [0, 1], with
+    w = point − p and inv_dd = 1 / d·d: u = clip(w·d / d·d, 0, 1)."""
+    u = _clip01((w0 * d0 + w1 * d1 + w2 * d2) * inv_dd)
+    e0, e1, e2 = u * d0 - w0, u * d1 - w1, u * d2 - w2
+    return e0 * e0 + e1 * e1 + e2 * e2
 
 
 @nb.njit(**_OPTS)
-def _segment_distance(P1, i1, Q1, j1, P2, i2, Q2, j2):
-    """Minimum distance between the segments P1[i1]→Q1[j1] and P2[i2]→Q2[j2] (rows of
-    (·, 3) arrays; indices, not slices, so that no array view is built per call) by the
-    formula of :func:`pkmcal.mechanisms.hexapod.segment_distance` (Ericson §5.1.9, with its
-    zero-length and parallel cases), in registers."""
-    p1 = (P1[i1, 0], P1[i1, 1], P1[i1, 2])
-    q1 = (Q1[j1, 0], Q1[j1, 1], Q1[j1, 2])
-    p2 = (P2[i2, 0], P2[i2, 1], P2[i2, 2])
-    q2 = (Q2[j2, 0], Q2[j2, 1], Q2[j2, 2])
-    d10, d11, d12 = q1[0] - p1[0], q1[1] - p1[1], q1[2] - p1[2]
-    d20, d21, d22 = q2[0] - p2[0], q2[1] - p2[1], q2[2] - p2[2]
-    r0, r1, r2 = p1[0] - p2[0], p1[1] - p2[1], p1[2] - p2[2]
-    a = d10 * d10 + d11 * d11 + d12 * d12
-    e = d20 * d20 + d21 * d21 + d22 * d22
+def _segment_distance_sq(r0, r1, r2, d10, d11, d12, d20, d21, d22, a, e):
+    """Squared minimum distance between the segments p1 → p1 + d1 and p2 → p2 + d2, given
+    r = p1 − p2, d1, d2 and a = d1·d1, e = d2·d2 (the limit kernel has them per leg and per
+    leg pair), by the formula of :func:`pkmcal.mechanisms.hexapod.segment_distance`
+    (Ericson §5.1.9, with its zero-length and parallel cases), in registers. Squared, so
+    that a minimum over pairs takes one square root."""
     f = d20 * r0 + d21 * r1 + d22 * r2
     c = d10 * r0 + d11 * r1 + d12 * r2
     b = d10 * d20 + d11 * d21 + d12 * d22
     point1 = a <= 2.2250738585072014e-308  # np.finfo(float).tiny: segment 1 is a point
     point2 = e <= 2.2250738585072014e-308
-    a_ = 1.0 if point1 else a
-    e_ = 1.0 if point2 else e
+    inv_a = 1.0 if point1 else 1.0 / a
+    inv_e = 1.0 if point2 else 1.0 / e
     denom = a * e - b * b
     skew = denom > 1e-12 * a * e
     s = _clip01((b * f - c * e) / denom) if skew else 0.0
-    t = (b * s + f) / e_
+    t = (b * s + f) * inv_e
     if t < 0.0:
-        s = _clip01(-c / a_)
+        s = _clip01(-c * inv_a)
     elif t > 1.0:
-        s = _clip01((b - c) / a_)
+        s = _clip01((b - c) * inv_a)
     t = _clip01(t)
     if point1:
         s = 0.0
     elif point2:
-        s = _clip01(-c / a_)
+        s = _clip01(-c * inv_a)
     if point2:
         t = 0.0
     elif point1:
-        t = _clip01(f / e_)
+        t = _clip01(f * inv_e)
     g0 = r0 + s * d10 - t * d20
     g1 = r1 + s * d11 - t * d21
     g2 = r2 + s * d12 - t * d22
-    dist = math.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
+    dist = g0 * g0 + g1 * g1 + g2 * g2
     if not skew and not point1 and not point2:
-        # (near-)parallel: the minimum is also attained at an endpoint of one segment
-        ends = min(_point_segment(p1[0], p1[1], p1[2], p2[0], p2[1], p2[2], d20, d21, d22, e_),
-                   _point_segment(q1[0], q1[1], q1[2], p2[0], p2[1], p2[2], d20, d21, d22, e_),
-                   _point_segment(p2[0], p2[1], p2[2], p1[0], p1[1], p1[2], d10, d11, d12, a_),
-                   _point_segment(q2[0], q2[1], q2[2], p1[0], p1[1], p1[2], d10, d11, d12, a_))
+        # (near-)parallel: the minimum is also attained at an endpoint of one segment:
+        # p1, q1 against segment 2 (w = r, r + d1), p2, q2 against segment 1 (w = −r, d2 − r)
+        ends = min(_point_segment_sq(r0, r1, r2, d20, d21, d22, inv_e),
+                   _point_segment_sq(r0 + d10, r1 + d11, r2 + d12, d20, d21, d22, inv_e),
+                   _point_segment_sq(-r0, -r1, -r2, d10, d11, d12, inv_a),
+                   _point_segment_sq(d20 - r0, d21 - r1, d22 - r2, d10, d11, d12, inv_a))
         if ends < dist:
             dist = ends
     return dist
+
+
+@nb.njit(**_OPTS)
+def segment_distances(p1, q1, p2, q2, out):
+    """out[k] = distance between the segments p1[k]→q1[k] and p2[k]→q2[k], arrays (N, 3):
+    the compiled :func:`_segment_distance_sq` (which the limit kernel uses), for testing it
+    against the NumPy formula."""
+    for k in range(p1.shape[0]):
+        r0, r1, r2 = p1[k, 0] - p2[k, 0], p1[k, 1] - p2[k, 1], p1[k, 2] - p2[k, 2]
+        d10, d11, d12 = q1[k, 0] - p1[k, 0], q1[k, 1] - p1[k, 1], q1[k, 2] - p1[k, 2]
+        d20, d21, d22 = q2[k, 0] - p2[k, 0], q2[k, 1] - p2[k, 1], q2[k, 2] - p2[k, 2]
+        out[k] = math.sqrt(_segment_distance_sq(r0, r1, r2, d10, d11, d12, d20, d21, d22,
+                                                d10 * d10 + d11 * d11 + d12 * d12, d20 * d20 + d21 * d21 + d22 * d22))
 
 
 @nb.njit(**_OPTS)
@@ -617,13 +624,19 @@ def _limits_range(poses, base, platform, offset, stroke, base_axis, platform_axi
     ``enabled[4]``, the singularity certificate (:func:`singularity_certificate`) of the
     length-scaled twist Jacobian; ``limit`` = (U-tilt limit, S-tilt limit, leg diameter,
     singularity margin, platform radius, safety margin mm, safety margin rad). Disabled
-    columns are NaN."""
+    columns are NaN. Leg i is the segment b_i → b_i + l_i; pair (i, j) has r = b_i − b_j."""
     R = np.empty((3, 3))
+    legs = np.empty((6, 3))
+    sq = np.empty(6)
     u = np.empty((6, 3))
-    tops = np.empty((6, 3))
     Jt = np.empty((6, 6))
     C = np.empty((6, 6))
     L = np.empty((6, 6))
+    n_pairs = pairs.shape[0]
+    r = np.empty((n_pairs, 3))
+    for q in range(n_pairs):
+        for c in range(3):
+            r[q, c] = base[pairs[q, 0], c] - base[pairs[q, 1], c]
     for k in range(start, stop):
         _euler_matrix(poses[k, 3], poses[k, 4], poses[k, 5], R)
         worst = np.inf
@@ -632,12 +645,12 @@ def _limits_range(poses, base, platform, offset, stroke, base_axis, platform_axi
             for q in range(3):
                 ra = R[q, 0] * platform[i, 0] + R[q, 1] * platform[i, 1] + R[q, 2] * platform[i, 2]
                 Jt[i, 3 + q] = ra
-                tops[i, q] = poses[k, q] + ra
-                u[i, q] = tops[i, q] - base[i, q]
-                s += u[i, q] * u[i, q]
+                legs[i, q] = poses[k, q] + ra - base[i, q]
+                s += legs[i, q] * legs[i, q]
+            sq[i] = s
             length = math.sqrt(s)
             for q in range(3):
-                u[i, q] /= length
+                u[i, q] = legs[i, q] / length
             lam = length - offset[i]
             m = min(lam - stroke[i, 0], stroke[i, 1] - lam)
             if not m >= worst:  # NaN propagates
@@ -666,12 +679,13 @@ def _limits_range(poses, base, platform, offset, stroke, base_axis, platform_axi
             out[k, 2] = limit[1] - limit[6] - worst
         if enabled[3]:
             worst = np.inf
-            for q in range(pairs.shape[0]):
+            for q in range(n_pairs):
                 i, j = pairs[q, 0], pairs[q, 1]
-                d = _segment_distance(base, i, tops, i, base, j, tops, j)
+                d = _segment_distance_sq(r[q, 0], r[q, 1], r[q, 2], legs[i, 0], legs[i, 1], legs[i, 2],
+                                         legs[j, 0], legs[j, 1], legs[j, 2], sq[i], sq[j])
                 if not d >= worst:
                     worst = d
-            out[k, 3] = worst - limit[2] - limit[5]
+            out[k, 3] = math.sqrt(worst) - limit[2] - limit[5]
         if enabled[4]:
             # twist Jacobian row i = [u_iᵀ, ((R a_i) × u_i)ᵀ / r]  (r = platform radius)
             for i in range(6):
@@ -681,14 +695,6 @@ def _limits_range(poses, base, platform, offset, stroke, base_axis, platform_axi
                 Jt[i, 4] = (ra2 * u[i, 0] - ra0 * u[i, 2]) / limit[4]
                 Jt[i, 5] = (ra0 * u[i, 1] - ra1 * u[i, 0]) / limit[4]
             out[k, 4] = singularity_certificate(Jt, limit[3], C, L)
-
-
-@nb.njit(**_OPTS)
-def segment_distances(p1, q1, p2, q2, out):
-    """out[k] = distance between the segments p1[k]→q1[k] and p2[k]→q2[k], arrays (N, 3):
-    the compiled :func:`_segment_distance`, for testing it against the NumPy formula."""
-    for k in range(p1.shape[0]):
-        out[k] = _segment_distance(p1, k, q1, k, p2, k, q2, k)
 
 
 def limit_margins(poses, base, platform, offset, stroke, base_axis, platform_axis, pairs, enabled, limit):

@@ -318,15 +318,16 @@ def check_chunk(poses: np.ndarray, *, mechanism: Mechanism, setup: MeasurementSe
 class _Accepted:
     """Accepted poses, per-reason rejection counts and extras of the chunks, in order, up to
     ``limit`` accepted poses (None: all): a chunk that crosses the limit counts only up to
-    its last pose used."""
+    its last pose used. With a limit, the accepted rows are written into arrays of
+    ``limit`` rows allocated once (no second copy when the chunks are joined)."""
 
     def __init__(self, limit: int | None = None):
         self.limit = limit
         self.tested = 0
         self.total = 0
         self.rejected: dict[str, int] = {}
-        self.poses: list[np.ndarray] = []
-        self.extra: list[tuple[np.ndarray, ...]] = []
+        self.parts: list[tuple[np.ndarray, ...]] = []      # (poses, *extra) per chunk
+        self.buffers: tuple[np.ndarray, ...] | None = None
 
     @property
     def full(self) -> bool:
@@ -340,16 +341,26 @@ class _Accepted:
             used = int(np.flatnonzero(ok)[take - 1]) + 1 if take > 0 else 0
         for k, v in chunk.check.violations.items():
             self.rejected[k] = self.rejected.get(k, 0) + int(np.count_nonzero(v[:used]))
+        rows = (chunk.poses[:used][ok[:used]],) + tuple(e[:take] for e in chunk.extra)
+        if self.limit is None:
+            self.parts.append(rows)
+        else:
+            if self.buffers is None:
+                self.buffers = tuple(np.empty((self.limit,) + r.shape[1:], r.dtype) for r in rows)
+            for buf, r in zip(self.buffers, rows):
+                buf[self.total:self.total + take] = r
         self.tested += used
         self.total += take
-        self.poses.append(chunk.poses[:used][ok[:used]])
-        self.extra.append(tuple(e[:take] for e in chunk.extra))
 
     def result(self, kind: str, n_dof: int) -> tuple[CandidateSet, tuple[np.ndarray, ...]]:
-        poses = np.concatenate(self.poses) if self.poses else np.empty((0, n_dof))
-        extra = tuple(np.concatenate(parts) for parts in zip(*self.extra)) if self.extra else ()
+        if self.buffers is not None:
+            arrays = tuple(buf[:self.total] for buf in self.buffers)
+        elif self.parts:
+            arrays = tuple(np.concatenate(col) for col in zip(*self.parts))
+        else:
+            arrays = (np.empty((0, n_dof)),)
         rejected = {k: v for k, v in self.rejected.items() if v}
-        return CandidateSet(poses, self.tested, rejected, kind), extra
+        return CandidateSet(arrays[0], self.tested, rejected, kind), arrays[1:]
 
 
 def _chunks(poses: np.ndarray, size: int):
