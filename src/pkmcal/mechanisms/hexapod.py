@@ -18,7 +18,9 @@ Analytic derivatives, with the unit leg vector u_i = l_i / L_i:
 stroke, U-joint tilt (angle between u_i and the base joint axis), S-joint tilt (angle
 between u_i and the platform joint axis R n_i), leg–leg collision (minimum distance
 between leg segments b_i → p + R a_i below the leg diameter) and a singularity margin
-(inverse condition number of the length-scaled pose Jacobian).
+(inverse condition number of the length-scaled pose Jacobian). They are computed by a
+compiled kernel (``_hexapod_kernels.limit_margins``) tested against the vectorised NumPy
+formulas (:meth:`Hexapod._limit_margins_numpy`), which decide every pose near a limit.
 """
 
 from __future__ import annotations

@@ -33,6 +33,14 @@ singularity) and measurability:
   the cone's half-angle.
 
 Rejected candidates are counted by reason.
+
+**Large sets** (:func:`checked_candidates`): candidates are drawn, checked and reduced
+(e.g. to their planning Jacobian blocks, only for accepted poses) in chunks of
+:data:`CHUNK_SIZE` poses, so memory stays bounded by the chunk and the accepted set; a
+chunk is a picklable unit of work (:func:`check_chunk`) that an executor's ``map`` can run
+(in order by default, in this process). Chunks cut one random draw into pieces, so the
+candidates, their rejection counts and the random generator's final state are those of
+the unchunked draw, whatever the chunk size.
 """
 
 from __future__ import annotations
