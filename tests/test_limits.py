@@ -475,10 +475,11 @@ def test_singularity_certificate_against_the_svd(seed, log_ratio, log_m, log_sca
     else:
         assert np.isnan(cert)
     # and decisive outside the band its bounds leave: λ_max ∈ [max C_ii, min(tr C, ‖C‖∞)]
-    # and tr C ≤ 6 max C_ii, so the band is at most m/√6 .. √6·m (1 % slack for the shifts)
-    if true > 1.01 * np.sqrt(6.0) * m:
+    # and tr C ≤ 6 max C_ii, so the band is at most m/√6 .. √6·m (1 % for the shifts), once
+    # m² tr is well above the rounding slack 1e-12 tr (m ≥ 1e-4; the default margin is 0.01)
+    if m >= 1e-4 and true > 1.01 * np.sqrt(6.0) * m:
         assert cert == 1.0
-    if true < m / (1.01 * np.sqrt(6.0)):
+    if m >= 1e-4 and true < m / (1.01 * np.sqrt(6.0)):
         assert cert == -1.0
 
 
