@@ -15,7 +15,7 @@ from scipy.optimize import brentq, minimize_scalar
 from pkmcal.mechanisms import _hexapod_kernels as kernels
 from pkmcal.mechanisms import builtin_machine, symmetric_hexapod
 from pkmcal.mechanisms.base import LimitReport
-from pkmcal.mechanisms.hexapod import EXACT_VERDICT_TOL, segment_distance
+from pkmcal.mechanisms.hexapod import EXACT_VERDICT_TOL, LIMIT_NAMES, LIMITS_COMPILED_FROM, segment_distance
 
 M = builtin_machine("stewart-prototype")
 HOME = M.home_pose
@@ -394,8 +394,8 @@ def test_kernel_margins_match_the_numpy_formulas(machine, seed, margin):
     out = kernels.limit_margins(poses, machine.base, machine.platform, machine.offset, machine.stroke,
                                 machine.base_axis, machine.platform_axis, machine._leg_pairs(), on, table)
     ref = machine._limit_margins_numpy(poses, margin)
-    assert set(ref) == {n for n, enabled in zip(kernels.LIMIT_NAMES, on) if enabled}
-    for c, name in enumerate(kernels.LIMIT_NAMES[:4]):
+    assert set(ref) == {n for n, enabled in zip(LIMIT_NAMES, on) if enabled}
+    for c, name in enumerate(LIMIT_NAMES[:4]):
         if name in ref:
             np.testing.assert_allclose(out[:, c], ref[name], rtol=0, atol=1e-11, err_msg=name)
         else:
@@ -422,8 +422,8 @@ def test_poses_on_a_limit_get_the_numpy_verdict():
     # their kernel margins are within EXACT_VERDICT_TOL of zero, so check_limits recomputes
     # them with NumPy and returns its verdict whatever the kernel's rounding
     rng = np.random.default_rng(3)
-    start = np.tile(HOME, (40, 1))
-    far = HOME + rng.uniform(-1, 1, (40, 6)) * np.array([90, 90, 40, 0.5, 0.5, 1.2])
+    start = np.tile(HOME, (100, 1))
+    far = HOME + rng.uniform(-1, 1, (100, 6)) * np.array([90, 90, 40, 0.5, 0.5, 1.2])
     bad = ~(M.check_limits(far).ok)
     lo, hi = np.zeros(bad.sum()), np.ones(bad.sum())
     a, b = start[bad], far[bad]
@@ -442,6 +442,7 @@ def test_poses_on_a_limit_get_the_numpy_verdict():
                                 M._leg_pairs(), M._limits_enabled(), table)
     near = np.any(np.abs(raw[:, :4]) <= EXACT_VERDICT_TOL, axis=1)
     assert near.sum() >= len(a)            # at least one side of every edge is recomputed
+    assert len(edge) >= LIMITS_COMPILED_FROM  # (the batch goes through the kernel)
     for margins in (True, False):
         rep = M.check_limits(edge, margins=margins)
         for name in ref:
@@ -504,6 +505,6 @@ def test_check_limits_without_margins_on_non_finite_poses_and_threads():
     for name in full.violations:
         np.testing.assert_array_equal(fast.violations[name], full.violations[name])
         assert fast.violations[name][5] and fast.violations[name][7]
-    rows = [M.check_limits(p, margin=0.1, margins=False).ok[0] for p in poses[:50]]
+    rows = [M.check_limits(p, margin=0.1, margins=False).ok[0] for p in poses[:50]]   # NumPy, one by one
     assert rows == fast.ok[:50].tolist()
     assert 0 < fast.ok.sum() < len(poses)

@@ -482,8 +482,6 @@ def fk_newton(lengths, guesses, base, platform, tol, max_iter, polish=0):
 
 # -- limits (Hexapod.check_limits) -------------------------------------------------------
 
-#: Columns of :func:`limit_margins`' output, in order.
-LIMIT_NAMES = ("stroke", "u_joint_tilt", "s_joint_tilt", "leg_collision", "singularity")
 #: Rows per thread below which :func:`limit_margins` runs on the calling thread only
 #: (~1 µs/pose; see the IK/FK grains above).
 _LIMIT_GRAIN = 2_000
@@ -633,7 +631,8 @@ def singularity_certificate(J, m, C, L):
 @nb.njit(**_OPTS)
 def _limits_range(poses, base, platform, offset, stroke, base_axis, platform_axis, pairs, enabled, limit,
                   out, start, stop):
-    """out[k] (columns :data:`LIMIT_NAMES`) for rows k in [start, stop): the stroke, tilt
+    """out[k] (columns stroke, U tilt, S tilt, leg collision, singularity:
+    ``hexapod.LIMIT_NAMES``) for rows k in [start, stop): the stroke, tilt
     and collision margins by the formulas of ``Hexapod._limit_margins_numpy`` and, when
     ``enabled[4]``, the singularity certificate (:func:`singularity_certificate`) of the
     length-scaled twist Jacobian; ``limit`` = (U-tilt limit, S-tilt limit, leg diameter,
@@ -712,13 +711,13 @@ def _limits_range(poses, base, platform, offset, stroke, base_axis, platform_axi
 
 
 def limit_margins(poses, base, platform, offset, stroke, base_axis, platform_axis, pairs, enabled, limit):
-    """(N, 5) array, columns :data:`LIMIT_NAMES`, for poses (N, 6) [mm, rad]: margins of
+    """(N, 5) array, columns ``hexapod.LIMIT_NAMES``, for poses (N, 6) [mm, rad]: margins of
     the stroke, tilt and collision limits and the singularity certificate (+1 / −1 / NaN
     undecided), see :func:`_limits_range`; ``pairs`` (P, 2) the leg pairs checked for
     collision, ``enabled`` (5,) which columns to compute. Batches of 2 × ``_LIMIT_GRAIN``
     poses or more are split over threads."""
     poses = _f64(poses)
-    out = np.empty((poses.shape[0], len(LIMIT_NAMES)))
+    out = np.empty((poses.shape[0], 5))
     pairs = np.ascontiguousarray(pairs, dtype=np.int64).reshape(-1, 2)
     enabled = np.ascontiguousarray(enabled, dtype=np.bool_).copy()
     args = (poses, _f64(base), _f64(platform), _f64(offset), _f64(stroke), _f64(base_axis), _f64(platform_axis),

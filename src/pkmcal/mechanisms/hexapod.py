@@ -42,6 +42,11 @@ HEXAPOD_PARAM_NAMES = tuple(s.format(i=i + 1) for i in range(N_LEGS) for s in _L
 #: Default FK tolerance on leg lengths (mm) and iteration cap.
 FK_TOL_MM = 1e-9
 FK_MAX_ITER = 30
+#: The limits checked, in the order of :class:`LimitReport` and of the compiled kernel's columns.
+LIMIT_NAMES = ("stroke", "u_joint_tilt", "s_joint_tilt", "leg_collision", "singularity")
+#: Batches of at least this many poses are checked by the compiled kernel; smaller ones by the
+#: NumPy formulas (the same verdicts), so that a command on a few poses does not import numba.
+LIMITS_COMPILED_FROM = 64
 #: Limit margins of the compiled kernel closer than this to zero (mm, rad, or inverse
 #: condition number) are recomputed by NumPy, so that the verdicts are NumPy's exactly;
 #: 10⁴ × the largest kernel–NumPy difference measured (4e-14 mm, the leg distance).
@@ -300,41 +305,55 @@ class Hexapod(Mechanism):
         report empty), faster: the singularity verdict then comes from a Cholesky
         certificate instead of the SVD (:func:`~._hexapod_kernels.singularity_certificate`).
 
-        The compiled kernel (:func:`~._hexapod_kernels.limit_margins`) computes the stroke,
-        tilt and collision margins; the singularity margin is the NumPy SVD's. Every pose
-        with a kernel margin within :data:`EXACT_VERDICT_TOL` of zero (or NaN), or an
-        undecided certificate, is recomputed by the NumPy formulas
-        (:meth:`_limit_margins_numpy`), so the verdicts are exactly theirs whatever the
-        rounding differences (the kernel agrees with them to ~1e-13, tested).
+        From :data:`LIMITS_COMPILED_FROM` poses on, the compiled kernel
+        (:func:`~._hexapod_kernels.limit_margins`) computes the stroke, tilt and collision
+        margins (the singularity margin is the NumPy SVD's), and every pose with a kernel
+        margin within :data:`EXACT_VERDICT_TOL` of zero (or NaN), or an undecided
+        certificate, is recomputed by the NumPy formulas (:meth:`_limit_margins_numpy`), so
+        the verdicts are exactly theirs whatever the rounding (the kernel agrees with them
+        to ~1e-13, tested); smaller batches use the NumPy formulas directly.
         """
         poses = self.as_pose_array(poses)
         finite = np.all(np.isfinite(poses), axis=1)
         safe = np.where(finite[:, None], poses, self.home)
-        lim = self.limits
-        on = self._limits_enabled()
-        names = [n for n, enabled in zip(kernels.LIMIT_NAMES, on) if enabled]
-        table = np.array([np.nan if v is None else v for v in (lim.u_joint_tilt, lim.s_joint_tilt, lim.leg_diameter)]
-                         + [lim.singularity_margin, self.platform_radius, margin, np.deg2rad(margin)])
-        out = kernels.limit_margins(safe, self.base, self.platform, self.offset, self.stroke, self.base_axis,
-                                    self.platform_axis, self._leg_pairs(), on[:4] + (not margins,), table)
-        result = {n: out[:, kernels.LIMIT_NAMES.index(n)] for n in names}
-        unsure = ~np.all([np.abs(result[n]) > EXACT_VERDICT_TOL for n in names if n != "singularity"], axis=0)
-        if margins:
-            result["singularity"] = self._singularity_margin(safe)
+        if len(poses) < LIMITS_COMPILED_FROM:
+            result = self._limit_margins_numpy(safe, margin)
         else:
-            unsure |= np.isnan(result["singularity"])  # certificate undecided (+1 ok, −1 violated)
-        unsure &= finite
-        if unsure.any():
-            exact = self._limit_margins_numpy(safe[unsure], margin)
-            for n in names:
-                result[n][unsure] = exact[n]
+            result = self._limit_margins_compiled(safe, finite, margin, margins)
         for m in result.values():
             m[~finite] = np.nan
         violations = {k: ~(m >= 0.0) for k, m in result.items()}
         return LimitReport(violations=violations, margins=result if margins else {})
 
+    def _limit_margins_compiled(self, safe: np.ndarray, finite: np.ndarray, margin: float,
+                                margins: bool) -> dict[str, np.ndarray]:
+        """:meth:`check_limits`' margins by the compiled kernel, every pose near a limit (or
+        undecided) recomputed by :meth:`_limit_margins_numpy`; without ``margins`` the
+        singularity entry is the certificate (+1 ok, −1 violated)."""
+        from pkmcal.mechanisms import _hexapod_kernels as kernels
+
+        lim = self.limits
+        on = self._limits_enabled()
+        names = [n for n, enabled in zip(LIMIT_NAMES, on) if enabled]
+        table = np.array([np.nan if v is None else v for v in (lim.u_joint_tilt, lim.s_joint_tilt, lim.leg_diameter)]
+                         + [lim.singularity_margin, self.platform_radius, margin, np.deg2rad(margin)])
+        out = kernels.limit_margins(safe, self.base, self.platform, self.offset, self.stroke, self.base_axis,
+                                    self.platform_axis, self._leg_pairs(), on[:4] + (not margins,), table)
+        result = {n: out[:, LIMIT_NAMES.index(n)] for n in names}
+        unsure = ~np.all([np.abs(result[n]) > EXACT_VERDICT_TOL for n in names if n != "singularity"], axis=0)
+        if margins:
+            result["singularity"] = self._singularity_margin(safe)
+        else:
+            unsure |= np.isnan(result["singularity"])  # certificate undecided
+        unsure &= finite
+        if unsure.any():
+            exact = self._limit_margins_numpy(safe[unsure], margin)
+            for n in names:
+                result[n][unsure] = exact[n]
+        return result
+
     def _limits_enabled(self) -> tuple[bool, ...]:
-        """Which limits of :data:`~._hexapod_kernels.LIMIT_NAMES` this machine checks."""
+        """Which limits of :data:`LIMIT_NAMES` this machine checks."""
         lim = self.limits
         return (True, lim.u_joint_tilt is not None, lim.s_joint_tilt is not None, lim.leg_diameter is not None, True)
 
