@@ -11,7 +11,6 @@ from pkmcal.mechanisms.library import stewart_prototype
 from pkmcal.planning.candidates import (
     Measurability,
     check_candidates,
-    checked_candidates,
     corner_box,
     corner_poses,
     generate_candidates,
@@ -21,7 +20,7 @@ from pkmcal.planning.candidates import (
     workspace_box,
 )
 from pkmcal.planning.indices import observability_indices
-from pkmcal.planning.plan import plan_poses
+from pkmcal.planning.plan import candidate_blocks, plan_poses
 from pkmcal.sensors import FullPoseSensor, MeasurementSetup, NoiseModel
 
 
@@ -179,28 +178,28 @@ def test_rejection_counts_are_those_of_checking_the_tested_poses(machine, indica
     grid = grid_poses(box, 4)
     whole = check_candidates(machine, indicators, grid)
     for chunk_size in (1, 333, 4096, 5000):
-        cs, _ = checked_candidates(machine, indicators, kind="grid", grid_per_axis=4, box=box, chunk_size=chunk_size)
+        cs = generate_candidates(machine, indicators, kind="grid", grid_per_axis=4, box=box, chunk_size=chunk_size)
         assert cs.n_tested == len(grid) and cs.rejected == whole.counts()
         np.testing.assert_array_equal(cs.poses, grid[whole.ok])
-        f, _ = checked_candidates(machine, indicators, kind="file", poses=grid[::-1], chunk_size=chunk_size)
+        f = generate_candidates(machine, indicators, kind="file", poses=grid[::-1], chunk_size=chunk_size)
         assert f.rejected == whole.counts() and f.kind == "file"
         np.testing.assert_array_equal(f.poses, grid[::-1][whole.ok[::-1]])
 
 
-def test_reduce_sees_only_accepted_poses_and_extras_follow_the_candidates(machine, indicators, box):
-    seen = []
+def test_only_accepted_candidates_get_blocks(machine, indicators):
+    calls = []
 
-    def reduce(poses):
-        seen.append(poses.copy())
-        return poses[:, :3] * 2.0, np.arange(len(poses))
+    def recording_map(fn, items):          # an in-order executor that records what it runs
+        items = list(items)
+        calls.append((getattr(fn, "__name__", getattr(getattr(fn, "func", None), "__name__", "")), items))
+        return map(fn, items)
 
-    cs, (doubled, idx) = checked_candidates(machine, indicators, n=500, rng=np.random.default_rng(2), box=box,
-                                            chunk_size=800, reduce=reduce)
-    assert len(doubled) == len(idx) == len(cs.poses) == 500
-    np.testing.assert_array_equal(doubled, cs.poses[:, :3] * 2.0)
-    reduced = np.concatenate(seen)
-    assert check_candidates(machine, indicators, reduced).ok.all()     # no rejected pose reduced
-    assert len(reduced) < 500 + 800                                    # at most one chunk beyond the last used
+    plan = plan_poses(machine, indicators, 20, n_candidates=900, seed=2, chunk_size=700, chunk_map=recording_map)
+    blocked = [np.concatenate(items) for name, items in calls if name == "blocks"]
+    assert len(blocked) == 1
+    np.testing.assert_array_equal(blocked[0], plan.candidates.poses)     # the 900 accepted, nothing else
+    assert check_candidates(machine, indicators, blocked[0]).ok.all()
+    assert sum(len(items) for name, items in calls if name == "check_chunk") > 1   # checked in chunks
 
 
 def test_an_eager_executor_map_gives_the_same_candidates(machine, indicators, box):
@@ -208,8 +207,8 @@ def test_an_eager_executor_map_gives_the_same_candidates(machine, indicators, bo
 
     ref = generate_candidates(machine, indicators, n=900, rng=np.random.default_rng(4), box=box, chunk_size=500)
     with ThreadPoolExecutor(2) as pool:
-        cs, _ = checked_candidates(machine, indicators, n=900, rng=np.random.default_rng(4), box=box, chunk_size=500,
-                                   chunk_map=pool.map)
+        cs = generate_candidates(machine, indicators, n=900, rng=np.random.default_rng(4), box=box, chunk_size=500,
+                                 chunk_map=pool.map)
     np.testing.assert_array_equal(cs.poses, ref.poses)
     assert (cs.n_tested, cs.rejected) == (ref.n_tested, ref.rejected)
 
@@ -246,10 +245,10 @@ def test_plans_do_not_depend_on_the_chunk_size(machine, indicators, kw):
         ref.selection.indices
 
 
-def test_blocks_reduced_chunk_by_chunk_are_those_computed_at_once(machine, indicators, box):
+def test_blocks_in_batches_are_those_computed_at_once(machine, indicators):
     plan = plan_poses(machine, indicators, 20, n_candidates=1500, seed=1)
-    cs, (G, ok) = checked_candidates(machine, indicators, n=1500, rng=np.random.default_rng(1), box=box,
-                                     chunk_size=333, reduce=plan.model.blocks)
-    G_all, ok_all = plan.model.blocks(cs.poses)
-    np.testing.assert_array_equal(G, G_all)
-    np.testing.assert_array_equal(ok, ok_all)
+    G_all, ok_all = plan.model.blocks(plan.candidates.poses)
+    for batch in (300, 701, 1500, 10**6):      # batches of ≥ batch/2 poses: 150 .. 1500
+        G, ok = candidate_blocks(plan.model, plan.candidates.poses, batch=batch)
+        np.testing.assert_array_equal(G, G_all)
+        np.testing.assert_array_equal(ok, ok_all)

@@ -34,11 +34,10 @@ singularity) and measurability:
 
 Rejected candidates are counted by reason.
 
-**Large sets** (:func:`checked_candidates`): candidates are drawn, checked and reduced
-(e.g. to their planning Jacobian blocks, only for accepted poses) in chunks of
-:data:`CHUNK_SIZE` poses, so memory stays bounded by the chunk and the accepted set; a
-chunk is a picklable unit of work (:func:`check_chunk`) that an executor's ``map`` can run
-(in order by default, in this process). Chunks cut one random draw into pieces, so the
+**Large sets** (:func:`generate_candidates`): candidates are drawn and checked in chunks
+of :data:`CHUNK_SIZE` poses, so memory stays bounded by the chunk and the accepted poses;
+a chunk is a picklable unit of work (:func:`check_chunk`) that an executor's ``map`` can
+run (in order by default, in this process). Chunks cut one random draw into pieces, so the
 candidates, their rejection counts and the random generator's final state are those of
 the unchunked draw, whatever the chunk size.
 """
@@ -62,7 +61,7 @@ from pkmcal.sensors.indicators import MIN_NORMAL_Z
 
 CANDIDATE_KINDS = ("random", "grid", "corners", "file")
 #: Poses checked per chunk: bounds the memory of the checks (a few MB per chunk) and is
-#: the unit of work of an executor (:func:`checked_candidates`).
+#: the unit of work of an executor (:func:`generate_candidates`).
 CHUNK_SIZE = 50_000
 #: A progress callback: called with (done, total).
 Progress = Callable[[int, int], None]
@@ -303,39 +302,31 @@ def read_candidates_csv(path: str | os.PathLike, mechanism: Mechanism | None = N
 
 @dataclass(frozen=True)
 class CheckedChunk:
-    """One chunk of candidate ``poses`` (N, n) after :func:`check_candidates`: its
-    ``check`` and, when a ``reduce`` function was given, ``extra`` = reduce(accepted poses),
-    a tuple of arrays with one row per accepted pose (e.g. planning Jacobian blocks)."""
+    """One chunk of candidate ``poses`` (N, n) and its :class:`CandidateCheck`."""
 
     poses: np.ndarray
     check: CandidateCheck
-    extra: tuple[np.ndarray, ...] = ()
 
 
 def check_chunk(poses: np.ndarray, *, mechanism: Mechanism, setup: MeasurementSetup | None,
-                margin: float = DEFAULT_MARGIN, measurability: Measurability = Measurability(),
-                reduce: Callable[[np.ndarray], tuple[np.ndarray, ...]] | None = None) -> CheckedChunk:
-    """Check one chunk and reduce its accepted poses (nothing is computed for rejected ones):
-    the unit of work that :func:`checked_candidates` maps over the chunks; a module-level
-    function of picklable arguments, so a process pool or Dask can run it."""
-    chk = check_candidates(mechanism, setup, poses, margin=margin, measurability=measurability)
-    extra = tuple(reduce(poses[chk.ok])) if reduce is not None else ()
-    return CheckedChunk(poses, chk, extra)
+                margin: float = DEFAULT_MARGIN, measurability: Measurability = Measurability()) -> CheckedChunk:
+    """:func:`check_candidates` of one chunk: the unit of work that
+    :func:`generate_candidates` maps over the chunks; a module-level function of picklable
+    arguments, so that a process pool or Dask can run it."""
+    return CheckedChunk(poses, check_candidates(mechanism, setup, poses, margin=margin, measurability=measurability))
 
 
 class _Accepted:
-    """Accepted poses, per-reason rejection counts and extras of the chunks, in order, up to
+    """Accepted poses and per-reason rejection counts of the chunks, in order, up to
     ``limit`` accepted poses (None: all): a chunk that crosses the limit counts only up to
-    its last pose used. With a limit, the accepted rows are written into arrays of
-    ``limit`` rows allocated once (no second copy when the chunks are joined)."""
+    its last pose used."""
 
     def __init__(self, limit: int | None = None):
         self.limit = limit
         self.tested = 0
         self.total = 0
         self.rejected: dict[str, int] = {}
-        self.parts: list[tuple[np.ndarray, ...]] = []      # (poses, *extra) per chunk
-        self.buffers: tuple[np.ndarray, ...] | None = None
+        self.poses: list[np.ndarray] = []
 
     @property
     def full(self) -> bool:
@@ -349,26 +340,13 @@ class _Accepted:
             used = int(np.flatnonzero(ok)[take - 1]) + 1 if take > 0 else 0
         for k, v in chunk.check.violations.items():
             self.rejected[k] = self.rejected.get(k, 0) + int(np.count_nonzero(v[:used]))
-        rows = (chunk.poses[:used][ok[:used]],) + tuple(e[:take] for e in chunk.extra)
-        if self.limit is None:
-            self.parts.append(rows)
-        else:
-            if self.buffers is None:
-                self.buffers = tuple(np.empty((self.limit,) + r.shape[1:], r.dtype) for r in rows)
-            for buf, r in zip(self.buffers, rows):
-                buf[self.total:self.total + take] = r
+        self.poses.append(chunk.poses[:used][ok[:used]])
         self.tested += used
         self.total += take
 
-    def result(self, kind: str, n_dof: int) -> tuple[CandidateSet, tuple[np.ndarray, ...]]:
-        if self.buffers is not None:
-            arrays = tuple(buf[:self.total] for buf in self.buffers)
-        elif self.parts:
-            arrays = tuple(np.concatenate(col) for col in zip(*self.parts))
-        else:
-            arrays = (np.empty((0, n_dof)),)
-        rejected = {k: v for k, v in self.rejected.items() if v}
-        return CandidateSet(arrays[0], self.tested, rejected, kind), arrays[1:]
+    def result(self, kind: str, n_dof: int) -> CandidateSet:
+        poses = np.concatenate(self.poses) if self.poses else np.empty((0, n_dof))
+        return CandidateSet(poses, self.tested, {k: v for k, v in self.rejected.items() if v}, kind)
 
 
 def _chunks(poses: np.ndarray, size: int):
@@ -399,32 +377,30 @@ class _RandomDraws:
 
 
 @blas_single_threaded
-def checked_candidates(mechanism: Mechanism, setup: MeasurementSetup | None, *, kind: str = "random",
-                       n: int = 2000, rng: np.random.Generator | None = None, box: np.ndarray | None = None,
-                       poses: np.ndarray | None = None, path: str | os.PathLike | None = None,
-                       grid_per_axis: int = 4, margin: float = DEFAULT_MARGIN,
-                       measurability: Measurability = Measurability(), max_rounds: int = 50,
-                       chunk_size: int = CHUNK_SIZE,
-                       reduce: Callable[[np.ndarray], tuple[np.ndarray, ...]] | None = None,
-                       chunk_map: Callable = map, progress: Progress | None = None,
-                       ) -> tuple[CandidateSet, tuple[np.ndarray, ...]]:
-    """Checked candidate poses of one ``kind`` of :data:`CANDIDATE_KINDS` (``poses``: a given
-    array, kind "file"), processed in chunks of ``chunk_size`` poses with bounded memory;
-    returns the :class:`CandidateSet` and the concatenated extras of ``reduce`` (one row
-    per accepted pose; () without ``reduce``).
+def generate_candidates(mechanism: Mechanism, setup: MeasurementSetup | None, *, kind: str = "random",
+                        n: int = 2000, rng: np.random.Generator | None = None, box: np.ndarray | None = None,
+                        path: str | os.PathLike | None = None, poses: np.ndarray | None = None,
+                        grid_per_axis: int = 4, margin: float = DEFAULT_MARGIN,
+                        measurability: Measurability = Measurability(), max_rounds: int = 50,
+                        chunk_size: int = CHUNK_SIZE, chunk_map: Callable = map,
+                        progress: Progress | None = None) -> CandidateSet:
+    """Checked candidate poses of one ``kind`` of :data:`CANDIDATE_KINDS`, processed in
+    chunks of ``chunk_size`` poses (bounded memory); error if none passes.
 
     ``random`` draws rounds of max(4·(n − accepted), 256) poses until ``n`` pass the checks
     (at most ``max_rounds`` rounds); each round is drawn and checked chunk by chunk, the
     poses after the n-th accepted one are drawn (so that ``rng`` ends in the same state)
-    but neither checked nor counted. The other kinds check a fixed set. The result does
-    not depend on ``chunk_size``.
+    but neither checked nor counted. The others check a fixed set: ``file`` the ``poses``
+    given or those of the CSV ``path``, ``grid`` the grid of ``box``, ``corners`` the
+    corners of :func:`corner_box` of it (so that all 64 pass). ``box`` defaults to
+    :func:`workspace_box`. The result does not depend on ``chunk_size``.
 
     ``chunk_map(fn, chunks)`` runs :func:`check_chunk` on the chunks and must yield the
     results in order; the default, the built-in lazy ``map``, runs them in this process
     one after the other and stops at the n-th accepted pose. An executor's ``map``
-    (``concurrent.futures``, or Dask's ``client.map`` then ``gather``) may run a round's
-    chunks at once: results after the n-th accepted pose are then discarded. ``progress``
-    is called after every chunk with (accepted so far, n) for ``random``, (checked so far,
+    (``concurrent.futures``; Dask's ``client.map`` then ``gather``) may run a round's chunks
+    at once; results after the n-th accepted pose are then discarded. ``progress`` is
+    called after every chunk with (accepted so far, n) for ``random``, (checked so far,
     number of poses) otherwise. Limits are checked without their margins
     (:meth:`~pkmcal.mechanisms.hexapod.Hexapod.check_limits` with ``margins=False``).
     """
@@ -432,7 +408,7 @@ def checked_candidates(mechanism: Mechanism, setup: MeasurementSetup | None, *, 
         raise PkmcalError(f"chunk_size must be a positive number of poses, not {chunk_size}")
     rng = np.random.default_rng() if rng is None else rng
     kw = dict(margin=margin, measurability=measurability)
-    task = partial(check_chunk, mechanism=mechanism, setup=setup, reduce=reduce, **kw)
+    task = partial(check_chunk, mechanism=mechanism, setup=setup, **kw)
     if kind == "random":
         if box is None:
             box = workspace_box(mechanism, setup, **kw)
@@ -473,22 +449,9 @@ def checked_candidates(mechanism: Mechanism, setup: MeasurementSetup | None, *, 
         acc.add(chunk)
         if progress is not None:
             progress(acc.tested, len(poses))
-    return acc.result(kind, poses.shape[1])
-
-
-def generate_candidates(mechanism: Mechanism, setup: MeasurementSetup | None, *, kind: str = "random",
-                        n: int = 2000, rng: np.random.Generator | None = None, box: np.ndarray | None = None,
-                        path: str | os.PathLike | None = None, grid_per_axis: int = 4,
-                        margin: float = DEFAULT_MARGIN, measurability: Measurability = Measurability(),
-                        max_rounds: int = 50, chunk_size: int = CHUNK_SIZE, progress: Progress | None = None,
-                        ) -> CandidateSet:
-    """Checked candidate poses of one ``kind`` of :data:`CANDIDATE_KINDS`: see
-    :func:`checked_candidates`. ``box`` defaults to :func:`workspace_box`; ``corners`` uses
-    :func:`corner_box` of it so that all 64 corners pass. Error if no pose passes."""
-    cand, _ = checked_candidates(mechanism, setup, kind=kind, n=n, rng=rng, box=box, path=path,
-                                 grid_per_axis=grid_per_axis, margin=margin, measurability=measurability,
-                                 max_rounds=max_rounds, chunk_size=chunk_size, progress=progress)
+    cand = acc.result(kind, poses.shape[1])
     if len(cand.poses) == 0:
         raise PkmcalError(f"none of the {cand.n_tested} {kind} candidate poses is reachable and measurable "
-                          f"(rejected: {cand.rejected})")
+                          f"(rejected by reason: {cand.rejected}); check the candidates, the margin and the sensor "
+                          "set-up")
     return cand
