@@ -42,8 +42,9 @@ import numpy as np
 from pkmcal.io.setup_file import load_setup
 from pkmcal.mechanisms.library import stewart_prototype
 from pkmcal.planning.blocks import planning_model
-from pkmcal.planning.candidates import checked_candidates, generate_candidates, random_poses, workspace_box
+from pkmcal.planning.candidates import generate_candidates, random_poses, workspace_box
 from pkmcal.planning.indices import observability_indices
+from pkmcal.planning.plan import candidate_blocks
 from pkmcal.planning.selection import select, select_cuckoo, select_default, select_random
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
@@ -107,10 +108,10 @@ def large_candidate_sets(setup_name: str, seed: int, skip_million: bool) -> dict
     setup = load_setup(setup_name)
     model = planning_model(machine, setup)
     box = workspace_box(machine, setup)
-    checked_candidates(machine, setup, n=1000, rng=np.random.default_rng(seed), box=box)     # warm-up
-    cand, t_gen, c_gen = timed_cpu(lambda: checked_candidates(machine, setup, n=100_000, box=box,
-                                                               rng=np.random.default_rng(seed))[0])
-    (G, ok), t_blk, c_blk = timed_cpu(model.blocks, cand.poses)
+    generate_candidates(machine, setup, n=1000, rng=np.random.default_rng(seed), box=box)     # warm-up
+    cand, t_gen, c_gen = timed_cpu(generate_candidates, machine, setup, n=100_000, box=box,
+                                   rng=np.random.default_rng(seed))
+    (G, ok), t_blk, c_blk = timed_cpu(candidate_blocks, model, cand.poses)
     sel, t_sel, c_sel = timed_cpu(select, G[ok], 110, rng=np.random.default_rng(seed), positions=cand.poses[ok])
     poses = random_poses(box, 200_000, np.random.default_rng(seed + 1))
     machine.check_limits(poses[:10], margin=0.1, margins=False)

@@ -66,8 +66,14 @@ def candidate_blocks(model: PlanningModel, poses: np.ndarray, *, batch: int = BL
     on all N: the blocks are bit-identical to ``model.blocks(poses)``.
     """
     parts = np.array_split(poses, max(1, -(-len(poses) // batch)))
-    results = list(chunk_map(model.blocks, parts))
-    return np.concatenate([G for G, _ in results]), np.concatenate([ok for _, ok in results])
+    G = ok = None
+    start = 0
+    for g, solved in chunk_map(model.blocks, parts):      # written in place: no second copy of G
+        if G is None:
+            G, ok = np.empty((len(poses),) + g.shape[1:]), np.empty(len(poses), dtype=bool)
+        G[start:start + len(g)], ok[start:start + len(g)] = g, solved
+        start += len(g)
+    return G, ok
 
 
 def plan_poses(mechanism: Mechanism, setup: MeasurementSetup, n: int, *, algorithm: str = "default",
