@@ -49,7 +49,7 @@ LIMIT_NAMES = ("stroke", "u_joint_tilt", "s_joint_tilt", "leg_collision", "singu
 LIMITS_COMPILED_FROM = 64
 #: Limit margins of the compiled kernel closer than this to zero (mm, rad, or inverse
 #: condition number) are recomputed by NumPy, so that the verdicts are NumPy's exactly;
-#: 10⁴ × the largest kernel–NumPy difference measured (4e-14 mm, the leg distance).
+#: over 10⁴ × the largest kernel–NumPy difference measured (5e-14 mm, the leg distance).
 EXACT_VERDICT_TOL = 1e-9
 
 
