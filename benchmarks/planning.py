@@ -1,15 +1,29 @@
-"""Benchmark of pose selection (issue 4): time and O1/O4 of the default D-optimal exchange
-choosing 30 of 2,000 and 110 of 10,000 candidates, and of paper 2's cuckoo search on the
-first case, measured in the same run.
+"""Benchmark of pose planning: the selection (issue 4) and whole plans with large candidate
+sets (issue 14 item 4), measured in the same run.
 
-    python benchmarks/planning.py [--setup indicators-prototype] [--seed 0]
+    python benchmarks/planning.py [--setup indicators-prototype] [--seed 0] [--skip-million]
 
 Machine: paper 2's prototype (``stewart-prototype``); candidates: random reachable and
-measurable poses of its workspace box (seeded). The per-pose Jacobian blocks are computed
-once (not timed); the timings are of the selection alone, after a warm-up call that
-compiles the numba kernel. Wall and process CPU times are both reported: the planning code
-runs single-threaded, so on a machine shared with other jobs the CPU time is the better
-estimate of the unloaded wall time. Last line of output: one JSON object.
+measurable poses of its workspace box (seeded).
+
+* Selection: time and O1/O4 of the default D-optimal exchange choosing 30 of 2,000 and 110
+  of 10,000 candidates, and of paper 2's cuckoo search on the first case. The per-pose
+  Jacobian blocks are computed once (not timed); the timings are of the selection alone,
+  after a warm-up call that compiles the numba kernel.
+* Large candidate sets: ``pkmcal plan stewart-prototype --setup SETUP --n 110
+  --n-candidates N`` end to end in a fresh process (start-up, imports, numba cache loads,
+  candidates, blocks, selection, output file) for N = 100,000 (target ≤ 2 s) and N = 10^6
+  (chunked, ``--skip-million`` to leave it out: its keys are then null), with the child's
+  CPU time and peak resident memory (``os.wait4``'s ru_maxrss); then, in this process, the
+  stages of the 100,000 plan: candidate generation and checks (including the ~8× more poses
+  tested than accepted), the planning blocks of the accepted candidates, and the selection;
+  and the limit check per pose, compiled kernel (:meth:`Hexapod.check_limits` without
+  margins, as the candidates use it) against the NumPy formulas it replaced.
+
+Wall and process CPU times are both reported: on a machine shared with other jobs the CPU
+time is the better estimate of the unloaded wall time (the checks use up to
+``numba.get_num_threads()`` threads, so their CPU time can exceed their wall time). Last
+line of output: one JSON object.
 """
 
 from __future__ import annotations
@@ -18,7 +32,9 @@ import argparse
 import json
 import os
 import platform
+import subprocess
 import sys
+import tempfile
 import time
 
 import numpy as np
@@ -26,9 +42,13 @@ import numpy as np
 from pkmcal.io.setup_file import load_setup
 from pkmcal.mechanisms.library import stewart_prototype
 from pkmcal.planning.blocks import planning_model
-from pkmcal.planning.candidates import generate_candidates
+from pkmcal.planning.candidates import generate_candidates, random_poses, workspace_box
 from pkmcal.planning.indices import observability_indices
-from pkmcal.planning.selection import select_cuckoo, select_default, select_random
+from pkmcal.planning.plan import candidate_blocks
+from pkmcal.planning.selection import select, select_cuckoo, select_default, select_random
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from kinematics import cpu_model  # noqa: E402  (benchmarks/kinematics.py)
 
 
 CPU = {}
@@ -43,11 +63,85 @@ def timed(fn, *args, **kwargs):
     return out, time.perf_counter() - t
 
 
+def run_child(n_candidates: int, setup: str, seed: int) -> dict:
+    """``pkmcal plan`` in a fresh process: wall and CPU seconds, peak RSS (MB), its summary."""
+    with tempfile.TemporaryDirectory() as tmp:
+        cmd = [sys.executable, "-m", "pkmcal.cli.main", "plan", "stewart-prototype", "--setup", setup, "--n", "110",
+               "--n-candidates", str(n_candidates), "--seed", str(seed), "-o", os.path.join(tmp, "poses.csv")]
+        with open(os.path.join(tmp, "out.txt"), "w+") as out, open(os.path.join(tmp, "err.txt"), "w+") as err:
+            t = time.perf_counter()
+            proc = subprocess.Popen(cmd, stdout=out, stderr=err)
+            _, status, usage = os.wait4(proc.pid, 0)
+            wall = time.perf_counter() - t
+            proc.returncode = os.waitstatus_to_exitcode(status)
+            out.seek(0)
+            err.seek(0)
+            text, errors = out.read(), err.read()
+    if proc.returncode != 0:
+        raise SystemExit(f"pkmcal plan --n-candidates {n_candidates} failed: {errors.strip()}")
+    scale = 1.0 if sys.platform == "darwin" else 1024.0       # ru_maxrss: bytes on macOS, KiB on Linux
+    return {"wall_s": wall, "cpu_s": usage.ru_utime + usage.ru_stime,
+            "peak_rss_mb": usage.ru_maxrss * scale / 2**20, "summary": text.splitlines()[0]}
+
+
+def timed_cpu(fn, *args, **kwargs):
+    """(result, wall seconds, process CPU seconds)."""
+    t, c = time.perf_counter(), time.process_time()
+    out = fn(*args, **kwargs)
+    return out, time.perf_counter() - t, time.process_time() - c
+
+
+def large_candidate_sets(setup_name: str, seed: int, skip_million: bool) -> dict:
+    """Issue 14 item 4: whole plans with 10^5 and 10^6 candidates, the stages of the first,
+    and the per-pose limit check (module docstring)."""
+    res = {}
+    for n, key in ((100_000, "plan_110_of_100000"), (1_000_000, "plan_110_of_1000000")):
+        if n == 1_000_000 and skip_million:
+            res.update({f"{key}_s": None, f"{key}_cpu_s": None, f"{key}_peak_rss_mb": None})
+            continue
+        child = run_child(n, setup_name, seed)
+        res.update({f"{key}_s": child["wall_s"], f"{key}_cpu_s": child["cpu_s"],
+                    f"{key}_peak_rss_mb": child["peak_rss_mb"]})
+        print(f"pkmcal plan --n 110 --n-candidates {n}: {child['wall_s']:.2f} s wall, {child['cpu_s']:.2f} s CPU, "
+              f"peak RSS {child['peak_rss_mb']:.0f} MB; {child['summary']}")
+    machine = stewart_prototype()
+    setup = load_setup(setup_name)
+    model = planning_model(machine, setup)
+    box = workspace_box(machine, setup)
+    generate_candidates(machine, setup, n=1000, rng=np.random.default_rng(seed), box=box)     # warm-up
+    cand, t_gen, c_gen = timed_cpu(generate_candidates, machine, setup, n=100_000, box=box,
+                                   rng=np.random.default_rng(seed))
+    (G, ok), t_blk, c_blk = timed_cpu(candidate_blocks, model, cand.poses)
+    sel, t_sel, c_sel = timed_cpu(select, G[ok], 110, rng=np.random.default_rng(seed), positions=cand.poses[ok])
+    poses = random_poses(box, 200_000, np.random.default_rng(seed + 1))
+    machine.check_limits(poses[:10], margin=0.1, margins=False)
+    _, t_ker, c_ker = timed_cpu(machine.check_limits, poses, margin=0.1, margins=False)
+    _, t_np, c_np = timed_cpu(machine._limit_margins_numpy, poses, 0.1)
+    res.update({
+        "plan_100000_candidates_tested": cand.n_tested,
+        "plan_100000_generate_check_s": t_gen, "plan_100000_generate_check_cpu_s": c_gen,
+        "plan_100000_blocks_s": t_blk, "plan_100000_blocks_cpu_s": c_blk,
+        "plan_100000_select_s": t_sel, "plan_100000_select_cpu_s": c_sel,
+        "check_limits_us_per_pose": 1e6 * t_ker / len(poses), "check_limits_cpu_us_per_pose": 1e6 * c_ker / len(poses),
+        "check_limits_numpy_us_per_pose": 1e6 * t_np / len(poses),
+        "check_limits_numpy_cpu_us_per_pose": 1e6 * c_np / len(poses),
+    })
+    print(f"stages of the 100000-candidate plan (in process): candidates {t_gen:.3f} s ({c_gen:.3f} s CPU; "
+          f"{cand.n_tested} poses tested), blocks {t_blk:.3f} s ({c_blk:.3f} s CPU), "
+          f"selection {t_sel:.3f} s ({c_sel:.3f} s CPU)")
+    print(f"limit check per pose: compiled {res['check_limits_us_per_pose']:.3f} µs "
+          f"({res['check_limits_cpu_us_per_pose']:.3f} µs CPU), NumPy formulas "
+          f"{res['check_limits_numpy_us_per_pose']:.3f} µs ({res['check_limits_numpy_cpu_us_per_pose']:.3f} µs CPU)")
+    return res
+
+
 def main(argv: list[str]) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--setup", default="indicators-prototype")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--skip-million", action="store_true", help="leave out the 10^6-candidate plan (keys null)")
     args = ap.parse_args(argv)
+    large = large_candidate_sets(args.setup, args.seed, args.skip_million)
 
     machine = stewart_prototype()
     setup = load_setup(args.setup)
@@ -81,8 +175,10 @@ def main(argv: list[str]) -> dict:
         "random_30_of_2000_mean_O1": float(np.mean([r["O1"] for r in r30])),
         "random_30_of_2000_mean_O4": float(np.mean([r["O4"] for r in r30])),
         "warmup_s": t_warm,
+        **large,
         "load_average_1min": os.getloadavg()[0],
         "cores": os.cpu_count(),
+        "cpu": cpu_model(),
         "python": platform.python_version(),
         "numpy": np.__version__,
     })

@@ -1,4 +1,6 @@
-"""Candidate poses: workspace box, corners, generators, CSV input, limit and measurability checks."""
+"""Candidate poses: workspace box, corners, generators, CSV input, limit and measurability
+checks; chunked generation against the one-batch loop it replaces (same poses, counts and
+random state whatever the chunk size) and plans that do not depend on the chunk size."""
 
 import numpy as np
 import pytest
@@ -17,6 +19,8 @@ from pkmcal.planning.candidates import (
     read_candidates_csv,
     workspace_box,
 )
+from pkmcal.planning.indices import observability_indices
+from pkmcal.planning.plan import candidate_blocks, plan_poses
 from pkmcal.sensors import FullPoseSensor, MeasurementSetup, NoiseModel
 
 
@@ -132,3 +136,119 @@ def test_read_candidates_csv_planar_converts_the_declared_angle_columns(tmp_path
     q = tmp_path / "p2.csv"
     q.write_text("y,x\n220,10\n")
     np.testing.assert_array_equal(read_candidates_csv(q, m2), [[10.0, 220.0]])
+
+
+# -- chunked generation: same candidates whatever the chunk size, exact rejection counts ------
+
+
+def _unchunked_random(machine, setup, n, rng, box, margin=0.1, measurability=Measurability()):
+    """The one-batch-per-round loop that the chunked generator replaces, spelled out: rounds
+    of max(4·(n − accepted), 256) poses, each checked as a whole, counted up to the pose
+    that completes n."""
+    kept, tested, rejected, total = [], 0, {}, 0
+    while total < n:
+        batch = box[:, 0] + rng.random((max(4 * (n - total), 256), 6)) * (box[:, 1] - box[:, 0])
+        chk = check_candidates(machine, setup, batch, margin=margin, measurability=measurability)
+        ok = chk.ok
+        used = len(batch) if ok.sum() < n - total else int(np.flatnonzero(ok)[n - total - 1]) + 1
+        tested += used
+        for k, v in chk.violations.items():
+            rejected[k] = rejected.get(k, 0) + int(v[:used].sum())
+        kept.append(batch[:used][ok[:used]])
+        total += len(kept[-1])
+    return np.concatenate(kept), tested, {k: v for k, v in rejected.items() if v}
+
+
+@pytest.mark.parametrize("chunk_size", [7, 97, 1000, 10**6])
+def test_random_candidates_do_not_depend_on_the_chunk_size(machine, indicators, box, chunk_size):
+    spec = Measurability(travel=(285.0, 330.0), plate_radius=80.0)      # every reason occurs
+    rng = np.random.default_rng(11)
+    poses, tested, rejected = _unchunked_random(machine, indicators, 700, rng, box, measurability=spec)
+    rng2 = np.random.default_rng(11)
+    cs = generate_candidates(machine, indicators, n=700, rng=rng2, box=box, measurability=spec,
+                             chunk_size=chunk_size)
+    np.testing.assert_array_equal(cs.poses, poses)
+    assert cs.n_tested == tested and cs.rejected == rejected
+    assert {"stroke", "s_joint_tilt", "leg_collision", "indicator_travel", "indicator_off_plate"} <= set(rejected)
+    assert rng2.random() == rng.random()     # the generator ends in the same state
+
+
+def test_rejection_counts_are_those_of_checking_the_tested_poses(machine, indicators, box):
+    # fixed sets (grid, file): counts = check_candidates over all poses, for any chunk size
+    grid = grid_poses(box, 4)
+    whole = check_candidates(machine, indicators, grid)
+    for chunk_size in (1, 333, 4096, 5000):
+        cs = generate_candidates(machine, indicators, kind="grid", grid_per_axis=4, box=box, chunk_size=chunk_size)
+        assert cs.n_tested == len(grid) and cs.rejected == whole.counts()
+        np.testing.assert_array_equal(cs.poses, grid[whole.ok])
+        f = generate_candidates(machine, indicators, kind="file", poses=grid[::-1], chunk_size=chunk_size)
+        assert f.rejected == whole.counts() and f.kind == "file"
+        np.testing.assert_array_equal(f.poses, grid[::-1][whole.ok[::-1]])
+
+
+def test_only_accepted_candidates_get_blocks(machine, indicators):
+    calls = []
+
+    def recording_map(fn, items):          # an in-order executor that records what it runs
+        items = list(items)
+        calls.append((getattr(fn, "__name__", getattr(getattr(fn, "func", None), "__name__", "")), items))
+        return map(fn, items)
+
+    plan = plan_poses(machine, indicators, 20, n_candidates=900, seed=2, chunk_size=700, chunk_map=recording_map)
+    blocked = [np.concatenate(items) for name, items in calls if name == "blocks"]
+    assert len(blocked) == 1
+    np.testing.assert_array_equal(blocked[0], plan.candidates.poses)     # the 900 accepted, nothing else
+    assert check_candidates(machine, indicators, blocked[0]).ok.all()
+    assert sum(len(items) for name, items in calls if name == "check_chunk") > 1   # checked in chunks
+
+
+def test_an_eager_executor_map_gives_the_same_candidates(machine, indicators, box):
+    from concurrent.futures import ThreadPoolExecutor
+
+    ref = generate_candidates(machine, indicators, n=900, rng=np.random.default_rng(4), box=box, chunk_size=500)
+    with ThreadPoolExecutor(2) as pool:
+        cs = generate_candidates(machine, indicators, n=900, rng=np.random.default_rng(4), box=box, chunk_size=500,
+                                 chunk_map=pool.map)
+    np.testing.assert_array_equal(cs.poses, ref.poses)
+    assert (cs.n_tested, cs.rejected) == (ref.n_tested, ref.rejected)
+
+
+def test_progress_is_reported_per_chunk(machine, indicators, box):
+    calls = []
+    generate_candidates(machine, indicators, n=400, rng=np.random.default_rng(0), box=box, chunk_size=300,
+                        progress=lambda done, total: calls.append((done, total)))
+    done = [d for d, _ in calls]
+    assert len(calls) > 3 and all(t == 400 for _, t in calls)
+    assert done == sorted(done) and done[-1] == 400
+    calls.clear()
+    generate_candidates(machine, indicators, kind="grid", grid_per_axis=3, box=box, chunk_size=100,
+                        progress=lambda done, total: calls.append((done, total)))
+    assert calls == [(min(100 * (i + 1), 729), 729) for i in range(8)]
+
+
+def test_chunk_size_must_be_positive(machine, indicators, box):
+    with pytest.raises(PkmcalError, match="chunk_size"):
+        generate_candidates(machine, indicators, n=10, box=box, chunk_size=0)
+
+
+@pytest.mark.parametrize("kw", [dict(algorithm="default"), dict(algorithm="cuckoo"), dict(algorithm="random"),
+                                dict(grid=4), dict(algorithm="corners")])
+def test_plans_do_not_depend_on_the_chunk_size(machine, indicators, kw):
+    n_cand = {} if "grid" in kw or kw.get("algorithm") == "corners" else dict(n_candidates=1200)
+    ref = plan_poses(machine, indicators, 20, seed=6, chunk_size=10**6, **n_cand, **kw)
+    for chunk_size in (50, 999):
+        p = plan_poses(machine, indicators, 20, seed=6, chunk_size=chunk_size, **n_cand, **kw)
+        np.testing.assert_array_equal(p.poses, ref.poses)
+        np.testing.assert_array_equal(p.candidates.poses, ref.candidates.poses)
+        assert p.candidates.rejected == ref.candidates.rejected and p.selection.indices == ref.selection.indices
+    assert observability_indices(ref.model.blocks(ref.candidates.poses)[0], ref.selection.chosen) == \
+        ref.selection.indices
+
+
+def test_blocks_in_batches_are_those_computed_at_once(machine, indicators):
+    plan = plan_poses(machine, indicators, 20, n_candidates=1500, seed=1)
+    G_all, ok_all = plan.model.blocks(plan.candidates.poses)
+    for batch in (300, 701, 1500, 10**6):      # batches of ≥ batch/2 poses: 150 .. 1500
+        G, ok = candidate_blocks(plan.model, plan.candidates.poses, batch=batch)
+        np.testing.assert_array_equal(G, G_all)
+        np.testing.assert_array_equal(ok, ok_all)

@@ -1,5 +1,7 @@
 """Hexapod.check_limits: every limit triggered by a constructed pose, each margin checked
-against an independent computation; segment_distance against brute-force sampling."""
+against an independent computation; segment_distance (NumPy, and the compiled kernel the
+limit check uses) against brute-force sampling; the compiled limit kernel against the NumPy
+formulas it replaces, and its singularity certificate against the SVD."""
 
 from __future__ import annotations
 
@@ -10,9 +12,10 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from scipy.optimize import brentq, minimize_scalar
 
+from pkmcal.mechanisms import _hexapod_kernels as kernels
 from pkmcal.mechanisms import builtin_machine, symmetric_hexapod
 from pkmcal.mechanisms.base import LimitReport
-from pkmcal.mechanisms.hexapod import segment_distance
+from pkmcal.mechanisms.hexapod import EXACT_VERDICT_TOL, LIMIT_NAMES, LIMITS_COMPILED_FROM, segment_distance
 
 M = builtin_machine("stewart-prototype")
 HOME = M.home_pose
@@ -129,9 +132,23 @@ def _brute_segment_distance(p1, q1, p2, q2, n=401, zooms=6):
 point = arrays(float, (3,), elements=st.floats(-100, 100))
 
 
+def compiled_segment_distance(p1, q1, p2, q2):
+    """The compiled pair distance of the limit kernel, with segment_distance's broadcasting."""
+    p1, q1, p2, q2 = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (p1, q1, p2, q2)))
+    out = np.empty(p1.shape[:-1]).reshape(-1)
+    kernels.segment_distances(*(np.ascontiguousarray(v.reshape(-1, 3)) for v in (p1, q1, p2, q2)), out)
+    return out.reshape(p1.shape[:-1])
+
+
+#: Both implementations must pass every segment-distance test.
+distances = pytest.mark.parametrize("segment_distance", [segment_distance, compiled_segment_distance],
+                                    ids=["numpy", "compiled"])
+
+
+@distances
 @settings(max_examples=150, deadline=None)
 @given(point, point, point, point)
-def test_segment_distance_against_brute_force(p1, q1, p2, q2):
+def test_segment_distance_against_brute_force(segment_distance, p1, q1, p2, q2):
     if min(np.linalg.norm(q1 - p1), np.linalg.norm(q2 - p2)) < 1e-3:
         q1 = q1 + [1.0, 0.0, 0.0]
         q2 = q2 + [0.0, 1.0, 0.0]
@@ -142,9 +159,10 @@ def test_segment_distance_against_brute_force(p1, q1, p2, q2):
     assert brute - exact <= 1e-6
 
 
+@distances
 @settings(max_examples=60, deadline=None)
 @given(point, point, arrays(float, (3,), elements=st.floats(-50, 50)), st.floats(-2, 2))
-def test_segment_distance_parallel_and_collinear(p1, q1, shift, scale):
+def test_segment_distance_parallel_and_collinear(segment_distance, p1, q1, shift, scale):
     if np.linalg.norm(q1 - p1) < 1e-3:
         q1 = p1 + [0.0, 0.0, 5.0]
     p2 = p1 + shift
@@ -154,7 +172,8 @@ def test_segment_distance_parallel_and_collinear(p1, q1, shift, scale):
     assert exact <= brute + 1e-9 and brute - exact <= 1e-6
 
 
-def test_segment_distance_broadcasts_and_closed_forms():
+@distances
+def test_segment_distance_broadcasts_and_closed_forms(segment_distance):
     # crossing at right angles, 3 mm apart; and end-to-end collinear with a 2 mm gap
     p1 = np.array([[-1.0, 0, 0], [0, 0, 0]])
     q1 = np.array([[1.0, 0, 0], [1, 0, 0]])
@@ -245,9 +264,10 @@ def _point_segment_distance(x, p, q):
     return float(np.linalg.norm(p + t * d - x))
 
 
+@distances
 @settings(max_examples=100, deadline=None)
 @given(point, point, point)
-def test_segment_distance_with_a_zero_length_segment(x, p, q):
+def test_segment_distance_with_a_zero_length_segment(segment_distance, x, p, q):
     # a zero-length segment is a point: the distance is the point–segment distance, from
     # either side, and the point–point distance when both segments are points
     expected = _point_segment_distance(x, p, q)
@@ -258,7 +278,8 @@ def test_segment_distance_with_a_zero_length_segment(x, p, q):
         assert segment_distance(x, x, p, q) <= _brute_segment_distance(x, x + 1e-300, p, q) + 1e-9
 
 
-def test_segment_distance_zero_length_closed_forms():
+@distances
+def test_segment_distance_zero_length_closed_forms(segment_distance):
     p = np.zeros(3)
     a, b = np.array([1.0, 1.0, 0.0]), np.array([3.0, 1.0, 0.0])
     # point beside the segment's start, beyond its end, above its middle; vectorised
@@ -334,3 +355,156 @@ def test_verdicts_of_a_real_machine_match_the_per_pose_definition():
     assert v == verdicts_by_pose(report)
     assert len(set(v)) > 3  # several different combinations were exercised
     assert [s == "ok" for s in v] == report.ok.tolist()
+
+
+# -- the compiled limit kernel against the NumPy formulas it replaces --------------------------
+
+limited_machines = st.builds(
+    symmetric_hexapod,
+    base_radius=st.floats(100.0, 250.0),
+    platform_radius=st.floats(50.0, 120.0),
+    base_separation=st.floats(8.0, 60.0),
+    platform_separation=st.one_of(st.just(0.0), st.floats(8.0, 60.0)),   # 3-6 designs share joints
+    phase=st.floats(0.0, 360.0),
+    offset=st.floats(200.0, 400.0),
+    stroke=st.floats(20.0, 200.0),
+    u_joint_tilt=st.one_of(st.none(), st.floats(20.0, 60.0)),
+    s_joint_tilt=st.one_of(st.none(), st.floats(20.0, 60.0)),
+    leg_diameter=st.one_of(st.none(), st.floats(5.0, 60.0)),
+)
+
+
+def _random_poses(machine, n, seed, spread=1.0):
+    rng = np.random.default_rng(seed)
+    half = spread * np.array([80.0, 80.0, 60.0, 0.5, 0.5, 1.2])
+    return machine.home_pose + rng.uniform(-1.0, 1.0, (n, 6)) * half
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.one_of(st.just(M), limited_machines), st.integers(0, 2**32 - 1), st.floats(0.0, 3.0))
+def test_kernel_margins_match_the_numpy_formulas(machine, seed, margin):
+    # the kernel's stroke, tilt and collision margins (before any NumPy recomputation) agree
+    # with the NumPy reference to rounding: 1e-11 mm/rad is 100× the ~1e-13 seen on
+    # 300 mm legs and 100× below EXACT_VERDICT_TOL, below which poses are recomputed
+    poses = _random_poses(machine, 300, seed)
+    lim = machine.limits
+    table = np.array([np.nan if v is None else v for v in (lim.u_joint_tilt, lim.s_joint_tilt, lim.leg_diameter)]
+                     + [lim.singularity_margin, machine.platform_radius, margin, np.deg2rad(margin)])
+    on = machine._limits_enabled()
+    out = kernels.limit_margins(poses, machine.base, machine.platform, machine.offset, machine.stroke,
+                                machine.base_axis, machine.platform_axis, machine._leg_pairs(), on, table)
+    ref = machine._limit_margins_numpy(poses, margin)
+    assert set(ref) == {n for n, enabled in zip(LIMIT_NAMES, on) if enabled}
+    for c, name in enumerate(LIMIT_NAMES[:4]):
+        if name in ref:
+            np.testing.assert_allclose(out[:, c], ref[name], rtol=0, atol=1e-11, err_msg=name)
+        else:
+            assert np.isnan(out[:, c]).all()
+    # the certificate column: +1 only where the SVD ratio is ≥ the margin, −1 only where below
+    cert, sing = out[:, 4], ref["singularity"]
+    assert np.all(sing[cert == 1.0] >= 0) and np.all(sing[cert == -1.0] < 0)
+    assert np.all(np.isin(cert[~np.isnan(cert)], [1.0, -1.0]))
+    # and check_limits, both modes, gives exactly the NumPy verdicts
+    for margins in (True, False):
+        rep = machine.check_limits(poses, margin=margin, margins=margins)
+        assert list(rep.violations) == list(ref)
+        for name in ref:
+            np.testing.assert_array_equal(rep.violations[name], ~(ref[name] >= 0), err_msg=name)
+        if margins:
+            for name in ref:
+                np.testing.assert_allclose(rep.margins[name], ref[name], rtol=0, atol=1e-11)
+        else:
+            assert rep.margins == {}
+
+
+def test_poses_on_a_limit_get_the_numpy_verdict():
+    # poses exactly on each limit (bisection on the NumPy margin to 1e-15 of the segment):
+    # their kernel margins are within EXACT_VERDICT_TOL of zero, so check_limits recomputes
+    # them with NumPy and returns its verdict whatever the kernel's rounding
+    rng = np.random.default_rng(3)
+    start = np.tile(HOME, (100, 1))
+    far = HOME + rng.uniform(-1, 1, (100, 6)) * np.array([90, 90, 40, 0.5, 0.5, 1.2])
+    bad = ~(M.check_limits(far).ok)
+    lo, hi = np.zeros(bad.sum()), np.ones(bad.sum())
+    a, b = start[bad], far[bad]
+    for _ in range(60):
+        mid = (lo + hi) / 2
+        ok = M._limit_margins_numpy(a + mid[:, None] * (b - a))
+        inside = np.all([m >= 0 for m in ok.values()], axis=0)
+        lo, hi = np.where(inside, mid, lo), np.where(inside, hi, mid)
+    edge = np.vstack([a + lo[:, None] * (b - a), a + hi[:, None] * (b - a)])
+    ref = M._limit_margins_numpy(edge)
+    assert np.min(np.abs(np.concatenate([m for m in ref.values()]))) < 1e-12   # really on a limit
+    lim = M.limits
+    table = np.array([lim.u_joint_tilt, lim.s_joint_tilt, lim.leg_diameter, lim.singularity_margin,
+                      M.platform_radius, 0.0, 0.0])
+    raw = kernels.limit_margins(edge, M.base, M.platform, M.offset, M.stroke, M.base_axis, M.platform_axis,
+                                M._leg_pairs(), M._limits_enabled(), table)
+    near = np.any(np.abs(raw[:, :4]) <= EXACT_VERDICT_TOL, axis=1)
+    assert near.sum() >= len(a)            # at least one side of every edge is recomputed
+    assert len(edge) >= LIMITS_COMPILED_FROM  # (the batch goes through the kernel)
+    for margins in (True, False):
+        rep = M.check_limits(edge, margins=margins)
+        for name in ref:
+            np.testing.assert_array_equal(rep.violations[name], ~(ref[name] >= 0), err_msg=name)
+            if margins:   # the recomputed poses carry the NumPy margins, bit for bit
+                np.testing.assert_array_equal(rep.margins[name][near], ref[name][near], err_msg=name)
+    assert M.check_limits(edge).ok.sum() == len(a) and not M.check_limits(edge[len(a):]).ok.any()
+
+
+def _matrix_with_singular_values(rng, sv):
+    U, _ = np.linalg.qr(rng.normal(size=(6, 6)))
+    V, _ = np.linalg.qr(rng.normal(size=(6, 6)))
+    return (U * sv) @ V.T
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.floats(-8.0, 0.0), st.floats(-6.0, 0.0), st.floats(-3.0, 3.0))
+def test_singularity_certificate_against_the_svd(seed, log_ratio, log_m, log_scale):
+    rng = np.random.default_rng(seed)
+    ratio, m = 10.0**log_ratio, 10.0**log_m
+    sv = np.sort(np.concatenate([[1.0, ratio], rng.uniform(ratio, 1.0, 4)]))[::-1] * 10.0**log_scale
+    J = _matrix_with_singular_values(rng, sv)
+    s = np.linalg.svd(J, compute_uv=False)
+    true = s[-1] / s[0]
+    cert = kernels.singularity_certificate(J, m, np.empty((6, 6)), np.empty((6, 6)))
+    # never wrong
+    if cert == 1.0:
+        assert true >= m
+    elif cert == -1.0:
+        assert true < m
+    else:
+        assert np.isnan(cert)
+    # and decisive outside the band its bounds leave: λ_max ∈ [max C_ii, min(tr C, ‖C‖∞)]
+    # and tr C ≤ 6 max C_ii, so the band is at most m/√6 .. √6·m (1 % for the shifts), once
+    # m² tr is well above the rounding slack 1e-12 tr (m ≥ 1e-4; the default margin is 0.01)
+    if m >= 1e-4 and true > 1.01 * np.sqrt(6.0) * m:
+        assert cert == 1.0
+    if m >= 1e-4 and true < m / (1.01 * np.sqrt(6.0)):
+        assert cert == -1.0
+
+
+def test_singularity_certificate_of_non_finite_or_zero_matrices_is_undecided():
+    C, L = np.empty((6, 6)), np.empty((6, 6))
+    for J in (np.zeros((6, 6)), np.full((6, 6), np.nan), np.diag([np.inf, 1, 1, 1, 1, 1])):
+        assert np.isnan(kernels.singularity_certificate(J, 0.01, C, L))
+    # a zero margin: a regular matrix passes; a singular one is left to the SVD (ratio 0 ≥ 0
+    # passes there too, but no Cholesky certificate can tell 0 from a tiny negative shift)
+    assert kernels.singularity_certificate(np.diag([1.0, 1, 1, 1, 1, 0.5]), 0.0, C, L) == 1.0
+    assert np.isnan(kernels.singularity_certificate(np.diag([1.0, 1, 1, 1, 1, 0]), 0.0, C, L))
+
+
+def test_check_limits_without_margins_on_non_finite_poses_and_threads():
+    # NaN / inf poses violate everything in both modes; a batch large enough to be split over
+    # threads gives the verdicts of its rows checked one by one
+    poses = _random_poses(M, 2 * kernels._LIMIT_GRAIN + 13, 11)
+    poses[5, 2] = np.nan
+    poses[7, 4] = np.inf
+    fast = M.check_limits(poses, margin=0.1, margins=False)
+    full = M.check_limits(poses, margin=0.1)
+    for name in full.violations:
+        np.testing.assert_array_equal(fast.violations[name], full.violations[name])
+        assert fast.violations[name][5] and fast.violations[name][7]
+    rows = [M.check_limits(p, margin=0.1, margins=False).ok[0] for p in poses[:50]]   # NumPy, one by one
+    assert rows == fast.ok[:50].tolist()
+    assert 0 < fast.ok.sum() < len(poses)

@@ -18,7 +18,9 @@ Analytic derivatives, with the unit leg vector u_i = l_i / L_i:
 stroke, U-joint tilt (angle between u_i and the base joint axis), S-joint tilt (angle
 between u_i and the platform joint axis R n_i), leg–leg collision (minimum distance
 between leg segments b_i → p + R a_i below the leg diameter) and a singularity margin
-(inverse condition number of the length-scaled pose Jacobian).
+(inverse condition number of the length-scaled pose Jacobian). They are computed by a
+compiled kernel (``_hexapod_kernels.limit_margins``) tested against the vectorised NumPy
+formulas (:meth:`Hexapod._limit_margins_numpy`), which decide every pose near a limit.
 """
 
 from __future__ import annotations
@@ -51,6 +53,15 @@ COMPILED_FROM = 64
 #: Default FK tolerance on leg lengths (mm) and iteration cap.
 FK_TOL_MM = 1e-9
 FK_MAX_ITER = 30
+#: The limits checked, in the order of :class:`LimitReport` and of the compiled kernel's columns.
+LIMIT_NAMES = ("stroke", "u_joint_tilt", "s_joint_tilt", "leg_collision", "singularity")
+#: Batches of at least this many poses are checked by the compiled kernel; smaller ones by the
+#: NumPy formulas (the same verdicts), so that a command on a few poses does not import numba.
+LIMITS_COMPILED_FROM = 64
+#: Limit margins of the compiled kernel closer than this to zero (mm, rad, or inverse
+#: condition number) are recomputed by NumPy, so that the verdicts are NumPy's exactly;
+#: over 10⁴ × the largest kernel–NumPy difference measured (5e-14 mm, the leg distance).
+EXACT_VERDICT_TOL = 1e-9
 
 
 @dataclass(frozen=True)
@@ -310,16 +321,86 @@ class Hexapod(Mechanism):
 
     # -- limits -------------------------------------------------------------------------
 
-    def check_limits(self, poses: np.ndarray, margin: float = 0.0) -> LimitReport:
+    def check_limits(self, poses: np.ndarray, margin: float = 0.0, *, margins: bool = True) -> LimitReport:
         """Reachability of N poses against every limit of the machine.
 
         ``margin`` shrinks every limit by that safety margin (mm for stroke and collision,
         the same number in degrees for the joint tilts). A pose with a NaN or infinite
         coordinate cannot be evaluated: it violates every limit and all its margins are NaN
         (likewise any single margin that cannot be evaluated, e.g. a zero-length leg).
+
+        ``margins=False`` gives the same verdicts without the margins (``margins`` of the
+        report empty), faster: the singularity verdict then comes from a Cholesky
+        certificate instead of the SVD (:func:`~._hexapod_kernels.singularity_certificate`).
+
+        From :data:`LIMITS_COMPILED_FROM` poses on, the compiled kernel
+        (:func:`~._hexapod_kernels.limit_margins`) computes the stroke, tilt and collision
+        margins (the singularity margin is the NumPy SVD's), and every pose with a kernel
+        margin within :data:`EXACT_VERDICT_TOL` of zero (or NaN), or an undecided
+        certificate, is recomputed by the NumPy formulas (:meth:`_limit_margins_numpy`), so
+        the verdicts are exactly theirs whatever the rounding (the kernel agrees with them
+        to ~1e-13, tested); smaller batches use the NumPy formulas directly.
         """
         poses = self.as_pose_array(poses)
         finite = np.all(np.isfinite(poses), axis=1)
+        safe = np.where(finite[:, None], poses, self.home)
+        if len(poses) < LIMITS_COMPILED_FROM:
+            result = self._limit_margins_numpy(safe, margin)
+        else:
+            result = self._limit_margins_compiled(safe, finite, margin, margins)
+        for m in result.values():
+            m[~finite] = np.nan
+        violations = {k: ~(m >= 0.0) for k, m in result.items()}
+        return LimitReport(violations=violations, margins=result if margins else {})
+
+    def _limit_margins_compiled(self, safe: np.ndarray, finite: np.ndarray, margin: float,
+                                margins: bool) -> dict[str, np.ndarray]:
+        """:meth:`check_limits`' margins by the compiled kernel, every pose near a limit (or
+        undecided) recomputed by :meth:`_limit_margins_numpy`; without ``margins`` the
+        singularity entry is the certificate (+1 ok, −1 violated)."""
+        from pkmcal.mechanisms import _hexapod_kernels as kernels
+
+        lim = self.limits
+        on = self._limits_enabled()
+        names = [n for n, enabled in zip(LIMIT_NAMES, on) if enabled]
+        table = np.array([np.nan if v is None else v for v in (lim.u_joint_tilt, lim.s_joint_tilt, lim.leg_diameter)]
+                         + [lim.singularity_margin, self.platform_radius, margin, np.deg2rad(margin)])
+        out = kernels.limit_margins(safe, self.base, self.platform, self.offset, self.stroke, self.base_axis,
+                                    self.platform_axis, self._leg_pairs(), on[:4] + (not margins,), table)
+        result = {n: out[:, LIMIT_NAMES.index(n)] for n in names}
+        unsure = ~np.all([np.abs(result[n]) > EXACT_VERDICT_TOL for n in names if n != "singularity"], axis=0)
+        if margins:
+            result["singularity"] = self._singularity_margin(safe)
+        else:
+            unsure |= np.isnan(result["singularity"])  # certificate undecided
+        unsure &= finite
+        if unsure.any():
+            exact = self._limit_margins_numpy(safe[unsure], margin)
+            for n in names:
+                result[n][unsure] = exact[n]
+        return result
+
+    def _limits_enabled(self) -> tuple[bool, ...]:
+        """Which limits of :data:`LIMIT_NAMES` this machine checks."""
+        lim = self.limits
+        return (True, lim.u_joint_tilt is not None, lim.s_joint_tilt is not None, lim.leg_diameter is not None, True)
+
+    def _singularity_margin(self, poses: np.ndarray) -> np.ndarray:
+        """Inverse condition number of the length-scaled twist Jacobian minus the margin
+        (N,), by SVD, only where the Jacobian is finite (LAPACK rejects NaN/inf); else NaN."""
+        with np.errstate(invalid="ignore", divide="ignore"):
+            Jt = self.twist_jacobian(poses)
+            Jt[:, :, 3:] /= self.platform_radius
+        good = np.all(np.isfinite(Jt), axis=(1, 2))
+        out = np.full(len(Jt), np.nan)
+        if np.any(good):
+            sv = np.linalg.svd(Jt[good], compute_uv=False)
+            out[good] = sv[:, -1] / sv[:, 0] - self.limits.singularity_margin
+        return out
+
+    def _limit_margins_numpy(self, poses: np.ndarray, margin: float = 0.0) -> dict[str, np.ndarray]:
+        """The limit margins by vectorised NumPy (finite poses): the reference formulas of
+        :meth:`check_limits` (module docstring), which the compiled kernel is tested against."""
         margins: dict[str, np.ndarray] = {}
         lim = self.limits
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -338,19 +419,8 @@ class Hexapod(Mechanism):
             if lim.leg_diameter is not None:
                 tops = poses[:, None, 0:3] + Ra
                 margins["leg_collision"] = self._min_leg_distance(tops) - lim.leg_diameter - margin
-            Jt = np.concatenate([u, np.cross(Ra, u)], axis=2)  # twist Jacobian
-            Jt[:, :, 3:] /= self.platform_radius
-        # inverse condition number by SVD, only where the Jacobian is finite (LAPACK
-        # rejects NaN/inf)
-        good = np.all(np.isfinite(Jt), axis=(1, 2))
-        margins["singularity"] = np.full(poses.shape[0], np.nan)
-        if np.any(good):
-            sv = np.linalg.svd(Jt[good], compute_uv=False)
-            margins["singularity"][good] = sv[:, -1] / sv[:, 0] - lim.singularity_margin
-        for m in margins.values():
-            m[~finite] = np.nan
-        violations = {k: ~(m >= 0.0) for k, m in margins.items()}
-        return LimitReport(violations=violations, margins=margins)
+        margins["singularity"] = self._singularity_margin(poses)
+        return margins
 
     def _leg_pairs(self) -> np.ndarray:
         """Leg pairs (i, j) whose segments can collide: pairs sharing a joint centre

@@ -33,6 +33,13 @@ singularity) and measurability:
   the cone's half-angle.
 
 Rejected candidates are counted by reason.
+
+**Large sets** (:func:`generate_candidates`): candidates are drawn and checked in chunks
+of :data:`CHUNK_SIZE` poses, so memory stays bounded by the chunk and the accepted poses;
+a chunk is a picklable unit of work (:func:`check_chunk`) that an executor's ``map`` can
+run (in order by default, in this process). Chunks cut one random draw into pieces, so the
+candidates, their rejection counts and the random generator's final state are those of
+the unchunked draw, whatever the chunk size.
 """
 
 from __future__ import annotations
@@ -40,6 +47,8 @@ from __future__ import annotations
 import itertools
 import os
 from dataclasses import dataclass, field
+from functools import partial
+from typing import Callable
 
 import numpy as np
 
@@ -51,6 +60,11 @@ from pkmcal.sensors.base import MeasurementSetup
 from pkmcal.sensors.indicators import MIN_NORMAL_Z
 
 CANDIDATE_KINDS = ("random", "grid", "corners", "file")
+#: Poses checked per chunk: bounds the memory of the checks (a few MB per chunk) and is
+#: the unit of work of an executor (:func:`generate_candidates`).
+CHUNK_SIZE = 50_000
+#: A progress callback: called with (done, total).
+Progress = Callable[[int, int], None]
 #: Default safety margin: mm for stroke and collision, degrees for the joint tilts.
 DEFAULT_MARGIN = 0.1
 
@@ -113,10 +127,11 @@ def measurability_violations(setup: MeasurementSetup, poses: np.ndarray,
     sensor = setup.sensor
     out: dict[str, np.ndarray] = {}
     if sensor.kind == "indicators":
-        R = euler_to_matrix(poses[:, 3:6])
-        n = R[:, :, 2]
-        facing = n[:, 2] >= MIN_NORMAL_Z
+        facing = np.cos(poses[:, 4]) * np.cos(poses[:, 3]) >= MIN_NORMAL_Z    # n_z = R_22 = cos b cos a
         out["indicator_plane_tilt"] = ~facing
+        if spec.travel is None and spec.plate_radius is None:
+            return out
+        R = euler_to_matrix(poses[:, 3:6])
         safe = np.where(facing[:, None], poses, np.zeros(6))
         if spec.travel is not None:
             z = sensor.predict(safe)
@@ -154,8 +169,8 @@ def check_candidates(mechanism: Mechanism, setup: MeasurementSetup | None, poses
     poses = mechanism.as_pose_array(poses)
     finite = np.all(np.isfinite(poses), axis=1)
     safe = np.where(finite[:, None], poses, mechanism.home_pose)
-    try:
-        lim = mechanism.check_limits(safe, margin=margin)
+    try:                                   # verdicts only: the hexapod's faster path
+        lim = mechanism.check_limits(safe, margin=margin, margins=False)
     except TypeError:                      # a mechanism whose limits take no safety margin
         lim = mechanism.check_limits(safe)
     viol = {k: v | ~finite for k, v in lim.violations.items()}
@@ -282,24 +297,144 @@ def read_candidates_csv(path: str | os.PathLike, mechanism: Mechanism | None = N
     return from_file_units(table[list(names)], is_angle)   # any pose dimension (planar: 2 or 3)
 
 
+# -- checking in chunks ------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class CheckedChunk:
+    """One chunk of candidate ``poses`` (N, n) and its :class:`CandidateCheck`."""
+
+    poses: np.ndarray
+    check: CandidateCheck
+
+
+def check_chunk(poses: np.ndarray, *, mechanism: Mechanism, setup: MeasurementSetup | None,
+                margin: float = DEFAULT_MARGIN, measurability: Measurability = Measurability()) -> CheckedChunk:
+    """:func:`check_candidates` of one chunk: the unit of work that
+    :func:`generate_candidates` maps over the chunks; a module-level function of picklable
+    arguments, so that a process pool or Dask can run it."""
+    return CheckedChunk(poses, check_candidates(mechanism, setup, poses, margin=margin, measurability=measurability))
+
+
+class _Accepted:
+    """Accepted poses and per-reason rejection counts of the chunks, in order, up to
+    ``limit`` accepted poses (None: all): a chunk that crosses the limit counts only up to
+    its last pose used."""
+
+    def __init__(self, limit: int | None = None):
+        self.limit = limit
+        self.tested = 0
+        self.total = 0
+        self.rejected: dict[str, int] = {}
+        self.poses: list[np.ndarray] = []
+
+    @property
+    def full(self) -> bool:
+        return self.limit is not None and self.total >= self.limit
+
+    def add(self, chunk: CheckedChunk) -> None:
+        ok = chunk.check.ok
+        used, take = len(ok), int(ok.sum())
+        if self.limit is not None and self.total + take >= self.limit:
+            take = self.limit - self.total
+            used = int(np.flatnonzero(ok)[take - 1]) + 1 if take > 0 else 0
+        for k, v in chunk.check.violations.items():
+            self.rejected[k] = self.rejected.get(k, 0) + int(np.count_nonzero(v[:used]))
+        self.poses.append(chunk.poses[:used][ok[:used]])
+        self.tested += used
+        self.total += take
+
+    def result(self, kind: str, n_dof: int) -> CandidateSet:
+        poses = np.concatenate(self.poses) if self.poses else np.empty((0, n_dof))
+        return CandidateSet(poses, self.tested, {k: v for k, v in self.rejected.items() if v}, kind)
+
+
+def _chunks(poses: np.ndarray, size: int):
+    for i in range(0, len(poses), size):
+        yield poses[i:i + size]
+
+
+class _RandomDraws:
+    """``total`` poses uniform in ``box``, drawn from ``rng`` in chunks of ``size`` as they
+    are consumed. :meth:`skip_rest` advances ``rng`` past the poses not drawn, so that the
+    generator ends in the state one draw of all ``total`` poses leaves (numpy fills
+    ``rng.random`` arrays in order, so consecutive chunks are that one draw, split)."""
+
+    def __init__(self, box: np.ndarray, total: int, rng: np.random.Generator, size: int):
+        self.box, self.left, self.rng, self.size = box, total, rng, size
+
+    def __iter__(self):
+        while self.left > 0:
+            k = min(self.size, self.left)
+            self.left -= k
+            yield random_poses(self.box, k, self.rng)
+
+    def skip_rest(self) -> None:
+        while self.left > 0:
+            k = min(self.size, self.left)
+            self.left -= k
+            self.rng.random((k, self.box.shape[0]))
+
+
 @blas_single_threaded
 def generate_candidates(mechanism: Mechanism, setup: MeasurementSetup | None, *, kind: str = "random",
                         n: int = 2000, rng: np.random.Generator | None = None, box: np.ndarray | None = None,
-                        path: str | os.PathLike | None = None, grid_per_axis: int = 4,
-                        margin: float = DEFAULT_MARGIN, measurability: Measurability = Measurability(),
-                        max_rounds: int = 50) -> CandidateSet:
-    """Checked candidate poses of one ``kind`` of :data:`CANDIDATE_KINDS`.
+                        path: str | os.PathLike | None = None, poses: np.ndarray | None = None,
+                        grid_per_axis: int = 4, margin: float = DEFAULT_MARGIN,
+                        measurability: Measurability = Measurability(), max_rounds: int = 50,
+                        chunk_size: int = CHUNK_SIZE, chunk_map: Callable = map,
+                        progress: Progress | None = None) -> CandidateSet:
+    """Checked candidate poses of one ``kind`` of :data:`CANDIDATE_KINDS`, processed in
+    chunks of ``chunk_size`` poses (bounded memory); error if none passes.
 
-    ``random`` draws in batches until ``n`` poses pass the checks (at most ``max_rounds``
-    batches); the others check a fixed set. ``box`` defaults to :func:`workspace_box`;
-    ``corners`` uses :func:`corner_box` of it so that all 64 corners pass.
+    ``random`` draws rounds of max(4·(n − accepted), 256) poses until ``n`` pass the checks
+    (at most ``max_rounds`` rounds); each round is drawn and checked chunk by chunk, the
+    poses after the n-th accepted one are drawn (so that ``rng`` ends in the same state)
+    but neither checked nor counted. The others check a fixed set: ``file`` the ``poses``
+    given or those of the CSV ``path``, ``grid`` the grid of ``box``, ``corners`` the
+    corners of :func:`corner_box` of it (so that all 64 pass). ``box`` defaults to
+    :func:`workspace_box`. The result does not depend on ``chunk_size``.
+
+    ``chunk_map(fn, chunks)`` runs :func:`check_chunk` on the chunks and must yield the
+    results in order; the default, the built-in lazy ``map``, runs them in this process
+    one after the other and stops at the n-th accepted pose. An executor's ``map``
+    (``concurrent.futures``; Dask's ``client.map`` then ``gather``) may run a round's chunks
+    at once; results after the n-th accepted pose are then discarded. ``progress`` is
+    called after every chunk with (accepted so far, n) for ``random``, (checked so far,
+    number of poses) otherwise. Limits are checked without their margins
+    (:meth:`~pkmcal.mechanisms.hexapod.Hexapod.check_limits` with ``margins=False``).
     """
+    if chunk_size < 1:
+        raise PkmcalError(f"chunk_size must be a positive number of poses, not {chunk_size}")
     rng = np.random.default_rng() if rng is None else rng
     kw = dict(margin=margin, measurability=measurability)
+    task = partial(check_chunk, mechanism=mechanism, setup=setup, **kw)
+    if kind == "random":
+        if box is None:
+            box = workspace_box(mechanism, setup, **kw)
+        box = np.asarray(box, dtype=float).reshape(-1, 2)
+        acc = _Accepted(limit=n)
+        for _ in range(max_rounds):
+            draws = _RandomDraws(box, max(4 * (n - acc.total), 256), rng, chunk_size)
+            for chunk in chunk_map(task, iter(draws)):
+                acc.add(chunk)
+                if progress is not None:
+                    progress(acc.total, n)
+                if acc.full:
+                    break
+            draws.skip_rest()
+            if acc.full:
+                break
+        if not acc.full:
+            raise PkmcalError(f"only {acc.total} of {acc.tested} random poses in the workspace box are reachable and "
+                              f"measurable; ask for fewer candidates or relax the margin/sensor checks")
+        return acc.result("random", box.shape[0])
     if kind == "file":
-        if path is None:
-            raise PkmcalError("candidate kind 'file' needs a CSV path")
-        poses = read_candidates_csv(path)
+        if poses is None:
+            if path is None:
+                raise PkmcalError("candidate kind 'file' needs a CSV path")
+            poses = read_candidates_csv(path)
+        poses = mechanism.as_pose_array(poses)
     else:
         if box is None:
             box = workspace_box(mechanism, setup, **kw)
@@ -307,31 +442,16 @@ def generate_candidates(mechanism: Mechanism, setup: MeasurementSetup | None, *,
             poses = corner_poses(corner_box(mechanism, box, setup, **kw))
         elif kind == "grid":
             poses = grid_poses(box, grid_per_axis)
-        elif kind == "random":
-            kept, tested, rejected = [], 0, {}
-            total = 0
-            for _ in range(max_rounds):
-                batch = random_poses(box, max(4 * (n - total), 256), rng)
-                ok = check_candidates(mechanism, setup, batch, **kw).ok
-                need = n - total
-                if ok.sum() >= need:                 # count only up to the last pose used
-                    batch = batch[: int(np.flatnonzero(ok)[need - 1]) + 1]
-                chk = check_candidates(mechanism, setup, batch, **kw)
-                tested += len(batch)
-                for k, v in chk.counts().items():
-                    rejected[k] = rejected.get(k, 0) + v
-                kept.append(batch[chk.ok])
-                total += len(kept[-1])
-                if total >= n:
-                    break
-            if total < n:
-                raise PkmcalError(f"only {total} of {tested} random poses in the workspace box are reachable and "
-                                  f"measurable; ask for fewer candidates or relax the margin/sensor checks")
-            return CandidateSet(np.concatenate(kept), tested, rejected, "random")
         else:
             raise PkmcalError(f"unknown candidate kind '{kind}'; use one of {', '.join(CANDIDATE_KINDS)}")
-    chk = check_candidates(mechanism, setup, poses, **kw)
-    if not chk.ok.any():
-        raise PkmcalError(f"none of the {len(poses)} {kind} candidate poses is reachable and measurable "
-                          f"(rejected: {chk.counts()})")
-    return CandidateSet(poses[chk.ok], len(poses), chk.counts(), kind)
+    acc = _Accepted()
+    for chunk in chunk_map(task, _chunks(poses, chunk_size)):
+        acc.add(chunk)
+        if progress is not None:
+            progress(acc.tested, len(poses))
+    cand = acc.result(kind, poses.shape[1])
+    if len(cand.poses) == 0:
+        raise PkmcalError(f"none of the {cand.n_tested} {kind} candidate poses is reachable and measurable "
+                          f"(rejected by reason: {cand.rejected}); check the candidates, the margin and the sensor "
+                          "set-up")
+    return cand

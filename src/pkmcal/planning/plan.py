@@ -1,8 +1,9 @@
 """Measurement planning end to end: candidates → per-pose blocks → selection → poses.
 
-:func:`plan_poses` ties :mod:`.candidates` (reachable, measurable candidate poses),
-:mod:`.blocks` (each candidate's whitened, scaled identification Jacobian rows on the
-identifiable parameters) and :mod:`.selection` (the algorithms) together;
+:func:`plan_poses` ties :mod:`.candidates` (reachable, measurable candidate poses, checked
+in chunks), :mod:`.blocks` (each accepted candidate's whitened, scaled identification
+Jacobian rows on the identifiable parameters, in batches: :func:`candidate_blocks`) and
+:mod:`.selection` (the algorithms) together;
 :func:`pose_set_indices` gives O1..O5 (:mod:`.indices`) of any pose set with the same
 parameters and scaling, so ``pkmcal plan`` and ``pkmcal observability`` agree.
 """
@@ -11,6 +12,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -18,10 +20,10 @@ from pkmcal.errors import PkmcalError
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.planning.blocks import PlanningModel, planning_model
 from pkmcal.planning.candidates import (
+    CHUNK_SIZE,
     DEFAULT_MARGIN,
     CandidateSet,
     Measurability,
-    check_candidates,
     corner_box,
     generate_candidates,
     read_candidates_csv,
@@ -49,12 +51,39 @@ class Plan:
         return self.selection.indices
 
 
+#: Accepted candidates per call of :meth:`PlanningModel.blocks` (bounds its temporaries).
+BLOCK_BATCH = 50_000
+
+
+def candidate_blocks(model: PlanningModel, poses: np.ndarray, *, batch: int = BLOCK_BATCH,
+                     chunk_map: Callable = map) -> tuple[np.ndarray, np.ndarray]:
+    """``model.blocks`` of the accepted candidate ``poses``, in ⌈N / batch⌉ near-equal
+    batches mapped by ``chunk_map`` (results in order): G (N, k, n) and the solved flags.
+
+    The batches depend only on N and ``batch`` — not on how the candidates were chunked —
+    and are never shorter than batch/2 (or N), so that code paths chosen by batch size
+    (e.g. NumPy below a few dozen poses, compiled above) take the same path as one call
+    on all N: the blocks are bit-identical to ``model.blocks(poses)``.
+    """
+    parts = np.array_split(poses, max(1, -(-len(poses) // batch)))
+    G = ok = None
+    start = 0
+    for g, solved in chunk_map(model.blocks, parts):      # written in place: no second copy of G
+        if G is None:
+            G, ok = np.empty((len(poses),) + g.shape[1:]), np.empty(len(poses), dtype=bool)
+        G[start:start + len(g)], ok[start:start + len(g)] = g, solved
+        start += len(g)
+    return G, ok
+
+
 def plan_poses(mechanism: Mechanism, setup: MeasurementSetup, n: int, *, algorithm: str = "default",
                index: str | None = None, candidates: np.ndarray | str | os.PathLike | None = None,
                n_candidates: int = 2000, grid: int | None = None, seed: int | None = None,
                margin: float = DEFAULT_MARGIN,
                measurability: Measurability = Measurability(), method: str | None = None,
-               model: PlanningModel | None = None, progress: Progress | None = None) -> Plan:
+               model: PlanningModel | None = None, progress: Progress | None = None,
+               chunk_size: int = CHUNK_SIZE, chunk_map: Callable = map,
+               candidate_progress: Progress | None = None) -> Plan:
     """Choose ``n`` poses to measure (paper 2 §4, paper 1 §IV).
 
     ``candidates``: an array (N, 6) (mm, rad) or a CSV path (x, y, z, a, b, c in mm, deg);
@@ -62,37 +91,41 @@ def plan_poses(mechanism: Mechanism, setup: MeasurementSetup, n: int, *, algorit
     grid of the box. ``algorithm="corners"``
     ignores them and draws among the 64 corners of the largest all-reachable box. Every
     candidate is checked (limits with ``margin``, measurability) before selection.
+
+    The candidates are generated and checked in chunks of ``chunk_size`` poses
+    (:func:`~pkmcal.planning.candidates.generate_candidates`, ``candidate_progress`` called
+    with (done, total) after every chunk), then only the accepted ones get their planning
+    blocks (:func:`candidate_blocks`); both steps are mapped by ``chunk_map`` (default:
+    in this process, in order). The plan does not depend on ``chunk_size``. ``progress``
+    is the selection's.
     """
     algorithm = str(algorithm).lower()
     if algorithm not in ALGORITHMS:
         raise PkmcalError(f"unknown selection algorithm '{algorithm}'; use one of {', '.join(ALGORITHMS)}")
     rng = np.random.default_rng(seed)
     kw = dict(margin=margin, measurability=measurability)
+    chunked = dict(chunk_size=chunk_size, chunk_map=chunk_map, progress=candidate_progress, **kw)
     box = None
     if algorithm == "corners":
         if candidates is not None:
             raise PkmcalError("--algorithm corners draws among the workspace-box corners; do not give --candidates")
         box = workspace_box(mechanism, setup, **kw)
-        cand = generate_candidates(mechanism, setup, kind="corners", box=box, **kw)
+        cand = generate_candidates(mechanism, setup, kind="corners", box=box, **chunked)
         box = corner_box(mechanism, box, setup, **kw)
     elif candidates is None:
         box = workspace_box(mechanism, setup, **kw)
         if grid is not None:
-            cand = generate_candidates(mechanism, setup, kind="grid", grid_per_axis=grid, box=box, **kw)
+            cand = generate_candidates(mechanism, setup, kind="grid", grid_per_axis=grid, box=box, **chunked)
         else:
-            cand = generate_candidates(mechanism, setup, kind="random", n=n_candidates, rng=rng, box=box, **kw)
+            cand = generate_candidates(mechanism, setup, kind="random", n=n_candidates, rng=rng, box=box, **chunked)
     else:
         poses = candidates if isinstance(candidates, np.ndarray) else read_candidates_csv(candidates, mechanism)
-        chk = check_candidates(mechanism, setup, poses, **kw)
-        if not chk.ok.any():
-            raise PkmcalError(f"none of the {len(poses)} candidate poses is reachable and measurable "
-                              f"(rejected by reason: {chk.counts()}); check the file, the margin and the sensor")
-        cand = CandidateSet(mechanism.as_pose_array(poses)[chk.ok], len(poses), chk.counts(), "file")
+        cand = generate_candidates(mechanism, setup, kind="file", poses=poses, **chunked)
     if n > len(cand.poses):
         raise PkmcalError(f"asked for {n} poses but only {len(cand.poses)} candidates are reachable and "
                           f"measurable ({cand.describe()}); ask for fewer poses or give more candidates")
     model = model or planning_model(mechanism, setup, method=method)
-    G, ok = model.blocks(cand.poses)
+    G, ok = candidate_blocks(model, cand.poses, chunk_map=chunk_map)
     if not ok.all():
         rejected = dict(cand.rejected)
         rejected["pose_not_solved"] = rejected.get("pose_not_solved", 0) + int((~ok).sum())
