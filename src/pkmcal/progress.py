@@ -31,6 +31,9 @@ Stages = Callable[[str], "Progress | None"]
 
 #: A bar appears only once the work has run this long (seconds).
 DELAY_S = 0.5
+#: What a bar shows: counts and elapsed time, no percentage or time-to-go (the totals of the
+#: exchange algorithms are upper bounds: they stop when no exchange improves the set).
+BAR_FORMAT = "{desc}: {n_fmt}/{total_fmt} {unit} |{bar}| {elapsed}"
 
 
 def bars_enabled(quiet: bool = False) -> bool:
@@ -56,7 +59,7 @@ class ProgressBar:
     the first update after :data:`DELAY_S` seconds.
     """
 
-    def __init__(self, label: str, *, quiet: bool = False, unit: str = "step"):
+    def __init__(self, label: str, *, quiet: bool = False, unit: str = "steps"):
         self.label, self.unit, self.quiet = label, unit, quiet
         self.enabled = bars_enabled(quiet)
         self._t0 = time.monotonic()
@@ -121,8 +124,9 @@ class ProgressBar:
             from tqdm import tqdm
 
             self._bar = tqdm(desc=self._description(), total=self._total, initial=self._done, unit=self.unit,
-                             file=sys.stderr, leave=False, dynamic_ncols=True, mininterval=0.2)
+                             file=sys.stderr, leave=False, dynamic_ncols=True, mininterval=0.2,
+                             bar_format=BAR_FORMAT)
         return self._bar
 
 
-__all__ = ["DELAY_S", "Progress", "ProgressBar", "Stages", "bars_enabled"]
+__all__ = ["BAR_FORMAT", "DELAY_S", "Progress", "ProgressBar", "Stages", "bars_enabled"]

@@ -51,9 +51,18 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
 }
 
 
+#: Key of the command line's arguments in the root ``click.Context.meta`` (for records of
+#: how a file was made, :mod:`pkmcal.cli.provenance`).
+ARGV_KEY = "pkmcal.argv"
+
+
 class PkmcalGroup(click.Group):
     """The ``pkmcal`` group: commands from :data:`COMMANDS`, imported on first use, and
     :class:`PkmcalError` turned into one stderr line and exit code 2."""
+
+    def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
+        ctx.meta[ARGV_KEY] = list(args)
+        return super().parse_args(ctx, args)
 
     def list_commands(self, ctx: click.Context) -> list[str]:
         return list(COMMANDS)

@@ -156,9 +156,8 @@ def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, 
 @click.option("--poses", metavar="POSES.csv", help="The pose set: columns x,y,z (mm), a,b,c (deg).")
 @click.option("--setup", "setup_spec", required=True, metavar="SETUP.yaml", help=_SETUP_HELP)
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object (keys O1..O5, n_poses).")
-@output_option("FILE", "Write the indices (text or JSON) here")
 @import_options
-def observability_cmd(machine, poses_arg, poses, setup_spec, as_json, output, mapping=None) -> None:
+def observability_cmd(machine, poses_arg, poses, setup_spec, as_json, mapping=None) -> None:
     """Observability indices O1..O5 of the poses in POSES.csv (columns x,y,z mm, a,b,c deg).
 
     On the scaled, noise-weighted identification Jacobian restricted to the identifiable
@@ -170,13 +169,13 @@ def observability_cmd(machine, poses_arg, poses, setup_spec, as_json, output, ma
     from pkmcal.planning.plan import pose_set_indices
 
     poses = poses_file(poses, poses_arg, "observability")
-    check_output(output, [machine, poses, setup_spec])
     mech = load_machine(machine)
     setup = load_setup(setup_spec, mech)
     pose_arr = read_candidates_csv(poses, mech, mapping)
     ind = pose_set_indices(mech, setup, pose_arr)
     if as_json:
-        emit(json.dumps({**ind, "n_poses": int(len(pose_arr))}) + "\n", output)
+        click.echo(json.dumps({**ind, "n_poses": int(len(pose_arr))}))
         return
-    lines = [f"{len(pose_arr)} poses"] + [f"{k} = {ind[k]:.6g}   {INDEX_DESCRIPTIONS[k]}" for k in INDEX_NAMES]
-    emit("\n".join(lines) + "\n", output)
+    click.echo(f"{len(pose_arr)} poses")
+    for k in INDEX_NAMES:
+        click.echo(f"{k} = {ind[k]:.6g}   {INDEX_DESCRIPTIONS[k]}")
