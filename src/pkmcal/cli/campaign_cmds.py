@@ -43,7 +43,7 @@ from pkmcal.sensors.library import BUILTIN_SETUPS
     "pkmcal simulate stewart-prototype --real stewart-prototype-real --setup indicators-prototype --poses poses.csv "
     "--seed 2 -o meas.csv",
     "pkmcal simulate stewart-prototype --random-errors 1 --save-real real.yaml --setup full-pose-paper1 "
-    "--poses poses.csv -o meas-full.csv",
+    "--poses poses.csv --ignore-limit leg_collision -o meas-full.csv",
     "pkmcal simulate planar-3dof-4act --random-errors 0.5 --setup planar-tracker --poses planar-poses.csv "
     "-o planar-meas.csv"))
 @click.argument("machine")

@@ -14,9 +14,7 @@ from pkmcal.demo import DEMO_MACHINE, DEMO_OUT, DEMO_REAL, DEMO_SETUP, DemoConfi
 
 @click.command("demo", epilog=examples(
     "pkmcal demo",
-    "pkmcal demo --setup indicators-prototype --out demo-indicators --seed 3",
-    "pkmcal demo --n-poses 20 --held-out 20 --no-png --out demo-small --quiet",
-    "pkmcal demo --poses poses.csv --held-out 20 --no-png --out demo-my-poses"))
+    "pkmcal demo --setup indicators-prototype --n-poses 30 --held-out 20 --no-png --out demo-indicators --quiet"))
 @click.option("--out", default=DEMO_OUT, show_default=True, metavar="DIR",
               help="Folder for the report and the exported files (created if needed).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed (same seed, same bytes).")

@@ -92,9 +92,8 @@ def fit_summary(result) -> str:
 
 @click.command("identify", epilog=examples(
     "pkmcal identify stewart-prototype meas.csv --setup indicators-prototype -o calibrated.yaml",
-    "pkmcal identify stewart-prototype meas.csv --setup indicators-prototype -o calibrated.yaml --report report "
-    "--name hexapod-A-2026",
-    "pkmcal identify stewart-prototype meas.csv --setup indicators-prototype -o - --fix 'b1.*' > cal-b1-fixed.yaml",
+    "pkmcal identify stewart-prototype meas.csv --setup indicators-prototype -o hexapod-A.yaml --name hexapod-A-2026",
+    "pkmcal identify stewart-prototype meas.csv --setup indicators-prototype -o - --unweighted > cal-unweighted.yaml",
     "pkmcal identify stewart-prototype meas.csv --setup indicators-prototype -o calibrated.yaml --json"))
 @click.argument("machine")
 @click.argument("measurements", metavar="MEAS.csv")

@@ -50,7 +50,7 @@ def parse_pose_option(text: str, mech: Mechanism, option: str) -> np.ndarray:
 @click.command("ik", epilog=examples(
     "pkmcal ik stewart-prototype poses.csv -o legs.csv",
     "pkmcal ik stewart-prototype poses.csv",
-    "pkmcal ik stewart-prototype poses.csv --columns 'X [mm]=x' -o legs-mapped.csv"))
+    "pkmcal ik stewart-prototype-real heldout.csv -o heldout-legs.csv"))
 @click.argument("machine")
 @click.argument("poses", metavar="POSES.csv")
 @output_option("LEGS.csv", "Output CSV")

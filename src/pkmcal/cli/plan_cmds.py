@@ -51,7 +51,7 @@ def _format_indices(ind: dict[str, float]) -> str:
 
 @click.command("plan", epilog=examples(
     "pkmcal plan stewart-prototype --setup indicators-prototype --n 45 --seed 1 -o poses.csv",
-    "pkmcal plan stewart-prototype --setup full-pose-paper1 --n 20 --algorithm cuckoo -o cuckoo.csv",
+    "pkmcal plan stewart-prototype --setup full-pose-paper1 --n 20 --algorithm cuckoo --n-candidates 500 -o cuckoo.csv",
     "pkmcal plan stewart-prototype --setup indicators-prototype --n 50 --algorithm random --seed 9 -o heldout.csv",
     "pkmcal plan stewart-prototype --setup indicators-prototype --n 30 --tilt-margin 5 -o cautious.csv",
     "pkmcal plan planar-3dof-4act --setup planar-tracker --n 12 -o planar-poses.csv"))

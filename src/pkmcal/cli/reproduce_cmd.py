@@ -14,8 +14,8 @@ from pkmcal.errors import PkmcalError
 @click.command("reproduce", epilog=examples(
     "pkmcal reproduce --list",
     "pkmcal reproduce paper3-case2 --quick",
-    "pkmcal reproduce paper2-tables1-2 --quick --json -o tables1-2.json",
-    "pkmcal reproduce paper1-table1 --seed 1 -o paper1-table1.txt"))
+    "pkmcal reproduce paper3-case1 --quick --json -o case1.json",
+    "pkmcal reproduce paper1-table1 --quick --seed 1 -o paper1-table1.txt"))
 @click.argument("name", required=False, metavar="NAME")
 @click.option("--list", "list_", is_flag=True, help="List the reproductions and exit.")
 @click.option("--quick", is_flag=True, help="Few Monte Carlo runs (seconds; for tests and a first look).")
