@@ -11,7 +11,8 @@ bar on **standard error**, shown only when
 * standard output *and* standard error are terminals (a redirected or piped output, a CI log
   or a test sees nothing),
 * ``--quiet`` was not given, and
-* the work is still running after :data:`DELAY_S` seconds (quick runs stay clean).
+* the work is still running after :data:`DELAY_S` seconds (quick runs stay clean;
+  ``PKMCAL_PROGRESS_DELAY`` sets another delay).
 
 The bar is removed when the work ends (``leave=False``), so what stays on the screen is the
 command's own output. tqdm is imported only when a bar is actually shown.
@@ -19,6 +20,7 @@ command's own output. tqdm is imported only when a bar is actually shown.
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from typing import Callable
@@ -29,7 +31,8 @@ Progress = Callable[[int, int], None]
 #: announce(stage) → the progress callback of that stage (or None: nobody is listening).
 Stages = Callable[[str], "Progress | None"]
 
-#: A bar appears only once the work has run this long (seconds).
+#: A bar appears only once the work has run this long (seconds); the environment variable
+#: ``PKMCAL_PROGRESS_DELAY`` (seconds) overrides it.
 DELAY_S = 0.5
 #: What a bar shows: counts and elapsed time, no percentage or time-to-go (the totals of the
 #: exchange algorithms are upper bounds: they stop when no exchange improves the set).
@@ -49,6 +52,14 @@ def _isatty(stream) -> bool:
         return False
 
 
+def _delay() -> float:
+    text = os.environ.get("PKMCAL_PROGRESS_DELAY", "").strip()
+    try:
+        return max(0.0, float(text)) if text else DELAY_S
+    except ValueError:
+        return DELAY_S
+
+
 class ProgressBar:
     """A progress bar on standard error for one command (module docstring).
 
@@ -63,6 +74,7 @@ class ProgressBar:
         self.label, self.unit, self.quiet = label, unit, quiet
         self.enabled = bars_enabled(quiet)
         self._t0 = time.monotonic()
+        self._delay = _delay()
         self._bar = None
         self._stage = ""
         self._done, self._total = 0, None
@@ -120,7 +132,7 @@ class ProgressBar:
 
     def _shown(self):
         """The tqdm bar, created (and so imported) once the work has run :data:`DELAY_S`."""
-        if self._bar is None and time.monotonic() - self._t0 >= DELAY_S:
+        if self._bar is None and time.monotonic() - self._t0 >= self._delay:
             from tqdm import tqdm
 
             self._bar = tqdm(desc=self._description(), total=self._total, initial=self._done, unit=self.unit,
