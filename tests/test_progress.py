@@ -101,11 +101,11 @@ def test_csv_on_stdout_stays_a_clean_table(tmp_path):
 
 
 def test_json_stays_valid_with_a_bar_on_the_terminal(tmp_path):
-    code, out, err = run(["reproduce", "paper3-case2", "--quick", "--json"], tmp_path)
+    code, out, err = run(["reproduce", "paper1-table1", "--quick", "--json"], tmp_path)
     assert code == 0, err
-    assert "reproduce paper3-case2:" in err
+    assert "reproduce paper1-table1:" in err and "runs" in err
     # numba's colorama resets a terminal's colours at exit ("\x1b[0m"; on a terminal only)
-    assert json.loads(out.replace("\r\n", "\n").replace("\x1b[0m", ""))["name"] == "paper3-case2"
+    assert json.loads(out.replace("\r\n", "\n").replace("\x1b[0m", ""))["name"] == "paper1-table1"
 
 
 def test_bars_need_both_streams_on_a_terminal(monkeypatch):

@@ -131,8 +131,10 @@ class ProgressBar:
         return f"{self.label}: {self._stage}" if self._stage else self.label
 
     def _shown(self):
-        """The tqdm bar, created (and so imported) once the work has run :data:`DELAY_S`."""
-        if self._bar is None and time.monotonic() - self._t0 >= self._delay:
+        """The tqdm bar, created (and so imported) once the work has run :data:`DELAY_S`
+        and while it is not finished (a bar born complete would only flash)."""
+        unfinished = self._total is None or self._done < self._total
+        if self._bar is None and unfinished and time.monotonic() - self._t0 >= self._delay:
             from tqdm import tqdm
 
             self._bar = tqdm(desc=self._description(), total=self._total, initial=self._done, unit=self.unit,

@@ -172,7 +172,8 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     if not result.success:
         raise PkmcalError(f"the fit did not converge ({result.message}); nothing written")
     text = machine_to_text(_with_calibration_record(result, machine, measurements, setup_spec, name))
-    report = None if report_dir is None else _report_data(nominal, result, setup, meas, measurements, output)
+    report = None if report_dir is None else _report_data(nominal, result, setup, meas, measurements,
+                                                           "(standard output)" if to_stdout(output) else output)
     emit(text, output)
     if report is not None:
         from pkmcal.report import write_report
