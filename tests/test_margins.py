@@ -84,9 +84,10 @@ def test_plan_command_states_and_uses_its_margin(tmp_path):
     args = ["plan", "stewart-prototype", "--setup", "indicators-prototype", "--n", "15", "--n-candidates", "300"]
     res = runner.invoke(cli, [*args, "--tilt-margin", "5", "-o", str(out)])
     assert res.exit_code == 0, res.output
-    assert "safety margin: stroke 3 mm, joint tilts 5°, leg clearance 0.1 mm (given: tilt; others default)" \
+    assert "safety margin: stroke 3 mm, joint tilts 5 deg, leg clearance 0.1 mm (given: tilt; others default)" \
         in res.stdout
-    assert "# safety margin: stroke 3 mm, joint tilts 5°" in out.read_text()
+    assert "# safety margin: stroke 3 mm, joint tilts 5 deg" in out.read_text()
+    assert out.read_bytes().isascii()                  # spreadsheet programs read it with any code page
     names = ["x", "y", "z", "a", "b", "c"]
     poses = read_table(out, names)[names].copy()
     poses[:, 3:] = np.deg2rad(poses[:, 3:])

@@ -64,7 +64,7 @@ class SafetyMargin:
                 raise PkmcalError(f"safety margin {name.split('_')[0]} must be a non-negative number; got {v}")
 
     def describe(self) -> str:
-        text = (f"stroke {self.stroke_mm:g} mm, joint tilts {self.tilt_deg:.3g}°, "
+        text = (f"stroke {self.stroke_mm:g} mm, joint tilts {self.tilt_deg:.3g} deg, "
                 f"leg clearance {self.clearance_mm:g} mm")
         return f"{text} ({self.source})" if self.source else text
 
