@@ -1,14 +1,16 @@
 """Every ``--help`` has an Examples section, and every example in it runs.
 
 The examples are read from the help texts themselves (``pkmcal --help`` and each command's),
-run in one fresh folder in an order where each file an example reads was written by an
-earlier one (``-o FILE``, ``--save-real FILE``, ``> FILE``), and must exit with 0 and no
-deprecation note. ``pkmcal demo`` with its defaults is run by ``tests/test_demo.py``.
+run in one fresh folder (holding a copy of the repository's ``examples/``) in an order where
+each file an example reads was written by an earlier one (``-o FILE``, ``--save-real FILE``,
+``> FILE``), and must exit with 0 and no deprecation note. ``pkmcal demo`` with its defaults is run by ``tests/test_demo.py``.
 """
 
 from __future__ import annotations
 
 import shlex
+import shutil
+from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
@@ -18,6 +20,8 @@ from pkmcal.io.machine_file import load_machine
 
 #: Options whose value is a file or folder the example writes.
 OUTPUT_OPTIONS = ("-o", "--output", "--save-real", "--out", "--report", ">")
+#: The repository's example input files (``examples/...`` in an example reads them).
+EXAMPLE_FILES = Path(__file__).resolve().parent.parent / "examples"
 #: Examples run elsewhere (the same command line, by another test).
 RUN_ELSEWHERE = {"pkmcal demo": "tests/test_demo.py runs the default demo"}
 
@@ -67,6 +71,8 @@ def _files(tokens: list[str]) -> tuple[set[str], set[str]]:
 
 def test_every_example_runs(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
+    if EXAMPLE_FILES.is_dir():                  # examples may name the repository's example files
+        shutil.copytree(EXAMPLE_FILES, tmp_path / "examples")
     pending = []
     for found in all_examples().values():
         pending += [e for e in found if e not in pending and e not in RUN_ELSEWHERE]

@@ -93,15 +93,19 @@ def test_dash_o_is_standard_output_everywhere(tmp_path):
 
 
 def test_every_output_option_reads_the_same():
+    """-o is the output everywhere: a file ('-' = standard output), or a folder (METAVAR/)."""
     from pkmcal.cli.main import COMMANDS
 
-    ctx_help = {}
+    files, folders = {}, {}
     for name in COMMANDS:
         text = run(name, "--help", terminal_width=300).output
-        if "-o, --output" in text:
-            ctx_help[name] = next(line for line in text.splitlines() if "-o, --output" in line)
-    assert set(ctx_help) >= {"ik", "fk", "plan", "simulate", "identify", "verify", "export", "reproduce"}
-    for name, line in ctx_help.items():
+        line = next((line for line in text.splitlines() if line.strip().startswith("-o, --")), None)
+        if line is not None:
+            metavar = line.split()[2]
+            (folders if metavar.endswith("/") else files)[name] = line
+    assert set(files) >= {"ik", "fk", "plan", "simulate", "identify", "verify", "export", "reproduce"}
+    assert set(folders) >= {"demo"}                      # -o names the output folder of folder commands
+    for name, line in files.items():
         assert "'-' = standard output" in line, (name, line)
 
 

@@ -14,8 +14,8 @@ from pkmcal.demo import DEMO_MACHINE, DEMO_OUT, DEMO_REAL, DEMO_SETUP, DemoConfi
 
 @click.command("demo", epilog=examples(
     "pkmcal demo",
-    "pkmcal demo --setup indicators-prototype --n-poses 30 --held-out 20 --no-png --out demo-indicators --quiet"))
-@click.option("--out", default=DEMO_OUT, show_default=True, metavar="DIR",
+    "pkmcal demo --setup indicators-prototype --n-poses 30 --held-out 20 --no-png -o demo-indicators --quiet"))
+@click.option("-o", "--out", default=DEMO_OUT, show_default=True, metavar="DIR/",
               help="Folder for the report and the exported files (created if needed).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed (same seed, same bytes).")
 @click.option("--n-poses", type=click.IntRange(min=1), default=None,
