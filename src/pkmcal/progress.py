@@ -137,6 +137,7 @@ class ProgressBar:
         if self._bar is None and unfinished and time.monotonic() - self._t0 >= self._delay:
             from tqdm import tqdm
 
+            tqdm.monitor_interval = 0      # no monitor thread: a process pool may fork this process later
             self._bar = tqdm(desc=self._description(), total=self._total, initial=self._done, unit=self.unit,
                              file=sys.stderr, leave=False, dynamic_ncols=True, mininterval=0.2,
                              bar_format=BAR_FORMAT)
