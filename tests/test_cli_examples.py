@@ -34,7 +34,9 @@ def help_text(*path: str) -> str:
 
 def examples_of(text: str) -> list[str]:
     lines = text.splitlines()
-    start = next(i for i, line in enumerate(lines) if line.strip() == "Examples:")
+    start = next((i for i, line in enumerate(lines) if line.strip() == "Examples:"), None)
+    if start is None:
+        return []
     out = []
     for line in lines[start + 1:]:
         if not line.strip().startswith("pkmcal "):
