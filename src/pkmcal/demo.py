@@ -206,7 +206,9 @@ def run_demo(config: DemoConfig = DemoConfig(), progress: Progress | None = None
         selection, pool = plan.selection, plan.candidates.poses
         planned = pool[np.sort(selection.chosen)]
         planning = {"candidates": int(len(pool)), "chosen": int(len(planned)), "algorithm": selection.algorithm,
-                    "criterion": selection.criterion, "indices": selection.indices, "parameters": list(pm.names)}
+                    "criterion": selection.criterion, "indices": selection.indices, "parameters": list(pm.names),
+                    "safety_margin": {"stroke_mm": margin.stroke_mm, "tilt_deg": margin.tilt_deg,
+                                      "clearance_mm": margin.clearance_mm, "source": margin.source}}
         plan_text = (f"{len(planned)} D-optimal poses of {len(pool)} random candidates; safety margin "
                      f"{margin.describe()}")
         step("plan", f"{len(planned)} poses chosen from {len(pool)} candidates (D-optimal, {pm.n_params} parameters; "
