@@ -173,7 +173,8 @@ def test_cli_plan_and_observability(machine, tmp_path):
     poses[:, 3:] = np.deg2rad(poses[:, 3:])
     assert machine.check_limits(poses, margin=0.1).ok.all()
     assert np.allclose(table[[f"lambda{i}" for i in range(1, 7)]], machine.ik(poses), atol=1e-9)
-    res = runner.invoke(cli, ["observability", "stewart-prototype", "--setup", "full-pose-paper1", str(out), "--json"])
+    res = runner.invoke(cli, ["observability", "stewart-prototype", "--setup", "full-pose-paper1", "--poses", str(out),
+                              "--json"])
     assert res.exit_code == 0, res.output
     ind = json.loads(res.output)
     assert set(ind) >= {"O1", "O2", "O3", "O4", "O5"} and ind["O1"] > 0

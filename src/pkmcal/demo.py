@@ -7,8 +7,10 @@ counterpart (``stewart-prototype-real``: Table 4's joint and offset errors of 1�
    the workspace box, their whitened, scaled identification-Jacobian blocks G_j
    (:mod:`pkmcal.planning.blocks`) and a D-optimal selection max log det Σ G_jᵀG_j
    (:mod:`pkmcal.planning.selection`, paper 2 §4). Candidates are
-   checked against the nominal machine with a safety margin on the stroke and the joint
-   tilts, so that the real machine — whose legs differ by millimetres — still reaches them;
+   checked against the nominal machine with the safety margins of ``pkmcal plan``
+   (:mod:`pkmcal.planning.margins`: stroke, joint tilts, leg clearance), so that the real
+   machine — whose joints differ by millimetres — still reaches them. With ``poses`` (a
+   poses file) the plan is that file instead;
 2. **simulate** the campaign on the real machine (:mod:`pkmcal.identification.simulation`,
    paper 1 §IV): q = IK(x_c, ρ_nom), x_r = FK(q, ρ_real), y = h(x_r) + noise;
 3. **identify** the 42 parameters (:func:`pkmcal.identification.engine.identify`, the
@@ -49,7 +51,8 @@ DEMO_OUT = "pkmcal-demo"
 #: Demo steps, in order, as reported to the progress callback.
 STEPS = ("plan", "simulate", "identify", "verify", "export", "report")
 
-#: progress(step_number (1-based), n_steps, step name, message)
+#: progress(step_number (1-based), n_steps, step name, message): called as each step starts
+#: (message "") and ends (message: what it did).
 Progress = Callable[[int, int, str, str], None]
 
 
@@ -65,10 +68,11 @@ class DemoConfig:
     n_poses: int = 40
     n_candidates: int = 1000
     n_held_out: int = 100
-    stroke_margin: float = 3.0
-    tilt_margin_deg: float = 2.5
+    stroke_margin: float | None = None        # None: the default of pkmcal.planning.margins
+    tilt_margin_deg: float | None = None      # None: the default of pkmcal.planning.margins
     error_map_points: int = 31
     png: bool = True
+    poses: str | None = None                  # a poses file measured instead of a planned set
 
     def __post_init__(self) -> None:
         for name in ("n_poses", "n_candidates", "n_held_out", "error_map_points"):
@@ -80,7 +84,7 @@ class DemoConfig:
                               "ask for more candidates or fewer poses")
         for name in ("stroke_margin", "tilt_margin_deg"):
             v = getattr(self, name)
-            if not (math.isfinite(v) and v >= 0):
+            if v is not None and not (math.isfinite(v) and v >= 0):
                 raise PkmcalError(f"demo: {name.replace('_', ' ')} must be a non-negative number; got {v}")
 
 
@@ -119,23 +123,17 @@ class DemoResult:
         return "\n".join(lines)
 
 
-def _safe_planning_machine(machine, stroke_margin: float, tilt_margin_deg: float):
-    """The nominal hexapod with its stroke shrunk by ``stroke_margin`` mm at both ends and its
-    joint-tilt limits by ``tilt_margin_deg``: planning inside these limits leaves room for
-    the real machine's deviations (the candidate checks' own margin is one number for mm and
-    degrees, and the prototype's legs pass within 0.14 mm of each other at home)."""
+def _safe_planning_machine(machine, config: DemoConfig):
+    """The nominal hexapod with its limits shrunk by the plan's safety margins
+    (:mod:`pkmcal.planning.margins`; the config's stroke and tilt margins where given), and
+    those margins."""
     from pkmcal.mechanisms.hexapod import Hexapod
+    from pkmcal.planning.margins import planning_machine, resolve_margin
 
     if not isinstance(machine, Hexapod):
         raise PkmcalError(f"pkmcal demo runs on hexapods; machine '{machine.name}' is a {type(machine).__name__}")
-    lim = machine.limits
-    t = math.radians(tilt_margin_deg)
-    shrink = lambda v: None if v is None else v - t  # noqa: E731
-    stroke = machine.stroke + np.array([stroke_margin, -stroke_margin])
-    if np.any(stroke[:, 1] <= stroke[:, 0]):
-        raise PkmcalError(f"demo: a stroke margin of {stroke_margin} mm leaves no stroke on machine '{machine.name}'")
-    return replace(machine, stroke=stroke,
-                   limits=replace(lim, u_joint_tilt=shrink(lim.u_joint_tilt), s_joint_tilt=shrink(lim.s_joint_tilt)))
+    margin = resolve_margin(machine, stroke_mm=config.stroke_margin, tilt_deg=config.tilt_margin_deg)
+    return planning_machine(machine, margin), margin
 
 
 def _finite(obj):
@@ -200,14 +198,31 @@ def run_demo(config: DemoConfig = DemoConfig(), progress: Progress | None = None
 
     # 1. plan ---------------------------------------------------------------------------
     step("plan")
-    safe = _safe_planning_machine(nominal, config.stroke_margin, config.tilt_margin_deg)
+    safe, margin = _safe_planning_machine(nominal, config)
     pm = planning_model(nominal, setup, method=method)
-    plan = plan_poses(safe, setup, config.n_poses, algorithm="default", n_candidates=config.n_candidates,
-                      seed=int(seed_plan), method=method, model=pm)
-    selection, pool = plan.selection, plan.candidates.poses
-    planned = pool[np.sort(selection.chosen)]
-    step("plan", f"{len(planned)} poses chosen from {len(pool)} candidates (D-optimal, {pm.n_params} parameters; "
-                 f"O1 = {selection.indices['O1']:.3g})")
+    if config.poses is None:
+        plan = plan_poses(nominal, setup, config.n_poses, algorithm="default", n_candidates=config.n_candidates,
+                          seed=int(seed_plan), method=method, model=pm, margin=margin)
+        selection, pool = plan.selection, plan.candidates.poses
+        planned = pool[np.sort(selection.chosen)]
+        planning = {"candidates": int(len(pool)), "chosen": int(len(planned)), "algorithm": selection.algorithm,
+                    "criterion": selection.criterion, "indices": selection.indices, "parameters": list(pm.names),
+                    "safety_margin": {"stroke_mm": margin.stroke_mm, "tilt_deg": margin.tilt_deg,
+                                      "clearance_mm": margin.clearance_mm, "source": margin.source}}
+        plan_text = (f"{len(planned)} D-optimal poses of {len(pool)} random candidates; safety margin "
+                     f"{margin.describe()}")
+        step("plan", f"{len(planned)} poses chosen from {len(pool)} candidates (D-optimal, {pm.n_params} parameters; "
+                     f"O1 = {selection.indices['O1']:.3g}); safety margin {margin.describe()}")
+    else:
+        from pkmcal.io.tables import read_poses
+        from pkmcal.planning.plan import pose_set_indices
+
+        planned = pool = read_poses(config.poses, nominal)
+        indices = pose_set_indices(nominal, setup, planned, model=pm)
+        planning = {"file": str(config.poses), "chosen": int(len(planned)), "indices": indices,
+                    "parameters": list(pm.names)}
+        plan_text = f"{len(planned)} poses of the file {config.poses}"
+        step("plan", f"{len(planned)} poses read from {config.poses} (O1 = {indices['O1']:.3g})")
 
     # 2. simulate -----------------------------------------------------------------------
     step("simulate")
@@ -228,7 +243,7 @@ def run_demo(config: DemoConfig = DemoConfig(), progress: Progress | None = None
 
     # 4. verify -------------------------------------------------------------------------
     step("verify")
-    held = generate_candidates(safe, setup, kind="random", n=config.n_held_out, rng=rng_held).poses
+    held = generate_candidates(safe, setup, kind="random", n=config.n_held_out, rng=rng_held, margin=0.0).poses
     verification = verify(calibrated, real, held, nominal)
     m = verification.common
     summaries = verification.to_dict()  # over the poses both models reach (m)
@@ -266,8 +281,7 @@ def run_demo(config: DemoConfig = DemoConfig(), progress: Progress | None = None
         "machine": nominal.name,
         "real_machine": real.name,
         "setup": setup.sensor.kind,
-        "planning": {"candidates": int(len(pool)), "chosen": int(len(planned)), "algorithm": selection.algorithm,
-                     "criterion": selection.criterion, "indices": selection.indices, "parameters": list(pm.names)},
+        "planning": planning,
         "simulation": {"measured": int(len(sim.kept)),
                        "dropped": [{"pose": int(i) + 1, "reason": r} for i, r in sim.dropped.items()]},
         "identification": result.to_dict(),
@@ -288,8 +302,7 @@ def run_demo(config: DemoConfig = DemoConfig(), progress: Progress | None = None
         title=f"pkmcal demo: calibration of {nominal.name}",
         setup_summary=setup_to_yaml(setup),
         facts=(("real machine (simulated)", real.name), ("seed", str(config.seed)),
-               ("pose plan", f"{len(planned)} D-optimal poses of {len(pool)} random candidates; safety margin "
-                             f"{config.stroke_margin:g} mm stroke, {config.tilt_margin_deg:g}° joint tilt"),
+               ("pose plan", plan_text),
                ("held-out poses", f"{int(m.sum())} of {len(held)} (random, other seed)"),
                ("calibrated machine file", files["calibrated"].name),
                ("LinuxCNC settings", files["linuxcnc"].name)),

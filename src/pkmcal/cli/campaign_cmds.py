@@ -31,14 +31,21 @@ from pkmcal.identification.redundant_campaign import (
 from pkmcal.identification.simulation import perturb_machine, simulate_campaign
 from pkmcal.identification.verification import verify
 from pkmcal.cli.import_options import import_options
-from pkmcal.io.atomic import atomic_write_text, check_output_path
+from pkmcal.cli.options import check_output, emit, examples, output_option, quiet_option, to_stdout
+from pkmcal.io.atomic import atomic_write_text
 from pkmcal.io.measurements import measurement_columns
 from pkmcal.io.tables import format_table, read_poses
 from pkmcal.mechanisms.planar import PlanarMechanism
 from pkmcal.sensors.library import BUILTIN_SETUPS
 
 
-@click.command("simulate")
+@click.command("simulate", epilog=examples(
+    "pkmcal simulate stewart-prototype --real stewart-prototype-real --setup indicators-prototype --poses poses.csv "
+    "--seed 2 -o meas.csv",
+    "pkmcal simulate stewart-prototype --random-errors 1 --save-real real.yaml --setup full-pose-paper1 "
+    "--poses poses.csv --ignore-limit leg_collision -o meas-full.csv",
+    "pkmcal simulate planar-3dof-4act --random-errors 0.5 --setup planar-tracker --poses planar-poses.csv "
+    "-o planar-meas.csv"))
 @click.argument("machine")
 @click.option("--real", "real_spec", metavar="REAL", help="The 'real' machine: a machine file or built-in name.")
 @click.option("--random-errors", type=float, metavar="MM",
@@ -54,10 +61,11 @@ from pkmcal.sensors.library import BUILTIN_SETUPS
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed (same seed, same bytes).")
 @click.option("--ignore-limit", "ignore_limits", multiple=True, metavar="NAME",
               help="A limit of the real machine not to check (e.g. leg_collision); repeatable.")
-@click.option("-o", "--output", metavar="MEAS.csv", help="Measurement CSV (default: standard output).")
+@output_option("MEAS.csv", "Measurement CSV")
+@quiet_option
 @import_options
 def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_real, setup_spec, poses, seed,
-                 ignore_limits, output, mapping) -> None:
+                 ignore_limits, output, quiet, mapping) -> None:
     """Simulate measuring POSES.csv on a real machine commanded with the nominal MACHINE.
 
     The actuators are commanded by MACHINE's inverse kinematics; the real machine goes where
@@ -77,9 +85,9 @@ def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_rea
     if save_real is not None and random_errors is None:
         raise PkmcalError("--save-real writes the machine drawn by --random-errors; use it with --random-errors")
     inputs = [machine, real_spec, setup_spec, poses]
-    for out in (output, save_real):
-        if out is not None:
-            check_output_path(out, inputs)
+    check_output(output, inputs)
+    if save_real is not None:
+        check_output(save_real, inputs)
     if output is not None and save_real is not None and output == save_real:
         raise PkmcalError("-o and --save-real name the same file; choose two paths")
     from pkmcal.io.machine_file import load_machine, machine_to_text
@@ -98,8 +106,14 @@ def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_rea
     if type(real) is not type(nominal):
         raise PkmcalError(f"the real machine '{real.name}' is not of the kind of '{nominal.name}' "
                           f"({type(real).__name__} vs {type(nominal).__name__})")
-    simulate = simulate_redundant_campaign if is_redundant(nominal) else simulate_campaign
-    result = simulate(nominal, real, setup, commanded, rng, ignore_limits=tuple(ignore_limits))
+    if is_redundant(nominal):
+        result = simulate_redundant_campaign(nominal, real, setup, commanded, rng, ignore_limits=tuple(ignore_limits))
+    else:
+        from pkmcal.progress import ProgressBar
+
+        with ProgressBar("simulate", quiet=quiet, unit="poses") as bar:
+            result = simulate_campaign(nominal, real, setup, commanded, rng, ignore_limits=tuple(ignore_limits),
+                                       progress=bar)
     if len(result.kept) == 0:
         raise PkmcalError(f"the real machine '{real.name}' reaches none of the {len(commanded)} poses of "
                           f"'{poses}' ({'; '.join(sorted(set(result.dropped.values())))}); nothing written")
@@ -115,16 +129,17 @@ def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_rea
     if real_text is not None:
         atomic_write_text(save_real, real_text)
     summary = result.summary()
-    if output is None:
-        click.echo(text, nl=False)
+    emit(text, output)
+    if to_stdout(output):
         click.echo(summary, err=True)
     else:
-        atomic_write_text(output, text)
         click.echo(summary)
         click.echo(f"wrote {output}" + (f" and {save_real}" if save_real else ""))
 
 
-@click.command("verify")
+@click.command("verify", epilog=examples(
+    "pkmcal verify calibrated.yaml --real stewart-prototype-real --nominal stewart-prototype --poses heldout.csv",
+    "pkmcal verify calibrated.yaml --real stewart-prototype-real --poses heldout.csv --json -o verify.json"))
 @click.argument("calibrated")
 @click.option("--real", "real_spec", required=True, metavar="REAL", help="The real machine (file or built-in name).")
 @click.option("--poses", required=True, metavar="HELDOUT.csv",
@@ -136,7 +151,7 @@ def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_rea
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
 @click.option("--ignore-limit", "ignore_limits", multiple=True, metavar="NAME",
               help="A limit of the real machine not to check (e.g. leg_collision); repeatable.")
-@click.option("-o", "--output", metavar="FILE", help="Write the table/JSON here (default: standard output).")
+@output_option("FILE", "Write the table/JSON here")
 @import_options
 def verify_cmd(calibrated, real_spec, poses, nominal, setup_spec, as_json, ignore_limits, output, mapping) -> None:
     """Pose errors of the REAL machine commanded through CALIBRATED (and NOMINAL) on held-out poses.
@@ -155,8 +170,7 @@ def verify_cmd(calibrated, real_spec, poses, nominal, setup_spec, as_json, ignor
     keys: before/after: {poses, tool_mean_mm, tool_max_mm, tool_rms_mm[, angle_*_deg]},
     improvement_pct, dropped.
     """
-    if output is not None:
-        check_output_path(output, [calibrated, real_spec, poses, nominal, setup_spec])
+    check_output(output, [calibrated, real_spec, poses, nominal, setup_spec])
     from pkmcal.io.machine_file import load_machine
     from pkmcal.io.setup_file import load_setup
 
@@ -179,7 +193,4 @@ def verify_cmd(calibrated, real_spec, poses, nominal, setup_spec, as_json, ignor
             raise PkmcalError("--setup applies to redundantly actuated machines only; remove it")
         report = verify(cal, real, read_poses(poses, cal, mapping), nominal=nom, ignore_limits=tuple(ignore_limits))
     text = json.dumps(report.to_dict(), indent=2, allow_nan=False) + "\n" if as_json else report.format_table() + "\n"
-    if output is None:
-        click.echo(text, nl=False)
-    else:
-        atomic_write_text(output, text)
+    emit(text, output)

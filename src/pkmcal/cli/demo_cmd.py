@@ -1,5 +1,6 @@
 """``pkmcal demo``: plan, simulate, identify, verify, export and report in one command
-(:mod:`pkmcal.demo`)."""
+(:mod:`pkmcal.demo`). Its steps show as a progress bar on a terminal (:mod:`pkmcal.progress`)
+and as one note per finished step on standard error; ``--quiet`` leaves only the summary."""
 
 from __future__ import annotations
 
@@ -7,15 +8,20 @@ import time
 
 import click
 
+from pkmcal.cli.options import count_or_poses_file, examples, quiet_option
 from pkmcal.demo import DEMO_MACHINE, DEMO_OUT, DEMO_REAL, DEMO_SETUP, DemoConfig, run_demo
 
 
-@click.command("demo")
-@click.option("--out", default=DEMO_OUT, show_default=True, metavar="DIR",
+@click.command("demo", epilog=examples(
+    "pkmcal demo",
+    "pkmcal demo --setup indicators-prototype --n-poses 30 --held-out 20 --no-png -o demo-indicators --quiet"))
+@click.option("-o", "--out", default=DEMO_OUT, show_default=True, metavar="DIR/",
               help="Folder for the report and the exported files (created if needed).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed (same seed, same bytes).")
-@click.option("--poses", "n_poses", type=click.IntRange(min=1), default=DemoConfig.n_poses, show_default=True,
-              help="Number of poses to plan and measure.")
+@click.option("--n-poses", type=click.IntRange(min=1), default=None,
+              help=f"Number of poses to plan and measure.  [default: {DemoConfig.n_poses}]")
+@click.option("--poses", metavar="POSES.csv",
+              help="Measure the poses of this file (x,y,z mm, a,b,c deg) instead of planning them.")
 @click.option("--held-out", "n_held_out", type=click.IntRange(min=1), default=DemoConfig.n_held_out,
               show_default=True, help="Number of held-out verification poses.")
 @click.option("--setup", default=DEMO_SETUP, show_default=True, metavar="SETUP",
@@ -25,9 +31,14 @@ from pkmcal.demo import DEMO_MACHINE, DEMO_OUT, DEMO_REAL, DEMO_SETUP, DemoConfi
               help="Nominal machine (file or built-in name).")
 @click.option("--real", default=DEMO_REAL, show_default=True, metavar="REAL",
               help="The simulated real machine (file or built-in name).")
+@click.option("--stroke-margin", type=click.FloatRange(min=0.0), metavar="MM",
+              help="Safety margin of the plan on the stroke (default as 'pkmcal plan': 3 mm).")
+@click.option("--tilt-margin", type=click.FloatRange(min=0.0), metavar="DEG",
+              help="Safety margin of the plan on the joint tilts (default as 'pkmcal plan').")
 @click.option("--no-png", is_flag=True, help="Write the figures as SVG only.")
-@click.option("-q", "--quiet", is_flag=True, help="Print only the closing summary.")
-def demo(out, seed, n_poses, n_held_out, setup, machine, real, no_png, quiet) -> None:
+@quiet_option
+def demo(out, seed, n_poses, poses, n_held_out, setup, machine, real, stroke_margin, tilt_margin, no_png,
+         quiet) -> None:
     """Calibrate the built-in prototype end to end on a simulated 'real' machine.
 
     Plans the measurement poses (D-optimal), simulates the campaign on REAL, identifies the
@@ -35,24 +46,30 @@ def demo(out, seed, n_poses, n_held_out, setup, machine, real, no_png, quiet) ->
     LinuxCNC HAL, JSON) and writes an HTML report into DIR/report.html. The default setup
     measures the full pose (paper 1); indicators-prototype is paper 2's three dial indicators.
     """
+    from pkmcal.progress import ProgressBar
+
     t0 = time.perf_counter()
+    n_poses, poses = count_or_poses_file(poses, n_poses, DemoConfig.n_poses)
     config = DemoConfig(machine=machine, real=real, setup=setup, out=out, seed=seed, n_poses=n_poses,
-                        n_held_out=n_held_out, png=not no_png)
+                        n_held_out=n_held_out, png=not no_png, stroke_margin=stroke_margin,
+                        tilt_margin_deg=tilt_margin, poses=poses)
     starts: dict[str, float] = {}
+    with ProgressBar("demo", quiet=quiet) as bar:
+        bar.note(f"pkmcal demo: calibrating '{machine}' against the simulated '{real}' with setup '{setup}', "
+                 f"seed {seed}")
 
-    def progress(k: int, n: int, step: str, message: str) -> None:
-        if quiet:
-            return
-        if not message:
-            starts[step] = time.perf_counter()
-            click.echo(f"[{k}/{n}] {step:<9}...", nl=False, err=True)
-        else:
-            dt = time.perf_counter() - starts.get(step, t0)
-            click.echo(f" {dt:5.1f} s  {message}", err=True)
+        def progress(k: int, n: int, step: str, message: str) -> None:
+            if not message:
+                starts[step] = time.perf_counter()
+                bar.stage(step)
+                bar(k - 1, n)
+            else:
+                bar(k, n)
+                bar.note(f"[{k}/{n}] {step:<9} {time.perf_counter() - starts.get(step, t0):5.1f} s  {message}")
 
-    if not quiet:
-        click.echo(f"pkmcal demo: calibrating '{machine}' against the simulated '{real}' with setup '{setup}', "
-                   f"seed {seed}", err=True)
-    result = run_demo(config, progress)
+        result = run_demo(config, progress)
     click.echo(result.summary())
     click.echo(f"Done in {time.perf_counter() - t0:.1f} s.")
+
+
+__all__ = ["demo"]

@@ -21,8 +21,8 @@ import click
 import numpy as np
 
 from pkmcal import __version__
+from pkmcal.cli.options import check_output, emit, examples, output_option, to_stdout
 from pkmcal.errors import PkmcalError
-from pkmcal.io.atomic import atomic_write_text, check_output_path
 from pkmcal.io.tables import to_file_units
 from pkmcal.mechanisms.base import Mechanism
 
@@ -98,11 +98,14 @@ def format_calibration_json(machine: Mechanism, source: str | None = None) -> st
                       default=str) + "\n"
 
 
-@click.command("export")
+@click.command("export", epilog=examples(
+    "pkmcal export calibrated.yaml --format linuxcnc -o kinematics.hal",
+    "pkmcal export calibrated.yaml --format json -o calibrated.json",
+    "pkmcal export stewart-prototype --format linuxcnc"))
 @click.argument("calibrated", metavar="CALIBRATED.yaml")
 @click.option("--format", "fmt", type=click.Choice(["linuxcnc", "json"]), required=True,
               help="linuxcnc: genhexkins HAL setp lines (hexapods); json: parameters with std and correlation.")
-@click.option("-o", "--output", metavar="FILE", help="File to write (default: standard output).")
+@output_option("FILE", "File to write")
 def export_cmd(calibrated: str, fmt: str, output: str | None) -> None:
     """Export the machine in CALIBRATED.yaml (a machine file or built-in name) for a controller.
 
@@ -111,8 +114,7 @@ def export_cmd(calibrated: str, fmt: str, output: str | None) -> None:
     joint limits and home strut length. json: every parameter (mm, deg) with its std, the
     correlation matrix, units, conventions and the file's calibration metadata.
     """
-    if output is not None:
-        check_output_path(output, [calibrated])
+    check_output(output, [calibrated])
     from pkmcal.io.machine_file import load_machine
 
     machine = load_machine(calibrated)
@@ -122,10 +124,8 @@ def export_cmd(calibrated: str, fmt: str, output: str | None) -> None:
         text = linuxcnc_hal(machine)
     else:
         text = format_calibration_json(machine, source=os.fspath(calibrated))
-    if output is None:
-        click.echo(text, nl=False)
-    else:
-        atomic_write_text(output, text)
+    emit(text, output)
+    if not to_stdout(output):
         click.echo(f"wrote {output} ({fmt})", err=True)
 
 

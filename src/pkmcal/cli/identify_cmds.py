@@ -28,7 +28,8 @@ from pkmcal.identification.redundant_campaign import (
 )
 from pkmcal.identification.residuals import METHODS
 from pkmcal.cli.import_options import import_options
-from pkmcal.io.atomic import atomic_write_text, check_output_path
+from pkmcal.cli.options import DeprecatedArgument, check_output, emit, examples, output_option, poses_file, to_stdout
+from pkmcal.io.atomic import check_output_path
 from pkmcal.io.measurements import load_measurements
 from pkmcal.io.tables import read_poses
 from pkmcal.sensors.library import BUILTIN_SETUPS
@@ -89,7 +90,11 @@ def fit_summary(result) -> str:
     return "\n".join(lines)
 
 
-@click.command("identify")
+@click.command("identify", epilog=examples(
+    "pkmcal identify stewart-prototype meas.csv --setup indicators-prototype -o calibrated.yaml",
+    "pkmcal identify stewart-prototype meas.csv --setup indicators-prototype -o hexapod-A.yaml --name hexapod-A-2026",
+    "pkmcal identify stewart-prototype meas.csv --setup indicators-prototype -o - --unweighted > cal-unweighted.yaml",
+    "pkmcal identify stewart-prototype meas.csv --setup indicators-prototype -o calibrated.yaml --json"))
 @click.argument("machine")
 @click.argument("measurements", metavar="MEAS.csv")
 @click.option("--setup", "setup_spec", required=True, metavar="SETUP.yaml",
@@ -110,21 +115,30 @@ def fit_summary(result) -> str:
               help="Parameters to hold (names or patterns like 'b1.*', comma separated; repeatable), or 'auto'.")
 @click.option("--free", "free", multiple=True, metavar="NAMES",
               help="Parameters to estimate (default: all machine parameters and the sensor's free ones).")
-@click.option("-o", "--output", required=True, metavar="CALIBRATED.yaml", help="Calibrated machine file to write.")
+@output_option("CALIBRATED.yaml", "Calibrated machine file to write", stdout=False)
+@click.option("--name", metavar="NAME",
+              help="Name of the calibrated machine (default: MACHINE-calibrated-YYYY-MM-DD, the UTC date).")
 @click.option("--json", "as_json", is_flag=True, help="Print the fit as JSON instead of a table.")
 @click.option("--report", "report_dir", metavar="DIR",
               help="Also write the HTML calibration report (report.html and its figures) into folder DIR.")
 @import_options
-def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fix, free, output, as_json,
+def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fix, free, output, name, as_json,
                  report_dir=None, mapping=None, keep=None) -> None:
     """Identify MACHINE's kinematic parameters from MEAS.csv and write CALIBRATED.yaml.
 
     Units: mm, degrees in files and tables. Unidentifiable combinations are fixed
     automatically (the gauge, shown in the table) unless --free/--fix say otherwise, in
     which case an unidentifiable request is an error naming the combination.
+    CALIBRATED.yaml carries a calibration record: the machine's new name, the UTC date
+    (SOURCE_DATE_EPOCH fixes it), the pkmcal version, the command line and the SHA-256 of
+    every input file. With -o - the machine file goes to standard output and the table to
+    standard error.
     """
     inputs = [machine, measurements, setup_spec]
-    check_output_path(output, inputs)
+    check_output(output, inputs)
+    if to_stdout(output) and as_json:
+        raise PkmcalError("-o - puts the machine file on standard output; --json would go there too: "
+                          "write the machine file to a file, or leave out --json")
     if report_dir is not None:
         _check_report_dir(report_dir, inputs)
     from pkmcal.identification.engine import identify
@@ -157,9 +171,10 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
         result = baseline_result(result, nominal, baseline)
     if not result.success:
         raise PkmcalError(f"the fit did not converge ({result.message}); nothing written")
-    text = machine_to_text(_with_calibration_record(result, measurements, setup_spec))
-    report = None if report_dir is None else _report_data(nominal, result, setup, meas, measurements, output)
-    atomic_write_text(output, text)
+    text = machine_to_text(_with_calibration_record(result, machine, measurements, setup_spec, name))
+    report = None if report_dir is None else _report_data(nominal, result, setup, meas, measurements,
+                                                           "(standard output)" if to_stdout(output) else output)
+    emit(text, output)
     if report is not None:
         from pkmcal.report import write_report
 
@@ -171,21 +186,39 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
             d["report"] = str(written.html)
         click.echo(json.dumps(d, indent=2, allow_nan=False))
     else:
-        click.echo(result_table(result))
-        click.echo(fit_summary(result))
-        click.echo(f"wrote {output}" + (f" and {written.html}" if report is not None else ""))
+        err = to_stdout(output)
+        click.echo(result_table(result), err=err)
+        click.echo(fit_summary(result), err=err)
+        if not err:
+            click.echo(f"wrote {output}" + (f" and {written.html}" if report is not None else ""))
+        elif report is not None:
+            click.echo(f"wrote {written.html}", err=True)
 
 
-def _with_calibration_record(result, measurements: str, setup_spec: str):
-    """The identified machine with a ``calibration`` record in its metadata (kept in the
-    machine file; ``pkmcal export --format json`` shows it). No date: same inputs, same bytes."""
+def _with_calibration_record(result, machine: str, measurements: str, setup_spec: str, name: str | None):
+    """The identified machine under its own name with a ``calibration`` record in its
+    metadata (kept in the machine file; ``pkmcal export --format json`` shows it): name,
+    calibrated-from, UTC date, pkmcal version, command line, the inputs with their SHA-256
+    (:mod:`pkmcal.cli.provenance`), and the fit. ``SOURCE_DATE_EPOCH`` fixes the date, so
+    that the same inputs give the same bytes."""
     import dataclasses
+
+    from pkmcal import __version__
+    from pkmcal.cli.provenance import command_line, input_record, utc_timestamp
 
     mech = result.mechanism
     if not dataclasses.is_dataclass(mech) or "metadata" not in {f.name for f in dataclasses.fields(mech)}:
         return mech
+    date = utc_timestamp()
+    new_name = name if name is not None else f"{mech.name}-calibrated-{date[:10]}"
+    if not new_name.strip():
+        raise PkmcalError("--name '': give the calibrated machine a name, e.g. --name hexapod-A-2026")
     u = result.uncertainty
     record = {
+        "name": new_name, "calibrated_from": mech.name, "date": date, "pkmcal_version": __version__,
+        "command": command_line(),
+        "inputs": {"machine": input_record(machine), "setup": input_record(setup_spec),
+                   "measurements": input_record(measurements)},
         "method": result.method, "weighted": bool(result.weighted), "measurements": str(measurements),
         "setup": str(setup_spec), "n_poses": int(len(result.used_poses)), "n_free": int(len(result.free)),
         "gauge": list(result.gauge), "rms_residual": float(result.rms_residual),
@@ -193,7 +226,7 @@ def _with_calibration_record(result, measurements: str, setup_spec: str):
     }
     if getattr(result.sensor, "kind", "") == "planar-tool":  # read back by 'pkmcal verify'
         record["sensor"] = sensor_calibration_block(result.sensor)
-    return dataclasses.replace(mech, metadata={**dict(mech.metadata), "calibration": record})
+    return dataclasses.replace(mech, name=new_name, metadata={**dict(mech.metadata), "calibration": record})
 
 
 def _check_report_dir(report_dir: str, inputs) -> None:
@@ -228,18 +261,21 @@ def _report_data(nominal, result, setup, meas, meas_path: str, output: str):
         facts=(("measurement file", str(meas_path)), ("calibrated machine file", str(output))))
 
 
-@click.command("identifiability")
+@click.command("identifiability", epilog=examples(
+    "pkmcal identifiability stewart-prototype --setup indicators-prototype --poses poses.csv",
+    "pkmcal identifiability stewart-prototype --setup full-pose-paper1 --poses poses.csv --json"))
 @click.argument("machine")
+@click.argument("poses_arg", required=False, cls=DeprecatedArgument)
 @click.option("--setup", "setup_spec", required=True, metavar="SETUP.yaml",
               help=f"Measurement setup file or built-in ({', '.join(BUILTIN_SETUPS)}).")
-@click.option("--poses", required=True, metavar="POSES.csv", help="Poses: columns x,y,z (mm), a,b,c (deg).")
+@click.option("--poses", metavar="POSES.csv", help="Poses: columns x,y,z (mm), a,b,c (deg).")
 @click.option("--method", type=click.Choice(METHODS), default=None,
               help="Method whose Jacobian is analysed (default: fk-residual; projection for redundant machines).")
 @click.option("--fix", "fix", multiple=True, metavar="NAMES", help="Parameters held (removed from the analysis).")
 @click.option("--free", "free", multiple=True, metavar="NAMES", help="Candidate parameters (default: all + sensor's free).")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON.")
 @import_options
-def identifiability_cmd(machine, setup_spec, poses, method, fix, free, as_json, mapping=None) -> None:
+def identifiability_cmd(machine, poses_arg, setup_spec, poses, method, fix, free, as_json, mapping=None) -> None:
     """Which parameters of MACHINE the SETUP can identify from POSES.csv.
 
     Prints the rank of the column-scaled, noise-weighted identification Jacobian, its
@@ -251,6 +287,7 @@ def identifiability_cmd(machine, setup_spec, poses, method, fix, free, as_json, 
     from pkmcal.io.machine_file import load_machine
     from pkmcal.io.setup_file import load_setup
 
+    poses = poses_file(poses, poses_arg, "identifiability")
     nominal = load_machine(machine)
     setup = load_setup(setup_spec, nominal)
     x = read_poses(poses, nominal, mapping)

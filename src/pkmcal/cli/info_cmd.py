@@ -7,9 +7,10 @@
    the "travel range" of hexapod data sheets. The limit that stops each end is named.
 3. Box occupancy: the fraction of uniform random poses in the box of those ranges that are
    reachable (the 6-D workspace is much smaller than the box).
-4. IK→FK round trip on random reachable poses of that box: readings q = IK(x), then
-   x̂ = FK(q) from the home pose; reported: converged fraction, Newton iterations, and
-   max ‖p̂ − p‖ (mm) and max rotation angle of R̂ Rᵀ (rad) over converged poses.
+4. IK→FK round trip on random reachable poses of that box (``--n-poses``), or on the poses
+   of a file (``--poses FILE``): readings q = IK(x), then x̂ = FK(q) from the home pose;
+   reported: converged fraction, Newton iterations, and max ‖p̂ − p‖ (mm) and max rotation
+   angle of R̂ Rᵀ (rad) over converged poses.
 
 Everything is vectorised over poses (one ``check_limits`` call per bisection step).
 """
@@ -19,7 +20,9 @@ from __future__ import annotations
 import click
 import numpy as np
 
+from pkmcal.cli.options import count_or_poses_file, examples
 from pkmcal.conventions import euler_to_matrix, rotation_error
+from pkmcal.errors import PkmcalError
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.mechanisms.library import DEFAULT_MACHINE
 
@@ -100,15 +103,27 @@ def _fmt(value: float, is_angle: bool) -> str:
     return f"{np.rad2deg(value):9.3f}" if is_angle else f"{value:9.3f}"
 
 
-@click.command("info")
+N_ROUND_TRIP = 300
+
+
+@click.command("info", epilog=examples(
+    "pkmcal info",
+    "pkmcal info stewart-prototype-real --n-poses 1000 --seed 2",
+    "pkmcal info planar-3dof-4act",
+    "pkmcal info stewart-prototype --poses poses.csv"))
 @click.argument("machine", default=DEFAULT_MACHINE, required=False)
-@click.option("--poses", "n_poses", default=300, show_default=True, type=click.IntRange(1, 100_000),
-              help="Random reachable poses for the IK→FK round trip.")
+@click.option("--n-poses", type=click.IntRange(1, 100_000), default=None,
+              help=f"Random reachable poses for the IK→FK round trip.  [default: {N_ROUND_TRIP}]")
+@click.option("--poses", metavar="POSES.csv",
+              help="Instead: the round trip on the poses of this file (x,y,z mm, a,b,c deg).")
 @click.option("--seed", default=0, show_default=True, type=int, help="Seed of the random poses.")
-def info_cmd(machine: str, n_poses: int, seed: int) -> None:
+def info_cmd(machine: str, n_poses: int | None, poses: str | None, seed: int) -> None:
     """Describe MACHINE (default: stewart-prototype): summary, workspace, IK→FK round trip."""
     from pkmcal.io.machine_file import load_machine
 
+    n_poses, poses_path = count_or_poses_file(poses, n_poses, N_ROUND_TRIP)
+    if n_poses > 100_000:
+        raise PkmcalError(f"--n-poses {n_poses}: at most 100000")
     mech = load_machine(machine)
     summary = mech.summary() if hasattr(mech, "summary") else mech.name
     click.echo(summary)
@@ -137,21 +152,28 @@ def info_cmd(machine: str, n_poses: int, seed: int) -> None:
     ok = _reachable(mech, box)
     click.echo(f"  {100.0 * ok.mean():.1f} % of {BOX_SAMPLES} uniform random poses in the box of these ranges "
                "are reachable")
-    pool = box[ok]
-    for _ in range(20):  # top up in batches (not per pose) when the box is sparsely reachable
-        if len(pool) >= n_poses:
-            break
-        more = rng.uniform(ranges[:, 0], ranges[:, 1], size=(BOX_SAMPLES, mech.n_dof))
-        pool = np.concatenate([pool, more[_reachable(mech, more)]])
-    poses = pool[:n_poses]
-    if len(poses) == 0:
-        click.echo("IK→FK round trip: no reachable random pose found")
-        return
+    if poses_path is not None:
+        from pkmcal.io.tables import read_poses
+
+        poses = read_poses(poses_path, mech)
+        what = f"the {len(poses)} poses of {poses_path}"
+    else:
+        pool = box[ok]
+        for _ in range(20):  # top up in batches (not per pose) when the box is sparsely reachable
+            if len(pool) >= n_poses:
+                break
+            more = rng.uniform(ranges[:, 0], ranges[:, 1], size=(BOX_SAMPLES, mech.n_dof))
+            pool = np.concatenate([pool, more[_reachable(mech, more)]])
+        poses = pool[:n_poses]
+        what = f"{len(poses)} random reachable poses"
+        if len(poses) == 0:
+            click.echo("IK→FK round trip: no reachable random pose found")
+            return
     readings = mech.ik(poses)
     result = mech.fk(readings)
     conv = np.asarray(result.converged, dtype=bool)
     iters = np.asarray(result.iterations)
-    click.echo(f"IK→FK round trip on {len(poses)} random reachable poses (FK from home):")
+    click.echo(f"IK→FK round trip on {what} (FK from home):")
     click.echo(f"  converged {int(conv.sum())}/{len(poses)}; Newton iterations mean {iters.mean():.2f}, "
                f"max {int(iters.max())}")
     if conv.any():

@@ -16,18 +16,11 @@ import numpy as np
 
 from pkmcal.errors import PkmcalError
 from pkmcal.cli.import_options import import_options
-from pkmcal.io.atomic import atomic_write_text, check_output_path
+from pkmcal.cli.options import check_output, emit, examples, output_option
 from pkmcal.io.tables import LENGTH_COLUMNS, column_kinds, format_table, from_file_units, read_table, to_file_units
 from pkmcal.mechanisms.base import Mechanism
 
 _MAX_LISTED = 20
-
-
-def _emit(text: str, output: str | None) -> None:
-    if output is None:
-        click.echo(text, nl=False)
-    else:
-        atomic_write_text(output, text)
 
 
 def _note(message: str) -> None:
@@ -54,10 +47,13 @@ def parse_pose_option(text: str, mech: Mechanism, option: str) -> np.ndarray:
     return from_file_units(values, mech.pose_is_angle)
 
 
-@click.command("ik")
+@click.command("ik", epilog=examples(
+    "pkmcal ik stewart-prototype poses.csv -o legs.csv",
+    "pkmcal ik stewart-prototype poses.csv",
+    "pkmcal ik stewart-prototype-real heldout.csv -o heldout-legs.csv"))
 @click.argument("machine")
-@click.argument("poses")
-@click.option("-o", "--output", metavar="LEGS.csv", help="Output CSV (default: standard output).")
+@click.argument("poses", metavar="POSES.csv")
+@output_option("LEGS.csv", "Output CSV")
 @import_options
 def ik_cmd(machine: str, poses: str, output: str | None, mapping=None) -> None:
     """Inverse kinematics: leg lengths and readings of the poses in POSES.csv.
@@ -68,8 +64,7 @@ def ik_cmd(machine: str, poses: str, output: str | None, mapping=None) -> None:
     'reachable': 'ok' or the violated limits joined by '+'. (Other machines: their pose
     columns, their actuator columns; rotary actuators in degrees.)
     """
-    if output is not None:
-        check_output_path(output, [poses, machine])
+    check_output(output, [poses, machine])
     from pkmcal.io.machine_file import load_machine
 
     mech = load_machine(machine)
@@ -88,16 +83,18 @@ def ik_cmd(machine: str, poses: str, output: str | None, mapping=None) -> None:
     columns.update({n: readings[:, i] for i, n in enumerate(mech.actuator_names)})
     columns["reachable"] = limits.verdicts()
     text = format_table(columns)
-    _emit(text, output)
+    emit(text, output)
     n_bad = int(np.count_nonzero(~limits.ok))
     _note(f"ik: {len(table)} poses, {len(table) - n_bad} reachable"
           + (f"; {n_bad} violate limits (column 'reachable')" if n_bad else ""))
 
 
-@click.command("fk")
+@click.command("fk", epilog=examples(
+    "pkmcal fk stewart-prototype legs.csv -o fk-poses.csv",
+    "pkmcal fk stewart-prototype-real legs.csv --guess 0,0,315,0,0,0"))
 @click.argument("machine")
-@click.argument("legs")
-@click.option("-o", "--output", metavar="POSES.csv", help="Output CSV (default: standard output).")
+@click.argument("legs", metavar="LEGS.csv")
+@output_option("POSES.csv", "Output CSV")
 @click.option("--guess", metavar="X,Y,Z,A,B,C", help="Start pose of the Newton iteration (mm, deg); "
               "default: the machine's home pose.")
 @import_options
@@ -110,8 +107,7 @@ def fk_cmd(machine: str, legs: str, output: str | None, guess: str | None, mappi
     standard error by their line in LEGS.csv and get 'nan' poses; the exit code is still 0
     (check the 'converged' column).
     """
-    if output is not None:
-        check_output_path(output, [legs, machine])
+    check_output(output, [legs, machine])
     from pkmcal.io.machine_file import load_machine
 
     mech = load_machine(machine)
@@ -136,7 +132,7 @@ def fk_cmd(machine: str, legs: str, output: str | None, guess: str | None, mappi
     columns["converged"] = conv.astype(int)
     columns["iterations"] = np.asarray(result.iterations, dtype=int)
     text = format_table(columns)
-    _emit(text, output)
+    emit(text, output)
     n = len(table)
     iters = np.asarray(result.iterations)
     _note(f"fk: {n} rows, {int(conv.sum())} converged"

@@ -53,9 +53,18 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
 }
 
 
+#: Key of the command line's arguments in the root ``click.Context.meta`` (for records of
+#: how a file was made, :mod:`pkmcal.cli.provenance`).
+ARGV_KEY = "pkmcal.argv"
+
+
 class PkmcalGroup(click.Group):
     """The ``pkmcal`` group: commands from :data:`COMMANDS`, imported on first use, and
     :class:`PkmcalError` turned into one stderr line and exit code 2."""
+
+    def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
+        ctx.meta[ARGV_KEY] = list(args)
+        return super().parse_args(ctx, args)
 
     def list_commands(self, ctx: click.Context) -> list[str]:
         return list(COMMANDS)
@@ -81,7 +90,22 @@ class PkmcalGroup(click.Group):
             sys.exit(exc.exit_code)
 
 
-@click.group(cls=PkmcalGroup, context_settings={"help_option_names": ["-h", "--help"]})
+#: Examples of ``pkmcal --help`` (each command's ``--help`` has its own; all are run by
+#: ``tests/test_cli_examples.py``).
+EXAMPLES = (
+    "pkmcal machines",
+    "pkmcal demo",
+    "pkmcal plan stewart-prototype --setup indicators-prototype --n 45 --seed 1 -o poses.csv",
+    "pkmcal simulate stewart-prototype --real stewart-prototype-real --setup indicators-prototype --poses poses.csv "
+    "--seed 2 -o meas.csv",
+    "pkmcal identify stewart-prototype meas.csv --setup indicators-prototype -o calibrated.yaml",
+    "pkmcal export calibrated.yaml --format linuxcnc -o kinematics.hal",
+)
+
+
+@click.group(cls=PkmcalGroup, context_settings={"help_option_names": ["-h", "--help"]},
+             epilog="\b\nExamples:\n" + "\n".join(f"  {c}" for c in EXAMPLES) + "\n\nRun 'pkmcal COMMAND --help' for "
+                    "a command's options and examples.")
 @click.version_option(__version__, prog_name="pkmcal")
 def cli() -> None:
     """Calibrate parallel kinematic machines (hexapods, redundantly actuated PKMs).

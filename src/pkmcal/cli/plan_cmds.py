@@ -1,7 +1,8 @@
 """``pkmcal plan`` and ``pkmcal observability``: which poses to measure, and how good a set is.
 
 * ``plan``: candidate poses (random in the workspace box, or a CSV), checked against the
-  nominal machine's limits with a safety margin and against the sensor's measurability,
+  nominal machine's limits with safety margins a real machine survives
+  (:mod:`pkmcal.planning.margins`) and against the sensor's measurability,
   then a selection algorithm (:mod:`pkmcal.planning.selection`) picks N of them; writes
   x, y, z (mm), a, b, c (deg) and the nominal actuator commands lambda1..lambda6 (rotary
   actuators of other machines in degrees).
@@ -12,42 +13,30 @@
 from __future__ import annotations
 
 import json
-import sys
-import time
 
 import click
 import numpy as np
 
 from pkmcal.cli.import_options import import_options
-from pkmcal.io.atomic import check_output_path
-from pkmcal.io.tables import to_file_units, write_table
-from pkmcal.planning.candidates import DEFAULT_MARGIN, Measurability, read_candidates_csv
+from pkmcal.cli.options import (
+    DeprecatedArgument,
+    check_output,
+    emit,
+    examples,
+    output_option,
+    poses_file,
+    quiet_option,
+    summary_echo,
+)
+from pkmcal.errors import PkmcalError
+from pkmcal.io.tables import format_table, to_file_units
+from pkmcal.planning.candidates import Measurability, read_candidates_csv
 from pkmcal.planning.indices import INDEX_DESCRIPTIONS, INDEX_NAMES
+from pkmcal.planning.margins import ASSUMED_JOINT_ERROR_MM, CLEARANCE_MARGIN_MM
 from pkmcal.planning.selection import ALGORITHMS
 from pkmcal.sensors.library import BUILTIN_SETUPS
 
 _SETUP_HELP = f"Measurement setup file or built-in ({', '.join(BUILTIN_SETUPS)})."
-
-
-class _Progress:
-    """A one-line progress display on stderr, only on a terminal and after 2 s."""
-
-    def __init__(self, label: str, delay: float = 2.0):
-        self.label, self.delay = label, delay
-        self.t0 = time.monotonic()
-        self.shown = False
-        self.tty = sys.stderr.isatty()
-
-    def __call__(self, done: int, total: int) -> None:
-        if not self.tty or time.monotonic() - self.t0 < self.delay:
-            return
-        self.shown = True
-        click.echo(f"\r{self.label}: step {done} (at most {total}), {time.monotonic() - self.t0:.1f} s",
-                   err=True, nl=False)
-
-    def close(self) -> None:
-        if self.shown:
-            click.echo("", err=True)
 
 
 def _measurability(travel, plate_radius, sight_cone) -> Measurability:
@@ -60,7 +49,12 @@ def _format_indices(ind: dict[str, float]) -> str:
     return "  ".join(f"{k} = {ind[k]:.6g}" for k in INDEX_NAMES)
 
 
-@click.command("plan")
+@click.command("plan", epilog=examples(
+    "pkmcal plan stewart-prototype --setup indicators-prototype --n 45 --seed 1 -o poses.csv",
+    "pkmcal plan stewart-prototype --setup full-pose-paper1 --n 20 --algorithm cuckoo --n-candidates 500 -o cuckoo.csv",
+    "pkmcal plan stewart-prototype --setup indicators-prototype --n 50 --algorithm random --seed 9 -o heldout.csv",
+    "pkmcal plan stewart-prototype --setup indicators-prototype --n 30 --tilt-margin 5 -o cautious.csv",
+    "pkmcal plan planar-3dof-4act --setup planar-tracker --n 12 -o planar-poses.csv"))
 @click.argument("machine")
 @click.option("--setup", "setup_spec", required=True, metavar="SETUP.yaml", help=_SETUP_HELP)
 @click.option("--n", "n_poses", type=click.IntRange(min=1), default=30, show_default=True, help="Number of poses to choose.")
@@ -77,73 +71,104 @@ def _format_indices(ind: dict[str, float]) -> str:
               help="default: D-optimal exchange (O1); detmax / cuckoo: paper 2 add/remove search on --index; "
                    "corners: random corners of the workspace box (paper 1); random.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed (same seed, same poses).")
-@click.option("--margin", type=click.FloatRange(min=0.0), default=DEFAULT_MARGIN, show_default=True,
-              help="Safety margin on every limit: mm (stroke, collision) and degrees (joint tilts).")
+@click.option("--stroke-margin", type=click.FloatRange(min=0.0), metavar="MM",
+              help=f"Hexapods: keep every leg reading this far inside its stroke, at both ends. Default "
+                   f"{ASSUMED_JOINT_ERROR_MM:g} mm (joint errors up to {ASSUMED_JOINT_ERROR_MM:g} mm).")
+@click.option("--tilt-margin", type=click.FloatRange(min=0.0), metavar="DEG",
+              help=f"Hexapods: keep every U/S-joint tilt this far inside its limit. Default "
+                   f"atan(d/r_p) + atan(d/L_min) for joint errors d = {ASSUMED_JOINT_ERROR_MM:g} mm, r_p the smallest "
+                   "platform joint radius, L_min the shortest leg (3.02° on stewart-prototype).")
+@click.option("--clearance-margin", type=click.FloatRange(min=0.0), metavar="MM",
+              help=f"Hexapods: extra leg-to-leg clearance of the collision check. Default {CLEARANCE_MARGIN_MM:g} mm.")
+@click.option("--margin", type=click.FloatRange(min=0.0), metavar="X",
+              help="Instead of the three above: X on every limit (mm for stroke and clearance, degrees for the "
+                   "joint tilts; the former single margin).")
 @click.option("--indicator-travel", nargs=2, type=float, metavar="LO HI",
               help="Indicators: accepted reading range (mm).")
 @click.option("--plate-radius", type=click.FloatRange(min=0.0), metavar="MM",
               help="Indicators: the touch points must lie within this radius of the platform origin.")
 @click.option("--sight-cone", type=click.FloatRange(min=0.0, max=180.0), metavar="DEG",
               help="Full-pose/position: half-angle of the target's line-of-sight cone.")
-@click.option("-o", "--output", required=True, metavar="POSES.csv", help="Output CSV of the chosen poses.")
+@output_option("POSES.csv", "CSV of the chosen poses")
+@quiet_option
 @import_options
-def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, index, algorithm, seed, margin,
-             indicator_travel, plate_radius, sight_cone, output, mapping=None) -> None:
+def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, index, algorithm, seed,
+             stroke_margin, tilt_margin, clearance_margin, margin, indicator_travel, plate_radius, sight_cone,
+             output, quiet, mapping=None) -> None:
     """Choose N poses of MACHINE to measure with SETUP (paper 2 §4, paper 1 §IV).
 
     Every candidate is checked on the nominal machine (stroke, joint tilts, leg collision,
-    singularity, with --margin) and for measurability; rejections are counted by reason.
-    Writes x,y,z,a,b,c and the nominal commands lambda1..; prints O1..O5 of the chosen set.
+    singularity) with safety margins that leave room for the real machine's deviations
+    (defaults for joint errors up to 3 mm; the plan prints the margins it used), and for
+    measurability; rejections are counted by reason. Writes x,y,z,a,b,c and the nominal
+    commands lambda1..; prints O1..O5 of the chosen set.
     """
     from pkmcal.io.machine_file import load_machine
     from pkmcal.io.setup_file import load_setup
+    from pkmcal.planning.margins import has_margins, resolve_margin
     from pkmcal.planning.plan import plan_poses
+    from pkmcal.progress import ProgressBar
 
+    check_output(output, [candidates_path, setup_spec, machine])
     mech = load_machine(machine)
     setup = load_setup(setup_spec, mech)
-    check_output_path(output, [candidates_path, setup_spec, machine])
+    given = [n for n, v in (("--stroke-margin", stroke_margin), ("--tilt-margin", tilt_margin),
+                            ("--clearance-margin", clearance_margin)) if v is not None]
+    if margin is not None and given:
+        raise PkmcalError(f"--margin sets every limit's margin; give it or {', '.join(given)}, not both")
+    if (given or margin is not None) and not has_margins(mech):
+        raise PkmcalError(f"machine '{mech.name}' has no stroke or joint-tilt limits to keep a margin from "
+                          "(its limits: workspace box, reach, transmission angle); remove the margin options")
+    safety = margin if margin is not None else resolve_margin(mech, stroke_mm=stroke_margin, tilt_deg=tilt_margin,
+                                                                clearance_mm=clearance_margin)
     candidates = read_candidates_csv(candidates_path, mech, mapping) if candidates_path else None
-    progress = _Progress(f"plan ({algorithm})")
-    try:
+    with ProgressBar("plan", quiet=quiet) as bar:
         plan = plan_poses(mech, setup, n_poses, algorithm=algorithm, index=index.upper() if index else None,
-                          candidates=candidates, n_candidates=n_candidates, grid=grid, seed=seed, margin=margin,
+                          candidates=candidates, n_candidates=n_candidates, grid=grid, seed=seed, margin=safety,
                           measurability=_measurability(indicator_travel, plate_radius, sight_cone),
-                          progress=progress)
-    finally:
-        progress.close()
+                          progress=bar.stage)
     poses = to_file_units(plan.poses, mech.pose_is_angle)
     commands = to_file_units(plan.commands, mech.actuator_is_angle)
     cols = {name: poses[:, i] for i, name in enumerate(mech.pose_names)}
     cols.update({name: commands[:, i] for i, name in enumerate(mech.actuator_names)})
     sel = plan.selection
-    write_table(output, cols, comments=[
+    emit(format_table(cols, comments=[
         f"pkmcal plan {mech.name} --setup {setup_spec} --n {n_poses} --algorithm {sel.algorithm} "
         f"--seed {seed}; maximised {sel.criterion}",
-        _format_indices(sel.indices)])
-    click.echo(f"candidates: {plan.candidates.describe()}")
-    click.echo(f"identifiable parameters: {plan.model.n_params} ({plan.model.method}; gauge fixed: "
-               f"{', '.join(plan.model.report.fixed) or 'none'})")
-    click.echo(f"{sel.algorithm}: {len(sel.chosen)} poses, maximised {sel.criterion}; {sel.message}")
-    click.echo(_format_indices(sel.indices))
-    click.echo(f"wrote {output}")
+        f"safety margin: {plan.describe_margin()}",
+        _format_indices(sel.indices)]), output)
+    say = summary_echo(output)
+    say(f"candidates: {plan.candidates.describe()}")
+    say(f"safety margin: {plan.describe_margin()}")
+    say(f"identifiable parameters: {plan.model.n_params} ({plan.model.method}; gauge fixed: "
+        f"{', '.join(plan.model.report.fixed) or 'none'})")
+    say(f"{sel.algorithm}: {len(sel.chosen)} poses, maximised {sel.criterion}; {sel.message}")
+    say(_format_indices(sel.indices))
+    if output is not None and output != "-":
+        say(f"wrote {output}")
 
 
-@click.command("observability")
+@click.command("observability", epilog=examples(
+    "pkmcal observability stewart-prototype --setup indicators-prototype --poses poses.csv",
+    "pkmcal observability stewart-prototype --setup indicators-prototype --poses poses.csv --json"))
 @click.argument("machine")
-@click.argument("poses", metavar="POSES.csv", type=click.Path(dir_okay=False))
+@click.argument("poses_arg", required=False, cls=DeprecatedArgument)
+@click.option("--poses", metavar="POSES.csv", help="The pose set: columns x,y,z (mm), a,b,c (deg).")
 @click.option("--setup", "setup_spec", required=True, metavar="SETUP.yaml", help=_SETUP_HELP)
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object (keys O1..O5, n_poses).")
 @import_options
-def observability_cmd(machine, poses, setup_spec, as_json, mapping=None) -> None:
+def observability_cmd(machine, poses_arg, poses, setup_spec, as_json, mapping=None) -> None:
     """Observability indices O1..O5 of the poses in POSES.csv (columns x,y,z mm, a,b,c deg).
 
     On the scaled, noise-weighted identification Jacobian restricted to the identifiable
     parameters (as 'pkmcal plan'). O1 is D-optimality, O4 the noise amplification index.
+    (The former spelling 'observability MACHINE POSES.csv' still works.)
     """
     from pkmcal.io.machine_file import load_machine
     from pkmcal.io.setup_file import load_setup
     from pkmcal.planning.plan import pose_set_indices
 
+    poses = poses_file(poses, poses_arg, "observability")
     mech = load_machine(machine)
     setup = load_setup(setup_spec, mech)
     pose_arr = read_candidates_csv(poses, mech, mapping)

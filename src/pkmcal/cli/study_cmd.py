@@ -3,12 +3,14 @@ campaigns (:mod:`pkmcal.study`; docs/studies.md). Only click is imported at star
 
 from __future__ import annotations
 
-import sys
 
 import click
 
+from pkmcal.cli.options import examples
 
-@click.command("study")
+
+@click.command("study", epilog=examples(
+    "pkmcal study examples/study-quick.yaml -o quick-results --workers 1"))
 @click.argument("study_file", type=click.Path(dir_okay=False), metavar="STUDY.yaml")
 @click.option("-o", "--output", required=True, type=click.Path(file_okay=False), metavar="RESULTS/",
               help="Results folder (created; never overwritten: use --resume to continue one).")
@@ -33,6 +35,7 @@ def study(study_file, output, seed, trials, workers, dask_address, resume, quiet
     (stderr) shows only on a terminal.
     """
     from pkmcal.errors import PkmcalError
+    from pkmcal.progress import bars_enabled
     from pkmcal.study import load_study, run_study
 
     if workers is not None and dask_address not in (None, "local"):
@@ -45,7 +48,7 @@ def study(study_file, output, seed, trials, workers, dask_address, resume, quiet
         if trials < 1:
             raise PkmcalError(f"--trials must be at least 1; got {trials}")
         spec = spec.with_trials(trials)
-    show = not quiet and sys.stdout.isatty() and sys.stderr.isatty()
+    show = bars_enabled(quiet)
     result = run_study(spec, output, workers=workers, dask=dask_address, resume=resume, progress=show,
                        figures=not no_figures)
     if quiet:

@@ -24,6 +24,7 @@ from pkmcal.conventions import euler_to_matrix
 from pkmcal.errors import PkmcalError
 from pkmcal.io.measurements import Measurements
 from pkmcal.mechanisms.base import Mechanism
+from pkmcal.progress import Progress
 from pkmcal.sensors.base import MeasurementSetup, Sensor
 from pkmcal.sensors.indicators import MIN_NORMAL_Z, IndicatorSensor
 
@@ -116,6 +117,11 @@ def campaign_inputs(nominal: Mechanism, real: Mechanism, setup: MeasurementSetup
     return commanded, e_y, e_q
 
 
+#: Commanded poses simulated per chunk: bounded memory on large campaigns, and one
+#: ``progress(done, total)`` call per chunk.
+CHUNK_POSES = 20_000
+
+
 def simulate_campaign(
     nominal: Mechanism,
     real: Mechanism,
@@ -123,6 +129,7 @@ def simulate_campaign(
     commanded_poses: np.ndarray,
     rng: np.random.Generator | int | None = None,
     ignore_limits: tuple[str, ...] = (),
+    progress: Progress | None = None,
 ) -> SimulationResult:
     """Simulate measuring ``commanded_poses`` (N, 6; mm, rad) on ``real`` commanded by ``nominal``.
 
@@ -130,26 +137,21 @@ def simulate_campaign(
     gives bit-identical readings. ``ignore_limits`` names limits of the real machine not
     checked (e.g. ``("leg_collision",)``: a parameter perturbation of a few mm can bring
     the modelled legs of a tight design such as ``stewart-prototype`` into contact).
+    The poses are simulated in chunks of :data:`CHUNK_POSES`, ``progress(done, N)`` called
+    after each.
     """
     commanded, e_y, e_q = campaign_inputs(nominal, real, setup, commanded_poses, rng)
     sensor = setup.sensor
-
-    q = nominal.ik(commanded)
-    dropped: dict[int, str] = {}
-    finite = np.all(np.isfinite(q), axis=1)
-    for k in np.flatnonzero(~finite):
-        dropped[int(k)] = "nominal-ik-failed"
-    fk = real.fk(np.where(finite[:, None], q, 0.0), guess=commanded)
-    bad_fk = finite & ~fk.converged
-    for k in np.flatnonzero(bad_fk):
-        dropped[int(k)] = f"fk-not-converged (residual {fk.residual[k]:.3g})"
-    ok = finite & fk.converged
-    poses = np.where(ok[:, None], fk.poses, commanded)   # placeholders where not ok, never kept
-    ok = drop_limit_violations(real, poses, ok, ignore_limits, dropped)
-    unread = ok & _unreadable(sensor, poses)
-    for k in np.flatnonzero(unread):
-        dropped[int(k)] = "not-readable-by-sensor"
-    ok &= ~unread
+    n = len(commanded)
+    parts, dropped = [], {}
+    for start in range(0, max(n, 1), CHUNK_POSES):
+        q_c, poses_c, ok_c, dropped_c = _reach(nominal, real, sensor, commanded[start:start + CHUNK_POSES],
+                                               ignore_limits)
+        parts.append((q_c, poses_c, ok_c))
+        dropped.update({start + k: why for k, why in dropped_c.items()})
+        if progress is not None:
+            progress(min(start + CHUNK_POSES, n), n)
+    q, poses, ok = (np.concatenate(a) for a in zip(*parts))
 
     kept = np.flatnonzero(ok)
     real_poses = poses[kept]
@@ -166,6 +168,29 @@ def simulate_campaign(
         sensor_readings=y_true + e_y[kept],
         setup=setup,
     )
+
+
+def _reach(nominal: Mechanism, real: Mechanism, sensor: Sensor, commanded: np.ndarray,
+           ignore_limits: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[int, str]]:
+    """Where ``real`` goes for each of the ``commanded`` poses (one chunk): the commands
+    q = IK(x_c, ρ_nom) (N, l), the real poses (N, n; the commanded pose where not reached),
+    whether each was reached and read, and the reasons of the others by position."""
+    q = nominal.ik(commanded)
+    dropped: dict[int, str] = {}
+    finite = np.all(np.isfinite(q), axis=1)
+    for k in np.flatnonzero(~finite):
+        dropped[int(k)] = "nominal-ik-failed"
+    fk = real.fk(np.where(finite[:, None], q, 0.0), guess=commanded)
+    bad_fk = finite & ~fk.converged
+    for k in np.flatnonzero(bad_fk):
+        dropped[int(k)] = f"fk-not-converged (residual {fk.residual[k]:.3g})"
+    ok = finite & fk.converged
+    poses = np.where(ok[:, None], fk.poses, commanded)   # placeholders where not ok, never kept
+    ok = drop_limit_violations(real, poses, ok, ignore_limits, dropped)
+    unread = ok & _unreadable(sensor, poses)
+    for k in np.flatnonzero(unread):
+        dropped[int(k)] = "not-readable-by-sensor"
+    return q, poses, ok & ~unread, dropped
 
 
 def perturb_machine(

@@ -6,6 +6,11 @@ Jacobian rows on the identifiable parameters, in batches: :func:`candidate_block
 :mod:`.selection` (the algorithms) together;
 :func:`pose_set_indices` gives O1..O5 (:mod:`.indices`) of any pose set with the same
 parameters and scaling, so ``pkmcal plan`` and ``pkmcal observability`` agree.
+
+Candidates are checked inside the nominal machine's limits by the safety margins of
+:mod:`.margins` (by default those a real machine with joint errors of 3 mm survives), and
+the stages report progress through an optional ``progress(stage)`` announcer
+(:data:`pkmcal.progress.Stages`).
 """
 
 from __future__ import annotations
@@ -21,7 +26,6 @@ from pkmcal.mechanisms.base import Mechanism
 from pkmcal.planning.blocks import PlanningModel, planning_model
 from pkmcal.planning.candidates import (
     CHUNK_SIZE,
-    DEFAULT_MARGIN,
     CandidateSet,
     Measurability,
     corner_box,
@@ -30,14 +34,18 @@ from pkmcal.planning.candidates import (
     workspace_box,
 )
 from pkmcal.planning.indices import observability_indices
-from pkmcal.planning.selection import ALGORITHMS, Progress, Selection, select
+from pkmcal.planning.margins import SafetyMargin, planning_machine, resolve_margin
+from pkmcal.planning.selection import ALGORITHMS, Selection, select
+from pkmcal.progress import Stages
 from pkmcal.sensors.base import MeasurementSetup
 
 
 @dataclass(frozen=True)
 class Plan:
     """Chosen ``poses`` (n, 6) (mm, rad) with their nominal actuator ``commands`` (n, l), the
-    ``selection`` (indices into the candidates, O1..O5), the ``candidates`` and the model."""
+    ``selection`` (indices into the candidates, O1..O5), the ``candidates``, the model and the
+    safety ``margin`` the candidates were checked with (a :class:`SafetyMargin`, a single
+    number on every limit, or None for a machine whose limits take none)."""
 
     poses: np.ndarray
     commands: np.ndarray
@@ -45,6 +53,15 @@ class Plan:
     candidates: CandidateSet
     model: PlanningModel
     box: np.ndarray | None = None
+    margin: SafetyMargin | float | None = None
+
+    def describe_margin(self) -> str:
+        """The safety margin in words (what ``pkmcal plan`` prints)."""
+        if self.margin is None:
+            return "none (this machine's limits take no safety margin)"
+        if isinstance(self.margin, SafetyMargin):
+            return self.margin.describe()
+        return f"{self.margin:g} on every limit (mm for stroke and clearance, degrees for joint tilts)"
 
     @property
     def indices(self) -> dict[str, float]:
@@ -79,61 +96,82 @@ def candidate_blocks(model: PlanningModel, poses: np.ndarray, *, batch: int = BL
 def plan_poses(mechanism: Mechanism, setup: MeasurementSetup, n: int, *, algorithm: str = "default",
                index: str | None = None, candidates: np.ndarray | str | os.PathLike | None = None,
                n_candidates: int = 2000, grid: int | None = None, seed: int | None = None,
-               margin: float = DEFAULT_MARGIN,
+               margin: SafetyMargin | float | None = None,
                measurability: Measurability = Measurability(), method: str | None = None,
-               model: PlanningModel | None = None, progress: Progress | None = None,
-               chunk_size: int = CHUNK_SIZE, chunk_map: Callable = map,
-               candidate_progress: Progress | None = None) -> Plan:
+               model: PlanningModel | None = None, progress: Stages | None = None,
+               chunk_size: int = CHUNK_SIZE, chunk_map: Callable = map) -> Plan:
     """Choose ``n`` poses to measure (paper 2 §4, paper 1 §IV).
 
     ``candidates``: an array (N, 6) (mm, rad) or a CSV path (x, y, z, a, b, c in mm, deg);
     default ``n_candidates`` random poses of the workspace box, or with ``grid=k`` the k^6
     grid of the box. ``algorithm="corners"``
     ignores them and draws among the 64 corners of the largest all-reachable box. Every
-    candidate is checked (limits with ``margin``, measurability) before selection.
+    candidate is checked (limits with the safety margin, measurability) before selection.
+
+    ``margin``: a :class:`~pkmcal.planning.margins.SafetyMargin`; None (default) the
+    machine's default margins (:func:`~pkmcal.planning.margins.default_margin`); a number,
+    that margin on every limit (mm and degrees, as ``check_limits(margin=...)``).
+    ``progress(stage)`` is called as each stage starts and returns that stage's
+    ``(done, total)`` callback or None.
 
     The candidates are generated and checked in chunks of ``chunk_size`` poses
-    (:func:`~pkmcal.planning.candidates.generate_candidates`, ``candidate_progress`` called
-    with (done, total) after every chunk), then only the accepted ones get their planning
-    blocks (:func:`candidate_blocks`); both steps are mapped by ``chunk_map`` (default:
-    in this process, in order). The plan does not depend on ``chunk_size``. ``progress``
-    is the selection's.
+    (:func:`~pkmcal.planning.candidates.generate_candidates`, the "candidates" stage's
+    callback called with (done, total) after every chunk), then only the accepted ones get
+    their planning blocks (:func:`candidate_blocks`); both steps are mapped by ``chunk_map``
+    (default: in this process, in order). The plan does not depend on ``chunk_size``.
     """
     algorithm = str(algorithm).lower()
     if algorithm not in ALGORITHMS:
         raise PkmcalError(f"unknown selection algorithm '{algorithm}'; use one of {', '.join(ALGORITHMS)}")
+    announce = progress or (lambda stage: None)
     rng = np.random.default_rng(seed)
-    kw = dict(margin=margin, measurability=measurability)
-    chunked = dict(chunk_size=chunk_size, chunk_map=chunk_map, progress=candidate_progress, **kw)
+    if margin is None:
+        margin = resolve_margin(mechanism)
+    nominal = mechanism
+    if isinstance(margin, SafetyMargin) or margin is None:
+        mechanism = planning_machine(mechanism, margin)
+        kw = dict(margin=0.0, measurability=measurability)
+    else:
+        kw = dict(margin=float(margin), measurability=measurability)
+    chunked = dict(chunk_size=chunk_size, chunk_map=chunk_map, **kw)
     box = None
     if algorithm == "corners":
         if candidates is not None:
             raise PkmcalError("--algorithm corners draws among the workspace-box corners; do not give --candidates")
+        announce("workspace box")
         box = workspace_box(mechanism, setup, **kw)
-        cand = generate_candidates(mechanism, setup, kind="corners", box=box, **chunked)
+        cand = generate_candidates(mechanism, setup, kind="corners", box=box,
+                                   progress=announce("candidates"), **chunked)
         box = corner_box(mechanism, box, setup, **kw)
     elif candidates is None:
+        announce("workspace box")
         box = workspace_box(mechanism, setup, **kw)
+        step = announce("candidates")
         if grid is not None:
-            cand = generate_candidates(mechanism, setup, kind="grid", grid_per_axis=grid, box=box, **chunked)
+            cand = generate_candidates(mechanism, setup, kind="grid", grid_per_axis=grid, box=box, progress=step,
+                                       **chunked)
         else:
-            cand = generate_candidates(mechanism, setup, kind="random", n=n_candidates, rng=rng, box=box, **chunked)
+            cand = generate_candidates(mechanism, setup, kind="random", n=n_candidates, rng=rng, box=box,
+                                       progress=step, **chunked)
     else:
+        step = announce("candidates")
         poses = candidates if isinstance(candidates, np.ndarray) else read_candidates_csv(candidates, mechanism)
-        cand = generate_candidates(mechanism, setup, kind="file", poses=poses, **chunked)
+        cand = generate_candidates(mechanism, setup, kind="file", poses=poses, progress=step, **chunked)
     if n > len(cand.poses):
         raise PkmcalError(f"asked for {n} poses but only {len(cand.poses)} candidates are reachable and "
                           f"measurable ({cand.describe()}); ask for fewer poses or give more candidates")
-    model = model or planning_model(mechanism, setup, method=method)
+    announce("planning model")
+    model = model or planning_model(nominal, setup, method=method)   # the nominal's scaling (= observability)
     G, ok = candidate_blocks(model, cand.poses, chunk_map=chunk_map)
     if not ok.all():
         rejected = dict(cand.rejected)
         rejected["pose_not_solved"] = rejected.get("pose_not_solved", 0) + int((~ok).sum())
         cand = CandidateSet(cand.poses[ok], cand.n_tested, rejected, cand.kind)
         G = G[ok]
-    sel = select(G, n, algorithm=algorithm, index=index, rng=rng, positions=cand.poses, progress=progress)
+    sel = select(G, n, algorithm=algorithm, index=index, rng=rng, positions=cand.poses,
+                 progress=announce(f"selection ({algorithm})"))
     poses = cand.poses[sel.chosen]
-    return Plan(poses, mechanism.ik(poses), sel, cand, model, box)
+    return Plan(poses, nominal.ik(poses), sel, cand, model, box, margin)
 
 
 def pose_set_indices(mechanism: Mechanism, setup: MeasurementSetup, poses: np.ndarray, *,

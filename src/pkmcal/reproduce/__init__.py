@@ -3,7 +3,8 @@
 One module per paper table (:mod:`.paper1`, :mod:`.paper2`, :mod:`.paper2_planning`,
 :mod:`.paper2_study` (Table 6 and Fig. 6, run as :mod:`pkmcal.study` studies), :mod:`.paper3`); each reproduction is a function ``f(seed=0, quick=False) -> Reproduction``
 (:mod:`.table`), deterministic for a seed, with a ``quick`` mode (few Monte Carlo runs)
-for tests. :data:`REPRODUCTIONS`
+for tests and a ``progress(done, total)`` callback over its Monte Carlo loop
+(:mod:`pkmcal.progress`). :data:`REPRODUCTIONS`
 is the registry behind ``pkmcal reproduce NAME``; :func:`run_reproduction` runs one by name.
 
 Paper 2 Tables 1–2 (observability indices of random and optimal pose sets) are in
@@ -15,6 +16,7 @@ from __future__ import annotations
 from typing import Callable
 
 from pkmcal.errors import PkmcalError
+from pkmcal.progress import Progress
 from pkmcal.reproduce.paper1 import paper1_table1
 from pkmcal.reproduce.paper2 import paper2_table5
 from pkmcal.reproduce.paper2_planning import paper2_tables1_2
@@ -38,14 +40,15 @@ REPRODUCTIONS: dict[str, tuple[Callable[..., Reproduction], str]] = {
 }
 
 
-def run_reproduction(name: str, seed: int = 0, quick: bool = False) -> Reproduction:
-    """Run the reproduction ``name`` (see :data:`REPRODUCTIONS`)."""
+def run_reproduction(name: str, seed: int = 0, quick: bool = False, progress: Progress | None = None) -> Reproduction:
+    """Run the reproduction ``name`` (see :data:`REPRODUCTIONS`), reporting its Monte Carlo
+    loop to ``progress(done, total)``."""
     try:
         fn, _ = REPRODUCTIONS[name]
     except KeyError:
         raise PkmcalError(f"unknown reproduction '{name}'; available: {', '.join(REPRODUCTIONS)} "
                           "(run 'pkmcal reproduce --list')") from None
-    return fn(seed=seed, quick=quick)
+    return fn(seed=seed, quick=quick, progress=progress)
 
 
 __all__ = ["REPRODUCTIONS", "Reproduction", "Row", "run_reproduction", "paper1_table1", "paper2_table5",

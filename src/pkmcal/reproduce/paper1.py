@@ -41,6 +41,7 @@ from pkmcal.io.setup_file import builtin_setup
 from pkmcal.mechanisms import builtin_machine
 from pkmcal.mechanisms.library import symmetric_hexapod
 from pkmcal.planning.candidates import corner_poses
+from pkmcal.progress import Progress
 from pkmcal.reproduce.table import Reproduction, Row, mean_sd
 
 #: Paper 1 Table I: mean parameter error (mm) before, after (15 interior), after (15 boundary).
@@ -128,8 +129,10 @@ def _trial(nominal, half, ignore, setup, rng):
     return out
 
 
-def paper1_table1(seed: int = 0, quick: bool = False, machines: int | None = None) -> Reproduction:
-    """Paper 1 Table I and §VI–VII verification claims (module docstring)."""
+def paper1_table1(seed: int = 0, quick: bool = False, machines: int | None = None,
+                  progress: Progress | None = None) -> Reproduction:
+    """Paper 1 Table I and §VI–VII verification claims (module docstring); ``progress(done,
+    total)`` after each Monte Carlo machine."""
     t0 = time.perf_counter()
     n_mc = machines if machines is not None else (3 if quick else 40)
     setup = builtin_setup("full-pose-paper1")
@@ -141,12 +144,14 @@ def paper1_table1(seed: int = 0, quick: bool = False, machines: int | None = Non
         seeds = np.random.SeedSequence([seed, mi]).spawn(n_mc)
         trials = []
         skipped[mname] = 0
-        for ss in seeds:
+        for k, ss in enumerate(seeds):
             t = _trial(nominal, half, ignore, setup, np.random.default_rng(ss))
             if t is None:
                 skipped[mname] += 1
             else:
                 trials.append(t)
+            if progress is not None:
+                progress(mi * n_mc + k + 1, len(MACHINES) * n_mc)
         col = {k: [t[k] for t in trials] for k in trials[0]}
         g = f"{mname}, {len(trials)} random real machines"
 

@@ -42,6 +42,7 @@ from pkmcal.mechanisms.library import (
     TABLE4_DELTA_OFFSET,
     TABLE4_DELTA_PLATFORM,
 )
+from pkmcal.progress import Progress
 from pkmcal.reproduce.table import Reproduction, Row, mean_sd
 from pkmcal.sensors.base import MeasurementSetup, NoiseModel
 
@@ -140,8 +141,10 @@ def _fit(nominal, setup, sim, gauge):
                     commanded=sim.commanded[sim.kept], method="fk-residual", weighted=False, free=free)
 
 
-def paper2_table5(seed: int = 0, quick: bool = False, trials: int | None = None) -> Reproduction:
-    """Paper 2 Table 5 (module docstring); ``trials`` campaigns per noise level and reading."""
+def paper2_table5(seed: int = 0, quick: bool = False, trials: int | None = None,
+                  progress: Progress | None = None) -> Reproduction:
+    """Paper 2 Table 5 (module docstring); ``trials`` campaigns per noise level and reading;
+    ``progress(done, total)`` after each campaign."""
     t0 = time.perf_counter()
     n_tr = trials if trials is not None else (1 if quick else 5)
     # Quick mode runs fewer campaigns, not fewer poses: with 40 poses, D_E at N_L = 0.1 fell below
@@ -159,13 +162,15 @@ def paper2_table5(seed: int = 0, quick: bool = False, trials: int | None = None)
             sigma = float(np.sqrt(level)) if reading == "variance" else level
             setup = MeasurementSetup(sensor, NoiseModel(np.full(3, sigma), np.array(0.0)))
             res = {"auto": [], "paper": []}
-            for ss in np.random.SeedSequence([seed, vi, li]).spawn(n_tr):
+            for ti, ss in enumerate(np.random.SeedSequence([seed, vi, li]).spawn(n_tr)):
                 rng = np.random.default_rng(ss)
                 sim, verify_poses = _campaign(nominal, real, setup, n_poses, n_verify, rng)
                 for gauge in res:
                     fit = _fit(nominal, setup, sim, gauge)
                     gauges_seen[gauge] = fit.gauge if gauge == "auto" else PAPER_GAUGE
                     res[gauge].append(_metrics(nominal, real, sensor, sim, fit.mechanism, verify_poses))
+                if progress is not None:
+                    progress(((vi * len(NOISE_LEVELS)) + li) * n_tr + ti + 1, 2 * len(NOISE_LEVELS) * n_tr)
             for gauge, vals in res.items():
                 mean = {c: mean_sd([v[c] for v in vals]) for c in COLS}
                 if reading == "variance" and gauge == "auto":

@@ -35,6 +35,7 @@ from pkmcal.planning.candidates import generate_candidates
 from pkmcal.planning.indices import INDEX_NAMES, observability_indices
 from pkmcal.planning.selection import select_default, select_random
 from pkmcal.reproduce.paper2 import PAPER_GAUGE
+from pkmcal.progress import Progress
 from pkmcal.reproduce.table import Reproduction, Row, mean_sd
 
 SIZES = (14, 28, 42, 56, 70, 84, 98, 112)
@@ -74,9 +75,10 @@ def paper_like_blocks(machine, setup, poses: np.ndarray) -> np.ndarray:
 
 
 def paper2_tables1_2(seed: int = 0, quick: bool = False, random_sets: int | None = None,
-                     n_candidates: int | None = None) -> Reproduction:
+                     n_candidates: int | None = None, progress: Progress | None = None) -> Reproduction:
     """Paper 2 Tables 1–2 (module docstring): ``random_sets`` random sets per size (10; 3
-    quick) from ``n_candidates`` checked random candidates (2,000; 400 quick)."""
+    quick) from ``n_candidates`` checked random candidates (2,000; 400 quick);
+    ``progress(done, total)`` after each set size."""
     t0 = time.perf_counter()
     n_sets = random_sets if random_sets is not None else (3 if quick else 10)
     n_cand = n_candidates if n_candidates is not None else (400 if quick else 2000)
@@ -89,7 +91,7 @@ def paper2_tables1_2(seed: int = 0, quick: bool = False, random_sets: int | None
     P = paper_like_blocks(machine, setup, cand.poses)
     rows: list[Row] = []
     headline: dict[str, float] = {}
-    for n in SIZES:
+    for si, n in enumerate(SIZES):
         rsets = [select_random(len(G), n, rng) for _ in range(n_sets)]
         opt = select_default(G, n, index="O4").chosen
         like_r = [observability_indices(P, s) for s in rsets]
@@ -110,6 +112,8 @@ def paper2_tables1_2(seed: int = 0, quick: bool = False, random_sets: int | None
             headline[f"paper2_tables12_paper_like_O4_optimal_{n}"] = like_o["O4"]
             headline[f"paper2_tables12_planning_O4_random_{n}"] = float(np.mean([v["O4"] for v in ours_r]))
             headline[f"paper2_tables12_planning_O4_optimal_{n}"] = ours_o["O4"]
+        if progress is not None:
+            progress(si + 1, len(SIZES))
     setup_d = {
         "machine": "stewart-prototype (paper 2 Table 3)",
         "sensor": "indicators-prototype: 3 indicators at radius 40 mm, 0/120/240° (paper 2 gives no positions)",

@@ -33,6 +33,7 @@ import numpy as np
 
 from pkmcal.io.setup_file import builtin_setup
 from pkmcal.mechanisms import builtin_machine
+from pkmcal.progress import Progress
 from pkmcal.reproduce.paper2 import IGNORE, PAPER_GAUGE, _metrics
 from pkmcal.reproduce.table import Reproduction, Row, mean_sd
 from pkmcal.study import MachineSpec, MethodSpec, PlanSpec, SetupSpec, Study, run_study
@@ -57,17 +58,19 @@ def _machine() -> MachineSpec:
                        ignore_limits=IGNORE)
 
 
-def _run(study: Study, quick: bool):
+def _run(study: Study, quick: bool, progress: Progress | None = None):
     with tempfile.TemporaryDirectory(prefix="pkmcal-paper2-study-") as tmp:
-        return run_study(study, f"{tmp}/r", workers=1 if quick else None, figures=False)
+        return run_study(study, f"{tmp}/r", workers=1 if quick else None, figures=False,
+                         progress=progress or False)
 
 
 def _column(cols: dict, config: int, name: str) -> np.ndarray:
     return cols[name][cols["config"].astype(int) == config]
 
 
-def paper2_table6(seed: int = 0, quick: bool = False, trials: int | None = None) -> Reproduction:
-    """Paper 2 Table 6 (module docstring)."""
+def paper2_table6(seed: int = 0, quick: bool = False, trials: int | None = None,
+                  progress: Progress | None = None) -> Reproduction:
+    """Paper 2 Table 6 (module docstring); ``progress(done, total)`` over the study's trials."""
     t0 = time.perf_counter()
     n_tr = trials if trials is not None else (2 if quick else 40)
     base = builtin_setup("indicators-prototype")
@@ -80,7 +83,7 @@ def paper2_table6(seed: int = 0, quick: bool = False, trials: int | None = None)
                PlanSpec("optimal", optimal, (N_TABLE6,), candidates=n_cand, resample="once", index="O4")),
         methods=(MethodSpec("fk-residual, unweighted", "fk-residual", weighted=False),),
         heldout_poses=50, extra_metrics=table5_metrics, extra_columns=EXTRA_COLUMNS)
-    res = _run(study, quick)
+    res = _run(study, quick, progress)
     cols = res.columns
     rows: list[Row] = []
     headline: dict[str, float] = {}
@@ -130,8 +133,9 @@ def paper2_table6(seed: int = 0, quick: bool = False, trials: int | None = None)
                         seconds=time.perf_counter() - t0)
 
 
-def paper2_fig6(seed: int = 0, quick: bool = False, trials: int | None = None) -> Reproduction:
-    """Paper 2 Fig. 6 (module docstring)."""
+def paper2_fig6(seed: int = 0, quick: bool = False, trials: int | None = None,
+                progress: Progress | None = None) -> Reproduction:
+    """Paper 2 Fig. 6 (module docstring); ``progress(done, total)`` over the study's trials."""
     t0 = time.perf_counter()
     n_tr = trials if trials is not None else (2 if quick else 20)
     sizes = (14, 56, 112) if quick else FIG6_SIZES
@@ -143,7 +147,7 @@ def paper2_fig6(seed: int = 0, quick: bool = False, trials: int | None = None) -
         methods=(MethodSpec("auto gauge", "fk-residual", weighted=False),
                  MethodSpec("paper gauge", "fk-residual", weighted=False, fix=paper_fix)),
         heldout_poses=30)
-    res = _run(study, quick)
+    res = _run(study, quick, progress)
     cols = res.columns
     rows: list[Row] = []
     headline: dict[str, float] = {}

@@ -19,6 +19,7 @@ import numpy as np
 from pkmcal.identification.projection import METHODS, HeldOutResult, calibration_experiment
 from pkmcal.mechanisms import planar as PL
 from pkmcal.mechanisms.statics import StaticsModel
+from pkmcal.progress import Progress
 from pkmcal.reproduce.table import Reproduction, Row, mean_sd
 from pkmcal.sensors.base import MeasurementSetup, NoiseModel
 from pkmcal.sensors.planar_tool import PlanarToolSensor
@@ -78,14 +79,17 @@ def table_experiment(name: str, rng: np.random.Generator, models=None) -> HeldOu
                                   rng, free=c["free"], methods=METHODS)
 
 
-def _run(name: str, seed: int, quick: bool, repeats: int | None) -> Reproduction:
+def _run(name: str, seed: int, quick: bool, repeats: int | None, progress: Progress | None) -> Reproduction:
     t0 = time.perf_counter()
     c = CASES[name]
     n_rep = repeats if repeats is not None else (1 if quick else 50)
     models = case_models(name)
     nominal = models[0]
-    results = [table_experiment(name, np.random.default_rng(ss), models)
-               for ss in np.random.SeedSequence([seed, 3]).spawn(n_rep)]
+    results = []
+    for k, ss in enumerate(np.random.SeedSequence([seed, 3]).spawn(n_rep)):
+        results.append(table_experiment(name, np.random.default_rng(ss), models))
+        if progress is not None:
+            progress(k + 1, n_rep)
     p = c["paper"]
     rows = []
     m, s = mean_sd([float(r.before.max()) for r in results])
@@ -127,11 +131,13 @@ def _run(name: str, seed: int, quick: bool, repeats: int | None) -> Reproduction
                         headline=headline, seconds=time.perf_counter() - t0)
 
 
-def paper3_case1(seed: int = 0, quick: bool = False, repeats: int | None = None) -> Reproduction:
-    """Paper 3 §3.1 (module docstring)."""
-    return _run("paper3-case1", seed, quick, repeats)
+def paper3_case1(seed: int = 0, quick: bool = False, repeats: int | None = None,
+                 progress: Progress | None = None) -> Reproduction:
+    """Paper 3 §3.1 (module docstring); ``progress(done, total)`` after each repeat."""
+    return _run("paper3-case1", seed, quick, repeats, progress)
 
 
-def paper3_case2(seed: int = 0, quick: bool = False, repeats: int | None = None) -> Reproduction:
-    """Paper 3 §3.2 (module docstring)."""
-    return _run("paper3-case2", seed, quick, repeats)
+def paper3_case2(seed: int = 0, quick: bool = False, repeats: int | None = None,
+                 progress: Progress | None = None) -> Reproduction:
+    """Paper 3 §3.2 (module docstring); ``progress(done, total)`` after each repeat."""
+    return _run("paper3-case2", seed, quick, repeats, progress)

@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from pkmcal.errors import PkmcalError
+from pkmcal.progress import Progress
 from pkmcal.io.atomic import atomic_write_text
 from pkmcal.study import backends
 from pkmcal.study.results import (
@@ -89,12 +90,15 @@ class _Progress:
 
 
 def run_study(study: Study, out: str | Path, *, workers: int | None = None, dask: str | None = None,
-              resume: bool = False, progress: bool = False, figures: bool = True, client=None) -> StudyRun:
+              resume: bool = False, progress: "bool | Progress" = False, figures: bool = True,
+              client=None) -> StudyRun:
     """Run ``study`` into folder ``out`` (module docstring).
 
     ``workers``: 1 = in this process; N = a local process pool of N; None = all local cores
     (or, with ``dask``, the cluster's workers). ``dask``: a scheduler address or ``"local"``;
-    ``client``: an existing ``distributed.Client`` (tests). ``progress``: show the bar.
+    ``client``: an existing ``distributed.Client`` (tests). ``progress``: True shows the
+    study's own bar (trials and the running median error); a :data:`pkmcal.progress.Progress`
+    callback is called with (trials done, total) after every batch instead.
     """
     t0 = time.perf_counter()
     if workers is not None and workers < 1:
@@ -108,11 +112,16 @@ def run_study(study: Study, out: str | Path, *, workers: int | None = None, dask
     todo = {c: v for c, v in todo.items() if v}
     n_todo = sum(len(v) for v in todo.values())
     total = study.trials * len(ctx.campaigns)
-    bar = _Progress(total, total - n_todo, progress, ctx.names)
+    callback = progress if callable(progress) else None
+    bar = _Progress(total, total - n_todo, progress is True, ctx.names)
+    finished = [total - n_todo]
 
     def on_batch(c, first, last, lines, seconds):
         folder.write_part(c, first, last, lines)
         bar.update(last - first + 1, lines)
+        finished[0] += last - first + 1
+        if callback is not None:
+            callback(finished[0], total)
 
     backend, n_workers, own_client, cluster = "inprocess", 1, None, None
     t_run = time.perf_counter()

@@ -40,7 +40,8 @@ the size of the candidate pool (drawn once per machine × setup × plan); ``resa
 ``trial`` (a new selection from the pool in every trial; the default for ``random`` and
 ``corners``) or ``once`` (one selection used in every trial; the default for the
 optimising planners, as an engineer plans once and measures). ``margin`` and ``index`` as
-for ``pkmcal plan``.
+for ``pkmcal plan`` (no ``margin``: the safety margins a real machine survives,
+:func:`pkmcal.planning.margins.default_margin`; a number: that margin on every limit).
 
 :func:`load_study` validates a file with pydantic and resolves it into a :class:`Study`
 (machines and setups loaded); errors name the file, line and key.
@@ -106,7 +107,7 @@ class _Plan(_Strict):
     poses: list[int]
     candidates: int = Field(2000, ge=1, le=10_000_000)
     resample: Literal["trial", "once"] | None = None
-    margin: float = Field(0.1, ge=0.0, allow_inf_nan=False)
+    margin: float | None = Field(None, ge=0.0, allow_inf_nan=False)
     index: Literal["O1", "O2", "O3", "O4", "O5"] | None = None
     label: str | None = None
 
@@ -209,7 +210,7 @@ class PlanSpec:
     poses: tuple[int, ...]
     candidates: int = 2000
     resample: str = "trial"
-    margin: float = 0.1
+    margin: float | None = None
     index: str | None = None
 
 

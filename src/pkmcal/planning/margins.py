@@ -1,0 +1,135 @@
+"""Safety margins of a measurement plan: how far inside the *nominal* machine's limits the
+planned poses stay, so that the *real* machine — whose joints differ from the nominal ones by
+millimetres before calibration — still reaches them when commanded through the nominal model.
+
+The real machine commanded with the nominal leg readings λ reaches a pose that differs from
+the planned one. With joint position errors of size δ (mm):
+
+* the platform turns by up to about δ / r_p (r_p: the smallest platform joint radius), which
+  tilts every spherical joint by as much, and each leg's direction changes by about δ / L
+  (L: the shortest leg, L0 + lowest reading); hence the **joint tilt margin**
+
+      Δθ = atan(δ / r_p) + atan(δ / L_min)                          (degrees on the command line)
+
+  on both the U- and the S-joint limits;
+* the **stroke margin** is δ mm at both ends (encoder zero and homing uncertainty of the same
+  order; the readings themselves are commanded, so the geometry does not move them);
+* the **leg clearance margin** stays small (:data:`CLEARANCE_MARGIN_MM`): the modelled legs of
+  tight designs pass within 0.13 mm of each other at home (the prototype), so a margin of δ
+  would reject the home pose itself.
+
+The default δ = :data:`ASSUMED_JOINT_ERROR_MM` = 3 mm is the largest joint deviation of
+paper 2's Table 4 (1–3 mm). On the prototype (r_p = 70 mm, L_min = 305 mm) it gives 3 mm and
+3.02°, and every pose of the indicator tutorial's plan is then reached by
+``stewart-prototype-real`` (18 of 45 exceeded its 29° S-joint tilt with the former default of
+0.1 mm / 0.1°). A machine expected to deviate more needs larger margins (``--stroke-margin``,
+``--tilt-margin``).
+
+Margins apply to machines whose limits take them (hexapods); the planar machines' limits
+(workspace box, reach, transmission angle) take none. :func:`planning_machine` returns the
+nominal machine with its limits shrunk by the margins (the candidate checks then add none),
+the same treatment ``pkmcal plan`` and ``pkmcal demo`` give it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from pkmcal.errors import PkmcalError
+from pkmcal.mechanisms.base import Mechanism
+
+#: Joint position error the default margins allow for (mm): paper 2 Table 4's largest.
+ASSUMED_JOINT_ERROR_MM = 3.0
+#: Leg-to-leg clearance margin (mm) of the collision check.
+CLEARANCE_MARGIN_MM = 0.1
+
+
+@dataclass(frozen=True)
+class SafetyMargin:
+    """Margins inside the nominal limits: stroke (mm, both ends), joint tilts (degrees, U and
+    S joints) and leg clearance (mm). ``source`` says where they come from."""
+
+    stroke_mm: float
+    tilt_deg: float
+    clearance_mm: float
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        for name in ("stroke_mm", "tilt_deg", "clearance_mm"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0.0):
+                raise PkmcalError(f"safety margin {name.split('_')[0]} must be a non-negative number; got {v}")
+
+    def describe(self) -> str:
+        text = (f"stroke {self.stroke_mm:g} mm, joint tilts {self.tilt_deg:.3g} deg, "
+                f"leg clearance {self.clearance_mm:g} mm")
+        return f"{text} ({self.source})" if self.source else text
+
+
+def has_margins(mechanism: Mechanism) -> bool:
+    """Whether the machine's limits take safety margins (stroke and joint tilts)."""
+    from pkmcal.mechanisms.hexapod import Hexapod
+
+    return isinstance(mechanism, Hexapod)
+
+
+def default_margin(mechanism: Mechanism, joint_error_mm: float = ASSUMED_JOINT_ERROR_MM) -> SafetyMargin | None:
+    """The margins of the module docstring for ``mechanism`` (None if its limits take none)."""
+    if not has_margins(mechanism):
+        return None
+    r_p = float(np.min(np.linalg.norm(np.asarray(mechanism.platform), axis=1)))
+    l_min = float(np.min(np.asarray(mechanism.offset) + np.asarray(mechanism.stroke)[:, 0]))
+    if r_p <= 0 or l_min <= 0:
+        raise PkmcalError(f"machine '{mechanism.name}': cannot derive safety margins (smallest platform joint "
+                          f"radius {r_p:g} mm, shortest leg {l_min:g} mm); give --stroke-margin and --tilt-margin")
+    tilt = math.degrees(math.atan(joint_error_mm / r_p) + math.atan(joint_error_mm / l_min))
+    return SafetyMargin(joint_error_mm, tilt, CLEARANCE_MARGIN_MM,
+                        f"default for joint errors up to {joint_error_mm:g} mm: atan({joint_error_mm:g}/{r_p:.4g}) + "
+                        f"atan({joint_error_mm:g}/{l_min:.4g})")
+
+
+def resolve_margin(mechanism: Mechanism, *, stroke_mm: float | None = None, tilt_deg: float | None = None,
+                   clearance_mm: float | None = None) -> SafetyMargin | None:
+    """The default margins of ``mechanism`` with the given ones replacing them."""
+    base = default_margin(mechanism)
+    if base is None:
+        return None
+    given = [n for n, v in (("stroke", stroke_mm), ("tilt", tilt_deg), ("clearance", clearance_mm)) if v is not None]
+    if not given:
+        return base
+    source = "given: " + ", ".join(given) + ("" if len(given) == 3 else "; others default")
+    return SafetyMargin(base.stroke_mm if stroke_mm is None else float(stroke_mm),
+                        base.tilt_deg if tilt_deg is None else float(tilt_deg),
+                        base.clearance_mm if clearance_mm is None else float(clearance_mm), source)
+
+
+def planning_machine(mechanism: Mechanism, margin: SafetyMargin | None) -> Mechanism:
+    """``mechanism`` with its stroke shrunk by ``margin.stroke_mm`` at both ends, its
+    joint-tilt limits by ``margin.tilt_deg`` and its leg diameter grown by
+    ``margin.clearance_mm`` (the same machine when there is no margin). Plan on it with no
+    further margin in the candidate checks (``margin=0``)."""
+    if margin is None:
+        return mechanism
+    lim = mechanism.limits
+    t = math.radians(margin.tilt_deg)
+    stroke = np.asarray(mechanism.stroke) + np.array([margin.stroke_mm, -margin.stroke_mm])
+    if np.any(stroke[:, 1] <= stroke[:, 0]):
+        raise PkmcalError(f"a stroke margin of {margin.stroke_mm:g} mm leaves no stroke on machine "
+                          f"'{mechanism.name}'; give a smaller --stroke-margin")
+    shrunk = []
+    for name in ("u_joint_tilt", "s_joint_tilt"):
+        v = getattr(lim, name)
+        if v is not None and v - t <= 0:
+            raise PkmcalError(f"a tilt margin of {margin.tilt_deg:g}° leaves no {name.replace('_', ' ')} on "
+                              f"machine '{mechanism.name}' (limit {math.degrees(v):g}°); give a smaller --tilt-margin")
+        shrunk.append(None if v is None else v - t)
+    diameter = None if lim.leg_diameter is None else lim.leg_diameter + margin.clearance_mm
+    return replace(mechanism, stroke=stroke, limits=replace(lim, u_joint_tilt=shrunk[0], s_joint_tilt=shrunk[1],
+                                                           leg_diameter=diameter))
+
+
+__all__ = ["ASSUMED_JOINT_ERROR_MM", "CLEARANCE_MARGIN_MM", "SafetyMargin", "default_margin",
+           "has_margins", "planning_machine", "resolve_margin"]

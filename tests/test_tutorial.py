@@ -1,0 +1,138 @@
+"""docs/tutorial-indicators.md cannot rot: its commands run, in order, in a copy of
+docs/tutorial-files/, and print what the page shows.
+
+* Every ``$ pkmcal ...`` line of a ``console`` block (with ``\\`` continuations) is run; it
+  must exit with 0, or with 2 where the page shows a ``pkmcal: error:`` line.
+* Every output line the page shows (not ``...``, nor a line trimmed with ``...``) must be a
+  line of what the command printed, numbers compared to three significant digits (digits
+  beyond about the tenth are round-off and differ between computers).
+* A block after ``<!-- file: NAME -->`` is an excerpt of the file NAME as the commands left
+  it, compared the same way.
+* ``dials_inch.csv`` is ``meas.csv`` of the tutorial in inches (7 decimals).
+
+The page was written with ``SOURCE_DATE_EPOCH=1798761600`` (2027-01-01, the date in the
+calibrated machine's name); so is this run.
+"""
+
+from __future__ import annotations
+
+import csv
+import re
+import shlex
+import shutil
+from pathlib import Path
+
+import numpy as np
+from click.testing import CliRunner
+
+from pkmcal.cli.main import cli
+from pkmcal.io.tables import read_table
+
+DOCS = Path(__file__).resolve().parent.parent / "docs"
+PAGE = DOCS / "tutorial-indicators.md"
+FILES = DOCS / "tutorial-files"
+NUMBER = re.compile(r"[-+]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][-+]?\d+)?")
+
+
+def normalise(line: str) -> str:
+    """Numbers to 3 significant digits, runs of blanks to one."""
+    return " ".join(NUMBER.sub(lambda m: f"{float(m.group()):.3g}", line).split())
+
+
+def blocks(text: str):
+    """(kind, label, lines) of every fenced block: kind is the fence's language, label the
+    NAME of a preceding ``<!-- file: NAME -->``."""
+    lines = text.splitlines()
+    i = 0
+    while i < len(lines):
+        fence = re.match(r"^```(\w*)\s*$", lines[i])
+        if not fence:
+            i += 1
+            continue
+        label = None
+        k = i - 1
+        while k >= 0 and not lines[k].strip():
+            k -= 1
+        m = re.match(r"<!-- file: (\S+) -->", lines[k]) if k >= 0 else None
+        if m:
+            label = m.group(1)
+        j = i + 1
+        while not lines[j].startswith("```"):
+            j += 1
+        yield fence.group(1), label, lines[i + 1:j]
+        i = j + 1
+
+
+def commands(lines: list[str]):
+    """(argv, shown output lines) of every ``$ pkmcal`` command of a console block."""
+    out, k = [], 0
+    while k < len(lines):
+        line = lines[k]
+        if line.startswith("$ "):
+            cmd = line[2:]
+            while cmd.endswith("\\"):
+                k += 1
+                cmd = cmd[:-1] + " " + lines[k].strip()
+            out.append((shlex.split(cmd), []))
+        elif out:
+            out[-1][1].append(line)
+        k += 1
+    return out
+
+
+def check_shown(shown: list[str], actual: str, what: str) -> None:
+    got = {normalise(line) for line in actual.splitlines()}
+    for line in shown:
+        if "..." in line or not line.strip():
+            continue
+        assert normalise(line) in got, f"{what}: the page shows\n  {line}\nbut it printed:\n{actual[-3000:]}"
+
+
+def test_tutorial_runs_as_written(tmp_path, monkeypatch):
+    work = tmp_path / "my-calibration"
+    shutil.copytree(FILES, work)
+    monkeypatch.chdir(work)
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1798761600")
+    text = PAGE.read_text(encoding="utf-8")
+    runner = CliRunner()
+    n_run, excerpts = 0, []
+    for kind, label, lines in blocks(text):
+        if label is not None:
+            excerpts.append((label, lines))
+        if kind != "console":
+            continue
+        for argv, shown in commands(lines):
+            assert argv[0] == "pkmcal", argv
+            res = runner.invoke(cli, argv[1:])
+            expected = 2 if any(s.startswith("pkmcal: error:") for s in shown) else 0
+            assert res.exit_code == expected, (argv, res.output[-3000:])
+            check_shown(shown, res.output, " ".join(argv))
+            n_run += 1
+    assert n_run >= 10
+    for name, lines in excerpts:
+        check_shown(lines, (work / name).read_text(encoding="utf-8"), name)
+    assert {name for name, _ in excerpts} >= {"indicators.yaml", "meas.csv", "dials_inch.csv", "kinematics.hal"}
+    # the shipped setup is the one the page shows, byte for byte (but for the fence)
+    shown_setup = next(lines for name, lines in excerpts if name == "indicators.yaml")
+    assert (FILES / "indicators.yaml").read_text(encoding="utf-8").splitlines() == shown_setup
+
+
+def test_dials_inch_is_the_tutorials_measurements_in_inches(tmp_path, monkeypatch):
+    """The shipped logger file is what the tutorial's simulate writes, converted to inches
+    with 7 decimals (so the page's comparison of the two fits holds)."""
+    monkeypatch.chdir(tmp_path)
+    shutil.copy(FILES / "indicators.yaml", tmp_path)
+    runner = CliRunner()
+    for argv in (["plan", "stewart-prototype", "--setup", "indicators.yaml", "--n", "45", "--seed", "1",
+                  "-o", "poses.csv"],
+                 ["simulate", "stewart-prototype", "--real", "stewart-prototype-real", "--setup", "indicators.yaml",
+                  "--poses", "poses.csv", "--seed", "2", "-o", "meas.csv"]):
+        assert runner.invoke(cli, argv).exit_code == 0, argv
+    mm = ("d1", "d2", "d3") + tuple(f"lambda{i}" for i in range(1, 7))
+    meas = read_table(tmp_path / "meas.csv", mm)[list(mm)]
+    with open(FILES / "dials_inch.csv", newline="") as fh:             # plain csv: read independently
+        rows = list(csv.reader(fh))
+    assert rows[0] == ["Pose", "DI-A", "DI-B", "DI-C"] + [f"Strut {i}" for i in range(1, 7)]
+    log = np.array(rows[1:], dtype=float)
+    np.testing.assert_array_equal(log[:, 0], np.arange(1, len(meas) + 1))
+    np.testing.assert_allclose(log[:, 1:], meas / 25.4, rtol=0, atol=0.5e-7 + 1e-12)
