@@ -439,6 +439,76 @@ def _fk_range(lengths, guesses, base, platform, tol, max_iter, polish, poses, co
         poses[k, 5] = math.atan2(R[1, 0], R[0, 0])
 
 
+@nb.njit(**_OPTS)
+def _det_sign_range(poses, base, platform, out, start, stop):
+    """out[k] = sign det J(pose_k) of the twist Jacobian, row i = [u_iᵀ, ((R a_i) × u_i)ᵀ],
+    for rows k in [start, stop): Gaussian elimination with partial pivoting, det =
+    (−1)^(row swaps) · Π pivots; 0 when a pivot is below 1e-12 × the largest entry (singular
+    to working precision) or the pose is not finite."""
+    R = np.empty((3, 3))
+    J = np.empty((6, 6))
+    rhs = np.empty(6)
+    ra = np.empty(3)
+    p = np.empty(3)
+    zero = np.zeros(6)
+    for k in range(start, stop):
+        _euler_matrix(poses[k, 3], poses[k, 4], poses[k, 5], R)
+        for r in range(3):
+            p[r] = poses[k, r]
+        err = _residual_jacobian(zero, p, R, base, platform, J, rhs, ra)
+        out[k] = 0
+        if not math.isfinite(err):
+            continue
+        scale = 0.0
+        for r in range(6):
+            for c in range(6):
+                scale = max(scale, abs(J[r, c]))
+        if not scale > 0.0:
+            continue
+        tiny = 1e-12 * scale
+        sign = 1
+        singular = False
+        for col in range(6):
+            piv = col
+            best = abs(J[col, col])
+            for r in range(6):
+                if r > col:
+                    v = abs(J[r, col])
+                    if v > best:
+                        best = v
+                        piv = r
+            if not best > tiny:
+                singular = True
+                break
+            if piv != col:
+                sign = -sign
+                for c in range(6):
+                    t = J[col, c]
+                    J[col, c] = J[piv, c]
+                    J[piv, c] = t
+            if J[col, col] < 0.0:
+                sign = -sign
+            inv = 1.0 / J[col, col]
+            for r in range(6):
+                if r > col:
+                    f = J[r, col] * inv
+                    for c in range(6):
+                        if c > col:
+                            J[r, c] -= f * J[col, c]
+        if not singular:
+            out[k] = sign
+
+
+def twist_det_signs(poses, base, platform):
+    """sign det J (N,) int8 of the twist Jacobian ∂L/∂(δp, δω) at poses (N, 6) [mm, rad]:
+    +1, −1, or 0 where singular to working precision (or not finite). Its sign tells the
+    assembly mode apart: it changes only through a singularity (det J = 0)."""
+    poses, base, platform = _f64(np.atleast_2d(poses)), _f64(base), _f64(platform)
+    out = np.zeros(poses.shape[0], dtype=np.int8)
+    _run_rows(_det_sign_range, poses.shape[0], _IK_GRAIN, (poses, base, platform, out))
+    return out
+
+
 def fk_newton(lengths, guesses, base, platform, tol, max_iter, polish=0):
     """Newton–Raphson FK for N sets of leg lengths (N, 6) from guesses (N, 6) or one guess
     for all, (1, 6) or (6,).
