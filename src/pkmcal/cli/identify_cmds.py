@@ -218,7 +218,7 @@ def _report_data(nominal, result, setup, meas, meas_path: str, output: str):
     else:
         with np.errstate(all="ignore"):
             fk = nominal.fk(meas.actuators)
-        poses = np.asarray(fk.poses)[np.asarray(fk.converged, dtype=bool)]
+        poses = np.asarray(fk.poses)[fk.ok]
     try:
         setup_text = setup_to_yaml(setup)
     except PkmcalError:

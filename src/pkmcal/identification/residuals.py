@@ -21,8 +21,8 @@ with, per pose, A = ∂IK/∂x (l×n), B = ∂IK/∂ρ (l×p), H = ∂h/∂x (m�
 ``fk-residual`` (paper 2 §3, eq. 3; x from the forward kinematics)
     x_j = FK(q_j, ρ);  r_j = y_j − h(x_j, s);  implicit differentiation of IK(x, ρ) = q:
     ∂x/∂ρ = −A⁻¹B, so ∂r/∂ρ = H A⁻¹ B and ∂r/∂s = −G (one batched solve over the poses);
-    Σ_j = Σ_y + H A⁻¹ Σ_q A⁻ᵀ Hᵀ.  Poses whose FK does not converge are flagged
-    (``converged``); the engine drops those that fail at the nominal machine (error if
+    Σ_j = Σ_y + H A⁻¹ Σ_q A⁻ᵀ Hᵀ.  Poses whose FK does not converge, or converges on another
+    assembly mode than its start pose (``FKResult.ok``), are flagged (``converged``); the engine drops those that fail at the nominal machine (error if
     more than 10 %) and reports those failing at the solution. At a trial point where
     a pose's FK fails, its residual is taken at the last converged pose (finite, and
     typically larger than at the accepted iterate, so the solver shortens the step).
@@ -453,7 +453,7 @@ class FKResidual(Method):
         mech, sensor = m.split(theta)
         fk = mech.fk_precise(m.q, guess=self._guess)
         x = fk.poses
-        ok = fk.converged & np.all(np.isfinite(x), axis=1)
+        ok = fk.ok & np.all(np.isfinite(x), axis=1)
         # warm start the next evaluation from the converged poses
         self._guess = np.where(ok[:, None], x, self._guess)
         x = np.where(ok[:, None], x, self._guess)
@@ -527,7 +527,7 @@ class Projection(Method):
         start = model.start_poses()
         if mech.n_actuators == mech.n_dof:
             fk = mech.fk(model.q, guess=start)
-            start = np.where(fk.converged[:, None], fk.poses, start)
+            start = np.where(fk.ok[:, None], fk.poses, start)
         self._x = start
 
     def rows_per_pose(self) -> int:

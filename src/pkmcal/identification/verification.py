@@ -87,7 +87,9 @@ def pose_errors(model: Mechanism, real: Mechanism, poses: np.ndarray, ignore_lim
         dropped[int(k)] = "ik-failed"
     for k in np.flatnonzero(finite & ~fk.converged):
         dropped[int(k)] = "fk-not-converged"
-    ok = finite & fk.converged
+    for k in np.flatnonzero(finite & fk.branch_changed):
+        dropped[int(k)] = "fk-other-assembly-mode"
+    ok = finite & fk.ok
     reached = np.where(ok[:, None], fk.poses, cmd)
     ok = drop_limit_violations(real, reached, ok, ignore_limits, dropped)
 
