@@ -26,6 +26,7 @@ from pkmcal.identification.redundant_campaign import (
     sensor_calibration_block,
 )
 from pkmcal.identification.residuals import METHODS, default_method
+from pkmcal.cli._limits import unreachable_notes
 from pkmcal.cli.import_options import import_options
 from pkmcal.io.atomic import atomic_write_text, check_output_path
 from pkmcal.io.measurements import load_measurements
@@ -386,19 +387,3 @@ def identifiability_cmd(machine, setup_spec, poses, method, fix, free, as_json, 
         click.echo(f"not seen at all: {', '.join(rep.unseen)}")
     for n in notes:
         click.echo(f"warning: {n}")
-
-
-def unreachable_notes(machine, poses: np.ndarray, path: str) -> list[str]:
-    """One warning per kind of limit that poses (N, n) of the file ``path`` violate on
-    ``machine``, naming their rows (data rows of the file, 1-based): an analysis of poses
-    the machine cannot take describes a plan it cannot carry out."""
-    with np.errstate(all="ignore"):
-        report = machine.check_limits(poses)
-    bad = ~report.ok
-    if not bad.any():
-        return []
-    rows = np.flatnonzero(bad) + 1
-    shown = ", ".join(str(int(k)) for k in rows[:20]) + (" ..." if len(rows) > 20 else "")
-    kinds = ", ".join(f"{name} ({int(np.count_nonzero(v))})" for name, v in report.violations.items() if v.any())
-    return [f"{int(bad.sum())} of the {len(poses)} poses of {path} violate the machine's limits ({kinds}): rows "
-            f"{shown} (data rows, 1-based); the numbers above assume the machine reaches them"]

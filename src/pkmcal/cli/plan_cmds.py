@@ -18,6 +18,7 @@ import time
 import click
 import numpy as np
 
+from pkmcal.cli._limits import unreachable_notes
 from pkmcal.cli.import_options import import_options
 from pkmcal.io.atomic import check_output_path
 from pkmcal.io.tables import to_file_units, write_table
@@ -148,9 +149,13 @@ def observability_cmd(machine, poses, setup_spec, as_json, mapping=None) -> None
     setup = load_setup(setup_spec, mech)
     pose_arr = read_candidates_csv(poses, mech, mapping)
     ind = pose_set_indices(mech, setup, pose_arr)
+    notes = unreachable_notes(mech, pose_arr, poses)
     if as_json:
-        click.echo(json.dumps({**ind, "n_poses": int(len(pose_arr))}))
+        click.echo(json.dumps({**ind, "n_poses": int(len(pose_arr)), "warnings": notes,
+                               "units": {**{k: "1" for k in INDEX_NAMES}, "n_poses": "1"}}))
         return
     click.echo(f"{len(pose_arr)} poses")
     for k in INDEX_NAMES:
         click.echo(f"{k} = {ind[k]:.6g}   {INDEX_DESCRIPTIONS[k]}")
+    for n in notes:
+        click.echo(f"warning: {n}")
