@@ -194,9 +194,13 @@ class IdentificationResult:
             return float(v) * (deg if n in angles else 1.0)
 
         rms = self.rms_by_unit()
-        row_units = set(self.residual_units)
-        rms_unit = ({"rad": "rad", "mm": "mm"}.get(next(iter(row_units)), "1") if len(row_units) == 1 else
-                    "mixed: one rms over rows of different units (mm and rad); see residual_rms_mm, residual_rms_deg")
+        row_units = sorted(set(self.residual_units))
+        if row_units == ["rad"]:
+            rms_unit = "rad (kept as it was; residual_rms_deg gives it in degrees)"
+        elif len(row_units) == 1:
+            rms_unit = row_units[0]
+        else:
+            rms_unit = "mixed: one rms over rows of different units; see residual_rms_mm, residual_rms_deg"
         return {
             "method": self.method,
             "weighted": self.weighted,
