@@ -51,8 +51,8 @@ COMPILED_FROM = 64
 #: Default FK tolerance on leg lengths (mm) and iteration cap.
 FK_TOL_MM = 1e-9
 FK_MAX_ITER = 30
-#: Leg-length steps of the continuation that re-solves a row whose Newton FK failed or left
-#: the guess's assembly mode (:meth:`Hexapod.fk_lengths`).
+#: Leg-length steps of the continuation that re-solves a row whose Newton FK converged on
+#: another assembly mode than its guess (:meth:`Hexapod.fk_lengths`).
 FK_CONTINUATION_STEPS = 8
 
 
@@ -304,13 +304,15 @@ class Hexapod(Mechanism):
 
         Branch check (:attr:`FKResult.same_branch`): the returned pose must be on the
         assembly mode of its guess, sign det J(pose) = sign det J(guess) with J the twist
-        Jacobian (:meth:`assembly_signs`). A row whose Newton iteration fails, or lands on
-        another assembly mode, is solved again by continuation from its guess: the leg
-        lengths are moved from L(guess) to L in :data:`FK_CONTINUATION_STEPS` equal steps,
-        each solved by Newton from the previous pose, the path a machine takes when its legs
-        move together from the guess; that answer replaces Newton's when it converges on the
-        guess's assembly mode. Rows still on another assembly mode keep their (valid) pose
-        with ``same_branch`` False.
+        Jacobian (:meth:`assembly_signs`; the pose's sign comes free from the last Newton
+        factorisation). A row whose Newton iteration lands on another assembly mode is
+        solved again by continuation from its guess: the leg lengths are moved from L(guess)
+        to L in :data:`FK_CONTINUATION_STEPS` equal steps, each solved by Newton from the
+        previous pose, the path a machine takes when its legs move together from the guess;
+        that answer replaces Newton's when it converges on the guess's assembly mode
+        (``iterations`` stays Newton's count). Rows still on another assembly mode keep
+        their (valid) pose with ``same_branch`` False; rows that did not converge are left
+        as Newton left them.
         """
         lengths = np.ascontiguousarray(np.atleast_2d(np.asarray(lengths, dtype=float)))
         if lengths.ndim != 2 or lengths.shape[1] != N_LEGS:
@@ -320,13 +322,12 @@ class Hexapod(Mechanism):
         if g.ndim == 1 or g.shape[0] == 1:
             guesses = guesses[:1]  # one guess for all: the kernel broadcasts it
         K = _kernels()
-        poses, conv, iters, res = K.fk_newton(lengths, guesses, self.base, self.platform, tol, max_iter, polish)
+        poses, conv, iters, res, sign = K.fk_newton_signed(lengths, guesses, self.base, self.platform, tol, max_iter,
+                                                           polish)
         ref_sign = K.twist_det_signs(guesses, self.base, self.platform)
         ref_sign = np.broadcast_to(ref_sign, conv.shape) if ref_sign.shape[0] == 1 else ref_sign
-        sign = K.twist_det_signs(poses, self.base, self.platform)
         same = (sign == ref_sign) | (sign == 0) | (ref_sign == 0)
-        finite_guess = np.broadcast_to(np.all(np.isfinite(guesses), axis=1), conv.shape)
-        retry = np.flatnonzero(~(conv & same) & np.all(np.isfinite(lengths), axis=1) & finite_guess)
+        retry = np.flatnonzero(conv & ~same)
         if retry.size:
             gr = np.ascontiguousarray(guesses[retry] if guesses.shape[0] > 1 else np.repeat(guesses, retry.size, 0))
             x, ok = self._fk_continuation(lengths[retry], gr, tol, max_iter, polish)
