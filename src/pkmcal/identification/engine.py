@@ -576,7 +576,7 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
         from pkmcal.identification.identifiability import design_jacobian
 
         Jd, okd, _ = design_jacobian(model.mechanism, model.sensor, model.noise, model.commanded, meth.name,
-                                     weighted, form=form)
+                                     weighted, form=form, sensor_columns=sensor_free)
         if okd.any():
             judged = Jd[okd].reshape(-1, Jd.shape[-1])[:, cand]
             basis = f"{meth.name} at the {int(okd.sum())} commanded poses (noise-free, nominal machine)"

@@ -291,22 +291,26 @@ def analyse_jacobian(
 
 
 def design_jacobian(machine, sensor, noise, poses: np.ndarray, method: str, weighted: bool = True,
-                    form: str = "plain") -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+                    form: str = "plain", sensor_columns: bool = True) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
     """The engine's whitened residual Jacobian W_j J_j (N, k, P) of all parameters for
     noise-free readings simulated at ``poses`` (N, n) on the nominal machine (q = IK(x),
     y = h(x)), a flag (N,) of the poses whose nuisance pose was solved, and the parameter
     names: the identification Jacobian of a pose *plan*, which ``pkmcal identifiability``
     analyses and ``pkmcal identify`` judges its free set on when the measurements carry
-    their commanded poses (same method, same weights, same candidate parameters)."""
+    their commanded poses (same method, same weights, same candidate parameters).
+    ``sensor_columns=False`` skips the sensor parameters' columns (NaN), as the engine does
+    when none of them is a candidate."""
     from pkmcal.identification.residuals import Model, make_method, whitening
 
     poses = machine.as_pose_array(poses)
     with np.errstate(invalid="ignore"):
         model = Model(machine, sensor, noise, machine.ik(poses), sensor.predict(poses), poses)
     meth = make_method(method, model, weighted, form=form)
+    meth.sensor_columns = sensor_columns
     whiten = weighted and not meth.prewhitened            # the weighted projection is already whitened
     ev = meth.evaluate(model.theta0, jac=True, cov=whiten)
-    ok = np.asarray(ev.converged, dtype=bool) & np.all(np.isfinite(ev.J), axis=(1, 2))
+    cols = slice(None) if sensor_columns else slice(0, model.n_mech)
+    ok = np.asarray(ev.converged, dtype=bool) & np.all(np.isfinite(ev.J[:, :, cols]), axis=(1, 2))
     J = ev.J
     if whiten:
         J = np.full_like(ev.J, np.nan)
