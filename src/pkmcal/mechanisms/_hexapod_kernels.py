@@ -458,7 +458,7 @@ def _fk_range(lengths, guesses, base, platform, tol, max_iter, polish, poses, co
             else:
                 if not j_here:
                     _residual_jacobian(target, p, R, base, platform, J, rhs, ra)
-                signs[k] = _det_sign6(J)
+                signs[k] = _solve6(J, rhs, d)
         iterations[k] = it
         residual[k] = err
         for r in range(3):
@@ -470,53 +470,14 @@ def _fk_range(lengths, guesses, base, platform, tol, max_iter, polish, poses, co
 
 
 @nb.njit(**_OPTS)
-def _det_sign6(J):
-    """sign det J (6×6) by Gaussian elimination with partial pivoting, det = (−1)^(row
-    swaps) · Π pivots; 0 when a pivot is below 1e-12 × the largest entry (singular to
-    working precision) or J is not finite. J is overwritten. Constant trip counts with
-    ``if r > col`` guards, as :func:`_solve6` (LLVM unrolls them)."""
-    scale = 0.0
-    for r in range(6):
-        for c in range(6):
-            scale = max(scale, abs(J[r, c]))
-    tiny = 1e-12 * scale
-    sign = 1
-    ok = scale > 0.0 and math.isfinite(scale)
-    for col in range(6):
-        piv = col
-        best = abs(J[col, col])
-        for r in range(6):
-            if r > col:
-                v = abs(J[r, col])
-                if v > best:
-                    best = v
-                    piv = r
-        ok = ok and best > tiny
-        if piv != col:
-            sign = -sign
-            for c in range(6):
-                t = J[col, c]
-                J[col, c] = J[piv, c]
-                J[piv, c] = t
-        if J[col, col] < 0.0:
-            sign = -sign
-        inv = 1.0 / J[col, col] if ok else 0.0
-        for r in range(6):
-            if r > col:
-                f = J[r, col] * inv
-                for c in range(6):
-                    if c > col:
-                        J[r, c] -= f * J[col, c]
-    return sign if ok else 0
-
-
-@nb.njit(**_OPTS)
 def _det_sign_range(poses, base, platform, out, start, stop):
     """out[k] = sign det J(pose_k) of the twist Jacobian, row i = [u_iᵀ, ((R a_i) × u_i)ᵀ],
-    for rows k in [start, stop) (:func:`_det_sign6`; 0 for a pose that is not finite)."""
+    for rows k in [start, stop): the sign :func:`_solve6` finds while factorising J (0 when
+    singular to working precision, or for a pose that is not finite)."""
     R = np.empty((3, 3))
     J = np.empty((6, 6))
     rhs = np.empty(6)
+    d = np.empty(6)
     ra = np.empty(3)
     p = np.empty(3)
     zero = np.zeros(6)
@@ -525,7 +486,7 @@ def _det_sign_range(poses, base, platform, out, start, stop):
         for r in range(3):
             p[r] = poses[k, r]
         err = _residual_jacobian(zero, p, R, base, platform, J, rhs, ra)
-        out[k] = _det_sign6(J) if math.isfinite(err) else 0
+        out[k] = _solve6(J, rhs, d) if math.isfinite(err) else 0
 
 
 def twist_det_signs(poses, base, platform):

@@ -337,7 +337,6 @@ class Hexapod(Mechanism):
             take = retry[better]
             if take.size:
                 poses[take] = x[better]
-                conv[take] = True
                 same[take] = True
                 res[take] = np.max(np.abs(self.leg_lengths(x[better]) - lengths[take]), axis=1)
         return FKResult(poses=poses, converged=conv, iterations=iters, residual=res, same_branch=same)
