@@ -286,7 +286,12 @@ def run_demo(config: DemoConfig = DemoConfig(), progress: Progress | None = None
                        "dropped": [{"pose": int(i) + 1, "reason": r} for i, r in sim.dropped.items()]},
         "identification": result.to_dict(),
         "verification": verification.to_dict(),
+        "headline_mm_deg": {k: math.degrees(v) if k.startswith("orientation") else v for k, v in headline.items()},
         "headline_mm_rad": headline,
+        "units": {"seed": "1", "n_poses": "1", "n_candidates": "1", "n_held_out": "1", "error_map_points": "1",
+                  "stroke_margin": "mm", "candidates": "1", "chosen": "1", "indices": "1", "measured": "1",
+                  "headline_mm_deg": "mm for position_*, deg for orientation_*",
+                  "headline_mm_rad": "deprecated: headline_mm_deg with the orientation in radians"},
     }
     files["json"] = out / "calibration.json"
     atomic_write_text(files["json"], json.dumps(_finite(summary), indent=2, ensure_ascii=False) + "\n")

@@ -23,10 +23,10 @@ from pkmcal.identification.redundant_campaign import (
     BASELINES,
     baseline_inputs,
     baseline_result,
-    is_redundant,
     sensor_calibration_block,
 )
-from pkmcal.identification.residuals import METHODS
+from pkmcal.identification.residuals import METHODS, default_method
+from pkmcal.cli._limits import unreachable_notes
 from pkmcal.cli.import_options import import_options
 from pkmcal.cli.options import DeprecatedArgument, check_output, emit, examples, output_option, poses_file, to_stdout
 from pkmcal.io.atomic import check_output_path
@@ -70,24 +70,112 @@ def result_table(result) -> str:
     return "\n".join(f"{r[0]:<{w[0]}}  {r[1]:>{w[1]}}  {r[2]:>{w[2]}}  {r[3]:>{w[3]}}  {r[4]}".rstrip() for r in rows)
 
 
-def fit_summary(result) -> str:
+def merged_free(free: list[str] | None, setup) -> list[str] | None:
+    """The free list the fit gets from ``--free`` and the setup (the rule of ``identify
+    --help``): None without ``--free`` (the engine's default: every machine parameter and the
+    setup's free sensor parameters); else the ``--free`` names and patterns followed by the
+    setup's ``free:`` sensor parameters (merged, not replaced; ``--fix`` holds any of them)."""
+    if free is None:
+        return None
+    return list(free) + [n for n in setup.sensor.default_free if n not in free]
+
+
+def free_statement(result, free_opt: list[str] | None, setup) -> str:
+    """Which parameters were estimated and where each list came from (one line)."""
+    p = len(result.mechanism.param_names)
+    names = result.names
+    mech_free = [n for n in result.free if names.index(n) < p]
+    sensor_free = [n for n in result.free if names.index(n) >= p]
+    setup_free = set(setup.sensor.default_free)
+    src = "--free" if free_opt is not None else "all, no --free given"
+    text = f"free parameters: {len(mech_free)} of {p} machine parameters ({src})"
+    if sensor_free:
+        parts = [f"{n} ({'setup free:' if n in setup_free else '--free'})" for n in sensor_free]
+        text += "; sensor: " + ", ".join(parts)
+    else:
+        text += "; no sensor parameter"
+    held = [n for n in setup_free if n not in result.free]
+    if held:
+        text += f"; setup-free sensor parameters held: {', '.join(held)} (--fix or gauge)"
+    return text + ". Rule: --free adds to the setup's free: list, it does not replace it"
+
+
+def _residual_line(result) -> str:
+    groups: dict[str, list[str]] = {}
+    for name, unit in zip(result.residual_names, result.residual_units or ("1",) * len(result.residual_names)):
+        groups.setdefault({"rad": "deg"}.get(unit, unit), []).append(name)
+    rms = result.rms_by_unit()
+    parts = [f"rms {rms[u]:.6g}{'' if u == '1' else ' ' + u} over {', '.join(ns)}" + (" (whitened or mixed units)"
+                                                                                   if u == "1" else "")
+             for u, ns in groups.items()]
+    return "residuals at the solution (measured - predicted, raw): " + "; ".join(parts)
+
+
+def fit_summary(result, free_line: str | None = None) -> str:
     u = result.uncertainty
     rep = result.identifiability
+    dropped = (f", {len(result.dropped)} dropped (rows {', '.join(str(int(k) + 1) for k in result.dropped[:20])}"
+               f"{' ...' if len(result.dropped) > 20 else ''} of the file, 1-based)") if len(result.dropped) else ""
+    whitened = ("whitened (noise model): chi2 = sum |W r|^2 = "
+                f"{u.chi2:.6g} with the weights at the solution, chi2/dof = {u.chi2:.6g}/{u.dof} = "
+                f"{u.reduced_chi2:.4g}, rms whitened residual sqrt(chi2/M) = {result.rms_whitened:.4g}")
+    cost = (f"solver cost 1/2 sum |W0 r|^2 = {result.cost:.6g} (weights from the start, held fixed while solving)"
+            if result.weighted else
+            f"solver cost 1/2 sum r^2 = {result.cost:.6g} (plain least squares on the raw residuals)")
     lines = [
         f"method {result.method} ({'noise-weighted' if result.weighted else 'unweighted'}), "
-        f"{len(result.used_poses)} poses, {len(result.free)} free parameters",
+        f"{len(result.used_poses)} poses used{dropped}, {len(result.free)} free parameters",
+        *([free_line] if free_line else []),
         f"solver: {'converged' if result.success else 'NOT converged'} after {result.nfev} evaluations: {result.message}",
-        f"rms residual {result.rms_residual:.6g} ({', '.join(result.residual_names)}); "
-        f"chi2/dof = {u.chi2:.6g}/{u.dof} = {u.reduced_chi2:.4g}",
-        f"identifiability: rank {rep.rank} of {rep.n_params}, condition number {rep.condition_number:.3g}",
+        _residual_line(result),
+        whitened if (result.weighted or np.isfinite(u.chi2)) else "no noise model to whiten with: chi2 undefined",
+        cost,
+        f"identifiability ({rep.basis or 'at the start'}): rank {rep.rank} of {rep.n_params}, "
+        f"condition number {rep.condition_number:.3g}",
         "std: a-priori (noise model) x max(1, chi2/dof) — this covariance is written to the machine file",
     ]
     for d in rep.null_space:
         lines.append(f"  unobservable: {format_direction(d)}")
-    for w in rep.weak:
-        lines.append(f"  weak (sigma ratio {w['ratio']:.2g}): {format_direction(w['direction'])}")
-    lines += [f"note: {w}" for w in result.warnings]
+    for w in result.warnings:
+        lines.append(w if w.startswith("warning: ") else f"note: {w}")
     return "\n".join(lines)
+
+
+def radian_hints(nominal, setup, meas) -> list[str]:
+    """Warnings when the sensor's angle columns and the poses the fit starts from differ in
+    spread by about 180/π (57.3): one of them was written in radians where degrees were
+    read. The reference poses are the commanded ones (cmd_a..), else the FK of the actuator
+    readings at the nominal machine; per angle column the ratio of standard deviations over
+    the poses (offsets of world/tool transforms cancel) is compared with [30, 110]."""
+    sensor = setup.sensor
+    angle_cols = [k for k, a in enumerate(sensor.reading_is_angle) if a]
+    if not angle_cols or tuple(sensor.reading_names) != tuple(nominal.pose_names):
+        return []
+    if meas.commanded is not None:
+        ref, what = np.asarray(meas.commanded, dtype=float), "the commanded poses (cmd_ columns)"
+    else:
+        with np.errstate(all="ignore"):
+            fk = nominal.fk(meas.actuators)
+        ref, what = np.asarray(fk.poses)[fk.ok], "the poses of the actuator readings (FK at the nominal machine)"
+        if len(ref) < 3:
+            return []
+    y = np.asarray(meas.readings, dtype=float)[: len(ref)] if meas.commanded is not None else \
+        np.asarray(meas.readings, dtype=float)[fk.ok]
+    out = []
+    for k in angle_cols:
+        s_ref, s_y = float(np.std(ref[:, k])), float(np.std(y[:, k]))
+        if not (s_ref > np.deg2rad(0.5) or s_y > np.deg2rad(0.5)) or s_ref == 0 or s_y == 0:
+            continue
+        r = s_ref / s_y
+        name = sensor.reading_names[k]
+        if 30.0 < r < 110.0:
+            out.append(f"warning: column '{name}' varies {r:.3g} times less than the angles of {what}: it looks like "
+                       "radians where degrees are read; convert it to degrees (or, when every angle column of the "
+                       "file is in radians, give --angle-unit rad)")
+        elif 1 / 110.0 < r < 1 / 30.0 and meas.commanded is not None:
+            out.append(f"warning: column 'cmd_{name}' varies {1 / r:.3g} times less than the measured '{name}': it "
+                       "looks like radians where degrees are read; convert it to degrees")
+    return out
 
 
 @click.command("identify", epilog=examples(
@@ -114,7 +202,10 @@ def fit_summary(result) -> str:
 @click.option("--fix", "fix", multiple=True, metavar="NAMES",
               help="Parameters to hold (names or patterns like 'b1.*', comma separated; repeatable), or 'auto'.")
 @click.option("--free", "free", multiple=True, metavar="NAMES",
-              help="Parameters to estimate (default: all machine parameters and the sensor's free ones).")
+              help="Parameters to estimate (names or patterns, comma separated; repeatable). Default: all machine "
+                   "parameters and the sensor parameters of the setup's 'free:' list. With --free, the setup's "
+                   "'free:' sensor parameters are estimated too: --free adds to that list, it does not replace "
+                   "it (hold one of them with --fix). The output states which list each free parameter came from.")
 @output_option("CALIBRATED.yaml", "Calibrated machine file to write", stdout=False)
 @click.option("--name", metavar="NAME",
               help="Name of the calibrated machine (default: MACHINE-calibrated-YYYY-MM-DD, the UTC date).")
@@ -149,8 +240,7 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     setup = load_setup(setup_spec, nominal)
     meas = load_measurements(measurements, nominal, setup, mapping)
     if method is None:
-        method = ("projection" if is_redundant(nominal) else
-                  "ik-residual" if setup.sensor.kind == "full-pose" else "fk-residual")
+        method = default_method(setup, nominal)
     if keep is not None and method != "actuator-subset":
         raise PkmcalError("--keep selects the actuators of --method actuator-subset; use them together")
     baseline = method if method in BASELINES else None
@@ -165,12 +255,25 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     fix_names = _names(fix)
     if fix_names == ["auto"]:
         fix_names = "auto"
-    result = identify(fit_machine, fit_setup, fit_meas, method=method, free=_names(free), fix=fix_names,
-                      weighted=not unweighted, form=form)
+    free_opt = _names(free)
+    result = identify(fit_machine, fit_setup, fit_meas, method=method, free=merged_free(free_opt, fit_setup),
+                      fix=fix_names, weighted=not unweighted, form=form)
     if baseline is not None:
         result = baseline_result(result, nominal, baseline)
     if not result.success:
         raise PkmcalError(f"the fit did not converge ({result.message}); nothing written")
+    u = result.uncertainty
+    if u.dof <= 0:
+        raise PkmcalError(
+            f"{len(result.used_poses)} poses give {u.dof + len(result.free)} residuals for {len(result.free)} free "
+            f"parameters{' (after fixing the gauge)' if result.gauge else ''}: no degree of freedom is left to check "
+            "the fit (chi2/dof undefined); measure more poses or fix parameters; nothing written")
+    hints = radian_hints(nominal, setup, meas)
+    if hints:
+        import dataclasses
+
+        result = dataclasses.replace(result, warnings=tuple(result.warnings) + tuple(hints))
+    free_line = free_statement(result, free_opt, fit_setup)
     text = machine_to_text(_with_calibration_record(result, machine, measurements, setup_spec, name))
     report = None if report_dir is None else _report_data(nominal, result, setup, meas, measurements,
                                                            "(standard output)" if to_stdout(output) else output)
@@ -181,6 +284,7 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
         written = write_report(report, report_dir)
     if as_json:
         d = result.to_dict()
+        d["free_rule"] = free_line
         d["output"] = output
         if report is not None:
             d["report"] = str(written.html)
@@ -188,7 +292,7 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     else:
         err = to_stdout(output)
         click.echo(result_table(result), err=err)
-        click.echo(fit_summary(result), err=err)
+        click.echo(fit_summary(result, free_line), err=err)
         if not err:
             click.echo(f"wrote {output}" + (f" and {written.html}" if report is not None else ""))
         elif report is not None:
@@ -251,7 +355,7 @@ def _report_data(nominal, result, setup, meas, meas_path: str, output: str):
     else:
         with np.errstate(all="ignore"):
             fk = nominal.fk(meas.actuators)
-        poses = np.asarray(fk.poses)[np.asarray(fk.converged, dtype=bool)]
+        poses = np.asarray(fk.poses)[fk.ok]
     try:
         setup_text = setup_to_yaml(setup)
     except PkmcalError:
@@ -292,14 +396,21 @@ def identifiability_cmd(machine, poses_arg, setup_spec, poses, method, fix, free
     setup = load_setup(setup_spec, nominal)
     x = read_poses(poses, nominal, mapping)
     fix_names = _names(fix)
-    rep = identifiability(nominal, setup, x, method=method, free=_names(free),
+    rep = identifiability(nominal, setup, x, method=method, free=merged_free(_names(free), setup),
                           fix=None if fix_names == ["auto"] else fix_names)
+    notes = unreachable_notes(nominal, x, poses)
+    if rep.n_unsolved:
+        notes.append(f"{rep.n_unsolved} of the {len(x)} poses were left out: their readings or pose cannot be "
+                     "computed on this machine (outside the reach of a chain, or the pose does not solve)")
     if as_json:
-        click.echo(json.dumps(rep.to_dict(), indent=2, allow_nan=False))
+        d = rep.to_dict()
+        d["warnings"] = notes
+        click.echo(json.dumps(d, indent=2, allow_nan=False))
         return
     click.echo(f"{nominal.name} with {setup.sensor.kind} sensor, {len(x)} poses: rank {rep.rank} of "
                f"{rep.n_params} (relative tolerance {rep.rtol:g}, unit-norm columns), "
                f"condition number {rep.condition_number:.3g}")
+    click.echo(f"Jacobian of {rep.basis}")
     s = rep.singular_values
     click.echo("singular values / largest: " + " ".join(f"{v / s[0]:.2e}" for v in s))
     if rep.null_space:
@@ -311,3 +422,5 @@ def identifiability_cmd(machine, poses_arg, setup_spec, poses, method, fix, free
         click.echo(f"weak (ratio {w['ratio']:.2g}): {format_direction(w['direction'])}")
     if rep.unseen:
         click.echo(f"not seen at all: {', '.join(rep.unseen)}")
+    for n in notes:
+        click.echo(f"warning: {n}")

@@ -6,11 +6,17 @@
    ``check_limits`` satisfied) is then refined at both ends by bisection to 1e-6 mm/deg. This is
    the "travel range" of hexapod data sheets. The limit that stops each end is named.
 3. Box occupancy: the fraction of uniform random poses in the box of those ranges that are
-   reachable (the 6-D workspace is much smaller than the box).
+   reachable (the 6-D workspace is much smaller than the box), and of those on another
+   assembly mode than home.
 4. IK→FK round trip on random reachable poses of that box (``--n-poses``), or on the poses
-   of a file (``--poses FILE``): readings q = IK(x), then x̂ = FK(q) from the home pose;
-   reported: converged fraction, Newton iterations, and max ‖p̂ − p‖ (mm) and max rotation
-   angle of R̂ Rᵀ (rad) over converged poses.
+   of a file (``--poses FILE``): readings q = IK(x), then x̂ = FK(q) from the home pose. A
+   pose is a round trip only when x̂ is x: converged, on the assembly mode of x
+   (:meth:`Mechanism.same_branch`, sign det J the same) and within 1e-6 mm and 1e-6 rad;
+   max ‖p̂ − p‖ (mm) and max rotation angle of R̂ Rᵀ (deg) are reported over those. Poses
+   that converged on another assembly mode (the mirror solution) or to another pose, and
+   those that did not converge, are counted apart, never as round trips; poses that lie on
+   another assembly mode than home are counted too (the limits admit them, but FK from home
+   cannot return them).
 
 Everything is vectorised over poses (one ``check_limits`` call per bisection step).
 """
@@ -27,6 +33,12 @@ from pkmcal.mechanisms.base import Mechanism
 from pkmcal.mechanisms.library import DEFAULT_MACHINE
 
 GRID_POINTS = 1001
+#: A round trip returned the pose when within these (mm, rad). The FK stops at leg errors of
+#: 1e-9 mm; a pose with inverse condition number ≥ 0.01 (the default singularity margin)
+#: turns that into a pose error ≤ 1e-9·√6/0.01 ≈ 2.5e-7 mm (rad × the joint radius), so a
+#: pose farther off is another solution, not rounding.
+ROUND_TRIP_TOL_MM = 1e-6
+ROUND_TRIP_TOL_RAD = 1e-6
 BISECTION_TOL = 1e-6
 BOX_SAMPLES = 10_000
 
@@ -150,8 +162,10 @@ def info_cmd(machine: str, n_poses: int | None, poses: str | None, seed: int) ->
     rng = np.random.default_rng(seed)
     box = rng.uniform(ranges[:, 0], ranges[:, 1], size=(BOX_SAMPLES, mech.n_dof))
     ok = _reachable(mech, box)
+    other = int(np.count_nonzero(~mech.same_branch(box[ok], home))) if ok.any() else 0
     click.echo(f"  {100.0 * ok.mean():.1f} % of {BOX_SAMPLES} uniform random poses in the box of these ranges "
-               "are reachable")
+               "are reachable" + (f" ({100.0 * other / BOX_SAMPLES:.1f} % on another assembly mode than home)"
+                                  if other else ""))
     if poses_path is not None:
         from pkmcal.io.tables import read_poses
 
@@ -171,24 +185,56 @@ def info_cmd(machine: str, n_poses: int | None, poses: str | None, seed: int) ->
             return
     readings = mech.ik(poses)
     result = mech.fk(readings)
+    for line in round_trip_lines(mech, poses, result, what):
+        click.echo(line)
+
+
+def round_trip_lines(mech: Mechanism, poses: np.ndarray, result, what: str | None = None) -> list[str]:
+    """The round-trip report of module docstring item 4: poses (N, n) the readings came
+    from, ``result`` their FK from home. A pose counts as a round trip only when FK
+    returned it (converged, on the assembly mode of the pose itself, position within
+    :data:`ROUND_TRIP_TOL_MM` and angles within :data:`ROUND_TRIP_TOL_RAD`); errors are
+    reported over those poses only, and every other pose is counted with its reason."""
+    angle = np.array(mech.pose_is_angle)
     conv = np.asarray(result.converged, dtype=bool)
     iters = np.asarray(result.iterations)
-    click.echo(f"IK→FK round trip on {what} (FK from home):")
-    click.echo(f"  converged {int(conv.sum())}/{len(poses)}; Newton iterations mean {iters.mean():.2f}, "
-               f"max {int(iters.max())}")
-    if conv.any():
-        p, q = poses[conv], np.asarray(result.poses)[conv]
-        lin = ~angle
-        pos_err = float(np.max(np.linalg.norm(p[:, lin] - q[:, lin], axis=1)))
+    q = np.asarray(result.poses)
+    n = len(poses)
+    with np.errstate(invalid="ignore"):
+        pos_err = np.linalg.norm(poses[:, ~angle] - q[:, ~angle], axis=1)
         if mech.pose_names == ("x", "y", "z", "a", "b", "c"):
-            rot_err = float(np.max(rotation_error(euler_to_matrix(p[:, 3:]), euler_to_matrix(q[:, 3:]))))
+            rot_err = rotation_error(euler_to_matrix(poses[:, 3:]), euler_to_matrix(q[:, 3:]))
         elif angle.any():
-            d = np.angle(np.exp(1j * (p[:, angle] - q[:, angle])))
-            rot_err = float(np.max(np.abs(d)))
+            rot_err = np.max(np.abs(np.angle(np.exp(1j * (poses[:, angle] - q[:, angle])))), axis=1)
         else:
-            rot_err = None
-        click.echo(f"  max position error {pos_err:.3g} mm"
-                   + ("" if rot_err is None else f", max orientation error {rot_err:.3g} rad"))
+            rot_err = np.zeros(n)
+    mode = mech.same_branch(np.where(conv[:, None], q, poses), poses)
+    home_mode = mech.same_branch(poses, mech.home_pose)
+    back = conv & mode & (pos_err <= ROUND_TRIP_TOL_MM) & (rot_err <= ROUND_TRIP_TOL_RAD)
+    other_mode = conv & ~mode
+    other_pose = conv & mode & ~back
+    lines = [f"IK→FK round trip on {what or f'{n} poses'} (FK from home):",
+             f"  converged {int(conv.sum())}/{n}; Newton iterations mean {iters.mean():.2f}, max {int(iters.max())}"]
+    if back.any():
+        text = f"  returned the pose they came from: {int(back.sum())}/{n}; max position error {pos_err[back].max():.3g} mm"
+        if angle.any():
+            text += f", max orientation error {np.rad2deg(rot_err[back].max()):.3g} deg"
+        lines.append(text)
+    else:
+        lines.append(f"  returned the pose they came from: 0/{n}")
+    if other_mode.any():
+        lines.append(f"  NOT round trips: {int(other_mode.sum())} converged on another assembly mode than the pose they "
+                     f"came from (max position error {pos_err[other_mode].max():.3g} mm)")
+    if other_pose.any():
+        lines.append(f"  NOT round trips: {int(other_pose.sum())} converged to another pose of the same assembly mode "
+                     f"(max position error {pos_err[other_pose].max():.3g} mm)")
+    if (~conv).any():
+        lines.append(f"  NOT round trips: {int((~conv).sum())} did not converge")
+    if (~home_mode).any():
+        lines.append(f"  {int((~home_mode).sum())} of the {n} poses satisfy every limit but lie on another assembly "
+                     "mode than home (sign det J differs: beyond a singularity): FK from home cannot return them, "
+                     "and the machine cannot reach them from home without crossing a singularity")
+    return lines
 
 
 __all__ = ["info_cmd", "single_axis_ranges"]

@@ -3,7 +3,9 @@
 * ``ik``: poses (x, y, z mm; a, b, c deg) → leg lengths L_i = ‖p + R a_i − b_i‖, readings
   λ_i = L_i − L0_i (paper 2 eq. 1–2) and the limits each pose violates.
 * ``fk``: readings λ_i (or lengths L_i) → poses by Newton–Raphson (see
-  :meth:`pkmcal.mechanisms.hexapod.Hexapod.fk`), with a convergence flag per row.
+  :meth:`pkmcal.mechanisms.hexapod.Hexapod.fk`), with per row a convergence flag, an
+  assembly-mode flag (:attr:`pkmcal.mechanisms.base.FKResult.same_branch`) and the limits
+  the pose violates (readings beyond the stroke among them).
 
 Every input is validated and every result computed before the output is written
 (atomically); on a user error nothing is written and the exit code is 2.
@@ -103,9 +105,21 @@ def fk_cmd(machine: str, legs: str, output: str | None, guess: str | None, mappi
 
     LEGS.csv has columns lambda1..lambda6 (actuator readings, mm) or l1..l6 (leg lengths,
     mm); when both are present the readings are used. The output has x,y,z (mm), a,b,c
-    (degrees), 'converged' (1/0) and 'iterations'. Rows that did not converge are listed on
-    standard error by their line in LEGS.csv and get 'nan' poses; the exit code is still 0
-    (check the 'converged' column).
+    (degrees) and per row:
+
+    \b
+    converged    1/0: the pose reproduces the readings
+    iterations   Newton steps
+    same_branch  1/0: converged on the assembly mode of the start pose (sign det J of
+                 the pose Jacobian the same); 0 on a converged row means FK found the
+                 mirror solution of another assembly mode, not where a machine that
+                 started there is
+    reachable    'ok', or the limits the pose violates ('stroke' for readings beyond
+                 the stroke, ...); 'not-solved' where FK did not converge
+
+    Rows that did not converge get 'nan' poses. Rows that did not converge, changed
+    assembly mode or violate limits are listed on standard error by their line in
+    LEGS.csv; the exit code is still 0 (check the columns).
     """
     check_output(output, [legs, machine])
     from pkmcal.io.machine_file import load_machine
@@ -125,21 +139,37 @@ def fk_cmd(machine: str, legs: str, output: str | None, guess: str | None, mappi
             result = mech.fk(from_file_units(table.values, rotary), guess=start)
         else:
             result = mech.fk_lengths(table.values, guess=start)
-    conv = np.asarray(result.converged, dtype=bool)
+        conv = np.asarray(result.converged, dtype=bool)
+        same = np.asarray(result.same_branch, dtype=bool)
+        verdicts = np.array(mech.check_limits(np.where(conv[:, None], result.poses, mech.home_pose)).verdicts(),
+                            dtype=object)
+    verdicts[~conv] = "not-solved"
     poses = to_file_units(result.poses, mech.pose_is_angle)
     poses[~conv] = np.nan
     columns: dict[str, np.ndarray] = {n: poses[:, k] for k, n in enumerate(mech.pose_names)}
     columns["converged"] = conv.astype(int)
     columns["iterations"] = np.asarray(result.iterations, dtype=int)
+    columns["same_branch"] = (same & conv).astype(int)
+    columns["reachable"] = verdicts.tolist()
     text = format_table(columns)
     emit(text, output)
     n = len(table)
     iters = np.asarray(result.iterations)
-    _note(f"fk: {n} rows, {int(conv.sum())} converged"
+    good = conv & same
+    _note(f"fk: {n} rows, {int(good.sum())} converged on the start pose's assembly mode"
           + (f" (at most {int(iters[conv].max())} iterations)" if conv.any() else ""))
     if not conv.all():
         _note(f"fk: {int((~conv).sum())} rows did not converge (their poses are nan): lines "
               f"{_line_list(table.lines[~conv])} of {legs}; try --guess near the expected pose")
+    changed = conv & ~same
+    if changed.any():
+        _note(f"fk: {int(changed.sum())} rows converged on another assembly mode than the start pose "
+              f"(same_branch 0: a mirror solution, not where the machine is): lines "
+              f"{_line_list(table.lines[changed])} of {legs}; give --guess on the machine's assembly mode")
+    beyond = conv & (verdicts != "ok")
+    if beyond.any():
+        _note(f"fk: {int(beyond.sum())} rows violate the machine's limits (column 'reachable'): lines "
+              f"{_line_list(table.lines[beyond])} of {legs}")
 
 
 __all__ = ["fk_cmd", "ik_cmd", "parse_pose_option"]

@@ -17,6 +17,7 @@ import json
 import click
 import numpy as np
 
+from pkmcal.cli._limits import unreachable_notes
 from pkmcal.cli.import_options import import_options
 from pkmcal.cli.options import (
     DeprecatedArgument,
@@ -173,9 +174,13 @@ def observability_cmd(machine, poses_arg, poses, setup_spec, as_json, mapping=No
     setup = load_setup(setup_spec, mech)
     pose_arr = read_candidates_csv(poses, mech, mapping)
     ind = pose_set_indices(mech, setup, pose_arr)
+    notes = unreachable_notes(mech, pose_arr, poses)
     if as_json:
-        click.echo(json.dumps({**ind, "n_poses": int(len(pose_arr))}))
+        click.echo(json.dumps({**ind, "n_poses": int(len(pose_arr)), "warnings": notes,
+                               "units": {**{k: "1" for k in INDEX_NAMES}, "n_poses": "1"}}))
         return
     click.echo(f"{len(pose_arr)} poses")
     for k in INDEX_NAMES:
         click.echo(f"{k} = {ind[k]:.6g}   {INDEX_DESCRIPTIONS[k]}")
+    for n in notes:
+        click.echo(f"warning: {n}")

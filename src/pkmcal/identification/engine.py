@@ -41,6 +41,7 @@ import numpy as np
 
 from pkmcal.errors import PkmcalError
 from pkmcal.identification.identifiability import (
+    WEAK_RATIO,
     IdentifiabilityReport,
     ScaledJacobian,
     format_direction,
@@ -50,6 +51,7 @@ from pkmcal.identification.residuals import (
     Method,
     Model,
     candidate_parameters,
+    default_method,
     make_method,
     single_threaded_blas,
     whitening,
@@ -120,6 +122,8 @@ class IdentificationResult:
     identifiability_analysis: Callable[[], IdentifiabilityReport] = field(repr=False, compare=False)
     gauge: tuple[str, ...] = ()
     warnings: tuple[str, ...] = field(default_factory=tuple)
+    #: Unit of each residual row ("mm", "rad", or "1" for whitened / mixed rows).
+    residual_units: tuple[str, ...] = ()
 
     @cached_property
     def identifiability(self) -> IdentifiabilityReport:
@@ -150,11 +154,53 @@ class IdentificationResult:
 
     @property
     def rms_residual(self) -> float:
+        """√(mean r²) over every raw residual row and pose (measured − predicted), whatever
+        their units: a single number only when all rows share one unit (see
+        :meth:`rms_by_unit`)."""
         return float(np.sqrt(np.mean(self.residuals**2)))
 
+    def rms_by_unit(self) -> dict[str, float]:
+        """{unit: rms} of the raw residuals over the rows of each unit, angles in degrees:
+        keys "mm", "deg" and "1" (whitened or mixed rows), only those present."""
+        units = self.residual_units or ("1",) * self.residuals.shape[1]
+        out = {}
+        for unit, shown, scale in (("mm", "mm", 1.0), ("rad", "deg", float(np.rad2deg(1.0))), ("1", "1", 1.0)):
+            cols = [k for k, un in enumerate(units) if un == unit]
+            if cols and self.residuals.size:
+                out[shown] = float(np.sqrt(np.mean(self.residuals[:, cols] ** 2))) * scale
+        return out
+
+    @property
+    def rms_whitened(self) -> float:
+        """√(χ²/M): rms of the whitened residuals at the solution (weights recomputed there),
+        1 when the residuals are as large as the noise model says (unit 1)."""
+        r = self.residuals_weighted
+        return float(np.sqrt(np.mean(r**2))) if r.size else float("nan")
+
+    def angle_names(self) -> tuple[str, ...]:
+        """The parameters that are angles (the machine's and the sensor's ``param_is_angle``)."""
+        flags = tuple(self.mechanism.param_is_angle) + tuple(self.sensor.param_is_angle)
+        return tuple(n for n, a in zip(self.names, flags) if a)
+
     def to_dict(self) -> dict:
-        """A JSON-ready summary (internal units)."""
+        """A JSON-ready summary. Units as every pkmcal JSON states them (docs/conventions.md):
+        parameters in file units (mm, degrees for angle parameters, each with its ``unit``),
+        the other numbers named in ``units``."""
         u = self.uncertainty
+        angles = set(self.angle_names())
+        deg = float(np.rad2deg(1.0))
+
+        def conv(n: str, v: float) -> float:
+            return float(v) * (deg if n in angles else 1.0)
+
+        rms = self.rms_by_unit()
+        row_units = sorted(set(self.residual_units))
+        if row_units == ["rad"]:
+            rms_unit = "rad (kept as it was; residual_rms_deg gives it in degrees)"
+        elif len(row_units) == 1:
+            rms_unit = row_units[0]
+        else:
+            rms_unit = "mixed: one rms over rows of different units; see residual_rms_mm, residual_rms_deg"
         return {
             "method": self.method,
             "weighted": self.weighted,
@@ -170,10 +216,11 @@ class IdentificationResult:
             "fixed": list(self.fixed),
             "gauge": list(self.gauge),
             "parameters": {
-                n: {"initial": float(self.initial[i]), "estimate": float(self.estimate[i]),
-                    **({"std": float(u.std[self.free.index(n)]),
-                        "std_prior": float(u.std_prior[self.free.index(n)]),
-                        "std_posterior": float(u.std_posterior[self.free.index(n)])} if n in self.free else {})}
+                n: {"unit": "deg" if n in angles else "mm",
+                    "initial": conv(n, self.initial[i]), "estimate": conv(n, self.estimate[i]),
+                    **({"std": conv(n, u.std[self.free.index(n)]),
+                        "std_prior": conv(n, u.std_prior[self.free.index(n)]),
+                        "std_posterior": conv(n, u.std_posterior[self.free.index(n)])} if n in self.free else {})}
                 for i, n in enumerate(self.names)
             },
             "chi2": u.chi2,
@@ -181,9 +228,22 @@ class IdentificationResult:
             "reduced_chi2": u.reduced_chi2,
             "covariance_in_file": "max(1, reduced_chi2) * a-priori covariance",
             "rms_residual": self.rms_residual,
+            **{f"residual_rms_{'whitened_mixed' if k == '1' else k}": v for k, v in rms.items()},
+            "rms_whitened": self.rms_whitened,
             "residual_names": list(self.residual_names),
+            "residual_units": [{"rad": "deg"}.get(un, un) for un in self.residual_units],
             "identifiability": self.identifiability.to_dict(),
             "warnings": list(self.warnings),
+            "units": {
+                "cost": ("1: 1/2 sum |W0 r|^2, residuals whitened with the weights at the start (held fixed "
+                         "during the fit)") if self.weighted else
+                        "1/2 sum r^2 of the raw residuals, in their units squared (mm^2, rad^2)",
+                "nfev": "1", "njev": "1", "status": "1", "n_poses": "1",
+                "dropped_poses": "1: pose numbers = data rows of the measurement file, 1-based",
+                "chi2": "1: sum |W r|^2 with the weights at the solution", "dof": "1", "reduced_chi2": "1",
+                "rms_residual": rms_unit,
+                "residual_rms_whitened_mixed": "1", "rms_whitened": "1",
+            },
         }
 
 
@@ -336,6 +396,46 @@ def _gauss_newton_step(obj: "_Objective", x0: np.ndarray) -> _Solution:
                      message="one Gauss-Newton step from the start (single linearisation)")
 
 
+#: χ²/ν above this is reported: the residuals are then ≥ 10× the noise the setup states,
+#: which no noise model explains (wrong units, e.g. radians in a degrees column, wrong noise,
+#: measurements of another machine). χ²/ν of a correct model is 1 ± √(2/ν).
+ABSURD_REDUCED_CHI2 = 100.0
+
+
+def _short_direction(direction: dict[str, float], terms: int = 6) -> str:
+    """The ``terms`` largest coefficients of a direction, formatted, "+ …" when cut."""
+    top = dict(sorted(direction.items(), key=lambda kv: -abs(kv[1]))[:terms])
+    return format_direction(top) + (" + …" if len(direction) > terms else "")
+
+
+def fit_warnings(report: IdentifiabilityReport | None, free: tuple[str, ...], unc: Uncertainty,
+                 angle_names: tuple[str, ...] = ()) -> list[str]:
+    """Warnings on a fit's result: every weakly identifiable direction of ``report`` (σ/σ₁
+    below :data:`~pkmcal.identification.identifiability.WEAK_RATIO`), with the largest
+    standard deviation among its free parameters (mm; degrees for ``angle_names``), and an
+    absurd χ²/ν (:data:`ABSURD_REDUCED_CHI2`)."""
+    out = []
+    std = dict(zip(free, unc.std))
+    for w in [] if report is None else report.weak:
+        d = w["direction"]
+        named = [n for n in d if n in std]
+        text = (f"weakly identifiable direction (sigma/sigma_1 = {w['ratio']:.2g}: the noise is amplified about "
+                f"{1.0 / w['ratio']:.2g} times more along it than along the best-determined one): "
+                f"{_short_direction(d)}")
+        if named:
+            worst = max(named, key=lambda n: std[n] * (np.rad2deg(1.0) if n in angle_names else 1.0))
+            s = std[worst] * (np.rad2deg(1.0) if worst in angle_names else 1.0)
+            text += f"; std up to {s:.3g} {'deg' if worst in angle_names else 'mm'} ({worst})"
+        out.append("warning: " + text + ": add poses that move it, or fix one of its parameters")
+    chi = unc.reduced_chi2
+    if np.isfinite(chi) and chi > ABSURD_REDUCED_CHI2:
+        out.append(f"warning: chi2/dof = {chi:.4g}: the residuals are {np.sqrt(chi):.3g} times the noise the setup states, "
+                   "which no noise explains; check the units of the files (angles in degrees, lengths in mm), "
+                   "the setup's noise, and that the measurements belong to this machine and setup "
+                   "(the file covariance is inflated by chi2/dof)")
+    return out
+
+
 def _solver_args(solver: str, m: int, n: int) -> str:
     if solver == "auto":
         return "lm" if m >= n else "trf"
@@ -349,7 +449,7 @@ def identify(
     setup: MeasurementSetup,
     measurements=None,
     *,
-    method: str = "fk-residual",
+    method: str | None = None,
     free=None,
     fix=None,
     weighted: bool = True,
@@ -377,7 +477,9 @@ def identify(
     method : ``"ik-residual"`` (full-pose sensor, paper 1), ``"fk-residual"`` (paper 2),
         ``"projection"`` (paper 3; any sensor, redundant machines) or ``"projection-single"``
         (paper 3 eq. 10 as published: linearised once at the commanded poses, one
-        Gauss–Newton step; needs commanded poses).
+        Gauss–Newton step; needs commanded poses). Default (None):
+        :func:`~pkmcal.identification.residuals.default_method`, the same rule as every
+        command's.
     free : names or shell patterns of the parameters to estimate (default: all machine
         parameters and the sensor's ``default_free``).
     fix : names/patterns held at their nominal values, or ``"auto"``; default (``None``):
@@ -410,6 +512,8 @@ def identify(
 
 def _identify(machine, setup, measurements, *, method, free, fix, weighted, form, jac, solver, ftol, xtol, gtol,
               max_nfev, q, y, commanded, max_dropped_fraction) -> IdentificationResult:
+    if method is None:
+        method = default_method(setup, machine)
     if method not in METHODS:
         raise PkmcalError(f"unknown identification method '{method}'; use one of {', '.join(METHODS)}")
     if jac not in ("analytic", "2-point", "3-point"):
@@ -443,8 +547,9 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
                 f"{_where(measurements, bad[:3])}): "
                 "check that the measurements belong to this machine and setup, or give commanded poses"
             )
-        notes.append(f"dropped {len(bad)} pose(s) whose pose could not be solved at the nominal machine: "
-                     + ", ".join(str(i + 1) for i in bad) + _where(measurements, bad))
+        notes.append(f"dropped {len(bad)} pose(s) whose pose could not be solved at the nominal machine "
+                     "(FK or pose solve not converged, or converged on another assembly mode than its start "
+                     "pose): " + ", ".join(str(i + 1) for i in bad) + _where(measurements, bad))
         used = np.flatnonzero(ev0.converged)
         model = model.subset(used)
         meth = make_method(method, model, weighted, form=form)
@@ -456,14 +561,37 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
 
     names = model.names
     rows = Jw0.reshape(-1, Jw0.shape[-1])
-    scaled, cand_names = ScaledJacobian(rows[:, cand]), tuple(names[i] for i in cand)
+    cand_names = tuple(names[i] for i in cand)
+    angle_names = tuple(n for n, a in zip(names, tuple(model.mechanism.param_is_angle)
+                                          + tuple(model.sensor.param_is_angle)) if a)
+    # Which parameters the data can determine is judged on the plan: the Jacobian at the
+    # commanded poses with noise-free readings (design_jacobian, what `pkmcal identifiability`
+    # analyses). At the measured poses a plan's exact deficiencies (pure-z poses, a flat grid)
+    # look like weak directions of σ/σ₁ ~ 1e-7, seen only through the pose errors the
+    # noise and the machine's errors cause, above the rank tolerance: they then came out
+    # "identified" with σ of 1e7 mm. Without commanded poses the measured data are all there is.
+    basis = f"{meth.name} at the {model.n_poses} measured poses (nominal machine; no commanded poses given)"
+    judged = rows[:, cand]
+    if model.commanded is not None:
+        from pkmcal.identification.identifiability import design_jacobian
+
+        Jd, okd, _ = design_jacobian(model.mechanism, model.sensor, model.noise, model.commanded, meth.name,
+                                     weighted, form=form, sensor_columns=sensor_free)
+        if okd.any():
+            judged = Jd[okd].reshape(-1, Jd.shape[-1])[:, cand]
+            basis = f"{meth.name} at the {int(okd.sum())} commanded poses (noise-free, nominal machine)"
+    scaled = ScaledJacobian(judged)
 
     def analyse() -> IdentifiabilityReport:
-        return scaled.analyse(cand_names, tuple(model.mechanism.param_names))
+        import dataclasses
 
-    # the full analysis (an SVD) only when the cheap certificate cannot prove full rank;
-    # otherwise the result computes the report on first use
-    report = None if scaled.certainly_full_rank() else analyse()
+        rep = scaled.analyse(cand_names, tuple(model.mechanism.param_names))
+        return dataclasses.replace(rep, basis=basis, angle_names=tuple(n for n in cand_names if n in angle_names))
+
+    # the full analysis (an SVD) only when the cheap certificate cannot prove that no
+    # direction is weak (σ/σ₁ > WEAK_RATIO everywhere, hence full rank); otherwise the result
+    # computes the report on first use
+    report = None if scaled.certainly_full_rank(WEAK_RATIO) else analyse()
     auto = (fix is None and not explicit) or (isinstance(fix, str) and fix == "auto")
     if report is not None and not report.identifiable:
         if not auto:
@@ -518,6 +646,7 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
         unc = parameter_uncertainty(free_names, J_free, ev.r, weighted=False, W=W_end, cov_rows=ev.cov)
         r_w = ev.r
 
+    notes.extend(fit_warnings(report, free_names, unc, angle_names))
     mech_cal, sensor_cal = model.split(theta)
     p = model.n_mech
     mech_free = free_idx[free_idx < p]
@@ -560,6 +689,7 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
         identifiability_analysis=analyse if report is None else (lambda: report),
         gauge=tuple(report.fixed) if report is not None and not report.identifiable else (),
         warnings=tuple(notes),
+        residual_units=meth.row_units(),
     )
 
 

@@ -29,6 +29,7 @@ engine fits them; columns: the candidate parameters) is analysed as follows.
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -62,6 +63,13 @@ class IdentifiabilityReport:
     unseen: tuple[str, ...] = ()
     rtol: float = RANK_RTOL
     n_rows: int = 0
+    #: What the Jacobian was evaluated on (method and poses), e.g. "fk-residual at 40 planned
+    #: poses (noise-free, nominal machine)".
+    basis: str = ""
+    #: Poses left out because their readings or nuisance pose could not be computed.
+    n_unsolved: int = 0
+    #: The candidate parameters that are angles (rad here; degrees in :meth:`to_dict`).
+    angle_names: tuple[str, ...] = ()
 
     @property
     def n_params(self) -> int:
@@ -76,7 +84,18 @@ class IdentifiabilityReport:
         s = self.singular_values
         return float(s[0] / s[self.rank - 1]) if self.rank > 0 else float("inf")
 
+    def _file_direction(self, d: dict[str, float], unit_on: str | None) -> dict[str, float]:
+        """A direction {name: coefficient} with its angle parameters in degrees: each
+        coefficient times 180/π for an angle parameter, divided by the same factor of
+        ``unit_on`` (the parameter whose coefficient is 1), else renormalised to max 1."""
+        f = {n: (180.0 / np.pi if n in self.angle_names else 1.0) for n in d}
+        out = {n: c * f[n] for n, c in d.items()}
+        norm = f[unit_on] if unit_on in out else max((abs(v) for v in out.values()), default=1.0) or 1.0
+        return {n: float(v / norm) for n, v in out.items()}
+
     def to_dict(self) -> dict:
+        """JSON-ready; angle parameters in degrees (directions in file units, mm and deg)."""
+        gauge_of = [next((n for n in self.fixed if d.get(n) == 1.0), None) for d in self.null_space]
         return {
             "n_params": self.n_params,
             "n_rows": self.n_rows,
@@ -85,11 +104,21 @@ class IdentifiabilityReport:
             "column_scaling": "unit norm",
             "condition_number": self.condition_number,
             "singular_values": [float(s) for s in self.singular_values],
-            "null_space": [dict(d) for d in self.null_space],
+            "null_space": [self._file_direction(d, g) for d, g in zip(self.null_space, gauge_of)],
             "fixed": list(self.fixed),
-            "weak": [dict(w) for w in self.weak],
+            "weak": [{"ratio": float(w["ratio"]), "direction": self._file_direction(w["direction"], None)}
+                     for w in self.weak],
             "unseen": list(self.unseen),
             "parameters": list(self.names),
+            "basis": self.basis,
+            "n_unsolved_poses": self.n_unsolved,
+            "units": {"n_params": "1", "n_rows": "1", "rank": "1", "rank_rtol": "1", "condition_number": "1",
+                      "singular_values": "1 (of the column-scaled, whitened Jacobian)",
+                      "null_space": "coefficients of each direction in file units (mm; deg for angle "
+                                    "parameters), 1 on the gauge parameter it is named after",
+                      "weak": "ratio: 1 (sigma/sigma_1); direction: coefficients in file units (mm, deg), "
+                              "largest 1",
+                      "n_unsolved_poses": "1"},
         }
 
     def describe(self, limit: int = 3) -> str:
@@ -261,6 +290,35 @@ def analyse_jacobian(
     return ScaledJacobian(J).analyse(names, mechanism_names, rtol=rtol, weak_ratio=weak_ratio)
 
 
+def design_jacobian(machine, sensor, noise, poses: np.ndarray, method: str, weighted: bool = True,
+                    form: str = "plain", sensor_columns: bool = True) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+    """The engine's whitened residual Jacobian W_j J_j (N, k, P) of all parameters for
+    noise-free readings simulated at ``poses`` (N, n) on the nominal machine (q = IK(x),
+    y = h(x)), a flag (N,) of the poses whose nuisance pose was solved, and the parameter
+    names: the identification Jacobian of a pose *plan*, which ``pkmcal identifiability``
+    analyses and ``pkmcal identify`` judges its free set on when the measurements carry
+    their commanded poses (same method, same weights, same candidate parameters).
+    ``sensor_columns=False`` skips the sensor parameters' columns (NaN), as the engine does
+    when none of them is a candidate."""
+    from pkmcal.identification.residuals import Model, make_method, whitening
+
+    poses = machine.as_pose_array(poses)
+    with np.errstate(invalid="ignore"):
+        model = Model(machine, sensor, noise, machine.ik(poses), sensor.predict(poses), poses)
+    meth = make_method(method, model, weighted, form=form)
+    meth.sensor_columns = sensor_columns
+    whiten = weighted and not meth.prewhitened            # the weighted projection is already whitened
+    ev = meth.evaluate(model.theta0, jac=True, cov=whiten)
+    cols = slice(None) if sensor_columns else slice(0, model.n_mech)
+    ok = np.asarray(ev.converged, dtype=bool) & np.all(np.isfinite(ev.J[:, :, cols]), axis=(1, 2))
+    J = ev.J
+    if whiten:
+        J = np.full_like(ev.J, np.nan)
+        if ok.any():
+            J[ok] = whitening(ev.cov[ok], f"{method} residual") @ ev.J[ok]
+    return J, ok, model.names
+
+
 def identifiability(
     machine,
     setup,
@@ -274,11 +332,14 @@ def identifiability(
     """Identifiability of the parameters for ``machine`` + ``setup`` measured at ``poses``.
 
     The Jacobian is the engine's (same method, same noise whitening), evaluated at the
-    nominal machine on noise-free readings simulated at ``poses`` (N, n) (internal units).
-    ``method`` defaults to ``fk-residual`` (``projection`` for redundant machines);
+    nominal machine on noise-free readings simulated at ``poses`` (N, n) (internal units;
+    :func:`design_jacobian`). ``method`` defaults to
+    :func:`~pkmcal.identification.residuals.default_method`, the engine's own default;
     ``free`` / ``fix`` select the candidate parameters as in
     :func:`~pkmcal.identification.engine.identify` (an explicit ``fix`` list is removed
     from the candidates; ``"auto"`` or ``None`` keeps them, the report suggests the gauge).
+    Poses whose readings or nuisance pose cannot be computed (IK outside the reach, FK not
+    solved) are left out; the report counts them in ``n_unsolved``.
     """
     from pkmcal.identification.residuals import single_threaded_blas
 
@@ -287,24 +348,22 @@ def identifiability(
 
 
 def _identifiability(machine, setup, poses, *, method, free, fix, weighted) -> IdentifiabilityReport:
-    from pkmcal.identification.residuals import (
-        Model,
-        candidate_parameters,
-        make_method,
-        whitening,
-    )
+    from pkmcal.identification.residuals import Model, candidate_parameters, default_method
 
     poses = machine.as_pose_array(poses)
     if method is None:
-        method = "fk-residual" if machine.n_actuators == machine.n_dof else "projection"
-    q = machine.ik(poses)
-    y = setup.sensor.predict(poses)
-    model = Model(machine, setup.sensor, setup.noise, q, y, poses)
-    meth = make_method(method, model, weighted)
-    whiten = weighted and not meth.prewhitened            # the weighted projection is already whitened
-    ev = meth.evaluate(model.theta0, jac=True, cov=whiten)
-    J = whitening(ev.cov, f"{method} residual") @ ev.J if whiten else ev.J
+        method = default_method(setup, machine)
+    J, ok, names = design_jacobian(machine, setup.sensor, setup.noise, poses, method, weighted)
+    with np.errstate(invalid="ignore"):
+        model = Model(machine, setup.sensor, setup.noise, machine.ik(poses[:1]), setup.sensor.predict(poses[:1]))
     cand, _ = candidate_parameters(model, free, None if fix == "auto" else fix)
-    names = model.names
-    return analyse_jacobian(J.reshape(-1, J.shape[-1])[:, cand], tuple(names[i] for i in cand),
-                            tuple(machine.param_names))
+    rows = J[ok].reshape(-1, J.shape[-1])[:, cand]
+    if rows.shape[0] == 0:
+        from pkmcal.errors import PkmcalError
+
+        raise PkmcalError(f"none of the {len(poses)} poses can be evaluated on machine '{machine.name}' "
+                          "(outside the reach of its chains, or the pose cannot be solved): no identifiability")
+    rep = analyse_jacobian(rows, tuple(names[i] for i in cand), tuple(machine.param_names))
+    angles = tuple(n for n, a in zip(names, tuple(machine.param_is_angle) + tuple(setup.sensor.param_is_angle)) if a)
+    return dataclasses.replace(rep, basis=f"{method} at {int(ok.sum())} planned poses (noise-free, nominal machine)",
+                               n_unsolved=int(np.count_nonzero(~ok)), angle_names=angles)

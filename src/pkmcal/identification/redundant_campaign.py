@@ -197,14 +197,30 @@ class RedundantVerification:
     def common(self) -> np.ndarray:
         return self.after.valid if self.before is None else self.after.valid & self.before.valid
 
+    @property
+    def dropped(self) -> dict[int, str]:
+        """{pose index: why it is not compared}, naming the model whose commands the real
+        machine could not follow when there is a 'before' model (a pose left out by either
+        is left out of both)."""
+        if self.before is None:
+            return dict(self.after.dropped)
+        return {k: "; ".join(f"{label} model: {d[k]}" for label, d in (("nominal", self.before.dropped),
+                                                                         ("calibrated", self.after.dropped)) if k in d)
+                for k in sorted(set(self.before.dropped) | set(self.after.dropped))}
+
     def to_dict(self) -> dict:
+        n = len(self.after.valid)
         out = {"after": self.after.summary(self.common),
-               "dropped": {str(k + 1): v for k, v in {**(self.before.dropped if self.before else {}),
-                                                      **self.after.dropped}.items()}}
+               "dropped": {str(k + 1): v for k, v in self.dropped.items()},
+               "compared_set": (f"the {int(self.common.sum())} of {n} held-out poses at which the real machine settles "
+                                "within its limits when commanded through "
+                                + ("both models (the same poses before and after)" if self.before is not None
+                                   else "the calibrated model"))}
         if self.before is not None:
             out["before"] = self.before.summary(self.common)
             b, a = out["before"]["tool_mean_mm"], out["after"]["tool_mean_mm"]
             out["improvement_pct"] = float(100.0 * (1.0 - a / b)) if b > 0 else float("nan")
+        out["units"] = {"poses": "1", "dropped": "keys: held-out pose numbers = data rows of the pose file, 1-based"}
         return out
 
     def format_table(self) -> str:
@@ -214,12 +230,14 @@ class RedundantVerification:
         rows = [("measure",) + tuple(cols)] + [(k,) + tuple(f"{d[c][k]:.6g}" for c in cols) for k in keys]
         w = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
         lines = [f"{d['after']['poses']} held-out poses (tool error = |tracker reading - target|; real machine at "
-                 "equilibrium under the setup's stiffness and load)"]
+                 "equilibrium under the setup's stiffness and load)", f"compared: {d['compared_set']}"]
         lines += ["  ".join(f"{c:<{w[i]}}" if i == 0 else f"{c:>{w[i]}}" for i, c in enumerate(r)) for r in rows]
         if "improvement_pct" in d:
             lines.append(f"improvement of the mean tool error: {d['improvement_pct']:.1f} %")
         for k, v in d["dropped"].items():
             lines.append(f"pose {k} not reached: {v}")
+        if d["dropped"]:
+            lines.append("(pose numbers: data rows of the held-out pose file, 1-based)")
         return "\n".join(lines)
 
 
@@ -234,7 +252,12 @@ def verify_redundant(calibrated: Mechanism, real: Mechanism, setup: MeasurementS
     before = None
     if nominal is not None:
         before = tool_errors(nominal, setup.sensor, real, setup, poses, "before", ignore_limits)
-    return RedundantVerification(after=after, before=before)
+    report = RedundantVerification(after=after, before=before)
+    if not report.common.any():
+        raise PkmcalError(f"the real machine '{real.name}' settles within its limits at none of the {len(after.valid)} "
+                          f"held-out poses ({'; '.join(sorted(set(report.dropped.values())))}); choose poses inside "
+                          "its workspace")
+    return report
 
 
 # -- baselines of paper 3 §1 through the engine ------------------------------------------

@@ -21,8 +21,8 @@ with, per pose, A = ∂IK/∂x (l×n), B = ∂IK/∂ρ (l×p), H = ∂h/∂x (m�
 ``fk-residual`` (paper 2 §3, eq. 3; x from the forward kinematics)
     x_j = FK(q_j, ρ);  r_j = y_j − h(x_j, s);  implicit differentiation of IK(x, ρ) = q:
     ∂x/∂ρ = −A⁻¹B, so ∂r/∂ρ = H A⁻¹ B and ∂r/∂s = −G (one batched solve over the poses);
-    Σ_j = Σ_y + H A⁻¹ Σ_q A⁻ᵀ Hᵀ.  Poses whose FK does not converge are flagged
-    (``converged``); the engine drops those that fail at the nominal machine (error if
+    Σ_j = Σ_y + H A⁻¹ Σ_q A⁻ᵀ Hᵀ.  Poses whose FK does not converge, or converges on another
+    assembly mode than its start pose (``FKResult.ok``), are flagged (``converged``); the engine drops those that fail at the nominal machine (error if
     more than 10 %) and reports those failing at the solution. At a trial point where
     a pose's FK fails, its residual is taken at the last converged pose (finite, and
     typically larger than at the accepted iterate, so the solver shortens the step).
@@ -333,6 +333,11 @@ class Method(ABC):
     def row_names(self) -> tuple[str, ...]:
         return tuple(f"r{i + 1}" for i in range(self.rows_per_pose()))
 
+    def row_units(self) -> tuple[str, ...]:
+        """Unit of each raw residual row: "mm", "rad", or "1" for rows without one physical
+        unit (whitened, or combining readings of different units)."""
+        return ("1",) * self.rows_per_pose()
+
 
 class IKResidual(Method):
     """``ik-residual``: r_j = q_j − IK(x̂_j, ρ), x̂_j from a full-pose sensor (paper 1)."""
@@ -360,6 +365,11 @@ class IKResidual(Method):
 
     def row_names(self) -> tuple[str, ...]:
         return tuple(self.model.mechanism.actuator_names)
+
+    def row_units(self) -> tuple[str, ...]:
+        if self.form == "squared":   # L_q² − L²: mm² rows, no unit of the readings
+            return ("1",) * self.rows_per_pose()
+        return tuple("rad" if a else "mm" for a in self.model.mechanism.actuator_is_angle)
 
     def _measured_poses(self, sensor) -> dict:
         """x̂ and converged, and on demand H⁻¹ and H⁻¹G: cached while the sensor parameters
@@ -448,12 +458,15 @@ class FKResidual(Method):
     def row_names(self) -> tuple[str, ...]:
         return tuple(self.model.sensor.reading_names)
 
+    def row_units(self) -> tuple[str, ...]:
+        return tuple("rad" if a else "mm" for a in self.model.sensor.reading_is_angle)
+
     def _solve(self, theta):
         m = self.model
         mech, sensor = m.split(theta)
         fk = mech.fk_precise(m.q, guess=self._guess)
         x = fk.poses
-        ok = fk.converged & np.all(np.isfinite(x), axis=1)
+        ok = fk.ok & np.all(np.isfinite(x), axis=1)
         # warm start the next evaluation from the converged poses
         self._guess = np.where(ok[:, None], x, self._guess)
         x = np.where(ok[:, None], x, self._guess)
@@ -527,12 +540,19 @@ class Projection(Method):
         start = model.start_poses()
         if mech.n_actuators == mech.n_dof:
             fk = mech.fk(model.q, guess=start)
-            start = np.where(fk.converged[:, None], fk.poses, start)
+            start = np.where(fk.ok[:, None], fk.poses, start)
         self._x = start
 
     def rows_per_pose(self) -> int:
         mech = self.model.mechanism
         return self.model.sensor.n_readings + mech.n_actuators - mech.n_dof
+
+    def row_units(self) -> tuple[str, ...]:
+        """r = U⊥ᵀ W e combines all readings: "1" when whitened (weighted) or when the
+        readings mix lengths and angles, else their common unit."""
+        flags = tuple(self.model.sensor.reading_is_angle) + tuple(self.model.mechanism.actuator_is_angle)
+        unit = "1" if self.weighted or (any(flags) and not all(flags)) else ("rad" if all(flags) else "mm")
+        return (unit,) * self.rows_per_pose()
 
     def _stacked(self, mech, sensor, x):
         m = self.model
@@ -600,6 +620,16 @@ class Projection(Method):
             # whitened e has covariance diag((w σ)²); projected: U⊥ᵀ diag(.) U⊥ (= I if weighted)
             C = _sandwich(Ut, self._w * self._sig)
         return Evaluation(r=r, J=J, cov=C, converged=ok, poses=x)
+
+
+def default_method(setup, mechanism: Mechanism | None = None) -> str:
+    """The method used when none is named, the one rule for every command and function
+    (``identify``, ``identifiability``, ``plan``, ``observability``, the demo): ``projection``
+    for a redundantly actuated machine (paper 3), else ``ik-residual`` for a full-pose sensor
+    (paper 1) and ``fk-residual`` otherwise (paper 2)."""
+    if mechanism is not None and mechanism.n_actuators != mechanism.n_dof:
+        return "projection"
+    return "ik-residual" if setup.sensor.kind == "full-pose" else "fk-residual"
 
 
 def make_method(name: str, model: Model, weighted: bool = True, form: str = "plain") -> Method:

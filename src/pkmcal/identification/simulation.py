@@ -8,9 +8,11 @@ y = h(x_r, θ) + e_y and the encoders q + e_q, with e_y, e_q drawn from the setu
 :class:`~pkmcal.sensors.base.NoiseModel` (Gaussian, or uniform of half-width h = √3·std).
 Encoder noise is a reading error: the machine moves to FK(q), the file records q + e_q.
 
-Poses the real machine cannot reach — FK not converged, real pose outside the real machine's
-limits, or not readable by the sensor (indicator plane near vertical) — are dropped and
-reported with their reasons. Noise is drawn for all N commanded poses before dropping, so a
+Poses the real machine cannot reach — FK not converged, or converged on another assembly
+mode than the commanded pose (:attr:`~pkmcal.mechanisms.base.FKResult.same_branch`: a
+mirror solution, not where the machine goes), real pose outside the real machine's limits,
+or not readable by the sensor (indicator plane near vertical) — are dropped and reported
+with their reasons. Noise is drawn for all N commanded poses before dropping, so a
 pose's noise does not depend on which other poses were dropped.
 """
 
@@ -184,7 +186,9 @@ def _reach(nominal: Mechanism, real: Mechanism, sensor: Sensor, commanded: np.nd
     bad_fk = finite & ~fk.converged
     for k in np.flatnonzero(bad_fk):
         dropped[int(k)] = f"fk-not-converged (residual {fk.residual[k]:.3g})"
-    ok = finite & fk.converged
+    for k in np.flatnonzero(finite & fk.branch_changed):
+        dropped[int(k)] = "fk-other-assembly-mode"
+    ok = finite & fk.ok
     poses = np.where(ok[:, None], fk.poses, commanded)   # placeholders where not ok, never kept
     ok = drop_limit_violations(real, poses, ok, ignore_limits, dropped)
     unread = ok & _unreadable(sensor, poses)

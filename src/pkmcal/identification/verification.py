@@ -13,7 +13,10 @@ Paper 1 §IV reports the pose errors; paper 2 §5 (Table 5) the errors its indic
                        under the platform centre sees (eq. 6 with d_off = 0)
 
 Summaries (mean, max, RMS; for e_z of |e_z|) are taken over the poses that both models
-reach; a pose the real machine cannot reach (FK not converged, real limits) is reported.
+bring the real machine to, so that "before" and "after" compare the same poses; a pose the
+real machine cannot reach through either model (FK not converged or on another assembly
+mode, real limits) is reported with the model that failed. Angles in degrees in the
+summaries (``*_deg``; ``*_rad`` are deprecated aliases).
 """
 
 from __future__ import annotations
@@ -52,12 +55,16 @@ class PoseErrors:
     dropped: dict[int, str] = field(default_factory=dict)
 
     def summary(self, mask: np.ndarray | None = None) -> dict[str, float]:
-        """``{position_mean_mm, position_max_mm, position_rms_mm, orientation_mean_rad, …}``
-        over ``mask`` (default: the valid poses); signed height errors are taken as |e_z|."""
+        """``{position_mean_mm, position_max_mm, position_rms_mm, orientation_mean_deg, …}``
+        over ``mask`` (default: the valid poses); signed height errors are taken as |e_z|.
+        Angles in degrees (``*_deg``); the ``*_rad`` keys are the same values in radians,
+        kept as deprecated aliases for scripts that read them."""
         m = self.valid if mask is None else mask
         out: dict[str, float] = {"poses": int(np.count_nonzero(m))}
         for key, (unit, _) in MEASURES.items():
             out.update(error_stats(getattr(self, key)[m], key, unit))
+            if unit == "rad":
+                out.update(error_stats(np.rad2deg(getattr(self, key)[m]), key, "deg"))
         return out
 
 
@@ -87,7 +94,9 @@ def pose_errors(model: Mechanism, real: Mechanism, poses: np.ndarray, ignore_lim
         dropped[int(k)] = "ik-failed"
     for k in np.flatnonzero(finite & ~fk.converged):
         dropped[int(k)] = "fk-not-converged"
-    ok = finite & fk.converged
+    for k in np.flatnonzero(finite & fk.branch_changed):
+        dropped[int(k)] = "fk-other-assembly-mode"
+    ok = finite & fk.ok
     reached = np.where(ok[:, None], fk.poses, cmd)
     ok = drop_limit_violations(real, reached, ok, ignore_limits, dropped)
 
@@ -124,20 +133,48 @@ class VerificationReport:
 
     @property
     def dropped(self) -> dict[int, str]:
-        out = dict(self.after.dropped)
-        if self.before is not None:
-            for k, why in self.before.dropped.items():
-                out[k] = why if k not in out else out[k]
-        return dict(sorted(out.items()))
+        """{pose index: why it is not compared}; with a 'before' model, each reason names
+        the model whose commands the real machine could not follow ("nominal model: …",
+        "calibrated model: …"), since a pose left out by either is left out of both."""
+        if self.before is None:
+            return dict(self.after.dropped)
+        out: dict[int, str] = {}
+        for k in sorted(set(self.before.dropped) | set(self.after.dropped)):
+            parts = [f"{label} model: {d[k]}" for label, d in (("nominal", self.before.dropped),
+                                                               ("calibrated", self.after.dropped)) if k in d]
+            out[k] = "; ".join(parts)
+        return out
+
+    def reached_by(self) -> dict[str, int]:
+        """Pose counts: reached through both models, only one of them, neither."""
+        a = self.after.valid
+        b = self.before.valid if self.before is not None else a
+        return {"both": int(np.count_nonzero(a & b)), "calibrated_only": int(np.count_nonzero(a & ~b)),
+                "nominal_only": int(np.count_nonzero(~a & b)), "neither": int(np.count_nonzero(~a & ~b))}
+
+    def compared_set(self) -> str:
+        """Which poses the figures are taken over, and why that set (one sentence)."""
+        n = len(self.after.valid)
+        if self.before is None:
+            return (f"the {int(self.after.valid.sum())} of {n} held-out poses the real machine reaches when commanded "
+                    "through the calibrated model (with a nominal model, only the poses both models bring it to "
+                    "are compared, so that before and after are taken over the same poses)")
+        r = self.reached_by()
+        return (f"the {r['both']} of {n} held-out poses the real machine reaches when commanded through both models, "
+                f"the same poses before and after ({r['calibrated_only']} reached through the calibrated model only, "
+                f"{r['nominal_only']} through the nominal model only, {r['neither']} through neither: listed below)")
 
     def to_dict(self) -> dict:
         """JSON-ready: ``{"poses": N, "used": K, "real": …, "after": {...}, "before": {...},
-        "dropped": [{"pose": 1-based, "reason": …}], "reduction_percent": {...}}``."""
+        "dropped": [{"pose": 1-based, "reason": …}], "reduction_percent": {...}}``; units
+        in the key names (``_mm``, ``_deg``; ``_rad`` keys are deprecated aliases) and in
+        ``units``."""
         mask = self.common
         out: dict = {"poses": int(len(mask)), "used": int(np.count_nonzero(mask)), "real": self.real,
-                     "calibrated": self.after.model}
+                     "calibrated": self.after.model, "compared_set": self.compared_set()}
         if self.before is not None:
             out["nominal"] = self.before.model
+            out["reached_by"] = self.reached_by()
             out["before"] = self.before.summary(mask)
         out["after"] = self.after.summary(mask)
         if self.before is not None:
@@ -147,30 +184,35 @@ class VerificationReport:
                 for k in a if k.endswith(("_mm", "_rad")) and "_mean_" in k
             }
         out["dropped"] = [{"pose": k + 1, "reason": why} for k, why in self.dropped.items()]
+        out["units"] = {"poses": "1", "used": "1", "reached_by": "1 (pose counts)",
+                        "pose": "1: held-out pose number = data row of the pose file, 1-based"}
+        out["deprecated"] = "the *_rad keys repeat the *_deg values in radians; read the *_deg keys"
         return out
 
     def format_table(self) -> str:
-        """A before/after table for the terminal (angles in degrees there)."""
+        """A before/after table for the terminal (angles in degrees)."""
         d = self.to_dict()
         cols = (["before"] if self.before is not None else []) + ["after"]
-        lines = [f"verification on {d['used']} of {d['poses']} held-out poses; real machine '{self.real}'"]
+        lines = [f"verification on {d['used']} of {d['poses']} held-out poses; real machine '{self.real}'",
+                 f"compared: {d['compared_set']}"]
         head = f"{'error':<36}" + "".join(f"{c:>14}" for c in cols)
         if self.before is not None:
             head += f"{'reduction':>11}"
         lines.append(head)
         for key, (unit, text) in MEASURES.items():
             show_unit = "deg" if unit == "rad" else unit
-            scale = float(np.rad2deg(1.0)) if unit == "rad" else 1.0
             for stat in ("mean", "max", "rms"):
-                name = f"{key}_{stat}_{unit}"
+                name = f"{key}_{stat}_{show_unit}"
                 row = f"{text + ' ' + stat + ' (' + show_unit + ')':<36}"
-                row += "".join(f"{d[c][name] * scale:>14.6g}" for c in cols)
+                row += "".join(f"{d[c][name]:>14.6g}" for c in cols)
                 if self.before is not None:
                     b, a = d["before"][name], d["after"][name]
                     row += f"{100 * (1 - a / b):>10.1f}%" if b > 0 else f"{'-':>11}"
                 lines.append(row)
         for item in d["dropped"]:
             lines.append(f"  pose {item['pose']} not used: {item['reason']}")
+        if d["dropped"]:
+            lines.append("  (pose numbers: data rows of the held-out pose file, 1-based)")
         return "\n".join(lines)
 
 

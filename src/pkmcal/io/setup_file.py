@@ -18,10 +18,11 @@ Full pose (paper 1 §III), with optional world→base and platform→target tran
     sensor: full-pose
     world: {x: 0, y: 0, z: 0, a: 0, b: 0, c: 0}    # pose of the base in the sensor frame, mm/deg
     tool: {x: 0, y: 0, z: 25}                      # target frame on the platform, mm/deg
-    noise: {distribution: uniform, position: 0.025, orientation: 0.001, actuator: 0.01}
+    noise: {distribution: uniform, position: 0.025, orientation_deg: 0.0573, actuator: 0.01}
 
-``orientation`` is in radians (``orientation_deg`` in degrees); ``reading``, ``position``,
-``orientation`` and ``actuator`` take one value or one per reading/actuator. A 3D tracker::
+``orientation_deg`` is in degrees, as every angle in files (docs/conventions.md); the older
+key ``orientation`` is still read, in radians as it always was; ``reading``, ``position``,
+``orientation_deg`` and ``actuator`` take one value or one per reading/actuator. A 3D tracker::
 
     sensor: position
     target: {x: 0, y: 0, z: 30}   # initial target offset on the platform, mm (free by default)
@@ -233,11 +234,15 @@ def load_setup(path: str | os.PathLike, machine=None) -> MeasurementSetup:
             if err["type"] == "literal_error" and loc == ("sensor",):
                 what = "must be one of full-pose, position, indicators, planar-tool"
         _fail(path, lines, loc, what)
-    setup = _build(path, lines, spec)
+    raw_noise = data.get("noise") if isinstance(data.get("noise"), dict) else {}
+    setup = _build(path, lines, spec, raw_noise)
     return setup if machine is None else bind_setup(setup, machine, path)
 
 
-def _build(path, lines, spec: _Setup) -> MeasurementSetup:
+def _build(path, lines, spec: _Setup, raw_noise: dict | None = None) -> MeasurementSetup:
+    """The setup of a validated file; ``raw_noise`` the file's ``noise`` mapping as parsed
+    (its numbers keep their text, which pydantic drops: degree values are converted from
+    that text, so that a setup written by :func:`setup_to_yaml` reads back exactly)."""
     kind = spec.sensor
     for key in ("indicators", "plane_offset", "zero", "world", "tool", "target"):
         if getattr(spec, key) is not None and key not in _SENSOR_KEYS[kind]:
@@ -302,7 +307,10 @@ def _build(path, lines, spec: _Setup) -> MeasurementSetup:
             if noise.orientation is not None:
                 ori = _expand(path, lines, noise.orientation, 3, ("noise", "orientation"), "rad")
             else:
-                ori = np.deg2rad(_expand(path, lines, noise.orientation_deg, 3, ("noise", "orientation_deg"), "deg"))
+                raw = (raw_noise or {}).get("orientation_deg", noise.orientation_deg)   # numbers with their text
+                _expand(path, lines, raw, 3, ("noise", "orientation_deg"), "deg")   # checks the count
+                ori = np.broadcast_to(np.array([deg_to_rad(v) for v in (raw if isinstance(raw, list) else [raw])]),
+                                      (3,)).copy()
             reading_std = np.concatenate([pos, ori])
         sensor = _from_file_units(sensor)
     except InputFileError:
@@ -362,6 +370,17 @@ def _values(std: np.ndarray, uniform: bool):
     return FlowList(float(x) for x in v)
 
 
+def _values_deg(std_rad: np.ndarray, uniform: bool):
+    """:func:`_values` of angles given in radians, written in degrees (the text that reads
+    back to the same radians exactly, :func:`rad_to_deg_text`)."""
+    v = np.asarray(std_rad, dtype=float).reshape(-1)
+    if uniform:
+        v = np.array([_half_width(float(x)) for x in v])
+    if v.size == 1 or np.all(v == v[0]):
+        return RawFloat(rad_to_deg_text(float(v[0])))
+    return FlowList(RawFloat(rad_to_deg_text(float(x))) for x in v)
+
+
 def _group_dict(sensor, field: str) -> dict:
     """The mapping written for the θ field ``field`` of ``sensor`` (``world``, ``tool``,
     ``target``): keys the parameter names after the dot (``world.c`` → ``c``), values in file
@@ -402,7 +421,7 @@ def setup_to_yaml(setup: MeasurementSetup) -> str:
     std = np.asarray(noise.reading_std, dtype=float).reshape(-1)
     if isinstance(s, FullPoseSensor):
         nd["position"] = _values(std[:3], uniform)
-        nd["orientation"] = _values(std[3:], uniform)
+        nd["orientation_deg"] = _values_deg(std[3:], uniform)
     else:
         nd["reading"] = _values(std, uniform)
     nd["actuator"] = _values(noise.actuator_std, uniform)
@@ -412,7 +431,7 @@ def setup_to_yaml(setup: MeasurementSetup) -> str:
         if setup.simulation.load is not None:
             sim["load"] = FlowList(float(v) for v in setup.simulation.load)
         doc["simulation"] = sim
-    head = "# pkmcal measurement setup: mm, transform angles in degrees, orientation noise in rad\n"
+    head = "# pkmcal measurement setup: mm, angles in degrees (transforms, orientation_deg noise)\n"
     if noise.distribution == "uniform":
         head += "# uniform noise: values are half-widths h (std = h/sqrt(3))\n"
     return head + dump_yaml(doc)

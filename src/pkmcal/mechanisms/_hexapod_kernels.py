@@ -246,7 +246,8 @@ def actuator_jacobians(poses, base, platform):
 def _solve6(J, rhs, d):
     """Solve J d = rhs (6×6) by Gaussian elimination with partial pivoting, in place.
 
-    Returns False when a pivot is below 1e-12 × the largest entry (singular system). The
+    Returns 0 when a pivot is below 1e-12 × the largest entry (singular system), else the
+    sign of det J (±1: (−1)^(row swaps) times the signs of the pivots), for free. The
     loops have constant trip counts with ``if r > col`` guards so that LLVM unrolls them
     fully (measured 2.4× faster than variable-bound loops); on exit the diagonal of J
     holds the reciprocal pivots.
@@ -256,8 +257,9 @@ def _solve6(J, rhs, d):
         for c in range(6):
             scale = max(scale, abs(J[r, c]))
     if not scale > 0.0:
-        return False
+        return 0
     tiny = 1e-12 * scale
+    sign = 1
     for col in range(6):
         piv = col
         best = abs(J[col, col])
@@ -268,8 +270,9 @@ def _solve6(J, rhs, d):
                     best = v
                     piv = r
         if not best > tiny:
-            return False
+            return 0
         if piv != col:
+            sign = -sign
             for c in range(6):
                 t = J[col, c]
                 J[col, c] = J[piv, c]
@@ -277,6 +280,8 @@ def _solve6(J, rhs, d):
             t = rhs[col]
             rhs[col] = rhs[piv]
             rhs[piv] = t
+        if J[col, col] < 0.0:
+            sign = -sign
         inv = 1.0 / J[col, col]
         J[col, col] = inv
         for r in range(6):
@@ -293,7 +298,7 @@ def _solve6(J, rhs, d):
             if c > r:
                 s -= J[r, c] * d[c]
         d[r] = s * J[r, r]
-    return True
+    return sign
 
 
 @nb.njit(**_OPTS)
@@ -354,9 +359,11 @@ def _apply_step(d, p, R, Rn):
 
 @nb.njit(**_OPTS)
 def _fk_range(lengths, guesses, base, platform, tol, max_iter, polish, poses, converged, iterations, residual,
-              start, stop):
+              signs, start, stop):
     """Newton FK of rows [start, stop) (see :func:`fk_newton`); ``guesses`` is (1, 6), one
-    guess for every row, or (N, 6)."""
+    guess for every row, or (N, 6). ``signs[k]``: sign det J of the twist Jacobian at the
+    converged pose, from the factorisation of the last Newton system (free; see the comment
+    at its end), 0 where not converged."""
     R = np.empty((3, 3))
     Rn = np.empty((3, 3))
     J = np.empty((6, 6))
@@ -371,6 +378,7 @@ def _fk_range(lengths, guesses, base, platform, tol, max_iter, polish, poses, co
     g0 = start if per_row else 0
     # hoisted: leg lengths L_g and J_g⁻¹ at the chunk's first guess (6 solves)
     shared_ok = False
+    shared_sign = 0
     if stop - start >= _HOIST_FROM and max_iter > 0:
         _euler_matrix(guesses[g0, 3], guesses[g0, 4], guesses[g0, 5], R)
         for r in range(3):
@@ -385,7 +393,8 @@ def _fk_range(lengths, guesses, base, platform, tol, max_iter, polish, poses, co
                 rhs[r] = 1.0 if r == col else 0.0
                 for c in range(6):
                     J[r, c] = Jg[r, c]
-            shared_ok = _solve6(J, rhs, d)
+            shared_sign = _solve6(J, rhs, d)
+            shared_ok = shared_sign != 0
             for r in range(6):
                 Jinv[r, col] = d[r]
     for k in range(start, stop):
@@ -397,6 +406,7 @@ def _fk_range(lengths, guesses, base, platform, tol, max_iter, polish, poses, co
         it = 0
         extra = 0
         err = np.inf
+        last_sign = 0  # sign det J of the last Newton system solved (0: none)
         first = shared_ok
         if first and per_row:
             for c in range(6):
@@ -418,10 +428,13 @@ def _fk_range(lengths, guesses, base, platform, tol, max_iter, polish, poses, co
                     d[r] = s
                 _apply_step(d, p, R, Rn)
                 it = 1
+                last_sign = shared_sign
+        j_here = False  # J holds the twist Jacobian at the current (p, R)
         while True:
             fresh = not (first and it == 0)  # else: converged at the guess, or non-finite input
             if fresh:
                 err = _residual_jacobian(target, p, R, base, platform, J, rhs, ra)
+                j_here = True
             first = False
             if not math.isfinite(err):
                 break
@@ -432,17 +445,34 @@ def _fk_range(lengths, guesses, base, platform, tol, max_iter, polish, poses, co
                 if not fresh:
                     err = _residual_jacobian(target, p, R, base, platform, J, rhs, ra)
                 extra += 1
-                if not _solve6(J, rhs, d):
+                j_here = False
+                sgn = _solve6(J, rhs, d)
+                if sgn == 0:
                     break
+                last_sign = sgn
                 _apply_step(d, p, R, Rn)
                 continue
             if it >= max_iter:
                 break
-            if not _solve6(J, rhs, d):
+            j_here = False
+            sgn = _solve6(J, rhs, d)
+            if sgn == 0:
                 break
+            last_sign = sgn
             it += 1
             _apply_step(d, p, R, Rn)
         converged[k] = err <= tol
+        # sign det J at the pose: that of the last Newton system, solved at the previous
+        # iterate, one converged step (≲ √(tol·L) mm) away, so the same unless the pose is
+        # singular to that distance; computed afresh only when no system was solved
+        signs[k] = 0
+        if err <= tol:
+            if last_sign != 0:
+                signs[k] = last_sign
+            else:
+                if not j_here:
+                    _residual_jacobian(target, p, R, base, platform, J, rhs, ra)
+                signs[k] = _solve6(J, rhs, d)
         iterations[k] = it
         residual[k] = err
         for r in range(3):
@@ -453,7 +483,42 @@ def _fk_range(lengths, guesses, base, platform, tol, max_iter, polish, poses, co
         poses[k, 5] = math.atan2(R[1, 0], R[0, 0])
 
 
+@nb.njit(**_OPTS)
+def _det_sign_range(poses, base, platform, out, start, stop):
+    """out[k] = sign det J(pose_k) of the twist Jacobian, row i = [u_iᵀ, ((R a_i) × u_i)ᵀ],
+    for rows k in [start, stop): the sign :func:`_solve6` finds while factorising J (0 when
+    singular to working precision, or for a pose that is not finite)."""
+    R = np.empty((3, 3))
+    J = np.empty((6, 6))
+    rhs = np.empty(6)
+    d = np.empty(6)
+    ra = np.empty(3)
+    p = np.empty(3)
+    zero = np.zeros(6)
+    for k in range(start, stop):
+        _euler_matrix(poses[k, 3], poses[k, 4], poses[k, 5], R)
+        for r in range(3):
+            p[r] = poses[k, r]
+        err = _residual_jacobian(zero, p, R, base, platform, J, rhs, ra)
+        out[k] = _solve6(J, rhs, d) if math.isfinite(err) else 0
+
+
+def twist_det_signs(poses, base, platform):
+    """sign det J (N,) int8 of the twist Jacobian ∂L/∂(δp, δω) at poses (N, 6) [mm, rad]:
+    +1, −1, or 0 where singular to working precision (or not finite). Its sign tells the
+    assembly mode apart: it changes only through a singularity (det J = 0)."""
+    poses, base, platform = _f64(np.atleast_2d(poses)), _f64(base), _f64(platform)
+    out = np.zeros(poses.shape[0], dtype=np.int8)
+    _run_rows(_det_sign_range, poses.shape[0], _IK_GRAIN, (poses, base, platform, out))
+    return out
+
+
 def fk_newton(lengths, guesses, base, platform, tol, max_iter, polish=0):
+    """``(poses, converged, iterations, residual)`` of :func:`fk_newton_signed`."""
+    return fk_newton_signed(lengths, guesses, base, platform, tol, max_iter, polish)[:4]
+
+
+def fk_newton_signed(lengths, guesses, base, platform, tol, max_iter, polish=0):
     """Newton–Raphson FK for N sets of leg lengths (N, 6) from guesses (N, 6) or one guess
     for all, (1, 6) or (6,).
 
@@ -464,7 +529,8 @@ def fk_newton(lengths, guesses, base, platform, tol, max_iter, polish=0):
     error of 1e-10 mm as noise.
 
     Returns poses (N, 6) [mm, rad], converged (N,) bool, iterations (N,) int and the final
-    max |L − L_target| (N,) in mm.
+    max |L − L_target| (N,) in mm (:func:`fk_newton_signed` also the sign det J of each
+    converged pose).
 
     Hoisted work: in each chunk of rows, poses whose guess equals the chunk's first guess
     (the usual cold start from the home pose) share that guess's leg lengths L_g and J_g⁻¹,
@@ -483,11 +549,12 @@ def fk_newton(lengths, guesses, base, platform, tol, max_iter, polish=0):
     converged = np.zeros(n, dtype=np.bool_)
     iterations = np.zeros(n, dtype=np.int64)
     residual = np.empty(n)
+    signs = np.zeros(n, dtype=np.int8)
     if n:
         args = (lengths, guesses, _f64(base), _f64(platform), float(tol), int(max_iter), int(polish),
-                poses, converged, iterations, residual)
+                poses, converged, iterations, residual, signs)
         _run_rows(_fk_range, n, _FK_GRAIN, args)
-    return poses, converged, iterations, residual
+    return poses, converged, iterations, residual, signs
 
 
 # -- limits (Hexapod.check_limits) -------------------------------------------------------

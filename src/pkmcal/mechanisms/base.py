@@ -6,7 +6,8 @@ parameters ρ, and pure, vectorised functions of N poses:
 * ``ik(poses)``                    → actuator readings q (N, l)
 * ``actuator_pose_jacobian(poses)`` → ∂q/∂pose (N, l, n) at fixed ρ
 * ``actuator_param_jacobian(poses)``→ ∂q/∂ρ (N, l, p) at fixed pose
-* ``fk(readings)``                 → poses (N, n), with a per-pose convergence flag
+* ``fk(readings)``                 → poses (N, n), with per-pose convergence and
+  same-assembly-mode flags (:class:`FKResult`)
 
 This is everything the identification engine needs: every calibration model in pkmcal is
 the closure equation ``q = IK(x, ρ)`` plus a sensor model ``y = h(x, θ)``, with the pose x
@@ -31,12 +32,36 @@ class FKResult:
     ``poses`` (N, n) in internal units; ``converged`` (N,) is True only where the IK of the
     returned pose reproduces the readings within ``tol``; ``iterations`` (N,) Newton steps
     taken; ``residual`` (N,) the final max |q − IK(pose)| (mm or rad, per actuator).
+
+    ``same_branch`` (N,) is True where the returned pose is on the assembly mode of the start
+    pose it was solved from (the guess, default the home pose): every sign of
+    :meth:`Mechanism.assembly_signs` (for a hexapod sign det J of the twist Jacobian) is the
+    same at both poses. A pose that reproduces the readings on another assembly mode is a
+    mathematically valid FK solution but not where a machine that started at the guess is:
+    :attr:`ok` is False for it, and every FK-based result of pkmcal (``pkmcal fk`` and
+    ``info``, simulation, verification, the fk-residual fit) flags or drops it.
     """
 
     poses: np.ndarray
     converged: np.ndarray
     iterations: np.ndarray
     residual: np.ndarray
+    same_branch: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.same_branch is None:
+            object.__setattr__(self, "same_branch", np.ones(np.shape(self.converged), dtype=bool))
+
+    @property
+    def ok(self) -> np.ndarray:
+        """(N,) True where the pose reproduces the readings on the start pose's assembly
+        mode: the answer a caller should use."""
+        return np.asarray(self.converged, dtype=bool) & np.asarray(self.same_branch, dtype=bool)
+
+    @property
+    def branch_changed(self) -> np.ndarray:
+        """(N,) True where FK converged, but on another assembly mode than its start pose."""
+        return np.asarray(self.converged, dtype=bool) & ~np.asarray(self.same_branch, dtype=bool)
 
     @property
     def all_converged(self) -> bool:
@@ -163,6 +188,37 @@ class Mechanism(ABC):
         least-squares solver evaluates at 1e-12 tolerances or differentiates numerically.
         Default :meth:`fk`, for mechanisms whose FK already stops at a rounding-level step."""
         return self.fk(readings, guess)
+
+    def assembly_signs(self, poses: np.ndarray) -> np.ndarray:
+        """Signs (N, k) in {−1, 0, +1} that tell the assembly modes of poses (N, n) apart:
+        two poses are on the same branch when every sign agrees (0: singular, undecided).
+
+        Default: for as many actuators as pose coordinates, sign det ∂q/∂pose (k = 1), which
+        changes only through a singularity; a redundantly actuated machine has no single
+        such determinant and declares its own signs (default none, k = 0). A mechanism
+        overrides this where a better-defined quantity exists (the hexapod: the twist
+        Jacobian, free of the Euler-angle factor cos b)."""
+        poses = self.as_pose_array(poses)
+        if self.n_actuators != self.n_dof:
+            return np.zeros((poses.shape[0], 0), dtype=np.int8)
+        with np.errstate(invalid="ignore"):
+            A = self.actuator_pose_jacobian(poses)
+            good = np.all(np.isfinite(A), axis=(1, 2))
+            det = np.zeros(poses.shape[0])
+            if np.any(good):
+                det[good] = np.linalg.det(A[good])
+        return np.sign(det).astype(np.int8)[:, None]
+
+    def same_branch(self, poses: np.ndarray, reference: np.ndarray) -> np.ndarray:
+        """(N,) True where each of ``poses`` (N, n) is on the assembly mode of its
+        ``reference`` (one pose (n,) or one per pose (N, n)): the signs of
+        :meth:`assembly_signs` agree wherever both are non-zero."""
+        poses = self.as_pose_array(poses)
+        ref = self.as_pose_array(reference)
+        s = self.assembly_signs(poses)
+        r = self.assembly_signs(ref)
+        r = np.broadcast_to(r, s.shape) if r.shape[0] == 1 else r
+        return np.all((s == r) | (s == 0) | (r == 0), axis=1)
 
     @abstractmethod
     def check_limits(self, poses: np.ndarray) -> LimitReport:

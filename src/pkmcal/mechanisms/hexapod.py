@@ -62,6 +62,9 @@ LIMITS_COMPILED_FROM = 64
 #: condition number) are recomputed by NumPy, so that the verdicts are NumPy's exactly;
 #: over 10⁴ × the largest kernel–NumPy difference measured (5e-14 mm, the leg distance).
 EXACT_VERDICT_TOL = 1e-9
+#: Leg-length steps of the continuation that re-solves a row whose Newton FK converged on
+#: another assembly mode than its guess (:meth:`Hexapod.fk_lengths`).
+FK_CONTINUATION_STEPS = 8
 
 
 @dataclass(frozen=True)
@@ -308,7 +311,20 @@ class Hexapod(Mechanism):
 
     def fk_lengths(self, lengths, guess=None, *, tol: float = FK_TOL_MM, max_iter: int = FK_MAX_ITER,
                    polish: int = 0) -> FKResult:
-        """As :meth:`fk`, from leg lengths L (N, 6) instead of readings."""
+        """As :meth:`fk`, from leg lengths L (N, 6) instead of readings.
+
+        Branch check (:attr:`FKResult.same_branch`): the returned pose must be on the
+        assembly mode of its guess, sign det J(pose) = sign det J(guess) with J the twist
+        Jacobian (:meth:`assembly_signs`; the pose's sign comes free from the last Newton
+        factorisation). A row whose Newton iteration lands on another assembly mode is
+        solved again by continuation from its guess: the leg lengths are moved from L(guess)
+        to L in :data:`FK_CONTINUATION_STEPS` equal steps, each solved by Newton from the
+        previous pose, the path a machine takes when its legs move together from the guess;
+        that answer replaces Newton's when it converges on the guess's assembly mode
+        (``iterations`` stays Newton's count). Rows still on another assembly mode keep
+        their (valid) pose with ``same_branch`` False; rows that did not converge are left
+        as Newton left them.
+        """
         lengths = np.ascontiguousarray(np.atleast_2d(np.asarray(lengths, dtype=float)))
         if lengths.ndim != 2 or lengths.shape[1] != N_LEGS:
             raise PkmcalError(f"FK needs 6 leg lengths per pose; got an array of shape {lengths.shape}")
@@ -316,8 +332,47 @@ class Hexapod(Mechanism):
         guesses = np.broadcast_to(g, lengths.shape)
         if g.ndim == 1 or g.shape[0] == 1:
             guesses = guesses[:1]  # one guess for all: the kernel broadcasts it
-        poses, conv, iters, res = _kernels().fk_newton(lengths, guesses, self.base, self.platform, tol, max_iter, polish)
-        return FKResult(poses=poses, converged=conv, iterations=iters, residual=res)
+        K = _kernels()
+        poses, conv, iters, res, sign = K.fk_newton_signed(lengths, guesses, self.base, self.platform, tol, max_iter,
+                                                           polish)
+        ref_sign = K.twist_det_signs(guesses, self.base, self.platform)
+        ref_sign = np.broadcast_to(ref_sign, conv.shape) if ref_sign.shape[0] == 1 else ref_sign
+        same = (sign == ref_sign) | (sign == 0) | (ref_sign == 0)
+        retry = np.flatnonzero(conv & ~same)
+        if retry.size:
+            gr = np.ascontiguousarray(guesses[retry] if guesses.shape[0] > 1 else np.repeat(guesses, retry.size, 0))
+            x, ok = self._fk_continuation(lengths[retry], gr, tol, max_iter, polish)
+            s_new = K.twist_det_signs(x, self.base, self.platform)
+            r_ref = ref_sign[retry]
+            better = ok & ((s_new == r_ref) | (s_new == 0) | (r_ref == 0))
+            take = retry[better]
+            if take.size:
+                poses[take] = x[better]
+                same[take] = True
+                res[take] = np.max(np.abs(self.leg_lengths(x[better]) - lengths[take]), axis=1)
+        return FKResult(poses=poses, converged=conv, iterations=iters, residual=res, same_branch=same)
+
+    def _fk_continuation(self, lengths, guesses, tol, max_iter, polish) -> tuple[np.ndarray, np.ndarray]:
+        """Poses (M, 6) and converged (M,) of FK by continuation from ``guesses`` (M, 6): leg
+        lengths L(guess) + t (L − L(guess)), t = 1/K, 2/K, …, 1, each solved by Newton from
+        the previous step's pose (see :meth:`fk_lengths`)."""
+        K = _kernels()
+        start = self.leg_lengths(guesses)
+        x = np.array(guesses, dtype=float)
+        ok = np.ones(len(x), dtype=bool)
+        for t in np.arange(1, FK_CONTINUATION_STEPS + 1) / FK_CONTINUATION_STEPS:
+            target = np.ascontiguousarray(start + t * (lengths - start))
+            x, conv, _, _ = K.fk_newton(target, x, self.base, self.platform, tol, max_iter,
+                                        polish if t == 1.0 else 0)
+            ok &= conv
+        return x, ok
+
+    def assembly_signs(self, poses: np.ndarray) -> np.ndarray:
+        """sign det J (N, 1) of the twist Jacobian ∂L/∂(δp, δω) (module docstring), compiled;
+        it changes sign only through a singularity, so two poses with different signs are on
+        different assembly modes. 0 where singular to working precision."""
+        poses = self.as_pose_array(poses)
+        return _kernels().twist_det_signs(poses, self.base, self.platform)[:, None]
 
     # -- limits -------------------------------------------------------------------------
 

@@ -133,7 +133,8 @@ class PlanarMechanism(Mechanism):
         With l > n the readings of a real machine are not exactly consistent; ``converged``
         is then True where the Gauss–Newton step has vanished and the remaining
         max |q − IK(x)| (``residual``) is below ``res_tol`` (mm or rad). Steps are
-        backtracked so that ‖q − IK(x)‖ never grows; IK is NaN outside a chain's reach."""
+        backtracked so that ‖q − IK(x)‖ never grows; IK is NaN outside a chain's reach.
+        ``same_branch``: the pose is on the guess's assembly mode (:meth:`assembly_signs`)."""
         q = np.atleast_2d(np.asarray(readings, dtype=float))
         if q.ndim != 2 or q.shape[1] != self.n_actuators:
             raise PkmcalError(f"machine '{self.name}' needs {self.n_actuators} actuator readings per pose; "
@@ -171,7 +172,8 @@ class PlanarMechanism(Mechanism):
         with np.errstate(invalid="ignore"):
             res = np.max(np.abs(q - self.ik(x)), axis=1)
         ok = done & np.isfinite(res) & (res <= res_tol)
-        return FKResult(poses=x, converged=ok, iterations=it, residual=res)
+        return FKResult(poses=x, converged=ok, iterations=it, residual=res,
+                        same_branch=self.same_branch(x, np.broadcast_to(g, x.shape)))
 
     @property
     def actuator_is_angle(self) -> tuple[bool, ...]:
@@ -288,6 +290,14 @@ class Planar2Dof3Act(PlanarMechanism):
         J[:, i, 12 + i] = np.einsum("nik,ik->ni", dC, _e(P2_BETA))
         J[:, i, 15 + i] = 1.0
         return J
+
+    def assembly_signs(self, poses: np.ndarray) -> np.ndarray:
+        """None (N, 0): each chain's working mode (elbow σ_i) is fixed by the IK, so every
+        pose whose IK reproduces the readings has it; and three chains determine the
+        translating plate uniquely (two circles about A_i − D_i u_i meet in at most two
+        points, and the third chain picks one), so the mirror pose of two chains does not
+        reproduce the third reading and is reported not converged."""
+        return np.zeros((self.as_pose_array(poses).shape[0], 0), dtype=np.int8)
 
     def check_limits(self, poses: np.ndarray) -> LimitReport:
         """Workspace box, reach of every chain, and transmission angle (angle between the
@@ -410,6 +420,14 @@ class Planar3Dof4Act(PlanarMechanism):
         J[:, i, 5 + i] = _TAU * rho / root
         J[:, i, 9 + i] = 1.0
         return J
+
+    def assembly_signs(self, poses: np.ndarray) -> np.ndarray:
+        """sign b_i (N, 2): the side of guide-way i on which the plate joint C_i lies. The IK
+        s_ij = a + τ_j √(ρ_ij² − b²) depends on b only through b², so C_i mirrored across its
+        way gives the same readings: that is the assembly-mode change this flags."""
+        b = self._geometry(poses)[5]
+        with np.errstate(invalid="ignore"):
+            return np.sign(np.nan_to_num(b[:, [0, 2]])).astype(np.int8)
 
     def check_limits(self, poses: np.ndarray) -> LimitReport:
         """Workspace box, leg reach (|b| < ρ) and leg angle to the way ≥ ``min_leg_angle``

@@ -28,20 +28,18 @@ import numpy as np
 
 from pkmcal.errors import PkmcalError
 from pkmcal.identification.identifiability import IdentifiabilityReport, analyse_jacobian
-from pkmcal.identification.residuals import Model, candidate_parameters, make_method, whitening
+from pkmcal.identification.residuals import (  # noqa: F401  (default_method: re-exported, the one rule)
+    Model,
+    candidate_parameters,
+    default_method,
+    make_method,
+    whitening,
+)
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.planning.indices import blas_single_threaded
 from pkmcal.sensors.base import MeasurementSetup
 
 N_REFERENCE = 256
-
-
-def default_method(setup: MeasurementSetup, mechanism: Mechanism | None = None) -> str:
-    """``projection`` for a redundantly actuated machine (paper 3), else ``ik-residual`` for
-    a full-pose sensor (paper 1) and ``fk-residual`` otherwise (paper 2)."""
-    if mechanism is not None and mechanism.n_actuators != mechanism.n_dof:
-        return "projection"
-    return "ik-residual" if setup.sensor.kind == "full-pose" else "fk-residual"
 
 
 def raw_blocks(mechanism: Mechanism, setup: MeasurementSetup, poses: np.ndarray, method: str,

@@ -48,7 +48,11 @@ class Identifiability:
     ``singular_values`` (k,) of the column-scaled identification Jacobian, descending;
     ``rank`` its numerical rank; ``fixed`` parameters held at nominal (gauge fixing and
     user choice); ``weak`` parameters (or combinations) that the data barely determine;
-    ``null_space`` human-readable descriptions of the unidentifiable directions.
+    ``null_space`` human-readable descriptions of the unidentifiable directions;
+    ``condition_number`` σ_1/σ_rank, the ratio of the largest to the smallest singular
+    value *within the rank* (the null directions, σ ~ 1e-16 σ_1, are not identified and
+    do not count; the engine's :attr:`IdentifiabilityReport.condition_number`, which
+    ``pkmcal identify`` prints); ``basis`` what the Jacobian was evaluated on.
     """
 
     rank: int
@@ -58,21 +62,21 @@ class Identifiability:
     weak: tuple[str, ...] = ()
     null_space: tuple[str, ...] = ()
     condition_number: float | None = None
+    basis: str = ""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "singular_values", _array(self.singular_values, "singular_values", 1))
         for attr in ("fixed", "weak", "null_space"):
             object.__setattr__(self, attr, tuple(str(s) for s in getattr(self, attr)))
-        if self.condition_number is None and self.singular_values.size:
-            s = self.singular_values[self.singular_values > 0]
-            if s.size:
-                object.__setattr__(self, "condition_number", float(s.max() / s.min()))
+        s = np.sort(self.singular_values)[::-1]
+        if self.condition_number is None and 0 < self.rank <= s.size and s[self.rank - 1] > 0:
+            object.__setattr__(self, "condition_number", float(s[0] / s[self.rank - 1]))
 
     @classmethod
     def from_mapping(cls, d: dict) -> "Identifiability":
         """From a plain dict with keys rank, n_params, singular_values, fixed, weak,
         null_space (and optionally condition_number); unknown keys are an error."""
-        allowed = {"rank", "n_params", "singular_values", "fixed", "weak", "null_space", "condition_number"}
+        allowed = {"rank", "n_params", "singular_values", "fixed", "weak", "null_space", "condition_number", "basis"}
         unknown = set(d) - allowed
         if unknown:
             raise PkmcalError(f"report: unknown identifiability keys {sorted(unknown)}; allowed {sorted(allowed)}")
@@ -141,17 +145,26 @@ class Residuals:
     ``names`` (m,) the reading names (e.g. "d1", or "lambda3" for actuator residuals);
     ``units`` (m,) "mm", "rad", or "1" for rows without one physical unit (the projection's
     combinations of readings r = U⊥ᵀ W e: whitened, or mixing mm and rad), shown as computed.
+    ``pose_numbers`` (N,) the number of each residual row's pose: its data row in the
+    measurement file, 1-based (default 1..N); poses the fit dropped have no row here.
     """
 
     values: np.ndarray
     names: tuple[str, ...]
     units: tuple[str, ...]
+    pose_numbers: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         values = _array(self.values, "residuals", 2)
         object.__setattr__(self, "values", values)
         object.__setattr__(self, "names", tuple(self.names))
         object.__setattr__(self, "units", tuple(self.units))
+        numbers = np.arange(1, values.shape[0] + 1) if self.pose_numbers is None else \
+            np.asarray(self.pose_numbers, dtype=int).reshape(-1)
+        if numbers.shape != (values.shape[0],):
+            raise PkmcalError(f"report: {numbers.size} pose numbers for {values.shape[0]} residual rows")
+        numbers.setflags(write=False)
+        object.__setattr__(self, "pose_numbers", numbers)
         if len(self.names) != values.shape[1] or len(self.units) != values.shape[1]:
             raise PkmcalError(
                 f"report: residuals have {values.shape[1]} columns but {len(self.names)} names, {len(self.units)} units"
@@ -243,7 +256,10 @@ class ReportData:
     ``poses`` (N, 6) the measured (planned) poses, internal units; ``correlation`` (k, k)
     correlation matrix of the free parameters named ``correlation_names``; ``facts`` are
     extra (label, value) lines for the summary table (method, seed, setup, ...);
-    ``held_out_poses`` (K, 6) the verification poses, drawn in the pose cloud.
+    ``held_out_poses`` (K, 6) the verification poses, drawn in the pose cloud;
+    ``held_out_total`` how many held-out poses were given and ``held_out_dropped``
+    (pose number, reason) of those left out of the comparison (pose numbers: 1-based
+    rows of the held-out set), so that the report says why fewer poses were compared.
     """
 
     title: str
@@ -261,8 +277,11 @@ class ReportData:
     setup_summary: str = ""
     facts: tuple[tuple[str, str], ...] = field(default_factory=tuple)
     held_out_poses: np.ndarray | None = None
+    held_out_total: int | None = None
+    held_out_dropped: tuple[tuple[int, str], ...] = ()
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "held_out_dropped", tuple((int(k), str(w)) for k, w in self.held_out_dropped))
         object.__setattr__(self, "poses", _array(self.poses, "poses", 2))
         if self.held_out_poses is not None:
             object.__setattr__(self, "held_out_poses", _array(self.held_out_poses, "held_out_poses", 2))

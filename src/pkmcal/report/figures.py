@@ -262,10 +262,10 @@ def _unit_groups(res: Residuals):
 
 
 def residual_pose_figure(res: Residuals) -> Figure:
-    """Residual of every reading against the pose index (one marker series per reading)."""
+    """Residual of every reading against the pose number (its data row in the measurement
+    file, 1-based; one marker series per reading)."""
     groups = _unit_groups(res)
-    n = res.values.shape[0]
-    idx = np.arange(1, n + 1)
+    idx = res.pose_numbers
     with style():
         fig = _new((7.2, 2.8 * len(groups) + 0.4))
         for g, (label, scale, cols) in enumerate(groups):
@@ -276,7 +276,7 @@ def residual_pose_figure(res: Residuals) -> Figure:
             ax.set_ylabel(label)
             ax.legend(fontsize=7, ncol=min(6, len(cols)), loc="upper right")
             if g == len(groups) - 1:
-                ax.set_xlabel("pose")
+                ax.set_xlabel("pose (data row of the measurement file, from 1)")
             if g == 0:
                 ax.set_title("Residuals after identification, per pose")
         fig.tight_layout()

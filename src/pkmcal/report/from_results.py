@@ -24,7 +24,9 @@ def identifiability_from_report(report, fixed: tuple[str, ...]) -> Identifiabili
     null = tuple(format_direction(d) for d in report.null_space)
     return Identifiability(rank=int(report.rank), n_params=int(report.n_params),
                            singular_values=np.asarray(report.singular_values, dtype=float),
-                           fixed=tuple(fixed), weak=weak, null_space=null)
+                           fixed=tuple(fixed), weak=weak, null_space=null,
+                           condition_number=float(report.condition_number),
+                           basis=getattr(report, "basis", ""))
 
 
 def residual_units(names: tuple[str, ...], setup: MeasurementSetup, mechanism: Mechanism | None = None,
@@ -123,7 +125,12 @@ def report_data_from_results(
     facts = (("identification method", f"{result.method} ({'noise-weighted' if result.weighted else 'plain'} "
                                         "least squares)"),
              ("solver", f"{result.message} ({result.nfev} evaluations)"),
-             ("poses used", f"{len(result.used_poses)} (dropped {len(result.dropped)})"),
+             ("poses used", f"{len(result.used_poses)} (dropped {len(result.dropped)})"
+                            + (f": rows {', '.join(str(int(k) + 1) for k in result.dropped[:20])}"
+                               f"{' …' if len(result.dropped) > 20 else ''} of the measurement file"
+                               if len(result.dropped) else "")),
+             ("pose numbers", "data rows of the measurement file, counted from 1 (comment and header lines "
+                              "not counted)"),
              ("reduced χ²", f"{result.uncertainty.reduced_chi2:.3f}"),
              *facts,
              *(("note", w) for w in result.warnings))
@@ -138,8 +145,12 @@ def report_data_from_results(
         correlation=corr,
         correlation_names=tuple(result.free),
         residuals=Residuals(np.asarray(result.residuals, dtype=float), res_names,
-                            residual_units(res_names, setup, nominal, bool(result.weighted))),
+                            residual_units(res_names, setup, nominal, bool(result.weighted)),
+                            pose_numbers=np.asarray(result.used_poses, dtype=int) + 1),
         held_out=None if verification is None else held_out_from_verification(verification),
+        held_out_total=None if verification is None else int(len(verification.after.valid)),
+        held_out_dropped=() if verification is None else tuple((k + 1, why) for k, why in
+                                                               verification.dropped.items()),
         error_map=error_map,
         setup_summary=setup_summary,
         facts=facts,

@@ -164,10 +164,21 @@ def _held_out_rows(data: ReportData) -> tuple[str, list[list[str]]]:
                      _fmt(b["max"] * scale, ".2f"), _fmt(a["rms"] * scale, ".2f"), _fmt(a["p95"] * scale, ".2f"),
                      _fmt(a["max"] * scale, ".2f"), _fmt(ratio, ".1f") + "×"])
     pb, pa = s["position_before"], s["position_after"]
+    ob, oa = s["orientation_before"], s["orientation_after"]
     headline = (f"Held-out position error (rms): {pb['rms'] * 1000:.1f} µm before → {pa['rms'] * 1000:.2f} µm after "
-                f"calibration; max {pb['max'] * 1000:.1f} → {pa['max'] * 1000:.2f} µm "
-                f"({data.held_out.n_poses} poses not used for identification).")
+                f"calibration; max {pb['max'] * 1000:.1f} → {pa['max'] * 1000:.2f} µm. Orientation error (rms): "
+                f"{ob['rms'] * ARCSEC:.1f}″ before → {oa['rms'] * ARCSEC:.2f}″ after; max {ob['max'] * ARCSEC:.1f}″ → "
+                f"{oa['max'] * ARCSEC:.2f}″ ({data.held_out.n_poses} poses not used for identification"
+                + _held_out_count(data) + ").")
     return headline, rows
+
+
+def _held_out_count(data: ReportData) -> str:
+    """" of K given (n left out, see Verification)" when poses were left out of the comparison."""
+    total = data.held_out_total
+    if total is None or total == data.held_out.n_poses:
+        return ""
+    return f" of {total} given ({total - data.held_out.n_poses} left out, see Verification)"
 
 
 #: Per display unit of a parameter: digits of its values, and the scale of its error
@@ -236,11 +247,13 @@ def render_html(data: ReportData, figs: list[F.RenderedFigure]) -> str:
     ident = data.identifiability
     add('<h2 id="identifiability">Identifiability</h2>')
     rows = [["rank", f"{ident.rank} of {ident.n_params} candidate parameters"],
-            ["condition number", _fmt(ident.condition_number, ".4g") if ident.condition_number else "—"],
+            ["condition number (σ₁/σ_rank)", _fmt(ident.condition_number, ".4g") if ident.condition_number else "—"],
             ["fixed (gauge and user)", _esc(", ".join(ident.fixed) or "none")],
             ["weak directions", _esc("; ".join(ident.weak) or "none")],
             ["null space", _esc("; ".join(ident.null_space) or "none (full rank)")]]
-    add(_table(["", ""], rows, left=2))
+    if ident.basis:
+        rows.append(["Jacobian evaluated at", _esc(ident.basis)])
+    add(_table(["quantity", "value"], rows, left=2))
     if ident.rank < ident.n_params:
         add(f'<p class="warn">The data determine only {ident.rank} of {ident.n_params} parameter directions. '
             "The combinations listed under null space cannot be seen by this sensor and pose set; a gauge "
@@ -280,13 +293,22 @@ def render_html(data: ReportData, figs: list[F.RenderedFigure]) -> str:
                 "noise σ in a weighted fit, else mixing mm and rad; shown as computed.</p>")
         scales = np.array([F.RESIDUAL_DISPLAY[u][1] for u in r.units])
         worst = np.argsort(-np.sqrt(np.mean((r.values * scales) ** 2, axis=1)), kind="stable")[:3]
-        add(f"<p>Poses with the largest residuals: {', '.join(str(int(w) + 1) for w in worst)}.</p>")
+        add(f"<p>Poses with the largest residuals: {', '.join(str(int(r.pose_numbers[w])) for w in worst)} "
+            "(pose numbers: data rows of the measurement file, counted from 1).</p>")
     add(fig("residuals-per-pose"))
     add(fig("residuals-per-reading"))
 
     # -- verification ------------------------------------------------------------------
     add('<h2 id="verification">Verification on held-out poses</h2>')
     if data.held_out is not None and data.held_out.n_poses:
+        add(f"<p>{data.held_out.n_poses} held-out poses compared"
+            + (f" of {data.held_out_total} given" if data.held_out_total is not None else "")
+            + ": the poses the real machine reaches when commanded through both models, so that before and "
+            "after are taken over the same poses.</p>")
+        if data.held_out_dropped:
+            add("<p>Left out (held-out pose number, counted from 1: why; the model named is the one whose "
+                "commands the real machine could not follow):</p>")
+            add(_table(["pose", "reason"], [[str(k), _esc(w)] for k, w in data.held_out_dropped], left=2))
         add(_table(["error", "before rms", "before p95", "before max", "after rms", "after p95", "after max",
                     "rms ratio"], held_rows))
         add(fig("held-out"))

@@ -95,9 +95,24 @@ class Reproduction:
 
     def to_dict(self) -> dict:
         return {"name": self.name, "title": self.title, "rows": [r.to_dict() for r in self.rows],
-                "setup": dict(self.setup), "notes": list(self.notes), "headline": dict(self.headline),
+                "setup": dict(self.setup), "notes": list(self.notes), "headline": _headline_json(self.headline),
                 "extra": [{"title": t, "header": list(h), "rows": [list(r) for r in rows]} for t, h, rows in self.extra],
-                "seconds": self.seconds}
+                "seconds": self.seconds,
+                "units": {"seconds": "s",
+                          "headline": "per key: its suffix (_mm, _pct, _deg; _rad = the paper's unit, with its "
+                                      "_deg twin); paper2_D_E_*, paper2_E_E_*: % (rows D_E, E_E); *_O4_*: 1 "
+                                      "(observability index O4)"}}
+
+
+def _headline_json(headline: dict[str, float]) -> dict[str, float]:
+    """The headline for JSON: every ``*_rad`` value (the paper's unit) followed by its
+    ``*_deg`` twin, since pkmcal's JSON gives angles in degrees (docs/conventions.md)."""
+    out: dict[str, float] = {}
+    for k, v in headline.items():
+        out[k] = v
+        if k.endswith("_rad") and isinstance(v, (int, float)) and math.isfinite(v):
+            out[k[:-4] + "_deg"] = math.degrees(v)
+    return out
 
 
 def mean_sd(values) -> tuple[float, str]:
