@@ -60,7 +60,7 @@ def test_record_names_dates_and_fingerprints_the_inputs(files, monkeypatch):
     inputs = rec["inputs"]
     assert inputs["machine"] == {"builtin": "stewart-prototype"}
     for key, name in (("setup", "indicators.yaml"), ("measurements", "meas.csv")):
-        assert inputs[key] == {"file": name, "bytes": (files / name).stat().st_size, "sha256": sha256(files / name)}
+        assert inputs[key] == {"file": name, "size_bytes": (files / name).stat().st_size, "sha256": sha256(files / name)}
     # the fit part of the record is still there (export --format json shows it all)
     assert rec["method"] == "fk-residual" and rec["n_poses"] > 0 and len(rec["gauge"]) == 3
     res = run("export", "cal.yaml", "--format", "json")

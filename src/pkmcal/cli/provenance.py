@@ -51,7 +51,7 @@ def command_line() -> str | None:
 
 
 def input_record(spec: str | os.PathLike) -> dict:
-    """``{"file", "bytes", "sha256"}`` of an input file, or ``{"builtin": name}``."""
+    """``{"file", "size_bytes", "sha256"}`` of an input file, or ``{"builtin": name}``."""
     path = os.fspath(spec)
     if not os.path.isfile(path):
         return {"builtin": path}
@@ -59,7 +59,7 @@ def input_record(spec: str | os.PathLike) -> dict:
     with open(path, "rb") as fh:
         for block in iter(lambda: fh.read(1 << 20), b""):
             digest.update(block)
-    return {"file": path, "bytes": os.path.getsize(path), "sha256": digest.hexdigest()}
+    return {"file": path, "size_bytes": os.path.getsize(path), "sha256": digest.hexdigest()}
 
 
 __all__ = ["ARGV_KEY", "command_line", "input_record", "utc_timestamp"]
