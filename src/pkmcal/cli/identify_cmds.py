@@ -79,7 +79,7 @@ def fit_summary(result) -> str:
         f"rms residual {result.rms_residual:.6g} ({', '.join(result.residual_names)}); "
         f"chi2/dof = {u.chi2:.6g}/{u.dof} = {u.reduced_chi2:.4g}",
         f"identifiability: rank {rep.rank} of {rep.n_params}, condition number {rep.condition_number:.3g}",
-        "std: a-priori (noise model) x max(1, chi2/dof) — this covariance is written to the machine file",
+        f"std: {u.description} — this covariance is written to the machine file",
     ]
     for d in rep.null_space:
         lines.append(f"  unobservable: {format_direction(d)}")
@@ -189,7 +189,7 @@ def _with_calibration_record(result, measurements: str, setup_spec: str):
         "method": result.method, "weighted": bool(result.weighted), "measurements": str(measurements),
         "setup": str(setup_spec), "n_poses": int(len(result.used_poses)), "n_free": int(len(result.free)),
         "gauge": list(result.gauge), "rms_residual": float(result.rms_residual),
-        "reduced_chi2": float(u.reduced_chi2), "std": "a-priori (noise model) x max(1, chi2/dof)",
+        "reduced_chi2": float(u.reduced_chi2), "std": u.description,
     }
     if getattr(result.sensor, "kind", "") == "planar-tool":  # read back by 'pkmcal verify'
         record["sensor"] = sensor_calibration_block(result.sensor)

@@ -125,6 +125,7 @@ def report_data_from_results(
              ("solver", f"{result.message} ({result.nfev} evaluations)"),
              ("poses used", f"{len(result.used_poses)} (dropped {len(result.dropped)})"),
              ("reduced χ²", f"{result.uncertainty.reduced_chi2:.3f}"),
+             ("standard deviations", result.uncertainty.description),
              *facts,
              *(("note", w) for w in result.warnings))
     return ReportData(
