@@ -105,8 +105,8 @@ def report(tmp_path_factory):
 def test_report_writes_page_and_figure_files(report):
     data, files, page = report
     names = {p.stem for p in files.figures}
-    assert names == {"machine-poses", "pose-cloud", "singular-values", "parameters", "correlation",
-                     "residuals-per-pose", "residuals-per-reading", "held-out", "error-map"}
+    assert names == {"machine-poses", "pose-cloud", "singular-values", "parameters", "parameter-errors", "correlation",
+                     "residuals-per-pose", "residuals-per-reading", "held-out", "held-out-per-pose", "error-map"}
     for p in files.figures:
         assert p.exists() and p.stat().st_size > 1000
         assert p.parent == files.html.parent

@@ -10,7 +10,8 @@ Dial indicators (paper 2 §2.3, eqs. 4–6)::
     indicators: [[40, 0], [-20, 34.641], [-20, -34.641]]   # x, y in the base frame, mm
     plane_offset: 10.0            # platform origin above its lower plane, mm
     zero: [0, 0, 0]               # optional indicator zero offsets, mm
-    free: [zero1, zero2, zero3]   # optional: sensor parameters to estimate
+    plate: {x: 0, y: 0, z: 0, a: 0, b: 0, c: 0}   # optional: pose of the indicator plate in the base, mm/deg
+    free: [zero1, zero2, zero3]   # optional: sensor parameters to estimate (also plate.x ... plate.c)
     noise: {reading: 0.01, actuator: 0.005}               # std, mm
 
 Full pose (paper 1 §III), with optional world→base and platform→target transforms::
@@ -125,6 +126,7 @@ class _Setup(_Strict):
     indicators: list[tuple[Number, Number]] | None = None
     plane_offset: Number | None = None
     zero: list[Number] | None = None
+    plate: _Transform | None = None
     world: _Transform | None = None
     tool: _Transform | None = None
     target: _Point | None = None
@@ -137,7 +139,7 @@ class _Setup(_Strict):
 _SENSOR_KEYS = {
     "full-pose": ("world", "tool"),
     "position": ("target", "world"),
-    "indicators": ("indicators", "plane_offset", "zero"),
+    "indicators": ("indicators", "plane_offset", "zero", "plate"),
     "planar-tool": ("target", "world"),
 }
 _NOISE_KEYS = {
@@ -225,7 +227,7 @@ def load_setup(path: str | os.PathLike, machine=None) -> MeasurementSetup:
                 "; give the actuator stiffness, e.g. simulation: {stiffness: 2.0e4, load: [0, -30]} "
                 "(N/mm or N*mm/rad; N)" if loc == ("simulation", "stiffness") else "")
         elif err["type"] == "extra_forbidden":
-            model = {(): _Setup, ("noise",): _Noise, ("world",): _Transform, ("tool",): _Transform,
+            model = {(): _Setup, ("noise",): _Noise, ("world",): _Transform, ("tool",): _Transform, ("plate",): _Transform,
                      ("target",): _Point, ("simulation",): _Simulation}.get(loc[:-1], _Setup)
             what = f"is not a setup key here; remove or correct it (allowed: {', '.join(model.model_fields)})"
         else:
@@ -239,7 +241,7 @@ def load_setup(path: str | os.PathLike, machine=None) -> MeasurementSetup:
 
 def _build(path, lines, spec: _Setup) -> MeasurementSetup:
     kind = spec.sensor
-    for key in ("indicators", "plane_offset", "zero", "world", "tool", "target"):
+    for key in ("indicators", "plane_offset", "zero", "plate", "world", "tool", "target"):
         if getattr(spec, key) is not None and key not in _SENSOR_KEYS[kind]:
             _fail(path, lines, (key,), f"does not apply to sensor '{kind}' (its keys: {', '.join(_SENSOR_KEYS[kind])})")
     noise = spec.noise
@@ -267,7 +269,7 @@ def _build(path, lines, spec: _Setup) -> MeasurementSetup:
             if spec.zero is not None and len(spec.zero) != k:
                 _fail(path, lines, ("zero",), f"give one zero offset per indicator ({k}); got {len(spec.zero)}")
             sensor = IndicatorSensor(positions=np.array(spec.indicators, dtype=float),
-                                     plane_offset=spec.plane_offset, zero=spec.zero, free=free)
+                                     plane_offset=spec.plane_offset, zero=spec.zero, plate=tf(spec.plate), free=free)
             reading = noise.reading
             if reading is None:
                 _fail(path, lines, ("noise", "reading"), "is missing; give the indicator noise (mm)")
@@ -380,6 +382,8 @@ def setup_to_yaml(setup: MeasurementSetup) -> str:
         doc["plane_offset"] = float(s.plane_offset)
         if np.any(s.zero != 0):
             doc["zero"] = FlowList(float(v) for v in s.zero)
+        if not s.plate_is_identity:
+            doc["plate"] = _group_dict(s, "plate")
     elif isinstance(s, PositionSensor):
         doc["target"] = _group_dict(s, "target")
         if np.any(s.world != 0):

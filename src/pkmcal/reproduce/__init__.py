@@ -5,6 +5,8 @@ One module per paper table (:mod:`.paper1`, :mod:`.paper2`, :mod:`.paper2_planni
 (:mod:`.table`), deterministic for a seed, with a ``quick`` mode (few Monte Carlo runs)
 for tests. :data:`REPRODUCTIONS`
 is the registry behind ``pkmcal reproduce NAME``; :func:`run_reproduction` runs one by name.
+:data:`CATALOGUE` (:mod:`.catalogue`) lists every table and figure of the three papers with
+the reproduction that covers it or the reason none can (``pkmcal reproduce --list``).
 
 Paper 2 Tables 1–2 (observability indices of random and optimal pose sets) are in
 :mod:`.paper2_planning`; ``benchmarks/planning_tables.py`` prints them (docs/planning.md).
@@ -15,8 +17,10 @@ from __future__ import annotations
 from typing import Callable
 
 from pkmcal.errors import PkmcalError
+from pkmcal.reproduce.catalogue import CATALOGUE, format_catalogue
 from pkmcal.reproduce.paper1 import paper1_table1
 from pkmcal.reproduce.paper2 import paper2_table5
+from pkmcal.reproduce.paper2_plate import paper2_plate_frame
 from pkmcal.reproduce.paper2_planning import paper2_tables1_2
 from pkmcal.reproduce.paper2_study import paper2_fig6, paper2_table6
 from pkmcal.reproduce.paper3 import paper3_case1, paper3_case2
@@ -24,8 +28,9 @@ from pkmcal.reproduce.table import Reproduction, Row
 
 #: name → (function, one-line description)
 REPRODUCTIONS: dict[str, tuple[Callable[..., Reproduction], str]] = {
-    "paper1-table1": (paper1_table1, "paper 1 Table I (parameter errors, boundary vs interior poses) and its "
-                                     "verification claims, with the Gauss-Markov bound"),
+    "paper1-table1": (paper1_table1, "paper 1 Table I, Figs. 10-11 (parameter errors, boundary vs interior "
+                                     "poses, D-optimal poses for context) and its verification claims, with the "
+                                     "Gauss-Markov bound"),
     "paper2-table5": (paper2_table5, "paper 2 Table 5 (3 indicators, Table 4 real machine, four noise levels), "
                                      "gauge evidence, Table 7 evidence"),
     "paper2-tables1-2": (paper2_tables1_2, "paper 2 Tables 1-2 (observability indices O1-O4 of random and "
@@ -33,6 +38,8 @@ REPRODUCTIONS: dict[str, tuple[Callable[..., Reproduction], str]] = {
     "paper2-table6": (paper2_table6, "paper 2 Table 6 (random vs optimally selected poses: D_E, P_Er), as a study"),
     "paper2-fig6": (paper2_fig6, "paper 2 Fig. 6 (parameter error vs number of random poses, auto and paper "
                                  "gauge), as a study"),
+    "paper2-plate-frame": (paper2_plate_frame, "paper 2 §2.3/§6: the indicator plate as its own frame (parallel "
+                                               "frames assumed, plate surveyed, plate identified)"),
     "paper3-case1": (paper3_case1, "paper 3 case 1 (2-dof, 3 rotary actuators): held-out improvement"),
     "paper3-case2": (paper3_case2, "paper 3 case 2 (3-dof, 4 linear actuators): held-out improvement"),
 }
@@ -48,5 +55,5 @@ def run_reproduction(name: str, seed: int = 0, quick: bool = False) -> Reproduct
     return fn(seed=seed, quick=quick)
 
 
-__all__ = ["REPRODUCTIONS", "Reproduction", "Row", "run_reproduction", "paper1_table1", "paper2_table5",
+__all__ = ["CATALOGUE", "REPRODUCTIONS", "Reproduction", "Row", "format_catalogue", "run_reproduction", "paper1_table1", "paper2_table5",
            "paper2_tables1_2", "paper2_table6", "paper2_fig6", "paper3_case1", "paper3_case2"]
