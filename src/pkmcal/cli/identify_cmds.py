@@ -224,7 +224,7 @@ def _report_data(nominal, result, setup, meas, meas_path: str, output: str):
     except PkmcalError:
         setup_text = setup.sensor.kind
     return report_data_from_results(
-        nominal, result, setup, poses, setup_summary=setup_text,
+        nominal, result, setup, poses, setup_summary=setup_text, commanded=meas.commanded,
         facts=(("measurement file", str(meas_path)), ("calibrated machine file", str(output))))
 
 

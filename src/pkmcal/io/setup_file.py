@@ -39,6 +39,7 @@ A tracker on the tool point of a planar machine (paper 3 §3), with the physics 
     simulation:
       stiffness: 5.0e7            # actuator stiffness K: N/mm (linear) or N·mm/rad (rotary); one or one per actuator
       load: [0, -30]              # in-plane force on the tool point, N (base frame)
+      backlash: 1.0e-4            # optional dead band per actuator, mm (linear) or rad (rotary); one or one per actuator
 
 Built-in setups (:data:`pkmcal.sensors.library.BUILTIN_SETUPS`, re-exported here) are usable by
 name wherever a setup file is. A planar-tool setup is bound to its machine's pose dimension
@@ -118,6 +119,7 @@ class _Noise(_Strict):
 class _Simulation(_Strict):
     stiffness: Values
     load: tuple[Number, Number] | None = None
+    backlash: Values | None = None
 
 
 class _Setup(_Strict):
@@ -320,10 +322,13 @@ def _build(path, lines, spec: _Setup) -> MeasurementSetup:
             _fail(path, lines, ("simulation",), "applies to redundantly actuated planar machines (sensor: planar-tool) "
                   "only; remove it")
         try:
+            backlash = spec.simulation.backlash
             simulation = StaticsModel(stiffness=np.array(spec.simulation.stiffness, dtype=float),
-                                      load=None if spec.simulation.load is None else np.array(spec.simulation.load))
+                                      load=None if spec.simulation.load is None else np.array(spec.simulation.load),
+                                      backlash=None if backlash is None else np.array(backlash, dtype=float))
         except PkmcalError as exc:
-            _fail(path, lines, ("simulation", "stiffness" if "stiffness" in str(exc) else "load"), str(exc))
+            key = next((k for k in ("stiffness", "load", "backlash") if k in str(exc)), "stiffness")
+            _fail(path, lines, ("simulation", key), str(exc))
     return MeasurementSetup(
         sensor=sensor,
         noise=NoiseModel(reading_std=reading_std, actuator_std=actuator, distribution=noise.distribution),
@@ -415,6 +420,8 @@ def setup_to_yaml(setup: MeasurementSetup) -> str:
         sim: dict = {"stiffness": _values(setup.simulation.stiffness, False)}
         if setup.simulation.load is not None:
             sim["load"] = FlowList(float(v) for v in setup.simulation.load)
+        if setup.simulation.backlash is not None:
+            sim["backlash"] = _values(setup.simulation.backlash, False)
         doc["simulation"] = sim
     head = "# pkmcal measurement setup: mm, transform angles in degrees, orientation noise in rad\n"
     if noise.distribution == "uniform":

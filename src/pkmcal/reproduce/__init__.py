@@ -22,8 +22,10 @@ from pkmcal.reproduce.paper1 import paper1_table1
 from pkmcal.reproduce.paper2 import paper2_table5
 from pkmcal.reproduce.paper2_plate import paper2_plate_frame
 from pkmcal.reproduce.paper2_planning import paper2_tables1_2
+from pkmcal.reproduce.paper2_singularity import paper2_singularity
 from pkmcal.reproduce.paper2_study import paper2_fig6, paper2_table6
 from pkmcal.reproduce.paper3 import paper3_case1, paper3_case2
+from pkmcal.reproduce.paper3_compliance import paper3_compliance
 from pkmcal.reproduce.table import Reproduction, Row
 
 #: name → (function, one-line description)
@@ -40,8 +42,13 @@ REPRODUCTIONS: dict[str, tuple[Callable[..., Reproduction], str]] = {
                                  "gauge), as a study"),
     "paper2-plate-frame": (paper2_plate_frame, "paper 2 §2.3/§6: the indicator plate as its own frame (parallel "
                                                "frames assumed, plate surveyed, plate identified)"),
+    "paper2-singularity": (paper2_singularity, "paper 2 §2.1: Merlet's |J⁻¹| singularity detector beside the "
+                                               "inverse condition number"),
     "paper3-case1": (paper3_case1, "paper 3 case 1 (2-dof, 3 rotary actuators): held-out improvement"),
     "paper3-case2": (paper3_case2, "paper 3 case 2 (3-dof, 4 linear actuators): held-out improvement"),
+    "paper3-compliance": (paper3_compliance, "paper 3: the load/compliance trap (softer actuators, larger loads: "
+                                             "floor, projection, naive and known-stiffness fits) and the report's "
+                                             "warning"),
 }
 
 
