@@ -27,8 +27,9 @@ def quick():
 
 
 def test_registry_and_unknown_name():
-    assert set(REPRODUCTIONS) == {"paper1-table1", "paper2-table5", "paper2-tables1-2", "paper2-table6",
-                                  "paper2-fig6", "paper3-case1", "paper3-case2"}
+    assert set(REPRODUCTIONS) == {"paper1-table1", "paper1-figs4-9", "paper2-table5", "paper2-tables1-2",
+                                  "paper2-table6", "paper2-fig6", "paper2-plate-frame", "paper2-singularity",
+                                  "paper3-case1", "paper3-case2", "paper3-compliance"}
     with pytest.raises(PkmcalError, match="unknown reproduction 'paper9'"):
         run_reproduction("paper9")
 

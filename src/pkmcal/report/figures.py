@@ -480,3 +480,29 @@ def path_errors_figure(before: np.ndarray, after: dict[str, np.ndarray], forward
         ax.legend(fontsize=6.5, ncol=2, loc="best")
         fig.tight_layout()
     return fig
+
+
+def error_slices_figure(values: np.ndarray, position: np.ndarray, orientation: np.ndarray, magnitude: float,
+                        title: str = "") -> Figure:
+    """Pose error along slices of each pose coordinate (paper 1 Figs. 4–9): one column per
+    coordinate x … c, position error (µm) on top, orientation error (arcsec) below, one line
+    per slice (:class:`~pkmcal.planning.error_maps.ErrorSlices` arrays: ``values`` (6, P),
+    ``position``/``orientation`` (6, C, P), mm and rad)."""
+    names = ("x", "y", "z", "a", "b", "c")
+    with style():
+        fig = _new((15.0, 5.2))
+        for k, name in enumerate(names):
+            x = values[k] if k < 3 else np.rad2deg(values[k])
+            for row, (data, scale, label) in enumerate(((position, 1000.0, "position error (µm)"),
+                                                        (orientation, ARCSEC_PER_RAD, "orientation error (arcsec)"))):
+                ax = fig.add_subplot(2, 6, row * 6 + k + 1)
+                for curve in data[k]:
+                    ax.plot(x, curve * scale, lw=0.7)
+                if k == 0:
+                    ax.set_ylabel(label)
+                if row == 1:
+                    ax.set_xlabel(f"{name} ({'mm' if k < 3 else 'deg'})")
+                ax.tick_params(labelsize=7)
+        fig.suptitle(title or f"Pose error from ±{magnitude:g} mm parameter errors (paper 1 Figs. 4–9)", fontsize=10)
+        fig.tight_layout()
+    return fig

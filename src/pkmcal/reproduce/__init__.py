@@ -19,6 +19,7 @@ from typing import Callable
 from pkmcal.errors import PkmcalError
 from pkmcal.reproduce.catalogue import CATALOGUE, format_catalogue
 from pkmcal.reproduce.paper1 import paper1_table1
+from pkmcal.reproduce.paper1_error_maps import paper1_figs4_9
 from pkmcal.reproduce.paper2 import paper2_table5
 from pkmcal.reproduce.paper2_plate import paper2_plate_frame
 from pkmcal.reproduce.paper2_planning import paper2_tables1_2
@@ -33,6 +34,8 @@ REPRODUCTIONS: dict[str, tuple[Callable[..., Reproduction], str]] = {
     "paper1-table1": (paper1_table1, "paper 1 Table I, Figs. 10-11 (parameter errors, boundary vs interior "
                                      "poses, D-optimal poses for context) and its verification claims, with the "
                                      "Gauss-Markov bound"),
+    "paper1-figs4-9": (paper1_figs4_9, "paper 1 Figs. 4-9 (pose error along slices of each coordinate) and "
+                                       "whether they support 'measure at the boundary'"),
     "paper2-table5": (paper2_table5, "paper 2 Table 5 (3 indicators, Table 4 real machine, four noise levels), "
                                      "gauge evidence, Table 7 evidence"),
     "paper2-tables1-2": (paper2_tables1_2, "paper 2 Tables 1-2 (observability indices O1-O4 of random and "

@@ -209,7 +209,7 @@ def _path_rows(rows, headline, name, p, runs, backlash):
         m, s = mean_sd([float(np.mean(np.abs(r["after"][meth][0:10] - r["after"][meth][19:9:-1]))) for r in runs])
         rows.append(Row("|forward − backward| at the same points, after", None, m, "mm", s, g))
     m, s = mean_sd([r["chi2"] for r in runs])
-    rows.append(Row("reduced χ² of the projection fit", None, m, "", s, f"{g0}: projection"))
+    rows.append(Row("reduced χ² of the projection fit", None, m, "", s, f"{g0}: projection fit"))
 
 
 def _figures(name, run):

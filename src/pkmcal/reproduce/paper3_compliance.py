@@ -113,7 +113,8 @@ def paper3_compliance(seed: int = 0, quick: bool = False, repeats: int | None = 
                 for m in MODELS:
                     mean, spread = mean_sd(acc[(where, m)])
                     rows.append(Row(f"improvement at the {where}: {m}", None, mean, "%", spread, g))
-                    key = f"paper3_compliance_s{s:g}_F{load_n:g}_{where.split()[0]}_{m.split(' ')[0]}"
+                    slug = lambda t: "".join(ch if ch.isalnum() else "_" for ch in t).strip("_")  # noqa: E731
+                    key = f"paper3_compliance_s{s:g}_F{load_n:g}_{slug(where)}_{slug(m.split(' (')[0])}"
                     headline[key] = mean
             for key, q in (("est_max", "deflection estimated from the following errors (max, calibration poses)"),
                            ("true_max", "true load deflection (max, calibration poses: the floor's errors there)"),
