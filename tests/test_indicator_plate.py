@@ -18,7 +18,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pkmcal.conventions import euler_pose_jacobian, euler_to_matrix, matrix_to_euler, rotation_vector_to_matrix
+from pkmcal.conventions import (
+    euler_pose_jacobian,
+    euler_to_matrix,
+    matrix_to_euler,
+    rotation_vector_to_matrix,
+)
 from pkmcal.identification.engine import identify
 from pkmcal.identification.simulation import simulate_campaign
 from pkmcal.io.setup_file import load_setup, setup_to_yaml

@@ -24,7 +24,12 @@ from pkmcal.identification.redundant_campaign import (
     simulate_redundant_campaign,
 )
 from pkmcal.io.setup_file import load_setup, setup_to_yaml
-from pkmcal.mechanisms.statics import StaticsModel, equilibrium, force_balance, linear_response
+from pkmcal.mechanisms.statics import (
+    StaticsModel,
+    equilibrium,
+    force_balance,
+    linear_response,
+)
 from pkmcal.reproduce.known_stiffness import KnownStiffnessModel, fit_known_stiffness
 from pkmcal.reproduce.paper3 import CASES, case_models, measurement_path, real_setup
 from pkmcal.sensors.base import MeasurementSetup

@@ -21,8 +21,8 @@ from pkmcal.reproduce.catalogue import CATALOGUE, format_catalogue
 from pkmcal.reproduce.paper1 import paper1_table1
 from pkmcal.reproduce.paper1_error_maps import paper1_figs4_9
 from pkmcal.reproduce.paper2 import paper2_table5
-from pkmcal.reproduce.paper2_plate import paper2_plate_frame
 from pkmcal.reproduce.paper2_planning import paper2_tables1_2
+from pkmcal.reproduce.paper2_plate import paper2_plate_frame
 from pkmcal.reproduce.paper2_singularity import paper2_singularity
 from pkmcal.reproduce.paper2_study import paper2_fig6, paper2_table6
 from pkmcal.reproduce.paper3 import paper3_case1, paper3_case2

@@ -167,7 +167,7 @@ def fit_known_stiffness(nominal: Mechanism, sensor, measurements, commanded_pose
     r = model.residual(sol.x)
     k = 2 + nominal.n_actuators
     unc = parameter_uncertainty(model.free, J.reshape(-1, k, model.idx.size), r.reshape(-1, k), weighted=True)
-    th, mech, sens, xe = model.state(sol.x)
+    _, mech, sens, xe = model.state(sol.x)
     return KnownStiffnessResult(mechanism=mech, sensor=sens, free=model.free, x=sol.x, uncertainty=unc, poses=xe,
                                 rms_whitened=float(np.sqrt(np.mean(r**2))), nfev=int(sol.nfev),
                                 success=bool(sol.status > 0), message=str(sol.message))

@@ -47,7 +47,12 @@ from pkmcal.io.setup_file import builtin_setup
 from pkmcal.mechanisms import builtin_machine
 from pkmcal.mechanisms.library import symmetric_hexapod
 from pkmcal.planning.blocks import planning_model
-from pkmcal.planning.candidates import corner_box, corner_poses, generate_candidates, workspace_box
+from pkmcal.planning.candidates import (
+    corner_box,
+    corner_poses,
+    generate_candidates,
+    workspace_box,
+)
 from pkmcal.planning.selection import select_default
 from pkmcal.reproduce.table import Reproduction, Row, mean_sd
 

@@ -17,8 +17,16 @@ import time
 import numpy as np
 
 from pkmcal.errors import PkmcalError
-from pkmcal.identification.projection import METHODS, HeldOutResult, calibration_experiment, fit_redundant
-from pkmcal.identification.redundant_campaign import simulate_redundant_campaign, tool_errors
+from pkmcal.identification.projection import (
+    METHODS,
+    HeldOutResult,
+    calibration_experiment,
+    fit_redundant,
+)
+from pkmcal.identification.redundant_campaign import (
+    simulate_redundant_campaign,
+    tool_errors,
+)
 from pkmcal.mechanisms import planar as PL
 from pkmcal.mechanisms.statics import StaticsModel
 from pkmcal.reproduce.known_stiffness import fit_known_stiffness

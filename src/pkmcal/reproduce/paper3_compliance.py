@@ -28,7 +28,11 @@ import time
 import numpy as np
 
 from pkmcal.identification.projection import calibration_experiment
-from pkmcal.identification.redundant_campaign import compliance_warning, load_deflection_estimate, tool_errors
+from pkmcal.identification.redundant_campaign import (
+    compliance_warning,
+    load_deflection_estimate,
+    tool_errors,
+)
 from pkmcal.mechanisms.statics import StaticsModel
 from pkmcal.reproduce.known_stiffness import fit_known_stiffness
 from pkmcal.reproduce.paper3 import CASES, N_CALIB, TRACKER_STD, case_models
@@ -55,7 +59,7 @@ def _errors(models_, sim, calib, check, K, load, other_load):
         setup = MeasurementSetup(real_sensor, noise, StaticsModel(K, np.array(F)))
         known = StaticsModel(K, np.array(F))
 
-        def err(mech, sens, statics=None):
+        def err(mech, sens, statics=None, setup=setup):
             return tool_errors(mech, sens, real, setup, check, "m", IGNORE, sensor, model_statics=statics).tool
 
         row = {"before": err(nominal, sensor), "perfect kinematics (the floor)": err(real, real_sensor)}
