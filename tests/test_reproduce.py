@@ -22,8 +22,8 @@ from pkmcal.reproduce.paper2_planning import SIZES
 
 
 @pytest.fixture(scope="module")
-def quick():
-    return {name: run_reproduction(name, seed=0, quick=True) for name in REPRODUCTIONS}
+def quick(quick_reproductions):
+    return quick_reproductions
 
 
 def test_registry_and_unknown_name():

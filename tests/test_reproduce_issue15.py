@@ -16,15 +16,15 @@ import pytest
 from click.testing import CliRunner
 
 from pkmcal.cli.main import cli
-from pkmcal.reproduce import run_reproduction
 
 NAMES = ("paper1-table1", "paper1-figs4-9", "paper2-table5", "paper2-plate-frame", "paper2-singularity",
          "paper3-case1", "paper3-case2", "paper3-compliance")
 
 
 @pytest.fixture(scope="module")
-def quick():
-    return {n: run_reproduction(n, seed=0, quick=True) for n in NAMES}
+def quick(quick_reproductions):
+    assert set(NAMES) <= set(quick_reproductions)
+    return quick_reproductions
 
 
 def _group(r, start):
