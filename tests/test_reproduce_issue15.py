@@ -170,3 +170,14 @@ def test_report_warns_of_load_deflection():
     facts = dict(report_data_from_results(nominal, fit, setup, cmd, commanded=cmd).facts)
     assert "deflected under its load" in facts["warning"]
     assert "warning" not in dict(report_data_from_results(nominal, fit, setup, cmd).facts)   # no commands: none
+
+
+def test_new_reproductions_report_progress():
+    """The new reproductions take the ``progress(done, total)`` callback of the CLI's progress
+    bar and end at done == total."""
+    from pkmcal.reproduce import paper2_plate_frame, paper2_singularity
+
+    for fn in (paper2_plate_frame, paper2_singularity):
+        calls = []
+        fn(quick=True, progress=lambda d, t, calls=calls: calls.append((d, t)))
+        assert calls and calls[-1][0] == calls[-1][1] and all(d <= t for d, t in calls)

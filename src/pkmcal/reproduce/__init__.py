@@ -1,9 +1,13 @@
 """Reproductions of the papers' tables: our numbers beside the published ones.
 
-One module per paper table (:mod:`.paper1`, :mod:`.paper2`, :mod:`.paper2_planning`,
-:mod:`.paper2_study` (Table 6 and Fig. 6, run as :mod:`pkmcal.study` studies), :mod:`.paper3`); each reproduction is a function ``f(seed=0, quick=False) -> Reproduction``
-(:mod:`.table`), deterministic for a seed, with a ``quick`` mode (few Monte Carlo runs)
-for tests. :data:`REPRODUCTIONS`
+One module per paper table or study (:mod:`.paper1`, :mod:`.paper1_error_maps`, :mod:`.paper2`,
+:mod:`.paper2_planning`, :mod:`.paper2_study` (Table 6 and Fig. 6, run as :mod:`pkmcal.study`
+studies), :mod:`.paper2_plate`, :mod:`.paper2_singularity`, :mod:`.paper3`,
+:mod:`.paper3_compliance`; the known-stiffness baseline of paper 3's ref. [7] is
+:mod:`.known_stiffness`); each reproduction is a function ``f(seed=0, quick=False) ->
+Reproduction`` (:mod:`.table`), deterministic for a seed, with a ``quick`` mode (few Monte
+Carlo runs) for tests; the new ones also take ``progress(done, total)``. Its ``figures`` are
+the paper's figures as we redraw them (``pkmcal reproduce NAME --figures DIR``). :data:`REPRODUCTIONS`
 is the registry behind ``pkmcal reproduce NAME``; :func:`run_reproduction` runs one by name.
 :data:`CATALOGUE` (:mod:`.catalogue`) lists every table and figure of the three papers with
 the reproduction that covers it or the reason none can (``pkmcal reproduce --list``).
@@ -65,5 +69,6 @@ def run_reproduction(name: str, seed: int = 0, quick: bool = False) -> Reproduct
     return fn(seed=seed, quick=quick)
 
 
-__all__ = ["CATALOGUE", "REPRODUCTIONS", "Reproduction", "Row", "format_catalogue", "run_reproduction", "paper1_table1", "paper2_table5",
-           "paper2_tables1_2", "paper2_table6", "paper2_fig6", "paper3_case1", "paper3_case2"]
+__all__ = ["CATALOGUE", "REPRODUCTIONS", "Reproduction", "Row", "format_catalogue", "run_reproduction",
+           "paper1_table1", "paper1_figs4_9", "paper2_table5", "paper2_tables1_2", "paper2_table6", "paper2_fig6",
+           "paper2_plate_frame", "paper2_singularity", "paper3_case1", "paper3_case2", "paper3_compliance"]

@@ -309,8 +309,9 @@ def _figures(figdata):
     return tuple(out)
 
 
-def paper1_table1(seed: int = 0, quick: bool = False, machines: int | None = None) -> Reproduction:
-    """Paper 1 Table I, Figs. 10–11 and §VI–VII verification claims (module docstring)."""
+def paper1_table1(seed: int = 0, quick: bool = False, machines: int | None = None, progress=None) -> Reproduction:
+    """Paper 1 Table I, Figs. 10–11 and §VI–VII verification claims (module docstring);
+    ``progress(done, total)`` after each Monte Carlo machine."""
     t0 = time.perf_counter()
     n_mc = machines if machines is not None else (3 if quick else 40)
     n_cand = 300 if quick else N_CANDIDATES
@@ -330,7 +331,7 @@ def paper1_table1(seed: int = 0, quick: bool = False, machines: int | None = Non
         seeds = np.random.SeedSequence([seed, mi]).spawn(n_mc)
         trials: list[list] = [[] for _ in boxes]
         dopt = []
-        for ss in seeds:
+        for k, ss in enumerate(seeds):
             rng = np.random.default_rng(ss)
             real = perturb_machine(nominal, ERROR_MM, rng, name="paper1-real")
             verify = None
@@ -341,6 +342,8 @@ def paper1_table1(seed: int = 0, quick: bool = False, machines: int | None = Non
                     verify = t["_verify"] if verify is None else verify
                 trials[b].append(t)
             dopt.append(_doptimal_trial(nominal, real, setup, cand, G, ignore, verify, rng))
+            if progress is not None:
+                progress(mi * n_mc + k + 1, len(HEXAPODS) * n_mc)
         short = "prototype" if mname == "stewart-prototype" else "machine_tool"
         for b, (blabel, _, _) in enumerate(boxes):
             ok_trials = [t for t in trials[b] if t is not None]

@@ -92,8 +92,9 @@ def _at_end(curves: np.ndarray) -> tuple[int, int, int]:
     return end, top, n
 
 
-def paper1_figs4_9(seed: int = 0, quick: bool = False, n_candidates: int | None = None) -> Reproduction:
-    """Paper 1 Figs. 4–9 and the boundary conclusion (module docstring)."""
+def paper1_figs4_9(seed: int = 0, quick: bool = False, n_candidates: int | None = None, progress=None) -> Reproduction:
+    """Paper 1 Figs. 4–9 and the boundary conclusion (module docstring); ``progress(done,
+    total)`` after the slices and after each selection."""
     t0 = time.perf_counter()
     n_curves, n_points = (6, 21) if quick else (20, 41)
     n_cand = n_candidates if n_candidates is not None else (400 if quick else 2000)
@@ -119,6 +120,8 @@ def paper1_figs4_9(seed: int = 0, quick: bool = False, n_candidates: int | None 
     rows.append(Row("all slices, largest orientation error at an end", "at the boundary", float(tot_o), "",
                     f"of {tot}", g))
     nl = slice_nonlinearity(m, real, sl.values, sl.bases)
+    if progress is not None:
+        progress(1, 4)
     v = nl[np.isfinite(nl)]
     rows.append(Row("deviation of the error vector from a straight line (median over slices)", None,
                     float(np.median(v)), "", "max ‖e − (a + b s)‖ / max ‖e‖", g))
@@ -136,8 +139,10 @@ def paper1_figs4_9(seed: int = 0, quick: bool = False, n_candidates: int | None 
     rows.append(Row("candidates within 1 mm / 1° of a stroke or joint limit", None, 100.0 * float(near.mean()), "%",
                     "", g2))
     z_lo, z_hi = cand[:, 2].min(), cand[:, 2].max()
-    for n_sel in (15, 30, 60):
+    for k, n_sel in enumerate((15, 30, 60)):
         chosen = select_default(G, n_sel).chosen
+        if progress is not None:
+            progress(k + 2, 4)
         rows.append(Row(f"D-optimal {n_sel}: within 1 mm / 1° of a limit", "on the boundary",
                         100.0 * float(near[chosen].mean()), "%", "", g2))
         rows.append(Row(f"D-optimal {n_sel}: mean height in the candidates' z range (0 bottom, 1 top)",

@@ -98,8 +98,9 @@ def _measures(fit, real, sensor, heldout):
     return out
 
 
-def paper2_plate_frame(seed: int = 0, quick: bool = False, trials: int | None = None) -> Reproduction:
-    """Paper 2's indicator plate as its own frame (module docstring)."""
+def paper2_plate_frame(seed: int = 0, quick: bool = False, trials: int | None = None, progress=None) -> Reproduction:
+    """Paper 2's indicator plate as its own frame (module docstring); ``progress(done, total)``
+    after each campaign."""
     t0 = time.perf_counter()
     n_tr = trials if trials is not None else (1 if quick else 5)
     nominal, real = builtin_machine("stewart-prototype"), builtin_machine("stewart-prototype-real")
@@ -112,7 +113,9 @@ def paper2_plate_frame(seed: int = 0, quick: bool = False, trials: int | None = 
                                                                              actuator_std=np.array(0.0))),
                                          ("indicators sigma 0.01 mm", base.noise))):
         res = {k: [] for k in FITS}
-        for ss in np.random.SeedSequence([seed, 21, li]).spawn(n_tr):
+        for ti, ss in enumerate(np.random.SeedSequence([seed, 21, li]).spawn(n_tr)):
+            if progress is not None:
+                progress(li * n_tr + ti + 1, 2 * n_tr)
             rng = np.random.default_rng(ss)
             cmd = nominal.home_pose + rng.uniform(-1.0, 1.0, (200, 6)) * BOX_HALF
             sim = simulate_campaign(nominal, real, MeasurementSetup(sensor, noise), cmd, rng,

@@ -41,8 +41,9 @@ def spearman(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.corrcoef(_ranks(a), _ranks(b))[0, 1])
 
 
-def paper2_singularity(seed: int = 0, quick: bool = False, n_poses: int | None = None) -> Reproduction:
-    """Merlet's |J⁻¹| beside the inverse condition number (module docstring)."""
+def paper2_singularity(seed: int = 0, quick: bool = False, n_poses: int | None = None, progress=None) -> Reproduction:
+    """Merlet's |J⁻¹| beside the inverse condition number (module docstring); ``progress``
+    (done, total) is called once, at the end (no Monte Carlo loop)."""
     t0 = time.perf_counter()
     n = n_poses if n_poses is not None else (2000 if quick else 20000)
     m = builtin_machine("stewart-prototype")
@@ -83,6 +84,8 @@ def paper2_singularity(seed: int = 0, quick: bool = False, n_poses: int | None =
     lo = (det < np.quantile(det, 0.05)) & (ic > np.median(ic))
     rows.append(Row("poses in the lowest 5 % of |det| but above the median inverse condition", None,
                     float(np.count_nonzero(lo)), "", "small |det| from uniformly small σ_i, not near-singular", g))
+    if progress is not None:
+        progress(1, 1)
     setup_d = {
         "machine": "stewart-prototype (paper 2 Table 3)",
         "measures": "J⁻¹ = ∂λ/∂(δp, δω) with its rotation columns divided by L = 70 mm (platform joint radius): "

@@ -242,7 +242,7 @@ def _figures(name, run):
                        "forward and backward", errors))
 
 
-def _run(name: str, seed: int, quick: bool, repeats: int | None) -> Reproduction:
+def _run(name: str, seed: int, quick: bool, repeats: int | None, progress=None) -> Reproduction:
     t0 = time.perf_counter()
     c = CASES[name]
     n_rep = repeats if repeats is not None else (1 if quick else 50)
@@ -263,6 +263,8 @@ def _run(name: str, seed: int, quick: bool, repeats: int | None) -> Reproduction
                 ks[label].append(100.0 * (1.0 - e.mean() / res.before.mean()))
                 ks[label + "_max"] = ks.get(label + "_max", []) + [float(e.max())]
             ks_fits.append(fits[(1.0,)])
+        if progress is not None:
+            progress(k + 1, n_rep)
     p = c["paper"]
     rows = []
     m, s = mean_sd([float(r.before.max()) for r in results])
@@ -369,11 +371,11 @@ def _parameter_table(name, models, result, ks_fit):
              "ours: known-stiffness ± 1σ"), tuple(rows))
 
 
-def paper3_case1(seed: int = 0, quick: bool = False, repeats: int | None = None) -> Reproduction:
-    """Paper 3 §3.1 (module docstring)."""
-    return _run("paper3-case1", seed, quick, repeats)
+def paper3_case1(seed: int = 0, quick: bool = False, repeats: int | None = None, progress=None) -> Reproduction:
+    """Paper 3 §3.1 (module docstring); ``progress(done, total)`` after each repeat."""
+    return _run("paper3-case1", seed, quick, repeats, progress)
 
 
-def paper3_case2(seed: int = 0, quick: bool = False, repeats: int | None = None) -> Reproduction:
-    """Paper 3 §3.2 (module docstring)."""
-    return _run("paper3-case2", seed, quick, repeats)
+def paper3_case2(seed: int = 0, quick: bool = False, repeats: int | None = None, progress=None) -> Reproduction:
+    """Paper 3 §3.2 (module docstring); ``progress(done, total)`` after each repeat."""
+    return _run("paper3-case2", seed, quick, repeats, progress)

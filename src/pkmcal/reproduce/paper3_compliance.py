@@ -69,8 +69,9 @@ def _errors(models_, sim, calib, check, K, load, other_load):
     return out
 
 
-def paper3_compliance(seed: int = 0, quick: bool = False, repeats: int | None = None) -> Reproduction:
-    """The load/compliance study (module docstring)."""
+def paper3_compliance(seed: int = 0, quick: bool = False, repeats: int | None = None, progress=None) -> Reproduction:
+    """The load/compliance study (module docstring); ``progress(done, total)`` after each
+    repetition."""
     t0 = time.perf_counter()
     n_rep = repeats if repeats is not None else (1 if quick else 8)
     softness = (1.0, 10.0) if quick else SOFTNESS
@@ -80,6 +81,7 @@ def paper3_compliance(seed: int = 0, quick: bool = False, repeats: int | None = 
     nominal, sensor, noise, real, real_sensor = models_
     rows: list[Row] = []
     headline: dict[str, float] = {}
+    done = 0
     for si, s in enumerate(softness):
         for li, load_n in enumerate(loads):
             K = c["stiffness"] / s
@@ -112,6 +114,9 @@ def paper3_compliance(seed: int = 0, quick: bool = False, repeats: int | None = 
                 warn = compliance_warning(nominal, fit.mechanism, fit.sensor, sim.commanded[sim.kept], fit.poses,
                                           TRACKER_STD)
                 acc.setdefault("warned", []).append(100.0 * (warn is not None))
+                if progress is not None:
+                    done += 1
+                    progress(done, len(softness) * len(loads) * n_rep)
             g = f"actuators {s:g}x softer (K = {K:.3g} N·mm/rad), {load_n:g} N load during calibration"
             for where in ("calibration load", "load removed"):
                 for m in MODELS:
