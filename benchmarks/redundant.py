@@ -33,10 +33,9 @@ import time
 
 import numpy as np
 
-from pkmcal.identification.identifiability import identifiability
 from pkmcal.identification.projection import METHODS, calibration_experiment
-from pkmcal.reproduce.paper3 import CASES, LOAD_N, N_CALIB, TRACKER_STD, case_models, real_setup, table_experiment
-from pkmcal.sensors.base import MeasurementSetup
+from pkmcal.reproduce.paper3 import (CASES, LOAD_N, N_CALIB, TRACKER_STD, case_models, gauge_equivalent, real_setup,
+                                     table_experiment)
 
 
 def _angle_flags(mech, sensor) -> dict[str, bool]:
@@ -93,8 +92,8 @@ def run(case, n_machines, seed):
                  "max_after_mm_mean": float(np.mean([r[m]["max_after_mm"] for r in rows])),
                  "max_after_mm_worst": float(np.max([r[m]["max_after_mm"] for r in rows]))}
     gauge_poses = nominal.sample_poses(N_CALIB, np.random.default_rng([seed, 7]))
-    truth = _gauge_equivalent(nominal, sensor, gauge_poses, noise, dict(setup["table"], **setup["table_tool"]),
-                              setup["free"], setup["gauge"])
+    truth = gauge_equivalent(nominal, sensor, gauge_poses, noise, dict(setup["table"], **setup["table_tool"]),
+                             setup["free"], setup["gauge"])
     fit = repro.fits["projection"]
     ident = []
     is_angle = _angle_flags(nominal, sensor)
@@ -104,19 +103,6 @@ def run(case, n_machines, seed):
         ident.append((name_, float(f(setup["table"].get(name_, setup["table_tool"].get(name_, 0.0)))),
                       float(f(truth[name_])), float(f(d)), float(f(sd)), "deg" if ang else "mm"))
     return _summ(repro), mc, ident
-
-
-def _gauge_equivalent(nominal, sensor, poses, noise, deltas, free, gauge):
-    """The paper's errors moved along the unidentifiable directions so that the gauge
-    parameters are zero: the values a perfect identification with the gauge fixed returns."""
-    names = tuple(free) + tuple(gauge)
-    d = np.array([deltas.get(n, 0.0) for n in names])
-    if gauge:
-        rep = identifiability(nominal, MeasurementSetup(sensor, noise), poses, method="projection", free=list(names))
-        N = np.array([[v.get(n, 0.0) for n in names] for v in rep.null_space]).T     # (P, d)
-        gi = [names.index(g) for g in gauge]
-        d = d - N @ np.linalg.solve(N[gi], d[gi])
-    return dict(zip(names, d))
 
 
 def main():

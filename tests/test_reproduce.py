@@ -22,13 +22,14 @@ from pkmcal.reproduce.paper2_planning import SIZES
 
 
 @pytest.fixture(scope="module")
-def quick():
-    return {name: run_reproduction(name, seed=0, quick=True) for name in REPRODUCTIONS}
+def quick(quick_reproductions):
+    return quick_reproductions
 
 
 def test_registry_and_unknown_name():
-    assert set(REPRODUCTIONS) == {"paper1-table1", "paper2-table5", "paper2-tables1-2", "paper2-table6",
-                                  "paper2-fig6", "paper3-case1", "paper3-case2"}
+    assert set(REPRODUCTIONS) == {"paper1-table1", "paper1-figs4-9", "paper2-table5", "paper2-tables1-2",
+                                  "paper2-table6", "paper2-fig6", "paper2-plate-frame", "paper2-singularity",
+                                  "paper3-case1", "paper3-case2", "paper3-compliance"}
     with pytest.raises(PkmcalError, match="unknown reproduction 'paper9'"):
         run_reproduction("paper9")
 

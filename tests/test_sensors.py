@@ -193,7 +193,7 @@ def test_indicator_level_platform_reads_height_minus_offset():
     s = IndicatorSensor(positions=[[40, 0], [-20, 34.641], [-20, -34.641]], plane_offset=10.0, zero=[1, 2, 3])
     np.testing.assert_allclose(s.predict([5, -3, 300, 0, 0, 0]), [[289, 288, 287]])
     assert s.reading_names == ("d1", "d2", "d3")
-    assert s.param_names == ("zero1", "zero2", "zero3")
+    assert s.param_names == ("zero1", "zero2", "zero3", "plate.x", "plate.y", "plate.z", "plate.a", "plate.b", "plate.c")
     assert s.default_free == ()
 
 
@@ -249,7 +249,7 @@ def _poses_for(sensor):
 EXPECTED_ANGLES = {
     "full-pose": {"world.a", "world.b", "world.c", "tool.a", "tool.b", "tool.c"},
     "position": {"world.a", "world.b", "world.c"},
-    "indicators": set(),
+    "indicators": {"plate.a", "plate.b", "plate.c"},
     "planar-tool": {"world.c"},
 }
 

@@ -132,7 +132,7 @@ def fit_summary(result, free_line: str | None = None) -> str:
         cost,
         f"identifiability ({rep.basis or 'at the start'}): rank {rep.rank} of {rep.n_params}, "
         f"condition number {rep.condition_number:.3g}",
-        "std: a-priori (noise model) x max(1, chi2/dof) — this covariance is written to the machine file",
+        f"std: {u.description} — this covariance is written to the machine file",
     ]
     for d in rep.null_space:
         lines.append(f"  unobservable: {format_direction(d)}")
@@ -326,7 +326,7 @@ def _with_calibration_record(result, machine: str, measurements: str, setup_spec
         "method": result.method, "weighted": bool(result.weighted), "measurements": str(measurements),
         "setup": str(setup_spec), "n_poses": int(len(result.used_poses)), "n_free": int(len(result.free)),
         "gauge": list(result.gauge), "rms_residual": float(result.rms_residual),
-        "reduced_chi2": float(u.reduced_chi2), "std": "a-priori (noise model) x max(1, chi2/dof)",
+        "reduced_chi2": float(u.reduced_chi2), "std": u.description,
     }
     if getattr(result.sensor, "kind", "") == "planar-tool":  # read back by 'pkmcal verify'
         record["sensor"] = sensor_calibration_block(result.sensor)
@@ -361,7 +361,7 @@ def _report_data(nominal, result, setup, meas, meas_path: str, output: str):
     except PkmcalError:
         setup_text = setup.sensor.kind
     return report_data_from_results(
-        nominal, result, setup, poses, setup_summary=setup_text,
+        nominal, result, setup, poses, setup_summary=setup_text, commanded=meas.commanded,
         facts=(("measurement file", str(meas_path)), ("calibrated machine file", str(output))))
 
 

@@ -22,19 +22,22 @@ from pkmcal.errors import PkmcalError
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed (same seed, same numbers).")
 @click.option("--json", "as_json", is_flag=True, help="Print the table as JSON instead of text.")
 @output_option("FILE", "Write the table (text, or JSON with --json) to FILE")
+@click.option("--figures", "figures", type=click.Path(file_okay=False), default=None, metavar="DIR",
+              help="Also draw the reproduction's figures (the paper's figures as we redraw them) into DIR "
+                   "as SVG and PNG.")
 @quiet_option
-def reproduce(name, list_, quick, seed, as_json, output, quiet) -> None:
+def reproduce(name, list_, quick, seed, as_json, output, figures, quiet) -> None:
     """Regenerate paper table NAME with our numbers beside the published ones.
 
     Each reproduction states its setup (machine, noise, poses, seeds, Monte Carlo count)
-    and explains every difference in its notes. Run with --list to see the names.
+    and explains every difference in its notes. Run with --list to see the names and every
+    table and figure of the three papers, each reproduced or listed with the reason it is not.
     """
     from pkmcal.progress import ProgressBar
-    from pkmcal.reproduce import REPRODUCTIONS, run_reproduction
+    from pkmcal.reproduce import REPRODUCTIONS, format_catalogue, run_reproduction
 
     if list_:
-        for key, (_, text) in REPRODUCTIONS.items():
-            click.echo(f"{key:<18}{text}")
+        click.echo(format_catalogue(REPRODUCTIONS))
         return
     if not name:
         raise PkmcalError(f"give a reproduction NAME ({', '.join(REPRODUCTIONS)}) or --list")
@@ -45,3 +48,8 @@ def reproduce(name, list_, quick, seed, as_json, output, quiet) -> None:
     emit(text + "\n", output)   # a failed write is a PkmcalError
     if not to_stdout(output):
         click.echo(f"wrote {output}")
+    if figures:
+        for path in result.write_figures(figures):
+            click.echo(f"wrote {path}", err=True)
+        if not result.figures:
+            click.echo(f"{name} draws no figures", err=True)

@@ -8,7 +8,9 @@ paper 3 eq. 1–3 solved nonlinearly)
     Γᵀ K (q(x) − c) − J_fᵀ F = 0,   c = IK(x_c, ρ_nom),
 
 with K and F from the setup's ``simulation:`` block (:class:`~pkmcal.mechanisms.statics.StaticsModel`),
-never seen by the identifier. The encoders then read q(x) + e_q (following error
+never seen by the identifier (nor the block's backlash, which shifts each actuator by half
+its dead band against the direction of its last commanded motion, poses taken in the
+order given). The encoders then read q(x) + e_q (following error
 q(x) − c ≠ 0) and the tracker y = h(x, θ) + e_y, with the setup's noise.
 
 Verification (paper 3 §3, Fig. 5/8): the tracker reading each held-out commanded pose x_c
@@ -55,17 +57,32 @@ def _statics(setup: MeasurementSetup, machine: Mechanism) -> tuple[np.ndarray, n
     return sim.stiffness_for(machine), sim.load
 
 
-def commands_for_targets(mechanism: Mechanism, sensor, targets: np.ndarray, angles=None) -> tuple[np.ndarray, np.ndarray]:
+def commands_for_targets(mechanism: Mechanism, sensor, targets: np.ndarray, angles=None,
+                         statics: StaticsModel | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Poses (N, n) and commanded readings (N, l) that put the tool on ``targets`` (N, 2,
     tracker frame) according to the model: x = S⁻¹(y*) (``sensor.poses_for_readings``, for
-    n = 3 at the plate ``angles``), c = IK(x, ρ)."""
+    n = 3 at the plate ``angles``), c = IK(x, ρ). With ``statics`` (a model that knows the
+    stiffness K and load F, paper 3 ref. [7]) the commands are pre-deflected so that the
+    model's equilibrium is x: c = IK(x) − Γ (ΓᵀKΓ)⁻¹ J_fᵀ F at x, which satisfies
+    Γᵀ K (IK(x) − c) = J_fᵀ F exactly (:mod:`pkmcal.mechanisms.statics`)."""
     poses = sensor.poses_for_readings(targets, angles)
-    return poses, mechanism.ik(poses)
+    c = mechanism.ik(poses)
+    if statics is not None and statics.load is not None:
+        K = statics.stiffness_for(mechanism)
+        G = mechanism.actuator_pose_jacobian(poses)
+        b = np.einsum("nki,k->ni", sensor.tool_pose_jacobian(poses), statics.load)
+        dx = np.linalg.solve(np.einsum("nli,l,nlj->nij", G, K, G), b[..., None])
+        c = c - (G @ dx)[..., 0]
+    return poses, c
 
 
 def _settle(real, setup, commands, guess, ignore_limits):
-    """Equilibrium of ``real`` under ``commands`` (N, l): (poses, readings, ok, reasons)."""
+    """Equilibrium of ``real`` under ``commands`` (N, l), in path order: (poses, readings, ok,
+    reasons). With backlash (``simulation.backlash``) the springs act on the commands less
+    the backlash shift s b/2 and the encoders read the joints plus it
+    (:meth:`~pkmcal.mechanisms.statics.StaticsModel.backlash_shift`)."""
     K, F = _statics(setup, real)
+    shift = setup.simulation.backlash_shift(commands)
     n = len(commands)
     finite = np.all(np.isfinite(commands), axis=1) & np.all(np.isfinite(guess), axis=1)
     reasons: dict[int, str] = {int(k): "nominal-ik-failed" for k in np.flatnonzero(~finite)}
@@ -73,10 +90,10 @@ def _settle(real, setup, commands, guess, ignore_limits):
     readings = np.full((n, real.n_actuators), np.nan)
     ok = finite.copy()
     if finite.any():
-        eq = equilibrium(real, commands[finite], K, F, setup.sensor, guess=guess[finite])
+        eq = equilibrium(real, commands[finite] - shift[finite], K, F, setup.sensor, guess=guess[finite])
         idx = np.flatnonzero(finite)
         poses[idx] = eq.poses
-        readings[idx] = eq.readings
+        readings[idx] = eq.readings + shift[finite]
         for j in np.flatnonzero(~eq.converged):
             reasons[int(idx[j])] = f"equilibrium-not-converged (force residual {eq.force_residual[j]:.3g})"
         ok[idx[~eq.converged]] = False
@@ -167,17 +184,20 @@ class ToolErrors:
 
 
 def tool_errors(model: Mechanism, model_sensor, real: Mechanism, setup: MeasurementSetup, poses: np.ndarray,
-                name: str = "model", ignore_limits: tuple[str, ...] = (), target_sensor=None) -> ToolErrors:
+                name: str = "model", ignore_limits: tuple[str, ...] = (), target_sensor=None,
+                model_statics: StaticsModel | None = None) -> ToolErrors:
     """Tool errors of ``real`` commanded through (``model``, ``model_sensor``) at the
     held-out ``poses`` (module docstring). The targets are y* = h(x_c) of ``target_sensor``
     (default the setup's): a simulated experiment whose true tool point (the setup's sensor)
     differs from the nominal one passes the nominal sensor, so that "before" includes the
-    tool-point error, as on a real machine whose tool point is only known nominally."""
+    tool-point error, as on a real machine whose tool point is only known nominally.
+    ``model_statics``: the model also knows stiffness and load and pre-deflects its
+    commands (:func:`commands_for_targets`)."""
     x_c = model.as_pose_array(poses)
     targets = (setup.sensor if target_sensor is None else target_sensor).predict(x_c)
     angles = x_c[:, 2] if model.n_dof == 3 else None
     with np.errstate(invalid="ignore"):
-        x_m, commands = commands_for_targets(model, model_sensor, targets, angles)
+        x_m, commands = commands_for_targets(model, model_sensor, targets, angles, model_statics)
     x_eq, _, ok, dropped = _settle(real, setup, commands, x_m, ignore_limits)
     y = setup.sensor.predict(x_eq)
     tool = np.where(ok, np.linalg.norm(y - targets, axis=1), np.nan)
@@ -313,3 +333,40 @@ def baseline_result(result, nominal: Mechanism, method: str):
         mech = base.with_params(base.params, covariance=cov)
         notes = tuple(w for w in notes if "does not store a covariance" not in w)
     return dataclasses.replace(result, mechanism=mech, method=method, warnings=notes)
+
+
+# -- what the following errors say about the load deflection ------------------------------
+
+
+def load_deflection_estimate(mechanism: Mechanism, sensor, poses: np.ndarray, following_errors: np.ndarray) -> np.ndarray:
+    """Tool deflection (N, 2) (mm) implied by the measured following errors e_j = q̂_j − c_j at
+    the rest poses ``poses`` (N, n): d_j = J_f (ΓᵀΓ)⁻¹ Γᵀ e_j.
+
+    At equilibrium Γᵀ K e = J_fᵀ F (:mod:`pkmcal.mechanisms.statics`). With equal actuator
+    stiffness K = k I the part of e along Γ is then exactly the linear load deflection
+    dx = (ΓᵀKΓ)⁻¹ J_fᵀ F, whatever the actuators' conflict (which lies in the null space of
+    Γᵀ); with unequal stiffness it is an estimate whose error is the conflict's leak into the
+    range of Γ. No stiffness is needed: the data say how far the machine gave way."""
+    x = mechanism.as_pose_array(poses)
+    G = mechanism.actuator_pose_jacobian(x)
+    e = np.asarray(following_errors, dtype=float)
+    dx = np.linalg.solve(np.swapaxes(G, 1, 2) @ G, np.einsum("nli,nl->ni", G, e)[..., None])[..., 0]
+    return np.einsum("nki,ni->nk", sensor.tool_pose_jacobian(x), dx)
+
+
+def compliance_warning(nominal: Mechanism, calibrated: Mechanism, sensor, commanded: np.ndarray, rest_poses: np.ndarray,
+                       tracker_std: float) -> str | None:
+    """A warning when a redundant machine visibly deflected under its load during calibration
+    (:func:`load_deflection_estimate` at the rest poses of a projection fit, following
+    errors IK(x*, ρ̂) − IK(x_c, ρ_nom)); None when the largest deflection is below twice the
+    tracker noise."""
+    with np.errstate(invalid="ignore"):
+        e = calibrated.ik(rest_poses) - nominal.ik(commanded)
+    d = np.linalg.norm(load_deflection_estimate(calibrated, sensor, rest_poses, e), axis=1)
+    if not np.any(np.isfinite(d)) or np.nanmax(d) <= 2.0 * tracker_std:
+        return None
+    return (f"the machine deflected under its load by up to {np.nanmax(d):.3g} mm (mean {np.nanmean(d):.3g} mm) "
+            "during calibration, as its following errors show (their part along the pose Jacobian, exact for "
+            "equal actuator stiffness); no kinematic calibration removes that deflection: the projection model "
+            "keeps it at this load, a fit that ignores the redundancy absorbs it into the parameters and looks "
+            "better at this load only (docs/redundant-machines.md, load and compliance)")

@@ -10,7 +10,8 @@ Dial indicators (paper 2 §2.3, eqs. 4–6)::
     indicators: [[40, 0], [-20, 34.641], [-20, -34.641]]   # x, y in the base frame, mm
     plane_offset: 10.0            # platform origin above its lower plane, mm
     zero: [0, 0, 0]               # optional indicator zero offsets, mm
-    free: [zero1, zero2, zero3]   # optional: sensor parameters to estimate
+    plate: {x: 0, y: 0, z: 0, a: 0, b: 0, c: 0}   # optional: pose of the indicator plate in the base, mm/deg
+    free: [zero1, zero2, zero3]   # optional: sensor parameters to estimate (also plate.x ... plate.c)
     noise: {reading: 0.01, actuator: 0.005}               # std, mm
 
 Full pose (paper 1 §III), with optional world→base and platform→target transforms::
@@ -39,6 +40,7 @@ A tracker on the tool point of a planar machine (paper 3 §3), with the physics 
     simulation:
       stiffness: 5.0e7            # actuator stiffness K: N/mm (linear) or N·mm/rad (rotary); one or one per actuator
       load: [0, -30]              # in-plane force on the tool point, N (base frame)
+      backlash: 1.0e-4            # optional dead band per actuator, mm (linear) or rad (rotary); one or one per actuator
 
 Built-in setups (:data:`pkmcal.sensors.library.BUILTIN_SETUPS`, re-exported here) are usable by
 name wherever a setup file is. A planar-tool setup is bound to its machine's pose dimension
@@ -118,6 +120,7 @@ class _Noise(_Strict):
 class _Simulation(_Strict):
     stiffness: Values
     load: tuple[Number, Number] | None = None
+    backlash: Values | None = None
 
 
 class _Setup(_Strict):
@@ -126,6 +129,7 @@ class _Setup(_Strict):
     indicators: list[tuple[Number, Number]] | None = None
     plane_offset: Number | None = None
     zero: list[Number] | None = None
+    plate: _Transform | None = None
     world: _Transform | None = None
     tool: _Transform | None = None
     target: _Point | None = None
@@ -138,7 +142,7 @@ class _Setup(_Strict):
 _SENSOR_KEYS = {
     "full-pose": ("world", "tool"),
     "position": ("target", "world"),
-    "indicators": ("indicators", "plane_offset", "zero"),
+    "indicators": ("indicators", "plane_offset", "zero", "plate"),
     "planar-tool": ("target", "world"),
 }
 _NOISE_KEYS = {
@@ -226,7 +230,7 @@ def load_setup(path: str | os.PathLike, machine=None) -> MeasurementSetup:
                 "; give the actuator stiffness, e.g. simulation: {stiffness: 2.0e4, load: [0, -30]} "
                 "(N/mm or N*mm/rad; N)" if loc == ("simulation", "stiffness") else "")
         elif err["type"] == "extra_forbidden":
-            model = {(): _Setup, ("noise",): _Noise, ("world",): _Transform, ("tool",): _Transform,
+            model = {(): _Setup, ("noise",): _Noise, ("world",): _Transform, ("tool",): _Transform, ("plate",): _Transform,
                      ("target",): _Point, ("simulation",): _Simulation}.get(loc[:-1], _Setup)
             what = f"is not a setup key here; remove or correct it (allowed: {', '.join(model.model_fields)})"
         else:
@@ -244,7 +248,7 @@ def _build(path, lines, spec: _Setup, raw_noise: dict | None = None) -> Measurem
     (its numbers keep their text, which pydantic drops: degree values are converted from
     that text, so that a setup written by :func:`setup_to_yaml` reads back exactly)."""
     kind = spec.sensor
-    for key in ("indicators", "plane_offset", "zero", "world", "tool", "target"):
+    for key in ("indicators", "plane_offset", "zero", "plate", "world", "tool", "target"):
         if getattr(spec, key) is not None and key not in _SENSOR_KEYS[kind]:
             _fail(path, lines, (key,), f"does not apply to sensor '{kind}' (its keys: {', '.join(_SENSOR_KEYS[kind])})")
     noise = spec.noise
@@ -272,7 +276,7 @@ def _build(path, lines, spec: _Setup, raw_noise: dict | None = None) -> Measurem
             if spec.zero is not None and len(spec.zero) != k:
                 _fail(path, lines, ("zero",), f"give one zero offset per indicator ({k}); got {len(spec.zero)}")
             sensor = IndicatorSensor(positions=np.array(spec.indicators, dtype=float),
-                                     plane_offset=spec.plane_offset, zero=spec.zero, free=free)
+                                     plane_offset=spec.plane_offset, zero=spec.zero, plate=tf(spec.plate), free=free)
             reading = noise.reading
             if reading is None:
                 _fail(path, lines, ("noise", "reading"), "is missing; give the indicator noise (mm)")
@@ -326,10 +330,13 @@ def _build(path, lines, spec: _Setup, raw_noise: dict | None = None) -> Measurem
             _fail(path, lines, ("simulation",), "applies to redundantly actuated planar machines (sensor: planar-tool) "
                   "only; remove it")
         try:
+            backlash = spec.simulation.backlash
             simulation = StaticsModel(stiffness=np.array(spec.simulation.stiffness, dtype=float),
-                                      load=None if spec.simulation.load is None else np.array(spec.simulation.load))
+                                      load=None if spec.simulation.load is None else np.array(spec.simulation.load),
+                                      backlash=None if backlash is None else np.array(backlash, dtype=float))
         except PkmcalError as exc:
-            _fail(path, lines, ("simulation", "stiffness" if "stiffness" in str(exc) else "load"), str(exc))
+            key = next((k for k in ("stiffness", "load", "backlash") if k in str(exc)), "stiffness")
+            _fail(path, lines, ("simulation", key), str(exc))
     return MeasurementSetup(
         sensor=sensor,
         noise=NoiseModel(reading_std=reading_std, actuator_std=actuator, distribution=noise.distribution),
@@ -399,6 +406,8 @@ def setup_to_yaml(setup: MeasurementSetup) -> str:
         doc["plane_offset"] = float(s.plane_offset)
         if np.any(s.zero != 0):
             doc["zero"] = FlowList(float(v) for v in s.zero)
+        if not s.plate_is_identity:
+            doc["plate"] = _group_dict(s, "plate")
     elif isinstance(s, PositionSensor):
         doc["target"] = _group_dict(s, "target")
         if np.any(s.world != 0):
@@ -430,6 +439,8 @@ def setup_to_yaml(setup: MeasurementSetup) -> str:
         sim: dict = {"stiffness": _values(setup.simulation.stiffness, False)}
         if setup.simulation.load is not None:
             sim["load"] = FlowList(float(v) for v in setup.simulation.load)
+        if setup.simulation.backlash is not None:
+            sim["backlash"] = _values(setup.simulation.backlash, False)
         doc["simulation"] = sim
     head = "# pkmcal measurement setup: mm, angles in degrees (transforms, orientation_deg noise)\n"
     if noise.distribution == "uniform":

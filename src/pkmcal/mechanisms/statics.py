@@ -30,6 +30,14 @@ mechanism and sensor parameter errors,
     dP_t = J_f dx + J_ρ Δθ                                                     (3)
 
 (paper 3 writes Δq_r − HΔρ; its Δq_r is −dq here and its P the generalised load −J_fᵀF).
+
+Backlash (simulation only, never seen by the identifier): a dead band b_i between actuator
+i's motor (which the servo positions and the encoder reads) and its joint. Moving along
+a path, the joint lags the motor by b_i/2 against the direction s_i ∈ {−1, +1} of the
+actuator's last commanded motion (s_i kept while the command does not change; +1 before
+the first motion: the path is approached from below). The spring then acts on
+m_i = q_i(x) + s_i b_i/2, i.e. the equilibrium is that of the commands c − s b/2, and the
+encoder reads q(x) + s b/2 (:meth:`StaticsModel.backlash_shift`).
 """
 
 from __future__ import annotations
@@ -68,11 +76,14 @@ class EquilibriumResult:
 class StaticsModel:
     """What a simulation of a redundantly actuated machine needs besides the kinematics:
     actuator stiffness K (one value or one per actuator; N/mm for linear, N·mm/rad for
-    rotary actuators) and the in-plane load F (2,) on the tool point (N, base frame; None
-    for no load). Written in the ``simulation:`` block of a setup file."""
+    rotary actuators), the in-plane load F (2,) on the tool point (N, base frame; None
+    for no load) and the backlash b (one value or one per actuator, mm or rad as the
+    actuator; None for none; module docstring). Written in the ``simulation:`` block of a
+    setup file."""
 
     stiffness: np.ndarray
     load: np.ndarray | None = None
+    backlash: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         k = np.array(self.stiffness, dtype=float).reshape(-1)
@@ -84,6 +95,31 @@ class StaticsModel:
             if f.shape != (2,) or not np.all(np.isfinite(f)):
                 raise PkmcalError(f"the tool load is an in-plane force [Fx, Fy] in N; got {self.load!r}")
             object.__setattr__(self, "load", f)
+        if self.backlash is not None:
+            b = np.array(self.backlash, dtype=float).reshape(-1)
+            if b.size == 0 or not np.all(np.isfinite(b)) or np.any(b < 0):
+                raise PkmcalError("actuator backlash must be non-negative numbers (mm or rad, as the actuator)")
+            object.__setattr__(self, "backlash", None if not np.any(b) else (b if b.size > 1 else b.reshape(())))
+
+    def backlash_shift(self, commands: np.ndarray) -> np.ndarray:
+        """s b/2 (N, l) for ``commands`` (N, l) in path order (module docstring): the motor
+        sits this far beyond the joint; zeros without backlash. A command that does not
+        change (or is not finite) keeps the previous direction."""
+        c = np.asarray(commands, dtype=float)
+        if self.backlash is None:
+            return np.zeros_like(c)
+        b = np.asarray(self.backlash, dtype=float)
+        if b.ndim and b.size != c.shape[1]:
+            raise PkmcalError(f"the setup gives {b.size} actuator backlash values for {c.shape[1]} actuators; "
+                              "give one value or one per actuator")
+        step = np.zeros_like(c)
+        with np.errstate(invalid="ignore"):
+            step[1:] = np.sign(np.nan_to_num(np.diff(c, axis=0), nan=0.0))
+        # direction of the last motion: the last non-zero step so far (+1 before any)
+        k = np.arange(c.shape[0])[:, None]
+        last = np.maximum.accumulate(np.where(step != 0, k, -1), axis=0)
+        s = np.where(last >= 0, step[np.maximum(last, 0), np.arange(c.shape[1])], 1.0)
+        return s * (0.5 * np.broadcast_to(b, c.shape[1:]))
 
     def stiffness_for(self, mechanism: Mechanism) -> np.ndarray:
         """K (l,) for ``mechanism``; a clear error when the count does not match."""

@@ -138,10 +138,8 @@ def measurability_violations(setup: MeasurementSetup, poses: np.ndarray,
             lo, hi = spec.travel
             out["indicator_travel"] = facing & ~np.all((z >= lo) & (z <= hi), axis=1)
         if spec.plate_radius is not None:
-            # touch point under indicator k: (x_k, y_k, z_k + ζ_k) in {F}; in {P} minus p, Rᵀ.
-            z = sensor.predict(safe) + sensor.params
-            pts = np.stack([np.broadcast_to(sensor.positions[:, 0], z.shape),
-                            np.broadcast_to(sensor.positions[:, 1], z.shape), z], axis=-1)
+            # touch point under indicator k (IndicatorSensor.touch_points, {F}); in {P} minus p, Rᵀ.
+            pts = sensor.touch_points(safe)
             local = np.einsum("nji,nkj->nki", R, pts - poses[:, None, 0:3])
             out["indicator_off_plate"] = facing & np.any(np.linalg.norm(local[..., :2], axis=-1)
                                                          > spec.plate_radius, axis=1)

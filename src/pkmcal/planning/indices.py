@@ -146,3 +146,36 @@ def log_det_information(G: np.ndarray, subset: np.ndarray | None = None) -> floa
     """log det M of the poses ``subset`` (−inf when singular): the D-criterion."""
     sign, logdet = np.linalg.slogdet(information_matrix(G, subset))
     return float(logdet) if sign > 0 else -np.inf
+
+
+# -- singularity of a pose (paper 2 §2.1: Merlet's detector) ---------------------------------
+
+
+def singularity_measures(mechanism, poses: np.ndarray, length: float | None = None) -> dict[str, np.ndarray]:
+    """Two measures of how close each pose is to a singularity of the hexapod, per pose (N,).
+
+    J⁻¹ is the inverse kinematic Jacobian, ∂λ/∂(δp, δω) (rows [u_iᵀ, ((R a_i) × u_i)ᵀ],
+    :meth:`~pkmcal.mechanisms.hexapod.Hexapod.twist_jacobian`), with its rotation columns
+    divided by ``length`` L (default the platform joint radius) so that both blocks are
+    dimensionless. Then
+
+    * ``det`` = |det J⁻¹_L| = |det J⁻¹| / L³ = Π σ_i: Merlet's criterion (paper 2 §2.1, ref.
+      [16]: "evaluating the absolute value of |J⁻¹| against a certain threshold"); 0 at a
+      singularity; it also shrinks when every σ_i shrinks together;
+    * ``inverse_condition`` = σ_min / σ_max of J⁻¹_L: the criterion of the machine's
+      ``singularity`` limit (``HexapodLimits.singularity_margin``); 0 at a singularity,
+      insensitive to an overall scale.
+
+    Both depend on L (the unit in which a rotation is compared with a translation); they
+    vanish together at a singularity and rank poses differently elsewhere.
+    """
+    poses = mechanism.as_pose_array(poses)
+    L = float(getattr(mechanism, "platform_radius", 1.0)) if length is None else float(length)
+    if not (L > 0 and np.isfinite(L)):
+        raise PkmcalError(f"the length that scales the rotation columns must be a positive number of mm; got {length}")
+    J = mechanism.twist_jacobian(poses)
+    J[:, :, 3:] /= L
+    with single_threaded_blas():
+        s = np.linalg.svd(J, compute_uv=False)
+        det = np.abs(np.linalg.det(J))
+    return {"det": det, "inverse_condition": s[:, -1] / s[:, 0]}

@@ -10,7 +10,10 @@ Figures: the hexapod in a few poses (legs l_i = p + R a_i − b_i, paper 2 eq. 1
 (angle between the platform and base z axes, arccos R₃₃); the singular values of the
 identification Jacobian (log scale); parameter deviations ρ̂ − ρ₀ with ±2σ bars (mm, and
 degrees for the angle parameters); the parameter correlation matrix; residuals per pose and
-per reading; histograms of held-out errors before and after; error maps before and after.
+per reading; histograms of held-out errors before and after; error maps before and after;
+the error of every parameter against the truth and of every held-out pose (paper 1 Figs.
+10–11); measurement paths and the error at every path point, forward and backward (paper 3
+Figs. 4/5, 7/8).
 """
 
 from __future__ import annotations
@@ -349,5 +352,157 @@ def error_map_figure(em: ErrorMap) -> Figure:
             cb.set_label("position error (µm)")
         a, b, c = np.rad2deg(em.abc)
         fig.suptitle(f"Error map at z = {em.z:.1f} mm, a b c = {a:.1f} {b:.1f} {c:.1f}°", fontsize=10)
+        fig.tight_layout()
+    return fig
+
+
+def _log_positive(values: np.ndarray) -> np.ndarray:
+    """``values`` with zeros and non-finite entries as NaN, for a log axis."""
+    v = np.asarray(values, dtype=float)
+    return np.where(np.isfinite(v) & (v > 0), v, np.nan)
+
+
+def parameter_errors_figure(names, errors: dict[str, np.ndarray], is_angle=None,
+                            title: str = "Parameter errors against the truth") -> Figure:
+    """|estimate − truth| of every parameter for one or more estimates (``errors``: label →
+    (n,) internal units), log scale; lengths in mm, angles (``is_angle``) in degrees, one
+    panel per unit (paper 1 Fig. 10: the identified parameters against the real ones)."""
+    names = tuple(names)
+    ang = np.zeros(len(names), dtype=bool) if is_angle is None else np.asarray(is_angle, dtype=bool)
+    groups = [(u, np.flatnonzero(ang == a)) for u, a in (("mm", False), ("deg", True)) if np.any(ang == a)]
+    markers = "os^Dv<>"
+    with style():
+        width = max(6.4, 0.16 * max(len(c) for _, c in groups) + 1.5)
+        fig = _new((width, 3.4 * len(groups)))
+        for g, (unit, cols) in enumerate(groups):
+            ax = fig.add_subplot(len(groups), 1, g + 1)
+            idx = np.arange(len(cols))
+            for k, (label, e) in enumerate(errors.items()):
+                e = np.abs(np.asarray(e, dtype=float)[cols])
+                e = np.rad2deg(e) if unit == "deg" else e
+                mean = np.nanmean(e) if np.isfinite(e).any() else float("nan")
+                ax.semilogy(idx, _log_positive(e), markers[k % len(markers)], ms=4, mfc="none" if k else None,
+                            label=f"{label} (mean {mean:.3g} {unit})")
+            ax.set_xticks(idx)
+            ax.set_xticklabels([names[c] for c in cols], rotation=90, fontsize=6)
+            ax.set_xlim(-0.8, len(idx) - 0.2)
+            ax.set_ylabel(f"|error| ({unit})")
+            if g == 0:
+                ax.set_title(title)
+            ax.legend(fontsize=7, loc="best")
+        fig.tight_layout()
+    return fig
+
+
+def per_pose_errors_figure(position: dict[str, np.ndarray], orientation: dict[str, np.ndarray] | None = None,
+                           title: str = "Errors at the held-out poses", xlabel: str = "held-out pose") -> Figure:
+    """Position (µm) and orientation (arcsec) error of every pose, one marker series per
+    model (``position``/``orientation``: label → (N,) mm / rad), log scale (paper 1 Fig. 11:
+    the verification poses after calibration)."""
+    panels = [(position, "position error (µm)", 1000.0)]
+    if orientation:
+        panels.append((orientation, "orientation error (arcsec)", ARCSEC_PER_RAD))
+    markers = "os^Dv<>"
+    with style():
+        fig = _new((7.2, 2.8 * len(panels) + 0.4))
+        for p, (series, label, scale) in enumerate(panels):
+            ax = fig.add_subplot(len(panels), 1, p + 1)
+            for k, (name, e) in enumerate(series.items()):
+                e = np.asarray(e, dtype=float)
+                ax.semilogy(np.arange(1, e.size + 1), _log_positive(e * scale), markers[k % len(markers)] + "-",
+                            lw=0.6, ms=4, mfc="none" if k else None, label=name)
+            ax.set_ylabel(label)
+            ax.legend(fontsize=7, loc="best")
+            ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))
+            if p == 0:
+                ax.set_title(title)
+            if p == len(panels) - 1:
+                ax.set_xlabel(xlabel)
+        fig.tight_layout()
+    return fig
+
+
+def path_figure(points: np.ndarray, forward: np.ndarray, calibration: np.ndarray,
+                title: str = "Measurement path") -> Figure:
+    """The measured points (N, 2) (mm) in their order: the path as a thin line, forward
+    passes as circles, backward passes as crosses, calibration points filled and the
+    verification points open (paper 3 Figs. 4 and 7)."""
+    pts = np.asarray(points, dtype=float)
+    fwd, cal = np.asarray(forward, dtype=bool), np.asarray(calibration, dtype=bool)
+    with style():
+        fig = _new((6.0, 4.6))
+        ax = fig.add_subplot(1, 1, 1)
+        ax.plot(pts[:, 0], pts[:, 1], "-", color="0.7", lw=0.8, zorder=1)
+        for sel, marker, label in ((fwd & cal, "o", "calibration, forward"), (~fwd & cal, "x", "calibration, backward"),
+                                   (fwd & ~cal, "s", "verification, forward"),
+                                   (~fwd & ~cal, "+", "verification, backward")):
+            if sel.any():
+                ax.plot(pts[sel, 0], pts[sel, 1], marker, ms=6, mfc="none", label=f"{label} ({int(sel.sum())})",
+                        color=AFTER_COLOUR if "calibration" in label else BEFORE_COLOUR, zorder=2)
+        for k in (0, len(pts) - 1):
+            ax.annotate("start" if k == 0 else "end", pts[k], textcoords="offset points", xytext=(5, 5), fontsize=7)
+        ax.set_xlabel("x (mm)")
+        ax.set_ylabel("y (mm)")
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_title(title)
+        ax.legend(fontsize=7, loc="best")
+        fig.tight_layout()
+    return fig
+
+
+def path_errors_figure(before: np.ndarray, after: dict[str, np.ndarray], forward: np.ndarray,
+                       calibration: np.ndarray | None = None, title: str = "Position error along the path") -> Figure:
+    """Tool-point error (µm) at every point of a measurement path, before (nominal model) and
+    after calibration by each model of ``after`` (label → (N,) mm), forward points as circles
+    and backward points as crosses, as paper 3 Figs. 5 and 8 (○/× before, ◇/+ after);
+    points not used for calibration are shaded."""
+    fwd = np.asarray(forward, dtype=bool)
+    idx = np.arange(1, fwd.size + 1)
+    series = [("before", np.asarray(before, dtype=float), BEFORE_COLOUR)]
+    colours = [AFTER_COLOUR, "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b"]
+    series += [(f"after: {k}", np.asarray(v, dtype=float), colours[i % len(colours)]) for i, (k, v) in enumerate(after.items())]
+    with style():
+        fig = _new((7.6, 3.8))
+        ax = fig.add_subplot(1, 1, 1)
+        if calibration is not None:
+            cal = np.asarray(calibration, dtype=bool)
+            for k in np.flatnonzero(~cal):
+                ax.axvspan(idx[k] - 0.5, idx[k] + 0.5, color="0.92", lw=0, zorder=0)
+        for k, (label, e, colour) in enumerate(series):
+            e = _log_positive(e * 1000.0)
+            ax.semilogy(idx[fwd], e[fwd], "o" if k == 0 else "D", ms=4, mfc="none", color=colour,
+                        label=f"{label}, forward")
+            ax.semilogy(idx[~fwd], e[~fwd], "x" if k == 0 else "+", ms=5, color=colour, label=f"{label}, backward")
+        ax.set_xlabel("measurement point (path order)" + ("; shaded: not used for calibration"
+                                                          if calibration is not None else ""))
+        ax.set_ylabel("position error (µm)")
+        ax.set_title(title)
+        ax.legend(fontsize=6.5, ncol=2, loc="best")
+        fig.tight_layout()
+    return fig
+
+
+def error_slices_figure(values: np.ndarray, position: np.ndarray, orientation: np.ndarray, magnitude: float,
+                        title: str = "") -> Figure:
+    """Pose error along slices of each pose coordinate (paper 1 Figs. 4–9): one column per
+    coordinate x … c, position error (µm) on top, orientation error (arcsec) below, one line
+    per slice (:class:`~pkmcal.planning.error_maps.ErrorSlices` arrays: ``values`` (6, P),
+    ``position``/``orientation`` (6, C, P), mm and rad)."""
+    names = ("x", "y", "z", "a", "b", "c")
+    with style():
+        fig = _new((15.0, 5.2))
+        for k, name in enumerate(names):
+            x = values[k] if k < 3 else np.rad2deg(values[k])
+            for row, (data, scale, label) in enumerate(((position, 1000.0, "position error (µm)"),
+                                                        (orientation, ARCSEC_PER_RAD, "orientation error (arcsec)"))):
+                ax = fig.add_subplot(2, 6, row * 6 + k + 1)
+                for curve in data[k]:
+                    ax.plot(x, curve * scale, lw=0.7)
+                if k == 0:
+                    ax.set_ylabel(label)
+                if row == 1:
+                    ax.set_xlabel(f"{name} ({'mm' if k < 3 else 'deg'})")
+                ax.tick_params(labelsize=7)
+        fig.suptitle(title or f"Pose error from ±{magnitude:g} mm parameter errors (paper 1 Figs. 4–9)", fontsize=10)
         fig.tight_layout()
     return fig

@@ -95,6 +95,23 @@ def parameter_table(nominal: Mechanism, result, true_machine: Mechanism | None =
                           is_angle=np.array(flags, dtype=bool)[shown])
 
 
+def _compliance_facts(nominal, result, setup, commanded) -> tuple[tuple[str, str], ...]:
+    """A warning line when a redundant machine calibrated by projection deflected under its
+    load (:func:`~pkmcal.identification.redundant_campaign.compliance_warning`); needs the
+    commanded poses of the measurements (``commanded``, one per input pose)."""
+    if commanded is None:
+        return ()
+    from pkmcal.identification.redundant_campaign import compliance_warning, is_redundant
+
+    poses = np.asarray(commanded, dtype=float)
+    if result.method != "projection" or not is_redundant(nominal) or poses.ndim != 2 \
+            or len(poses) <= int(np.max(result.used_poses, initial=-1)) or not hasattr(result.sensor, "tool_pose_jacobian"):
+        return ()
+    std = float(np.max(np.asarray(setup.noise.reading_std, dtype=float)))
+    text = compliance_warning(nominal, result.mechanism, result.sensor, poses[result.used_poses], result.poses, std)
+    return () if text is None else (("warning", text),)
+
+
 def report_data_from_results(
     nominal: Mechanism,
     result,
@@ -110,6 +127,7 @@ def report_data_from_results(
     setup_summary: str = "",
     facts: tuple[tuple[str, str], ...] = (),
     held_out_poses: np.ndarray | None = None,
+    commanded: np.ndarray | None = None,
 ) -> ReportData:
     """The report of an :class:`~pkmcal.identification.engine.IdentificationResult`.
 
@@ -117,7 +135,8 @@ def report_data_from_results(
     :class:`~pkmcal.identification.verification.VerificationReport` with a 'before'
     column; ``identified`` the calibrated machine as exported (default ``result.mechanism``);
     ``true_machine`` (and ``true_sensor``) the simulation's real machine (sensor), shown
-    beside the estimates.
+    beside the estimates; ``commanded`` (N, n) the commanded poses of the measurements, from
+    which a redundant machine's load deflection is estimated (a warning line when visible).
     """
     table = parameter_table(nominal, result, true_machine, true_sensor)
     corr = np.asarray(result.correlation, dtype=float)
@@ -132,8 +151,10 @@ def report_data_from_results(
              ("pose numbers", "data rows of the measurement file, counted from 1 (comment and header lines "
                               "not counted)"),
              ("reduced χ²", f"{result.uncertainty.reduced_chi2:.3f}"),
+             ("standard deviations", result.uncertainty.description),
              *facts,
-             *(("note", w) for w in result.warnings))
+             *(("note", w) for w in result.warnings),
+             *_compliance_facts(nominal, result, setup, commanded))
     return ReportData(
         title=title or f"pkmcal calibration report: {nominal.name}",
         machine_summary=nominal.summary() if hasattr(nominal, "summary") else nominal.name,

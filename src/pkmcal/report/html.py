@@ -10,7 +10,8 @@ Sections: machine and setup; pose plan (machine in a few poses, pose cloud);
 identifiability (rank, singular values, fixed gauge, weak directions, paper 2 §4 /
 paper 3 §3); identified parameters ± 1σ against nominal (and the simulation's truth when
 known), each in its unit: mm, degrees for the parameters declared angles with the correlation matrix ρ_ij = C_ij/√(C_ii C_jj); residuals per pose and per
-reading; held-out errors before/after (rms = √(mean e²), p95, max); error maps.
+reading; held-out errors before/after (rms = √(mean e²), p95, max), also pose by pose; error
+maps. With a known truth (simulation) the error of every parameter against it.
 """
 
 from __future__ import annotations
@@ -120,6 +121,15 @@ def build_figures(data: ReportData, png: bool = True) -> list[F.RenderedFigure]:
     out.append(F.render(F.parameter_figure(data.parameters), "parameters",
                         "Identified deviation from nominal, ±2σ; open circles: the true deviation "
                         "(simulation only).", png))
+    t = data.parameters
+    if t.true is not None and np.any(t.free & np.isfinite(t.true)):
+        shown = t.free & np.isfinite(t.true)
+        names = tuple(n for n, k in zip(t.names, shown) if k)
+        errs = {"before (nominal)": (t.nominal - t.true)[shown], "after (identified)": (t.identified - t.true)[shown]}
+        out.append(F.render(F.parameter_errors_figure(names, errs, t.is_angle[shown],
+                                                      "Error of every identified parameter against the truth"),
+                            "parameter-errors", "|nominal − true| and |identified − true| of every free parameter "
+                            "(simulation only; paper 1 Fig. 10), log scale.", png))
     if len(data.correlation_names) > 1:
         out.append(F.render(F.correlation_figure(data.correlation, data.correlation_names), "correlation",
                             "Correlation of the identified parameters (from their covariance).", png))
@@ -132,6 +142,13 @@ def build_figures(data: ReportData, png: bool = True) -> list[F.RenderedFigure]:
         out.append(F.render(F.held_out_figure(data.held_out), "held-out",
                             "Errors at held-out poses with the nominal (before) and identified (after) model.",
                             png))
+        h = data.held_out
+        out.append(F.render(F.per_pose_errors_figure(
+            {"before (nominal)": h.position_before, "after (identified)": h.position_after},
+            {"before (nominal)": h.orientation_before, "after (identified)": h.orientation_after},
+            "Errors at every held-out pose"), "held-out-per-pose",
+            "Position and orientation error of every held-out pose, before and after (paper 1 Fig. 11), log "
+            "scale.", png))
     if data.error_map is not None:
         out.append(F.render(F.error_map_figure(data.error_map), "error-map",
                             "Position error over the workspace, before and after calibration.", png))
@@ -264,6 +281,7 @@ def render_html(data: ReportData, figs: list[F.RenderedFigure]) -> str:
     t = data.parameters
     add('<h2 id="parameters">Identified parameters</h2>')
     add(fig("parameters"))
+    add(fig("parameter-errors"))
     add(_table(*_parameter_rows(t), left=2, row_class=["" if f else "fixed" for f in t.free]))
     if len(data.correlation_names) > 1:
         c = np.array(data.correlation, dtype=float)
@@ -312,6 +330,7 @@ def render_html(data: ReportData, figs: list[F.RenderedFigure]) -> str:
         add(_table(["error", "before rms", "before p95", "before max", "after rms", "after p95", "after max",
                     "rms ratio"], held_rows))
         add(fig("held-out"))
+        add(fig("held-out-per-pose"))
     else:
         add("<p>No held-out poses were given.</p>")
     if data.error_map is not None:

@@ -1,11 +1,17 @@
 """Reproductions of the papers' tables: our numbers beside the published ones.
 
-One module per paper table (:mod:`.paper1`, :mod:`.paper2`, :mod:`.paper2_planning`,
-:mod:`.paper2_study` (Table 6 and Fig. 6, run as :mod:`pkmcal.study` studies), :mod:`.paper3`); each reproduction is a function ``f(seed=0, quick=False) -> Reproduction``
-(:mod:`.table`), deterministic for a seed, with a ``quick`` mode (few Monte Carlo runs)
-for tests and a ``progress(done, total)`` callback over its Monte Carlo loop
-(:mod:`pkmcal.progress`). :data:`REPRODUCTIONS`
+One module per paper table or study (:mod:`.paper1`, :mod:`.paper1_error_maps`, :mod:`.paper2`,
+:mod:`.paper2_planning`, :mod:`.paper2_study` (Table 6 and Fig. 6, run as :mod:`pkmcal.study`
+studies), :mod:`.paper2_plate`, :mod:`.paper2_singularity`, :mod:`.paper3`,
+:mod:`.paper3_compliance`; the known-stiffness baseline of paper 3's ref. [7] is
+:mod:`.known_stiffness`); each reproduction is a function ``f(seed=0, quick=False,
+progress=None) -> Reproduction`` (:mod:`.table`), deterministic for a seed, with a ``quick``
+mode (few Monte Carlo runs) for tests and a ``progress(done, total)`` callback over its Monte
+Carlo loop (:mod:`pkmcal.progress`). Its ``figures`` are the paper's figures as we redraw them
+(``pkmcal reproduce NAME --figures DIR``). :data:`REPRODUCTIONS`
 is the registry behind ``pkmcal reproduce NAME``; :func:`run_reproduction` runs one by name.
+:data:`CATALOGUE` (:mod:`.catalogue`) lists every table and figure of the three papers with
+the reproduction that covers it or the reason none can (``pkmcal reproduce --list``).
 
 Paper 2 Tables 1–2 (observability indices of random and optimal pose sets) are in
 :mod:`.paper2_planning`; ``benchmarks/planning_tables.py`` prints them (docs/planning.md).
@@ -17,17 +23,25 @@ from typing import Callable
 
 from pkmcal.errors import PkmcalError
 from pkmcal.progress import Progress
+from pkmcal.reproduce.catalogue import CATALOGUE, format_catalogue
 from pkmcal.reproduce.paper1 import paper1_table1
+from pkmcal.reproduce.paper1_error_maps import paper1_figs4_9
 from pkmcal.reproduce.paper2 import paper2_table5
 from pkmcal.reproduce.paper2_planning import paper2_tables1_2
+from pkmcal.reproduce.paper2_plate import paper2_plate_frame
+from pkmcal.reproduce.paper2_singularity import paper2_singularity
 from pkmcal.reproduce.paper2_study import paper2_fig6, paper2_table6
 from pkmcal.reproduce.paper3 import paper3_case1, paper3_case2
+from pkmcal.reproduce.paper3_compliance import paper3_compliance
 from pkmcal.reproduce.table import Reproduction, Row
 
 #: name → (function, one-line description)
 REPRODUCTIONS: dict[str, tuple[Callable[..., Reproduction], str]] = {
-    "paper1-table1": (paper1_table1, "paper 1 Table I (parameter errors, boundary vs interior poses) and its "
-                                     "verification claims, with the Gauss-Markov bound"),
+    "paper1-table1": (paper1_table1, "paper 1 Table I, Figs. 10-11 (parameter errors, boundary vs interior "
+                                     "poses, D-optimal poses for context) and its verification claims, with the "
+                                     "Gauss-Markov bound"),
+    "paper1-figs4-9": (paper1_figs4_9, "paper 1 Figs. 4-9 (pose error along slices of each coordinate) and "
+                                       "whether they support 'measure at the boundary'"),
     "paper2-table5": (paper2_table5, "paper 2 Table 5 (3 indicators, Table 4 real machine, four noise levels), "
                                      "gauge evidence, Table 7 evidence"),
     "paper2-tables1-2": (paper2_tables1_2, "paper 2 Tables 1-2 (observability indices O1-O4 of random and "
@@ -35,8 +49,17 @@ REPRODUCTIONS: dict[str, tuple[Callable[..., Reproduction], str]] = {
     "paper2-table6": (paper2_table6, "paper 2 Table 6 (random vs optimally selected poses: D_E, P_Er), as a study"),
     "paper2-fig6": (paper2_fig6, "paper 2 Fig. 6 (parameter error vs number of random poses, auto and paper "
                                  "gauge), as a study"),
-    "paper3-case1": (paper3_case1, "paper 3 case 1 (2-dof, 3 rotary actuators): held-out improvement"),
-    "paper3-case2": (paper3_case2, "paper 3 case 2 (3-dof, 4 linear actuators): held-out improvement"),
+    "paper2-plate-frame": (paper2_plate_frame, "paper 2 §2.3/§6: the indicator plate as its own frame (parallel "
+                                               "frames assumed, plate surveyed, plate identified)"),
+    "paper2-singularity": (paper2_singularity, "paper 2 §2.1: Merlet's |J⁻¹| singularity detector beside the "
+                                               "inverse condition number"),
+    "paper3-case1": (paper3_case1, "paper 3 case 1 (2-dof, 3 rotary actuators): held-out improvement, Table 1, "
+                                   "Figs. 4-5 (path forward/backward, backlash), ref. [7] known-stiffness baseline"),
+    "paper3-case2": (paper3_case2, "paper 3 case 2 (3-dof, 4 linear actuators): held-out improvement, Table 2, "
+                                   "Figs. 7-8 (path forward/backward, backlash), ref. [7] known-stiffness baseline"),
+    "paper3-compliance": (paper3_compliance, "paper 3: the load/compliance trap (softer actuators, larger loads: "
+                                             "floor, projection, naive and known-stiffness fits) and the report's "
+                                             "warning"),
 }
 
 
@@ -51,5 +74,6 @@ def run_reproduction(name: str, seed: int = 0, quick: bool = False, progress: Pr
     return fn(seed=seed, quick=quick, progress=progress)
 
 
-__all__ = ["REPRODUCTIONS", "Reproduction", "Row", "run_reproduction", "paper1_table1", "paper2_table5",
-           "paper2_tables1_2", "paper2_table6", "paper2_fig6", "paper3_case1", "paper3_case2"]
+__all__ = ["CATALOGUE", "REPRODUCTIONS", "Reproduction", "Row", "format_catalogue", "run_reproduction",
+           "paper1_table1", "paper1_figs4_9", "paper2_table5", "paper2_tables1_2", "paper2_table6", "paper2_fig6",
+           "paper2_plate_frame", "paper2_singularity", "paper3_case1", "paper3_case2", "paper3_compliance"]

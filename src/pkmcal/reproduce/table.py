@@ -9,6 +9,7 @@ published (``None`` where the paper gives none); ``ours`` a measured number.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -48,9 +49,21 @@ def _num(v) -> str:
 
 
 @dataclass(frozen=True)
+class FigureSpec:
+    """A figure of a reproduction: file stem ``name``, ``caption`` and ``build()`` returning a
+    matplotlib Figure (called only when the figures are written, so that a reproduction
+    run for its numbers never imports matplotlib)."""
+
+    name: str
+    caption: str
+    build: Callable[[], object] = field(repr=False, compare=False)
+
+
+@dataclass(frozen=True)
 class Reproduction:
     """A reproduced table. ``setup`` maps setting → value (str); ``headline`` a few numbers
-    for the benchmark's JSON line; ``extra`` further tables as (title, header, rows of str)."""
+    for the benchmark's JSON line; ``extra`` further tables as (title, header, rows of str);
+    ``figures`` the paper's figures as we redraw them (:class:`FigureSpec`)."""
 
     name: str
     title: str
@@ -60,6 +73,7 @@ class Reproduction:
     headline: dict[str, float] = field(default_factory=dict)
     extra: tuple[tuple[str, tuple[str, ...], tuple[tuple[str, ...], ...]], ...] = ()
     seconds: float = float("nan")
+    figures: tuple[FigureSpec, ...] = ()
 
     def row(self, quantity: str, group: str | None = None) -> Row:
         """The row named ``quantity`` (in ``group`` when given)."""
@@ -97,11 +111,36 @@ class Reproduction:
         return {"name": self.name, "title": self.title, "rows": [r.to_dict() for r in self.rows],
                 "setup": dict(self.setup), "notes": list(self.notes), "headline": _headline_json(self.headline),
                 "extra": [{"title": t, "header": list(h), "rows": [list(r) for r in rows]} for t, h, rows in self.extra],
+                "figures": [{"name": f.name, "caption": f.caption} for f in self.figures],
                 "seconds": self.seconds,
                 "units": {"seconds": "s",
                           "headline": "per key: its suffix (_mm, _pct, _deg; _rad = the paper's unit, with its "
                                       "_deg twin); paper2_D_E_*, paper2_E_E_*: % (rows D_E, E_E); *_O4_*: 1 "
                                       "(observability index O4)"}}
+
+    def write_figures(self, out_dir, png: bool = True) -> list:
+        """Draw :attr:`figures` and write ``<name>.svg`` (and ``.png``) into ``out_dir``
+        (created if needed), atomically and byte-identically for the same numbers; returns
+        the paths written."""
+        from pathlib import Path
+
+        from pkmcal.errors import PkmcalError
+        from pkmcal.io.atomic import atomic_write_bytes
+        from pkmcal.report.figures import render
+
+        out = Path(out_dir)
+        if out.exists() and not out.is_dir():
+            raise PkmcalError(f"figure folder '{out}' exists and is not a folder; choose another --figures path")
+        out.mkdir(parents=True, exist_ok=True)
+        written = []
+        for spec in self.figures:
+            fig = render(spec.build(), spec.name, spec.caption, png)
+            for ext, data in (("svg", fig.svg), ("png", fig.png)):
+                if data is not None:
+                    path = out / f"{spec.name}.{ext}"
+                    atomic_write_bytes(path, data)
+                    written.append(path)
+        return written
 
 
 def _headline_json(headline: dict[str, float]) -> dict[str, float]:

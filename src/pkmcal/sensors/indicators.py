@@ -1,24 +1,40 @@
-"""Dial indicators fixed in the world (= base) frame, touching the platform's lower plane.
+"""Dial indicators on an external plate, touching the platform's lower plane.
 
-Model (paper 2 §3, eqs. 4–6). K ≥ 3 indicators with axes along z of the base frame {F}
-stand at (x_k, y_k). The platform's lower surface is a plane through
-x0 = p − d_off n with normal n = R e_z = (n_x, n_y, n_z) (paper 2 writes (a, b, c); here
-a, b, c are Euler angles), d_off = ``plane_offset`` (the platform origin lies d_off above
-its lower surface). Indicator k reads the height of that plane above (x_k, y_k), less its
-zero offset ζ_k (params ``zero1 … zeroK``; real indicators are relative, so free them
-when the zero is not referenced):
+Model (paper 2 §3, eqs. 4–6). K ≥ 3 indicators stand on the plate {W} at (x_k, y_k, 0),
+their axes along z_W. The plate's pose in the base frame {F} is (p_W, R_W) (params
+``plate.x … plate.c``, pose convention of :mod:`pkmcal.conventions`; identity by default:
+paper 2's "{F} and {W} parallel, origins collinear", which its conclusion says is not a
+limitation). In plate coordinates the platform is at p' = R_Wᵀ (p − p_W) with normal
+n' = R_Wᵀ n, n = R e_z = (n_x, n_y, n_z) (paper 2 writes (a, b, c); here a, b, c are Euler
+angles). The platform's lower surface is the plane through x0 = p − d_off n, d_off =
+``plane_offset`` (the platform origin lies d_off above its lower surface). Indicator k
+reads the distance along z_W from the plate to that plane, less its zero offset ζ_k
+(params ``zero1 … zeroK``; real indicators are relative, so free them when the zero is not
+referenced):
 
     n·x + d = 0,  d = −n·x0,  x0 = p − d_off n                                   (4)–(5)
-    z_k = (−d − n_x x_k − n_y y_k) / n_z − ζ_k
-        = (n·p − d_off − n_x x_k − n_y y_k) / n_z − ζ_k                          (6)
+    z_k = (−d' − n'_x x_k − n'_y y_k) / n'_z − ζ_k
+        = (n'·p' − d_off − n'_x x_k − n'_y y_k) / n'_z − ζ_k                     (6)
 
-Derivatives: with N_k = n·p − d_off − n_x x_k − n_y y_k and
-g_k = ∂z_k/∂n = ((p_x − x_k)/n_z, (p_y − y_k)/n_z, p_z/n_z − N_k/n_z²), and δn = δω × n,
+(d' = −n'·x0', the plane in plate coordinates; with the identity plate this is eq. 6 as
+printed.) Derivatives in plate coordinates: with N_k = n'·p' − d_off − n'_x x_k − n'_y y_k,
+a' = n'/n'_z and g_k = ∂z_k/∂n' = ((p'_x − x_k)/n'_z, (p'_y − y_k)/n'_z, p'_z/n'_z − N_k/n'_z²),
 
-    ∂z_k/∂p = n / n_z,     ∂z_k/∂δω = (n × g_k)ᵀ,     ∂z_k/∂ζ_k = −1,
+    ∂z_k/∂p' = a'ᵀ,     ∂z_k/∂δω' = (n' × g_k)ᵀ,     ∂z_k/∂ζ_k = −1,
 
-the Euler pose Jacobian being the twist one times diag(I, E(a, b, c)). A plane that is
-(near) vertical, |n_z| < :data:`MIN_NORMAL_Z`, cannot be read: :class:`PkmcalError`.
+and in the base frame (δp' = R_Wᵀ δp, δω' = R_Wᵀ δω) the twist Jacobian rows are
+(R_W a', R_W (n' × g_k)), the Euler pose Jacobian the twist one times diag(I, E(a, b, c)).
+The plate parameters (a plate displacement δp_W and small base-frame rotation δφ about
+p_W, with v = p − p_W):
+
+    ∂z_k/∂p_W = −(R_W a')ᵀ,     ∂z_k/∂δφ = ((R_W a') × v + (R_W g_k) × n)ᵀ,
+
+∂/∂(plate.a, b, c) = ∂z_k/∂δφ · E(plate a, b, c). A rigid motion of the plate and the
+platform together changes no reading, so the plate pose is identifiable only against a
+base frame pinned by the mechanism parameters (the engine's gauge analysis names the
+combinations); hold it (known from a survey) or free it. A plane that is (near) vertical
+to the plate, |n'_z| < :data:`MIN_NORMAL_Z`, cannot be read: :class:`PkmcalError`. With the
+identity plate the computation is the plate-free one, bit for bit.
 """
 
 from __future__ import annotations
@@ -27,10 +43,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pkmcal.conventions import euler_pose_jacobian
+from pkmcal.conventions import euler_pose_jacobian, euler_rate_matrix, euler_to_matrix
 from pkmcal.errors import PkmcalError
 from pkmcal.sensors._common import as_poses
+from pkmcal.sensors._frames import TRANSFORM_IS_ANGLE
 from pkmcal.sensors.base import ParamGroup, Sensor
+
+#: Names of the plate-pose parameters (the pose of the plate {W} in the base frame {F}).
+PLATE_PARAM_NAMES = tuple(f"plate.{c}" for c in ("x", "y", "z", "a", "b", "c"))
 
 #: Smallest |n_z| (cosine of the plane tilt) at which the indicators are evaluated (≈ 89.9°).
 MIN_NORMAL_Z = 1e-3
@@ -51,13 +71,16 @@ def plane_normals(abc: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class IndicatorSensor(Sensor):
-    """K ≥ 3 dial indicators along z of the base frame; see module docstring.
+    """K ≥ 3 dial indicators along z of the plate frame; see module docstring.
 
     Parameters
     ----------
-    positions : (K, 2) indicator positions (x_k, y_k) in the base frame, mm.
+    positions : (K, 2) indicator positions (x_k, y_k) in the plate frame (= the base frame
+        when the plate is the identity), mm.
     plane_offset : d_off, distance of the platform origin above its lower plane, mm.
     zero : (K,) indicator zero offsets ζ_k, mm; default 0.
+    plate : (6,) pose x, y, z (mm), a, b, c (rad) of the plate frame in the base frame;
+        default the identity (paper 2's parallel frames).
     free : sensor parameters estimated by the identification (default: none).
     """
 
@@ -65,6 +88,7 @@ class IndicatorSensor(Sensor):
     plane_offset: float = 0.0
     zero: np.ndarray | None = None
     free: tuple[str, ...] | None = None
+    plate: np.ndarray | None = None
 
     kind = "indicators"
 
@@ -93,14 +117,30 @@ class IndicatorSensor(Sensor):
 
     @property
     def param_groups(self) -> tuple[ParamGroup, ...]:
-        """θ = the zero offsets ζ_1 … ζ_K, lengths (mm)."""
+        """θ = the zero offsets ζ_1 … ζ_K (mm), then the plate pose ``plate.x … plate.c``
+        (mm, rad)."""
         k = self.n_indicators
-        return (ParamGroup("zero", tuple(f"zero{i + 1}" for i in range(k)), (False,) * k),)
+        return (ParamGroup("zero", tuple(f"zero{i + 1}" for i in range(k)), (False,) * k),
+                ParamGroup("plate", PLATE_PARAM_NAMES, TRANSFORM_IS_ANGLE))
 
-    def _plane(self, poses):
-        """Poses (N, 6), normals n (N, 3), N_k (N, K): numerators of eq. (6)."""
+    @property
+    def plate_is_identity(self) -> bool:
+        """True when the plate frame is the base frame (every plate parameter exactly 0)."""
+        return not np.any(self.plate)
+
+    def _in_plate(self, poses):
+        """Poses (N, 6), plate-frame positions p' (N, 3) and normals n' (N, 3) (module
+        docstring); p' = p and n' = n, unchanged bits, for the identity plate."""
         poses = as_poses(poses, self.kind)
         n = plane_normals(poses[:, 3:6])
+        if self.plate_is_identity:
+            return poses, poses[:, 0:3], n
+        Rw = euler_to_matrix(self.plate[3:6])
+        return poses, (poses[:, 0:3] - self.plate[0:3]) @ Rw, n @ Rw
+
+    def _plane(self, poses):
+        """Poses (N, 6), plate-frame p' and n' (N, 3), N_k (N, K): numerators of eq. (6)."""
+        poses, p, n = self._in_plate(poses)
         bad = np.abs(n[:, 2]) < MIN_NORMAL_Z
         if bad.any():
             k = int(np.argmax(bad))
@@ -110,31 +150,61 @@ class IndicatorSensor(Sensor):
                 f"{' '.join(f'{v:.6g}' for v in np.r_[poses[k, :3], np.rad2deg(poses[k, 3:])])} mm/deg): "
                 f"its platform plane is tilted {tilt:.3f}° (near vertical); remove the pose"
             )
-        num = (np.einsum("nk,nk->n", n, poses[:, 0:3]) - self.plane_offset)[:, None] \
-            - n[:, 0:2] @ self.positions.T
-        return poses, n, num
+        num = (np.einsum("nk,nk->n", n, p) - self.plane_offset)[:, None] - n[:, 0:2] @ self.positions.T
+        return poses, p, n, num
 
     def predict(self, poses: np.ndarray) -> np.ndarray:
         """Readings z_k − ζ_k (N, K), mm: eq. (6)."""
-        _, n, num = self._plane(poses)
+        _, _, n, num = self._plane(poses)
         return num / n[:, 2:3] - self.zero
 
-    def pose_jacobian(self, poses: np.ndarray) -> np.ndarray:
-        """∂z/∂(x, y, z, a, b, c) (N, K, 6) (module docstring)."""
-        poses, n, num = self._plane(poses)
+    def touch_points(self, poses: np.ndarray) -> np.ndarray:
+        """Where each indicator touches the platform plane (N, K, 3), base frame, mm:
+        p_W + R_W (x_k, y_k, z_k + ζ_k)."""
+        z = self.predict(poses) + self.zero
+        pts = np.stack([np.broadcast_to(self.positions[:, 0], z.shape),
+                        np.broadcast_to(self.positions[:, 1], z.shape), z], axis=-1)
+        if self.plate_is_identity:
+            return pts
+        return self.plate[0:3] + pts @ euler_to_matrix(self.plate[3:6]).T
+
+    def _plate_twist(self, p, n, num):
+        """Plate-frame twist Jacobian (N, K, 6): (a', n' × g_k) (module docstring)."""
         inz = 1.0 / n[:, 2:3]                                           # (N, 1)
-        gx = (poses[:, 0:1] - self.positions[:, 0]) * inz               # g_k, (N, K) each
-        gy = (poses[:, 1:2] - self.positions[:, 1]) * inz
-        gz = (poses[:, 2:3] - num * inz) * inz
+        gx = (p[:, 0:1] - self.positions[:, 0]) * inz                   # g_k, (N, K) each
+        gy = (p[:, 1:2] - self.positions[:, 1]) * inz
+        gz = (p[:, 2:3] - num * inz) * inz
         nx, ny, nz = n[:, 0:1], n[:, 1:2], n[:, 2:3]
         Jt = np.empty(num.shape + (6,))
         Jt[..., 0:3] = (n * inz)[:, None, :]
         Jt[..., 3] = ny * gz - nz * gy                                  # n × g_k
         Jt[..., 4] = nz * gx - nx * gz
         Jt[..., 5] = nx * gy - ny * gx
+        return Jt, np.stack([gx, gy, gz], axis=-1)
+
+    def pose_jacobian(self, poses: np.ndarray) -> np.ndarray:
+        """∂z/∂(x, y, z, a, b, c) (N, K, 6) (module docstring)."""
+        poses, p, n, num = self._plane(poses)
+        Jt, _ = self._plate_twist(p, n, num)
+        if not self.plate_is_identity:                                  # rows (R_W a', R_W (n' × g_k))
+            Rw = euler_to_matrix(self.plate[3:6])
+            Jt[..., 0:3] = Jt[..., 0:3] @ Rw.T
+            Jt[..., 3:6] = Jt[..., 3:6] @ Rw.T
         return euler_pose_jacobian(Jt, poses)
 
     def param_jacobian(self, poses: np.ndarray) -> np.ndarray:
-        """∂z/∂ζ (N, K, K) = −I."""
-        poses = as_poses(poses, self.kind)
-        return np.broadcast_to(-np.eye(self.n_indicators), (poses.shape[0],) + (self.n_indicators,) * 2).copy()
+        """∂z/∂θ (N, K, K + 6): −I for the zero offsets, then the plate pose (module docstring)."""
+        poses, p, n, num = self._plane(poses)
+        k = self.n_indicators
+        J = np.zeros((poses.shape[0], k, k + 6))
+        J[:, :, :k] = -np.eye(k)
+        _, g = self._plate_twist(p, n, num)
+        Rw = euler_to_matrix(self.plate[3:6])
+        a = (n / n[:, 2:3]) @ Rw.T                                      # R_W a' (N, 3)
+        g_base = g @ Rw.T                                               # R_W g_k (N, K, 3)
+        n_base = n @ Rw.T                                               # = n (N, 3)
+        v = poses[:, 0:3] - self.plate[0:3]
+        J[:, :, k:k + 3] = -a[:, None, :]
+        dphi = np.cross(a, v)[:, None, :] + np.cross(g_base, n_base[:, None, :])
+        J[:, :, k + 3:k + 6] = dphi @ euler_rate_matrix(self.plate[3:6])
+        return J
