@@ -25,7 +25,7 @@ from pkmcal.cli.main import cli
 from pkmcal.io.tables import format_table
 from pkmcal.mechanisms.library import stewart_prototype
 
-SUFFIXES = ("_mm", "_deg", "_rad", "_percent", "_pct", "_s", "_arcsec", "_um")
+SUFFIXES = ("_mm", "_deg", "_rad", "_percent", "_pct", "_s", "_arcsec", "_um", "_bytes")
 POSE_NAMES = ("x", "y", "z", "a", "b", "c")
 
 

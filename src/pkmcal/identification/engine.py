@@ -244,6 +244,8 @@ class IdentificationResult:
                 "nfev": "1", "njev": "1", "status": "1", "n_poses": "1",
                 "dropped_poses": "1: pose numbers = data rows of the measurement file, 1-based",
                 "chi2": "1: sum |W r|^2 with the weights at the solution", "dof": "1", "reduced_chi2": "1",
+                "chi2_expected": "1: E[chi2] under the noise model (dof for weighted fits)",
+                "birge_ratio": "1: chi2 / chi2_expected",
                 "rms_residual": rms_unit,
                 "residual_rms_whitened_mixed": "1", "rms_whitened": "1",
             },
