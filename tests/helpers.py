@@ -1,7 +1,9 @@
 """Helpers shared by the test modules (imported as ``from helpers import ...``; pytest puts
 ``tests/`` on the path): the prototype's legs as machine-file text, the CLI's user-error
 contract (exit code 2, one ``pkmcal: error:`` line on stderr, no traceback, nothing
-written), and the hypothesis strategies of the loader fuzz tests."""
+written), the hypothesis strategies of the loader fuzz tests, and the one comparison of
+analytic Jacobians with central finite differences that every Jacobian test uses
+(:func:`assert_jacobian_matches_fd`, its tolerance derived from the step and the scale)."""
 
 from __future__ import annotations
 
@@ -33,6 +35,121 @@ def random_poses(machine, n: int, seed: int = 0) -> np.ndarray:
     """``n`` poses uniform in home ± :data:`POSE_HALF_WIDTHS` (internal units)."""
     rng = np.random.default_rng(seed)
     return machine.home_pose + rng.uniform(-1.0, 1.0, (n, 6)) * POSE_HALF_WIDTHS
+
+
+# -- analytic Jacobians against central finite differences ---------------------------------------
+#
+# Central difference of f along x_k with step h:
+#
+#     D_k = (f(x + h e_k) − f(x − h e_k)) / 2h = ∂f/∂x_k + h²/6 · ∂³f/∂x_k³(ξ) + (δ⁺ − δ⁻)/2h,
+#
+# so |D_k − ∂f/∂x_k| ≤ h²·T_k/6 + δ/h, with T_k a bound on |∂³f/∂x_k³| near x and δ the
+# absolute error of one evaluation of f. Bounds used here:
+#
+# * T_k ≤ 2·G_k/ℓ_k² (Cauchy's estimate for the analytic function ∂f/∂x_k: if its size stays
+#   below the slope G_k within distance ℓ_k of x_k, its second derivative is ≤ 2!·G_k/ℓ_k²).
+#   ℓ_k is the problem's length scale for x_k: the leg length for a coordinate in mm of a leg
+#   of a hexapod (for ‖v + t e‖ exactly |d³/dt³| ≤ (2/√3)/‖v‖² ≤ 2/‖v‖², G = 1), 1 rad for an
+#   angle (a lever r rotating: |d³/dt³| ≤ r·(1 + 3r/L + 1.16 r²/L²) ≈ 2r for r/L ≤ 0.3, G = r).
+# * δ = FD_ROUNDINGS·ε·M: that many roundings of relative size ε on the largest value M the
+#   computation handles (default: the largest |f|); iterative solvers inside f (FK) give δ
+#   from their stopping tolerance instead.
+# * h_k = ε^(1/3)·max(ℓ_k, |x_k|), near the minimiser (3δ/T_k)^(1/3) ≈ ε^(1/3)·ℓ_k of the
+#   bound when M ≈ G·ℓ, so both terms are ~ε^(2/3)·G ≈ 4e-11·G.
+#
+# The tolerance is FD_SAFETY times that bound, plus the analytic Jacobian's own round-off.
+# The check has teeth: the tolerance of every column that matters must be below
+# ``resolution`` (default 1e-5) times the column's size, else the test itself fails; so a
+# sign flip or a 1e-5 relative error of one column is always caught (test_fd_check_has_teeth).
+
+EPS = float(np.finfo(float).eps)
+#: Factor between the error bound above (constants of typical, not worst-case size) and the
+#: tolerance.
+FD_SAFETY = 10.0
+#: Roundings of relative size ε in one evaluation of f (a few dozen flops per value).
+FD_ROUNDINGS = 32
+
+
+def fd_steps(x, scale) -> np.ndarray:
+    """Central-difference steps h = ε^(1/3)·max(ℓ, |x|) for x (..., n), scale ℓ (n,) or scalar."""
+    x = np.asarray(x, dtype=float)
+    return np.cbrt(EPS) * np.maximum(np.broadcast_to(np.asarray(scale, dtype=float), x.shape[-1:]), np.abs(x))
+
+
+def central_difference(f, x, k: int, h, diff=None) -> np.ndarray:
+    """(f(x + h e_k) − f(x − h e_k)) / (x⁺_k − x⁻_k): column k of the central-difference Jacobian.
+
+    ``x`` is (..., n); ``h`` a scalar or an array of the shape of ``x[..., k]`` (one step per
+    pose when f maps each row of x independently). The divisor is the step actually taken
+    after rounding x ± h. ``diff(a, b)`` replaces a − b (e.g. to wrap angle readings)."""
+    xp = np.array(x, dtype=float)
+    xm = xp.copy()
+    xp[..., k] += h
+    xm[..., k] -= h
+    fp, fm = np.asarray(f(xp), dtype=float), np.asarray(f(xm), dtype=float)
+    d = fp - fm if diff is None else diff(fp, fm)
+    step = xp[..., k] - xm[..., k]
+    return d / np.reshape(step, np.shape(step) + (1,) * (d.ndim - np.ndim(step)))
+
+
+def fd_tolerance(h, third, noise, safety: float = FD_SAFETY):
+    """safety·(h²·T/6 + δ/h): the bound on |central difference − derivative| (see above)."""
+    h = np.asarray(h, dtype=float)
+    return safety * (h**2 * np.asarray(third, dtype=float) / 6.0 + np.asarray(noise, dtype=float) / h)
+
+
+def assert_jacobian_matches_fd(f, x, J, *, scale, slope=None, magnitude=None, noise=None, h=None, diff=None,
+                               safety: float = FD_SAFETY, resolution: float = 1e-5, names=None, err_msg=""):
+    """Assert that ``J`` (f(x).shape + (n,)) is the Jacobian of ``f`` at ``x`` (..., n).
+
+    Parameters (the error model is in the comment above this function)
+    ----------
+    scale : ℓ_k, the length scale of each variable (n,) or scalar (mm: a leg length; rad: 1).
+    slope : G_k, a bound on |∂f/∂x_k| (n,) or scalar; default the largest |J[..., k]|.
+    magnitude : M, the largest value the computation of f handles; default max |f(x)|.
+    noise : δ, the absolute error of one evaluation of f; default FD_ROUNDINGS·ε·M.
+    h : steps (overrides :func:`fd_steps`), scalar, (n,) or x.shape.
+    resolution : the largest relative error of a column the check may miss (checked).
+    names : column names for the message.
+
+    Returns (finite differences, tolerance), broadcastable to J's shape.
+    """
+    x = np.asarray(x, dtype=float)
+    J = np.asarray(J, dtype=float)
+    n = x.shape[-1]
+    h = fd_steps(x, scale) if h is None else np.broadcast_to(np.asarray(h, dtype=float), x.shape)
+    fd = np.stack([central_difference(f, x, k, h[..., k], diff) for k in range(n)], axis=-1)
+    assert fd.shape == J.shape, f"Jacobian shape {J.shape}, finite differences {fd.shape}"
+    ell = np.broadcast_to(np.asarray(scale, dtype=float), (n,))
+    col_size = np.max(np.abs(J).reshape(-1, n), axis=0, initial=0.0)
+    G = col_size if slope is None else np.broadcast_to(np.asarray(slope, dtype=float), (n,))
+    if noise is None:
+        M = np.max(np.abs(f(x))) if magnitude is None else magnitude
+        noise = FD_ROUNDINGS * EPS * M
+    hb = np.reshape(h, x.shape[:-1] + (1,) * (J.ndim - x.ndim) + (n,))
+    tol = fd_tolerance(hb, 2.0 * G / ell**2, noise, safety) + FD_ROUNDINGS * EPS * np.max(np.abs(J), initial=0.0)
+    err = np.abs(J - fd)
+    names = list(names) if names is not None else [f"column {k}" for k in range(n)]
+    bad = ~(err <= tol)  # NaN counts as a failure
+    if bad.any():
+        ratio = np.where(np.isfinite(err), err / tol, np.inf)
+        idx = np.unravel_index(np.argmax(np.where(bad, ratio, -1.0)), J.shape)
+        raise AssertionError(
+            f"{err_msg}{': ' if err_msg else ''}analytic Jacobian differs from central differences at "
+            f"{bad.sum()} of {bad.size} entries; worst {names[idx[-1]]} at index {idx}: analytic "
+            f"{J[idx]:.6g}, finite differences {fd[idx]:.6g}, |difference| {err[idx]:.3g} > tolerance "
+            f"{np.broadcast_to(tol, J.shape)[idx]:.3g}")
+    # teeth: every column that matters (f changes by ≥ 1e-6 of the largest change over a scale)
+    # is resolved to `resolution` of its size
+    change = col_size * ell
+    matters = change >= 1e-6 * np.max(change, initial=0.0)
+    col_tol = np.max(np.broadcast_to(tol, J.shape).reshape(-1, n), axis=0)
+    blunt = matters & ~(col_tol <= resolution * col_size)
+    assert not blunt.any(), (
+        f"{err_msg}{': ' if err_msg else ''}the finite-difference check cannot resolve a relative error of "
+        f"{resolution:g} in {[names[k] for k in np.flatnonzero(blunt)]} (tolerance / column size "
+        f"{(col_tol / col_size)[blunt]})")
+    return fd, tol
 
 
 # -- the CLI's user-error contract ---------------------------------------------------------------

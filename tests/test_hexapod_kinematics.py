@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import assert_jacobian_matches_fd
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
@@ -282,24 +283,30 @@ def _skew_exp(w):
     return Rotation.from_rotvec(w).as_matrix()
 
 
+def _fd_scales(machine, poses):
+    """(ℓ, G, M) of the error model in helpers.assert_jacobian_matches_fd for a hexapod's
+    lengths at ``poses``: ℓ = the shortest leg (length scale of a coordinate in mm; 1 rad for
+    an angle), G = 1 for a coordinate in mm (∂L/∂p = u, a unit vector) and the largest lever
+    r = max ‖a_i‖ for an angle (∂L/∂ω = (R a_i) × u), M = the largest value handled."""
+    L = machine.leg_lengths(poses)
+    r = np.max(np.linalg.norm(machine.platform, axis=1))
+    M = max(L.max(), np.abs(poses[..., :3]).max(), np.abs(machine.base).max(), r)
+    return L.min(), r, M
+
+
 @settings(max_examples=20, deadline=None)
 @given(machines, seeds)
 def test_twist_jacobian_against_finite_differences(machine, seed):
+    # L(δp, δω) = leg lengths at (p + δp, exp([δω]×) R0), differenced on the manifold at 0
     pose = box_poses(machine, 1, seed)[0]
     R0 = euler_to_matrix(pose[3:])
-    J = machine.twist_jacobian(pose)[0]
-    h = 1e-6
-    num = np.empty((6, 6))
-    for k in range(6):
-        d = np.zeros(6)
-        d[k] = h
-        out = []
-        for sgn in (1.0, -1.0):
-            p = pose[:3] + sgn * d[:3]
-            R = _skew_exp(sgn * d[3:]) @ R0
-            out.append(np.concatenate([p, matrix_to_euler(R)]))
-        num[:, k] = (machine.leg_lengths(out[0]) - machine.leg_lengths(out[1]))[0] / (2 * h)
-    np.testing.assert_allclose(J, num, atol=1e-6)
+    ell, r, M = _fd_scales(machine, pose[None])
+
+    def lengths(d):
+        return machine.leg_lengths(np.concatenate([pose[:3] + d[:3], matrix_to_euler(_skew_exp(d[3:]) @ R0)]))[0]
+
+    assert_jacobian_matches_fd(lengths, np.zeros(6), machine.twist_jacobian(pose)[0], scale=[ell] * 3 + [1.0] * 3,
+                               slope=[1.0] * 3 + [r] * 3, magnitude=M, names=list("xyz") + ["wx", "wy", "wz"])
 
 
 @settings(max_examples=20, deadline=None)
@@ -307,11 +314,10 @@ def test_twist_jacobian_against_finite_differences(machine, seed):
 def test_actuator_pose_jacobian_against_finite_differences(machine, seed):
     pose = box_poses(machine, 1, seed)[0]
     J = machine.actuator_pose_jacobian(pose)[0]
-    h = 1e-6
-    num = np.column_stack([
-        (machine.ik(pose + h * e) - machine.ik(pose - h * e))[0] / (2 * h) for e in np.eye(6)
-    ])
-    np.testing.assert_allclose(J, num, atol=1e-6)
+    ell, r, M = _fd_scales(machine, pose[None])
+    # a, b, c each turn the platform about a unit axis through its origin: slope ≤ r
+    assert_jacobian_matches_fd(lambda x: machine.ik(x)[0], pose, J, scale=[ell] * 3 + [1.0] * 3,
+                               slope=[1.0] * 3 + [r] * 3, magnitude=M, names=list("xyzabc"))
     # and the chain rule with E: δω = E d(a, b, c)
     Jt = machine.twist_jacobian(pose)[0]
     np.testing.assert_allclose(J[:, 3:], Jt[:, 3:] @ euler_rate_matrix(pose[3:]), atol=1e-12)
@@ -323,17 +329,38 @@ def test_param_jacobians_against_finite_differences(machine, seed):
     poses = box_poses(machine, 3, seed)
     J = machine.actuator_param_jacobian(poses)
     JL = machine.length_param_jacobian(poses)
-    assert J.shape == (3, 6, len(HEXAPOD_PARAM_NAMES))
-    rho = machine.params
-    h = 1e-6
-    for k in range(len(rho)):
-        e = np.zeros_like(rho)
-        e[k] = h
-        plus, minus = machine.with_params(rho + e), machine.with_params(rho - e)
-        num = (plus.ik(poses) - minus.ik(poses)) / (2 * h)
-        numL = (plus.leg_lengths(poses) - minus.leg_lengths(poses)) / (2 * h)
-        np.testing.assert_allclose(J[:, :, k], num, atol=1e-7, err_msg=HEXAPOD_PARAM_NAMES[k])
-        np.testing.assert_allclose(JL[:, :, k], numL, atol=1e-7, err_msg=HEXAPOD_PARAM_NAMES[k])
+    assert J.shape == JL.shape == (3, 6, len(HEXAPOD_PARAM_NAMES))
+    # b_i, a_i move leg i's vector along a unit direction (slope 1, scale ℓ); L0_i is linear
+    ell, _, M = _fd_scales(machine, poses)
+    for jac, f in ((J, lambda rho: machine.with_params(rho).ik(poses)),
+                   (JL, lambda rho: machine.with_params(rho).leg_lengths(poses))):
+        assert_jacobian_matches_fd(f, machine.params, jac, scale=ell, slope=1.0, magnitude=M,
+                                   names=HEXAPOD_PARAM_NAMES)
+
+
+def test_fd_check_has_teeth():
+    """The shared finite-difference check rejects a Jacobian with one column's sign flipped
+    or one column off by 1e-5 relative, on every machine kind of the suite."""
+    for machine in (PROTOTYPE, REAL, symmetric_hexapod(base_radius=240.0, offset=260.0)):
+        poses = box_poses(machine, 3, 1)
+        ell, _, M = _fd_scales(machine, poses)
+        J = machine.actuator_param_jacobian(poses)
+
+        def f(rho):
+            return machine.with_params(rho).ik(poses)
+
+        check = dict(scale=ell, slope=1.0, magnitude=M)
+        _, tol = assert_jacobian_matches_fd(f, machine.params, J, **check)
+        assert np.max(tol) < 1e-7  # about 200 times below the 1e-5 wrong column of a unit slope
+        for k in (0, 11, 18, 40):  # b1.x, a2.y, a3.y, a6.z
+            for wrong in (-J[..., k], J[..., k] * (1.0 + 1e-5)):
+                bad = J.copy()
+                bad[..., k] = wrong
+                with pytest.raises(AssertionError, match="differs from central differences"):
+                    assert_jacobian_matches_fd(f, machine.params, bad, **check)
+    # a check too blunt to resolve 1e-5 fails by itself (here: a step far too small)
+    with pytest.raises(AssertionError, match="cannot resolve"):
+        assert_jacobian_matches_fd(f, machine.params, J, h=1e-12, **check)
 
 
 def test_param_jacobian_is_block_diagonal_per_leg():
