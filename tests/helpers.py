@@ -237,6 +237,21 @@ def mc_mean_bound(n_trials: int, n_quantities: int) -> float:
     return float(t.isf(FALSE_FAILURE / (2 * n_quantities), n_trials - 1))
 
 
+# -- subprocesses ---------------------------------------------------------------------------------
+
+def pkmcal_subprocess_env() -> dict:
+    """The environment for a ``python -m pkmcal...`` child that runs the pkmcal under test:
+    the folder this process imported it from first on PYTHONPATH (a relative PYTHONPATH, or an
+    editable install of another tree, would otherwise give the child another pkmcal)."""
+    import os
+
+    import pkmcal
+
+    root = str(Path(pkmcal.__file__).resolve().parent.parent)
+    rest = os.environ.get("PYTHONPATH", "")
+    return {**os.environ, "PYTHONPATH": root + (os.pathsep + rest if rest else "")}
+
+
 # -- the CLI's user-error contract ---------------------------------------------------------------
 
 def assert_user_error(result, *fragments) -> None:

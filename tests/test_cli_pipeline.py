@@ -13,6 +13,7 @@ import time
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from helpers import pkmcal_subprocess_env
 
 from pkmcal.cli.main import cli
 from pkmcal.identification.simulation import simulate_campaign
@@ -125,7 +126,8 @@ def test_killed_identify_leaves_no_output(tmp_path):
     before = sorted(os.listdir(tmp_path))
     cmd = [sys.executable, "-m", "pkmcal.cli.main", *IDENT, str(tmp_path / "meas.csv"), "-o",
            str(tmp_path / "cal.yaml"), "--report", str(tmp_path / "rep")]
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True,
+                            env=pkmcal_subprocess_env())
     try:
         deadline = time.monotonic() + 900.0
         while proc.poll() is None and time.monotonic() < deadline:
