@@ -1,9 +1,11 @@
 """Helpers shared by the test modules (imported as ``from helpers import ...``; pytest puts
 ``tests/`` on the path): the prototype's legs as machine-file text, the CLI's user-error
 contract (exit code 2, one ``pkmcal: error:`` line on stderr, no traceback, nothing
-written), the hypothesis strategies of the loader fuzz tests, and the one comparison of
+written), the hypothesis strategies of the loader fuzz tests, the one comparison of
 analytic Jacobians with central finite differences that every Jacobian test uses
-(:func:`assert_jacobian_matches_fd`, its tolerance derived from the step and the scale)."""
+(:func:`assert_jacobian_matches_fd`, its tolerance derived from the step and the scale), the
+bands of the Monte Carlo checks (from the sampling distributions, false failure < 1e-6 for
+any seed), and the environment of a pkmcal subprocess."""
 
 from __future__ import annotations
 
@@ -78,7 +80,7 @@ FD_ROUNDINGS = 32
 def fd_step(third, noise, scale):
     """The step minimising h²·T/6 + δ/h, h = (3δ/T)^(1/3), at most ℓ/10 (T = 0: ℓ/10)."""
     third, scale = np.asarray(third, dtype=float), np.asarray(scale, dtype=float)
-    with np.errstate(divide="ignore"):
+    with np.errstate(divide="ignore", over="ignore"):
         h = np.cbrt(3.0 * noise / third)
     return np.minimum(h, 0.1 * scale)
 

@@ -5,6 +5,7 @@ leaves no output file behind (outputs are written atomically, after the computat
 from __future__ import annotations
 
 import os
+import resource
 import signal
 import subprocess
 import sys
@@ -103,41 +104,57 @@ def _cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-#: CPU seconds after which the identification below is surely inside its fit: start-up and
-#: reading the file take ~2 s of CPU, the whole run ~19 s (2-core Xeon, 2026-12). Progress is
-#: measured in the child's CPU time, not in wall time, so a loaded machine cannot make the
-#: kill land before the work (a wall-clock sleep did: it then tested nothing) or after it.
-KILL_AFTER_CPU_S = 5.0
+def _campaign_file(path, n: int) -> None:
+    nominal, real = load_machine("stewart-prototype"), load_machine("stewart-prototype-real")
+    setup = builtin_setup("indicators-prototype")
+    rng = np.random.default_rng(5)
+    p = rng.uniform(-1, 1, (n, 6)) * HALF
+    p[:, :3] += nominal.home_pose[:3]
+    p[:, 3:] = np.deg2rad(p[:, 3:])
+    save_measurements(path, simulate_campaign(nominal, real, setup, p, rng=6).measurements, nominal, setup)
+
+
+def _identify_cmd(tmp_path, meas, report=True):
+    return [sys.executable, "-m", "pkmcal.cli.main", *IDENT, str(meas), "-o", str(tmp_path / "cal.yaml"),
+            *(["--report", str(tmp_path / "rep")] if report else [])]
 
 
 @pytest.mark.skipif(not os.path.exists("/proc/self/stat"), reason="needs /proc to measure the child's CPU time")
 def test_killed_identify_leaves_no_output(tmp_path):
-    """SIGKILL during a long identification (20 000 poses): no calibrated file, no report, no
+    """SIGKILL during a long identification (60 000 poses): no calibrated file, no report, no
     temporary file. (Files are written after the fit, each to a temporary file renamed over
-    the target.)"""
-    nominal, real = load_machine("stewart-prototype"), load_machine("stewart-prototype-real")
-    setup = builtin_setup("indicators-prototype")
-    rng = np.random.default_rng(5)
-    p = rng.uniform(-1, 1, (20000, 6)) * HALF
-    p[:, :3] += nominal.home_pose[:3]
-    p[:, 3:] = np.deg2rad(p[:, 3:])
-    sim = simulate_campaign(nominal, real, setup, p, rng=6)
-    save_measurements(tmp_path / "meas.csv", sim.measurements, nominal, setup)
-    before = sorted(os.listdir(tmp_path))
-    cmd = [sys.executable, "-m", "pkmcal.cli.main", *IDENT, str(tmp_path / "meas.csv"), "-o",
-           str(tmp_path / "cal.yaml"), "--report", str(tmp_path / "rep")]
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True,
-                            env=pkmcal_subprocess_env())
+    the target.)
+
+    The kill must land inside the fit, whatever the machine and its load, so it is timed by
+    the child's CPU time (not wall time: on a loaded machine a fixed sleep fired during the
+    start-up and tested nothing) against the CPU time of a 50-pose run without report measured
+    here: start-up and a trivial fit cost c (~2.3 s on a 2-core Xeon, 2026-12), the 60 000-pose
+    run reaches its calibrated file at ~4.5 c, so the kill at 2.5 c is inside reading and
+    fitting."""
+    small, big = tmp_path / "small", tmp_path / "big"
+    small.mkdir()
+    big.mkdir()
+    _campaign_file(small / "meas.csv", 50)
+    _campaign_file(big / "meas.csv", 60000)
+    used = resource.getrusage(resource.RUSAGE_CHILDREN)
+    done = subprocess.run(_identify_cmd(small, small / "meas.csv", report=False), capture_output=True, text=True,
+                          env=pkmcal_subprocess_env(), check=False)
+    assert done.returncode == 0, done.stderr
+    now = resource.getrusage(resource.RUSAGE_CHILDREN)
+    kill_at = 2.5 * (now.ru_utime + now.ru_stime - used.ru_utime - used.ru_stime)
+    before = sorted(os.listdir(big))
+    proc = subprocess.Popen(_identify_cmd(big, big / "meas.csv"), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            start_new_session=True, env=pkmcal_subprocess_env())
     try:
         deadline = time.monotonic() + 900.0
         while proc.poll() is None and time.monotonic() < deadline:
             try:
-                if _cpu_seconds(proc.pid) >= KILL_AFTER_CPU_S:
+                if _cpu_seconds(proc.pid) >= kill_at:
                     break
             except (FileNotFoundError, ProcessLookupError):
                 break
-            time.sleep(0.05)
-        assert proc.poll() is None, (f"identify finished before it had used {KILL_AFTER_CPU_S} s of CPU "
+            time.sleep(0.02)
+        assert proc.poll() is None, (f"identify finished before it had used {kill_at:.1f} s of CPU "
                                      f"(make the campaign larger): {proc.stderr.read()!r}")
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(timeout=30)
@@ -146,7 +163,7 @@ def test_killed_identify_leaves_no_output(tmp_path):
             os.kill(proc.pid, signal.SIGKILL)
             proc.wait()
     assert proc.returncode == -signal.SIGKILL
-    assert sorted(os.listdir(tmp_path)) == before  # no cal.yaml, no .cal.yaml.*.tmp, no rep/
+    assert sorted(os.listdir(big)) == before  # no cal.yaml, no .cal.yaml.*.tmp, no rep/
 
 
 @pytest.mark.parametrize("bad", ["rep_file"])
