@@ -131,7 +131,7 @@ def test_free_sensor_parameters_recovered(nominal, real):
 
 def _fd_model(model, method, form, x):
     """Error model (helpers.assert_jacobian_matches_fd) of a hexapod method's residual r(θ)
-    at poses x: dict(scale, slope, magnitude, noise).
+    at poses x: (dict(scale, magnitude, noise, resolution), the angle flags of θ).
 
     Scales: a leg length L_min per mm, 1 rad per angle (IK: the norm's curvature); through FK
     (fk-residual) divided by (1 + κ)², κ = max ‖A⁻¹‖ of the length-scaled actuator Jacobian,
