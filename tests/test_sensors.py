@@ -226,7 +226,13 @@ def test_indicator_model_matches_plane_construction_and_fd(poses, k, data, d_off
     reach = np.max(np.linalg.norm(positions[None] - poses[:, None, :2], axis=2)) + abs(d_off)
     _assert_pose_fd(s, poses, angle_scale=(np.pi / 2 - np.arccos(n_z)) / 2, mm_slope=1.0 / n_z,
                     angle_slope=2.0 * reach / n_z**2)
-    _assert_param_fd(s, poses, angle_scale=1.0, mm_slope=1.0, angle_slope=0.0)
+    # θ: the zeros (linear, slope 1), the plate translation (linear, slope ≤ 1/n_z) and the
+    # plate angles at the identity plate, which turn c' = R_Wᵀ c (lever |c| ≤ |p| + |d_off|)
+    # and n' as the platform's angles turn n: the same singularity distance, slope ≤
+    # (|c| + reach)/n_z², twice that within the scale
+    lever = np.max(np.linalg.norm(poses[:, :3], axis=1)) + abs(d_off)
+    _assert_param_fd(s, poses, angle_scale=(np.pi / 2 - np.arccos(n_z)) / 2, mm_slope=1.0 / n_z,
+                     angle_slope=2.0 * (lever + reach) / n_z**2)
 
 
 def test_indicator_level_platform_reads_height_minus_offset():
