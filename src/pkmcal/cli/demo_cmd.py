@@ -7,13 +7,14 @@ import time
 
 import click
 
+from pkmcal.cli.option_types import SEED
 from pkmcal.demo import DEMO_MACHINE, DEMO_OUT, DEMO_REAL, DEMO_SETUP, DemoConfig, run_demo
 
 
 @click.command("demo")
 @click.option("--out", default=DEMO_OUT, show_default=True, metavar="DIR",
               help="Folder for the report and the exported files (created if needed).")
-@click.option("--seed", type=int, default=0, show_default=True, help="Random seed (same seed, same bytes).")
+@click.option("--seed", type=SEED, default=0, show_default=True, help="Random seed (same seed, same bytes).")
 @click.option("--poses", "n_poses", type=click.IntRange(min=1), default=DemoConfig.n_poses, show_default=True,
               help="Number of poses to plan and measure.")
 @click.option("--held-out", "n_held_out", type=click.IntRange(min=1), default=DemoConfig.n_held_out,
@@ -35,6 +36,9 @@ def demo(out, seed, n_poses, n_held_out, setup, machine, real, no_png, quiet) ->
     LinuxCNC HAL, JSON) and writes an HTML report into DIR/report.html. The default setup
     measures the full pose (paper 1); indicators-prototype is paper 2's three dial indicators.
     """
+    from pkmcal.io.atomic import check_output_dir
+
+    check_output_dir(out, "--out")  # before anything runs: an uncreatable folder is refused at once
     t0 = time.perf_counter()
     config = DemoConfig(machine=machine, real=real, setup=setup, out=out, seed=seed, n_poses=n_poses,
                         n_held_out=n_held_out, png=not no_png)

@@ -159,14 +159,17 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
         raise PkmcalError(f"the fit did not converge ({result.message}); nothing written")
     text = machine_to_text(_with_calibration_record(result, measurements, setup_spec))
     report = None if report_dir is None else _report_data(nominal, result, setup, meas, measurements, output)
+    if as_json:  # everything printed is made before anything is written
+        from pkmcal.io.json_out import finite_or_null
+
+        d = finite_or_null(result.to_dict())
+        d["output"] = output
     atomic_write_text(output, text)
     if report is not None:
         from pkmcal.report import write_report
 
         written = write_report(report, report_dir)
     if as_json:
-        d = result.to_dict()
-        d["output"] = output
         if report is not None:
             d["report"] = str(written.html)
         click.echo(json.dumps(d, indent=2, allow_nan=False))
@@ -189,7 +192,9 @@ def _with_calibration_record(result, measurements: str, setup_spec: str):
         "method": result.method, "weighted": bool(result.weighted), "measurements": str(measurements),
         "setup": str(setup_spec), "n_poses": int(len(result.used_poses)), "n_free": int(len(result.free)),
         "gauge": list(result.gauge), "rms_residual": float(result.rms_residual),
-        "reduced_chi2": float(u.reduced_chi2), "std": "a-priori (noise model) x max(1, chi2/dof)",
+        # undefined (null) without degrees of freedom
+        "reduced_chi2": float(u.reduced_chi2) if np.isfinite(u.reduced_chi2) else None,
+        "std": "a-priori (noise model) x max(1, chi2/dof)",
     }
     if getattr(result.sensor, "kind", "") == "planar-tool":  # read back by 'pkmcal verify'
         record["sensor"] = sensor_calibration_block(result.sensor)
@@ -197,14 +202,16 @@ def _with_calibration_record(result, measurements: str, setup_spec: str):
 
 
 def _check_report_dir(report_dir: str, inputs) -> None:
-    """The report folder must not be an input file, nor hold one under a report file's name."""
+    """The report folder must be a folder that can be created or written into, and must not
+    hold an input file under a report file's name."""
     import os
 
+    from pkmcal.io.atomic import check_output_dir
     from pkmcal.report import REPORT_NAME
 
-    if os.path.exists(report_dir) and not os.path.isdir(report_dir):
-        raise PkmcalError(f"--report '{report_dir}' exists and is not a folder; give a folder for the report")
-    check_output_path(os.path.join(report_dir, REPORT_NAME), inputs)
+    check_output_dir(report_dir, "--report")
+    if os.path.isdir(report_dir):
+        check_output_path(os.path.join(report_dir, REPORT_NAME), inputs)
 
 
 def _report_data(nominal, result, setup, meas, meas_path: str, output: str):

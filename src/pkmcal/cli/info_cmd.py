@@ -19,6 +19,7 @@ from __future__ import annotations
 import click
 import numpy as np
 
+from pkmcal.cli.option_types import SEED
 from pkmcal.conventions import euler_to_matrix, rotation_error
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.mechanisms.library import DEFAULT_MACHINE
@@ -104,7 +105,7 @@ def _fmt(value: float, is_angle: bool) -> str:
 @click.argument("machine", default=DEFAULT_MACHINE, required=False)
 @click.option("--poses", "n_poses", default=300, show_default=True, type=click.IntRange(1, 100_000),
               help="Random reachable poses for the IK→FK round trip.")
-@click.option("--seed", default=0, show_default=True, type=int, help="Seed of the random poses.")
+@click.option("--seed", default=0, show_default=True, type=SEED, help="Seed of the random poses.")
 def info_cmd(machine: str, n_poses: int, seed: int) -> None:
     """Describe MACHINE (default: stewart-prototype): summary, workspace, IK→FK round trip."""
     from pkmcal.io.machine_file import load_machine

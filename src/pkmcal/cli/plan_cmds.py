@@ -19,6 +19,7 @@ import click
 import numpy as np
 
 from pkmcal.cli.import_options import import_options
+from pkmcal.cli.option_types import SEED, FiniteFloat
 from pkmcal.io.atomic import check_output_path
 from pkmcal.io.tables import to_file_units, write_table
 from pkmcal.planning.candidates import DEFAULT_MARGIN, Measurability, read_candidates_csv
@@ -76,14 +77,14 @@ def _format_indices(ind: dict[str, float]) -> str:
 @click.option("--algorithm", type=click.Choice(ALGORITHMS, case_sensitive=False), default="default", show_default=True,
               help="default: D-optimal exchange (O1); detmax / cuckoo: paper 2 add/remove search on --index; "
                    "corners: random corners of the workspace box (paper 1); random.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Random seed (same seed, same poses).")
-@click.option("--margin", type=click.FloatRange(min=0.0), default=DEFAULT_MARGIN, show_default=True,
+@click.option("--seed", type=SEED, default=0, show_default=True, help="Random seed (same seed, same poses).")
+@click.option("--margin", type=FiniteFloat(min=0.0), default=DEFAULT_MARGIN, show_default=True,
               help="Safety margin on every limit: mm (stroke, collision) and degrees (joint tilts).")
-@click.option("--indicator-travel", nargs=2, type=float, metavar="LO HI",
+@click.option("--indicator-travel", nargs=2, type=FiniteFloat(), metavar="LO HI",
               help="Indicators: accepted reading range (mm).")
-@click.option("--plate-radius", type=click.FloatRange(min=0.0), metavar="MM",
+@click.option("--plate-radius", type=FiniteFloat(min=0.0), metavar="MM",
               help="Indicators: the touch points must lie within this radius of the platform origin.")
-@click.option("--sight-cone", type=click.FloatRange(min=0.0, max=180.0), metavar="DEG",
+@click.option("--sight-cone", type=FiniteFloat(min=0.0, max=180.0), metavar="DEG",
               help="Full-pose/position: half-angle of the target's line-of-sight cone.")
 @click.option("-o", "--output", required=True, metavar="POSES.csv", help="Output CSV of the chosen poses.")
 @import_options

@@ -20,12 +20,12 @@ MAX_NAME_CHARS = 200
 MAX_DESCRIPTION_CHARS = 2000
 
 
-def magnitude_problem(value: float, unit: str = "mm") -> str | None:
-    """Why ``value`` (in ``unit``, file units) cannot be a machine's or a measurement's
-    number, or None."""
+def magnitude_problem(value: float, unit: str | None = "mm") -> str | None:
+    """Why ``value`` (in ``unit``, file units; None: mm or degrees) cannot be a machine's or a
+    measurement's number, or None."""
     if not math.isfinite(value):
         return f"{value!r} is not a finite number"
     if abs(value) > MAX_MAGNITUDE:
-        return (f"{value!r} {unit} is beyond ±{MAX_MAGNITUDE:g} {unit}, larger than any machine; "
-                "check the number and its unit")
+        bound = f"±{MAX_MAGNITUDE:g} {unit}" if unit else f"±{MAX_MAGNITUDE:g} (mm or degrees)"
+        return f"{value!r}{' ' + unit if unit else ''} is beyond {bound}, larger than any machine; check the number and its unit"
     return None

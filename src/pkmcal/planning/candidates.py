@@ -172,6 +172,13 @@ def default_box_shape(mechanism: Mechanism) -> np.ndarray:
     stroke = np.asarray(getattr(mechanism, "stroke", np.array([[0.0, 50.0]])), dtype=float)
     s = float(np.mean(stroke[:, 1] - stroke[:, 0]))
     r = float(getattr(mechanism, "platform_radius", 100.0))
+    if not s > 0:
+        raise PkmcalError(f"machine '{mechanism.name}': the actuators have no stroke (mean {s:g} mm), so the "
+                          "platform cannot move; check the legs' 'stroke: [min, max]'")
+    if not r > 0:
+        raise PkmcalError(f"machine '{mechanism.name}': every platform joint is at the platform origin (radius "
+                          f"{r:g} mm), so the legs cannot set the platform's orientation; check the legs' 'platform:' "
+                          "joints")
     return np.array([s, s, s / 2, s / r, s / r, s / r])
 
 
