@@ -158,6 +158,7 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     if not result.success:
         raise PkmcalError(f"the fit did not converge ({result.message}); nothing written")
     text = machine_to_text(_with_calibration_record(result, measurements, setup_spec))
+    _check_loads_back(text, output)
     report = None if report_dir is None else _report_data(nominal, result, setup, meas, measurements, output)
     if as_json:  # everything printed is made before anything is written
         from pkmcal.io.json_out import finite_or_null
@@ -199,6 +200,21 @@ def _with_calibration_record(result, measurements: str, setup_spec: str):
     if getattr(result.sensor, "kind", "") == "planar-tool":  # read back by 'pkmcal verify'
         record["sensor"] = sensor_calibration_block(result.sensor)
     return dataclasses.replace(mech, metadata={**dict(mech.metadata), "calibration": record})
+
+
+def _check_loads_back(text: str, output: str) -> None:
+    """Refuse to write a calibrated machine file that pkmcal itself would not load (e.g. a
+    fit that wandered to a leg offset of 10 km: beyond :mod:`pkmcal.io.limits`)."""
+    from pkmcal.errors import InputFileError
+    from pkmcal.io.machine_file import machine_from_text
+
+    try:
+        machine_from_text(text, output)
+    except InputFileError as exc:
+        detail = str(exc).split(": ", 1)[1] if ": " in str(exc) else str(exc)
+        raise PkmcalError(f"nothing written to {output}: the identified machine would not load as a machine file "
+                          f"({detail}); the fit is not meaningful: check the measurements, the setup and the free "
+                          "parameters") from None
 
 
 def _check_report_dir(report_dir: str, inputs) -> None:

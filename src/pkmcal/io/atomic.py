@@ -69,7 +69,7 @@ def _location_problem(output: str, what: str) -> str | None:
             return f"a name of {len(os.fsencode(part))} bytes; the file system allows at most {longest}"
     try:
         st = os.stat(output)
-    except FileNotFoundError:
+    except (FileNotFoundError, NotADirectoryError):  # ENOTDIR: an ancestor is a file (found below)
         st = None
     except OSError as exc:
         return str(exc.strerror or exc)
@@ -88,7 +88,7 @@ def _location_problem(output: str, what: str) -> str | None:
     while True:
         try:
             pst = os.stat(parent)
-        except FileNotFoundError:
+        except (FileNotFoundError, NotADirectoryError):
             if what == "file":
                 return f"the folder '{parent}' does not exist; create it first"
             if parent == parent.parent:

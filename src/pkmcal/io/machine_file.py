@@ -590,7 +590,8 @@ def machine_from_text(text: str, source: object = "<machine file>") -> Mechanism
     try:
         data, lines = parse_yaml(text)
     except YamlSyntaxError as exc:
-        raise InputFileError(source, f"{exc}; fix the YAML syntax", line=exc.line) from None
+        fix = "; fix the YAML syntax" if str(exc).startswith("not valid YAML") else ""
+        raise InputFileError(source, f"{exc}{fix}", line=exc.line) from None
     if data is None:
         raise InputFileError(source, "the file is empty; a machine file needs at least 'name:' and 'legs:' "
                                      "(see docs/file-formats.md)")
