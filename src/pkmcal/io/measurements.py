@@ -26,8 +26,7 @@ import numpy as np
 from pkmcal.conventions import POSE_COLUMNS
 from pkmcal.errors import InputFileError, PkmcalError
 from pkmcal.io.import_mapping import ImportMapping
-from pkmcal.io.limits import MAX_MAGNITUDE, magnitude_problem
-from pkmcal.io.tables import DEFAULT_ALIASES, column_kinds, from_file_units, mapped_name, read_table, to_file_units, write_table
+from pkmcal.io.tables import DEFAULT_ALIASES, check_magnitudes, column_kinds, from_file_units, mapped_name, read_table, to_file_units, write_table
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.sensors.base import MeasurementSetup
 
@@ -132,7 +131,7 @@ def load_measurements(path: str | os.PathLike, machine: Mechanism, setup: Measur
                 f"{legs[0]}..{legs[-1]} (leg lengths, mm), optionally cmd_x..cmd_c",
                 line=exc.line) from None
         raise
-    _check_magnitudes(table, kinds)
+    check_magnitudes(table, kinds)
     readings = from_file_units(table[list(reading_cols)], sensor.reading_is_angle)
     notes: tuple[str, ...] = ()
     if all(c in table.columns for c in act):
@@ -146,21 +145,6 @@ def load_measurements(path: str | os.PathLike, machine: Mechanism, setup: Measur
         commanded = from_file_units(table[list(cmd_cols)], machine.pose_is_angle)
     return Measurements(actuators=actuators, readings=readings, commanded=commanded, source=src, lines=table.lines,
                         notes=notes)
-
-
-def _check_magnitudes(table, kinds: dict[str, str]) -> None:
-    """:class:`InputFileError` at the first cell (file order) beyond ±:data:`MAX_MAGNITUDE`
-    (mm or degrees, after unit conversion): no measurement of a machine is that large, and
-    one such reading would make the fit's χ² overflow (:mod:`pkmcal.io.limits`)."""
-    big = np.abs(table.values) > MAX_MAGNITUDE
-    if not big.any():
-        return
-    row = int(np.argmax(big.any(axis=1)))
-    k = int(np.argmax(big[row]))
-    name = table.columns[k]
-    unit = "deg" if kinds.get(name) == "angle" else "mm"
-    raise InputFileError(table.path, str(magnitude_problem(float(table.values[row, k]), unit)),
-                         line=int(table.lines[row]), column=name)
 
 
 def _units(sensor) -> str:

@@ -28,6 +28,7 @@ import numpy as np
 
 from pkmcal.errors import InputFileError, PkmcalError, one_line
 from pkmcal.io.atomic import atomic_write_text
+from pkmcal.io.limits import MAX_MAGNITUDE, magnitude_problem
 
 if TYPE_CHECKING:
     from pkmcal.io.import_mapping import ImportMapping
@@ -430,11 +431,29 @@ def to_file_units(values, is_angle: Sequence[bool]) -> np.ndarray:
     return out
 
 
+def check_magnitudes(table: Table, kinds: Mapping[str, str]) -> None:
+    """:class:`InputFileError` at the first cell (file order) beyond ±:data:`MAX_MAGNITUDE`
+    (mm or degrees, after unit conversion; :mod:`pkmcal.io.limits`): no pose or measurement
+    of a machine is that large, and one such value would overflow the computations (a
+    squared 1e308 is infinite) into results that look like answers."""
+    big = np.abs(table.values) > MAX_MAGNITUDE
+    if not big.any():
+        return
+    row = int(np.argmax(big.any(axis=1)))
+    k = int(np.argmax(big[row]))
+    name = table.columns[k]
+    unit = "deg" if kinds.get(name) == "angle" else "mm"
+    raise InputFileError(table.path, str(magnitude_problem(float(table.values[row, k]), unit)),
+                         line=int(table.lines[row]), column=name)
+
+
 def read_poses(path: str | os.PathLike, machine, mapping: "ImportMapping | None" = None) -> np.ndarray:
     """Poses (N, n_dof) of a CSV with the machine's pose columns (mm, deg) in internal units
-    (mm, rad); ``mapping``: column renaming and units of a file from another tool."""
-    table = read_table(path, machine.pose_names, kinds=column_kinds(machine.pose_names, machine.pose_is_angle),
-                       mapping=mapping)
+    (mm, rad); ``mapping``: column renaming and units of a file from another tool. Every
+    coordinate must be within ±1e6 mm or degrees (:func:`check_magnitudes`)."""
+    kinds = column_kinds(machine.pose_names, machine.pose_is_angle)
+    table = read_table(path, machine.pose_names, kinds=kinds, mapping=mapping)
+    check_magnitudes(table, kinds)
     return from_file_units(table.values, machine.pose_is_angle)
 
 
@@ -455,6 +474,7 @@ __all__ = [
     "READING_COLUMNS",
     "Table",
     "canonical_name",
+    "check_magnitudes",
     "column_kinds",
     "format_table",
     "from_file_units",

@@ -140,13 +140,13 @@ SYMMETRIC_PREFIX = "symmetric:"
 
 #: What each ``symmetric:`` key must be: (test, the rule in words).
 _SYMMETRIC_RULES: dict[str, tuple[Callable[[float], bool], str]] = {
-    "base_radius": (lambda v: v > 0, "a positive radius (mm)"),
-    "platform_radius": (lambda v: v > 0, "a positive radius (mm)"),
+    "base_radius": (lambda v: v >= 1e-3, "a radius of at least 0.001 mm"),
+    "platform_radius": (lambda v: v >= 1e-3, "a radius of at least 0.001 mm"),
     "base_separation": (lambda v: 0 <= v < 120, "an angle in [0, 120) degrees"),
     "platform_separation": (lambda v: 0 <= v < 120, "an angle in [0, 120) degrees"),
     "phase": (lambda v: True, "an angle (degrees)"),
-    "offset": (lambda v: v > 0, "a positive leg offset (mm)"),
-    "stroke": (lambda v: v > 0, "a positive stroke (mm)"),
+    "offset": (lambda v: v >= 1e-3, "a leg offset of at least 0.001 mm"),
+    "stroke": (lambda v: v >= 1e-3, "a stroke of at least 0.001 mm"),
     "u_joint_tilt": (lambda v: 0 < v <= 180, "a tilt limit in (0, 180] degrees, or none"),
     "s_joint_tilt": (lambda v: 0 < v <= 180, "a tilt limit in (0, 180] degrees, or none"),
     "leg_diameter": (lambda v: v >= 0, "a diameter >= 0 (mm), or none"),
