@@ -89,8 +89,24 @@ def _one_line(v: str) -> str:
 #: coercion: ``true`` or ``'0.01'`` is an error), finite and within ±1e6 (:mod:`pkmcal.io.limits`).
 Number = Annotated[StrictFloat, AfterValidator(_plausible)]
 Values = Union[Number, list[Number]]
-#: Stiffnesses (N/mm, N·mm/rad) and loads (N): finite numbers, no bound.
-Physical = Union[StrictFloat, list[StrictFloat]]
+def _stiffness(v: float) -> float:
+    if not MIN_STIFFNESS <= v <= MAX_STIFFNESS:
+        raise ValueError(f"{v!r} is not an actuator stiffness: give {MIN_STIFFNESS:g} to {MAX_STIFFNESS:g} "
+                         "(N/mm, or N*mm/rad for rotary actuators)")
+    return v
+
+
+def _load(v: float) -> float:
+    if not abs(v) <= MAX_LOAD:
+        raise ValueError(f"{v!r} N is not a tool load: give at most {MAX_LOAD:g} N")
+    return v
+
+
+#: Plausible actuator stiffnesses (N/mm or N·mm/rad) and tool loads (N): beyond them the
+#: static equilibrium's matrices (K Jᵀ J) overflow or lose every digit.
+MIN_STIFFNESS, MAX_STIFFNESS, MAX_LOAD = 1e-6, 1e12, 1e9
+Stiffness = Annotated[StrictFloat, AfterValidator(_stiffness)]
+Load = Annotated[StrictFloat, AfterValidator(_load)]
 #: Largest accepted noise value (mm, rad, deg): beyond it the weights 1/σ² underflow.
 MAX_NOISE_STD = 1e6
 
@@ -134,8 +150,8 @@ class _Noise(_Strict):
 
 
 class _Simulation(_Strict):
-    stiffness: Physical
-    load: tuple[StrictFloat, StrictFloat] | None = None
+    stiffness: Union[Stiffness, list[Stiffness]]
+    load: tuple[Load, Load] | None = None
 
 
 class _Setup(_Strict):
