@@ -112,7 +112,8 @@ class PkmcalGroup(click.Group):
             usage = ""
             if exc.ctx is not None:
                 path = exc.ctx.command_path
-                usage = f" (usage: {path} {' '.join(exc.ctx.command.collect_usage_pieces(exc.ctx))}; see '{path} --help')"
+                pieces = " ".join(exc.ctx.command.collect_usage_pieces(exc.ctx))
+                usage = f" (usage: {path} {pieces}; see '{path} --help')"
             _error_line(exc.format_message() + usage)
             sys.exit(exc.exit_code)
         except click.ClickException as exc:

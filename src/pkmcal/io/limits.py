@@ -27,5 +27,6 @@ def magnitude_problem(value: float, unit: str | None = "mm") -> str | None:
         return f"{value!r} is not a finite number"
     if abs(value) > MAX_MAGNITUDE:
         bound = f"±{MAX_MAGNITUDE:g} {unit}" if unit else f"±{MAX_MAGNITUDE:g} (mm or degrees)"
-        return f"{value!r}{' ' + unit if unit else ''} is beyond {bound}, larger than any machine; check the number and its unit"
+        shown = f"{value!r} {unit}" if unit else repr(value)
+        return f"{shown} is beyond {bound}, larger than any machine; check the number and its unit"
     return None

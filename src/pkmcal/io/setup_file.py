@@ -55,7 +55,16 @@ import numpy as np
 from pydantic import AfterValidator, BaseModel, ConfigDict, StrictFloat, StrictStr, ValidationError, field_validator
 
 from pkmcal.errors import InputFileError, PkmcalError, line_problem
-from pkmcal.io._yaml import FlowList, RawFloat, YamlSyntaxError, deg_to_rad, dump_yaml, parse_yaml, plain, rad_to_deg_text
+from pkmcal.io._yaml import (
+    FlowList,
+    RawFloat,
+    YamlSyntaxError,
+    deg_to_rad,
+    dump_yaml,
+    parse_yaml,
+    plain,
+    rad_to_deg_text,
+)
 from pkmcal.io.atomic import atomic_write_text
 from pkmcal.io.limits import MAX_DESCRIPTION_CHARS, magnitude_problem
 from pkmcal.mechanisms.statics import StaticsModel
