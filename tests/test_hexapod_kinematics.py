@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from helpers import assert_jacobian_matches_fd
-from hypothesis import assume, given, settings
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pkmcal.conventions import euler_rate_matrix, euler_to_matrix, matrix_to_euler, rotation_error

@@ -164,6 +164,8 @@ def _pair(elem):
 
 
 unit_ish = st.tuples(*[st.floats(-1, 1, allow_nan=False)] * 3).filter(lambda v: np.linalg.norm(v) > 1e-3)
+#: One-line text: names and descriptions hold no control characters (pkmcal.errors.line_problem).
+one_line_text = st.text(st.characters(blacklist_categories=("Cc", "Cs", "Zl", "Zp")), max_size=30)
 json_scalar = st.one_of(st.none(), st.booleans(), st.integers(-10**6, 10**6),
                         st.floats(allow_nan=False, allow_infinity=False), st.text(max_size=20))
 json_like = st.recursive(json_scalar, lambda inner: st.one_of(
@@ -192,9 +194,9 @@ def machines(draw) -> Hexapod:
         covariance = np.zeros((42, 42))
         covariance[np.ix_(idx, idx)] = (block + block.T) / 2
     metadata = draw(st.dictionaries(st.text(min_size=1, max_size=8), json_like, max_size=3))
-    return Hexapod(name=draw(st.text(max_size=20)), base=base, platform=platform, offset=offset, stroke=stroke,
+    return Hexapod(name=draw(one_line_text), base=base, platform=platform, offset=offset, stroke=stroke,
                    base_axis=axes(), platform_axis=axes(), limits=limits, home=home, workspace=workspace,
-                   covariance=covariance, description=draw(st.text(max_size=30)), metadata=metadata)
+                   covariance=covariance, description=draw(one_line_text), metadata=metadata)
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])

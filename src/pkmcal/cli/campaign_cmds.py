@@ -32,7 +32,9 @@ from pkmcal.identification.simulation import perturb_machine, simulate_campaign
 from pkmcal.identification.verification import verify
 from pkmcal.cli.import_options import import_options
 from pkmcal.cli.options import check_output, emit, examples, output_option, quiet_option, to_stdout
+from pkmcal.cli.option_types import SEED, FiniteFloat
 from pkmcal.io.atomic import atomic_write_text
+from pkmcal.io.limits import MAX_MAGNITUDE
 from pkmcal.io.measurements import measurement_columns
 from pkmcal.io.tables import format_table, read_poses
 from pkmcal.mechanisms.planar import PlanarMechanism
@@ -48,7 +50,7 @@ from pkmcal.sensors.library import BUILTIN_SETUPS
     "-o planar-meas.csv"))
 @click.argument("machine")
 @click.option("--real", "real_spec", metavar="REAL", help="The 'real' machine: a machine file or built-in name.")
-@click.option("--random-errors", type=float, metavar="MM",
+@click.option("--random-errors", type=FiniteFloat(min=0.0, max=MAX_MAGNITUDE), metavar="MM",
               help="Instead of --real: every parameter of MACHINE plus a random error of this size (mm; "
                    "angle parameters of planar machines MM/1000 rad).")
 @click.option("--error-distribution", type=click.Choice(["uniform", "gaussian"]), default="uniform",
@@ -58,7 +60,7 @@ from pkmcal.sensors.library import BUILTIN_SETUPS
               help=f"Measurement setup file or built-in ({', '.join(BUILTIN_SETUPS)}).")
 @click.option("--poses", required=True, metavar="POSES.csv",
               help="Commanded poses: columns x,y,z (mm), a,b,c (deg); planar machines: their pose names (x,y[,phi]).")
-@click.option("--seed", type=int, default=0, show_default=True, help="Random seed (same seed, same bytes).")
+@click.option("--seed", type=SEED, default=0, show_default=True, help="Random seed (same seed, same bytes).")
 @click.option("--ignore-limit", "ignore_limits", multiple=True, metavar="NAME",
               help="A limit of the real machine not to check (e.g. leg_collision); repeatable.")
 @output_option("MEAS.csv", "Measurement CSV")

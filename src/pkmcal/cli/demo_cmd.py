@@ -9,6 +9,7 @@ import time
 import click
 
 from pkmcal.cli.options import count_or_poses_file, examples, quiet_option
+from pkmcal.cli.option_types import SEED, FiniteFloat
 from pkmcal.demo import DEMO_MACHINE, DEMO_OUT, DEMO_REAL, DEMO_SETUP, DemoConfig, run_demo
 
 
@@ -17,7 +18,7 @@ from pkmcal.demo import DEMO_MACHINE, DEMO_OUT, DEMO_REAL, DEMO_SETUP, DemoConfi
     "pkmcal demo --setup indicators-prototype --n-poses 30 --held-out 20 --no-png -o demo-indicators --quiet"))
 @click.option("-o", "--out", default=DEMO_OUT, show_default=True, metavar="DIR/",
               help="Folder for the report and the exported files (created if needed).")
-@click.option("--seed", type=int, default=0, show_default=True, help="Random seed (same seed, same bytes).")
+@click.option("--seed", type=SEED, default=0, show_default=True, help="Random seed (same seed, same bytes).")
 @click.option("--n-poses", type=click.IntRange(min=1), default=None,
               help=f"Number of poses to plan and measure.  [default: {DemoConfig.n_poses}]")
 @click.option("--poses", metavar="POSES.csv",
@@ -31,9 +32,9 @@ from pkmcal.demo import DEMO_MACHINE, DEMO_OUT, DEMO_REAL, DEMO_SETUP, DemoConfi
               help="Nominal machine (file or built-in name).")
 @click.option("--real", default=DEMO_REAL, show_default=True, metavar="REAL",
               help="The simulated real machine (file or built-in name).")
-@click.option("--stroke-margin", type=click.FloatRange(min=0.0), metavar="MM",
+@click.option("--stroke-margin", type=FiniteFloat(min=0.0), metavar="MM",
               help="Safety margin of the plan on the stroke (default as 'pkmcal plan': 3 mm).")
-@click.option("--tilt-margin", type=click.FloatRange(min=0.0), metavar="DEG",
+@click.option("--tilt-margin", type=FiniteFloat(min=0.0), metavar="DEG",
               help="Safety margin of the plan on the joint tilts (default as 'pkmcal plan').")
 @click.option("--no-png", is_flag=True, help="Write the figures as SVG only.")
 @quiet_option
@@ -46,8 +47,10 @@ def demo(out, seed, n_poses, poses, n_held_out, setup, machine, real, stroke_mar
     LinuxCNC HAL, JSON) and writes an HTML report into DIR/report.html. The default setup
     measures the full pose (paper 1); indicators-prototype is paper 2's three dial indicators.
     """
+    from pkmcal.io.atomic import check_output_dir
     from pkmcal.progress import ProgressBar
 
+    check_output_dir(out, "--out")  # before anything runs: an uncreatable folder is refused at once
     t0 = time.perf_counter()
     n_poses, poses = count_or_poses_file(poses, n_poses, DemoConfig.n_poses)
     config = DemoConfig(machine=machine, real=real, setup=setup, out=out, seed=seed, n_poses=n_poses,

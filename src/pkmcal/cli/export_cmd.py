@@ -100,9 +100,12 @@ def calibration_json(machine: Mechanism, source: str | None = None) -> dict:
 
 
 def format_calibration_json(machine: Mechanism, source: str | None = None) -> str:
-    """:func:`calibration_json` as text: 2-space indent, shortest exact floats, ``\\n`` ending."""
-    return json.dumps(calibration_json(machine, source), indent=2, ensure_ascii=False, allow_nan=False,
-                      default=str) + "\n"
+    """:func:`calibration_json` as text: 2-space indent, shortest exact floats, ``\\n`` ending;
+    a non-finite number in the file's free-form metadata (e.g. an undefined χ²/ν) is null."""
+    from pkmcal.io.json_out import finite_or_null
+
+    return json.dumps(finite_or_null(calibration_json(machine, source)), indent=2, ensure_ascii=False,
+                      allow_nan=False, default=str) + "\n"
 
 
 @click.command("export", epilog=examples(

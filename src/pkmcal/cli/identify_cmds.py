@@ -275,17 +275,21 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
         result = dataclasses.replace(result, warnings=tuple(result.warnings) + tuple(hints))
     free_line = free_statement(result, free_opt, fit_setup)
     text = machine_to_text(_with_calibration_record(result, machine, measurements, setup_spec, name))
+    _check_loads_back(text, "(standard output)" if to_stdout(output) else output)
     report = None if report_dir is None else _report_data(nominal, result, setup, meas, measurements,
                                                            "(standard output)" if to_stdout(output) else output)
+    if as_json:  # everything printed is made before anything is written
+        from pkmcal.io.json_out import finite_or_null
+
+        d = finite_or_null(result.to_dict())
+        d["free_rule"] = free_line
+        d["output"] = output
     emit(text, output)
     if report is not None:
         from pkmcal.report import write_report
 
         written = write_report(report, report_dir)
     if as_json:
-        d = result.to_dict()
-        d["free_rule"] = free_line
-        d["output"] = output
         if report is not None:
             d["report"] = str(written.html)
         click.echo(json.dumps(d, indent=2, allow_nan=False))
@@ -326,22 +330,40 @@ def _with_calibration_record(result, machine: str, measurements: str, setup_spec
         "method": result.method, "weighted": bool(result.weighted), "measurements": str(measurements),
         "setup": str(setup_spec), "n_poses": int(len(result.used_poses)), "n_free": int(len(result.free)),
         "gauge": list(result.gauge), "rms_residual": float(result.rms_residual),
-        "reduced_chi2": float(u.reduced_chi2), "std": u.description,
+        # undefined (null) without degrees of freedom
+        "reduced_chi2": float(u.reduced_chi2) if np.isfinite(u.reduced_chi2) else None, "std": u.description,
     }
     if getattr(result.sensor, "kind", "") == "planar-tool":  # read back by 'pkmcal verify'
         record["sensor"] = sensor_calibration_block(result.sensor)
     return dataclasses.replace(mech, name=new_name, metadata={**dict(mech.metadata), "calibration": record})
 
 
+def _check_loads_back(text: str, output: str) -> None:
+    """Refuse to write a calibrated machine file that pkmcal itself would not load (e.g. a
+    fit that wandered to a leg offset of 10 km: beyond :mod:`pkmcal.io.limits`)."""
+    from pkmcal.errors import InputFileError
+    from pkmcal.io.machine_file import machine_from_text
+
+    try:
+        machine_from_text(text, output)
+    except InputFileError as exc:
+        detail = str(exc).split(": ", 1)[1] if ": " in str(exc) else str(exc)
+        raise PkmcalError(f"nothing written to {output}: the identified machine would not load as a machine file "
+                          f"({detail}); the fit is not meaningful: check the measurements, the setup and the free "
+                          "parameters") from None
+
+
 def _check_report_dir(report_dir: str, inputs) -> None:
-    """The report folder must not be an input file, nor hold one under a report file's name."""
+    """The report folder must be a folder that can be created or written into, and must not
+    hold an input file under a report file's name."""
     import os
 
+    from pkmcal.io.atomic import check_output_dir
     from pkmcal.report import REPORT_NAME
 
-    if os.path.exists(report_dir) and not os.path.isdir(report_dir):
-        raise PkmcalError(f"--report '{report_dir}' exists and is not a folder; give a folder for the report")
-    check_output_path(os.path.join(report_dir, REPORT_NAME), inputs)
+    check_output_dir(report_dir, "--report")
+    if os.path.isdir(report_dir):
+        check_output_path(os.path.join(report_dir, REPORT_NAME), inputs)
 
 
 def _report_data(nominal, result, setup, meas, meas_path: str, output: str):

@@ -27,6 +27,7 @@ import click
 import numpy as np
 
 from pkmcal.cli.options import count_or_poses_file, examples
+from pkmcal.cli.option_types import SEED
 from pkmcal.conventions import euler_to_matrix, rotation_error
 from pkmcal.errors import PkmcalError
 from pkmcal.mechanisms.base import Mechanism
@@ -128,7 +129,7 @@ N_ROUND_TRIP = 300
               help=f"Random reachable poses for the IK→FK round trip.  [default: {N_ROUND_TRIP}]")
 @click.option("--poses", metavar="POSES.csv",
               help="Instead: the round trip on the poses of this file (x,y,z mm, a,b,c deg).")
-@click.option("--seed", default=0, show_default=True, type=int, help="Seed of the random poses.")
+@click.option("--seed", default=0, show_default=True, type=SEED, help="Seed of the random poses.")
 def info_cmd(machine: str, n_poses: int | None, poses: str | None, seed: int) -> None:
     """Describe MACHINE (default: stewart-prototype): summary, workspace, IK→FK round trip."""
     from pkmcal.io.machine_file import load_machine

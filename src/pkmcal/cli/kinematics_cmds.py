@@ -13,16 +13,21 @@ Every input is validated and every result computed before the output is written
 
 from __future__ import annotations
 
+import contextlib
+
 import click
 import numpy as np
 
 from pkmcal.errors import PkmcalError
 from pkmcal.cli.import_options import import_options
-from pkmcal.cli.options import check_output, emit, examples, output_option
+from pkmcal.cli.options import check_output, emit, examples, output_option, to_stdout
+from pkmcal.io.atomic import atomic_writer
 from pkmcal.io.tables import LENGTH_COLUMNS, column_kinds, format_table, from_file_units, read_table, to_file_units
 from pkmcal.mechanisms.base import Mechanism
 
 _MAX_LISTED = 20
+#: Poses computed and written at a time by ``pkmcal ik``.
+_IK_BLOCK = 10_000
 
 
 def _note(message: str) -> None:
@@ -72,21 +77,30 @@ def ik_cmd(machine: str, poses: str, output: str | None, mapping=None) -> None:
     mech = load_machine(machine)
     table = read_table(poses, mech.pose_names, kinds=column_kinds(mech.pose_names, mech.pose_is_angle),
                        mapping=mapping)
-    file_poses = table.values
-    internal = from_file_units(file_poses, mech.pose_is_angle)
-    with np.errstate(all="ignore"):
-        readings = mech.ik(internal)
-        limits = mech.check_limits(internal)
-        lengths = mech.leg_lengths(internal) if hasattr(mech, "leg_lengths") else None
-    columns: dict[str, np.ndarray] = {n: file_poses[:, k] for k, n in enumerate(mech.pose_names)}
-    if lengths is not None:
-        columns.update({f"l{i + 1}": lengths[:, i] for i in range(lengths.shape[1])})
-    readings = to_file_units(readings, mech.actuator_is_angle)
-    columns.update({n: readings[:, i] for i, n in enumerate(mech.actuator_names)})
-    columns["reachable"] = limits.verdicts()
-    text = format_table(columns)
-    emit(text, output)
-    n_bad = int(np.count_nonzero(~limits.ok))
+    # Every pose is read and checked first; then IK, limits and the CSV text are made
+    # _IK_BLOCK poses at a time and written as they come (to a temporary file that becomes
+    # the output at the end), so memory stays bounded however many poses there are.
+    n_bad = 0
+    with (atomic_writer(output) if not to_stdout(output) else contextlib.nullcontext()) as fh:
+        for start in range(0, len(table), _IK_BLOCK):
+            file_poses = table.values[start:start + _IK_BLOCK]
+            internal = from_file_units(file_poses, mech.pose_is_angle)
+            with np.errstate(all="ignore"):
+                readings = mech.ik(internal)
+                limits = mech.check_limits(internal)
+                lengths = mech.leg_lengths(internal) if hasattr(mech, "leg_lengths") else None
+            columns: dict[str, np.ndarray] = {n: file_poses[:, k] for k, n in enumerate(mech.pose_names)}
+            if lengths is not None:
+                columns.update({f"l{i + 1}": lengths[:, i] for i in range(lengths.shape[1])})
+            readings = to_file_units(readings, mech.actuator_is_angle)
+            columns.update({n: readings[:, i] for i, n in enumerate(mech.actuator_names)})
+            columns["reachable"] = limits.verdicts()
+            text = format_table(columns, head=start == 0)
+            if fh is None:
+                click.echo(text, nl=False)
+            else:
+                fh.write(text)
+            n_bad += int(np.count_nonzero(~limits.ok))
     _note(f"ik: {len(table)} poses, {len(table) - n_bad} reachable"
           + (f"; {n_bad} violate limits (column 'reachable')" if n_bad else ""))
 

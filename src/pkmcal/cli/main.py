@@ -3,20 +3,34 @@
 Every sub-command lives in its own module under :mod:`pkmcal.cli` and is listed in
 :data:`COMMANDS`; a command's module is imported only when that command runs (or its own
 ``--help`` is asked), so ``pkmcal --help`` starts without NumPy, SciPy, numba or pydantic
-(``benchmarks/cli_startup.py``). User errors (:class:`pkmcal.errors.PkmcalError`) are
-printed as one line on stderr and exit with code 2, without a traceback; anything else is a
-bug and keeps its traceback.
+(``benchmarks/cli_startup.py``).
+
+Errors, one line each on stderr, exit code 2, no traceback:
+
+* user errors (:class:`pkmcal.errors.PkmcalError`), with the file each machine named in
+  the message came from (:func:`pkmcal.errors.name_sources`);
+* click's usage errors (missing argument, bad option value): its message and the usage on
+  one line, ``pkmcal: error: Missing argument 'POSES'. (usage: pkmcal ik [OPTIONS] MACHINE
+  POSES; see 'pkmcal ik --help')``, instead of click's three-to-four-line block;
+* a request too large for the memory (:class:`MemoryError`).
+
+Every message is made one line by construction (:func:`pkmcal.errors.one_line`). NumPy's
+runtime warnings (overflow, invalid value) raised while a command runs are collected:
+dropped when the command ends in a user error (the error says what is wrong), and on success
+printed as one ``pkmcal: warning:`` line each. Anything else is a bug and keeps its
+traceback.
 """
 
 from __future__ import annotations
 
 import importlib
 import sys
+import warnings
 
 import click
 
 from pkmcal import __version__
-from pkmcal.errors import PkmcalError
+from pkmcal.errors import PkmcalError, name_sources, one_line, recorded_sources
 
 #: Command name → (module, click command object in it, the summary ``pkmcal --help`` shows).
 #: The summary is the first line of the command's own help; ``tests/test_cli_main.py``
@@ -83,11 +97,62 @@ class PkmcalGroup(click.Group):
             formatter.write_dl([(name, summary) for name, (_, _, summary) in COMMANDS.items()])
 
     def invoke(self, ctx: click.Context):
+        with recorded_sources() as sources, warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", RuntimeWarning)
+            try:
+                result = super().invoke(ctx)
+            except PkmcalError as exc:
+                _error_line(name_sources(str(exc), sources))
+                sys.exit(exc.exit_code)
+            except MemoryError:
+                _error_line("not enough memory for this request; ask for fewer poses, candidates or samples")
+                sys.exit(PkmcalError.exit_code)
+        _report_warnings(caught)
+        return result
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        """click's ``main``, with its usage errors printed on one line (module docstring)."""
+        if not standalone_mode:
+            return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
         try:
-            return super().invoke(ctx)
-        except PkmcalError as exc:
-            click.echo(f"pkmcal: error: {exc}", err=True)
+            rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        except click.exceptions.NoArgsIsHelpError as exc:
+            exc.show()  # 'pkmcal' alone: the help, as click prints it
             sys.exit(exc.exit_code)
+        except click.UsageError as exc:
+            usage = ""
+            if exc.ctx is not None:
+                path = exc.ctx.command_path
+                pieces = " ".join(exc.ctx.command.collect_usage_pieces(exc.ctx))
+                usage = f" (usage: {path} {pieces}; see '{path} --help')"
+            _error_line(exc.format_message() + usage)
+            sys.exit(exc.exit_code)
+        except click.ClickException as exc:
+            _error_line(exc.format_message())
+            sys.exit(exc.exit_code)
+        except click.Abort:
+            _error_line("aborted")
+            sys.exit(1)
+        sys.exit(rv if isinstance(rv, int) else 0)
+
+
+def _error_line(message: str) -> None:
+    click.echo(f"pkmcal: error: {one_line(message)}", err=True)
+
+
+def _report_warnings(caught: list[warnings.WarningMessage]) -> None:
+    """Each distinct RuntimeWarning as one ``pkmcal: warning:`` line; other warnings as
+    Python shows them."""
+    seen: set[str] = set()
+    for w in caught:
+        if issubclass(w.category, RuntimeWarning):
+            text = one_line(str(w.message))
+            if text not in seen:
+                seen.add(text)
+                click.echo(f"pkmcal: warning: numerical problem in this computation ({text}); check the inputs "
+                           "for extreme values", err=True)
+        else:
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
 
 
 #: Examples of ``pkmcal --help`` (each command's ``--help`` has its own; all are run by

@@ -32,6 +32,7 @@ from pkmcal.cli.options import (
 from pkmcal.errors import PkmcalError
 from pkmcal.io.tables import format_table, to_file_units
 from pkmcal.planning.candidates import Measurability, read_candidates_csv
+from pkmcal.cli.option_types import SEED, FiniteFloat
 from pkmcal.planning.indices import INDEX_DESCRIPTIONS, INDEX_NAMES
 from pkmcal.planning.margins import ASSUMED_JOINT_ERROR_MM, CLEARANCE_MARGIN_MM
 from pkmcal.planning.selection import ALGORITHMS
@@ -71,24 +72,24 @@ def _format_indices(ind: dict[str, float]) -> str:
 @click.option("--algorithm", type=click.Choice(ALGORITHMS, case_sensitive=False), default="default", show_default=True,
               help="default: D-optimal exchange (O1); detmax / cuckoo: paper 2 add/remove search on --index; "
                    "corners: random corners of the workspace box (paper 1); random.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Random seed (same seed, same poses).")
-@click.option("--stroke-margin", type=click.FloatRange(min=0.0), metavar="MM",
+@click.option("--seed", type=SEED, default=0, show_default=True, help="Random seed (same seed, same poses).")
+@click.option("--stroke-margin", type=FiniteFloat(min=0.0), metavar="MM",
               help=f"Hexapods: keep every leg reading this far inside its stroke, at both ends. Default "
                    f"{ASSUMED_JOINT_ERROR_MM:g} mm (joint errors up to {ASSUMED_JOINT_ERROR_MM:g} mm).")
-@click.option("--tilt-margin", type=click.FloatRange(min=0.0), metavar="DEG",
+@click.option("--tilt-margin", type=FiniteFloat(min=0.0), metavar="DEG",
               help=f"Hexapods: keep every U/S-joint tilt this far inside its limit. Default "
                    f"atan(d/r_p) + atan(d/L_min) for joint errors d = {ASSUMED_JOINT_ERROR_MM:g} mm, r_p the smallest "
                    "platform joint radius, L_min the shortest leg (3.02° on stewart-prototype).")
-@click.option("--clearance-margin", type=click.FloatRange(min=0.0), metavar="MM",
+@click.option("--clearance-margin", type=FiniteFloat(min=0.0), metavar="MM",
               help=f"Hexapods: extra leg-to-leg clearance of the collision check. Default {CLEARANCE_MARGIN_MM:g} mm.")
-@click.option("--margin", type=click.FloatRange(min=0.0), metavar="X",
+@click.option("--margin", type=FiniteFloat(min=0.0), metavar="X",
               help="Instead of the three above: X on every limit (mm for stroke and clearance, degrees for the "
                    "joint tilts; the former single margin).")
-@click.option("--indicator-travel", nargs=2, type=float, metavar="LO HI",
+@click.option("--indicator-travel", nargs=2, type=FiniteFloat(), metavar="LO HI",
               help="Indicators: accepted reading range (mm).")
-@click.option("--plate-radius", type=click.FloatRange(min=0.0), metavar="MM",
+@click.option("--plate-radius", type=FiniteFloat(min=0.0), metavar="MM",
               help="Indicators: the touch points must lie within this radius of the platform origin.")
-@click.option("--sight-cone", type=click.FloatRange(min=0.0, max=180.0), metavar="DEG",
+@click.option("--sight-cone", type=FiniteFloat(min=0.0, max=180.0), metavar="DEG",
               help="Full-pose/position: half-angle of the target's line-of-sight cone.")
 @output_option("POSES.csv", "CSV of the chosen poses")
 @quiet_option

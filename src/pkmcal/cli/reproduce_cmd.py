@@ -8,6 +8,7 @@ import json
 import click
 
 from pkmcal.cli.options import check_output, emit, examples, output_option, quiet_option, to_stdout
+from pkmcal.cli.option_types import SEED
 from pkmcal.errors import PkmcalError
 
 
@@ -19,7 +20,7 @@ from pkmcal.errors import PkmcalError
 @click.argument("name", required=False, metavar="NAME")
 @click.option("--list", "list_", is_flag=True, help="List the reproductions and exit.")
 @click.option("--quick", is_flag=True, help="Few Monte Carlo runs (seconds; for tests and a first look).")
-@click.option("--seed", type=int, default=0, show_default=True, help="Random seed (same seed, same numbers).")
+@click.option("--seed", type=SEED, default=0, show_default=True, help="Random seed (same seed, same numbers).")
 @click.option("--json", "as_json", is_flag=True, help="Print the table as JSON instead of text.")
 @output_option("FILE", "Write the table (text, or JSON with --json) to FILE")
 @click.option("--figures", "figures", type=click.Path(file_okay=False), default=None, metavar="DIR",

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import click
 
+from pkmcal.cli.option_types import SEED
 from pkmcal.cli.options import examples
 
 
@@ -14,9 +15,9 @@ from pkmcal.cli.options import examples
 @click.argument("study_file", type=click.Path(dir_okay=False), metavar="STUDY.yaml")
 @click.option("-o", "--output", required=True, type=click.Path(file_okay=False), metavar="RESULTS/",
               help="Results folder (created; never overwritten: use --resume to continue one).")
-@click.option("--seed", type=int, default=None, help="Override the study file's seed (same seed, same results).")
-@click.option("--trials", type=int, default=None, help="Override the number of trials per configuration.")
-@click.option("--workers", type=int, default=None, metavar="N",
+@click.option("--seed", type=SEED, default=None, help="Override the study file's seed (same seed, same results).")
+@click.option("--trials", type=click.IntRange(min=1), default=None, help="Override the number of trials per configuration.")
+@click.option("--workers", type=click.IntRange(min=1), default=None, metavar="N",
               help="Local worker processes (1 = in this process; default: all local cores); with --dask local, "
                    "the LocalCluster's workers.")
 @click.option("--dask", "dask_address", default=None, metavar="ADDRESS|local",

@@ -10,6 +10,8 @@ from importlib import import_module
 _EXPORTS = {
     "atomic_write_bytes": "pkmcal.io.atomic",
     "atomic_write_text": "pkmcal.io.atomic",
+    "atomic_writer": "pkmcal.io.atomic",
+    "check_output_dir": "pkmcal.io.atomic",
     "check_output_path": "pkmcal.io.atomic",
     "load_machine": "pkmcal.io.machine_file",
     "machine_from_text": "pkmcal.io.machine_file",

@@ -1,8 +1,18 @@
-"""YAML reading and writing for pkmcal's files: line numbers, exact floats, exact degrees.
+"""YAML reading and writing for pkmcal's files: YAML 1.2 numbers, line numbers, exact floats.
 
 * :func:`parse_yaml` reads a document with PyYAML's safe loader, rejects duplicate keys,
   and returns the data with a map from key paths (``("legs", 3, "stroke")``) to 1-based line
   numbers, so that schema errors can say where they are.
+* Plain scalars are resolved by the YAML 1.2 core schema (YAML 1.2.2 §10.3.2), not PyYAML's
+  YAML 1.1 rules: ``305``, ``0o17``, ``0x1F``, ``1e3``, ``.5``, ``.inf``, ``.nan`` are
+  numbers; ``true``/``false`` (any case as the spec lists) booleans; ``~``/``null`` and an
+  empty value null; everything else — ``yes``, ``off``, ``2024-05-01`` — text. A plain
+  scalar that YAML 1.1 readers (PyYAML, most tools) take for a *different number* than
+  YAML 1.2 does is refused with its line, because the same file must mean the same thing
+  to every reader: an integer with a leading zero (``0305`` is octal 197 in YAML 1.1, 305
+  in YAML 1.2), a base-60 number (``5:05`` = 305 in YAML 1.1, text in 1.2), digits with
+  underscores (``1_000``) and binary (``0b101``). Quote such a value to make it text.
+  Non-finite numbers load as floats; the schemas refuse them where a finite value is needed.
 * Floats keep their source text (:class:`TextFloat`), which :func:`deg_to_rad` uses.
 * Angles are degrees in files and radians inside. ``np.deg2rad`` cannot reach every double
   (the spacing of degree doubles times π/180 exceeds one radian ulp for about 1 value in 9),
@@ -11,6 +21,8 @@
   :func:`deg_to_rad` converts with 50-digit decimal arithmetic (correctly rounded). Texts of
   at most 17 significant digits are converted with ``np.deg2rad`` as everywhere else in
   pkmcal, so ``45`` in a file is exactly ``np.deg2rad(45.0)``.
+* :func:`dump_yaml` writes plain only what YAML 1.1 and YAML 1.2 readers both read back as
+  written: a text that either would take for a number, a boolean or null is quoted.
 """
 
 from __future__ import annotations
@@ -51,15 +63,82 @@ _BaseLoader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 _BaseDumper = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
 
 
+_INT_TAG = "tag:yaml.org,2002:int"
+_STR_TAG = "tag:yaml.org,2002:str"
+_AMBIGUOUS_TAG = "tag:pkmcal,2026:yaml-1.1-number"
+
+#: The YAML 1.2 core schema's plain scalars (YAML 1.2.2 §10.3.2), in resolution order.
+_CORE_SCALARS = (
+    ("tag:yaml.org,2002:null", re.compile(r"~|null|Null|NULL|")),
+    ("tag:yaml.org,2002:bool", re.compile(r"true|True|TRUE|false|False|FALSE")),
+    (_INT_TAG, re.compile(r"[-+]?[0-9]+|0o[0-7]+|0x[0-9a-fA-F]+")),
+    (_FLOAT_TAG, re.compile(r"[-+]?(\.[0-9]+|[0-9]+(\.[0-9]*)?)([eE][-+]?[0-9]+)?"
+                            r"|[-+]?\.(inf|Inf|INF)|\.(nan|NaN|NAN)")),
+)
+_LEADING_ZERO_INT = re.compile(r"[-+]?0[0-9]+")
+#: PyYAML's own YAML 1.1 rules, to find what a YAML 1.1 reader would make of a scalar.
+_YAML11 = yaml.resolver.Resolver()
+
+
+def _core_tag(value: str) -> str:
+    """The YAML 1.2 core-schema tag of a plain scalar, or :data:`_AMBIGUOUS_TAG` when a
+    YAML 1.1 reader would read a different number (module docstring)."""
+    if _LEADING_ZERO_INT.fullmatch(value):
+        return _AMBIGUOUS_TAG
+    tag = next((t for t, rx in _CORE_SCALARS if rx.fullmatch(value)), _STR_TAG)
+    if tag == _STR_TAG and _YAML11.resolve(yaml.ScalarNode, value, (True, False)) in (_INT_TAG, _FLOAT_TAG):
+        return _AMBIGUOUS_TAG
+    return tag
+
+
 class _Loader(_BaseLoader):  # type: ignore[misc, valid-type]
-    pass
+    def resolve(self, kind, value, implicit):
+        if kind is yaml.ScalarNode and implicit[0]:
+            return _core_tag(value)
+        return super().resolve(kind, value, implicit)
+
+
+def _construct_int(loader: yaml.SafeLoader, node: yaml.ScalarNode) -> int:
+    text = str(node.value)
+    if text.startswith(("0o", "0x")):
+        return int(text[2:], 8 if text[1] == "o" else 16)
+    return int(text, 10)
 
 
 def _construct_float(loader: yaml.SafeLoader, node: yaml.ScalarNode) -> float:
-    return TextFloat(yaml.SafeLoader.construct_yaml_float(loader, node), str(node.value))
+    text = str(node.value)
+    body = text.lstrip("+-").lower()
+    if body in (".inf", ".nan"):
+        value = float(body[1:]) * (-1.0 if text.startswith("-") else 1.0)
+    else:
+        value = float(text)
+    return TextFloat(value, text)
 
 
+def _refuse_yaml11_number(loader: yaml.SafeLoader, node: yaml.ScalarNode):
+    text = str(node.value)
+    if _LEADING_ZERO_INT.fullmatch(text):
+        digits = text.lstrip("+-").lstrip("0") or "0"
+        sign = "-" if text.startswith("-") else ""
+        old = yaml.SafeLoader.construct_yaml_int(loader, node) if re.fullmatch(r"[-+]?0[0-7]+", text) else None
+        what = (f"YAML 1.1 readers take it for the octal number {old} and YAML 1.2 for {sign}{digits}"
+                if old is not None else f"YAML 1.2 reads it as {sign}{digits}, YAML 1.1 readers as text")
+        fix = f"write {sign}{digits} without the leading zero"
+    else:
+        tag = _YAML11.resolve(yaml.ScalarNode, text, (True, False))
+        construct = yaml.SafeLoader.construct_yaml_int if tag == _INT_TAG else yaml.SafeLoader.construct_yaml_float
+        old = construct(loader, node)
+        kind = ("a base-60 number" if ":" in text else "a binary number" if "0b" in text.lower()
+                else "a number with '_' separators" if "_" in text else "a signed hexadecimal number")
+        what = f"YAML 1.1 readers take it for {kind} ({old!r}) and YAML 1.2 for text"
+        fix = f"write {old!r} in plain decimal"
+    raise YamlSyntaxError(f"'{text}' means different things to different YAML readers: {what}; {fix}, "
+                          "or quote it if it is text", node.start_mark.line + 1)
+
+
+_Loader.add_constructor(_INT_TAG, _construct_int)
 _Loader.add_constructor(_FLOAT_TAG, _construct_float)
+_Loader.add_constructor(_AMBIGUOUS_TAG, _refuse_yaml11_number)
 
 
 _MAX_EXPANDED_NODES = 1_000_000
@@ -230,6 +309,14 @@ class FlowList(list):
 class _Dumper(_BaseDumper):  # type: ignore[misc, valid-type]
     def ignore_aliases(self, data: Any) -> bool:  # never write &anchors for repeated values
         return True
+
+    def resolve(self, kind, value, implicit):
+        """YAML 1.1's tag, unless only YAML 1.2 (or the ambiguity rule) reads the plain text
+        as something else than text: then a text gets quoted (module docstring)."""
+        tag = super().resolve(kind, value, implicit)
+        if kind is yaml.ScalarNode and implicit[0] and tag == _STR_TAG:
+            return _core_tag(value)
+        return tag
 
 
 def _represent_raw(dumper: yaml.SafeDumper, data: RawFloat):

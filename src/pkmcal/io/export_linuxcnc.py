@@ -15,6 +15,14 @@ leg offsets L0_i have no genhexkins pin: they enter LinuxCNC through homing, as 
 position assigned at the home switch (``[JOINT_N] HOME_OFFSET`` in the INI file). The export
 writes them, the stroke as joint limits, and the strut lengths at pkmcal's home pose as
 comment lines with the INI settings they imply. See ``docs/conventions.md``.
+
+The text is safe by construction for ``halcmd -f``, which reads a file with ``fgets`` into
+a 1024-byte buffer (``MAX_CMD_LEN``) and treats ``#`` to the end of the line as a comment:
+user text (the machine's name and description) only ever appears in comment lines, with
+every control character escaped (:func:`pkmcal.errors.one_line`, so no newline can start a
+live ``setp`` line), and is wrapped into comment lines of at most :data:`MAX_COMMENT_CHARS`
+characters (< 1024 bytes even in 4-byte UTF-8, so no tail of a long line can be read as a
+command).
 """
 
 from __future__ import annotations
@@ -23,11 +31,27 @@ import numpy as np
 
 from pkmcal import __version__
 from pkmcal.conventions import poses_to_file_units
-from pkmcal.errors import PkmcalError
+from pkmcal.errors import PkmcalError, one_line
 from pkmcal.mechanisms.hexapod import Hexapod
 
 #: HAL prefix of the genhexkins component.
 HAL_PREFIX = "genhexkins"
+#: Longest comment line written (characters, '# ' included): 4 × 200 bytes < halcmd's 1024.
+MAX_COMMENT_CHARS = 200
+
+
+def comment_lines(text: str, first: str = "# ", rest: str = "#   ") -> list[str]:
+    """``text`` (one line, control characters escaped) as HAL comment lines of at most
+    :data:`MAX_COMMENT_CHARS` characters: ``first`` before the first piece, ``rest`` before
+    the others."""
+    body = one_line(text)
+    out, prefix = [], first
+    while True:
+        room = MAX_COMMENT_CHARS - len(prefix)
+        out.append(prefix + body[:room])
+        body, prefix = body[room:], rest
+        if not body:
+            return out
 
 
 def _num(v: float) -> str:
@@ -55,8 +79,8 @@ def linuxcnc_hal(machine: Hexapod) -> str:
         )
     L_home = machine.leg_lengths(machine.home_pose)[0]
     home_file = poses_to_file_units(machine.home_pose)
-    lines = [
-        f"# genhexkins configuration for machine '{machine.name}', written by pkmcal {__version__}.",
+    lines = comment_lines(f"genhexkins configuration for machine '{machine.name}', written by pkmcal {__version__}.")
+    lines += [
         "# Units: mm (set [TRAJ] LINEAR_UNITS = mm); A B C in degrees.",
         "# Pose X Y Z A B C = pkmcal x y z a b c: the platform frame in the base (world) frame,",
         "#   R = Rz(C) Ry(B) Rx(A), roll-pitch-yaw about the fixed base axes (pmRpyMatConvert).",
@@ -66,7 +90,7 @@ def linuxcnc_hal(machine: Hexapod) -> str:
         "#   genhexkins.spindle-offset and genhexkins.tool-offset must be 0 (their defaults).",
     ]
     if machine.description:
-        lines.append(f"# Machine: {machine.description}")
+        lines += comment_lines(f"Machine: {machine.description}")
     for n in range(6):
         for axis, k in zip("xyz", range(3)):
             lines.append(f"setp {HAL_PREFIX}.base.{n}.{axis} {_num(machine.base[n, k])}")

@@ -23,9 +23,18 @@ from typing import Annotated, Any, Callable, Literal
 
 import numpy as np
 import yaml
-from pydantic import BaseModel, ConfigDict, StrictFloat, StrictStr, ValidationError, WrapValidator, field_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    StrictFloat,
+    StrictStr,
+    ValidationError,
+    WrapValidator,
+    field_validator,
+)
 
-from pkmcal.errors import InputFileError, PkmcalError
+from pkmcal.errors import InputFileError, PkmcalError, line_problem, one_line, record_source
 from pkmcal.identification.uncertainty import correlation, standard_deviations
 from pkmcal.io._yaml import (
     FlowList,
@@ -39,6 +48,7 @@ from pkmcal.io._yaml import (
     rad_to_deg_text,
 )
 from pkmcal.io.atomic import atomic_write_text
+from pkmcal.io.limits import MAX_DESCRIPTION_CHARS, MAX_NAME_CHARS, magnitude_problem
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.mechanisms.hexapod import HEXAPOD_PARAM_NAMES, N_LEGS, Hexapod, HexapodLimits
 from pkmcal.mechanisms.library import builtin_machine, is_builtin_name
@@ -56,10 +66,33 @@ def _keep_text(value: Any, handler: Callable[[Any], float]) -> float:
     return out
 
 
+def _plausible(unit: str) -> Callable[[float], float]:
+    def check(v: float) -> float:
+        problem = magnitude_problem(float(v), unit)
+        if problem is not None:
+            raise ValueError(problem)
+        return v
+    return check
+
+
+def _one_line(max_chars: int) -> Callable[[str], str]:
+    def check(v: str) -> str:
+        problem = line_problem(v, max_chars)
+        if problem is not None:
+            raise ValueError(problem)
+        return v
+    return check
+
+
 Num = StrictFloat
+#: A length or a coordinate (mm), of a plausible size (:mod:`pkmcal.io.limits`).
+Length = Annotated[StrictFloat, AfterValidator(_plausible("mm"))]
 #: An angle in degrees; remembers its text for the exact conversion (:func:`deg_to_rad`).
-Deg = Annotated[StrictFloat, WrapValidator(_keep_text)]
-Vec3 = tuple[Num, Num, Num]
+Deg = Annotated[StrictFloat, WrapValidator(_keep_text), AfterValidator(_plausible("deg"))]
+Vec3 = tuple[Length, Length, Length]
+#: A machine's name and description: one line of text (:func:`pkmcal.errors.line_problem`).
+Name = Annotated[StrictStr, AfterValidator(_one_line(MAX_NAME_CHARS))]
+Description = Annotated[StrictStr, AfterValidator(_one_line(MAX_DESCRIPTION_CHARS))]
 
 
 class _Model(BaseModel):
@@ -71,8 +104,8 @@ class LegSpec(_Model):
 
     base: Vec3
     platform: Vec3
-    offset: Num
-    stroke: tuple[Num, Num]
+    offset: Length
+    stroke: tuple[Length, Length]
     base_axis: Vec3 | None = None
     platform_axis: Vec3 | None = None
 
@@ -103,7 +136,7 @@ class LimitsSpec(_Model):
 
     u_joint_tilt: Deg | None = None
     s_joint_tilt: Deg | None = None
-    leg_diameter: Num | None = None
+    leg_diameter: Length | None = None
     singularity_margin: Num = 0.01
 
     @field_validator("u_joint_tilt", "s_joint_tilt")
@@ -131,9 +164,9 @@ class LimitsSpec(_Model):
 class PoseSpec(_Model):
     """A pose: x, y, z (mm), a, b, c (degrees)."""
 
-    x: Num
-    y: Num
-    z: Num
+    x: Length
+    y: Length
+    z: Length
     a: Deg
     b: Deg
     c: Deg
@@ -145,7 +178,7 @@ def _ordered(v):
     return v
 
 
-Range = Annotated[tuple[Num, Num], WrapValidator(lambda v, h: _ordered(h(v)))]
+Range = Annotated[tuple[Length, Length], WrapValidator(lambda v, h: _ordered(h(v)))]
 DegRange = Annotated[tuple[Deg, Deg], WrapValidator(lambda v, h: _ordered(h(v)))]
 
 
@@ -174,8 +207,8 @@ class HexapodFile(_Model):
     """The ``kind: hexapod`` machine file."""
 
     kind: Literal["hexapod"] = "hexapod"
-    name: StrictStr | None = None
-    description: StrictStr = ""
+    name: Name | None = None
+    description: Description = ""
     legs: list[LegSpec]
     limits: LimitsSpec = LimitsSpec()
     home: PoseSpec | None = None
@@ -393,7 +426,7 @@ def _hexapod_from_file(path: object, data: dict, lines: dict[tuple, int]) -> Hex
     metadata = _metadata_from_spec(spec)
     axes = lambda key: (None if all(getattr(l, key) is None for l in legs)  # noqa: E731,E741
                         else [getattr(l, key) or (0.0, 0.0, 1.0) for l in legs])
-    name = spec.name if spec.name is not None else Path(str(path)).stem
+    name = spec.name if spec.name is not None else one_line(Path(str(path)).stem)
     try:
         machine = Hexapod(
             name=name,
@@ -557,7 +590,8 @@ def machine_from_text(text: str, source: object = "<machine file>") -> Mechanism
     try:
         data, lines = parse_yaml(text)
     except YamlSyntaxError as exc:
-        raise InputFileError(source, f"{exc}; fix the YAML syntax", line=exc.line) from None
+        fix = "; fix the YAML syntax" if str(exc).startswith("not valid YAML") else ""
+        raise InputFileError(source, f"{exc}{fix}", line=exc.line) from None
     if data is None:
         raise InputFileError(source, "the file is empty; a machine file needs at least 'name:' and 'legs:' "
                                      "(see docs/file-formats.md)")
@@ -584,7 +618,9 @@ def read_machine_file(path: str | os.PathLike) -> Mechanism:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise InputFileError(path, f"not a UTF-8 text file (byte {exc.start}); save it as UTF-8 YAML") from None
-    return machine_from_text(text, path)
+    machine = machine_from_text(text, path)
+    record_source("machine", machine.name, os.fspath(path))
+    return machine
 
 
 def load_machine(spec: str | os.PathLike) -> Mechanism:
@@ -595,7 +631,9 @@ def load_machine(spec: str | os.PathLike) -> Mechanism:
     if os.path.exists(text):
         return read_machine_file(text)
     if is_builtin_name(text):
-        return builtin_machine(text)
+        machine = builtin_machine(text)
+        record_source("machine", machine.name, "built-in")
+        return machine
     if text.lower().endswith(MACHINE_FILE_SUFFIXES) or os.sep in text or "/" in text:
         raise InputFileError(text, "no such machine file; check the path (or run 'pkmcal machines' for "
                                    "the built-in machines)")

@@ -26,7 +26,7 @@ import numpy as np
 from pkmcal.conventions import POSE_COLUMNS
 from pkmcal.errors import InputFileError, PkmcalError
 from pkmcal.io.import_mapping import ImportMapping
-from pkmcal.io.tables import DEFAULT_ALIASES, column_kinds, from_file_units, mapped_name, read_table, to_file_units, write_table
+from pkmcal.io.tables import DEFAULT_ALIASES, check_magnitudes, column_kinds, from_file_units, mapped_name, read_table, to_file_units, write_table
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.sensors.base import MeasurementSetup
 
@@ -131,6 +131,7 @@ def load_measurements(path: str | os.PathLike, machine: Mechanism, setup: Measur
                 f"{legs[0]}..{legs[-1]} (leg lengths, mm), optionally cmd_x..cmd_c",
                 line=exc.line) from None
         raise
+    check_magnitudes(table, kinds)
     readings = from_file_units(table[list(reading_cols)], sensor.reading_is_angle)
     notes: tuple[str, ...] = ()
     if all(c in table.columns for c in act):

@@ -32,11 +32,14 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import StrictStr, ValidationError
 
-from pkmcal.errors import InputFileError, PkmcalError
+from pkmcal.errors import InputFileError, PkmcalError, one_line
 from pkmcal.io._yaml import FlowList, RawFloat, deg_to_rad, rad_to_deg_text
+from pkmcal.io.limits import magnitude_problem
 from pkmcal.io.machine_file import (
     Deg,
     DegRange,
+    Description,
+    Name,
     UncertaintySpec,
     _covariance_from_spec,
     _line_of,
@@ -57,8 +60,8 @@ class _PlanarLimits(_Model):
 
 class _PlanarFile(_Model):
     kind: Literal["planar-2dof-3act", "planar-3dof-4act"]
-    name: StrictStr | None = None
-    description: StrictStr | None = None
+    name: Name | None = None
+    description: Description | None = None
     parameters: dict[StrictStr, Deg]
     home: dict[StrictStr, Deg] | None = None
     workspace: dict[StrictStr, DegRange] | None = None
@@ -101,6 +104,10 @@ def _planar_from_file(path: object, data: dict, lines: dict[tuple, int]) -> Plan
     ref = factory()
     names, p_ang = ref.param_names, ref.param_is_angle
     _named(path, lines, "parameters", spec.parameters, names, "parameter", required=True)
+    for n, a in zip(names, p_ang):
+        problem = None if a else magnitude_problem(float(spec.parameters[n]), "mm")
+        if problem is not None:
+            raise InputFileError(path, f"parameters.{n}: {problem}", line=_line_of(("parameters", n), lines))
     rho = np.array([_value(spec.parameters[n], a) for n, a in zip(names, p_ang)])
     home = ref.home
     if spec.home is not None:
@@ -126,13 +133,17 @@ def _planar_from_file(path: object, data: dict, lines: dict[tuple, int]) -> Plan
     if spec.uncertainty is not None:
         covariance = _covariance_from_spec(path, spec.uncertainty, lines, names, p_ang)
     metadata = _metadata_from_spec(spec)
-    name = spec.name if spec.name is not None else Path(str(path)).stem
+    name = spec.name if spec.name is not None else one_line(Path(str(path)).stem)
     try:
         machine = cls(name=name, rho=rho, home=home, workspace=workspace,
                       description=ref.description if spec.description is None else spec.description,
                       covariance=covariance, metadata=metadata, **kw)
     except PkmcalError as exc:
         raise InputFileError(path, str(exc)) from None
+    problem = machine.parameter_problem()
+    if problem is not None:
+        raise InputFileError(path, f"parameters.{problem[0]}: {problem[1]}",
+                             line=_line_of(("parameters", problem[0]), lines))
     if not np.all(np.isfinite(machine.ik(machine.home))):
         raise InputFileError(path, f"home: the machine cannot reach its home pose ({machine.summary().splitlines()[0]}); "
                                    "check the parameters or give 'home:'", line=_line_of(("home",), lines))

@@ -52,14 +52,24 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
-from typing import Literal, Union
+from typing import Annotated, Literal, Union
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, ValidationError, field_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, StrictFloat, StrictStr, ValidationError, field_validator
 
-from pkmcal.errors import InputFileError, PkmcalError
-from pkmcal.io._yaml import FlowList, RawFloat, YamlSyntaxError, deg_to_rad, dump_yaml, parse_yaml, rad_to_deg_text
+from pkmcal.errors import InputFileError, PkmcalError, line_problem
+from pkmcal.io._yaml import (
+    FlowList,
+    RawFloat,
+    YamlSyntaxError,
+    deg_to_rad,
+    dump_yaml,
+    parse_yaml,
+    plain,
+    rad_to_deg_text,
+)
 from pkmcal.io.atomic import atomic_write_text
+from pkmcal.io.limits import MAX_DESCRIPTION_CHARS, magnitude_problem
 from pkmcal.mechanisms.statics import StaticsModel
 from pkmcal.sensors import FullPoseSensor, IndicatorSensor, MeasurementSetup, NoiseModel, PlanarToolSensor, PositionSensor
 from pkmcal.sensors.library import (  # noqa: F401  (re-exported: the built-ins used to live here)
@@ -73,14 +83,48 @@ from pkmcal.sensors.library import (  # noqa: F401  (re-exported: the built-ins 
     builtin_setup,
 )
 
-Number = float
-Values = Union[float, list[float]]
+def _plausible(v: float) -> float:
+    problem = magnitude_problem(float(v), None)
+    if problem is not None:
+        raise ValueError(problem)
+    return v
+
+
+def _one_line(v: str) -> str:
+    problem = line_problem(v, MAX_DESCRIPTION_CHARS)
+    if problem is not None:
+        raise ValueError(problem)
+    return v
+
+
+#: A number as written: an integer or a float, never a boolean or a quoted text (no
+#: coercion: ``true`` or ``'0.01'`` is an error), finite and within ±1e6 (:mod:`pkmcal.io.limits`).
+Number = Annotated[StrictFloat, AfterValidator(_plausible)]
+Values = Union[Number, list[Number]]
+def _stiffness(v: float) -> float:
+    if not MIN_STIFFNESS <= v <= MAX_STIFFNESS:
+        raise ValueError(f"{v!r} is not an actuator stiffness: give {MIN_STIFFNESS:g} to {MAX_STIFFNESS:g} "
+                         "(N/mm, or N*mm/rad for rotary actuators)")
+    return v
+
+
+def _load(v: float) -> float:
+    if not abs(v) <= MAX_LOAD:
+        raise ValueError(f"{v!r} N is not a tool load: give at most {MAX_LOAD:g} N")
+    return v
+
+
+#: Plausible actuator stiffnesses (N/mm or N·mm/rad) and tool loads (N): beyond them the
+#: static equilibrium's matrices (K Jᵀ J) overflow or lose every digit.
+MIN_STIFFNESS, MAX_STIFFNESS, MAX_LOAD = 1e-6, 1e12, 1e9
+Stiffness = Annotated[StrictFloat, AfterValidator(_stiffness)]
+Load = Annotated[StrictFloat, AfterValidator(_load)]
 #: Largest accepted noise value (mm, rad, deg): beyond it the weights 1/σ² underflow.
 MAX_NOISE_STD = 1e6
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
 class _Transform(_Strict):
@@ -118,14 +162,14 @@ class _Noise(_Strict):
 
 
 class _Simulation(_Strict):
-    stiffness: Values
-    load: tuple[Number, Number] | None = None
+    stiffness: Union[Stiffness, list[Stiffness]]
+    load: tuple[Load, Load] | None = None
     backlash: Values | None = None
 
 
 class _Setup(_Strict):
     sensor: Literal["full-pose", "position", "indicators", "planar-tool"]
-    description: str = ""
+    description: Annotated[StrictStr, AfterValidator(_one_line)] = ""
     indicators: list[tuple[Number, Number]] | None = None
     plane_offset: Number | None = None
     zero: list[Number] | None = None
@@ -133,9 +177,18 @@ class _Setup(_Strict):
     world: _Transform | None = None
     tool: _Transform | None = None
     target: _Point | None = None
-    free: list[str] | None = None
+    free: list[StrictStr] | None = None
     noise: _Noise
     simulation: _Simulation | None = None
+
+    @field_validator("free")
+    @classmethod
+    def _each_once(cls, v):
+        if v is not None:
+            twice = next((n for i, n in enumerate(v) if n in v[:i]), None)
+            if twice is not None:
+                raise ValueError(f"'{twice}' is listed twice; list each parameter once")
+        return v
 
 
 #: Keys allowed for each sensor kind (besides sensor, description, free, noise).
@@ -200,7 +253,11 @@ def load_setup(path: str | os.PathLike, machine=None) -> MeasurementSetup:
     Raises :class:`~pkmcal.errors.InputFileError` naming the file, line and key.
     """
     p = Path(path)
-    if not p.exists():
+    try:
+        exists = p.exists()
+    except (OSError, ValueError):  # a name too long for the file system, a NUL byte
+        exists = False
+    if not exists:
         if str(path) in BUILTIN_SETUPS:
             return builtin_setup(str(path), machine)
         raise PkmcalError(
@@ -234,13 +291,36 @@ def load_setup(path: str | os.PathLike, machine=None) -> MeasurementSetup:
                      ("target",): _Point, ("simulation",): _Simulation}.get(loc[:-1], _Setup)
             what = f"is not a setup key here; remove or correct it (allowed: {', '.join(model.model_fields)})"
         else:
-            what = err["msg"][0].lower() + err["msg"][1:]
+            what = _describe(err)
             if err["type"] == "literal_error" and loc == ("sensor",):
                 what = "must be one of full-pose, position, indicators, planar-tool"
         _fail(path, lines, loc, what)
     raw_noise = data.get("noise") if isinstance(data.get("noise"), dict) else {}
     setup = _build(path, lines, spec, raw_noise)
     return setup if machine is None else bind_setup(setup, machine, path)
+
+
+def _describe(err: dict) -> str:
+    """One pydantic error in the file's words (no coercion happens: say what was given)."""
+    kind, value = err["type"], plain(err.get("input"))
+    shown = {True: "true", False: "false", None: "null"}.get(value, repr(value)) if not isinstance(
+        value, (list, dict, float, int)) or isinstance(value, bool) else repr(value)
+    shown = shown if len(shown) <= 60 else shown[:57] + "..."
+    if kind == "float_type":
+        why = ("; true/false is not a number" if isinstance(value, bool) else
+               "; it is quoted text: remove the quotes" if isinstance(value, str) else "")
+        return f"expected a number, got {shown}{why}"
+    if kind == "finite_number":
+        return f"expected a finite number, got {shown}"
+    if kind == "string_type":
+        return f"expected text, got {shown}; quote it if it looks like a number"
+    if kind in ("list_type", "tuple_type"):
+        return f"expected a list, got {shown}"
+    if kind in ("model_type", "dict_type", "model_attributes_type"):
+        return f"expected a mapping of 'key: value' entries, got {shown}"
+    if kind == "value_error":
+        return err["msg"].removeprefix("Value error, ")
+    return err["msg"][0].lower() + err["msg"][1:]
 
 
 def _build(path, lines, spec: _Setup, raw_noise: dict | None = None) -> MeasurementSetup:

@@ -16,6 +16,7 @@ it atomically.
 
 from __future__ import annotations
 
+import codecs
 import csv
 import io
 import os
@@ -25,8 +26,9 @@ from typing import TYPE_CHECKING, Mapping, Sequence
 
 import numpy as np
 
-from pkmcal.errors import InputFileError, PkmcalError
+from pkmcal.errors import InputFileError, PkmcalError, one_line
 from pkmcal.io.atomic import atomic_write_text
+from pkmcal.io.limits import MAX_MAGNITUDE, magnitude_problem
 
 if TYPE_CHECKING:
     from pkmcal.io.import_mapping import ImportMapping
@@ -179,29 +181,25 @@ def read_table(
         header cells renamed before the aliases apply (every renamed column must exist), and
         units that replace the file's units line.
 
+    The file is read line by line and its rows are parsed in blocks of :data:`_BLOCK_ROWS`,
+    so the memory it takes is that of the numbers it holds, not of its text. Problems are
+    reported in file order (the first bad row).
+
     Raises :class:`InputFileError` naming file, line and column for every malformed input.
     """
     src = os.fspath(path)
     kinds = POSE_KINDS if kinds is None else kinds
-    if text is None:
-        try:
-            with open(src, "rb") as fh:
-                raw = fh.read()
-        except OSError as exc:
-            raise InputFileError(src, f"cannot read the table: {exc.strerror or exc}") from None
-        try:
-            text = raw.decode("utf-8-sig")
-        except UnicodeDecodeError as exc:
-            raise InputFileError(src, f"not a UTF-8 text file (byte {exc.start}); save the table as UTF-8 CSV") from None
-    if "\x00" in text:
-        raise InputFileError(src, "contains NUL bytes: not a text CSV file")
-
     units: dict[str, str] = {}
     header: list[str] | None = None
     header_line = 0
+    chosen: list[str] = []
+    idx: list[int] = []
     rows: list[list[str]] = []
     row_lines: list[int] = []
-    for number, line in enumerate(text.splitlines(), start=1):
+    blocks: list[np.ndarray] = []
+    all_lines: list[np.ndarray] = []
+    wanted_hint = _describe_columns(list(columns) + (list(either[0]) if either else []))
+    for number, line in enumerate(_text_lines(src, text), start=1):
         stripped = line.strip()
         if not stripped:
             continue
@@ -216,17 +214,79 @@ def read_table(
             raise InputFileError(src, f"not a CSV row: {exc}", line=number) from None
         if header is None:
             header, header_line = cells, number
-        else:
-            rows.append(cells)
-            row_lines.append(number)
-    wanted_hint = _describe_columns(list(columns) + (list(either[0]) if either else []))
+            if mapping is not None:
+                _check_renamed(src, header, mapping, header_line)
+                units.update(mapping.units)
+            chosen, idx = _choose_columns(src, header, header_line, columns, either, aliases, mapping, wanted_hint)
+            continue
+        rows.append(cells)
+        row_lines.append(number)
+        if len(rows) == _BLOCK_ROWS:
+            blocks.append(_block_values(src, header, idx, rows, row_lines))
+            all_lines.append(np.array(row_lines, dtype=int))
+            rows, row_lines = [], []
     if header is None:
         raise InputFileError(src, f"the file is empty: expected a header row naming the columns "
                                   f"(e.g. {wanted_hint}) and one row per pose")
+    if rows:
+        blocks.append(_block_values(src, header, idx, rows, row_lines))
+        all_lines.append(np.array(row_lines, dtype=int))
+    if not blocks:
+        raise InputFileError(src, "no data rows after the header; add one row per pose", line=header_line)
+    values = blocks[0] if len(blocks) == 1 else np.concatenate(blocks)
+    for k, name in enumerate(chosen):
+        quantity = kinds.get(name)
+        if quantity is not None and quantity in units:
+            factor = UNITS[quantity][units[quantity]]
+            if factor != 1.0:
+                values[:, k] = np.rad2deg(values[:, k]) if units[quantity] == "rad" else values[:, k] * factor
+    return Table(path=src, columns=tuple(chosen), values=values,
+                 lines=all_lines[0] if len(all_lines) == 1 else np.concatenate(all_lines),
+                 header=tuple(header), units=units)
 
-    if mapping is not None:
-        _check_renamed(src, header, mapping, header_line)
-        units.update(mapping.units)
+
+#: Rows parsed at a time by :func:`read_table`.
+_BLOCK_ROWS = 65_536
+
+
+def _text_lines(src: str, text: str | None):
+    """The lines of ``text``, or of the file ``src``, split exactly as ``str.splitlines``
+    splits the whole text. A file is first checked to be UTF-8 text without NUL bytes (one
+    pass in 1 MB pieces, so that these errors come first as for a text read whole), then
+    read one line at a time (BOM dropped)."""
+    if text is not None:
+        if "\x00" in text:
+            raise InputFileError(src, "contains NUL bytes: not a text CSV file")
+        yield from text.splitlines()
+        return
+    try:
+        with open(src, "rb") as fh:
+            decoder, offset, nul = codecs.getincrementaldecoder("utf-8")(), 0, False
+            while piece := fh.read(1 << 20):
+                try:
+                    decoder.decode(piece)
+                except UnicodeDecodeError as exc:
+                    raise InputFileError(src, f"not a UTF-8 text file (byte {offset + exc.start}); save the table "
+                                              "as UTF-8 CSV") from None
+                nul = nul or b"\x00" in piece
+                offset += len(piece)
+            try:
+                decoder.decode(b"", final=True)
+            except UnicodeDecodeError as exc:
+                raise InputFileError(src, f"not a UTF-8 text file (byte {offset + exc.start}); save the table "
+                                          "as UTF-8 CSV") from None
+            if nul:
+                raise InputFileError(src, "contains NUL bytes: not a text CSV file")
+            fh.seek(0)
+            for k, raw in enumerate(fh):  # split at b"\n": no byte of a multi-byte UTF-8 character is 0x0A
+                line = raw.decode("utf-8")
+                yield from (line.removeprefix("\ufeff") if k == 0 else line).splitlines()
+    except OSError as exc:
+        raise InputFileError(src, f"cannot read the table: {exc.strerror or exc}") from None
+
+
+def _choose_columns(src, header, header_line, columns, either, aliases, mapping, wanted_hint):
+    """``(chosen, idx)``: the canonical names read and their cells' indices in the header."""
     canon = [mapped_name(h, mapping, aliases) for h in header]
     present: dict[str, int] = {}
     for i, name in enumerate(canon):
@@ -257,20 +317,21 @@ def read_table(
             raise InputFileError(src, missing_message([c for c in best if c not in present], options),
                                  line=header_line)
         chosen += list(group)
-    idx = [present[c] for c in chosen]
+    return chosen, [present[c] for c in chosen]
 
-    if not rows:
-        raise InputFileError(src, "no data rows after the header; add one row per pose", line=header_line)
+
+def _block_values(src: str, header: Sequence[str], idx: Sequence[int], rows: list[list[str]],
+                  row_lines: list[int]) -> np.ndarray:
+    """The numbers (n, len(idx)) of a block of rows; :class:`InputFileError` for the first
+    row (in file order) that has the wrong number of cells or a cell that is not a finite
+    number."""
     width = len(header)
-    for cells, number in zip(rows, row_lines):
-        if len(cells) != width:
-            raise InputFileError(src, f"{len(cells)} cells, but the header has {width} columns; every row needs "
-                                      f"one cell per column", line=number)
-
-    values = np.empty((len(rows), len(idx)))
+    ragged = next((k for k, r in enumerate(rows) if len(r) != width), None)
+    limit = len(rows) if ragged is None else ragged
+    values = np.empty((limit, len(idx)))
     bad: tuple[int, int, str] | None = None
     for k, j in enumerate(idx):
-        cells = [r[j] for r in rows]
+        cells = [r[j] for r in rows[:limit]]
         try:
             col = np.array(cells, dtype=float)
         except ValueError:
@@ -295,15 +356,10 @@ def read_table(
         n, j, what = bad
         raise InputFileError(src, f"{what}; every cell of column '{header[j]}' must be a finite number",
                              line=row_lines[n], column=header[j])
-
-    for k, name in enumerate(chosen):
-        quantity = kinds.get(name)
-        if quantity is not None and quantity in units:
-            factor = UNITS[quantity][units[quantity]]
-            if factor != 1.0:
-                values[:, k] = np.rad2deg(values[:, k]) if units[quantity] == "rad" else values[:, k] * factor
-    return Table(path=src, columns=tuple(chosen), values=values, lines=np.array(row_lines, dtype=int),
-                 header=tuple(header), units=units)
+    if ragged is not None:
+        raise InputFileError(src, f"{len(rows[ragged])} cells, but the header has {width} columns; every row needs "
+                                  f"one cell per column", line=row_lines[ragged])
+    return values
 
 
 def _cells(name: str, data) -> list[str]:
@@ -314,22 +370,28 @@ def _cells(name: str, data) -> list[str]:
         return [repr(v) for v in arr.tolist()]
     if arr.dtype.kind in "iub":
         return [str(int(v)) for v in arr.tolist()]
-    out = []
-    for v in arr.tolist():
-        s = str(v)
-        if any(ch in s for ch in ',"\n\r') or s != s.strip():
-            buf = io.StringIO()
-            csv.writer(buf, lineterminator="").writerow([s])
-            s = buf.getvalue()
-        out.append(s)
-    return out
+    return [_text_cell(str(v)) for v in arr.tolist()]
+
+
+def _text_cell(text: str) -> str:
+    """A text cell on one line (control characters escaped, :func:`pkmcal.errors.one_line`),
+    quoted only when it must be."""
+    s = one_line(text)
+    if any(ch in s for ch in ',"') or s != s.strip():
+        buf = io.StringIO()
+        csv.writer(buf, lineterminator="").writerow([s])
+        s = buf.getvalue()
+    return s
 
 
 def format_table(columns: Mapping[str, Sequence], *, units: Mapping[str, str] | None = FILE_UNITS,
-                 comments: Sequence[str] = ()) -> str:
+                 comments: Sequence[str] = (), head: bool = True) -> str:
     """CSV text of named columns (all the same length): optional ``# units:`` line and
     comments, a header, then rows. Floats are written as ``repr`` (shortest exact), integers
-    and booleans as integers, anything else as text (quoted only when it must be)."""
+    and booleans as integers, anything else as text (quoted only when it must be). Every
+    comment, header name and text cell is one line (control characters escaped), so no
+    value can add a line. ``head=False`` gives the rows only: the text of a table written in
+    pieces is the ``head=True`` text of its first rows followed by the others'."""
     names = list(columns)
     if not names:
         raise ValueError("a table needs at least one column")
@@ -337,13 +399,14 @@ def format_table(columns: Mapping[str, Sequence], *, units: Mapping[str, str] | 
     n_rows = {len(c) for c in cols}
     if len(n_rows) != 1:
         raise ValueError(f"columns have different lengths: {sorted(n_rows)}")
-    head = []
-    if units:
-        head.append("# units: " + ", ".join(f"{q}={u}" for q, u in units.items()))
-    head.extend(f"# {c}" for c in comments)
-    head.append(",".join(names))
-    body = [",".join(row) for row in zip(*cols)]
-    return "\n".join(head + body) + "\n"
+    lines = []
+    if head:
+        if units:
+            lines.append("# units: " + ", ".join(f"{q}={u}" for q, u in units.items()))
+        lines.extend(f"# {one_line(c)}" for c in comments)
+        lines.append(",".join(_text_cell(n) for n in names))
+    lines.extend(",".join(row) for row in zip(*cols))
+    return "\n".join(lines) + "\n" if lines else ""
 
 
 def column_kinds(names: Sequence[str], is_angle: Sequence[bool]) -> dict[str, str]:
@@ -368,11 +431,29 @@ def to_file_units(values, is_angle: Sequence[bool]) -> np.ndarray:
     return out
 
 
+def check_magnitudes(table: Table, kinds: Mapping[str, str]) -> None:
+    """:class:`InputFileError` at the first cell (file order) beyond ±:data:`MAX_MAGNITUDE`
+    (mm or degrees, after unit conversion; :mod:`pkmcal.io.limits`): no pose or measurement
+    of a machine is that large, and one such value would overflow the computations (a
+    squared 1e308 is infinite) into results that look like answers."""
+    big = np.abs(table.values) > MAX_MAGNITUDE
+    if not big.any():
+        return
+    row = int(np.argmax(big.any(axis=1)))
+    k = int(np.argmax(big[row]))
+    name = table.columns[k]
+    unit = "deg" if kinds.get(name) == "angle" else "mm"
+    raise InputFileError(table.path, str(magnitude_problem(float(table.values[row, k]), unit)),
+                         line=int(table.lines[row]), column=name)
+
+
 def read_poses(path: str | os.PathLike, machine, mapping: "ImportMapping | None" = None) -> np.ndarray:
     """Poses (N, n_dof) of a CSV with the machine's pose columns (mm, deg) in internal units
-    (mm, rad); ``mapping``: column renaming and units of a file from another tool."""
-    table = read_table(path, machine.pose_names, kinds=column_kinds(machine.pose_names, machine.pose_is_angle),
-                       mapping=mapping)
+    (mm, rad); ``mapping``: column renaming and units of a file from another tool. Every
+    coordinate must be within ±1e6 mm or degrees (:func:`check_magnitudes`)."""
+    kinds = column_kinds(machine.pose_names, machine.pose_is_angle)
+    table = read_table(path, machine.pose_names, kinds=kinds, mapping=mapping)
+    check_magnitudes(table, kinds)
     return from_file_units(table.values, machine.pose_is_angle)
 
 
@@ -393,6 +474,7 @@ __all__ = [
     "READING_COLUMNS",
     "Table",
     "canonical_name",
+    "check_magnitudes",
     "column_kinds",
     "format_table",
     "from_file_units",

@@ -138,21 +138,59 @@ DEFAULT_MACHINE = "stewart-prototype"
 SYMMETRIC_PREFIX = "symmetric:"
 
 
+#: What each ``symmetric:`` key must be: (test, the rule in words).
+_SYMMETRIC_RULES: dict[str, tuple[Callable[[float], bool], str]] = {
+    "base_radius": (lambda v: v >= 1e-3, "a radius of at least 0.001 mm"),
+    "platform_radius": (lambda v: v >= 1e-3, "a radius of at least 0.001 mm"),
+    "base_separation": (lambda v: 0 <= v < 120, "an angle in [0, 120) degrees"),
+    "platform_separation": (lambda v: 0 <= v < 120, "an angle in [0, 120) degrees"),
+    "phase": (lambda v: True, "an angle (degrees)"),
+    "offset": (lambda v: v >= 1e-3, "a leg offset of at least 0.001 mm"),
+    "stroke": (lambda v: v >= 1e-3, "a stroke of at least 0.001 mm"),
+    "u_joint_tilt": (lambda v: 0 < v <= 180, "a tilt limit in (0, 180] degrees, or none"),
+    "s_joint_tilt": (lambda v: 0 < v <= 180, "a tilt limit in (0, 180] degrees, or none"),
+    "leg_diameter": (lambda v: v >= 0, "a diameter >= 0 (mm), or none"),
+}
+#: Keys that may be switched off with ``none``/``off``.
+_OPTIONAL = ("u_joint_tilt", "s_joint_tilt", "leg_diameter")
+#: Largest accepted magnitude of a ``symmetric:`` value (mm or degrees): larger is no machine.
+_MAX_VALUE = 1e6
+
+
 def _parse_symmetric(spec: str) -> Hexapod:
+    if not spec.isprintable():
+        raise PkmcalError(f"machine {spec!r}: holds control characters; write the spec on one line")
     body = spec[len(SYMMETRIC_PREFIX):]
     kwargs: dict[str, float | None] = {}
-    allowed = set(symmetric_hexapod.__code__.co_varnames[: symmetric_hexapod.__code__.co_argcount]) - {"name"}
+    allowed = sorted(_SYMMETRIC_RULES)
     for item in filter(None, body.split(",")):
         key, sep, value = item.partition("=")
         key = key.strip()
-        if not sep or key not in allowed:
-            raise PkmcalError(
-                f"machine '{spec}': '{item}' is not KEY=VALUE with KEY one of {', '.join(sorted(allowed))}"
-            )
+        if not sep or key not in _SYMMETRIC_RULES:
+            raise PkmcalError(f"machine '{spec}': '{item}' is not KEY=VALUE with KEY one of {', '.join(allowed)}")
+        if key in kwargs:
+            raise PkmcalError(f"machine '{spec}': '{key}' is given twice; give each key once")
+        rule, words = _SYMMETRIC_RULES[key]
+        text = value.strip()
+        if text.lower() in ("none", "off"):
+            if key not in _OPTIONAL:
+                raise PkmcalError(f"machine '{spec}': '{key}' cannot be {text}; it must be {words}")
+            kwargs[key] = None
+            continue
         try:
-            kwargs[key] = None if value.strip().lower() in ("none", "off") else float(value)
+            if "_" in text:
+                raise ValueError(text)
+            number = float(text)
         except ValueError:
             raise PkmcalError(f"machine '{spec}': value of '{key}' is not a number: '{value}'") from None
+        if not np.isfinite(number):
+            raise PkmcalError(f"machine '{spec}': {key}={text} is not a finite number; it must be {words}")
+        if abs(number) > _MAX_VALUE:
+            raise PkmcalError(f"machine '{spec}': {key}={text} is beyond ±{_MAX_VALUE:g}, larger than any machine; "
+                              f"it must be {words}")
+        if not rule(number):
+            raise PkmcalError(f"machine '{spec}': {key}={text} is not {words}")
+        kwargs[key] = number
     return symmetric_hexapod(**kwargs, name=spec)
 
 

@@ -84,6 +84,8 @@ class PlanarMechanism(Mechanism):
 
     #: Parameter names, in the order of ``rho`` (set by each machine class).
     _names: ClassVar[tuple[str, ...]] = ()
+    #: Parameters that are link lengths: a machine is impossible unless they are positive.
+    _lengths: ClassVar[tuple[str, ...]] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "rho", _frozen(self.rho, (len(self._names),)))
@@ -125,6 +127,19 @@ class PlanarMechanism(Mechanism):
 
     def p(self, name: str) -> float:
         return float(self.rho[self._names.index(name)])
+
+    def parameter_problem(self) -> tuple[str, str] | None:
+        """``(name, why)`` of the first parameter that makes the machine impossible — not
+        finite, or a link length (:attr:`_lengths`) that is not positive (a zero link makes
+        every Jacobian singular) — or None. The machine-file loader calls it; a fit may pass
+        through such values and is not checked."""
+        for name, value in zip(self._names, self.rho):
+            if not np.isfinite(value):
+                return name, f"{value!r} is not a finite number"
+        for name in self._lengths:
+            if not self.p(name) > 0:
+                return name, f"{self.p(name)!r} mm is not a link length: give a positive length (mm)"
+        return None
 
     def fk(self, readings: np.ndarray, guess: np.ndarray | None = None, *, tol: float = FK_TOL,
            max_iter: int = FK_MAX_ITER, res_tol: float = 1e-3) -> FKResult:
@@ -229,6 +244,7 @@ class Planar2Dof3Act(PlanarMechanism):
     """Paper 3 case 1: 2-d.o.f. translating tool plate, three rotary actuators (module doc)."""
 
     _names: ClassVar[tuple[str, ...]] = _P2_NAMES
+    _lengths: ClassVar[tuple[str, ...]] = ("l11", "l12", "l21", "l22", "l31", "l32")
     min_transmission: float = np.deg2rad(15.0)
 
     pose_names = ("x", "y")
@@ -352,6 +368,8 @@ class Planar3Dof4Act(PlanarMechanism):
     """Paper 3 case 2: 3-d.o.f. tool plate on two guide-ways with four linear actuators."""
 
     _names: ClassVar[tuple[str, ...]] = _P3_NAMES
+    #: L3: the plate joints' distance (0 leaves the plate angle φ undetermined); ρ_ij: the legs.
+    _lengths: ClassVar[tuple[str, ...]] = ("L3", "rho11", "rho12", "rho21", "rho22")
     min_leg_angle: float = np.deg2rad(15.0)
 
     pose_names = ("x", "y", "phi")

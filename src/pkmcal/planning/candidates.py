@@ -185,6 +185,13 @@ def default_box_shape(mechanism: Mechanism) -> np.ndarray:
     stroke = np.asarray(getattr(mechanism, "stroke", np.array([[0.0, 50.0]])), dtype=float)
     s = float(np.mean(stroke[:, 1] - stroke[:, 0]))
     r = float(getattr(mechanism, "platform_radius", 100.0))
+    if not s > 0:
+        raise PkmcalError(f"machine '{mechanism.name}': the actuators have no stroke (mean {s:g} mm), so the "
+                          "platform cannot move; check the legs' 'stroke: [min, max]'")
+    if not r > 1e-9 * s:  # (practically) zero: the angle half-widths s/r would overflow
+        raise PkmcalError(f"machine '{mechanism.name}': every platform joint is at the platform origin (radius "
+                          f"{r:g} mm), so the legs cannot set the platform's orientation; check the legs' 'platform:' "
+                          "joints")
     return np.array([s, s, s / 2, s / r, s / r, s / r])
 
 
@@ -283,13 +290,14 @@ def read_candidates_csv(path: str | os.PathLike, mechanism: Mechanism | None = N
     """Poses (N, n) (mm, rad) from a CSV file with the machine's pose columns (default
     x, y, z, a, b, c; lengths mm, angles degrees); ``mapping`` an optional
     :class:`~pkmcal.io.import_mapping.ImportMapping` for files from other tools."""
-    from pkmcal.io.tables import POSE_KINDS, column_kinds, from_file_units, read_table
+    from pkmcal.io.tables import POSE_KINDS, check_magnitudes, column_kinds, from_file_units, read_table
 
     if mechanism is not None:
         names, is_angle = tuple(mechanism.pose_names), tuple(mechanism.pose_is_angle)
     else:
         names, is_angle = POSE_COLUMNS, tuple(POSE_KINDS[c] == "angle" for c in POSE_COLUMNS)
     table = read_table(path, names, kinds=column_kinds(names, is_angle), mapping=mapping)
+    check_magnitudes(table, column_kinds(names, is_angle))
     if len(table) == 0:
         raise InputFileError(path, "no candidate poses (the file has a header but no rows)")
     return from_file_units(table[list(names)], is_angle)   # any pose dimension (planar: 2 or 3)
