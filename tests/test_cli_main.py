@@ -44,3 +44,13 @@ def test_help_and_listing_import_no_heavy_library():
             "('numpy', 'scipy', 'numba', 'pydantic', 'matplotlib', 'yaml'))))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert json.loads(out.strip().splitlines()[-1]) == []
+
+
+def test_python_dash_m_pkmcal_is_the_pkmcal_command():
+    """``python -m pkmcal`` runs the same group (usage line names ``pkmcal``; a user error
+    exits 2 with one line)."""
+    ok = subprocess.run([sys.executable, "-m", "pkmcal", "--help"], capture_output=True, text=True)
+    assert ok.returncode == 0 and ok.stdout.startswith("Usage: pkmcal "), ok.stdout[:200]
+    bad = subprocess.run([sys.executable, "-m", "pkmcal", "ik", "no-such-machine", "poses.csv"],
+                         capture_output=True, text=True)
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1, bad.stderr
