@@ -1,0 +1,412 @@
+"""Linear delta robots (delta 3D printers, linear pick-and-place deltas): three carriages on
+three rails ("towers"), each joined to the effector by a parallelogram arm of length L_i.
+
+Pose: the tool point (nozzle) p = (x, y, z) in the machine frame {F} (mm), the firmware's
+Cartesian coordinates: origin on the bed at the centre of the towers, z up. The effector
+does not rotate (the parallelograms keep it level): its frame is (p, I).
+
+Geometry of tower i ∈ {a, b, c} (parameters ``angle_a``, ``radius_a``, …):
+
+* e_r = (cos θ_i, sin θ_i, 0), e_t = (−sin θ_i, cos θ_i, 0): the radial and tangential
+  directions of the tower at angle θ_i (Klipper's ``angle``: 210°, 330°, 90° by default);
+* the rail passes through B_i = r_i e_r on the bed plane (r_i: Klipper's ``delta_radius``,
+  the horizontal distance of the carriage joints from the effector joints' centre — the
+  carriage's and the effector's own joint offsets enter only through it, see below);
+* the rail direction, leaning by α_i towards the centre and β_i sideways (``lean_radial``,
+  ``lean_tangential``), is u_i = −sin α_i e_r + cos α_i sin β_i e_t + cos α_i cos β_i e_z
+  (a unit vector; u_i = e_z for a vertical rail);
+* the carriage joint is at C_i = B_i + s_i u_i, s_i its position along the rail;
+* the arm joins C_i to the effector joint q = p − t (t: the tool offset ``tool.x/y/z``, the
+  nozzle relative to the effector joints' centre), |C_i − q| = L_i (``arm``).
+
+Inverse kinematics (closed form). With d = B_i − q, the constraint |d + s u|² = L² gives
+s_i = −u·d + sqrt((u·d)² − |d|² + L²) (the carriage above the effector). For a vertical
+rail this is Klipper's stepper position s = z + sqrt(L² − (x − x_i)² − (y − y_i)²).
+
+Readings. λ_i (``lambda1..3``, mm) is the carriage position in the firmware's convention:
+Klipper's stepper position, the carriage height the firmware computes. The machine counts
+its travel from the endstop switch, so a reading means "travel H^fw_i − λ_i below the
+switch", where H^fw_i is the switch's reading in the firmware configuration the readings
+refer to (:attr:`LinearDelta.reading_reference`; Klipper's ``abs_endstop`` =
+position_endstop + sqrt(arm² − radius²)). The switch itself sits where the carriage is when
+the nozzle is at (0, 0, E_i), E_i = ``endstop_i`` (Klipper's ``position_endstop``): s at the
+switch S_i = s_i((0, 0, E_i)). Hence
+
+    λ_i = s_i(p) − S_i + H^fw_i,
+
+which is s_i(p) for a machine whose parameters are its firmware's (H^fw = S, the default),
+and gives a calibrated machine the readings its old firmware shows for the same physical
+carriage positions. Exporting to firmware makes the readings refer to the new
+configuration (:meth:`LinearDelta.as_firmware_reference`).
+
+Exactly absorbed, so not parameters: offsets of the carriage joints (fixed to a carriage
+that translates along u_i: a constant shift of B_i) and of the effector joints (a constant
+shift of q), which change only B_i — that is r_i, θ_i and E_i. The tool offset t is a
+common shift of all three B_i and E_i, hence also absorbed; it is a parameter, fixed by
+default (:attr:`LinearDelta.default_fixed`), for sensors that see the nozzle and the
+effector apart.
+
+Jacobians (analytic). With w = C_i − q and D = w·u_i ≠ 0 (the arm not perpendicular to its
+rail): ∂s/∂p = wᵀ/D; for a parameter change, from w·(dB + s du + u ds − dq) = L dL,
+ds = (L dL − w·dB − s w·du + w·dq)/D with dq = −dt. ∂λ/∂ρ adds −∂S/∂ρ (S at the pose
+(0, 0, E_i), whose height moves with E_i).
+
+Forward kinematics (closed form): q is the intersection of the three spheres of radius
+L_i about C_i (trilateration), the effector below the plane of the carriage joints.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import ClassVar
+
+import numpy as np
+
+from pkmcal.errors import PkmcalError
+from pkmcal.mechanisms.base import FKResult, LimitReport, Mechanism
+
+TOWERS = ("a", "b", "c")
+#: Per-tower parameters, in this order for each tower (angles: θ, α, β).
+TOWER_PARAMS = ("angle", "radius", "arm", "endstop", "lean_radial", "lean_tangential")
+_TOWER_ANGLE = {"angle": True, "radius": False, "arm": False, "endstop": False, "lean_radial": True,
+                "lean_tangential": True}
+TOOL_PARAMS = ("tool.x", "tool.y", "tool.z")
+PARAM_NAMES = tuple(f"{p}_{t}" for t in TOWERS for p in TOWER_PARAMS) + TOOL_PARAMS
+PARAM_IS_ANGLE = tuple(_TOWER_ANGLE[p] for _ in TOWERS for p in TOWER_PARAMS) + (False,) * 3
+#: Klipper's default tower angles (degrees): stepper_a, b, c.
+KLIPPER_TOWER_ANGLES_DEG = (210.0, 330.0, 90.0)
+#: FK is converged where the IK of its pose reproduces the readings within this (mm).
+FK_TOL = 1e-9
+_NP = len(TOWER_PARAMS)
+
+
+def _index(param: str, tower: int) -> int:
+    return tower * _NP + TOWER_PARAMS.index(param)
+
+
+def _towers(rho: np.ndarray) -> dict[str, np.ndarray]:
+    """Per-tower arrays (3,) of every tower parameter, plus the tool offset (3,)."""
+    out = {p: rho[[_index(p, i) for i in range(3)]] for p in TOWER_PARAMS}
+    out["tool"] = rho[-3:]
+    return out
+
+
+def _frames(g: dict[str, np.ndarray]):
+    """e_r, e_t (3, 3), rail directions u (3, 3) and the derivatives of u with respect to
+    θ, α and β (3, 3 each), one row per tower."""
+    th, al, be = g["angle"], g["lean_radial"], g["lean_tangential"]
+    z0 = np.zeros(3)
+    e_r = np.stack([np.cos(th), np.sin(th), z0], axis=1)
+    e_t = np.stack([-np.sin(th), np.cos(th), z0], axis=1)
+    e_z = np.broadcast_to([0.0, 0.0, 1.0], (3, 3))
+    ca, sa, cb, sb = np.cos(al)[:, None], np.sin(al)[:, None], np.cos(be)[:, None], np.sin(be)[:, None]
+    u = -sa * e_r + ca * sb * e_t + ca * cb * e_z
+    du_dth = -sa * e_t - ca * sb * e_r              # de_r/dθ = e_t, de_t/dθ = −e_r
+    du_dal = -ca * e_r - sa * sb * e_t - sa * cb * e_z
+    du_dbe = ca * cb * e_t - ca * sb * e_z
+    return e_r, e_t, u, du_dth, du_dal, du_dbe
+
+
+@dataclass(frozen=True, eq=False)
+class LinearDelta(Mechanism):
+    """A linear delta (module docstring). ``rho`` (21,) internal units (mm, rad) in the
+    order of :data:`PARAM_NAMES`; ``reading_reference`` (3,) H^fw (mm), default the
+    switch readings of ``rho`` itself; ``travel`` (3,) the rail length below each switch
+    (mm): readings within [H^fw − travel, H^fw]."""
+
+    name: str
+    rho: np.ndarray
+    reading_reference: np.ndarray | None = None
+    travel: np.ndarray | float = 400.0
+    print_radius: float = 85.0
+    min_z: float = 0.0
+    #: Smallest angle between an arm and the horizontal plane (rad).
+    min_arm_angle: float = np.deg2rad(20.0)
+    description: str = ""
+    covariance: np.ndarray | None = None
+    metadata: dict = field(default_factory=dict)
+
+    kind: ClassVar[str] = "linear-delta"
+    pose_names: ClassVar[tuple[str, ...]] = ("x", "y", "z")
+    pose_is_angle: ClassVar[tuple[bool, ...]] = (False, False, False)
+    actuator_names: ClassVar[tuple[str, ...]] = ("lambda1", "lambda2", "lambda3")
+    #: Parameters held unless freed by name (exactly absorbed by the tower positions).
+    default_fixed: ClassVar[tuple[str, ...]] = TOOL_PARAMS
+
+    def __post_init__(self) -> None:
+        rho = np.array(self.rho, dtype=float)
+        if rho.shape != (len(PARAM_NAMES),):
+            raise PkmcalError(f"linear delta '{self.name}' has {len(PARAM_NAMES)} parameters; got {rho.shape}")
+        rho.setflags(write=False)
+        object.__setattr__(self, "rho", rho)
+        problem = self.parameter_problem()
+        if problem is not None:
+            raise PkmcalError(f"linear delta '{self.name}': {problem[0]} {problem[1]}")
+        ref = self.switch_positions() if self.reading_reference is None else np.array(self.reading_reference,
+                                                                                       dtype=float)
+        if ref.shape != (3,) or not np.all(np.isfinite(ref)):
+            raise PkmcalError(f"linear delta '{self.name}': reading_reference must be 3 finite numbers (mm)")
+        ref.setflags(write=False)
+        object.__setattr__(self, "reading_reference", ref)
+        travel = np.broadcast_to(np.array(self.travel, dtype=float), (3,)).copy()
+        if not np.all(travel > 0):
+            raise PkmcalError(f"linear delta '{self.name}': the rail travel must be positive (mm)")
+        travel.setflags(write=False)
+        object.__setattr__(self, "travel", travel)
+
+    # -- declarations --------------------------------------------------------------------
+
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        return PARAM_NAMES
+
+    @property
+    def param_is_angle(self) -> tuple[bool, ...]:
+        return PARAM_IS_ANGLE
+
+    @property
+    def params(self) -> np.ndarray:
+        return self.rho.copy()
+
+    def with_params(self, params: np.ndarray, name: str | None = None, covariance=None) -> "LinearDelta":
+        """The same machine with parameters ``params``; the readings still refer to this
+        machine's firmware configuration (``reading_reference`` is kept)."""
+        return replace(self, rho=np.asarray(params, dtype=float), name=self.name if name is None else name,
+                       covariance=covariance)
+
+    def as_firmware_reference(self, name: str | None = None) -> "LinearDelta":
+        """This machine with its own parameters as the firmware configuration (after an
+        export): readings λ_i = s_i, the switch readings S_i."""
+        return replace(self, reading_reference=None, name=self.name if name is None else name)
+
+    @property
+    def home_pose(self) -> np.ndarray:
+        """Where FK starts and the workspace's centre: the centre, at half the lowest switch
+        height (the firmware homes to the top; this is inside the print volume)."""
+        return np.array([0.0, 0.0, 0.5 * float(np.min(_towers(self.rho)["endstop"]))])
+
+    def parameter_problem(self) -> tuple[str, str] | None:
+        """``(name, why)`` of the first parameter that makes the machine impossible."""
+        g = _towers(self.rho)
+        if not np.all(np.isfinite(self.rho)):
+            k = int(np.flatnonzero(~np.isfinite(self.rho))[0])
+            return PARAM_NAMES[k], "is not a finite number"
+        for i, t in enumerate(TOWERS):
+            if g["radius"][i] <= 0:
+                return f"radius_{t}", "must be positive (mm)"
+            if g["arm"][i] <= g["radius"][i]:
+                return f"arm_{t}", f"must be longer than radius_{t} (the nozzle could not reach the centre)"
+            for lean in ("lean_radial", "lean_tangential"):
+                if abs(g[lean][i]) >= np.pi / 4:
+                    return f"{lean}_{t}", "must be within ±45° of vertical"
+        angles = np.sort(np.mod(g["angle"], 2 * np.pi))
+        gaps = np.diff(np.r_[angles, angles[0] + 2 * np.pi])
+        if np.min(gaps) < np.deg2rad(10.0):
+            return "angle_a", "the three towers must be at least 10° apart"
+        return None
+
+    def workspace_box(self) -> np.ndarray:
+        """(3, 2) the box planning and ``info`` search in: the print radius in x and y,
+        ``min_z`` to the lowest switch height in z (mm)."""
+        top = float(np.min(_towers(self.rho)["endstop"]))
+        return np.array([[-self.print_radius, self.print_radius], [-self.print_radius, self.print_radius],
+                         [self.min_z, top]])
+
+    def summary(self) -> str:
+        g = _towers(self.rho)
+        lines = [f"{self.name}: linear delta (3 towers, pose x, y, z of the nozzle, readings lambda1..3 = "
+                 "carriage positions, Klipper's stepper positions)"]
+        for i, t in enumerate(TOWERS):
+            lines.append(f"  tower {t}: angle {np.rad2deg(g['angle'][i]):.3f} deg, radius {g['radius'][i]:.3f} mm, "
+                         f"arm {g['arm'][i]:.3f} mm, endstop {g['endstop'][i]:.3f} mm, lean "
+                         f"{np.rad2deg(g['lean_radial'][i]):.3f}/{np.rad2deg(g['lean_tangential'][i]):.3f} deg")
+        lines.append(f"  print radius {self.print_radius:g} mm, z from {self.min_z:g} mm, arms at least "
+                     f"{np.rad2deg(self.min_arm_angle):g} deg above horizontal")
+        return "\n".join(lines)
+
+    # -- kinematics ------------------------------------------------------------------------
+
+    def _rho(self, params) -> np.ndarray:
+        if params is None:
+            return self.rho
+        params = np.asarray(params, dtype=float)
+        if params.shape != (len(PARAM_NAMES),):
+            raise PkmcalError(f"linear delta '{self.name}' has {len(PARAM_NAMES)} parameters; got {params.shape}")
+        return params
+
+    @staticmethod
+    def _rail_positions(q: np.ndarray, g: dict, u: np.ndarray, B: np.ndarray):
+        """s (N, 3) of effector-joint centres q (N, 3) and w = C − q (N, 3, 3); NaN where an
+        arm cannot reach its rail."""
+        d = B[None, :, :] - q[:, None, :]                       # (N, 3 towers, 3)
+        ud = np.einsum("tk,ntk->nt", u, d)
+        disc = ud**2 - np.einsum("ntk,ntk->nt", d, d) + g["arm"][None, :] ** 2
+        with np.errstate(invalid="ignore"):
+            s = -ud + np.sqrt(np.where(disc >= 0, disc, np.nan))
+        w = d + s[:, :, None] * u[None, :, :]
+        return s, w
+
+    def _switch(self, g, u, B) -> tuple[np.ndarray, np.ndarray]:
+        """S (3,) the rail position of each switch, and w (3, 3) there (tower i at the
+        nozzle pose (0, 0, E_i))."""
+        S = np.empty(3)
+        W = np.empty((3, 3))
+        for i in range(3):   # three towers, not poses
+            q = np.array([[0.0, 0.0, g["endstop"][i]]]) - g["tool"][None, :]
+            s, w = self._rail_positions(q, g, u, B)
+            S[i], W[i] = s[0, i], w[0, i]
+        return S, W
+
+    def switch_positions(self, params=None) -> np.ndarray:
+        """S (3,): the rail position of each tower's switch (module docstring), mm."""
+        g = _towers(self._rho(params))
+        e_r, _, u, *_ = _frames(g)
+        return self._switch(g, u, g["radius"][:, None] * e_r)[0]
+
+    def ik(self, poses: np.ndarray, params=None) -> np.ndarray:
+        """λ (N, 3) mm; NaN where an arm cannot reach its rail."""
+        return self.ik_and_jacobians(poses, params, jacobians=False)[0]
+
+    def ik_and_jacobians(self, poses: np.ndarray, params=None, jacobians: bool = True):
+        """(λ (N, 3), ∂λ/∂pose (N, 3, 3), ∂λ/∂ρ (N, 3, 21)) in one pass (module docstring)."""
+        poses = self.as_pose_array(poses)
+        rho = self._rho(params)
+        g = _towers(rho)
+        e_r, e_t, u, du_th, du_al, du_be = _frames(g)
+        B = g["radius"][:, None] * e_r
+        q = poses - g["tool"][None, :]
+        s, w = self._rail_positions(q, g, u, B)
+        S, W = self._switch(g, u, B)
+        lam = s - S[None, :] + self.reading_reference[None, :]
+        if not jacobians:
+            return lam, None, None
+        D = np.einsum("ntk,tk->nt", w, u)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            A = w / D[:, :, None]                                # ∂s/∂p = wᵀ/D
+        n = len(poses)
+        Bj = np.zeros((n, 3, len(PARAM_NAMES)))
+
+        def ds(w_, s_, D_, i, dB, du, dL):
+            """ds for tower i of one parameter direction (module docstring); w_ (..., 3)."""
+            return (g["arm"][i] * dL - w_ @ dB - s_ * (w_ @ du)) / D_
+
+        D_sw = np.einsum("tk,tk->t", W, u)
+        for i in range(3):    # three towers × six parameters: columns, not poses
+            dirs = {"angle": (g["radius"][i] * e_t[i], du_th[i], 0.0), "radius": (e_r[i], np.zeros(3), 0.0),
+                    "arm": (np.zeros(3), np.zeros(3), 1.0), "lean_radial": (np.zeros(3), du_al[i], 0.0),
+                    "lean_tangential": (np.zeros(3), du_be[i], 0.0)}
+            with np.errstate(divide="ignore", invalid="ignore"):
+                for p, (dB, du, dL) in dirs.items():
+                    col = _index(p, i)
+                    Bj[:, i, col] = ds(w[:, i], s[:, i], D[:, i], i, dB, du, dL) - ds(W[i], S[i], D_sw[i], i, dB,
+                                                                                        du, dL)
+                # the switch pose (0, 0, E_i) rises with E_i: −∂S/∂p · e_z
+                Bj[:, i, _index("endstop", i)] = -W[i, 2] / D_sw[i]
+                # the tool offset: dq = −dt, at the pose and at the switch
+                Bj[:, i, -3:] = -w[:, i] / D[:, i, None] + W[i] / D_sw[i]
+        return lam, A, Bj
+
+    def actuator_pose_jacobian(self, poses: np.ndarray) -> np.ndarray:
+        return self.ik_and_jacobians(poses)[1]
+
+    def actuator_param_jacobian(self, poses: np.ndarray) -> np.ndarray:
+        return self.ik_and_jacobians(poses)[2]
+
+    def fk(self, readings: np.ndarray, guess: np.ndarray | None = None, params=None) -> FKResult:
+        """Closed-form FK (trilateration, module docstring); ``guess`` is not needed and only
+        checks the assembly mode (the effector below its carriage joints)."""
+        lam = np.asarray(readings, dtype=float)
+        lam = lam[None, :] if lam.ndim == 1 else lam
+        if lam.ndim != 2 or lam.shape[1] != 3:
+            raise PkmcalError(f"machine '{self.name}' needs 3 readings per pose; got an array of shape {lam.shape}")
+        rho = self._rho(params)
+        g = _towers(rho)
+        e_r, _, u, *_ = _frames(g)
+        B = g["radius"][:, None] * e_r
+        S, _ = self._switch(g, u, B)
+        s = lam - self.reading_reference[None, :] + S[None, :]
+        C = B[None, :, :] + s[:, :, None] * u[None, :, :]        # (N, 3, 3) carriage joints
+        q, ok = _trilaterate(C, g["arm"])
+        poses = q + g["tool"][None, :]
+        with np.errstate(invalid="ignore"):
+            back = self.ik(np.where(ok[:, None], poses, 0.0), params)
+            res = np.max(np.abs(back - lam), axis=1)
+        conv = ok & (res <= FK_TOL * np.maximum(1.0, np.max(np.abs(lam), axis=1)))
+        poses = np.where(conv[:, None], poses, np.nan)
+        return FKResult(poses=poses, converged=conv, iterations=np.zeros(len(lam), dtype=int),
+                        residual=np.where(ok, res, np.inf))
+
+    def assembly_signs(self, poses: np.ndarray) -> np.ndarray:
+        """One sign per tower: +1 where the effector is below the carriage joint along the
+        rail's arm (w·u > 0, the branch the IK and FK choose), −1 above, 0 at the arm ⊥ rail
+        singularity."""
+        poses = self.as_pose_array(poses)
+        g = _towers(self.rho)
+        e_r, _, u, *_ = _frames(g)
+        _, w = self._rail_positions(poses - g["tool"][None, :], g, u, g["radius"][:, None] * e_r)
+        return np.sign(np.nan_to_num(np.einsum("ntk,tk->nt", w, u))).astype(np.int8)
+
+    def check_limits(self, poses: np.ndarray, margin: float = 0.0) -> LimitReport:
+        """``reach`` (an arm cannot reach its rail), ``travel`` (a reading beyond the switch
+        or the rail's end), ``arm_angle`` (an arm flatter than :attr:`min_arm_angle`),
+        ``print_radius`` and ``min_z``; margins in mm (rad for the arm angle)."""
+        poses = self.as_pose_array(poses)
+        g = _towers(self.rho)
+        e_r, _, u, *_ = _frames(g)
+        s, w = self._rail_positions(poses - g["tool"][None, :], g, u, g["radius"][:, None] * e_r)
+        lam = self.ik(poses)
+        reach = np.all(np.isfinite(s), axis=1)
+        hi = self.reading_reference[None, :]
+        lo = hi - self.travel[None, :]
+        travel_m = np.where(reach[:, None], np.minimum(hi - lam, lam - lo), -np.inf).min(axis=1) - margin
+        with np.errstate(invalid="ignore"):
+            elev = np.arcsin(np.clip(w[..., 2] / g["arm"][None, :], -1.0, 1.0))
+        angle_m = np.min(np.where(np.isfinite(elev), elev, -np.inf), axis=1, initial=np.inf) - self.min_arm_angle
+        radius_m = self.print_radius - np.hypot(poses[:, 0], poses[:, 1]) - margin
+        z_m = poses[:, 2] - self.min_z
+        margins = {"reach": np.where(reach, 0.0, -np.inf), "travel": travel_m, "arm_angle": angle_m,
+                   "print_radius": radius_m, "min_z": z_m}
+        return LimitReport(violations={k: ~(v >= 0) for k, v in margins.items()}, margins=margins)
+
+
+def _trilaterate(C: np.ndarray, L: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Points q (N, 3) at distances L (3,) from the three centres C (N, 3, 3), the solution
+    below the centres' plane (the plane's normal taken upwards); ``ok`` (N,) False where the
+    spheres do not meet or the centres are collinear."""
+    p1, p2, p3 = C[:, 0], C[:, 1], C[:, 2]
+    ex = p2 - p1
+    d = np.linalg.norm(ex, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ex = ex / d[:, None]
+        t = p3 - p1
+        i = np.einsum("nk,nk->n", ex, t)
+        ey = t - i[:, None] * ex
+        j = np.linalg.norm(ey, axis=1)
+        ey = ey / j[:, None]
+        ez = np.cross(ex, ey)
+        ez = np.where(ez[:, 2:3] < 0, -ez, ez)      # upwards
+        x = (L[0] ** 2 - L[1] ** 2 + d**2) / (2 * d)
+        y = (L[0] ** 2 - L[2] ** 2 + i**2 + j**2) / (2 * j) - i / j * x
+        z2 = L[0] ** 2 - x**2 - y**2
+        ok = np.isfinite(z2) & (z2 >= 0) & (j > 1e-9 * d)
+        z = np.sqrt(np.where(ok, z2, 0.0))
+    q = p1 + x[:, None] * ex + y[:, None] * ey - z[:, None] * ez
+    return q, ok
+
+
+def klipper_delta(name: str, delta_radius: float, arm_length: float | tuple, position_endstop: float | tuple,
+                  angles_deg: tuple = KLIPPER_TOWER_ANGLES_DEG, **limits) -> LinearDelta:
+    """A linear delta from Klipper's ``[printer] kinematics: delta`` parameters (vertical
+    rails, one radius, per-tower ``angle``, ``arm_length`` and ``position_endstop``)."""
+    arms = np.broadcast_to(np.asarray(arm_length, dtype=float), (3,))
+    ends = np.broadcast_to(np.asarray(position_endstop, dtype=float), (3,))
+    rho = np.zeros(len(PARAM_NAMES))
+    for i in range(3):
+        rho[_index("angle", i)] = np.deg2rad(angles_deg[i])
+        rho[_index("radius", i)] = delta_radius
+        rho[_index("arm", i)] = arms[i]
+        rho[_index("endstop", i)] = ends[i]
+    return LinearDelta(name=name, rho=rho, **limits)
+
+
+__all__ = ["KLIPPER_TOWER_ANGLES_DEG", "LinearDelta", "PARAM_NAMES", "TOWERS", "TOWER_PARAMS", "klipper_delta"]
