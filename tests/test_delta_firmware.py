@@ -1,0 +1,212 @@
+"""Klipper and Marlin delta configurations (pkmcal.io.delta_firmware): a real-style
+printer.cfg with includes and a SAVE_CONFIG block, M503 output, the firmwares' formulas for
+the tower positions and switch heights, exact round trips, and what an export drops."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pkmcal.errors import InputFileError
+from pkmcal.io.delta_firmware import (
+    DeltaFirmware,
+    firmware_subset,
+    klipper_text,
+    marlin_text,
+    read_klipper,
+    read_marlin,
+)
+from pkmcal.mechanisms.linear_delta import PARAM_NAMES
+
+PRINTER_CFG = """\
+# Kossel-style delta, as Klipper's example-delta.cfg lays it out
+[include mainsail.cfg]
+
+[stepper_a]
+step_pin: PF0
+dir_pin: PF1
+microsteps: 16
+rotation_distance: 40
+endstop_pin: ^PE4
+homing_speed: 50
+position_endstop: 297.05 ; measured
+arm_length: 333.0
+
+[stepper_b]
+step_pin: PF6
+rotation_distance: 40
+endstop_pin: ^PJ0
+
+[stepper_c]
+step_pin: PL3
+rotation_distance: 40
+endstop_pin: ^PD2
+
+[printer]
+kinematics: delta
+max_velocity: 300
+max_accel: 3000
+max_z_velocity: 150
+delta_radius: 174.75
+print_radius: 140
+minimum_z_position: -5
+
+[gcode_macro START_PRINT]
+gcode:
+    G28
+    G1 Z10 F3000
+
+#*# <---------------------- SAVE_CONFIG ---------------------->
+#*# DO NOT EDIT THIS BLOCK OR BELOW. The contents are auto-generated.
+#*#
+#*# [printer]
+#*# delta_radius = 174.210123
+#*#
+#*# [stepper_a]
+#*# angle = 210.114221
+#*# arm_length = 333.000000
+#*# position_endstop = 296.681930
+#*#
+#*# [stepper_b]
+#*# angle = 329.707221
+#*# arm_length = 333.000000
+#*# position_endstop = 297.383285
+#*#
+#*# [stepper_c]
+#*# angle = 90.000000
+#*# arm_length = 333.000000
+#*# position_endstop = 296.917010
+#*#
+#*# [delta_calibrate]
+#*# height0 = 0.0
+#*# height0_pos = 23961.000,23961.000,23961.000
+"""
+
+
+def _write(tmp_path, name, text):
+    p = tmp_path / name
+    p.write_text(text)
+    return str(p)
+
+
+def test_klipper_config_with_include_and_saved_block(tmp_path):
+    _write(tmp_path, "mainsail.cfg", "[virtual_sdcard]\npath: ~/printer_data/gcodes\n")
+    fw = read_klipper(_write(tmp_path, "printer.cfg", PRINTER_CFG))
+    # the SAVE_CONFIG block overrides the sections above it
+    assert fw.radius == 174.210123
+    assert fw.angles_deg == (210.114221, 329.707221, 90.0)
+    assert fw.arms == (333.0, 333.0, 333.0)
+    assert fw.endstops == (296.68193, 297.383285, 296.91701)
+    assert fw.print_radius == 140.0 and fw.min_z == -5.0
+
+
+def test_klipper_defaults_follow_stepper_a_and_the_standard_angles(tmp_path):
+    fw = read_klipper(_write(tmp_path, "p.cfg", PRINTER_CFG.split("#*#")[0].replace("[include mainsail.cfg]", "")))
+    assert fw.radius == 174.75
+    assert fw.angles_deg == (210.0, 330.0, 90.0)
+    assert fw.arms == (333.0,) * 3 and fw.endstops == (297.05,) * 3
+
+
+def test_machine_has_klippers_towers_and_switch_heights(tmp_path):
+    fw = read_klipper(_write(tmp_path, "p.cfg", PRINTER_CFG.replace("[include mainsail.cfg]", "")))
+    m = fw.machine("kossel")
+    # Klipper: towers at radius·(cos angle, sin angle); abs_endstop = position_endstop +
+    # sqrt(arm² − radius²); stepper position z + sqrt(arm² − (x − x_t)² − (y − y_t)²)
+    ang = np.deg2rad(fw.angles_deg)
+    tx, ty = fw.radius * np.cos(ang), fw.radius * np.sin(ang)
+    np.testing.assert_allclose(m.reading_reference, np.array(fw.endstops) + np.sqrt(333.0**2 - fw.radius**2),
+                               rtol=0, atol=1e-12 * 600)
+    p = np.array([[12.0, -30.0, 5.0], [0.0, 100.0, 40.0]])
+    expected = p[:, 2:3] + np.sqrt(333.0**2 - (p[:, :1] - tx) ** 2 - (p[:, 1:2] - ty) ** 2)
+    np.testing.assert_allclose(m.ik(p), expected, rtol=0, atol=1e-12 * 600)
+
+
+_finite = st.floats(-1e3, 1e3, allow_nan=False, allow_infinity=False)
+
+
+@st.composite
+def firmwares(draw):
+    r = draw(st.floats(50, 300))
+    return DeltaFirmware(radius=r, angles_deg=tuple(a + draw(st.floats(-5, 5)) for a in (210.0, 330.0, 90.0)),
+                         arms=tuple(r * draw(st.floats(1.5, 2.5)) for _ in range(3)),
+                         endstops=tuple(draw(st.floats(100, 600)) for _ in range(3)),
+                         print_radius=0.8 * r, min_z=0.0)
+
+
+@settings(max_examples=50, deadline=None)
+@given(fw=firmwares())
+def test_round_trips_are_exact(tmp_path_factory, fw):
+    d = tmp_path_factory.mktemp("rt")
+    cfg = "[printer]\nkinematics: delta\nprint_radius: {!r}\n\n".format(fw.print_radius) + klipper_text(fw)
+    back = read_klipper(_write(d, "printer.cfg", cfg))
+    assert back == fw
+    # machine → firmware numbers → machine: lengths bit for bit; angles through one
+    # radian → degree → radian conversion, each correctly rounded: within 2 ulp
+    m = fw.machine("m")
+    fw2, dropped = firmware_subset(m)
+    assert dropped == []
+    is_angle = np.array(m.param_is_angle)
+    back_rho = fw2.machine("m").params
+    np.testing.assert_array_equal(back_rho[~is_angle], m.params[~is_angle])
+    np.testing.assert_allclose(back_rho[is_angle], m.params[is_angle], rtol=0, atol=2 * np.spacing(2 * np.pi))
+    # Marlin: each number written to 6 decimals (half a unit of 1e-6 off at most), then
+    # summed (L + trim, H − adj, 210 + trim: two written numbers each)
+    mb = read_marlin(_write(d, "m503.txt", "echo:; Delta settings:\necho:  " + marlin_text(fw)))
+    for got, want in ((mb.arms, fw.arms), (mb.endstops, fw.endstops), (mb.angles_deg, fw.angles_deg),
+                      ((mb.radius,), (fw.radius,))):
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-6 + 1e-12 * 1e3)
+
+
+def test_marlin_m503_output_and_its_conventions(tmp_path):
+    text = """\
+echo:; Delta config:
+echo:  M665 L217.00 R95.00 H300.50 S200.00 X0.25 Y-0.10 Z-0.15 A0.20 B0.00 C-0.30
+echo:; Endstop adjustment:
+echo:  M666 X-0.40 Y0.00 Z-1.20
+"""
+    fw = read_marlin(_write(tmp_path, "m503.txt", text))
+    assert fw.radius == 95.0
+    np.testing.assert_allclose(fw.arms, (217.2, 217.0, 216.7), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(fw.angles_deg, (210.25, 329.9, 89.85), rtol=0, atol=1e-12)
+    # M666 ≤ 0: the carriage goes |adj| below its switch, and the nozzle is then at H
+    np.testing.assert_allclose(fw.endstops, (300.9, 300.5, 301.7), rtol=0, atol=1e-12)
+    out = marlin_text(fw).splitlines()
+    assert out[0] == "M665 L216.966667 R95 H300.5 X0.25 Y-0.1 Z-0.15 A0.233333 B0.033333 C-0.266667"
+    assert out[1] == "M666 X-0.4 Y0 Z-1.2"
+
+
+def test_export_names_what_the_firmware_cannot_hold():
+    fw = DeltaFirmware(radius=100.0, angles_deg=(210.0, 330.0, 90.0), arms=(215.0,) * 3, endstops=(300.0,) * 3)
+    m = fw.machine("m")
+    rho = m.params
+    rho[PARAM_NAMES.index("lean_radial_b")] = np.deg2rad(0.3)
+    rho[PARAM_NAMES.index("radius_c")] = 101.5
+    fw2, dropped = firmware_subset(m.with_params(rho))
+    names = [d.name for d in dropped]
+    assert names == ["radius_a", "radius_b", "radius_c", "lean_radial_b"]
+    assert fw2.radius == pytest.approx(100.5)
+    assert "lean_radial_b = 0.3 deg cannot be represented" in dropped[-1].describe(True)
+
+
+@pytest.mark.parametrize("text, message", [
+    ("[printer]\nkinematics: cartesian\n", "kinematics is 'cartesian'"),
+    ("[printer]\nkinematics: delta\n[stepper_a]\narm_length: 300\nposition_endstop: 290\n",
+     "\\[printer\\] has no 'delta_radius'"),
+    ("[printer]\nkinematics: delta\ndelta_radius: abc\n", "delta_radius: expected a number, got 'abc'"),
+    ("[stepper_a]\nno section header problem\n", "not a Klipper config file"),
+    ("[include missing.cfg]\n[printer]\nkinematics: delta\n", "no such file"),
+])
+def test_bad_klipper_configs_name_the_file_and_key(tmp_path, text, message):
+    with pytest.raises(InputFileError, match=message):
+        read_klipper(_write(tmp_path, "printer.cfg", text))
+
+
+def test_bad_marlin_lines_name_the_line(tmp_path):
+    with pytest.raises(InputFileError, match=r"line 2: cannot read"):
+        read_marlin(_write(tmp_path, "m.gcode", "G28\nM665 L217 R95 H300 Q\n"))
+    with pytest.raises(InputFileError, match="no M665 H value"):
+        read_marlin(_write(tmp_path, "m.gcode", "M665 L217 R95\n"))
+    with pytest.raises(InputFileError, match="must be ≤ 0"):
+        read_marlin(_write(tmp_path, "m.gcode", "M665 L217 R95 H300\nM666 X0.5\n"))
