@@ -64,6 +64,7 @@ import numpy as np
 
 from pkmcal.errors import PkmcalError
 from pkmcal.mechanisms.base import FKResult, LimitReport, Mechanism
+from pkmcal.mechanisms.trilateration import trilaterate
 
 TOWERS = ("a", "b", "c")
 #: Per-tower parameters, in this order for each tower (angles: θ, α, β).
@@ -326,7 +327,7 @@ class LinearDelta(Mechanism):
         S, _ = self._switch(g, u, B)
         s = lam - self.reading_reference[None, :] + S[None, :]
         C = B[None, :, :] + s[:, :, None] * u[None, :, :]        # (N, 3, 3) carriage joints
-        q, ok = _trilaterate(C, g["arm"])
+        q, ok = trilaterate(C, g["arm"])
         poses = q + g["tool"][None, :]
         with np.errstate(invalid="ignore"):
             back = self.ik(np.where(ok[:, None], poses, 0.0), params)
@@ -367,31 +368,6 @@ class LinearDelta(Mechanism):
         margins = {"reach": np.where(reach, 0.0, -np.inf), "travel": travel_m, "arm_angle": angle_m,
                    "print_radius": radius_m, "min_z": z_m}
         return LimitReport(violations={k: ~(v >= 0) for k, v in margins.items()}, margins=margins)
-
-
-def _trilaterate(C: np.ndarray, L: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Points q (N, 3) at distances L (3,) from the three centres C (N, 3, 3), the solution
-    below the centres' plane (the plane's normal taken upwards); ``ok`` (N,) False where the
-    spheres do not meet or the centres are collinear."""
-    p1, p2, p3 = C[:, 0], C[:, 1], C[:, 2]
-    ex = p2 - p1
-    d = np.linalg.norm(ex, axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ex = ex / d[:, None]
-        t = p3 - p1
-        i = np.einsum("nk,nk->n", ex, t)
-        ey = t - i[:, None] * ex
-        j = np.linalg.norm(ey, axis=1)
-        ey = ey / j[:, None]
-        ez = np.cross(ex, ey)
-        ez = np.where(ez[:, 2:3] < 0, -ez, ez)      # upwards
-        x = (L[0] ** 2 - L[1] ** 2 + d**2) / (2 * d)
-        y = (L[0] ** 2 - L[2] ** 2 + i**2 + j**2) / (2 * j) - i / j * x
-        z2 = L[0] ** 2 - x**2 - y**2
-        ok = np.isfinite(z2) & (z2 >= 0) & (j > 1e-9 * d)
-        z = np.sqrt(np.where(ok, z2, 0.0))
-    q = p1 + x[:, None] * ex + y[:, None] * ey - z[:, None] * ez
-    return q, ok
 
 
 def klipper_delta(name: str, delta_radius: float, arm_length: float | tuple, position_endstop: float | tuple,
