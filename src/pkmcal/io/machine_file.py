@@ -650,6 +650,7 @@ def machine_to_text(machine: Mechanism) -> str:
 
 
 def _register_planar_kinds() -> None:
+    from pkmcal.io import delta_machine_file  # noqa: F401  (registers the delta kinds)
     from pkmcal.io import planar_machine_file  # noqa: F401  (registers the planar kinds)
 
 

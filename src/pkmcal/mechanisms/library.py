@@ -8,6 +8,17 @@
 * ``symmetric:KEY=VALUE,...``: a symmetric 6-6 (or, with ``platform_separation=0``, 3-6)
   hexapod from joint radii and pair separation angles; see :func:`symmetric_hexapod`.
 
+* ``kossel-mini``: Johann Rocholl's Kossel Mini linear delta printer with the dimensions
+  of Marlin's example configuration (MarlinFirmware/Configurations,
+  ``config/examples/delta/kossel_mini/Configuration.h``): DELTA_DIAGONAL_ROD 215 mm,
+  DELTA_RADIUS 105.2 mm, DELTA_HEIGHT 250 mm, DELTA_PRINTABLE_RADIUS 90 mm, towers at
+  210/330/90° with no trims or endstop adjustments.
+* ``delta-picker``: a rotary (Clavel) pick-and-place delta of illustrative dimensions,
+  typical of the 800 mm-workspace class: effective shoulder radius (base minus effector
+  joint radius) 150 mm, upper arms 350 mm, forearms 800 mm, motors −40…100°, ball joints
+  within 60° of vertical; its working cylinder (every pose in it reachable): radius 300 mm
+  between z = −950 and −680 mm.
+
 Other planar/redundant machines register themselves in :data:`BUILTIN_MACHINES`.
 """
 
@@ -85,6 +96,25 @@ def stewart_prototype_real() -> Hexapod:
     return replace(real, home=nominal.home, description="stewart-prototype with the Table 4 deviations of Saputra et al. (2014)")
 
 
+def kossel_mini():
+    """The Kossel Mini (module docstring)."""
+    from pkmcal.mechanisms.linear_delta import klipper_delta
+
+    return klipper_delta("kossel-mini", delta_radius=105.2, arm_length=215.0, position_endstop=250.0,
+                         print_radius=90.0, description="Kossel Mini linear delta printer (Marlin's example "
+                         "configuration: rod 215 mm, radius 105.2 mm, height 250 mm)")
+
+
+def delta_picker():
+    """The rotary pick-and-place delta (module docstring)."""
+    from pkmcal.mechanisms.rotary_delta import symmetric_rotary_delta
+
+    return symmetric_rotary_delta("delta-picker", radius=150.0, upper=350.0, forearm=800.0, workspace_radius=300.0,
+                                  z_range=(-950.0, -680.0),
+                                  description="rotary pick-and-place delta, illustrative 800 mm-workspace class "
+                                  "(upper arm 350 mm, forearm 800 mm)")
+
+
 def symmetric_hexapod(
     base_radius: float = 152.5,
     platform_radius: float = 70.0,
@@ -132,6 +162,8 @@ BUILTIN_MACHINES: dict[str, tuple[Callable[[], Mechanism], str]] = {
     "stewart-prototype-real": (stewart_prototype_real, "paper 2 prototype with Table 4 deviations"),
     "planar-2dof-3act": (planar_2dof_3act, "paper 3 case 1: 2-dof planar, 3 rotary actuators (redundant)"),
     "planar-3dof-4act": (planar_3dof_4act, "paper 3 case 2: 3-dof planar, 4 linear actuators (redundant)"),
+    "kossel-mini": (kossel_mini, "linear delta printer, Marlin's Kossel Mini example configuration"),
+    "delta-picker": (delta_picker, "rotary pick-and-place delta, illustrative dimensions"),
 }
 
 DEFAULT_MACHINE = "stewart-prototype"

@@ -69,11 +69,11 @@ from pkmcal.mechanisms.trilateration import trilaterate
 TOWERS = ("a", "b", "c")
 #: Per-tower parameters, in this order for each tower (angles: θ, α, β).
 TOWER_PARAMS = ("angle", "radius", "arm", "endstop", "lean_radial", "lean_tangential")
-_TOWER_ANGLE = {"angle": True, "radius": False, "arm": False, "endstop": False, "lean_radial": True,
+TOWER_PARAM_IS_ANGLE = {"angle": True, "radius": False, "arm": False, "endstop": False, "lean_radial": True,
                 "lean_tangential": True}
 TOOL_PARAMS = ("tool.x", "tool.y", "tool.z")
 PARAM_NAMES = tuple(f"{p}_{t}" for t in TOWERS for p in TOWER_PARAMS) + TOOL_PARAMS
-PARAM_IS_ANGLE = tuple(_TOWER_ANGLE[p] for _ in TOWERS for p in TOWER_PARAMS) + (False,) * 3
+PARAM_IS_ANGLE = tuple(TOWER_PARAM_IS_ANGLE[p] for _ in TOWERS for p in TOWER_PARAMS) + (False,) * 3
 #: Klipper's default tower angles (degrees): stepper_a, b, c.
 KLIPPER_TOWER_ANGLES_DEG = (210.0, 330.0, 90.0)
 #: FK is converged where the IK of its pose reproduces the readings within this (mm).
@@ -81,13 +81,13 @@ FK_TOL = 1e-9
 _NP = len(TOWER_PARAMS)
 
 
-def _index(param: str, tower: int) -> int:
+def param_position(param: str, tower: int) -> int:
     return tower * _NP + TOWER_PARAMS.index(param)
 
 
 def _towers(rho: np.ndarray) -> dict[str, np.ndarray]:
     """Per-tower arrays (3,) of every tower parameter, plus the tool offset (3,)."""
-    out = {p: rho[[_index(p, i) for i in range(3)]] for p in TOWER_PARAMS}
+    out = {p: rho[[param_position(p, i) for i in range(3)]] for p in TOWER_PARAMS}
     out["tool"] = rho[-3:]
     return out
 
@@ -154,6 +154,16 @@ class LinearDelta(Mechanism):
             raise PkmcalError(f"linear delta '{self.name}': the rail travel must be positive (mm)")
         travel.setflags(write=False)
         object.__setattr__(self, "travel", travel)
+
+    def __eq__(self, other: object) -> bool:
+        if type(other) is not type(self):
+            return NotImplemented
+        return bool(self.name == other.name and np.array_equal(self.rho, other.rho)
+                    and np.array_equal(self.reading_reference, other.reading_reference)
+                    and np.array_equal(self.travel, other.travel) and self.print_radius == other.print_radius
+                    and self.min_z == other.min_z and self.min_arm_angle == other.min_arm_angle)
+
+    __hash__ = None  # type: ignore[assignment]
 
     # -- declarations --------------------------------------------------------------------
 
@@ -298,11 +308,11 @@ class LinearDelta(Mechanism):
                     "lean_tangential": (np.zeros(3), du_be[i], 0.0)}
             with np.errstate(divide="ignore", invalid="ignore"):
                 for p, (dB, du, dL) in dirs.items():
-                    col = _index(p, i)
+                    col = param_position(p, i)
                     Bj[:, i, col] = ds(w[:, i], s[:, i], D[:, i], i, dB, du, dL) - ds(W[i], S[i], D_sw[i], i, dB,
                                                                                         du, dL)
                 # the switch pose (0, 0, E_i) rises with E_i: −∂S/∂p · e_z
-                Bj[:, i, _index("endstop", i)] = -W[i, 2] / D_sw[i]
+                Bj[:, i, param_position("endstop", i)] = -W[i, 2] / D_sw[i]
                 # the tool offset: dq = −dt, at the pose and at the switch
                 Bj[:, i, -3:] = -w[:, i] / D[:, i, None] + W[i] / D_sw[i]
         return lam, A, Bj
@@ -378,11 +388,12 @@ def klipper_delta(name: str, delta_radius: float, arm_length: float | tuple, pos
     ends = np.broadcast_to(np.asarray(position_endstop, dtype=float), (3,))
     rho = np.zeros(len(PARAM_NAMES))
     for i in range(3):
-        rho[_index("angle", i)] = np.deg2rad(angles_deg[i])
-        rho[_index("radius", i)] = delta_radius
-        rho[_index("arm", i)] = arms[i]
-        rho[_index("endstop", i)] = ends[i]
+        rho[param_position("angle", i)] = np.deg2rad(angles_deg[i])
+        rho[param_position("radius", i)] = delta_radius
+        rho[param_position("arm", i)] = arms[i]
+        rho[param_position("endstop", i)] = ends[i]
     return LinearDelta(name=name, rho=rho, **limits)
 
 
-__all__ = ["KLIPPER_TOWER_ANGLES_DEG", "LinearDelta", "PARAM_NAMES", "TOWERS", "TOWER_PARAMS", "klipper_delta"]
+__all__ = ["KLIPPER_TOWER_ANGLES_DEG", "LinearDelta", "PARAM_NAMES", "TOWERS", "TOWER_PARAMS", "TOWER_PARAM_IS_ANGLE",
+           "klipper_delta", "param_position"]

@@ -50,23 +50,23 @@ from pkmcal.mechanisms.trilateration import trilaterate
 ARMS = ("a", "b", "c")
 #: Per-arm parameters, in this order for each arm.
 ARM_PARAMS = ("angle", "radius", "height", "upper", "forearm", "zero", "axis_yaw", "axis_tilt")
-_ARM_ANGLE = {"angle": True, "radius": False, "height": False, "upper": False, "forearm": False, "zero": True,
+ARM_PARAM_IS_ANGLE = {"angle": True, "radius": False, "height": False, "upper": False, "forearm": False, "zero": True,
               "axis_yaw": True, "axis_tilt": True}
 TOOL_PARAMS = ("tool.x", "tool.y", "tool.z")
 PARAM_NAMES = tuple(f"{p}_{t}" for t in ARMS for p in ARM_PARAMS) + TOOL_PARAMS
-PARAM_IS_ANGLE = tuple(_ARM_ANGLE[p] for _ in ARMS for p in ARM_PARAMS) + (False,) * 3
+PARAM_IS_ANGLE = tuple(ARM_PARAM_IS_ANGLE[p] for _ in ARMS for p in ARM_PARAMS) + (False,) * 3
 NOMINAL_ANGLES_DEG = (90.0, 210.0, 330.0)
 #: FK is converged where the IK of its pose reproduces the readings within this (rad).
 FK_TOL = 1e-10
 _NP = len(ARM_PARAMS)
 
 
-def _index(param: str, arm: int) -> int:
+def param_position(param: str, arm: int) -> int:
     return arm * _NP + ARM_PARAMS.index(param)
 
 
 def _arms(rho: np.ndarray) -> dict[str, np.ndarray]:
-    out = {p: rho[[_index(p, i) for i in range(3)]] for p in ARM_PARAMS}
+    out = {p: rho[[param_position(p, i) for i in range(3)]] for p in ARM_PARAMS}
     out["tool"] = rho[-3:]
     return out
 
@@ -122,6 +122,17 @@ class RotaryDelta(Mechanism):
         problem = self.parameter_problem()
         if problem is not None:
             raise PkmcalError(f"rotary delta '{self.name}': {problem[0]} {problem[1]}")
+
+    def __eq__(self, other: object) -> bool:
+        if type(other) is not type(self):
+            return NotImplemented
+        return bool(self.name == other.name and np.array_equal(self.rho, other.rho)
+                    and tuple(self.motor_range) == tuple(other.motor_range)
+                    and self.max_joint_angle == other.max_joint_angle
+                    and self.workspace_radius == other.workspace_radius
+                    and tuple(self.z_range) == tuple(other.z_range))
+
+    __hash__ = None  # type: ignore[assignment]
 
     @property
     def actuator_is_angle(self) -> tuple[bool, ...]:
@@ -245,10 +256,10 @@ class RotaryDelta(Mechanism):
             n = len(poses)
             Bj = np.zeros((n, 3, len(PARAM_NAMES)))
             for p, de in dE.items():
-                col = [_index(p, i) for i in range(3)]
+                col = [param_position(p, i) for i in range(3)]
                 Bj[:, range(3), col] = -np.einsum("ntk,ntk->nt", w, de) / G
-            Bj[:, range(3), [_index("forearm", i) for i in range(3)]] = g["forearm"][None, :] / G
-            Bj[:, range(3), [_index("zero", i) for i in range(3)]] = -1.0
+            Bj[:, range(3), [param_position("forearm", i) for i in range(3)]] = g["forearm"][None, :] / G
+            Bj[:, range(3), [param_position("zero", i) for i in range(3)]] = -1.0
             Bj[:, :, -3:] = -A                                 # dq = −dt
         return lam, A, Bj
 
@@ -315,12 +326,13 @@ def symmetric_rotary_delta(name: str, radius: float, upper: float, forearm: floa
     """An ideal rotary delta: arms at 90°, 210°, 330°, equal lengths, axes tangent and level."""
     rho = np.zeros(len(PARAM_NAMES))
     for i in range(3):
-        rho[_index("angle", i)] = np.deg2rad(NOMINAL_ANGLES_DEG[i])
-        rho[_index("radius", i)] = radius
-        rho[_index("height", i)] = height
-        rho[_index("upper", i)] = upper
-        rho[_index("forearm", i)] = forearm
+        rho[param_position("angle", i)] = np.deg2rad(NOMINAL_ANGLES_DEG[i])
+        rho[param_position("radius", i)] = radius
+        rho[param_position("height", i)] = height
+        rho[param_position("upper", i)] = upper
+        rho[param_position("forearm", i)] = forearm
     return RotaryDelta(name=name, rho=rho, **limits)
 
 
-__all__ = ["ARMS", "ARM_PARAMS", "PARAM_NAMES", "RotaryDelta", "symmetric_rotary_delta"]
+__all__ = ["ARMS", "ARM_PARAMS", "ARM_PARAM_IS_ANGLE", "PARAM_NAMES", "RotaryDelta", "param_position",
+           "symmetric_rotary_delta"]
