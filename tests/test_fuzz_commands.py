@@ -441,7 +441,7 @@ def test_symmetric_specs_give_a_finite_machine_or_an_error(items):
     assert m.platform_radius > 0 and np.all(np.abs(m.params) <= MAX_MAGNITUDE), spec
 
 
-@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(st.integers(0, 13), st.integers(0, 14), st.one_of(st.floats(allow_nan=False).map(repr),
                                                          st.sampled_from(["1e308", "-1e308", "1e7", "9e5"])))
 def test_measurements_hold_plausible_numbers(base, tmp_path, row, column, cell):
@@ -540,7 +540,7 @@ SETUP_FIELDS = {"sensor": "sensor: indicators", "indicators": "indicators: [[40,
                 "noise": "noise: {reading: 0.01, actuator: 0.005}", "free": "free: [zero1, zero2]"}
 
 
-@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(st.sampled_from(["plane_offset: V", "noise: {reading: V, actuator: 0.005}",
                         "noise: {reading: 0.01, actuator: V}", "zero: [0, V, 0]",
                         "indicators: [[40, 0], [V, 34.641], [-20, -34.641]]", "free: [V, zero1]"]),
