@@ -391,7 +391,8 @@ def _least_squares(obj: "_Objective", x0: np.ndarray, *, jac: str, method: str, 
     ``jac="2-point"`` / ``"3-point"`` it is called
     through :func:`scipy.optimize.least_squares`, whose finite-difference Jacobian feeds
     the same ``lmder``. ``trf`` / ``dogbox`` always use ``least_squares``. A robust ``loss``
-    applies to the first ``n_data`` residuals (:func:`~pkmcal.identification.robust.masked_loss`).
+    applies to the first ``n_data`` residuals (:func:`~pkmcal.identification.robust.masked_loss`),
+    from the least-squares solution.
     """
     from scipy.optimize import least_squares, leastsq  # on first use: scipy.optimize takes ~0.3 s to import
 
@@ -403,11 +404,30 @@ def _least_squares(obj: "_Objective", x0: np.ndarray, *, jac: str, method: str, 
         status, message = _MINPACK_STATUS.get(int(ier), (-1, f"MINPACK returned info={ier}"))
         return _Solution(x=np.asarray(x, dtype=float), cost=0.5 * float(f @ f), nfev=int(info["nfev"]),
                          njev=int(info["njev"]), status=status, message=message)
+    start = None
+    if loss != "linear":
+        # from the nominal machine every pose is many σ off (the machine's errors are what is
+        # identified), where a robust loss is flat and the trust region stops far from the
+        # minimum: start from the least-squares solution (soft_l1 from nominal stopped 168 σ
+        # away on a 100-pose fk-residual fit with a 5 mm outlier; 0.4 σ from least squares).
+        # A redescending loss (cauchy) is not convex: it finds the minimum of the basin the
+        # least-squares fit is in, and a gross outlier that drags that fit far needs --reject
+        start = _least_squares(obj, x0, jac=jac, method="lm" if obj.fun(x0).size >= n else "trf", ftol=ftol,
+                               xtol=xtol, gtol=gtol, max_nfev=max_nfev)
+        x0 = start.x
     robust = {} if loss == "linear" else {"loss": masked_loss(loss, n_data), "f_scale": f_scale}
-    sol = least_squares(obj.fun, x0, jac=obj.jac if jac == "analytic" else jac, method=method, x_scale="jac",
+    x_scale = "jac"
+    if start is not None:
+        # variables scaled by the least-squares Jacobian: scaled by the robust one (which
+        # down-weights the outlying rows) the trust region collapsed, steps below xtol far
+        # from the minimum (soft_l1, a 20 mm outlier among 100 poses: 716 σ off; 0.4 σ so)
+        col = np.linalg.norm(obj.jac(x0), axis=0)
+        x_scale = 1.0 / np.where(col > 0, col, 1.0)
+    sol = least_squares(obj.fun, x0, jac=obj.jac if jac == "analytic" else jac, method=method, x_scale=x_scale,
                         ftol=ftol, xtol=xtol, gtol=gtol, max_nfev=max_nfev, **robust)
-    return _Solution(x=sol.x, cost=float(sol.cost), nfev=int(sol.nfev), njev=int(sol.njev or 0),
-                     status=int(sol.status), message=str(sol.message))
+    extra = (0, 0) if start is None else (start.nfev, start.njev)
+    return _Solution(x=sol.x, cost=float(sol.cost), nfev=int(sol.nfev) + extra[0],
+                     njev=int(sol.njev or 0) + extra[1], status=int(sol.status), message=str(sol.message))
 
 
 def _gauss_newton_step(obj: "_Objective", x0: np.ndarray) -> _Solution:
