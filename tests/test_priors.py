@@ -148,8 +148,8 @@ def test_prior_errors(nominal, real):
     with pytest.raises(PkmcalError, match="world.x is held fixed"):
         identify(nominal, setup, q=q, y=y, priors=["world.x=±1"])
     with pytest.raises(PkmcalError, match="lengths .mm. and angles"):
-        identify(nominal, MeasurementSetup(FullPoseSensor(free=("world.x", "world.y", "world.z", "world.a", "world.b", "world.c")), NOISE_FULL), q=q, y=y,
-                 priors=["world.*=±1"])
+        free_world = FullPoseSensor(free=("world.x", "world.y", "world.z", "world.a", "world.b", "world.c"))
+        identify(nominal, MeasurementSetup(free_world, NOISE_FULL), q=q, y=y, priors=["world.*=±1"])
     with pytest.raises(PkmcalError, match="two priors"):
         identify(nominal, setup, q=q, y=y, priors=["L0_*=±1", "L0_1=±2"])
     with pytest.raises(PkmcalError, match="noise-weighted"):

@@ -106,7 +106,8 @@ class Uncertainty:
         e = self.chi2_expected
         why = (f" (= dof {self.dof})" if self.kind != "sandwich" else
                f" (dof {self.dof}: an unweighted fit leaves more whitened residual)") if np.isfinite(e) else ""
-        return (f"{KINDS[self.kind]}{' [' + self.note + ']' if self.note else ''} x max(1, chi2/E[chi2]) = x {self.inflation:.4g}; chi2 {self.chi2:.6g}, "
+        note = f" [{self.note}]" if self.note else ""
+        return (f"{KINDS[self.kind]}{note} x max(1, chi2/E[chi2]) = x {self.inflation:.4g}; chi2 {self.chi2:.6g}, "
                 f"E[chi2] {e:.6g}{why}")
 
     @property
