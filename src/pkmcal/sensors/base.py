@@ -191,8 +191,11 @@ class MeasurementSetup:
     """A sensor and the noise of its readings and of the actuators; optionally the physics
     that only a simulation uses (``simulation``: a
     :class:`~pkmcal.mechanisms.statics.StaticsModel`, actuator stiffness and tool load of a
-    redundantly actuated machine; the identifier never reads it)."""
+    redundantly actuated machine; the identifier never reads it); ``priors``: Gaussian
+    priors on parameters (:class:`~pkmcal.identification.priors.Prior`, the setup file's
+    ``prior:``), which the identification adds to its own."""
 
     sensor: Sensor
     noise: NoiseModel
     simulation: "StaticsModel | None" = None
+    priors: tuple = ()
