@@ -1,7 +1,11 @@
 """Helpers shared by the test modules (imported as ``from helpers import ...``; pytest puts
 ``tests/`` on the path): the prototype's legs as machine-file text, the CLI's user-error
 contract (exit code 2, one ``pkmcal: error:`` line on stderr, no traceback, nothing
-written), and the hypothesis strategies of the loader fuzz tests."""
+written), the hypothesis strategies of the loader fuzz tests, the one comparison of
+analytic Jacobians with central finite differences that every Jacobian test uses
+(:func:`assert_jacobian_matches_fd`, its tolerance derived from the step and the scale), the
+bands of the Monte Carlo checks (from the sampling distributions, false failure < 1e-6 for
+any seed), and the environment of a pkmcal subprocess."""
 
 from __future__ import annotations
 
@@ -33,6 +37,221 @@ def random_poses(machine, n: int, seed: int = 0) -> np.ndarray:
     """``n`` poses uniform in home ± :data:`POSE_HALF_WIDTHS` (internal units)."""
     rng = np.random.default_rng(seed)
     return machine.home_pose + rng.uniform(-1.0, 1.0, (n, 6)) * POSE_HALF_WIDTHS
+
+
+# -- analytic Jacobians against central finite differences ---------------------------------------
+#
+# Central difference of f along x_k with step h:
+#
+#     D_k = (f(x + h e_k) − f(x − h e_k)) / 2h = ∂f/∂x_k + h²/6 · ∂³f/∂x_k³(ξ) + (δ⁺ − δ⁻)/2h,
+#
+# so |D_k − ∂f/∂x_k| ≤ h²·T_k/6 + δ/h, with T_k a bound on |∂³f/∂x_k³| near x and δ the
+# absolute error of one evaluation of f. The bounds used:
+#
+# * T_k = 2·G_k/ℓ_k²: Cauchy's estimate for the analytic function ∂f/∂x_k, whose size stays
+#   below the slope G_k within distance ℓ_k of x_k (its second derivative is ≤ 2!·G_k/ℓ_k²).
+#   ℓ_k is the problem's length scale for x_k: for a hexapod's leg length against a coordinate
+#   in mm, ℓ = the leg length and G = 1 (exactly, |d³‖v + t e‖/dt³| ≤ (2/√3)/‖v‖²); against
+#   an angle, ℓ = 1 rad and G = the lever r (|d³/dt³| ≤ r·(1 + 3r/L + 1.16 r²/L²) ≈ 2r for
+#   r/L ≤ 0.3); near a singularity (gimbal lock, a plane turning vertical, the edge of
+#   reach) ℓ is the distance to it.
+# * δ = FD_ROUNDINGS·ε·M: that many roundings of relative size ε on the largest value M the
+#   computation handles (default: the largest |f|); an iterative solver inside f (FK) gives δ
+#   from its stopping tolerance instead.
+# * h_k minimises the bound: h_k = (3δ/T_k)^(1/3) (≈ ε^(1/3)·ℓ_k when M ≈ G_k·ℓ_k), at most
+#   ℓ_k/10; the bound is then 1.3·G_k·(δ/(G_k ℓ_k))^(2/3), ≈ 4e-11·G_k for M ≈ G_k·ℓ_k.
+#
+# The tolerance is FD_SAFETY times that bound, plus the analytic Jacobian's own round-off. The
+# check has teeth, and checks it: the tolerance of every non-zero column must be below
+# ``resolution`` (default 1e-5) of the column's size, so a sign flip or a 1e-5 relative error
+# of a column is caught (test_fd_check_has_teeth) — except for columns so small that no
+# difference quotient resolves them relatively: below 1e-4·M/ℓ_k (f changes by less than
+# 1e-4 of its values over ℓ_k along x_k) or below 1 % of their slope bound G_k (a component of
+# a gradient that nearly vanishes at x), which are resolved to ``resolution`` of that size.
+
+EPS = float(np.finfo(float).eps)
+#: Factor between the error bound above (constants of typical, not worst-case size) and the
+#: tolerance.
+FD_SAFETY = 10.0
+#: Roundings of relative size ε in one evaluation of f (a few dozen flops per value).
+FD_ROUNDINGS = 32
+
+
+def fd_step(third, noise, scale):
+    """The step minimising h²·T/6 + δ/h, h = (3δ/T)^(1/3), at most ℓ/10 (T = 0: ℓ/10)."""
+    third, scale = np.asarray(third, dtype=float), np.asarray(scale, dtype=float)
+    with np.errstate(divide="ignore", over="ignore"):
+        h = np.cbrt(3.0 * noise / third)
+    return np.minimum(h, 0.1 * scale)
+
+
+def central_difference(f, x, k: int, h, diff=None) -> np.ndarray:
+    """(f(x + h e_k) − f(x − h e_k)) / (x⁺_k − x⁻_k): column k of the central-difference Jacobian.
+
+    ``x`` is (..., n); ``h`` a scalar or an array of the shape of ``x[..., k]``. The divisor is
+    the step actually taken after rounding x ± h. ``diff(a, b)`` replaces a − b (e.g. to wrap
+    angle readings)."""
+    xp = np.array(x, dtype=float)
+    xm = xp.copy()
+    xp[..., k] += h
+    xm[..., k] -= h
+    fp, fm = np.asarray(f(xp), dtype=float), np.asarray(f(xm), dtype=float)
+    d = fp - fm if diff is None else diff(fp, fm)
+    step = xp[..., k] - xm[..., k]
+    return d / np.reshape(step, np.shape(step) + (1,) * (d.ndim - np.ndim(step)))
+
+
+def fd_tolerance(h, third, noise, safety: float = FD_SAFETY):
+    """safety·(h²·T/6 + δ/h): the bound on |central difference − derivative| (see above)."""
+    h = np.asarray(h, dtype=float)
+    return safety * (h**2 * np.asarray(third, dtype=float) / 6.0 + np.asarray(noise, dtype=float) / h)
+
+
+def assert_jacobian_matches_fd(f, x, J, *, scale, slope=None, magnitude=None, noise=None, h=None, diff=None,
+                               safety: float = FD_SAFETY, resolution: float = 1e-5, names=None, err_msg=""):
+    """Assert that ``J`` (f(x).shape + (n,)) is the Jacobian of ``f`` at ``x`` (..., n).
+
+    f maps x to an array; when x holds one row per pose, f must map each row independently
+    (the step of column k moves every row at once). The error model is described above.
+
+    Parameters
+    ----------
+    scale : ℓ_k, the length scale of each variable, (n,) or scalar (mm: a leg length; rad: 1).
+    slope : G_k, a bound on |∂f/∂x_k|, (n,) or scalar; default the largest |J[..., k]|.
+    magnitude : M, the largest value the computation of f handles; default the largest |f(x)|.
+    noise : δ, the absolute error of one evaluation of f, scalar or (n,) (when a column's
+        step reaches a solver that others do not); default FD_ROUNDINGS·ε·M.
+    h : steps, scalar or (n,) (default :func:`fd_step`).
+    resolution : the relative error of a column that must not go unnoticed (checked), scalar
+        or (n,).
+    names : column names for the messages.
+
+    Returns (finite differences, tolerance), the tolerance broadcastable to J's shape.
+    """
+    x = np.asarray(x, dtype=float)
+    J = np.asarray(J, dtype=float)
+    n = x.shape[-1]
+    ell = np.broadcast_to(np.asarray(scale, dtype=float), (n,))
+    col_size = np.max(np.abs(J).reshape(-1, n), axis=0, initial=0.0)
+    G = col_size if slope is None else np.broadcast_to(np.asarray(slope, dtype=float), (n,))
+    third = 2.0 * G / ell**2
+    f0 = np.asarray(f(x), dtype=float)
+    M = np.max(np.abs(f0), initial=0.0) if magnitude is None else float(magnitude)
+    noise = FD_ROUNDINGS * EPS * M if noise is None else np.broadcast_to(np.asarray(noise, dtype=float), (n,))
+    h = fd_step(third, noise, ell) if h is None else np.broadcast_to(np.asarray(h, dtype=float), (n,))
+    fd = np.stack([central_difference(f, x, k, h[k], diff) for k in range(n)], axis=-1)
+    assert fd.shape == J.shape, f"Jacobian shape {J.shape}, finite differences {fd.shape}"
+    tol = fd_tolerance(h, third, noise, safety) + FD_ROUNDINGS * EPS * np.max(np.abs(J), initial=0.0)
+    err = np.abs(J - fd)
+    names = list(names) if names is not None else [f"column {k}" for k in range(n)]
+    where = f"{err_msg}: " if err_msg else ""
+    bad = ~(err <= tol)  # NaN counts as a failure
+    if bad.any():
+        ratio = np.where(np.isfinite(err), err / np.broadcast_to(tol, J.shape), np.inf)
+        idx = np.unravel_index(np.argmax(np.where(bad, ratio, -1.0)), J.shape)
+        raise AssertionError(
+            f"{where}analytic Jacobian differs from central differences at {bad.sum()} of {bad.size} entries; "
+            f"worst {names[idx[-1]]} at index {idx}: analytic {J[idx]:.9g}, finite differences {fd[idx]:.9g}, "
+            f"|difference| {err[idx]:.3g} > tolerance {tol[idx[-1]]:.3g} (step {h[idx[-1]]:.3g})")
+    reference = np.maximum(col_size, np.maximum(1e-2 * G, 1e-4 * M / ell))
+    blunt = (col_size > 0.0) & ~(tol <= resolution * reference)
+    assert not blunt.any(), (
+        f"{where}the finite-difference check cannot resolve a relative error of {resolution:g} in "
+        f"{[names[k] for k in np.flatnonzero(blunt)]} (tolerance / column size {(tol / reference)[blunt]})")
+    return fd, tol
+
+
+def planar_fd_model(m, x):
+    """Error-model scales of a planar machine's IK at poses x (see the comment above
+    :func:`assert_jacobian_matches_fd`): ``(pose, params)``, each ``dict(scale=ℓ, slope=G)``.
+
+    IK is analytic until a chain reaches a singularity — case 1: ‖C_i − B_i‖ = l_i1 ± l_i2
+    (arccos of ±1), case 2: |b_ij| = ρ_ij (√0) — at distance d (≥ 73 mm and ≥ 19 mm in the
+    workspace boxes). A length moves ‖C − B‖ or b at most 1:1, an angle by at most the lever r
+    (case 1: none, the encoder offsets enter linearly; case 2: ‖w‖ and L3/2): ℓ = d/2 for mm,
+    d/(2r) for rad. Slopes from the gradient norms (for every mm parameter of chain i):
+    case 1 ‖∂θ_i/∂(B, C)‖ = ‖g‖/|s| and ∂θ_i/∂l_i2 = l_i2/|s| with ‖g‖ = l_i2; case 2
+    ‖∂s/∂C‖ = ∂s/∂ρ = ρ/√(ρ² − b²); an angle multiplies by r. They grow like 1/√distance, so
+    by √2 within ℓ = d/2 of x: G = √2 × the largest at x."""
+    if m.n_dof == 2:
+        w, _, _, s, _ = m._chains(x)
+        l1, l2, *_ = m._unpack()
+        reach = np.linalg.norm(w, axis=2)
+        d = np.min(np.minimum(l1 + l2 - reach, reach - np.abs(l1 - l2)))
+        lever = 1.0
+        slope = np.sqrt(2.0) * np.max(l2 / np.abs(s))
+    else:
+        _, _, _, _, a, b, root, _ = m._geometry(x)
+        L3, _, _, rho, _ = m._unpack()
+        d = np.min(rho - np.abs(b))
+        lever = max(np.max(np.hypot(a, b)), 0.5 * L3)
+        slope = np.sqrt(2.0) * np.max(rho / root)
+    assert d > 0.0
+
+    def model(is_angle):
+        ang = np.asarray(is_angle, dtype=bool)
+        return dict(scale=np.where(ang, 0.5 * d / lever, 0.5 * d), slope=np.where(ang, lever * slope, slope))
+
+    return model(m.pose_is_angle), model(m.param_is_angle)
+
+
+# -- Monte Carlo bands ----------------------------------------------------------------------------
+
+#: Family-wise probability that a Monte Carlo check of the suite fails although the code is
+#: right (any seed): each check splits it over the quantities it tests (Bonferroni).
+FALSE_FAILURE = 1e-6
+
+
+def mc_std_ratio_band(n_trials: int, n_quantities: int) -> tuple[float, float]:
+    """[lo, hi] holding s/σ for every one of ``n_quantities`` sample standard deviations of
+    ``n_trials`` Gaussian draws but with probability FALSE_FAILURE: (s/σ)² ~ χ²_ν/ν, ν = n − 1."""
+    from scipy.stats import chi2
+
+    a = FALSE_FAILURE / (2 * n_quantities)
+    nu = n_trials - 1
+    lo, hi = np.sqrt(chi2.ppf([a, 1.0 - a], nu) / nu)
+    return float(lo), float(hi)
+
+
+def assert_covariance_matches_monte_carlo(estimates, truth, cov) -> float:
+    """The reported covariance ``cov`` (P, P) of Gaussian estimates against ``estimates``
+    (n, P) of independent trials around ``truth``, jointly: the squared Mahalanobis distances
+    d² = (θ̂ − θ)ᵀ C⁻¹ (θ̂ − θ) are χ²_P each, so n·P·mean(d²/P) ~ χ²_{nP}; the mean stays in
+    the band but with probability FALSE_FAILURE (n = 200, P = 42: within [0.926, 1.077], i.e.
+    the covariance right to ~4 % in σ, correlations and bias included). Returns the mean."""
+    from scipy.stats import chi2
+
+    d = np.asarray(estimates, dtype=float) - truth
+    L = np.linalg.cholesky(cov)
+    z = np.linalg.solve(L, d.T)
+    n, P = d.shape
+    mean = float(np.sum(z**2) / (n * P))
+    lo, hi = chi2.ppf([FALSE_FAILURE / 2, 1.0 - FALSE_FAILURE / 2], n * P) / (n * P)
+    assert lo < mean < hi, f"mean squared Mahalanobis distance per parameter {mean:.4f} outside [{lo:.4f}, {hi:.4f}]"
+    return mean
+
+
+def mc_mean_bound(n_trials: int, n_quantities: int) -> float:
+    """|mean − truth| / (s/√n) stays below this for all ``n_quantities`` sample means of
+    ``n_trials`` Gaussian draws but with probability FALSE_FAILURE (Student t, n − 1 dof)."""
+    from scipy.stats import t
+
+    return float(t.isf(FALSE_FAILURE / (2 * n_quantities), n_trials - 1))
+
+
+# -- subprocesses ---------------------------------------------------------------------------------
+
+def pkmcal_subprocess_env() -> dict:
+    """The environment for a ``python -m pkmcal...`` child that runs the pkmcal under test:
+    the folder this process imported it from first on PYTHONPATH (a relative PYTHONPATH, or an
+    editable install of another tree, would otherwise give the child another pkmcal)."""
+    import os
+
+    import pkmcal
+
+    root = str(Path(pkmcal.__file__).resolve().parent.parent)
+    rest = os.environ.get("PYTHONPATH", "")
+    return {**os.environ, "PYTHONPATH": root + (os.pathsep + rest if rest else "")}
 
 
 # -- the CLI's user-error contract ---------------------------------------------------------------

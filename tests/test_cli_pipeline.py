@@ -5,6 +5,7 @@ leaves no output file behind (outputs are written atomically, after the computat
 from __future__ import annotations
 
 import os
+import resource
 import signal
 import subprocess
 import sys
@@ -13,6 +14,7 @@ import time
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from helpers import pkmcal_subprocess_env
 
 from pkmcal.cli.main import cli
 from pkmcal.identification.simulation import simulate_campaign
@@ -97,25 +99,65 @@ def test_outputs_never_replace_inputs(tmp_path):
     assert {p: (tmp_path / p).read_bytes() for p in before} == before
 
 
-def test_killed_identify_leaves_no_output(tmp_path):
-    """SIGKILL during a long identification (20 000 poses, a few seconds on 2 cores): no
-    calibrated file, no report, no temporary file. (Files are written after the fit, each to
-    a temporary file renamed over the target.)"""
+def _cpu_seconds(pid: int) -> float:
+    """CPU time (user + system, all threads) the process has used, from /proc/<pid>/stat."""
+    with open(f"/proc/{pid}/stat") as fh:
+        fields = fh.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _campaign_file(path, n: int) -> None:
     nominal, real = load_machine("stewart-prototype"), load_machine("stewart-prototype-real")
     setup = builtin_setup("indicators-prototype")
     rng = np.random.default_rng(5)
-    p = rng.uniform(-1, 1, (20000, 6)) * HALF
+    p = rng.uniform(-1, 1, (n, 6)) * HALF
     p[:, :3] += nominal.home_pose[:3]
     p[:, 3:] = np.deg2rad(p[:, 3:])
-    sim = simulate_campaign(nominal, real, setup, p, rng=6)
-    save_measurements(tmp_path / "meas.csv", sim.measurements, nominal, setup)
-    before = sorted(os.listdir(tmp_path))
-    cmd = [sys.executable, "-m", "pkmcal.cli.main", *IDENT, str(tmp_path / "meas.csv"), "-o",
-           str(tmp_path / "cal.yaml"), "--report", str(tmp_path / "rep")]
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
+    save_measurements(path, simulate_campaign(nominal, real, setup, p, rng=6).measurements, nominal, setup)
+
+
+def _identify_cmd(tmp_path, meas, report=True):
+    return [sys.executable, "-m", "pkmcal.cli.main", *IDENT, str(meas), "-o", str(tmp_path / "cal.yaml"),
+            *(["--report", str(tmp_path / "rep")] if report else [])]
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/stat"), reason="needs /proc to measure the child's CPU time")
+def test_killed_identify_leaves_no_output(tmp_path):
+    """SIGKILL during a long identification (60 000 poses): no calibrated file, no report, no
+    temporary file. (Files are written after the fit, each to a temporary file renamed over
+    the target.)
+
+    The kill must land inside the fit, whatever the machine and its load, so it is timed by
+    the child's CPU time (not wall time: on a loaded machine a fixed sleep fired during the
+    start-up and tested nothing) against the CPU time of a 50-pose run without report measured
+    here: start-up and a trivial fit cost c (~2.3 s on a 2-core Xeon, 2026-12), the 60 000-pose
+    run reaches its calibrated file at ~4.5 c, so the kill at 2.5 c is inside reading and
+    fitting."""
+    small, big = tmp_path / "small", tmp_path / "big"
+    small.mkdir()
+    big.mkdir()
+    _campaign_file(small / "meas.csv", 50)
+    _campaign_file(big / "meas.csv", 60000)
+    used = resource.getrusage(resource.RUSAGE_CHILDREN)
+    done = subprocess.run(_identify_cmd(small, small / "meas.csv", report=False), capture_output=True, text=True,
+                          env=pkmcal_subprocess_env(), check=False)
+    assert done.returncode == 0, done.stderr
+    now = resource.getrusage(resource.RUSAGE_CHILDREN)
+    kill_at = 2.5 * (now.ru_utime + now.ru_stime - used.ru_utime - used.ru_stime)
+    before = sorted(os.listdir(big))
+    proc = subprocess.Popen(_identify_cmd(big, big / "meas.csv"), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            start_new_session=True, env=pkmcal_subprocess_env())
     try:
-        time.sleep(3.0)
-        assert proc.poll() is None, f"identify finished before it was killed: {proc.stderr.read()!r}"
+        deadline = time.monotonic() + 900.0
+        while proc.poll() is None and time.monotonic() < deadline:
+            try:
+                if _cpu_seconds(proc.pid) >= kill_at:
+                    break
+            except (FileNotFoundError, ProcessLookupError):
+                break
+            time.sleep(0.02)
+        assert proc.poll() is None, (f"identify finished before it had used {kill_at:.1f} s of CPU "
+                                     f"(make the campaign larger): {proc.stderr.read()!r}")
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(timeout=30)
     finally:
@@ -123,7 +165,7 @@ def test_killed_identify_leaves_no_output(tmp_path):
             os.kill(proc.pid, signal.SIGKILL)
             proc.wait()
     assert proc.returncode == -signal.SIGKILL
-    assert sorted(os.listdir(tmp_path)) == before  # no cal.yaml, no .cal.yaml.*.tmp, no rep/
+    assert sorted(os.listdir(big)) == before  # no cal.yaml, no .cal.yaml.*.tmp, no rep/
 
 
 @pytest.mark.parametrize("bad", ["rep_file"])

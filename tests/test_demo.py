@@ -15,6 +15,7 @@ import sys
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from helpers import pkmcal_subprocess_env
 
 from pkmcal.cli.main import cli
 from pkmcal.conventions import poses_from_file_units
@@ -28,8 +29,10 @@ from pkmcal.io.tables import read_table
 @pytest.fixture(scope="module")
 def demo_run(tmp_path_factory):
     cwd = tmp_path_factory.mktemp("fresh")
+    # the timeout guards against a hang, it is no speed test: the demo takes ~40 s alone and
+    # several times that on a loaded shared machine
     proc = subprocess.run([sys.executable, "-m", "pkmcal.cli.main", "demo"], cwd=cwd, capture_output=True,
-                          text=True, timeout=300, check=False)
+                          text=True, timeout=1800, check=False, env=pkmcal_subprocess_env())
     assert proc.returncode == 0, proc.stderr[-3000:]
     return cwd, cwd / "pkmcal-demo", proc
 

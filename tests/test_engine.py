@@ -10,7 +10,8 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from helpers import random_poses
+from helpers import FALSE_FAILURE, assert_jacobian_matches_fd, random_poses
+from scipy.stats import norm
 
 from pkmcal.errors import PkmcalError
 from pkmcal.identification.engine import identify, measurement_arrays
@@ -128,17 +129,55 @@ def test_free_sensor_parameters_recovered(nominal, real):
 # -- analytic Jacobians against finite differences ----------------------------------------
 
 
-def _fd_jacobian(meth, theta, h=1e-6):
-    P = len(theta)
-    r0 = meth.evaluate(theta, jac=False, cov=False).r
-    J = np.zeros(r0.shape + (P,))
-    for i in range(P):
-        step = h * max(1.0, abs(theta[i]))
-        tp, tm = theta.copy(), theta.copy()
-        tp[i] += step
-        tm[i] -= step
-        J[..., i] = (meth.evaluate(tp, jac=False, cov=False).r - meth.evaluate(tm, jac=False, cov=False).r) / (2 * step)
-    return J
+def _fd_model(model, method, form, x):
+    """Error model (helpers.assert_jacobian_matches_fd) of a hexapod method's residual r(θ)
+    at poses x: (dict(scale, magnitude, noise, resolution), the angle flags of θ).
+
+    Scales: a leg length L_min per mm, 1 rad per angle (IK: the norm's curvature); through FK
+    (fk-residual) divided by (1 + κ)², κ = max ‖A⁻¹‖ of the length-scaled actuator Jacobian,
+    since x(ρ) = FK(q, ρ) has x' = −A⁻¹B and x'' ~ A⁻¹ ∂²IK (x')² with ∂²IK ~ 1/L. Slopes
+    (_assert_method_jacobian): twice the column's largest entry over the 6 poses and all rows
+    (every row is a unit-vector or lever projection, none vanishes at all poses at once).
+    Values handled M: the leg lengths, poses and readings (squared form: L²). Noise δ: 32
+    roundings of M, plus the pose solves: fk-residual's polished FK is exact to rounding
+    (δ·(1 + ‖H A⁻¹‖) into the readings); ik-residual's sensor inversion (redone only when a
+    sensor parameter moves) stops at |h(x̂) − y| ≤ 1e-11·(1 + |y|) (residuals._POSE_TOL),
+    moving r by up to √6·that·‖A H⁻¹‖ (·2L squared): there the check resolves 1e-3 of a
+    sensor column, not 1e-5 (returned as the per-column resolution)."""
+    from pkmcal.identification.residuals import _POSE_TOL
+
+    mech, sensor = model.mechanism, model.sensor
+    L = mech.leg_lengths(x)
+    A = mech.actuator_pose_jacobian(x)
+    r_lever = np.max(np.linalg.norm(mech.platform, axis=1))
+    A_scaled = A * np.r_[1.0, 1.0, 1.0, [1.0 / r_lever] * 3]
+    kappa = np.max(np.linalg.norm(np.linalg.inv(A_scaled), ord=2, axis=(1, 2)))
+    H = sensor.pose_jacobian(x)
+    M = max(L.max(), np.abs(x[:, :3]).max(), np.abs(model.y).max())
+    ang = np.r_[mech.param_is_angle, sensor.param_is_angle].astype(bool)
+    scale = np.where(ang, 1.0, L.min())
+    resolution = np.full(len(ang), 1e-5)
+    if method == "fk-residual":
+        scale = scale / (1.0 + kappa) ** 2
+        HAi = np.max(np.linalg.norm(H @ np.linalg.inv(A), ord=2, axis=(1, 2)))
+        noise = 32 * np.finfo(float).eps * M * (1.0 + HAi)
+    else:
+        AHi = np.max(np.linalg.norm(A @ np.linalg.inv(H), ord=2, axis=(1, 2)))
+        pose_noise = np.sqrt(6.0) * _POSE_TOL * (1.0 + np.abs(model.y).max()) * AHi
+        if form == "squared":
+            M, pose_noise = M**2, pose_noise * 2.0 * L.max()
+        sensor_column = np.arange(len(ang)) >= model.n_mech
+        noise = 32 * np.finfo(float).eps * M + np.where(sensor_column, pose_noise, 0.0)
+        resolution[sensor_column] = 1e-3
+    return dict(scale=scale, magnitude=M, noise=noise, resolution=resolution), ang
+
+
+def _assert_method_jacobian(meth, model, theta, J, fd_model, ang):
+    """The method's J at θ against central differences of its residual (model: _fd_model;
+    slope twice each column's largest entry)."""
+    size = np.max(np.abs(J).reshape(-1, J.shape[-1]), axis=0)
+    assert_jacobian_matches_fd(lambda t: meth.evaluate(t, jac=False, cov=False).r, theta, J, slope=2.0 * size,
+                               names=model.names, **fd_model)
 
 
 JAC_CASES = [
@@ -171,17 +210,14 @@ def test_jacobian_matches_finite_differences(nominal, real, setup_name, method, 
     meth = make_method(method, model, form=form)
     theta = model.theta0 + np.random.default_rng(3).normal(0, 0.3, model.theta0.size) * np.r_[
         np.ones(42), 0.01 * np.ones(len(setup.sensor.param_names))]
-    J = meth.evaluate(theta).J
-    # h = 1e-4: the FK stops at 1e-9 mm, so smaller steps measure its round-off
-    Jfd = _fd_jacobian(meth, theta, h=1e-4)
-    scale = np.max(np.abs(Jfd))
-    np.testing.assert_allclose(J, Jfd, atol=1e-5 * scale, rtol=1e-4)
+    ev = meth.evaluate(theta)
+    _assert_method_jacobian(meth, model, theta, ev.J, *_fd_model(model, method, form, ev.poses))
 
 
 @pytest.mark.parametrize("setup_name", ["full-pose", "position", "indicators"])
 def test_projection_jacobian(nominal, real, setup_name):
-    """Projection: at a noise-free solution the Jacobian is exact; with noise, the cost
-    gradient Jᵀr is exact (variable projection, derivative of U⊥ dropped)."""
+    """Projection: at a noise-free solution the Jacobian is exact (the dropped derivative of
+    U⊥ multiplies e = 0); with noise, the cost gradient Jᵀr is exact (variable projection)."""
     setup = _jacobian_setup(setup_name)
     cmd = commanded(nominal, 6)
     q, y = simulate(nominal, nominal, setup.sensor, cmd)
@@ -190,11 +226,15 @@ def test_projection_jacobian(nominal, real, setup_name):
     theta = model.theta0
     ev = meth.evaluate(theta)
     assert np.max(np.abs(ev.r)) < 1e-8
-    Jfd = _fd_jacobian(meth, theta)
-    # the basis U⊥ is only defined up to a rotation: compare the projectors' actions
-    np.testing.assert_allclose(np.einsum("nkp,nkq->pq", ev.J, ev.J), np.einsum("nkp,nkq->pq", Jfd, Jfd),
-                               rtol=1e-5, atol=1e-6 * np.max(np.abs(Jfd)) ** 2)
-    # noisy data, perturbed machine: gradient of ½‖r‖² against finite differences of the cost
+    # r = U⊥ᵀ W e: as the fk-residual's scales (x* solves the poses as FK does), values over σ;
+    # the inner pose solve's error moves r only to second order (projected out)
+    fd_model, ang = _fd_model(model, "fk-residual", "plain", ev.poses)
+    fd_model["magnitude"] = M = max(np.abs(y / model.sigma_y).max(), np.abs(q / model.sigma_q).max())
+    fd_model["noise"] = 32 * np.finfo(float).eps * M
+    _assert_method_jacobian(meth, model, theta, ev.J, fd_model, ang)
+    # noisy data, perturbed machine: gradient of c = ½‖r‖² against finite differences of c,
+    # |c'_k| ≤ ‖r‖ ‖∂r/∂θ_k‖ (slope: twice that), δ_c = ‖r‖₁ δ_r + 32 ε c; a component of the
+    # gradient can be small by coincidence (the columns of J are checked above): 1e-4 of it
     q, y = simulate(nominal, real, setup.sensor, cmd, noise=setup.noise)
     model = Model(nominal, setup.sensor, setup.noise, q, y, cmd)
     meth = make_method("projection", model)
@@ -204,8 +244,13 @@ def test_projection_jacobian(nominal, real, setup_name):
     def cost(t):
         return 0.5 * np.sum(meth.evaluate(t, jac=False, cov=False).r ** 2)
 
-    fd = np.array([(cost(theta + h) - cost(theta - h)) / 2e-6 for h in np.eye(theta.size) * 1e-6])
-    np.testing.assert_allclose(grad, fd, rtol=1e-4, atol=1e-6 * np.max(np.abs(fd)))
+    eps = np.finfo(float).eps
+    col = np.linalg.norm(ev.J.reshape(-1, theta.size), axis=0)
+    slope = 2.0 * np.linalg.norm(ev.r) * np.where(ang, col[ang].max(initial=0.0), col[~ang].max(initial=0.0))
+    c = cost(theta)
+    noise = np.abs(ev.r).sum() * 32 * eps * fd_model["magnitude"] + 32 * eps * c
+    assert_jacobian_matches_fd(cost, theta, grad, scale=fd_model["scale"], slope=slope, magnitude=c, noise=noise,
+                               resolution=1e-4, names=model.names)
 
 
 def test_covariance_of_residuals_matches_sampling(nominal):
@@ -217,8 +262,13 @@ def test_covariance_of_residuals_matches_sampling(nominal):
     e_y, e_q = setup.noise.sample(np.random.default_rng(5), (4000, 3), (4000, 6))
     model = Model(nominal, setup.sensor, setup.noise, q0 + e_q, y0 + e_y, np.repeat(cmd, 4000, axis=0))
     ev = make_method("fk-residual", model).evaluate(model.theta0)
-    sample = np.cov(ev.r.T)
-    np.testing.assert_allclose(sample, ev.cov[0], rtol=0.1, atol=0.05 * np.max(ev.cov[0]))
+    # the sample covariance of n Gaussian draws has Var(S_ij) = (Σ_ij² + Σ_ii Σ_jj)/(n − 1):
+    # every one of the 6 distinct entries within z of them but with probability FALSE_FAILURE
+    # (the first-order Σ_j is exact to ~σ_q/L ~ 2e-5 here, far below that)
+    sample, cov = np.cov(ev.r.T), ev.cov[0]
+    se = np.sqrt((cov**2 + np.outer(np.diag(cov), np.diag(cov))) / (len(ev.r) - 1))
+    z = norm.isf(FALSE_FAILURE / (2 * 6))
+    assert np.all(np.abs(sample - cov) < z * se), (sample - cov) / se
 
 
 # -- weighting ------------------------------------------------------------------------------
@@ -243,8 +293,10 @@ def test_weighted_and_unweighted(nominal, real):
     rw = identify(nominal, setup, q=q, y=y, method="ik-residual", weighted=True)
     ru = identify(nominal, setup, q=q, y=y, method="ik-residual", weighted=False)
     assert not np.allclose(rw.estimate, ru.estimate)
+    # each within 6 of its own σ (the unweighted fit's is the sandwich, larger than the
+    # weighted one): 84 Gaussian estimates, false failure 84 · 2e-9 < 1e-6
     for r in (rw, ru):
-        assert np.all(np.abs(r.estimate[:42] - real.params) < 6 * rw.uncertainty.std_prior[:42] + 1e-3)
+        assert np.all(np.abs(r.estimate[:42] - real.params) < 6 * r.uncertainty.std_prior[:42] + 1e-3)
 
 
 def test_whitening_gives_unit_covariance():

@@ -114,7 +114,8 @@ def test_random_bytes_csv(tmp_path_factory, blob):
     _check_table(path)
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=60, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(csv_texts(), st.sampled_from(["ik", "fk"]))
 def test_cli_on_random_tables(tmp_path_factory, text, command):
     d = tmp_path_factory.mktemp("cli")

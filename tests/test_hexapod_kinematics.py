@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import assert_jacobian_matches_fd
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
@@ -46,19 +47,43 @@ def box_poses(machine, n, seed, scale=1.0):
     return machine.home_pose + scale * rng.uniform(-1.0, 1.0, (n, 6)) * HALF_BOX
 
 
+EPS = np.finfo(float).eps
+
+
 def pose_error(a, b):
-    """max over poses of (position error mm, rotation error rad)."""
-    dp = np.abs(a[:, :3] - b[:, :3]).max()
-    dr = rotation_error(euler_to_matrix(a[:, 3:]), euler_to_matrix(b[:, 3:])).max()
+    """Per pose: (position error mm, rotation error rad)."""
+    dp = np.linalg.norm(a[:, :3] - b[:, :3], axis=1)
+    dr = rotation_error(euler_to_matrix(a[:, 3:]), euler_to_matrix(b[:, 3:]))
     return dp, dr
 
 
+def fk_error_bound(machine, poses, tol=FK_TOL_MM):
+    """Per pose, a bound on the position (mm) and rotation (rad) error of an FK solution that
+    stopped at |L(x) − L| ≤ tol: |(δp, δω)| ≤ ‖J⁻¹‖₂ |δL|₂ with J the twist Jacobian and
+    |δL|₂ ≤ √6·tol, plus the rounding of lengths of the size handled (64 ε L); twice that
+    for the neglected second-order term."""
+    J = machine.twist_jacobian(poses)
+    inv_norm = 1.0 / np.linalg.svd(J, compute_uv=False)[:, -1]
+    L = machine.leg_lengths(poses).max()
+    return 2.0 * inv_norm * (np.sqrt(6.0) * tol + 64 * EPS * L)
+
+
+def assert_fk_within_bound(machine, fk_poses, poses, tol=FK_TOL_MM, factor=1.0):
+    """FK poses within ``factor`` × fk_error_bound of the true poses (position and rotation)."""
+    dp, dr = pose_error(fk_poses, poses)
+    bound = factor * fk_error_bound(machine, poses, tol)
+    assert np.all(dp <= bound) and np.all(dr <= bound), (np.max(dp / bound), np.max(dr / bound))
+
+
 def assert_converged_poses_reproduce(machine, lengths, fk, tol=FK_TOL_MM):
-    """The FK contract: converged ⇔ the returned pose's IK matches within tol."""
+    """The FK contract: converged ⇔ the returned pose's IK matches within tol (plus the
+    rounding of the final Euler-angle extraction and of IK: 64 ε of the lengths and
+    coordinates handled)."""
     back = machine.leg_lengths(fk.poses)
     err = np.max(np.abs(back - lengths), axis=1)
-    # rounding in the final Euler-angle extraction is ~1e-13 mm on these machines
-    assert np.all(err[fk.converged] <= tol + 1e-11)
+    vals = np.abs(np.c_[lengths, fk.poses[:, :3]])
+    size = np.max(np.where(np.isfinite(vals), vals, 0.0), axis=1) + np.abs(machine.platform).max()
+    assert np.all(err[fk.converged] <= tol + 64 * EPS * size[fk.converged])
     assert np.all(~(fk.residual[fk.converged] > tol))
     assert np.all(~(fk.residual[~fk.converged] <= tol))
 
@@ -88,10 +113,39 @@ def test_ik_accepts_one_pose_and_rejects_wrong_shapes():
 @settings(max_examples=25, deadline=None)
 @given(machines, seeds)
 def test_fk_inverts_ik_from_home(machine, seed):
+    """What holds for every design and pose: whatever FK says is true (the contract), and a
+    converged pose in the assembly mode of the true one is within the FK error bound of it.
+    How often FK from home reaches that mode is a property of the design, not a law: it is
+    checked on fixed designs (next test)."""
     poses = box_poses(machine, 2000, seed)
     lengths = machine.leg_lengths(poses)
     fk = machine.fk_lengths(lengths)
     assert_converged_poses_reproduce(machine, lengths, fk)
+    same = fk.converged & (np.abs(fk.poses - poses).max(axis=1) < 1e-6)
+    assert_fk_within_bound(machine, fk.poses[same], poses[same])
+
+
+#: Symmetric designs for the FK-from-home figures: the default (paper 2's prototype geometry),
+#: corners of the strategy's box above (short legs, small platform; large machine) and one
+#: inside. Measured (2026-12): all regular poses converge, ≥ 99.7 % in the true assembly mode,
+#: 99th percentile of the iterations 4–7.
+FK_DESIGNS = [
+    {},
+    dict(base_radius=224.0, platform_radius=50.0, base_separation=41.0, platform_separation=54.0, phase=0.0,
+         offset=250.0),
+    dict(base_radius=100.0, platform_radius=50.0, base_separation=8.0, platform_separation=8.0, offset=250.0),
+    dict(base_radius=250.0, platform_radius=120.0, base_separation=60.0, platform_separation=8.0, phase=90.0,
+         offset=500.0),
+    dict(base_radius=166.8, platform_radius=85.3, base_separation=36.8, platform_separation=59.8, phase=285.4,
+         offset=405.5),
+]
+
+
+@pytest.mark.parametrize("design", FK_DESIGNS, ids=lambda d: ",".join(f"{k}={v:g}" for k, v in d.items()) or "default")
+def test_fk_from_home_reaches_the_pose_on_regular_paths(design):
+    machine = symmetric_hexapod(**design)
+    poses = box_poses(machine, 2000, 1)
+    fk = machine.fk_lengths(machine.leg_lengths(poses))
     # "Not singular": the inverse condition number of the length-scaled Jacobian (what
     # check_limits' singularity margin measures) stays ≥ 0.03 on the straight path from
     # home to the pose (9 samples). Near-singular stretches on that path are where Newton
@@ -102,17 +156,12 @@ def test_fk_inverts_ik_from_home(machine, seed):
     path = machine.home_pose + ts[:, None, None] * (poses - machine.home_pose)[None]
     margin = machine.check_limits(path.reshape(-1, 6)).margins["singularity"].reshape(9, -1)
     regular = margin.min(axis=0) + machine.limits.singularity_margin >= 0.03
-    assume(regular.sum() >= 100)
-    # On random designs the path criterion is a heuristic, not a guarantee: a handful of
-    # poses may still need a 7th step or leave for another assembly mode. The strict
-    # "all converge in ≤ 6 steps" claim is made for the prototype (next test).
+    assert regular.sum() >= 1500
     ok = fk.converged[regular]
     assert ok.mean() >= 0.99
-    assert np.percentile(fk.iterations[regular][ok], 99) <= 6
+    assert np.percentile(fk.iterations[regular][ok], 99) <= 7
     same = ok & (np.abs(fk.poses[regular] - poses[regular]).max(axis=1) < 1e-6)
     assert same.mean() >= 0.99
-    dp, dr = pose_error(fk.poses[regular][same], poses[regular][same])
-    assert dp < 1e-8 and dr < 1e-8
 
 
 @settings(max_examples=10, deadline=None)
@@ -124,8 +173,7 @@ def test_fk_from_readings_matches_fk_from_lengths(seed):
     assert np.all(inv_cond >= 0.02)
     a = REAL.fk(REAL.ik(poses))
     assert a.all_converged and a.iterations.max() <= 6
-    dp, dr = pose_error(a.poses, poses)
-    assert dp < 1e-8 and dr < 1e-8
+    assert_fk_within_bound(REAL, a.poses, poses)
 
 
 def test_fk_per_pose_guesses_and_warm_start():
@@ -138,7 +186,7 @@ def test_fk_per_pose_guesses_and_warm_start():
     guesses = np.where(np.arange(300)[:, None] % 2 == 0, PROTOTYPE.home_pose, poses + 1e-3)
     fk2 = PROTOTYPE.fk_lengths(lengths, guesses)
     assert fk2.all_converged
-    np.testing.assert_allclose(fk2.poses, poses, atol=1e-8)
+    assert_fk_within_bound(PROTOTYPE, fk2.poses, poses)
 
 
 def test_fk_iteration_count_is_per_pose():
@@ -260,8 +308,7 @@ def test_fk_converges_at_large_yaw(yaw_range, guess_yaw):
     fk = PROTOTYPE.fk_lengths(lengths, guess)
     assert fk.all_converged
     assert fk.iterations.max() <= 10
-    dp, dr = pose_error(fk.poses, poses)
-    assert dp < 1e-8 and dr < 1e-8
+    assert_fk_within_bound(PROTOTYPE, fk.poses, poses)
     additive = [_additive_rpy_newton(PROTOTYPE, lengths[k], guess) for k in range(40)]
     assert sum(additive) <= 8  # the additive update mostly stalls or diverges here
 
@@ -282,24 +329,30 @@ def _skew_exp(w):
     return Rotation.from_rotvec(w).as_matrix()
 
 
+def _fd_scales(machine, poses):
+    """(ℓ, G, M) of the error model in helpers.assert_jacobian_matches_fd for a hexapod's
+    lengths at ``poses``: ℓ = the shortest leg (length scale of a coordinate in mm; 1 rad for
+    an angle), G = 1 for a coordinate in mm (∂L/∂p = u, a unit vector) and the largest lever
+    r = max ‖a_i‖ for an angle (∂L/∂ω = (R a_i) × u), M = the largest value handled."""
+    L = machine.leg_lengths(poses)
+    r = np.max(np.linalg.norm(machine.platform, axis=1))
+    M = max(L.max(), np.abs(poses[..., :3]).max(), np.abs(machine.base).max(), r)
+    return L.min(), r, M
+
+
 @settings(max_examples=20, deadline=None)
 @given(machines, seeds)
 def test_twist_jacobian_against_finite_differences(machine, seed):
+    # L(δp, δω) = leg lengths at (p + δp, exp([δω]×) R0), differenced on the manifold at 0
     pose = box_poses(machine, 1, seed)[0]
     R0 = euler_to_matrix(pose[3:])
-    J = machine.twist_jacobian(pose)[0]
-    h = 1e-6
-    num = np.empty((6, 6))
-    for k in range(6):
-        d = np.zeros(6)
-        d[k] = h
-        out = []
-        for sgn in (1.0, -1.0):
-            p = pose[:3] + sgn * d[:3]
-            R = _skew_exp(sgn * d[3:]) @ R0
-            out.append(np.concatenate([p, matrix_to_euler(R)]))
-        num[:, k] = (machine.leg_lengths(out[0]) - machine.leg_lengths(out[1]))[0] / (2 * h)
-    np.testing.assert_allclose(J, num, atol=1e-6)
+    ell, r, M = _fd_scales(machine, pose[None])
+
+    def lengths(d):
+        return machine.leg_lengths(np.concatenate([pose[:3] + d[:3], matrix_to_euler(_skew_exp(d[3:]) @ R0)]))[0]
+
+    assert_jacobian_matches_fd(lengths, np.zeros(6), machine.twist_jacobian(pose)[0], scale=[ell] * 3 + [1.0] * 3,
+                               slope=[1.0] * 3 + [r] * 3, magnitude=M, names=list("xyz") + ["wx", "wy", "wz"])
 
 
 @settings(max_examples=20, deadline=None)
@@ -307,11 +360,10 @@ def test_twist_jacobian_against_finite_differences(machine, seed):
 def test_actuator_pose_jacobian_against_finite_differences(machine, seed):
     pose = box_poses(machine, 1, seed)[0]
     J = machine.actuator_pose_jacobian(pose)[0]
-    h = 1e-6
-    num = np.column_stack([
-        (machine.ik(pose + h * e) - machine.ik(pose - h * e))[0] / (2 * h) for e in np.eye(6)
-    ])
-    np.testing.assert_allclose(J, num, atol=1e-6)
+    ell, r, M = _fd_scales(machine, pose[None])
+    # a, b, c each turn the platform about a unit axis through its origin: slope ≤ r
+    assert_jacobian_matches_fd(lambda x: machine.ik(x)[0], pose, J, scale=[ell] * 3 + [1.0] * 3,
+                               slope=[1.0] * 3 + [r] * 3, magnitude=M, names=list("xyzabc"))
     # and the chain rule with E: δω = E d(a, b, c)
     Jt = machine.twist_jacobian(pose)[0]
     np.testing.assert_allclose(J[:, 3:], Jt[:, 3:] @ euler_rate_matrix(pose[3:]), atol=1e-12)
@@ -323,17 +375,38 @@ def test_param_jacobians_against_finite_differences(machine, seed):
     poses = box_poses(machine, 3, seed)
     J = machine.actuator_param_jacobian(poses)
     JL = machine.length_param_jacobian(poses)
-    assert J.shape == (3, 6, len(HEXAPOD_PARAM_NAMES))
-    rho = machine.params
-    h = 1e-6
-    for k in range(len(rho)):
-        e = np.zeros_like(rho)
-        e[k] = h
-        plus, minus = machine.with_params(rho + e), machine.with_params(rho - e)
-        num = (plus.ik(poses) - minus.ik(poses)) / (2 * h)
-        numL = (plus.leg_lengths(poses) - minus.leg_lengths(poses)) / (2 * h)
-        np.testing.assert_allclose(J[:, :, k], num, atol=1e-7, err_msg=HEXAPOD_PARAM_NAMES[k])
-        np.testing.assert_allclose(JL[:, :, k], numL, atol=1e-7, err_msg=HEXAPOD_PARAM_NAMES[k])
+    assert J.shape == JL.shape == (3, 6, len(HEXAPOD_PARAM_NAMES))
+    # b_i, a_i move leg i's vector along a unit direction (slope 1, scale ℓ); L0_i is linear
+    ell, _, M = _fd_scales(machine, poses)
+    for jac, f in ((J, lambda rho: machine.with_params(rho).ik(poses)),
+                   (JL, lambda rho: machine.with_params(rho).leg_lengths(poses))):
+        assert_jacobian_matches_fd(f, machine.params, jac, scale=ell, slope=1.0, magnitude=M,
+                                   names=HEXAPOD_PARAM_NAMES)
+
+
+def test_fd_check_has_teeth():
+    """The shared finite-difference check rejects a Jacobian with one column's sign flipped
+    or one column off by 1e-5 relative, on every machine kind of the suite."""
+    for machine in (PROTOTYPE, REAL, symmetric_hexapod(base_radius=240.0, offset=260.0)):
+        poses = box_poses(machine, 3, 1)
+        ell, _, M = _fd_scales(machine, poses)
+        J = machine.actuator_param_jacobian(poses)
+
+        def f(rho):
+            return machine.with_params(rho).ik(poses)
+
+        check = dict(scale=ell, slope=1.0, magnitude=M)
+        _, tol = assert_jacobian_matches_fd(f, machine.params, J, **check)
+        assert np.max(tol) < 1e-7  # about 200 times below the 1e-5 wrong column of a unit slope
+        for k in (0, 11, 18, 40):  # b1.x, a2.y, a3.y, a6.z
+            for wrong in (-J[..., k], J[..., k] * (1.0 + 1e-5)):
+                bad = J.copy()
+                bad[..., k] = wrong
+                with pytest.raises(AssertionError, match="differs from central differences"):
+                    assert_jacobian_matches_fd(f, machine.params, bad, **check)
+    # a check too blunt to resolve 1e-5 fails by itself (here: a step far too small)
+    with pytest.raises(AssertionError, match="cannot resolve"):
+        assert_jacobian_matches_fd(f, machine.params, J, h=1e-12, **check)
 
 
 def test_param_jacobian_is_block_diagonal_per_leg():
@@ -405,8 +478,7 @@ def test_fk_respects_the_symmetry():
     rotated = _transform_poses(poses, Q)
     fk = m.fk_lengths(np.roll(m.leg_lengths(poses), 2, axis=1))
     assert fk.all_converged
-    dp, dr = pose_error(fk.poses, rotated)
-    assert dp < 1e-8 and dr < 1e-8
+    assert_fk_within_bound(m, fk.poses, rotated)
 
 
 # -- threaded batches: the chunked kernels give what one thread gives ------------------------
@@ -424,14 +496,14 @@ def test_threaded_fk_matches_small_serial_batches():
     parts = [PROTOTYPE.fk_lengths(lengths[k : k + 5]) for k in range(0, 3000, 5)]
     small_poses = np.concatenate([p.poses for p in parts])
     assert big.all_converged and all(p.all_converged for p in parts)
-    np.testing.assert_allclose(big.poses, small_poses, atol=1e-9)
+    # both within the FK error bound of the truth, so within twice it of each other
+    assert_fk_within_bound(PROTOTYPE, big.poses, poses)
+    assert_fk_within_bound(PROTOTYPE, big.poses, small_poses, factor=2.0)
     np.testing.assert_array_equal(big.iterations, np.concatenate([p.iterations for p in parts]))
-    dp, dr = pose_error(big.poses, poses)
-    assert dp < 1e-7 and dr < 1e-9
     # per-pose guesses, differing across chunk boundaries: warm start from a nearby pose
     warm = PROTOTYPE.fk_lengths(lengths, poses + 1e-3)
     assert warm.all_converged and warm.iterations.max() <= 3
-    np.testing.assert_allclose(warm.poses, big.poses, atol=1e-9)
+    assert_fk_within_bound(PROTOTYPE, warm.poses, big.poses, factor=2.0)
 
 
 def test_threaded_ik_matches_numpy():
@@ -515,7 +587,7 @@ def test_threaded_fk_works_in_a_forked_child():
     queue = ctx.Queue()
     child = ctx.Process(target=_threaded_fk_in_child, args=(lengths, queue))
     child.start()
-    child.join(timeout=60)
+    child.join(timeout=60)  # the FK takes milliseconds: 60 s only catches the deadlock this tests
     if child.is_alive():
         child.kill()
     assert child.exitcode == 0 and queue.get(timeout=5) is True

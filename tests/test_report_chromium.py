@@ -23,8 +23,9 @@ FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-
 
 
 def _chromium(args: list[str], profile: Path) -> subprocess.CompletedProcess:
+    # a guard against a hang, not a speed test (a loaded machine renders several times slower)
     return subprocess.run([CHROMIUM, *FLAGS, f"--user-data-dir={profile}", *args], capture_output=True, text=True,
-                          timeout=120, check=False)
+                          timeout=600, check=False)
 
 
 def render_in_chromium(html: Path, tmp: Path) -> tuple[str, list[str], Path]:

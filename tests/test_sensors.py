@@ -11,19 +11,18 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from helpers import assert_jacobian_matches_fd
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from scipy.spatial.transform import Rotation
 
 from pkmcal.cli.identify_cmds import _angle_names
+from pkmcal.conventions import euler_to_matrix
 from pkmcal.errors import PkmcalError
 from pkmcal.mechanisms.hexapod import HEXAPOD_PARAM_NAMES
 from pkmcal.mechanisms.library import builtin_machine
 from pkmcal.sensors import SENSOR_KINDS, FullPoseSensor, IndicatorSensor, PlanarToolSensor, PositionSensor
-
-H = 1e-6
-
 
 def _floats(lo, hi):
     return st.floats(lo, hi, allow_nan=False, allow_infinity=False)
@@ -39,32 +38,53 @@ def _transform(lo_t, hi_t, ang):
     return st.tuples(*([_floats(lo_t, hi_t)] * 3 + [_floats(-ang, ang)] * 3)).map(np.array)
 
 
-def _fd(f, x0, wrap=None):
-    """Central differences of f (N, m) w.r.t. each column of x0 (N, k) → (N, m, k)."""
-    cols = []
-    for j in range(x0.shape[1]):
-        xp, xm = x0.copy(), x0.copy()
-        xp[:, j] += H
-        xm[:, j] -= H
-        d = f(xp) - f(xm)
-        if wrap is not None:
-            d[:, wrap] = (d[:, wrap] + np.pi) % (2 * np.pi) - np.pi
-        cols.append(d / (2 * H))
-    return np.stack(cols, axis=2)
+#: Length scale ℓ of every coordinate in mm here (the setups drawn span ~1 m: world offsets
+#: ≤ 520 mm, poses ≤ 400 mm); the readings are linear in every mm coordinate, so ℓ only sets
+#: the step. Angles: 1 rad, or less near a singularity (gimbal lock, a vertical plane).
+LENGTH_SCALE = 1000.0
 
 
-def _fd_params(sensor, poses, wrap=None):
-    theta = sensor.params
-    cols = []
-    for j in range(theta.size):
-        tp, tm = theta.copy(), theta.copy()
-        tp[j] += H
-        tm[j] -= H
-        d = sensor.with_params(tp).predict(poses) - sensor.with_params(tm).predict(poses)
-        if wrap is not None:
-            d[:, wrap] = (d[:, wrap] + np.pi) % (2 * np.pi) - np.pi
-        cols.append(d / (2 * H))
-    return np.stack(cols, axis=2)
+def _wrap_angles(is_angle):
+    """diff(a, b) of readings: a − b, the angle readings wrapped to (−π, π]."""
+    ang = np.asarray(is_angle, dtype=bool)
+
+    def diff(a, b):
+        d = a - b
+        d[..., ang] = (d[..., ang] + np.pi) % (2 * np.pi) - np.pi
+        return d
+
+    return diff
+
+
+def _euler_levers(abc, v):
+    """Levers (3,) of the Euler angles (a, b, c) of R = Rz(c) Ry(b) Rx(a) acting on vectors v
+    (N, 3), largest over the rows: a turns v about x, b turns Rx v about y, c turns Ry Rx v
+    about z, and every derivative of a turn about a fixed unit axis k has norm |k × v|."""
+    abc, v = np.broadcast_arrays(np.atleast_2d(abc), np.atleast_2d(v))
+    ca, sa, cb, sb = np.cos(abc[:, 0]), np.sin(abc[:, 0]), np.cos(abc[:, 1]), np.sin(abc[:, 1])
+    vx = np.stack([v[:, 0], ca * v[:, 1] - sa * v[:, 2], sa * v[:, 1] + ca * v[:, 2]], axis=1)
+    vy = np.stack([cb * vx[:, 0] + sb * vx[:, 2], vx[:, 1], -sb * vx[:, 0] + cb * vx[:, 2]], axis=1)
+    return np.array([np.hypot(v[:, 1], v[:, 2]).max(), np.hypot(vx[:, 0], vx[:, 2]).max(),
+                     np.hypot(vy[:, 0], vy[:, 1]).max()])
+
+
+def _fd_model(is_angle, angle_scale, mm_slope, angle_slope):
+    """dict(scale, slope) of helpers.assert_jacobian_matches_fd for mm / angle columns."""
+    ang = np.asarray(is_angle, dtype=bool)
+    slope = np.full(ang.shape, float(mm_slope))
+    slope[ang] = angle_slope  # one for all angle columns, or one each
+    return dict(scale=np.where(ang, angle_scale, LENGTH_SCALE), slope=slope)
+
+
+def _assert_pose_fd(sensor, poses, **model):
+    assert_jacobian_matches_fd(sensor.predict, poses, sensor.pose_jacobian(poses), **_fd_model(ANG, **model),
+                               diff=_wrap_angles(sensor.reading_is_angle), names=list("xyzabc"))
+
+
+def _assert_param_fd(sensor, poses, **model):
+    assert_jacobian_matches_fd(lambda theta: sensor.with_params(theta).predict(poses), sensor.params,
+                               sensor.param_jacobian(poses), **_fd_model(sensor.param_is_angle, **model),
+                               diff=_wrap_angles(sensor.reading_is_angle), names=sensor.param_names)
 
 
 def _homogeneous(pose):
@@ -86,11 +106,18 @@ def test_full_pose_jacobians_match_finite_differences(poses, world, tool):
     s = FullPoseSensor(world=world, tool=tool)
     y = s.predict(poses)
     # stay away from gimbal lock of the measured angles, where E⁻¹ blows up
-    assume(np.max(np.abs(y[:, 4])) < np.deg2rad(75))
-    Jx = s.pose_jacobian(poses)
-    Jp = s.param_jacobian(poses)
-    np.testing.assert_allclose(Jx, _fd(s.predict, poses, wrap=ANG), atol=1e-5, rtol=1e-6)
-    np.testing.assert_allclose(Jp, _fd_params(s, poses, wrap=ANG), atol=1e-5, rtol=1e-6)
+    b_max = np.max(np.abs(y[:, 4]))
+    assume(b_max < np.deg2rad(75))
+    # The reading's Euler angles are analytic up to gimbal lock: angle scale half the distance
+    # to it. Slopes: position readings 1 per mm, the lever per rad (tool point: ‖t‖; world:
+    # the reading's distance from the world origin); Euler readings ‖E⁻¹‖‖E‖ ≤ 4/cos b, twice
+    # that within half the distance to the lock.
+    angle_scale = min(1.0, (np.pi / 2 - b_max) / 2)
+    euler = 8.0 / np.cos(b_max)
+    _assert_pose_fd(s, poses, angle_scale=angle_scale, mm_slope=1.0,
+                    angle_slope=max(np.linalg.norm(tool[:3]), euler))
+    _assert_param_fd(s, poses, angle_scale=angle_scale, mm_slope=1.0,
+                     angle_slope=max(np.linalg.norm(y[:, :3] - world[:3], axis=1).max(), euler))
 
 
 @settings(max_examples=40, deadline=None)
@@ -122,8 +149,13 @@ def test_full_pose_identity_reads_the_pose():
 @given(poses=_pose_array(4), target=_transform(-80, 80, 0).map(lambda v: v[:3]), world=_transform(-300, 300, 1.0))
 def test_position_jacobians_match_finite_differences(poses, target, world):
     s = PositionSensor(target=target, world=world)
-    np.testing.assert_allclose(s.pose_jacobian(poses), _fd(s.predict, poses), atol=1e-5, rtol=1e-6)
-    np.testing.assert_allclose(s.param_jacobian(poses), _fd_params(s, poses), atol=1e-5, rtol=1e-6)
+    # p_w + R_w (p + R t): linear in every mm coordinate (slope 1); an Euler angle turns a
+    # lever about a fixed axis (_euler_levers: of t for the pose's angles, of p + R t for the
+    # world's): ℓ = 1 rad
+    R = euler_to_matrix(poses[:, 3:])
+    _assert_pose_fd(s, poses, angle_scale=1.0, mm_slope=1.0, angle_slope=_euler_levers(poses[:, 3:], target))
+    _assert_param_fd(s, poses, angle_scale=1.0, mm_slope=1.0,
+                     angle_slope=_euler_levers(world[3:], poses[:, :3] + R @ target))
     for k, pose in enumerate(poses):
         expected = (_homogeneous(world) @ _homogeneous(pose) @ np.r_[target, 1.0])[:3]
         np.testing.assert_allclose(s.predict(poses)[k], expected, atol=1e-9)
@@ -185,8 +217,22 @@ def test_indicator_model_matches_plane_construction_and_fd(poses, k, data, d_off
     assert y.shape == (3, k)
     for j, pose in enumerate(poses):
         np.testing.assert_allclose(y[j] + zero, _plane_construction(positions, d_off, pose), atol=1e-8)
-    np.testing.assert_allclose(s.pose_jacobian(poses), _fd(s.predict, poses), atol=1e-5, rtol=1e-6)
-    np.testing.assert_allclose(s.param_jacobian(poses), _fd_params(s, poses), atol=1e-7)
+    # z_k = c_z − (n_x (x_k − c_x) + n_y (y_k − c_y)) / n_z, c = p + R (0, 0, −d_off), n = R e_z:
+    # linear in p (slope ≤ 1/n_z), analytic in the angles until the plane turns vertical
+    # (n_z = 0; the drawn tilts keep it ≥ π/2 − 0.71 rad away): angle scale half that, slope
+    # ≤ r/n_z² with r the indicators' reach from c, twice that within the scale; the zeros:
+    # linear, slope 1
+    n_z = np.min(np.cos(poses[:, 3]) * np.cos(poses[:, 4]))
+    reach = np.max(np.linalg.norm(positions[None] - poses[:, None, :2], axis=2)) + abs(d_off)
+    _assert_pose_fd(s, poses, angle_scale=(np.pi / 2 - np.arccos(n_z)) / 2, mm_slope=1.0 / n_z,
+                    angle_slope=2.0 * reach / n_z**2)
+    # θ: the zeros (linear, slope 1), the plate translation (linear, slope ≤ 1/n_z) and the
+    # plate angles at the identity plate, which turn c' = R_Wᵀ c (lever |c| ≤ |p| + |d_off|)
+    # and n' as the platform's angles turn n: the same singularity distance, slope ≤
+    # (|c| + reach)/n_z², twice that within the scale
+    lever = np.max(np.linalg.norm(poses[:, :3], axis=1)) + abs(d_off)
+    _assert_param_fd(s, poses, angle_scale=(np.pi / 2 - np.arccos(n_z)) / 2, mm_slope=1.0 / n_z,
+                     angle_slope=2.0 * (lever + reach) / n_z**2)
 
 
 def test_indicator_level_platform_reads_height_minus_offset():

@@ -109,6 +109,8 @@ def test_save_load_round_trip(tmp_path_factory, kind, vals, std, uniform):
     back = load_setup(path)
     assert back.sensor.kind == kind and back.sensor.default_free == sensor.default_free
     np.testing.assert_array_equal(back.sensor.params, sensor.params)  # degrees written exactly
+    # angle noise in degrees in the file: rad → deg → rad, relative error ≤ 2ε (four roundings
+    # of u = ε/2: two products, two rounded constants); 1e-15 ≈ 4.5ε
     np.testing.assert_allclose(back.noise.reading_std, rs, rtol=1e-15, atol=0)
     np.testing.assert_allclose(back.noise.actuator_std, std[5], rtol=1e-15, atol=0)
     assert back.noise.distribution == setup.noise.distribution
