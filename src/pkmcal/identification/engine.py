@@ -41,6 +41,7 @@ import numpy as np
 
 from pkmcal.errors import PkmcalError
 from pkmcal.identification.identifiability import (
+    RANK_RTOL,
     WEAK_RATIO,
     IdentifiabilityReport,
     ScaledJacobian,
@@ -83,6 +84,27 @@ MAX_DROPPED_FRACTION = 0.1
 TOLERANCE = 1e-10
 
 
+class _DeferredTuple:
+    """A dataclass field (descriptor) holding a tuple that may be given as a zero-argument
+    callable instead, called once on first read: the engine defers the weak-direction
+    warnings, which need the SVD of the identifiability analysis, until someone reads them
+    (``dataclasses.replace`` and ``==`` read them, so they see the full tuple)."""
+
+    def __set_name__(self, owner, name):
+        self._slot = "_deferred_" + name
+
+    def __get__(self, obj, owner=None):
+        if obj is None:
+            return ()                                   # the field's default
+        value = obj.__dict__[self._slot]
+        if callable(value):
+            value = obj.__dict__[self._slot] = tuple(value())
+        return value
+
+    def __set__(self, obj, value):
+        obj.__dict__[self._slot] = value if callable(value) else tuple(value)
+
+
 @dataclass(frozen=True)
 class IdentificationResult:
     """Outcome of :func:`identify` (numbers in internal units: mm, rad).
@@ -105,7 +127,9 @@ class IdentificationResult:
     cost : ½ Σ ‖W r‖²; ``nfev``, ``njev``, ``status``, ``success``, ``message`` from the solver.
     identifiability : the report on the candidate parameters at the start (a property,
         computed on first use from ``identifiability_analysis`` when not needed by the fit).
-    warnings : human-readable notes (dropped poses, auto-fixed gauge, outliers, …).
+    warnings : human-readable notes (dropped poses, auto-fixed gauge, outliers, weak
+        directions, …); the weak-direction ones come from the identifiability report, so
+        when the fit did not need that report they are computed on first read, with it.
     screening : per-pose normalised residuals and the outliers (:mod:`.robust`; None when
         the noise model cannot whiten); ``priors`` the Gaussian priors of the fit
         (:mod:`.priors`); ``loss`` the scipy loss of the fit ("linear": least squares).
@@ -135,7 +159,7 @@ class IdentificationResult:
     message: str
     identifiability_analysis: Callable[[], IdentifiabilityReport] = field(repr=False, compare=False)
     gauge: tuple[str, ...] = ()
-    warnings: tuple[str, ...] = field(default_factory=tuple)
+    warnings: tuple[str, ...] = _DeferredTuple()
     #: Unit of each residual row ("mm", "rad", or "1" for whitened / mixed rows).
     residual_units: tuple[str, ...] = ()
     screening: Screening | None = None
@@ -669,16 +693,29 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
     judged, basis = prior.augment(judged, cand, basis)   # a prior pins its direction (.priors)
     scaled = ScaledJacobian(judged)
 
+    done: list[IdentifiabilityReport] = []
+
     def analyse() -> IdentifiabilityReport:
-        import dataclasses
+        """The full analysis (one SVD), computed once: the fit, the result's report and its
+        deferred warnings share it. One BLAS thread also when deferred, outside
+        :func:`identify`: a threaded SVD of this 42 × 42 triangle took 100 ms instead of
+        0.3 ms on a loaded 2-core machine (2026-11-23)."""
+        if not done:
+            import dataclasses
 
-        rep = scaled.analyse(cand_names, tuple(model.mechanism.param_names))
-        return dataclasses.replace(rep, basis=basis, angle_names=tuple(n for n in cand_names if n in angle_names))
+            with single_threaded_blas():
+                rep = scaled.analyse(cand_names, tuple(model.mechanism.param_names))
+            done.append(dataclasses.replace(rep, basis=basis,
+                                            angle_names=tuple(n for n in cand_names if n in angle_names)))
+        return done[0]
 
-    # the full analysis (an SVD) only when the cheap certificate cannot prove that no
-    # direction is weak (σ/σ₁ > WEAK_RATIO everywhere, hence full rank); otherwise the result
-    # computes the report on first use
-    report = None if scaled.certainly_full_rank(WEAK_RATIO) else analyse()
+    # The full analysis runs before the fit only when the cheap certificate cannot prove
+    # full rank (a gauge may have to be fixed). Otherwise the result computes it on first
+    # use of its report, and of its warnings when the certificate could not also prove
+    # that no direction is weak (σ/σ₁ > WEAK_RATIO everywhere): the same report, the same
+    # warnings, its SVD paid only by those who read them.
+    report = None if scaled.certainly_full_rank(RANK_RTOL) else analyse()
+    no_weak = report is None and scaled.certainly_full_rank(WEAK_RATIO)
     auto = (fix is None and not explicit) or (isinstance(fix, str) and fix == "auto")
     if report is not None and not report.identifiable:
         if not auto:
@@ -755,7 +792,12 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
     if screening is not None:
         notes.extend(screening.warnings())
 
-    notes.extend(fit_warnings(report, free_names, unc, angle_names))
+    n_fit_notes = len(notes)     # the fit's warnings (weak directions, χ²) go here, maybe deferred
+
+    def all_notes() -> tuple[str, ...]:
+        found = fit_warnings(report if report is not None or no_weak else analyse(), free_names, unc, angle_names)
+        return tuple(notes[:n_fit_notes] + found + notes[n_fit_notes:])
+
     mech_cal, sensor_cal = model.split(theta)
     p = model.n_mech
     mech_free = free_idx[free_idx < p]
@@ -797,9 +839,9 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
         status=sol.status,
         success=sol.success,
         message=sol.message,
-        identifiability_analysis=analyse if report is None else (lambda: report),
+        identifiability_analysis=analyse,
         gauge=tuple(report.fixed) if report is not None and not report.identifiable else (),
-        warnings=tuple(notes),
+        warnings=all_notes() if report is not None or no_weak else all_notes,
         residual_units=meth.row_units(),
         screening=screening,
         priors=prior,
