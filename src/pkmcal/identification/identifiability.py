@@ -304,7 +304,7 @@ def design_jacobian(machine, sensor, noise, poses: np.ndarray, method: str, weig
 
     poses = machine.as_pose_array(poses)
     with np.errstate(invalid="ignore"):
-        model = Model(machine, sensor, noise, machine.ik(poses), sensor.predict(poses), poses)
+        model = Model(machine, sensor, noise, machine.ik(poses), sensor.predict(machine.frame(poses)), poses)
     meth = make_method(method, model, weighted, form=form)
     meth.sensor_columns = sensor_columns
     whiten = weighted and not meth.prewhitened            # the weighted projection is already whitened
@@ -355,7 +355,8 @@ def _identifiability(machine, setup, poses, *, method, free, fix, weighted) -> I
         method = default_method(setup, machine)
     J, ok, names = design_jacobian(machine, setup.sensor, setup.noise, poses, method, weighted)
     with np.errstate(invalid="ignore"):
-        model = Model(machine, setup.sensor, setup.noise, machine.ik(poses[:1]), setup.sensor.predict(poses[:1]))
+        model = Model(machine, setup.sensor, setup.noise, machine.ik(poses[:1]),
+                      setup.sensor.predict(machine.frame(poses[:1])))
     cand, _ = candidate_parameters(model, free, None if fix == "auto" else fix)
     rows = J[ok].reshape(-1, J.shape[-1])[:, cand]
     if rows.shape[0] == 0:

@@ -119,6 +119,14 @@ class ActuatorSubset(Mechanism):
         return self.base.kind
 
     @property
+    def abilities(self):  # type: ignore[override]
+        return self.base.abilities
+
+    @property
+    def frame_depends_on_params(self) -> bool:  # type: ignore[override]
+        return self.base.frame_depends_on_params
+
+    @property
     def home_pose(self):
         return self.base.home_pose
 

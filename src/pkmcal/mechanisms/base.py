@@ -135,6 +135,9 @@ class Mechanism(ABC):
     #: ``leg_lengths``, ``fk_lengths``, ``length_param_jacobian``), ``"drawing"`` (has
     #: ``draw_segments``), ``"linuxcnc"`` (exportable to a LinuxCNC kinematics module).
     abilities: frozenset[str] = frozenset()
+    #: True when the platform frame depends on ρ (a tool offset): then
+    #: :meth:`frame_jacobians` gives T_ρ and the engine adds (∂y/∂twist) · T_ρ to ∂y/∂ρ.
+    frame_depends_on_params: bool = False
     #: Parameter names or shell patterns held at their values unless freed by name
     #: (none today; e.g. actuator gains, which only special campaigns can identify).
     default_fixed: tuple[str, ...] = ()
@@ -266,7 +269,7 @@ class Mechanism(ABC):
         """FK exact to rounding, not just to the convergence tolerance, for residuals that a
         least-squares solver evaluates at 1e-12 tolerances or differentiates numerically.
         Default :meth:`fk`, for mechanisms whose FK already stops at a rounding-level step."""
-        return self.fk(readings, guess, params)
+        return self.fk(readings, guess, params=params)
 
     def assembly_signs(self, poses: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
         """Signs (N, k) in {−1, 0, +1} that tell the assembly modes of poses (N, n) apart:

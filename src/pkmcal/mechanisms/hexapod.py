@@ -373,7 +373,7 @@ class Hexapod(Mechanism):
                    params: np.ndarray | None = None) -> FKResult:
         """:meth:`fk` plus one polishing Newton step per converged pose, so that the poses are
         exact to rounding (the identification's FK; see ``_hexapod_kernels.fk_newton``)."""
-        return self.fk(readings, guess, params, polish=1)
+        return self.fk(readings, guess, params=params, polish=1)
 
     def fk_lengths(self, lengths, guess=None, params: np.ndarray | None = None, *, tol: float = FK_TOL_MM,
                    max_iter: int = FK_MAX_ITER, polish: int = 0) -> FKResult:

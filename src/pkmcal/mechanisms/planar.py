@@ -82,6 +82,8 @@ class PlanarMechanism(Mechanism):
     #: Free-form information kept in the machine file (e.g. the ``calibration`` block).
     metadata: dict = field(default_factory=dict)
 
+    #: A platform frame in the plane z = 0 turning about z only (what the planar-tool sensor reads).
+    abilities: ClassVar[frozenset[str]] = frozenset({"planar"})
     #: Parameter names, in the order of ``rho`` (set by each machine class).
     _names: ClassVar[tuple[str, ...]] = ()
     #: Parameters that are link lengths: a machine is impossible unless they are positive.

@@ -105,7 +105,7 @@ def _compliance_facts(nominal, result, setup, commanded) -> tuple[tuple[str, str
 
     poses = np.asarray(commanded, dtype=float)
     if result.method != "projection" or not is_redundant(nominal) or poses.ndim != 2 \
-            or len(poses) <= int(np.max(result.used_poses, initial=-1)) or not hasattr(result.sensor, "tool_pose_jacobian"):
+            or len(poses) <= int(np.max(result.used_poses, initial=-1)) or "tool-point" not in result.sensor.abilities:
         return ()
     std = float(np.max(np.asarray(setup.noise.reading_std, dtype=float)))
     text = compliance_warning(nominal, result.mechanism, result.sensor, poses[result.used_poses], result.poses, std)
