@@ -330,7 +330,6 @@ def baseline_result(result, nominal: Mechanism, method: str):
     """The engine's result of a baseline fit as a result of ``nominal``'s kind (covariance
     kept; ``method`` named)."""
     mech = result.mechanism
-    notes = result.warnings
     base = getattr(mech, "base", None)
     if base is not None:
         names = tuple(nominal.param_names)
@@ -338,8 +337,7 @@ def baseline_result(result, nominal: Mechanism, method: str):
         idx = np.array([names.index(result.free[i]) for i in sel], dtype=int)
         cov = embed(np.asarray(result.covariance)[np.ix_(sel, sel)], idx, len(names)) if sel else None
         mech = base.with_params(base.params, covariance=cov)
-        notes = tuple(w for w in notes if "does not store a covariance" not in w)
-    return dataclasses.replace(result, mechanism=mech, method=method, warnings=notes)
+    return dataclasses.replace(result, mechanism=mech, method=method)
 
 
 # -- what the following errors say about the load deflection ------------------------------

@@ -157,7 +157,7 @@ def report_data_from_results(
              *_compliance_facts(nominal, result, setup, commanded))
     return ReportData(
         title=title or f"pkmcal calibration report: {nominal.name}",
-        machine_summary=nominal.summary() if hasattr(nominal, "summary") else nominal.name,
+        machine_summary=nominal.summary(),
         nominal=nominal,
         identified=result.mechanism if identified is None else identified,
         poses=np.asarray(poses, dtype=float),
