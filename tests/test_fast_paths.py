@@ -174,3 +174,32 @@ def test_full_pose_inverse_is_exact_and_measures_the_poses(machine):
     model = Model(machine, setup.sensor, setup.noise, q, y)
     ev = make_method("ik-residual", model).evaluate(model.theta0, jac=True, cov=True)
     np.testing.assert_allclose(ev.poses, y, rtol=0, atol=16 * eps * np.abs(y).max())
+
+
+def test_readings_that_are_the_pose_match_the_general_inverse(machine, monkeypatch):
+    """A full-pose sensor without world/tool transforms on a hexapod reads the pose itself
+    (declared: Sensor.reads_pose and the "pose-convention" ability): the ik-residual takes
+    x̂ = y and H = I; the closed-form inverse and H⁻¹ must give the same residual, Jacobian
+    (sensor columns included) and covariance."""
+    from pkmcal.sensors.full_pose import FullPoseSensor
+
+    setup = builtin_setup("full-pose-paper1")
+    assert setup.sensor.reads_pose() and not FullPoseSensor(world=np.array([0, 0, 0, 0, 0, 1e-3])).reads_pose()
+    assert not setup.sensor.reads_pose(np.r_[np.zeros(11), 1e-3])
+    rng = np.random.default_rng(5)
+    poses = _poses(machine, 6, n=12)
+    y = setup.sensor.predict(machine.frame(poses)) + rng.normal(0.0, 0.01, (12, 6))
+    q = machine.ik(poses) + rng.normal(0.0, 0.005, (12, 6))
+
+    def evaluate():
+        model = Model(machine, setup.sensor, setup.noise, q, y)
+        return make_method("ik-residual", model).evaluate(model.theta0, jac=True, cov=True)
+
+    fast = evaluate()
+    np.testing.assert_array_equal(fast.poses, y)
+    monkeypatch.setattr(FullPoseSensor, "reads_pose", lambda self, params=None: False)
+    slow = evaluate()
+    np.testing.assert_allclose(fast.poses, slow.poses, atol=1e-12)
+    np.testing.assert_allclose(fast.r, slow.r, atol=1e-10)
+    np.testing.assert_allclose(fast.J, slow.J, atol=1e-10)
+    np.testing.assert_allclose(fast.cov, slow.cov, rtol=1e-10, atol=1e-16)

@@ -15,10 +15,9 @@ import dataclasses
 
 import numpy as np
 import pytest
+from helpers import frames_of, hexapod_pose_jacobian
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
-from helpers import frames_of, hexapod_pose_jacobian
 
 from pkmcal.conventions import (
     euler_pose_jacobian,

@@ -23,6 +23,7 @@ from pkmcal.errors import PkmcalError
 from pkmcal.mechanisms.hexapod import HEXAPOD_PARAM_NAMES
 from pkmcal.mechanisms.library import builtin_machine
 from pkmcal.sensors import SENSOR_KINDS, FullPoseSensor, IndicatorSensor, PlanarToolSensor, PositionSensor
+from pkmcal.sensors.library import PROTOTYPE_INDICATORS
 
 def _floats(lo, hi):
     return st.floats(lo, hi, allow_nan=False, allow_infinity=False)
@@ -361,3 +362,54 @@ def test_identify_table_angles_come_from_the_flags():
     assert planar_angles  # the way directions α_i
     result = SimpleNamespace(sensor=PlanarToolSensor(n_pose=3), mechanism=planar)
     assert _angle_names(result) == planar_angles | {"world.c"}
+
+
+# -- the sensor contract: frames in, explicit parameters, declared abilities -------------------
+
+PROTOTYPE_POSITIONS = PROTOTYPE_INDICATORS
+PLATE = np.array([3.0, -2.0, 1.0, 0.02, -0.01, 0.3])
+
+
+@pytest.mark.parametrize("sensor", _all_sensors() + [IndicatorSensor(PROTOTYPE_POSITIONS, 5.0, plate=PLATE)],
+                         ids=lambda s: f"{s.kind}")
+def test_explicit_params_equal_with_params_to_the_bit(sensor):
+    frames = _frames_for(sensor)
+    theta = sensor.params + 0.01 * (1 + np.arange(len(sensor.params)))
+    other = sensor.with_params(theta)
+    for f in ("predict", "frame_jacobian", "param_jacobian"):
+        np.testing.assert_array_equal(getattr(sensor, f)(frames, theta), getattr(other, f)(frames), err_msg=f)
+        np.testing.assert_array_equal(getattr(sensor, f)(frames), getattr(sensor, f)(frames, sensor.params))
+    assert sensor.frame_jacobian(frames).shape == (len(frames), sensor.n_readings, 6)
+
+
+@pytest.mark.parametrize("sensor", _all_sensors(), ids=lambda s: f"{s.kind}")
+def test_frame_jacobian_matches_twists_of_the_frame(sensor):
+    """∂y/∂(δp, δω) against central differences of y(frame moved by a twist) (Frame.moved):
+    the readings are smooth in the twist on the scale of the setup (1 m for δp, 1 rad for δω)."""
+    frames = _frames_for(sensor)[:1]
+    J = sensor.frame_jacobian(frames)
+    planar = "tool-point" in sensor.abilities
+    rows = [0, 1, 5] if planar else list(range(6))     # a planar frame turns about z only
+    assert_jacobian_matches_fd(lambda t: sensor.predict(frames.moved(_twist(t, rows))), np.zeros((1, len(rows))),
+                               J[..., rows], scale=np.where(np.array(rows) >= 3, 1.0, 1000.0),
+                               magnitude=1000.0, diff=_wrap_angles(sensor.reading_is_angle),
+                               names=[("dpx", "dpy", "dpz", "dwx", "dwy", "dwz")[k] for k in rows])
+
+
+def _twist(t, rows):
+    full = np.zeros((np.shape(t)[0], 6))
+    full[:, rows] = t
+    return full
+
+
+def test_readable_and_works_with_are_declared():
+    hexapod, planar = builtin_machine("stewart-prototype"), builtin_machine("planar-3dof-4act")
+    s = IndicatorSensor(PROTOTYPE_POSITIONS, 5.0)
+    ok, why = s.readable(frames_of(np.array([[0, 0, 300, 0, 0, 0], [0, 0, 300, np.pi / 2, 0, 0]])))
+    assert ok.tolist() == [True, False] and "vertical" in why
+    assert FullPoseSensor().readable(frames_of(np.zeros(6)))[0].all()
+    assert s.works_with(hexapod) is None and "planar-tool" in s.works_with(planar)
+    assert PlanarToolSensor(n_pose=3).works_with(planar) is None
+    assert FullPoseSensor().invertible and not PositionSensor().invertible
+    with pytest.raises(PkmcalError, match="do not determine"):
+        PositionSensor().invert(np.zeros((1, 3)))

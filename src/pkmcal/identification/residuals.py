@@ -376,25 +376,38 @@ class IKResidual(Method):
         last = self._measured
         if last is None or not np.array_equal(last[0], s):
             m = self.model
-            frame = m.sensor.invert(m.y, s)
-            x = m.mechanism.poses_from_frame(frame)
+            if "pose-convention" in m.mechanism.abilities and m.sensor.reads_pose(s):
+                # the readings are the pose (declared by both): x̂ = y, H = I, bit for bit
+                x = np.array(m.y, dtype=float)
+                frame, identity = m.mechanism.frame(x, rho), True
+            else:
+                frame, identity = m.sensor.invert(m.y, s), False
+                x = m.mechanism.poses_from_frame(frame)
             conv = np.all(np.isfinite(x), axis=1)
-            last = self._measured = (np.array(s), {"x": x, "conv": conv, "frame": frame, "rho": rho, "s": s})
+            last = self._measured = (np.array(s), {"x": x, "conv": conv, "frame": frame, "rho": rho, "s": s,
+                                                   "identity": identity})
         return last[1]
 
-    def _Hinv(self, poses: dict) -> np.ndarray:
-        """H⁻¹ (N, n, m)."""
+    def _Hinv(self, poses: dict) -> np.ndarray | None:
+        """H⁻¹ (N, n, m), or None when the readings are the pose (H = I)."""
+        if poses["identity"]:
+            return None
         m = self.model
         return self._piece(poses, "Hinv", lambda: np.linalg.inv(
             sensor_pose_jacobian(m.mechanism, m.sensor, poses["x"], poses["frame"], poses["rho"], poses["s"])))
 
     def _AHinv(self, A: np.ndarray, poses: dict) -> np.ndarray:
         """A H⁻¹: how the sensor noise moves the actuator residual."""
-        return A @ self._Hinv(poses)
+        Hinv = self._Hinv(poses)
+        return A if Hinv is None else A @ Hinv
 
     def _HinvG(self, poses: dict) -> np.ndarray:
-        return self._piece(poses, "HinvG", lambda: self._Hinv(poses) @ self.model.sensor.param_jacobian(
-            poses["frame"], poses["s"]))
+        def compute():
+            G = self.model.sensor.param_jacobian(poses["frame"], poses["s"])
+            Hinv = self._Hinv(poses)
+            return G if Hinv is None else Hinv @ G
+
+        return self._piece(poses, "HinvG", compute)
 
     def _solve(self, theta):
         # IK with its Jacobians in one pass: a solver asks for the Jacobian at most points

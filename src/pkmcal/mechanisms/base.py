@@ -133,7 +133,9 @@ class Mechanism(ABC):
     actuator_names: tuple[str, ...]
     #: Optional features, asked as ``"x" in mech.abilities``: ``"leg-lengths"`` (has
     #: ``leg_lengths``, ``fk_lengths``, ``length_param_jacobian``), ``"drawing"`` (has
-    #: ``draw_segments``), ``"linuxcnc"`` (exportable to a LinuxCNC kinematics module).
+    #: ``draw_segments``), ``"linuxcnc"`` (exportable to a LinuxCNC kinematics module),
+    #: ``"pose-convention"`` (the pose coordinates are the platform frame's x, y, z, a, b, c
+    #: of :mod:`pkmcal.conventions`: ``frame`` is ``Frame.from_poses``), ``"planar"``.
     abilities: frozenset[str] = frozenset()
     #: True when the platform frame depends on ρ (a tool offset): then
     #: :meth:`frame_jacobians` gives T_ρ and the engine adds (∂y/∂twist) · T_ρ to ∂y/∂ρ.

@@ -30,7 +30,7 @@ class Frame:
     R: np.ndarray
 
     @classmethod
-    def from_poses(cls, poses: np.ndarray) -> "Frame":
+    def from_poses(cls, poses: np.ndarray) -> Frame:
         """The frames of poses (N, 6) x, y, z, a, b, c in the pose convention of
         :mod:`pkmcal.conventions` (p = (x, y, z), R = Rz(c) Ry(b) Rx(a)); a single pose
         (6,) gives one frame."""
@@ -42,11 +42,11 @@ class Frame:
     def __len__(self) -> int:
         return int(self.p.shape[0])
 
-    def __getitem__(self, index) -> "Frame":
+    def __getitem__(self, index) -> Frame:
         """The frames ``index`` (an index array, boolean mask or slice) as a Frame."""
         return Frame(p=self.p[index], R=self.R[index])
 
-    def moved(self, twist: np.ndarray) -> "Frame":
+    def moved(self, twist: np.ndarray) -> Frame:
         """The frames displaced by twists (N, 6) or (6,) = (δp, δω): p + δp, exp([δω]×) R."""
         from pkmcal.conventions import rotation_vector_to_matrix
 

@@ -127,7 +127,7 @@ class Hexapod(Mechanism):
     pose_names = POSE_COLUMNS
     pose_is_angle = (False, False, False, True, True, True)
     actuator_names = tuple(f"lambda{i + 1}" for i in range(N_LEGS))
-    abilities = frozenset({"leg-lengths", "drawing", "linuxcnc"})
+    abilities = frozenset({"leg-lengths", "drawing", "linuxcnc", "pose-convention"})
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -168,8 +168,9 @@ class Hexapod(Mechanism):
     def with_params(self, params: np.ndarray, name: str | None = None, covariance=None) -> "Hexapod":
         """This machine with parameters ρ (42,) (and ``name``, ``covariance``, default none).
 
-        On the identification hot path (one call per residual evaluation), so it does not
-        go through ``dataclasses.replace``: only the changed fields are validated and
+        Cheap (studies and simulations build many machines; the identification passes ρ
+        explicitly instead), so it does not go through ``dataclasses.replace``: only the
+        changed fields are validated and
         frozen; the others (axes, stroke, limits, home, workspace, description, metadata)
         are this machine's already-validated objects, shared. The home pose is kept, not
         recomputed from the new parameters (as with ``replace``, since home is never None

@@ -44,9 +44,9 @@ FK_RES_TOL = 1e-3
 _STEPS = 0.5 ** np.arange(12)
 
 
-def solve_fk(mechanism: "Mechanism", readings: np.ndarray, guess: np.ndarray | None = None,
+def solve_fk(mechanism: Mechanism, readings: np.ndarray, guess: np.ndarray | None = None,
              params: np.ndarray | None = None, *, tol: float = FK_TOL, max_iter: int = FK_MAX_ITER,
-             res_tol: float = FK_RES_TOL) -> "FKResult":
+             res_tol: float = FK_RES_TOL) -> FKResult:
     """Poses (N, n) minimising ‖q − IK(x, ρ)‖ over all l actuators (module docstring).
 
     ``readings`` (N, l); ``guess`` one pose (n,) or one per reading (N, n), default the home

@@ -113,7 +113,7 @@ class Sensor(ABC):
         """Sensor parameters estimated by default (the rest are held at their values)."""
         return self.free_when_unset if self.free is None else self.free
 
-    def with_params(self, params: np.ndarray) -> "Sensor":
+    def with_params(self, params: np.ndarray) -> Sensor:
         """A copy of this sensor with θ replaced."""
         theta = check_params(params, self.param_names, self.kind)
         parts, i = {}, 0
@@ -151,23 +151,23 @@ class Sensor(ABC):
         return theta
 
     @abstractmethod
-    def predict(self, frame: "Frame", params: np.ndarray | None = None) -> np.ndarray:
+    def predict(self, frame: Frame, params: np.ndarray | None = None) -> np.ndarray:
         """Readings y (N, m) of the platform frames, at θ = ``params`` (default own)."""
 
     @abstractmethod
-    def frame_jacobian(self, frame: "Frame", params: np.ndarray | None = None) -> np.ndarray:
+    def frame_jacobian(self, frame: Frame, params: np.ndarray | None = None) -> np.ndarray:
         """∂y/∂(δp, δω) (N, m, 6): the readings' derivative with respect to the frame's twist."""
 
     @abstractmethod
-    def param_jacobian(self, frame: "Frame", params: np.ndarray | None = None) -> np.ndarray:
+    def param_jacobian(self, frame: Frame, params: np.ndarray | None = None) -> np.ndarray:
         """∂y/∂θ (N, m, s)."""
 
-    def readable(self, frame: "Frame") -> tuple[np.ndarray, str]:
+    def readable(self, frame: Frame) -> tuple[np.ndarray, str]:
         """``(ok, reason)``: ok (N,) True where the sensor can read the frame; ``reason``
         why the others cannot (a short phrase). Default: every frame."""
         return np.ones(len(frame), dtype=bool), ""
 
-    def works_with(self, mechanism: "Mechanism") -> str | None:
+    def works_with(self, mechanism: Mechanism) -> str | None:
         """None when this sensor can measure ``mechanism``, else why not (a sentence).
 
         Default (the spatial sensors): any machine whose platform frame moves in space, not a
@@ -179,7 +179,14 @@ class Sensor(ABC):
                     "coordinates, a planar machine); use a 'planar-tool' setup")
         return None
 
-    def invert(self, readings: np.ndarray, params: np.ndarray | None = None) -> "Frame":
+    def reads_pose(self, params: np.ndarray | None = None) -> bool:
+        """True when, at θ = ``params``, the readings are exactly the frame's x, y, z, a, b, c
+        in the pose convention of :mod:`pkmcal.conventions` (no transform): on a mechanism
+        with the ``"pose-convention"`` ability they are then the pose itself (∂y/∂x = I), which
+        the ik-residual uses as such, bit for bit. Default False."""
+        return False
+
+    def invert(self, readings: np.ndarray, params: np.ndarray | None = None) -> Frame:
         """The platform frames whose readings are ``readings`` (N, m); only for
         :attr:`invertible` sensors."""
         from pkmcal.errors import PkmcalError
@@ -236,4 +243,4 @@ class MeasurementSetup:
 
     sensor: Sensor
     noise: NoiseModel
-    simulation: "StaticsModel | None" = None
+    simulation: StaticsModel | None = None

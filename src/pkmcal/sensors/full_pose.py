@@ -73,6 +73,11 @@ class FullPoseSensor(Sensor):
     def reading_is_angle(self) -> tuple[bool, ...]:
         return TRANSFORM_IS_ANGLE
 
+    def reads_pose(self, params: np.ndarray | None = None) -> bool:
+        """No world or tool transform at θ: the readings are the platform frame's pose (|b| < 90°)."""
+        theta = self._theta(params)
+        return not (np.any(self.world) or np.any(self.tool)) if theta is None else not np.any(theta)
+
     def _parts(self, params) -> tuple[PointChain, np.ndarray, np.ndarray]:
         """(chain, R_t, tool (6,)) of θ = ``params`` (this sensor's own for None)."""
         theta = self._theta(params)
