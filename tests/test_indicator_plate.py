@@ -48,8 +48,8 @@ def _plate(seed):
 
 def _reference(s: IndicatorSensor, poses):
     """Eq. 6 and its pose Jacobian exactly as implemented before the plate frame (same NumPy
-    operations, with the platform normal n = R e_z of the frame), for the bit-identity check."""
-    n = frames_of(poses).R[:, :, 2]
+    operations), for the bit-identity check."""
+    n = plane_normals(poses[:, 3:6])
     num = (np.einsum("nk,nk->n", n, poses[:, 0:3]) - s.plane_offset)[:, None] - n[:, 0:2] @ s.positions.T
     y = num / n[:, 2:3] - s.zero
     inz = 1.0 / n[:, 2:3]

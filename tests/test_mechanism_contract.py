@@ -208,3 +208,14 @@ def test_shared_solver_flags_another_assembly_mode():
     np.testing.assert_allclose(flagged.poses[0], x, rtol=0, atol=1e-9)
     kept = solve_fk(m, q, guess=x - [10.0, 0.0, 0.0])
     assert kept.ok.all()
+
+
+def test_frame_z_axis_is_the_third_column_of_R():
+    """Frame.from_poses' closed-form normal (the indicators' formula) is R e_z to one rounding;
+    a frame without one gives R e_z itself."""
+    x = _poses(MACHINES["stewart-prototype"], 100, seed=8)
+    f = Frame.from_poses(x)
+    np.testing.assert_allclose(f.z_axis, f.R[:, :, 2], rtol=0, atol=4 * np.finfo(float).eps)
+    g = Frame(p=f.p, R=f.R)
+    np.testing.assert_array_equal(g.z_axis, f.R[:, :, 2])
+    np.testing.assert_array_equal(f[3:5].z_axis, f.z_axis[3:5])

@@ -45,7 +45,7 @@ import numpy as np
 
 from pkmcal.conventions import euler_rate_matrix, euler_to_matrix
 from pkmcal.errors import PkmcalError
-from pkmcal.mechanisms.frame import Frame
+from pkmcal.mechanisms.frame import Frame, z_axes
 from pkmcal.sensors._frames import TRANSFORM_IS_ANGLE
 from pkmcal.sensors.base import ParamGroup, Sensor
 
@@ -56,17 +56,9 @@ PLATE_PARAM_NAMES = tuple(f"plate.{c}" for c in ("x", "y", "z", "a", "b", "c"))
 MIN_NORMAL_Z = 1e-3
 
 
-def plane_normals(abc: np.ndarray) -> np.ndarray:
-    """n = R e_z (N, 3), the third column of R = Rz(c) Ry(b) Rx(a) (:func:`euler_to_matrix`):
-    (c_c s_b c_a + s_c s_a, s_c s_b c_a − c_c s_a, c_b c_a), without forming R."""
-    c, s = np.cos(abc), np.sin(abc)
-    ca, sa = c[:, 0], s[:, 0]
-    cb_ca, sb_ca = c[:, 1] * ca, s[:, 1] * ca
-    n = np.empty(abc.shape)
-    n[:, 0] = c[:, 2] * sb_ca + s[:, 2] * sa
-    n[:, 1] = s[:, 2] * sb_ca - c[:, 2] * sa
-    n[:, 2] = cb_ca
-    return n
+#: n = R e_z of Euler angles without forming R (the sensor reads :attr:`Frame.z_axis`,
+#: which is this for the frames of poses).
+plane_normals = z_axes
 
 
 @dataclass(frozen=True, eq=False)
@@ -139,7 +131,7 @@ class IndicatorSensor(Sensor):
     def _in_plate(self, frame: Frame, plate: np.ndarray):
         """Plate-frame positions p' (N, 3) and normals n' (N, 3) of the frames (module
         docstring); p' = p and n' = n = R e_z, unchanged bits, for the identity plate."""
-        n = frame.R[:, :, 2]
+        n = frame.z_axis
         if not np.any(plate):
             return frame.p, n
         Rw = euler_to_matrix(plate[3:6])
