@@ -15,26 +15,28 @@ engine composes H = ∂y/∂x = (∂y/∂twist) · T (:meth:`Mechanism.frame_jac
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from pkmcal.conventions import euler_to_matrix
 
 
-@dataclass(frozen=True, eq=False)
 class Frame:
     """N platform frames in the base frame: ``p`` (N, 3) mm, ``R`` (N, 3, 3) rotations.
 
-    ``normal`` (N, 3), optional: the platform's z axis R e_z as its constructor computed it
-    in closed form (:meth:`from_poses`: the pose convention's third column without forming R,
-    the formula the indicators have always used), equal to ``R[:, :, 2]`` to one rounding;
-    :attr:`z_axis` gives it, or ``R[:, :, 2]`` when None. It keeps the indicator readings
-    of a hexapod bit-identical to those before frames existed."""
+    Built from pose-convention angles (:meth:`from_poses`), R and the platform's z axis
+    R e_z are computed on first use, each once: a sensor that needs only the z axis (the
+    indicators) never forms R. :attr:`z_axis` is then the closed form of the convention's
+    third column (the formula the indicators have always used), equal to ``R[:, :, 2]`` to one
+    rounding, so the indicator readings of a hexapod are bit-identical to those before frames
+    existed; for a frame given by its R it is ``R[:, :, 2]``. A Frame is never changed after
+    construction (the lazily computed R and z axis are derived values, not state)."""
 
-    p: np.ndarray
-    R: np.ndarray
-    normal: np.ndarray | None = None
+    __slots__ = ("p", "_R", "_abc", "_z")
+
+    def __init__(self, p: np.ndarray, R: np.ndarray | None = None, *, abc: np.ndarray | None = None) -> None:
+        if R is None and abc is None:
+            raise ValueError("a Frame needs its rotations R or their pose-convention angles abc")
+        self.p, self._R, self._abc, self._z = p, R, abc, None
 
     @classmethod
     def from_poses(cls, poses: np.ndarray) -> Frame:
@@ -44,19 +46,30 @@ class Frame:
         poses = np.asarray(poses, dtype=float)
         if poses.ndim == 1:
             poses = poses[None, :]
-        return cls(p=poses[:, 0:3].copy(), R=euler_to_matrix(poses[:, 3:6]), normal=z_axes(poses[:, 3:6]))
+        return cls(p=poses[:, 0:3].copy(), abc=poses[:, 3:6].copy())
+
+    @property
+    def R(self) -> np.ndarray:
+        """Rotations (N, 3, 3)."""
+        if self._R is None:
+            self._R = euler_to_matrix(self._abc)
+        return self._R
 
     @property
     def z_axis(self) -> np.ndarray:
-        """R e_z (N, 3): :attr:`normal` when the constructor gave it, else ``R[:, :, 2]``."""
-        return self.R[:, :, 2] if self.normal is None else self.normal
+        """R e_z (N, 3) (class docstring)."""
+        if self._z is None:
+            self._z = self._R[:, :, 2] if self._abc is None else z_axes(self._abc)
+        return self._z
 
     def __len__(self) -> int:
         return int(self.p.shape[0])
 
     def __getitem__(self, index) -> Frame:
         """The frames ``index`` (an index array, boolean mask or slice) as a Frame."""
-        return Frame(p=self.p[index], R=self.R[index], normal=None if self.normal is None else self.normal[index])
+        if self._abc is not None:
+            return Frame(p=self.p[index], abc=self._abc[index])
+        return Frame(p=self.p[index], R=self._R[index])
 
     def moved(self, twist: np.ndarray) -> Frame:
         """The frames displaced by twists (N, 6) or (6,) = (δp, δω): p + δp, exp([δω]×) R."""
