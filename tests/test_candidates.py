@@ -91,7 +91,7 @@ def test_grid_and_corner_kinds(machine, indicators, box):
 
 def test_indicator_measurability(machine, indicators):
     home = machine.home[None]
-    z = indicators.sensor.predict(home)[0]
+    z = indicators.sensor.predict(machine.frame(home))[0]
     ok = measurability_violations(indicators, home, Measurability(travel=(z.min() - 1, z.max() + 1)))
     assert not any(v.any() for v in ok.values())
     bad = measurability_violations(indicators, home, Measurability(travel=(z.max() + 1, z.max() + 10)))

@@ -192,17 +192,43 @@ def test_small_linalg_flags_singular_and_indefinite():
     assert cholesky_inverse(np.stack([np.eye(2), np.diag([1.0, np.nan])]))[1] == 1
 
 
-def test_identity_sensor_shortcut_matches_general_path(machine, monkeypatch):
-    """A full-pose sensor without world/tool transforms skips the sensor inversion (x̂ = y,
-    H = I); the general Newton inversion and H⁻¹ must give the same residual, Jacobian
+def test_full_pose_inverse_is_exact_and_measures_the_poses(machine):
+    """The full-pose sensor's closed-form inverse (R = R_wᵀ R_T R_tᵀ, p = R_wᵀ(y − p_w) − R p_t)
+    gives back the frame it read to rounding, with and without world/tool transforms; the
+    ik-residual's measured poses are those frames' poses (for the identity sensor: the
+    readings themselves, to rounding)."""
+    from pkmcal.sensors.full_pose import FullPoseSensor
+
+    setup = builtin_setup("full-pose-paper1")
+    rng = np.random.default_rng(5)
+    poses = _poses(machine, 6, n=12)
+    frame = machine.frame(poses)
+    eps = np.finfo(float).eps
+    for s in (setup.sensor, FullPoseSensor(world=np.array([100.0, -50.0, 20.0, 0.1, -0.2, 0.3]),
+                                           tool=np.array([5.0, 3.0, 40.0, -0.05, 0.02, 1.0]))):
+        back = s.invert(s.predict(frame))
+        np.testing.assert_allclose(back.R, frame.R, rtol=0, atol=16 * eps)
+        np.testing.assert_allclose(back.p, frame.p, rtol=0, atol=16 * eps * 1000.0)
+    y = setup.sensor.predict(frame) + rng.normal(0.0, 0.01, (12, 6))
+    q = machine.ik(poses) + rng.normal(0.0, 0.005, (12, 6))
+    model = Model(machine, setup.sensor, setup.noise, q, y)
+    ev = make_method("ik-residual", model).evaluate(model.theta0, jac=True, cov=True)
+    np.testing.assert_allclose(ev.poses, y, rtol=0, atol=16 * eps * np.abs(y).max())
+
+
+def test_readings_that_are_the_pose_match_the_general_inverse(machine, monkeypatch):
+    """A full-pose sensor without world/tool transforms on a hexapod reads the pose itself
+    (declared: Sensor.reads_pose and the "pose-convention" ability): the ik-residual takes
+    x̂ = y and H = I; the closed-form inverse and H⁻¹ must give the same residual, Jacobian
     (sensor columns included) and covariance."""
     from pkmcal.sensors.full_pose import FullPoseSensor
 
     setup = builtin_setup("full-pose-paper1")
-    assert setup.sensor.is_identity and not FullPoseSensor(world=np.array([0, 0, 0, 0, 0, 1e-3])).is_identity
+    assert setup.sensor.reads_pose() and not FullPoseSensor(world=np.array([0, 0, 0, 0, 0, 1e-3])).reads_pose()
+    assert not setup.sensor.reads_pose(np.r_[np.zeros(11), 1e-3])
     rng = np.random.default_rng(5)
     poses = _poses(machine, 6, n=12)
-    y = setup.sensor.predict(poses) + rng.normal(0.0, 0.01, (12, 6))
+    y = setup.sensor.predict(machine.frame(poses)) + rng.normal(0.0, 0.01, (12, 6))
     q = machine.ik(poses) + rng.normal(0.0, 0.005, (12, 6))
 
     def evaluate():
@@ -210,7 +236,8 @@ def test_identity_sensor_shortcut_matches_general_path(machine, monkeypatch):
         return make_method("ik-residual", model).evaluate(model.theta0, jac=True, cov=True)
 
     fast = evaluate()
-    monkeypatch.setattr(FullPoseSensor, "is_identity", property(lambda self: False))
+    np.testing.assert_array_equal(fast.poses, y)
+    monkeypatch.setattr(FullPoseSensor, "reads_pose", lambda self, params=None: False)
     slow = evaluate()
     np.testing.assert_allclose(fast.poses, slow.poses, atol=1e-12)
     np.testing.assert_allclose(fast.r, slow.r, atol=1e-10)

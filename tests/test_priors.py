@@ -51,7 +51,7 @@ def measure(nominal, real, sensor, n, noise=None, seed=1):
     q = nominal.ik(cmd)
     fk = real.fk(q, guess=cmd)
     assert fk.all_converged
-    y = sensor.predict(fk.poses)
+    y = sensor.predict(real.frame(fk.poses))
     if noise is not None:
         e_y, e_q = noise.sample(np.random.default_rng(seed + 1), y.shape, q.shape)
         y, q = y + e_y, q + e_q

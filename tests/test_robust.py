@@ -41,7 +41,7 @@ def data():
     q = nominal.ik(cmd)
     fk = real.fk(q, guess=cmd)
     assert fk.all_converged
-    y = FullPoseSensor().predict(fk.poses)
+    y = FullPoseSensor().predict(real.frame(fk.poses))
     e_y, e_q = NOISE_FULL.sample(np.random.default_rng(5), y.shape, q.shape)
     setup = MeasurementSetup(FullPoseSensor(), NOISE_FULL)
     clean = identify(nominal, setup, q=q + e_q, y=y + e_y)

@@ -152,7 +152,7 @@ def test_planned_poses_are_reachable_and_measurable(machine, setup_name, algorit
     assert np.all((plan.commands >= machine.stroke[:, 0]) & (plan.commands <= machine.stroke[:, 1]))
     fk = machine.fk(plan.commands, guess=plan.poses)
     assert fk.all_converged and np.allclose(fk.poses, plan.poses, atol=1e-8)
-    readings = setup.sensor.predict(plan.poses)            # raises if the sensor cannot read a pose
+    readings = setup.sensor.predict(machine.frame(plan.poses))            # raises if the sensor cannot read a pose
     assert np.all(np.isfinite(readings))
     assert pose_set_indices(machine, setup, plan.poses, model=plan.model) == pytest.approx(plan.indices)
 

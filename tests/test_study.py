@@ -234,8 +234,8 @@ def test_truth_is_the_real_machine_in_the_fits_gauge():
     other = nominal.home_pose + rng.uniform(-1, 1, (30, 6)) * half
     twin = nominal.with_params(truth[:42])
     q = nominal.ik(other)
-    y_real = setup.sensor.predict(real.fk(q, guess=other).poses)
-    y_twin = setup.sensor.predict(twin.fk(q, guess=other).poses)
+    y_real = setup.sensor.predict(real.frame(real.fk(q, guess=other).poses))
+    y_twin = setup.sensor.predict(twin.frame(twin.fk(q, guess=other).poses))
     assert np.max(np.abs(y_real - y_twin)) < 1e-8
 
 

@@ -88,7 +88,7 @@ def ik_cmd(machine: str, poses: str, output: str | None, mapping=None) -> None:
             with np.errstate(all="ignore"):
                 readings = mech.ik(internal)
                 limits = mech.check_limits(internal)
-                lengths = mech.leg_lengths(internal) if hasattr(mech, "leg_lengths") else None
+                lengths = mech.leg_lengths(internal) if "leg-lengths" in mech.abilities else None
             columns: dict[str, np.ndarray] = {n: file_poses[:, k] for k, n in enumerate(mech.pose_names)}
             if lengths is not None:
                 columns.update({f"l{i + 1}": lengths[:, i] for i in range(lengths.shape[1])})
@@ -141,7 +141,7 @@ def fk_cmd(machine: str, legs: str, output: str | None, guess: str | None, mappi
     mech = load_machine(machine)
     start = None if guess is None else parse_pose_option(guess, mech, "--guess")
     groups = [mech.actuator_names]
-    if hasattr(mech, "fk_lengths"):
+    if "leg-lengths" in mech.abilities:
         groups.append(LENGTH_COLUMNS[: mech.n_actuators])
     rotary = mech.actuator_is_angle
     kinds = column_kinds(mech.actuator_names, rotary)

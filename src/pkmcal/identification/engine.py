@@ -804,10 +804,7 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
     if mech_free.size:
         sel = np.flatnonzero(free_idx < p)
         cov_mech = embed(unc.covariance[np.ix_(sel, sel)], mech_free, p)
-        try:
-            mech_cal = model.mechanism.with_params(theta[:p], covariance=cov_mech)
-        except TypeError:
-            notes.append(f"machine type {type(model.mechanism).__name__} does not store a covariance")
+        mech_cal = model.mechanism.with_params(theta[:p], covariance=cov_mech)
 
     free_set = set(free_idx.tolist())
     fixed = tuple(n for i, n in enumerate(names) if i not in free_set)

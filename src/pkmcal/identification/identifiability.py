@@ -323,7 +323,7 @@ def design_jacobian(machine, sensor, noise, poses: np.ndarray, method: str, weig
         # residual q − IK does, which is not returned): no IK pass for readings unused
         q = np.zeros((len(poses), machine.n_actuators)) if method == "ik-residual" and form == "plain" \
             else machine.ik(poses)
-        model = Model(machine, sensor, noise, q, sensor.predict(poses), poses)
+        model = Model(machine, sensor, noise, q, sensor.predict(machine.frame(poses)), poses)
     meth = make_method(method, model, weighted, form=form)
     meth.sensor_columns = sensor_columns
     whiten = weighted and not meth.prewhitened            # the weighted projection is already whitened
@@ -374,7 +374,8 @@ def _identifiability(machine, setup, poses, *, method, free, fix, weighted) -> I
         method = default_method(setup, machine)
     J, ok, names = design_jacobian(machine, setup.sensor, setup.noise, poses, method, weighted)
     with np.errstate(invalid="ignore"):
-        model = Model(machine, setup.sensor, setup.noise, machine.ik(poses[:1]), setup.sensor.predict(poses[:1]))
+        model = Model(machine, setup.sensor, setup.noise, machine.ik(poses[:1]),
+                      setup.sensor.predict(machine.frame(poses[:1])))
     cand, _ = candidate_parameters(model, free, None if fix == "auto" else fix)
     rows = J[ok].reshape(-1, J.shape[-1])[:, cand]
     if rows.shape[0] == 0:

@@ -115,7 +115,7 @@ def _compliance_facts(nominal, result, setup, commanded) -> tuple[tuple[str, str
 
     poses = np.asarray(commanded, dtype=float)
     if result.method != "projection" or not is_redundant(nominal) or poses.ndim != 2 \
-            or len(poses) <= int(np.max(result.used_poses, initial=-1)) or not hasattr(result.sensor, "tool_pose_jacobian"):
+            or len(poses) <= int(np.max(result.used_poses, initial=-1)) or "tool-point" not in result.sensor.abilities:
         return ()
     std = float(np.max(np.asarray(setup.noise.reading_std, dtype=float)))
     text = compliance_warning(nominal, result.mechanism, result.sensor, poses[result.used_poses], result.poses, std)
@@ -189,7 +189,7 @@ def report_data_from_results(
              *_compliance_facts(nominal, result, setup, commanded))
     return ReportData(
         title=title or f"pkmcal calibration report: {nominal.name}",
-        machine_summary=nominal.summary() if hasattr(nominal, "summary") else nominal.name,
+        machine_summary=nominal.summary(),
         nominal=nominal,
         identified=result.mechanism if identified is None else identified,
         poses=np.asarray(poses, dtype=float),
