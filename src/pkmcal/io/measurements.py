@@ -11,9 +11,9 @@ extra columns are ignored):
   (position; mm) or ``d1..dK`` (indicators; mm);
 * optional commanded pose ``cmd_x..cmd_c`` (mm, degrees).
 
-Inside, angles are radians (:mod:`pkmcal.conventions`). Files are written with a units
-line, the header and every float as its shortest round-trip text, so the same data always
-give the same bytes, atomically.
+Inside, angles are radians (:mod:`pkmcal.conventions`). Files are written as a plain CSV
+(a units line and comments only when asked), the header and every float as its shortest
+round-trip text, so the same data always give the same bytes, atomically.
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ import numpy as np
 from pkmcal.conventions import POSE_COLUMNS
 from pkmcal.errors import InputFileError, PkmcalError
 from pkmcal.io.import_mapping import ImportMapping
+from pkmcal.io.orientation import euler_triples, orientation_given
 from pkmcal.io.tables import DEFAULT_ALIASES, check_magnitudes, column_kinds, from_file_units, mapped_name, read_table, to_file_units, write_table
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.sensors.base import MeasurementSetup
@@ -113,9 +114,14 @@ def load_measurements(path: str | os.PathLike, machine: Mechanism, setup: Measur
     except UnicodeDecodeError as exc:
         raise InputFileError(src, f"not a UTF-8 text file (byte {exc.start}); save it as UTF-8 CSV") from None
     header = _header(text, mapping)
-    with_cmd = [c for c in cmd_cols if c in header]
+    given = set(header)
+    order = (mapping.quaternion_order if mapping is not None else None) or "xyzw"
+    for triple in euler_triples(cmd_cols):
+        if orientation_given(header, triple, order):
+            given.update(triple)      # cmd_a..cmd_c given as a quaternion or rotation vector
+    with_cmd = [c for c in cmd_cols if c in given]
     if with_cmd and len(with_cmd) != len(cmd_cols):
-        missing = [c for c in cmd_cols if c not in header]
+        missing = [c for c in cmd_cols if c not in given]
         raise InputFileError(src, f"has commanded-pose columns {', '.join(with_cmd)} but not {', '.join(missing)}; "
                                   f"give all of {', '.join(cmd_cols)} (mm, deg) or none")
     columns = reading_cols + (cmd_cols if with_cmd else ())
@@ -191,7 +197,9 @@ def save_measurements(
     machine: Mechanism,
     setup: MeasurementSetup,
     comments: tuple[str, ...] = (),
+    units_comment: bool = False,
 ) -> None:
-    """Write ``measurements`` as a measurement CSV (atomic, deterministic bytes, full precision)."""
-    write_table(path, measurement_columns(measurements, machine, setup),
+    """Write ``measurements`` as a measurement CSV (atomic, deterministic bytes, full
+    precision; a plain CSV, or with ``units_comment`` a units line and ``comments`` first)."""
+    write_table(path, measurement_columns(measurements, machine, setup), units_comment=units_comment,
                 comments=(f"pkmcal measurements: machine {machine.name}, sensor {setup.sensor.kind}",) + tuple(comments))
