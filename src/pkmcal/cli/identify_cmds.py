@@ -30,7 +30,7 @@ from pkmcal.cli._limits import unreachable_notes
 from pkmcal.cli.import_options import import_options
 from pkmcal.cli.options import DeprecatedArgument, check_output, emit, examples, output_option, poses_file, to_stdout
 from pkmcal.io.atomic import check_output_path
-from pkmcal.io.measurements import load_measurements
+from pkmcal.io.measurements import CLIPPED_POLICIES, apply_clipped_policy, load_measurements
 from pkmcal.io.tables import read_poses
 from pkmcal.sensors.library import BUILTIN_SETUPS
 
@@ -212,9 +212,12 @@ def radian_hints(nominal, setup, meas) -> list[str]:
 @click.option("--json", "as_json", is_flag=True, help="Print the fit as JSON instead of a table.")
 @click.option("--report", "report_dir", metavar="DIR",
               help="Also write the HTML calibration report (report.html and its figures) into folder DIR.")
+@click.option("--clipped", type=click.Choice(CLIPPED_POLICIES), default="drop", show_default=True,
+              help="Poses with an actuator reading outside its stroke or at one of its ends (a clipped or stuck "
+                   "actuator): listed with a warning and left out (drop), used (keep), or an error.")
 @import_options
 def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fix, free, output, name, as_json,
-                 report_dir=None, mapping=None, keep=None) -> None:
+                 report_dir=None, mapping=None, keep=None, clipped="drop") -> None:
     """Identify MACHINE's kinematic parameters from MEAS.csv and write CALIBRATED.yaml.
 
     Units: mm, degrees in files and tables. Unidentifiable combinations are fixed
@@ -238,7 +241,8 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
 
     nominal = load_machine(machine)
     setup = load_setup(setup_spec, nominal)
-    meas = load_measurements(measurements, nominal, setup, mapping)
+    meas, clipped_found, clipped_lines = apply_clipped_policy(load_measurements(measurements, nominal, setup, mapping),
+                                                              nominal, clipped)
     if method is None:
         method = default_method(setup, nominal)
     if keep is not None and method != "actuator-subset":
@@ -268,7 +272,7 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
             f"{len(result.used_poses)} poses give {u.dof + len(result.free)} residuals for {len(result.free)} free "
             f"parameters{' (after fixing the gauge)' if result.gauge else ''}: no degree of freedom is left to check "
             "the fit (chi2/dof undefined); measure more poses or fix parameters; nothing written")
-    hints = radian_hints(nominal, setup, meas)
+    hints = [f"warning: {w}" for w in clipped_lines] + radian_hints(nominal, setup, meas)
     if hints:
         import dataclasses
 
@@ -283,6 +287,8 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
 
         d = finite_or_null(result.to_dict())
         d["free_rule"] = free_line
+        d["clipped"] = [c.to_dict("deg" if nominal.actuator_is_angle[nominal.actuator_names.index(c.actuator)] else "mm")
+                        for c in clipped_found]
         d["output"] = output
     emit(text, output)
     if report is not None:
