@@ -108,3 +108,12 @@ def test_identify_reports_drops_keeps_or_refuses_clipped_poses(tmp_path):
     res = runner.invoke(cli, [*base, "-o", str(tmp_path / "cal4.yaml"), "--clipped", "error"])
     assert res.exit_code == 2 and "2 clipped actuator reading(s) in 2 pose(s)" in res.stderr
     assert not (tmp_path / "cal4.yaml").exists()
+    # a fit that fails for want of poses says which were left out, on its one error line
+    few = tmp_path / "few.csv"
+    few.write_text("\n".join([header] + [",".join(c) for c in cells[:7]]) + "\n")
+    res = runner.invoke(cli, ["identify", "stewart-prototype", str(few), "--setup", "full-pose-paper1", "--method",
+                              "ik-residual", "-o", str(tmp_path / "cal5.yaml")])
+    err = res.stderr.strip()
+    assert res.exit_code == 2 and "\n" not in err and err.startswith("pkmcal: error: "), res.output
+    assert err.endswith("1 pose(s) with clipped readings left out (--clipped drop, the default; --clipped keep uses "
+                        "them): 7)"), err

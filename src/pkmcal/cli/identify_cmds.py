@@ -30,7 +30,7 @@ from pkmcal.cli._limits import unreachable_notes
 from pkmcal.cli.import_options import import_options
 from pkmcal.cli.options import DeprecatedArgument, check_output, emit, examples, output_option, poses_file, to_stdout
 from pkmcal.io.atomic import check_output_path
-from pkmcal.io.measurements import CLIPPED_POLICIES, apply_clipped_policy, load_measurements
+from pkmcal.io.measurements import CLIPPED_POLICIES, apply_clipped_policy, clipped_named_in_errors, load_measurements
 from pkmcal.io.tables import read_poses
 from pkmcal.sensors.library import BUILTIN_SETUPS
 
@@ -260,18 +260,19 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     if fix_names == ["auto"]:
         fix_names = "auto"
     free_opt = _names(free)
-    result = identify(fit_machine, fit_setup, fit_meas, method=method, free=merged_free(free_opt, fit_setup),
-                      fix=fix_names, weighted=not unweighted, form=form)
-    if baseline is not None:
-        result = baseline_result(result, nominal, baseline)
-    if not result.success:
-        raise PkmcalError(f"the fit did not converge ({result.message}); nothing written")
-    u = result.uncertainty
-    if u.dof <= 0:
-        raise PkmcalError(
-            f"{len(result.used_poses)} poses give {u.dof + len(result.free)} residuals for {len(result.free)} free "
-            f"parameters{' (after fixing the gauge)' if result.gauge else ''}: no degree of freedom is left to check "
-            "the fit (chi2/dof undefined); measure more poses or fix parameters; nothing written")
+    with clipped_named_in_errors(clipped_lines):
+        result = identify(fit_machine, fit_setup, fit_meas, method=method, free=merged_free(free_opt, fit_setup),
+                          fix=fix_names, weighted=not unweighted, form=form)
+        if baseline is not None:
+            result = baseline_result(result, nominal, baseline)
+        if not result.success:
+            raise PkmcalError(f"the fit did not converge ({result.message}); nothing written")
+        u = result.uncertainty
+        if u.dof <= 0:
+            raise PkmcalError(
+                f"{len(result.used_poses)} poses give {u.dof + len(result.free)} residuals for {len(result.free)} free "
+                f"parameters{' (after fixing the gauge)' if result.gauge else ''}: no degree of freedom is left to "
+                "check the fit (chi2/dof undefined); measure more poses or fix parameters; nothing written")
     hints = [f"warning: {w}" for w in clipped_lines] + radian_hints(nominal, setup, meas)
     if hints:
         import dataclasses

@@ -18,6 +18,7 @@ round-trip text, so the same data always give the same bytes, atomically.
 
 from __future__ import annotations
 
+import contextlib
 import os
 from dataclasses import dataclass
 
@@ -325,3 +326,16 @@ def apply_clipped_policy(measurements: Measurements, machine: Mechanism, policy:
     lines.append(f"{src}: {len(poses)} pose(s) with clipped readings left out (--clipped drop, the default; "
                  f"--clipped keep uses them): {', '.join(map(str, poses))}")
     return measurements.subset(keep), found, lines
+
+
+@contextlib.contextmanager
+def clipped_named_in_errors(lines: list[str]):
+    """A :class:`~pkmcal.errors.PkmcalError` raised inside (a fit that fails, too few poses)
+    also says which poses :func:`apply_clipped_policy` left out (its last line), so that
+    the one error line explains itself."""
+    try:
+        yield
+    except PkmcalError as exc:
+        if not lines:
+            raise
+        raise PkmcalError(f"{exc} ({lines[-1]})") from None
