@@ -47,7 +47,7 @@ def test_round_trip_and_deterministic_bytes(tmp_path_factory, name, n, seed, cmd
     else:
         assert back.commanded is None
     assert back.source == str(d / "a.csv") and len(back) == n and back.notes == ()
-    assert list(back.lines) == list(range(4, 4 + n))  # units line, comment, header, then rows
+    assert list(back.lines) == list(range(2, 2 + n))  # header, then rows (no comment unless asked)
 
 
 def test_full_pose_file_in_degrees_with_extra_columns(tmp_path):

@@ -204,9 +204,9 @@ def test_cli_outliers_json_and_report(tmp_path, data):
     res = run(cli, base + ["-o", str(tmp_path / "a.yaml")])
     assert res.exit_code == 0, res.output
     # the outlier first (it also drags the fit, so that others follow it beyond 3 σ), with its line:
-    # data row 42 under the units and header lines
+    # data row 42 under the header line
     assert "pose(s) beyond 3 sigma" in res.output and "whitened with the noise model): pose 42 (" in res.output
-    assert "meas.csv, line 44]" in res.output
+    assert "meas.csv, line 43]" in res.output
     res = run(cli, base + ["-o", str(tmp_path / "b.yaml"), "--reject", "3", "--loss", "soft_l1", "--json",
                            "--report", str(tmp_path / "rep")])
     assert res.exit_code == 0, res.output
@@ -220,3 +220,27 @@ def test_cli_outliers_json_and_report(tmp_path, data):
     assert "rejected_poses:\n  - 42\n" in (tmp_path / "b.yaml").read_text()
     bad_cmd = run(cli, base + ["-o", str(tmp_path / "c.yaml"), "--loss", "huber", "--unweighted"])
     assert_user_error(bad_cmd, "noise-weighted", "--unweighted")
+
+
+def test_outliers_keep_their_file_numbers_when_clipped_poses_are_left_out(tmp_path, data):
+    """A clipped reading drops pose 5 before the fit (identify --clipped drop); the outlier
+    is still reported as data row 42, and --reject drops that row, not its neighbour."""
+    from pkmcal.io.tables import write_table
+
+    nominal, setup, q, y, clean = data
+    bad = with_outlier(y)
+    q = q.copy()
+    q[4, 0] = nominal.stroke[0, 1]          # pose 5's leg 1 at its stroke end: clipped
+    cols = {**{f"lambda{i + 1}": q[:, i] for i in range(6)},
+            **{k: (np.rad2deg(bad[:, i]) if i >= 3 else bad[:, i]) for i, k in enumerate("xyzabc")}}
+    write_table(tmp_path / "meas.csv", cols)
+    (tmp_path / "setup.yaml").write_text("sensor: full-pose\nnoise: {position: 0.01, orientation_deg: "
+                                         f"{float(np.rad2deg(1e-4))!r}, actuator: 0.005}}\n")
+    res = CliRunner().invoke(cli, ["identify", "stewart-prototype", str(tmp_path / "meas.csv"), "--setup",
+                                   str(tmp_path / "setup.yaml"), "-o", str(tmp_path / "c.yaml"), "--reject", "3",
+                                   "--json"])
+    assert res.exit_code == 0, res.output
+    d = json.loads(res.output[res.output.index("{"):])
+    assert [o["pose"] for o in d["outliers"] if o["dropped"]] == [42]
+    assert 5 not in d["normalised_residuals"]["pose"] and 42 not in d["normalised_residuals"]["pose"]
+    assert len(d["normalised_residuals"]["pose"]) == 98

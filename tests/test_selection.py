@@ -168,7 +168,7 @@ def test_cli_plan_and_observability(machine, tmp_path):
     out = tmp_path / "poses.csv"
     runner = CliRunner()
     res = runner.invoke(cli, ["plan", "stewart-prototype", "--setup", "full-pose-paper1", "--n", "14",
-                              "--n-candidates", "300", "--seed", "2", "-o", str(out)])
+                              "--n-candidates", "300", "--seed", "2", "-o", str(out), "--units-comment"])
     assert res.exit_code == 0, res.output
     table = read_table(out, ["x", "y", "z", "a", "b", "c"] + [f"lambda{i}" for i in range(1, 7)])
     poses = table[["x", "y", "z", "a", "b", "c"]].copy()

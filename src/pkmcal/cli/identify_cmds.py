@@ -32,7 +32,7 @@ from pkmcal.cli.import_options import import_options
 from pkmcal.cli.option_types import FiniteFloat
 from pkmcal.cli.options import DeprecatedArgument, check_output, emit, examples, output_option, poses_file, to_stdout
 from pkmcal.io.atomic import check_output_path
-from pkmcal.io.measurements import load_measurements
+from pkmcal.io.measurements import CLIPPED_POLICIES, apply_clipped_policy, clipped_named_in_errors, load_measurements
 from pkmcal.io.tables import read_poses
 from pkmcal.sensors.library import BUILTIN_SETUPS
 
@@ -264,10 +264,13 @@ def radian_hints(nominal, setup, meas) -> list[str]:
                    "centres it on the machine's value. Adds to the setup's prior: list, replacing its prior of "
                    "the same parameter. A prior pins a direction the data cannot see: the automatic gauge does "
                    "not fix it. The covariance is then the posterior one.")
+@click.option("--clipped", type=click.Choice(CLIPPED_POLICIES), default="drop", show_default=True,
+              help="Poses with an actuator reading outside its stroke or at one of its ends (a clipped or stuck "
+                   "actuator): listed with a warning and left out (drop), used (keep), or an error.")
 @import_options
 def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fix, free, output, name, as_json,
                  report_dir=None, mapping=None, keep=None, loss="linear", f_scale=None, reject=None,
-                 prior=()) -> None:
+                 prior=(), clipped="drop") -> None:
     """Identify MACHINE's kinematic parameters from MEAS.csv and write CALIBRATED.yaml.
 
     Units: mm, degrees in files and tables. Unidentifiable combinations are fixed
@@ -298,7 +301,8 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
 
     nominal = load_machine(machine)
     setup = load_setup(setup_spec, nominal)
-    meas = load_measurements(measurements, nominal, setup, mapping)
+    meas, clipped_found, clipped_lines = apply_clipped_policy(load_measurements(measurements, nominal, setup, mapping),
+                                                              nominal, clipped)
     if method is None:
         method = default_method(setup, nominal)
     if keep is not None and method != "actuator-subset":
@@ -319,20 +323,21 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     from pkmcal.identification.priors import parse_prior
 
     priors = tuple(parse_prior(p) for p in prior)
-    result = identify(fit_machine, fit_setup, fit_meas, method=method, free=merged_free(free_opt, fit_setup),
-                      fix=fix_names, weighted=not unweighted, form=form, loss=loss, f_scale=f_scale,
-                      reject=reject, priors=priors)
-    if baseline is not None:
-        result = baseline_result(result, nominal, baseline)
-    if not result.success:
-        raise PkmcalError(f"the fit did not converge ({result.message}); nothing written")
-    u = result.uncertainty
-    if u.dof <= 0:
-        raise PkmcalError(
-            f"{len(result.used_poses)} poses give {u.dof + len(result.free)} residuals for {len(result.free)} free "
-            f"parameters{' (after fixing the gauge)' if result.gauge else ''}: no degree of freedom is left to check "
-            "the fit (chi2/dof undefined); measure more poses or fix parameters; nothing written")
-    hints = radian_hints(nominal, setup, meas)
+    with clipped_named_in_errors(clipped_lines):
+        result = identify(fit_machine, fit_setup, fit_meas, method=method, free=merged_free(free_opt, fit_setup),
+                          fix=fix_names, weighted=not unweighted, form=form, loss=loss, f_scale=f_scale,
+                          reject=reject, priors=priors)
+        if baseline is not None:
+            result = baseline_result(result, nominal, baseline)
+        if not result.success:
+            raise PkmcalError(f"the fit did not converge ({result.message}); nothing written")
+        u = result.uncertainty
+        if u.dof <= 0:
+            raise PkmcalError(
+                f"{len(result.used_poses)} poses give {u.dof + len(result.free)} residuals for {len(result.free)} free "
+                f"parameters{' (after fixing the gauge)' if result.gauge else ''}: no degree of freedom is left to "
+                "check the fit (chi2/dof undefined); measure more poses or fix parameters; nothing written")
+    hints = [f"warning: {w}" for w in clipped_lines] + radian_hints(nominal, setup, meas)
     if hints:
         import dataclasses
 
@@ -347,6 +352,8 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
 
         d = finite_or_null(result.to_dict())
         d["free_rule"] = free_line
+        d["clipped"] = [c.to_dict("deg" if nominal.actuator_is_angle[nominal.actuator_names.index(c.actuator)] else "mm")
+                        for c in clipped_found]
         d["output"] = output
     emit(text, output)
     if report is not None:

@@ -165,6 +165,9 @@ class IdentificationResult:
     screening: Screening | None = None
     priors: ResolvedPriors = NO_PRIORS
     loss: str = "linear"
+    #: (N,) the file's pose numbers (1-based data rows, docs/conventions.md) of the N poses
+    #: given; None: 1 … N
+    pose_numbers: np.ndarray | None = None
 
     @cached_property
     def identifiability(self) -> IdentifiabilityReport:
@@ -223,6 +226,10 @@ class IdentificationResult:
         flags = tuple(self.mechanism.param_is_angle) + tuple(self.sensor.param_is_angle)
         return tuple(n for n, a in zip(self.names, flags) if a)
 
+    def pose_number(self, i: int) -> int:
+        """The file's number of pose index ``i`` (0-based in the poses given)."""
+        return int(i) + 1 if self.pose_numbers is None else int(self.pose_numbers[i])
+
     def to_dict(self) -> dict:
         """A JSON-ready summary. Units as every pkmcal JSON states them (docs/conventions.md):
         parameters in file units (mm, degrees for angle parameters, each with its ``unit``),
@@ -252,7 +259,7 @@ class IdentificationResult:
             "nfev": self.nfev,
             "njev": self.njev,
             "n_poses": int(len(self.used_poses)),
-            "dropped_poses": [int(i) + 1 for i in self.dropped],
+            "dropped_poses": [int(self.pose_number(i)) for i in self.dropped],
             "free": list(self.free),
             "fixed": list(self.fixed),
             "gauge": list(self.gauge),
@@ -626,6 +633,8 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
     notes: list[str] = []
     n_total = model.n_poses
     used = np.arange(n_total)
+    # the file's pose numbers (1-based data rows), kept when poses were left out before the fit
+    numbers = np.asarray(getattr(measurements, "pose_numbers", np.arange(1, n_total + 1)), dtype=int)
     f_scale = check_loss(loss, f_scale)
     if exclude is not None and len(exclude):
         used = np.setdiff1d(used, np.asarray(exclude, dtype=int))
@@ -654,13 +663,13 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
         if len(bad) > max_dropped_fraction * n_total:
             raise PkmcalError(
                 f"the pose could not be solved for {len(bad)} of {n_total} poses at the nominal machine "
-                f"(poses {', '.join(str(i + 1) for i in bad[:10])}{' ...' if len(bad) > 10 else ''}"
+                f"(poses {', '.join(str(numbers[i]) for i in bad[:10])}{' ...' if len(bad) > 10 else ''}"
                 f"{_where(measurements, bad[:3])}): "
                 "check that the measurements belong to this machine and setup, or give commanded poses"
             )
         notes.append(f"dropped {len(bad)} pose(s) whose pose could not be solved at the nominal machine "
                      "(FK or pose solve not converged, or converged on another assembly mode than its start "
-                     "pose): " + ", ".join(str(i + 1) for i in bad) + _where(measurements, bad))
+                     "pose): " + ", ".join(str(numbers[i]) for i in bad) + _where(measurements, bad))
         model = model.subset(np.flatnonzero(ev0.converged))
         used = used[np.flatnonzero(ev0.converged)]
         meth = make_method(method, model, weighted, form=form)
@@ -759,7 +768,8 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
     if not ev.converged.all():
         bad = used[np.flatnonzero(~ev.converged)]
         notes.append("the pose could not be solved at the identified machine for pose(s) "
-                     + ", ".join(str(i + 1) for i in bad) + _where(measurements, bad) + "; their residuals are unreliable")
+                     + ", ".join(str(numbers[i]) for i in bad) + _where(measurements, bad)
+                     + "; their residuals are unreliable")
 
     # covariance with weights recomputed at the solution (module docstring); the weighted
     # projection's residual is already whitened (cov = I)
@@ -781,7 +791,7 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
         z = None if W_end is None else (W_end @ ev.r[..., None])[..., 0]
     where = getattr(measurements, "where", None) if getattr(measurements, "source", None) is not None else None
     screening = None if z is None else screen(z, used, meth.row_names(), outlier_sigma, where=where, round_=round_,
-                                              loss=loss, f_scale=f_scale)
+                                              numbers=numbers, loss=loss, f_scale=f_scale)
     if weighted:
         inliers = screening.inliers if loss != "linear" else np.ones(len(used), dtype=bool)
         if loss == "linear" and not len(prior):
@@ -843,6 +853,7 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
         screening=screening,
         priors=prior,
         loss=loss,
+        pose_numbers=numbers,
     )
 
 

@@ -225,21 +225,23 @@ class Screening:
         return out
 
 
-def screen(z: np.ndarray, used: np.ndarray, row_names, threshold: float, *, where=None, round_: int = 1,
+def screen(z: np.ndarray, used: np.ndarray, row_names, threshold: float, *, where=None, round_: int = 1, numbers=None,
            loss: str = "linear", f_scale: float = 1.0) -> Screening:
     """The :class:`Screening` of whitened residuals ``z`` (N, k) of the poses ``used``
-    (indices into the file's poses); ``where(i)`` names pose i's file and line."""
+    (indices into the poses given); ``where(i)`` names pose i's file and line, ``numbers``
+    (default index + 1) are the poses' numbers in the file."""
+    numbers = np.arange(1, int(np.max(used, initial=-1)) + 2) if numbers is None else np.asarray(numbers, dtype=int)
     z = np.asarray(z, dtype=float)
     N, k = z.shape
     sigma = np.sqrt(np.sum(z**2, axis=1) / k) if k else np.zeros(N)
     out = []
     for j in np.flatnonzero(sigma > threshold):
         i = int(np.argmax(np.abs(z[j])))
-        out.append(Outlier(pose=int(used[j]) + 1, sigma=float(sigma[j]), reading=str(row_names[i]),
+        out.append(Outlier(pose=int(numbers[used[j]]), sigma=float(sigma[j]), reading=str(row_names[i]),
                            reading_sigma=float(z[j, i]), dropped=False, round=round_,
                            where="" if where is None else f" [{where(int(used[j]))}]"))
     out.sort(key=lambda o: -o.sigma)
-    return Screening(pose_numbers=np.asarray(used, dtype=int) + 1, sigma=sigma, z=z, row_names=tuple(row_names),
+    return Screening(pose_numbers=numbers[np.asarray(used, dtype=int)], sigma=sigma, z=z, row_names=tuple(row_names),
                      threshold=float(threshold), outliers=tuple(out), loss=loss, f_scale=float(f_scale),
                      rounds=round_, n_inliers=int(np.sum(sigma <= threshold)))
 
@@ -295,9 +297,12 @@ def identify_rejecting(fit, reject: float, n_poses: int):
     if not (np.isfinite(reject) and reject > 0):
         raise PkmcalError(f"--reject takes a positive number of sigmas; got {reject:g}")
     rejected: list[Outlier] = []
+    index_of: dict[int, int] = {}      # file pose number → index in the poses given
     round_ = 1
     while True:
-        result = fit(exclude=np.array([o.pose - 1 for o in rejected], dtype=int), round_=round_)
+        result = fit(exclude=np.array([index_of[o.pose] for o in rejected], dtype=int), round_=round_)
+        numbers = range(1, n_poses + 1) if result.pose_numbers is None else result.pose_numbers
+        index_of = {int(n): i for i, n in enumerate(numbers)}
         sc = result.screening
         beyond = [o for o in sc.outliers if not o.dropped]
         if not beyond:

@@ -111,9 +111,11 @@ class LegSpec(_Model):
 
     @field_validator("offset")
     @classmethod
-    def _positive_offset(cls, v: float) -> float:
-        if not v > 0:
-            raise ValueError(f"{v!r} mm is not a leg offset: L0 is the leg length at reading 0, give a positive length")
+    def _non_negative_offset(cls, v: float) -> float:
+        # L0 = 0 is genhexkins' convention (the reading is the strut length itself)
+        if not v >= 0:
+            raise ValueError(f"{v!r} mm is not a leg offset: L0 is the leg length at reading 0, give a length >= 0 "
+                             "(0 when the readings are the leg lengths themselves, as LinuxCNC's joints)")
         return v
 
     @field_validator("stroke")
