@@ -372,3 +372,22 @@ def csv_texts(draw):
         lines.insert(draw(st.integers(0, len(lines))), draw(st.sampled_from(
             ["# units: length=mm, angle=deg", "# units: length=m", "# units: angle=grad", "# c", "", "#units:"])))
     return draw(st.sampled_from(["\n", "\r\n"])).join(lines)
+
+
+# -- sensors on hexapod poses ----------------------------------------------------------------------
+
+
+def frames_of(poses):
+    """The platform frames of hexapod poses (N, 6) or (6,) (x, y, z, a, b, c): what a sensor reads."""
+    from pkmcal.mechanisms.frame import Frame
+
+    return Frame.from_poses(poses)
+
+
+def hexapod_pose_jacobian(sensor, poses, params=None):
+    """∂y/∂(x, y, z, a, b, c) (N, m, 6) of a sensor on a hexapod: its twist Jacobian times the
+    hexapod's T = diag(I, E(a, b, c)) (the engine's composition)."""
+    from pkmcal.conventions import euler_pose_jacobian
+
+    poses = np.atleast_2d(np.asarray(poses, dtype=float))
+    return euler_pose_jacobian(sensor.frame_jacobian(frames_of(poses), params), poses)

@@ -91,7 +91,7 @@ def test_grid_and_corner_kinds(machine, indicators, box):
 
 def test_indicator_measurability(machine, indicators):
     home = machine.home[None]
-    z = indicators.sensor.predict(home)[0]
+    z = indicators.sensor.predict(machine.frame(home))[0]
     ok = measurability_violations(indicators, home, Measurability(travel=(z.min() - 1, z.max() + 1)))
     assert not any(v.any() for v in ok.values())
     bad = measurability_violations(indicators, home, Measurability(travel=(z.max() + 1, z.max() + 10)))
@@ -252,3 +252,31 @@ def test_blocks_in_batches_are_those_computed_at_once(machine, indicators):
         G, ok = candidate_blocks(plan.model, plan.candidates.poses, batch=batch)
         np.testing.assert_array_equal(G, G_all)
         np.testing.assert_array_equal(ok, ok_all)
+
+
+@pytest.mark.parametrize("n", [1, 15, 63])
+def test_small_batches_without_margins_give_the_numpy_verdicts(machine, box, n):
+    """Below LIMITS_COMPILED_FROM poses, check_limits(margins=False) (what candidates,
+    simulation and verification ask) runs the compiled kernel, check_limits() the NumPy
+    formulas: the same verdicts for every limit, also for poses right at a limit (a
+    bisection between home and a rejected pose puts each within 1e-9 of its boundary)."""
+    rng = np.random.default_rng(n)
+    lo, hi = box[:, 0], box[:, 1]
+    poses = lo + rng.uniform(size=(4 * n, 6)) * (hi - lo) * 1.6 - 0.3 * (hi - lo)
+    full = machine.check_limits(poses)
+    outside = np.flatnonzero(~full.ok)
+    edge = []
+    for k in outside[:n]:
+        a, b = 0.0, 1.0                                   # home + t (pose - home): ok at 0, not at 1
+        for _ in range(40):
+            t = 0.5 * (a + b)
+            p = machine.home_pose + t * (poses[k] - machine.home_pose)
+            a, b = (t, b) if machine.check_limits(p[None]).ok[0] else (a, t)
+        edge += [machine.home_pose + a * (poses[k] - machine.home_pose), machine.home_pose + b * (poses[k] - machine.home_pose)]
+    batch = np.vstack([np.array(edge).reshape(-1, 6), poses])[:n]       # both sides of the limits first
+    fast, ref = machine.check_limits(batch, margins=False), machine.check_limits(batch)
+    assert fast.margins == {} and set(fast.violations) == set(ref.violations)
+    for name in ref.violations:
+        np.testing.assert_array_equal(fast.violations[name], ref.violations[name], err_msg=name)
+    if n > 1:
+        assert 0 < ref.ok.sum() < n

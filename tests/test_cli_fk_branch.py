@@ -52,7 +52,7 @@ def test_fk_flags_readings_beyond_the_stroke(tmp_path):
     reach = [r["reachable"] for r in rows]
     assert reach[0] == "ok"
     assert all("stroke" in r for r in reach[1:])
-    assert "3 rows violate the machine's limits" in res.stderr and "lines 4, 5, 6" in res.stderr  # line 1: units, 2: header
+    assert "3 rows violate the machine's limits" in res.stderr and "lines 3, 4, 5" in res.stderr  # line 1: the header
 
 
 def test_fk_column_same_branch_for_a_guess_on_the_other_mode(tmp_path):

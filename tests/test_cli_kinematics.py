@@ -54,7 +54,7 @@ def test_ik_values_and_reachability(tmp_path):
     L = _independent_lengths(m, POSES)
     np.testing.assert_allclose(t[[f"l{i}" for i in range(1, 7)]], L, rtol=0, atol=1e-9)
     np.testing.assert_allclose(t[[f"lambda{i}" for i in range(1, 7)]], L - 305.0, rtol=0, atol=1e-9)
-    reach = [line.rsplit(",", 1)[1] for line in out.read_text().splitlines()[2:]]
+    reach = [line.rsplit(",", 1)[1] for line in out.read_text().splitlines()[1:]]
     assert reach[:3] == ["ok", "ok", "ok"]
     assert reach[3] != "ok" and reach[3].split("+")[0] == "stroke"
 
@@ -97,8 +97,8 @@ def test_fk_reports_non_converged_rows_and_exits_0(tmp_path):
     assert "3 rows, 2 converged" in res.stderr
     assert "1 rows did not converge (their poses are nan): lines 4 of" in res.stderr
     lines = (tmp_path / "p.csv").read_text().splitlines()
-    assert lines[3].startswith("nan,nan,nan,nan,nan,nan,0,")
-    assert lines[2].endswith(",1," + lines[2].rsplit(",", 1)[1])
+    assert lines[2].startswith("nan,nan,nan,nan,nan,nan,0,")
+    assert lines[1].endswith(",1," + lines[1].rsplit(",", 1)[1])
 
 
 def test_machine_file_argument(tmp_path):
@@ -216,7 +216,7 @@ def test_planar_machine_ik_fk_round_trip(tmp_path):
     (tmp_path / "p.csv").write_text("x,y,phi\n0,230,0\n10,200,5\n")
     ik = run("ik", "planar-3dof-4act", str(tmp_path / "p.csv"), "-o", str(tmp_path / "q.csv"))
     assert ik.exit_code == 0, ik.output
-    assert (tmp_path / "q.csv").read_text().splitlines()[1] == "x,y,phi,q1,q2,q3,q4,reachable"
+    assert (tmp_path / "q.csv").read_text().splitlines()[0] == "x,y,phi,q1,q2,q3,q4,reachable"
     fk = run("fk", "planar-3dof-4act", str(tmp_path / "q.csv"))
     assert fk.exit_code == 0, fk.output
     back = read_table("fk", ("x", "y", "phi", "converged"), text=fk.stdout)

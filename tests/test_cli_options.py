@@ -78,7 +78,7 @@ def test_dash_o_is_standard_output_everywhere(tmp_path):
     assert ik_file.exit_code == ik_dash.exit_code == 0
     assert ik_dash.stdout == (tmp_path / "legs.csv").read_text()
     plan = run("plan", "stewart-prototype", *SETUP, "--n", 15, "--n-candidates", 300, "-o", "-")
-    assert plan.exit_code == 0 and plan.stdout.startswith("# units:") and "safety margin" in plan.stderr
+    assert plan.exit_code == 0 and plan.stdout.startswith("x,y,z,a,b,c,") and "safety margin" in plan.stderr
     sim = run("simulate", "stewart-prototype", "--real", "stewart-prototype-real", *SETUP, "--poses", f, "-o", "-")
     assert sim.exit_code == 0 and "lambda1" in sim.stdout and "poses measured" in sim.stderr
     meas = tmp_path / "meas.csv"

@@ -7,7 +7,8 @@
 * ``ScaledJacobian.certainly_full_rank`` against the singular values: never claims full
   rank when σ_P/σ_1 ≤ rtol, and does claim it for well-conditioned matrices;
 * ``identify``'s deferred identifiability report against ``analyse_jacobian`` on the same
-  Jacobian;
+  Jacobian, and its deferred weak-direction warnings against ``fit_warnings`` on it and an
+  independent SVD;
 * ``solve_right`` and ``cholesky_inverse`` (compiled loops over tiny matrices) and
   ``qr_triangle`` (LAPACK ``dgeqrf``) against NumPy's ``linalg``.
 """
@@ -92,6 +93,11 @@ def test_full_rank_certificate_is_never_wrong(seed, log_cond, rank_drop):
     sj = ScaledJacobian(J)
     sv = np.linalg.svd(J / np.linalg.norm(J, axis=0), compute_uv=False)
     ok = sj.certainly_full_rank()
+    kappa = sj.condition_bound()                 # an upper bound of σ_1/σ_P, or inf
+    if sv[-1] > 1e-8 * sv[0]:
+        # the QR's backward error moves σ_P by ≲ M·√P·ε·σ_1 ≈ 1e-13·σ_1, ≤ 1e-5 of σ_P here
+        assert kappa * sv[-1] >= sv[0] * (1 - 1e-4)
+    assert sj.condition_bound() == kappa         # computed once, asked twice by the engine
     if ok:
         assert sv[-1] > RANK_RTOL * sv[0]
     if sv[-1] > 1e3 * P * RANK_RTOL * sv[0]:               # clearly full rank: must be proven
@@ -118,6 +124,40 @@ def test_deferred_report_equals_full_analysis(machine, setup_name, method):
     assert rep.rank == ref.rank and rep.fixed == ref.fixed
     np.testing.assert_allclose(rep.singular_values, ref.singular_values, rtol=1e-10, atol=1e-12)
     assert res.gauge == (() if ref.identifiable else ref.fixed)
+
+
+def test_deferred_warnings_equal_the_eager_ones(machine):
+    """Paper 1's corners leave weak directions (σ/σ₁ < WEAK_RATIO) but full rank: the fit
+    needs no SVD, so the weak-direction warnings are computed on first read. They must be
+    what fit_warnings gives on the report (in the place the eager ones had, before later
+    notes), whichever is read first, and name every direction an independent SVD of the
+    commanded-pose Jacobian finds below WEAK_RATIO."""
+    from pkmcal.identification.engine import fit_warnings
+    from pkmcal.identification.identifiability import WEAK_RATIO, design_jacobian
+
+    setup = builtin_setup("full-pose-paper1")
+    rng = np.random.default_rng(5)
+    real = perturb_machine(machine, 5.0, rng)
+    half = np.array([15.0, 15.0, 8.0, *np.deg2rad([6.0, 6.0, 6.0])])
+    corners = np.array(np.meshgrid(*[[-1.0, 1.0]] * 6)).reshape(6, -1).T * half + machine.home_pose
+    corners = corners[machine.check_limits(corners).ok][::4][:15]
+    sim = simulate_campaign(machine, real, setup, corners, rng, ignore_limits=("leg_collision",))
+
+    def fit():
+        return identify(machine, setup, sim.measurements, method="ik-residual")
+
+    first_warnings, first_report = fit(), fit()
+    rep = first_report.identifiability
+    w1, w2 = first_warnings.warnings, first_report.warnings
+    assert w1 == w2
+    Jd, ok, _ = design_jacobian(machine, setup.sensor, setup.noise, sim.commanded[sim.kept], "ik-residual")
+    sv = np.linalg.svd(Jd[ok].reshape(-1, Jd.shape[-1])[:, :42] / np.linalg.norm(Jd[ok].reshape(-1, Jd.shape[-1])[:, :42],
+                                                                                   axis=0), compute_uv=False)
+    n_weak = int(np.sum(sv / sv[0] < WEAK_RATIO))
+    assert rep.identifiable and n_weak >= 1 and len(rep.weak) == n_weak
+    weak = [w for w in w1 if "weakly identifiable" in w]
+    assert len(weak) == n_weak
+    assert tuple(fit_warnings(rep, first_report.free, first_report.uncertainty, first_report.angle_names())) == w1
 
 
 @settings(max_examples=40, deadline=None)
@@ -152,17 +192,43 @@ def test_small_linalg_flags_singular_and_indefinite():
     assert cholesky_inverse(np.stack([np.eye(2), np.diag([1.0, np.nan])]))[1] == 1
 
 
-def test_identity_sensor_shortcut_matches_general_path(machine, monkeypatch):
-    """A full-pose sensor without world/tool transforms skips the sensor inversion (x̂ = y,
-    H = I); the general Newton inversion and H⁻¹ must give the same residual, Jacobian
+def test_full_pose_inverse_is_exact_and_measures_the_poses(machine):
+    """The full-pose sensor's closed-form inverse (R = R_wᵀ R_T R_tᵀ, p = R_wᵀ(y − p_w) − R p_t)
+    gives back the frame it read to rounding, with and without world/tool transforms; the
+    ik-residual's measured poses are those frames' poses (for the identity sensor: the
+    readings themselves, to rounding)."""
+    from pkmcal.sensors.full_pose import FullPoseSensor
+
+    setup = builtin_setup("full-pose-paper1")
+    rng = np.random.default_rng(5)
+    poses = _poses(machine, 6, n=12)
+    frame = machine.frame(poses)
+    eps = np.finfo(float).eps
+    for s in (setup.sensor, FullPoseSensor(world=np.array([100.0, -50.0, 20.0, 0.1, -0.2, 0.3]),
+                                           tool=np.array([5.0, 3.0, 40.0, -0.05, 0.02, 1.0]))):
+        back = s.invert(s.predict(frame))
+        np.testing.assert_allclose(back.R, frame.R, rtol=0, atol=16 * eps)
+        np.testing.assert_allclose(back.p, frame.p, rtol=0, atol=16 * eps * 1000.0)
+    y = setup.sensor.predict(frame) + rng.normal(0.0, 0.01, (12, 6))
+    q = machine.ik(poses) + rng.normal(0.0, 0.005, (12, 6))
+    model = Model(machine, setup.sensor, setup.noise, q, y)
+    ev = make_method("ik-residual", model).evaluate(model.theta0, jac=True, cov=True)
+    np.testing.assert_allclose(ev.poses, y, rtol=0, atol=16 * eps * np.abs(y).max())
+
+
+def test_readings_that_are_the_pose_match_the_general_inverse(machine, monkeypatch):
+    """A full-pose sensor without world/tool transforms on a hexapod reads the pose itself
+    (declared: Sensor.reads_pose and the "pose-convention" ability): the ik-residual takes
+    x̂ = y and H = I; the closed-form inverse and H⁻¹ must give the same residual, Jacobian
     (sensor columns included) and covariance."""
     from pkmcal.sensors.full_pose import FullPoseSensor
 
     setup = builtin_setup("full-pose-paper1")
-    assert setup.sensor.is_identity and not FullPoseSensor(world=np.array([0, 0, 0, 0, 0, 1e-3])).is_identity
+    assert setup.sensor.reads_pose() and not FullPoseSensor(world=np.array([0, 0, 0, 0, 0, 1e-3])).reads_pose()
+    assert not setup.sensor.reads_pose(np.r_[np.zeros(11), 1e-3])
     rng = np.random.default_rng(5)
     poses = _poses(machine, 6, n=12)
-    y = setup.sensor.predict(poses) + rng.normal(0.0, 0.01, (12, 6))
+    y = setup.sensor.predict(machine.frame(poses)) + rng.normal(0.0, 0.01, (12, 6))
     q = machine.ik(poses) + rng.normal(0.0, 0.005, (12, 6))
 
     def evaluate():
@@ -170,7 +236,8 @@ def test_identity_sensor_shortcut_matches_general_path(machine, monkeypatch):
         return make_method("ik-residual", model).evaluate(model.theta0, jac=True, cov=True)
 
     fast = evaluate()
-    monkeypatch.setattr(FullPoseSensor, "is_identity", property(lambda self: False))
+    np.testing.assert_array_equal(fast.poses, y)
+    monkeypatch.setattr(FullPoseSensor, "reads_pose", lambda self, params=None: False)
     slow = evaluate()
     np.testing.assert_allclose(fast.poses, slow.poses, atol=1e-12)
     np.testing.assert_allclose(fast.r, slow.r, atol=1e-10)

@@ -239,4 +239,4 @@ def test_bad_options_are_user_errors(tmp_path):
     user_error(run("ik", "stewart-prototype", foreign, "--columns", "X [m]"), "--columns", "not OLD=NEW")
     res = run("ik", "stewart-prototype", foreign, "--length-unit", "furlong")
     assert res.exit_code == 2 and "Traceback" not in res.output  # click's own usage error
-    user_error(run("ik", "stewart-prototype", ref, "--columns", "nope=x"), "poses.csv, line 2:", "'nope'")
+    user_error(run("ik", "stewart-prototype", ref, "--columns", "nope=x"), "poses.csv, line 1:", "'nope'")

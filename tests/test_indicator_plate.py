@@ -15,6 +15,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from helpers import frames_of, hexapod_pose_jacobian
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -69,10 +70,10 @@ def test_identity_plate_is_bit_identical_to_eq6():
     assert s.plate_is_identity and s.param_names[3:] == PLATE_PARAM_NAMES
     P = _poses(1, 50)
     y, J = _reference(s, P)
-    assert np.array_equal(s.predict(P), y)
-    assert np.array_equal(s.pose_jacobian(P), J)
+    assert np.array_equal(s.predict(frames_of(P)), y)
+    assert np.array_equal(hexapod_pose_jacobian(s, P), J)
     explicit = IndicatorSensor(PROTOTYPE_INDICATORS, 10.0, zero=[0.1, -0.2, 0.3], plate=np.zeros(6))
-    assert explicit == s and np.array_equal(explicit.predict(P), y)
+    assert explicit == s and np.array_equal(explicit.predict(frames_of(P)), y)
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -82,12 +83,12 @@ def test_jacobians_against_central_differences(seed):
     s = IndicatorSensor(PROTOTYPE_INDICATORS, 10.0, zero=[0.1, 0.2, 0.3], plate=_plate(seed))
     P = _poses(10 + seed)
     h = 1e-6
-    J = s.pose_jacobian(P)
-    Jfd = np.stack([(s.predict(P + h * e) - s.predict(P - h * e)) / (2 * h) for e in np.eye(6)], axis=-1)
+    J = hexapod_pose_jacobian(s, P)
+    Jfd = np.stack([(s.predict(frames_of(P + h * e)) - s.predict(frames_of(P - h * e))) / (2 * h) for e in np.eye(6)], axis=-1)
     np.testing.assert_allclose(J, Jfd, atol=5e-7, rtol=0)
     th = s.params
-    Jp = s.param_jacobian(P)
-    Jpfd = np.stack([(s.with_params(th + h * e).predict(P) - s.with_params(th - h * e).predict(P)) / (2 * h)
+    Jp = s.param_jacobian(frames_of(P))
+    Jpfd = np.stack([(s.with_params(th + h * e).predict(frames_of(P)) - s.with_params(th - h * e).predict(frames_of(P))) / (2 * h)
                      for e in np.eye(th.size)], axis=-1)
     np.testing.assert_allclose(Jp, Jpfd, atol=5e-7, rtol=0)
     assert np.abs(Jp[:, :, 6:]).max() > 1.0          # the plate angles matter (lever ~ the platform height)
@@ -110,7 +111,7 @@ def test_rigid_motion_of_plate_and_platform_changes_no_reading(seed):
 
     s0 = IndicatorSensor(PROTOTYPE_INDICATORS, 10.0, plate=plate)
     s1 = IndicatorSensor(PROTOTYPE_INDICATORS, 10.0, plate=move(plate[None])[0])
-    np.testing.assert_allclose(s1.predict(move(P)), s0.predict(P), atol=1e-9)
+    np.testing.assert_allclose(s1.predict(frames_of(move(P))), s0.predict(frames_of(P)), atol=1e-9)
 
 
 def test_tilted_plate_reads_the_plate_frame_pose():
@@ -122,9 +123,9 @@ def test_tilted_plate_reads_the_plate_frame_pose():
     local = np.concatenate([(P[:, 0:3] - plate[0:3]) @ Rw, matrix_to_euler(Rw.T @ euler_to_matrix(P[:, 3:6]))], 1)
     tilted = IndicatorSensor(PROTOTYPE_INDICATORS, 10.0, plate=plate)
     level = IndicatorSensor(PROTOTYPE_INDICATORS, 10.0)
-    np.testing.assert_allclose(tilted.predict(P), level.predict(local), atol=1e-10)
+    np.testing.assert_allclose(tilted.predict(frames_of(P)), level.predict(frames_of(local)), atol=1e-10)
     # the touch points lie on the platform's lower plane and on the indicator axes
-    pts = tilted.touch_points(P)
+    pts = tilted.touch_points(frames_of(P))
     n = plane_normals(P[:, 3:6])
     x0 = P[:, 0:3] - 10.0 * n
     np.testing.assert_allclose(np.einsum("nkj,nj->nk", pts - x0[:, None, :], n), 0.0, atol=1e-9)

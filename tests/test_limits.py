@@ -505,6 +505,6 @@ def test_check_limits_without_margins_on_non_finite_poses_and_threads():
     for name in full.violations:
         np.testing.assert_array_equal(fast.violations[name], full.violations[name])
         assert fast.violations[name][5] and fast.violations[name][7]
-    rows = [M.check_limits(p, margin=0.1, margins=False).ok[0] for p in poses[:50]]   # NumPy, one by one
+    rows = [M.check_limits(p, margin=0.1, margins=False).ok[0] for p in poses[:50]]   # one by one
     assert rows == fast.ok[:50].tolist()
     assert 0 < fast.ok.sum() < len(poses)

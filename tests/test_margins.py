@@ -82,7 +82,7 @@ def test_plan_command_states_and_uses_its_margin(tmp_path):
     runner = CliRunner()
     out = tmp_path / "p.csv"
     args = ["plan", "stewart-prototype", "--setup", "indicators-prototype", "--n", "15", "--n-candidates", "300"]
-    res = runner.invoke(cli, [*args, "--tilt-margin", "5", "-o", str(out)])
+    res = runner.invoke(cli, [*args, "--tilt-margin", "5", "-o", str(out), "--units-comment"])
     assert res.exit_code == 0, res.output
     assert "safety margin: stroke 3 mm, joint tilts 5 deg, leg clearance 0.1 mm (given: tilt; others default)" \
         in res.stdout

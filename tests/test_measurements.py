@@ -47,7 +47,7 @@ def test_round_trip_and_deterministic_bytes(tmp_path_factory, name, n, seed, cmd
     else:
         assert back.commanded is None
     assert back.source == str(d / "a.csv") and len(back) == n and back.notes == ()
-    assert list(back.lines) == list(range(4, 4 + n))  # units line, comment, header, then rows
+    assert list(back.lines) == list(range(2, 2 + n))  # header, then rows (no comment unless asked)
 
 
 def test_full_pose_file_in_degrees_with_extra_columns(tmp_path):
@@ -129,7 +129,7 @@ def test_planar_rotary_encoders_are_degrees_in_files(tmp_path):
     setup = load_setup("planar-tracker", m)
     poses = np.array([[0.0, 205.0], [-30.0, 180.0], [40.0, 230.0]])
     q = m.ik(poses)
-    meas = Measurements(actuators=q, readings=setup.sensor.predict(poses), commanded=poses)
+    meas = Measurements(actuators=q, readings=setup.sensor.predict(m.frame(poses)), commanded=poses)
     path = tmp_path / "m.csv"
     save_measurements(path, meas, m, setup)
     text = path.read_text()
@@ -143,6 +143,6 @@ def test_planar_rotary_encoders_are_degrees_in_files(tmp_path):
     m4 = builtin_machine("planar-3dof-4act")
     s4 = load_setup("planar-tracker", m4)
     p4 = np.array([[0.0, 230.0, 0.1]])
-    save_measurements(path, Measurements(m4.ik(p4), s4.sensor.predict(p4), p4), m4, s4)
+    save_measurements(path, Measurements(m4.ik(p4), s4.sensor.predict(m4.frame(p4)), p4), m4, s4)
     assert float(path.read_text().splitlines()[-1].split(",")[0]) == m4.ik(p4)[0, 0]
     assert np.array_equal(load_measurements(path, m4, s4).actuators, m4.ik(p4))

@@ -145,14 +145,14 @@ def test_known_stiffness_recovers_the_machine_from_exact_data(campaign):
 
 def test_load_compensated_commands_put_the_model_on_the_target(campaign):
     name, (nominal, sensor, noise, real, real_sensor), setup, calib, _ = campaign
-    targets = sensor.predict(calib)
+    targets = sensor.predict(nominal.frame(calib))
     angles = calib[:, 2] if nominal.n_dof == 3 else None
     x, c = commands_for_targets(nominal, sensor, targets, angles, setup.simulation)
     K = setup.simulation.stiffness_for(nominal)
     g = force_balance(nominal, c, K, x, setup.simulation.load, sensor)
     assert np.abs(g).max() < 1e-6 * np.abs(K).max() * 1e-3      # balanced at x itself (N or N·mm)
     eq = equilibrium(nominal, c, K, setup.simulation.load, sensor, guess=x)
-    np.testing.assert_allclose(sensor.predict(eq.poses), targets, atol=1e-7)
+    np.testing.assert_allclose(sensor.predict(nominal.frame(eq.poses)), targets, atol=1e-7)
     _, plain = commands_for_targets(nominal, sensor, targets, angles)
     assert np.abs(plain - c).max() > 0        # the load changes the commands
 

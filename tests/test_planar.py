@@ -178,11 +178,18 @@ def test_tool_sensor_jacobians_match_finite_differences(n, u, v):
     # readings p_w + R(c_w)(x + R(φ) t): linear in every mm coordinate (ℓ = the 1 m the setup
     # spans sets only the step), the angles φ and c_w turn levers (ℓ = 1 rad)
     pose_scale = np.where(m.pose_is_angle, 1.0, 1000.0)
-    assert_jacobian_matches_fd(s.predict, x, s.pose_jacobian(x), scale=pose_scale, names=m.pose_names)
-    assert_jacobian_matches_fd(lambda p: s.with_params(p).predict(x), s.params, s.param_jacobian(x),
+    # the pose Jacobian is the sensor's twist Jacobian composed with the machine's T
+    H = m.pose_jacobian_from_twist(s.frame_jacobian(m.frame(x)), x)
+    assert_jacobian_matches_fd(lambda z: s.predict(m.frame(z)), x, H, scale=pose_scale, names=m.pose_names)
+    assert_jacobian_matches_fd(lambda p: s.with_params(p).predict(m.frame(x)), s.params, s.param_jacobian(m.frame(x)),
                                scale=np.where(s.param_is_angle, 1.0, 1000.0), names=s.param_names)
-    assert_jacobian_matches_fd(s.tool_point, x, s.tool_pose_jacobian(x), scale=pose_scale, names=m.pose_names)
-    back = s.poses_for_readings(s.predict(x), x[:, 2] if n == 3 else None)
+    Jf = m.pose_jacobian_from_twist(s.tool_frame_jacobian(m.frame(x)), x)
+    assert_jacobian_matches_fd(lambda z: s.tool_point(m.frame(z)), x, Jf, scale=pose_scale, names=m.pose_names)
+    # explicit sensor parameters equal with_params' to the bit
+    theta = s.params + 0.25
+    for f in ("predict", "frame_jacobian", "param_jacobian", "tool_point", "tool_frame_jacobian"):
+        np.testing.assert_array_equal(getattr(s, f)(m.frame(x), theta), getattr(s.with_params(theta), f)(m.frame(x)))
+    back = m.poses_from_frame(s.frame_for_readings(s.predict(m.frame(x)), m.frame(x).R))
     np.testing.assert_allclose(back, x, atol=1e-9)
 
 
@@ -191,8 +198,9 @@ def test_tool_sensor_rejects_bad_input():
         PlanarToolSensor(n_pose=6)
     with pytest.raises(PkmcalError, match="no parameter"):
         PlanarToolSensor(n_pose=2, free=("target.z",))
-    with pytest.raises(PkmcalError, match="plate angle"):
-        PlanarToolSensor(n_pose=3).poses_for_readings(np.zeros((1, 2)))
+    assert "not a planar machine" in PlanarToolSensor(n_pose=2).works_with(builtin_machine("stewart-prototype"))
+    assert "3 pose coordinates" in PlanarToolSensor(n_pose=3).works_with(MACHINES["planar-2dof-3act"])
+    assert PlanarToolSensor(n_pose=3).works_with(MACHINES["planar-3dof-4act"]) is None
 
 
 def test_angle_parameters_and_summary():

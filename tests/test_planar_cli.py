@@ -68,9 +68,9 @@ def _independent_rest_check(nominal, real, setup, meas):
     encoder reading, and the actuator springs balance there (no load: Γᵀ K (q − c) = 0)."""
     q, y, cmd = meas.actuators, meas.readings, meas.commanded
     if nominal.n_dof == 2:
-        x = setup.sensor.poses_for_readings(y)
+        x = real.poses_from_frame(setup.sensor.frame_for_readings(y, np.eye(3)))
     else:
-        x = setup.sensor.poses_for_readings(y, real.fk(q, guess=cmd).poses[:, 2])
+        x = real.poses_from_frame(setup.sensor.frame_for_readings(y, real.frame(real.fk(q, guess=cmd).poses).R))
     np.testing.assert_allclose(real.ik(x), q, rtol=0, atol=1e-9)
     c = nominal.ik(cmd)
     assert np.max(np.abs(q - c)) > 1e-4                                       # real following errors
@@ -82,10 +82,10 @@ def _independent_rest_check(nominal, real, setup, meas):
 def _predicts_real_readings(cal, cal_sens, real, sensor, held):
     """Gauge-invariant recovery: for real poses x, there is a calibrated-model pose x' whose
     calibrated IK and tracker prediction equal the real readings (≤ 1e-6 mm or rad)."""
-    q, y = real.ik(held), sensor.predict(held)
+    q, y = real.ik(held), sensor.predict(real.frame(held))
     x2 = cal.fk(q, guess=held).poses
     np.testing.assert_allclose(cal.ik(x2), q, rtol=0, atol=1e-6)
-    np.testing.assert_allclose(cal_sens.predict(x2), y, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(cal_sens.predict(cal.frame(x2)), y, rtol=0, atol=1e-6)
 
 
 @pytest.mark.parametrize("case", [1, 2])

@@ -122,7 +122,7 @@ def test_agrees_with_an_independent_joint_fit_of_poses_and_parameters(n_dof):
         th[idx] = z[: len(idx)]
         mech, sens = model.split(th)
         xs = z[len(idx):].reshape(x.shape)
-        return (np.concatenate([y - sens.predict(xs), q - mech.ik(xs)], axis=1) * w).ravel()
+        return (np.concatenate([y - sens.predict(mech.frame(xs)), q - mech.ik(xs)], axis=1) * w).ravel()
 
     sol = least_squares(e, np.concatenate([theta0[idx], x.ravel()]), jac="3-point", x_scale="jac", ftol=1e-15,
                         xtol=1e-15, gtol=1e-15)
@@ -192,9 +192,9 @@ def test_projector_has_rank_m_plus_l_minus_n_and_annihilates_q():
     for n_dof in (2, 3):
         m, s, _, _, noise, _ = _case(n_dof)
         x = m.sample_poses(10, np.random.default_rng(0))
-        model = Model(m, s, noise, q=m.ik(x), y=s.predict(x), commanded=x)
+        model = Model(m, s, noise, q=m.ik(x), y=s.predict(m.frame(x)), commanded=x)
         w = 1.0 / np.concatenate([model.sigma_y, model.sigma_q])
-        Q = np.concatenate([s.pose_jacobian(x), m.actuator_pose_jacobian(x)], axis=1) * w[:, None]
+        Q = np.concatenate([m.pose_jacobian_from_twist(s.frame_jacobian(m.frame(x)), x), m.actuator_pose_jacobian(x)], axis=1) * w[:, None]
         U = np.linalg.qr(Q, mode="complete")[0][:, :, n_dof:]
         R = U @ np.swapaxes(U, 1, 2)
         R_paper = np.eye(Q.shape[1]) - Q @ np.linalg.solve(np.swapaxes(Q, 1, 2) @ Q, np.swapaxes(Q, 1, 2))
@@ -278,7 +278,7 @@ def test_baselines(n_dof):
     # noise-free, the kept actuators' model reproduces the real readings at the fitted poses
     q = sim.actuator_readings
     np.testing.assert_allclose(ActuatorSubset(sub.mechanism, keep).ik(sub.poses), q[:, list(keep)], atol=1e-8)
-    np.testing.assert_allclose(sub.sensor.predict(sub.poses), sim.sensor_readings, atol=1e-8)
+    np.testing.assert_allclose(sub.sensor.predict(sub.mechanism.frame(sub.poses)), sim.sensor_readings, atol=1e-8)
     # actuators assumed at their commands: biased (the following errors are real)
     ign = fit_redundant("ignore-redundancy", m, setup, sim.measurements, _free(m, fixed))
     assert ign.method == "ignore-redundancy"
@@ -303,7 +303,7 @@ def test_bad_requests_are_user_errors():
     m, s, K, F, noise, fixed = _case(2)
     x = m.sample_poses(5, np.random.default_rng(0))
     setup = MeasurementSetup(s, noise)
-    data = (m.ik(x), s.predict(x), x)
+    data = (m.ik(x), s.predict(m.frame(x)), x)
     with pytest.raises(PkmcalError, match="unknown paper-3 method 'twice'"):
         fit_redundant("twice", m, setup, data, ("l11",))
     with pytest.raises(PkmcalError, match="no parameter matches 'l99'"):
@@ -336,7 +336,7 @@ def test_single_linearisation_jacobian_matches_finite_differences(n_dof):
     derivative of U⊥ multiplies e, so J must equal central differences of r(θ)."""
     m, s, _, _, noise, _ = _case(n_dof)
     x = m.sample_poses(6, np.random.default_rng(41))
-    model = Model(m, s, noise, q=m.ik(x), y=s.predict(x), commanded=x)
+    model = Model(m, s, noise, q=m.ik(x), y=s.predict(m.frame(x)), commanded=x)
     r0, J = single_linearisation(model)
     assert np.abs(r0).max() < 1e-9
 

@@ -152,7 +152,7 @@ def test_planned_poses_are_reachable_and_measurable(machine, setup_name, algorit
     assert np.all((plan.commands >= machine.stroke[:, 0]) & (plan.commands <= machine.stroke[:, 1]))
     fk = machine.fk(plan.commands, guess=plan.poses)
     assert fk.all_converged and np.allclose(fk.poses, plan.poses, atol=1e-8)
-    readings = setup.sensor.predict(plan.poses)            # raises if the sensor cannot read a pose
+    readings = setup.sensor.predict(machine.frame(plan.poses))            # raises if the sensor cannot read a pose
     assert np.all(np.isfinite(readings))
     assert pose_set_indices(machine, setup, plan.poses, model=plan.model) == pytest.approx(plan.indices)
 
@@ -168,7 +168,7 @@ def test_cli_plan_and_observability(machine, tmp_path):
     out = tmp_path / "poses.csv"
     runner = CliRunner()
     res = runner.invoke(cli, ["plan", "stewart-prototype", "--setup", "full-pose-paper1", "--n", "14",
-                              "--n-candidates", "300", "--seed", "2", "-o", str(out)])
+                              "--n-candidates", "300", "--seed", "2", "-o", str(out), "--units-comment"])
     assert res.exit_code == 0, res.output
     table = read_table(out, ["x", "y", "z", "a", "b", "c"] + [f"lambda{i}" for i in range(1, 7)])
     poses = table[["x", "y", "z", "a", "b", "c"]].copy()

@@ -11,7 +11,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from helpers import assert_jacobian_matches_fd
+from helpers import assert_jacobian_matches_fd, frames_of, hexapod_pose_jacobian
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
@@ -23,6 +23,7 @@ from pkmcal.errors import PkmcalError
 from pkmcal.mechanisms.hexapod import HEXAPOD_PARAM_NAMES
 from pkmcal.mechanisms.library import builtin_machine
 from pkmcal.sensors import SENSOR_KINDS, FullPoseSensor, IndicatorSensor, PlanarToolSensor, PositionSensor
+from pkmcal.sensors.library import PROTOTYPE_INDICATORS
 
 def _floats(lo, hi):
     return st.floats(lo, hi, allow_nan=False, allow_infinity=False)
@@ -77,13 +78,13 @@ def _fd_model(is_angle, angle_scale, mm_slope, angle_slope):
 
 
 def _assert_pose_fd(sensor, poses, **model):
-    assert_jacobian_matches_fd(sensor.predict, poses, sensor.pose_jacobian(poses), **_fd_model(ANG, **model),
+    assert_jacobian_matches_fd(lambda x: sensor.predict(frames_of(x)), poses, hexapod_pose_jacobian(sensor, poses), **_fd_model(ANG, **model),
                                diff=_wrap_angles(sensor.reading_is_angle), names=list("xyzabc"))
 
 
 def _assert_param_fd(sensor, poses, **model):
-    assert_jacobian_matches_fd(lambda theta: sensor.with_params(theta).predict(poses), sensor.params,
-                               sensor.param_jacobian(poses), **_fd_model(sensor.param_is_angle, **model),
+    assert_jacobian_matches_fd(lambda theta: sensor.with_params(theta).predict(frames_of(poses)), sensor.params,
+                               sensor.param_jacobian(frames_of(poses)), **_fd_model(sensor.param_is_angle, **model),
                                diff=_wrap_angles(sensor.reading_is_angle), names=sensor.param_names)
 
 
@@ -104,7 +105,7 @@ ANG = np.array([False, False, False, True, True, True])
 @given(poses=_pose_array(4), world=_transform(-300, 300, 0.6), tool=_transform(-80, 80, 0.6))
 def test_full_pose_jacobians_match_finite_differences(poses, world, tool):
     s = FullPoseSensor(world=world, tool=tool)
-    y = s.predict(poses)
+    y = s.predict(frames_of(poses))
     # stay away from gimbal lock of the measured angles, where E⁻¹ blows up
     b_max = np.max(np.abs(y[:, 4]))
     assume(b_max < np.deg2rad(75))
@@ -124,7 +125,7 @@ def test_full_pose_jacobians_match_finite_differences(poses, world, tool):
 @given(poses=_pose_array(3), world=_transform(-300, 300, 1.0), tool=_transform(-80, 80, 1.0))
 def test_full_pose_reading_is_world_base_platform_tool_composition(poses, world, tool):
     s = FullPoseSensor(world=world, tool=tool)
-    y = s.predict(poses)
+    y = s.predict(frames_of(poses))
     for k, pose in enumerate(poses):
         T = _homogeneous(world) @ _homogeneous(pose) @ _homogeneous(tool)
         np.testing.assert_allclose(y[k, :3], T[:3, 3], atol=1e-9)
@@ -135,8 +136,8 @@ def test_full_pose_reading_is_world_base_platform_tool_composition(poses, world,
 def test_full_pose_identity_reads_the_pose():
     poses = np.array([[1.0, -2.0, 300.0, 0.1, -0.2, 0.3], [0, 0, 250, 0, 0, 0]])
     s = FullPoseSensor()
-    np.testing.assert_allclose(s.predict(poses), poses, atol=1e-12)
-    np.testing.assert_allclose(s.pose_jacobian(poses), np.broadcast_to(np.eye(6), (2, 6, 6)), atol=1e-12)
+    np.testing.assert_allclose(s.predict(frames_of(poses)), poses, atol=1e-12)
+    np.testing.assert_allclose(hexapod_pose_jacobian(s, poses), np.broadcast_to(np.eye(6), (2, 6, 6)), atol=1e-12)
     assert s.reading_is_angle == (False, False, False, True, True, True)
     assert s.default_free == ()
     assert FullPoseSensor(free=("world.x",)).default_free == ("world.x",)
@@ -158,7 +159,7 @@ def test_position_jacobians_match_finite_differences(poses, target, world):
                      angle_slope=_euler_levers(world[3:], poses[:, :3] + R @ target))
     for k, pose in enumerate(poses):
         expected = (_homogeneous(world) @ _homogeneous(pose) @ np.r_[target, 1.0])[:3]
-        np.testing.assert_allclose(s.predict(poses)[k], expected, atol=1e-9)
+        np.testing.assert_allclose(s.predict(frames_of(poses))[k], expected, atol=1e-9)
 
 
 @settings(max_examples=40, deadline=None)
@@ -170,9 +171,9 @@ def test_position_is_the_position_part_of_full_pose(poses, target, world, tool_a
     position rows."""
     pos = PositionSensor(target=target, world=world)
     full = FullPoseSensor(world=world, tool=np.r_[target, tool_abc])
-    np.testing.assert_allclose(pos.predict(poses), full.predict(poses)[:, 0:3], rtol=1e-14, atol=1e-12)
-    np.testing.assert_allclose(pos.pose_jacobian(poses), full.pose_jacobian(poses)[:, 0:3], rtol=1e-14, atol=1e-12)
-    Jp, Jf = pos.param_jacobian(poses), full.param_jacobian(poses)
+    np.testing.assert_allclose(pos.predict(frames_of(poses)), full.predict(frames_of(poses))[:, 0:3], rtol=1e-14, atol=1e-12)
+    np.testing.assert_allclose(hexapod_pose_jacobian(pos, poses), hexapod_pose_jacobian(full, poses)[:, 0:3], rtol=1e-14, atol=1e-12)
+    Jp, Jf = pos.param_jacobian(frames_of(poses)), full.param_jacobian(frames_of(poses))
     col = {n: k for k, n in enumerate(full.param_names)}
     for k, name in enumerate(pos.param_names):
         other = col[name.replace("target.", "tool.")]
@@ -183,7 +184,7 @@ def test_position_defaults():
     s = PositionSensor(target=[1.0, 2.0, 3.0])
     assert s.reading_names == ("px", "py", "pz")
     assert s.default_free == ("target.x", "target.y", "target.z")
-    np.testing.assert_allclose(s.predict([10, 20, 300, 0, 0, 0]), [[11, 22, 303]])
+    np.testing.assert_allclose(s.predict(frames_of([10, 20, 300, 0, 0, 0])), [[11, 22, 303]])
 
 
 # -- indicators --------------------------------------------------------------------------
@@ -213,7 +214,7 @@ def test_indicator_model_matches_plane_construction_and_fd(poses, k, data, d_off
     positions = data.draw(_indicator_positions(k))
     zero = data.draw(arrays(float, (k,), elements=_floats(-5, 5)))
     s = IndicatorSensor(positions=positions, plane_offset=d_off, zero=zero)
-    y = s.predict(poses)
+    y = s.predict(frames_of(poses))
     assert y.shape == (3, k)
     for j, pose in enumerate(poses):
         np.testing.assert_allclose(y[j] + zero, _plane_construction(positions, d_off, pose), atol=1e-8)
@@ -237,7 +238,7 @@ def test_indicator_model_matches_plane_construction_and_fd(poses, k, data, d_off
 
 def test_indicator_level_platform_reads_height_minus_offset():
     s = IndicatorSensor(positions=[[40, 0], [-20, 34.641], [-20, -34.641]], plane_offset=10.0, zero=[1, 2, 3])
-    np.testing.assert_allclose(s.predict([5, -3, 300, 0, 0, 0]), [[289, 288, 287]])
+    np.testing.assert_allclose(s.predict(frames_of([5, -3, 300, 0, 0, 0])), [[289, 288, 287]])
     assert s.reading_names == ("d1", "d2", "d3")
     assert s.param_names == ("zero1", "zero2", "zero3", "plate.x", "plate.y", "plate.z", "plate.a", "plate.b", "plate.c")
     assert s.default_free == ()
@@ -247,7 +248,7 @@ def test_indicator_vertical_plane_names_the_pose():
     s = IndicatorSensor(positions=[[40, 0], [-20, 34.641], [-20, -34.641]], plane_offset=10.0)
     poses = np.array([[0, 0, 300, 0, 0, 0], [0, 0, 300, np.pi / 2, 0, 0]])
     with pytest.raises(PkmcalError, match=r"pose 1 .*near vertical"):
-        s.predict(poses)
+        s.predict(frames_of(poses))
 
 
 def test_indicator_needs_three():
@@ -287,9 +288,13 @@ def _all_sensors():
     ]
 
 
-def _poses_for(sensor):
+def _frames_for(sensor):
+    """Two platform frames the sensor can read: of a hexapod, or of a planar machine."""
     poses = np.array([[10.0, -5.0, 300.0, 0.1, -0.2, 0.3], [-20.0, 15.0, 280.0, -0.15, 0.1, -0.4]])
-    return poses[:, :sensor.n_pose] if isinstance(sensor, PlanarToolSensor) else poses
+    if "tool-point" in sensor.abilities:
+        m = builtin_machine("planar-2dof-3act" if sensor.n_pose == 2 else "planar-3dof-4act")
+        return m.frame(poses[:, :sensor.n_pose])
+    return frames_of(poses)
 
 
 EXPECTED_ANGLES = {
@@ -307,12 +312,12 @@ def test_param_is_angle_flags_the_2pi_periodic_parameters(sensor):
     flags = sensor.param_is_angle
     assert len(flags) == len(sensor.param_names) and all(isinstance(a, bool) for a in flags)
     assert {n for n, a in zip(sensor.param_names, flags) if a} == EXPECTED_ANGLES[sensor.kind]
-    poses = _poses_for(sensor)
-    y0 = sensor.predict(poses)
+    frames = _frames_for(sensor)
+    y0 = sensor.predict(frames)
     for k, is_angle in enumerate(flags):
         theta = sensor.params
         theta[k] += 2 * np.pi
-        change = np.max(np.abs(sensor.reading_residual(sensor.with_params(theta).predict(poses), y0)))
+        change = np.max(np.abs(sensor.reading_residual(sensor.with_params(theta).predict(frames), y0)))
         if is_angle:
             assert change < 1e-9, sensor.param_names[k]
         else:
@@ -357,3 +362,54 @@ def test_identify_table_angles_come_from_the_flags():
     assert planar_angles  # the way directions α_i
     result = SimpleNamespace(sensor=PlanarToolSensor(n_pose=3), mechanism=planar)
     assert _angle_names(result) == planar_angles | {"world.c"}
+
+
+# -- the sensor contract: frames in, explicit parameters, declared abilities -------------------
+
+PROTOTYPE_POSITIONS = PROTOTYPE_INDICATORS
+PLATE = np.array([3.0, -2.0, 1.0, 0.02, -0.01, 0.3])
+
+
+@pytest.mark.parametrize("sensor", _all_sensors() + [IndicatorSensor(PROTOTYPE_POSITIONS, 5.0, plate=PLATE)],
+                         ids=lambda s: f"{s.kind}")
+def test_explicit_params_equal_with_params_to_the_bit(sensor):
+    frames = _frames_for(sensor)
+    theta = sensor.params + 0.01 * (1 + np.arange(len(sensor.params)))
+    other = sensor.with_params(theta)
+    for f in ("predict", "frame_jacobian", "param_jacobian"):
+        np.testing.assert_array_equal(getattr(sensor, f)(frames, theta), getattr(other, f)(frames), err_msg=f)
+        np.testing.assert_array_equal(getattr(sensor, f)(frames), getattr(sensor, f)(frames, sensor.params))
+    assert sensor.frame_jacobian(frames).shape == (len(frames), sensor.n_readings, 6)
+
+
+@pytest.mark.parametrize("sensor", _all_sensors(), ids=lambda s: f"{s.kind}")
+def test_frame_jacobian_matches_twists_of_the_frame(sensor):
+    """∂y/∂(δp, δω) against central differences of y(frame moved by a twist) (Frame.moved):
+    the readings are smooth in the twist on the scale of the setup (1 m for δp, 1 rad for δω)."""
+    frames = _frames_for(sensor)[:1]
+    J = sensor.frame_jacobian(frames)
+    planar = "tool-point" in sensor.abilities
+    rows = [0, 1, 5] if planar else list(range(6))     # a planar frame turns about z only
+    assert_jacobian_matches_fd(lambda t: sensor.predict(frames.moved(_twist(t, rows))), np.zeros((1, len(rows))),
+                               J[..., rows], scale=np.where(np.array(rows) >= 3, 1.0, 1000.0),
+                               magnitude=1000.0, diff=_wrap_angles(sensor.reading_is_angle),
+                               names=[("dpx", "dpy", "dpz", "dwx", "dwy", "dwz")[k] for k in rows])
+
+
+def _twist(t, rows):
+    full = np.zeros((np.shape(t)[0], 6))
+    full[:, rows] = t
+    return full
+
+
+def test_readable_and_works_with_are_declared():
+    hexapod, planar = builtin_machine("stewart-prototype"), builtin_machine("planar-3dof-4act")
+    s = IndicatorSensor(PROTOTYPE_POSITIONS, 5.0)
+    ok, why = s.readable(frames_of(np.array([[0, 0, 300, 0, 0, 0], [0, 0, 300, np.pi / 2, 0, 0]])))
+    assert ok.tolist() == [True, False] and "vertical" in why
+    assert FullPoseSensor().readable(frames_of(np.zeros(6)))[0].all()
+    assert s.works_with(hexapod) is None and "planar-tool" in s.works_with(planar)
+    assert PlanarToolSensor(n_pose=3).works_with(planar) is None
+    assert FullPoseSensor().invertible and not PositionSensor().invertible
+    with pytest.raises(PkmcalError, match="do not determine"):
+        PositionSensor().invert(np.zeros((1, 3)))

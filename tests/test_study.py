@@ -25,7 +25,8 @@ from pkmcal.mechanisms import builtin_machine
 from pkmcal.study import backends, load_study, read_trials, run_study
 from pkmcal.study.results import median_interval, t_interval, wilson_interval
 from pkmcal.study.schema import ErrorGroup, MachineSpec, MethodSpec, PlanSpec, SetupSpec, Study, scaled_noise
-from pkmcal.study.trial import pseudo_truth
+from pkmcal.identification.verification import pose_errors
+from pkmcal.study.trial import heldout_columns, pseudo_truth
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 SMALL = """\
@@ -233,9 +234,39 @@ def test_truth_is_the_real_machine_in_the_fits_gauge():
     other = nominal.home_pose + rng.uniform(-1, 1, (30, 6)) * half
     twin = nominal.with_params(truth[:42])
     q = nominal.ik(other)
-    y_real = setup.sensor.predict(real.fk(q, guess=other).poses)
-    y_twin = setup.sensor.predict(twin.fk(q, guess=other).poses)
+    y_real = setup.sensor.predict(real.frame(real.fk(q, guess=other).poses))
+    y_twin = setup.sensor.predict(twin.frame(twin.fk(q, guess=other).poses))
     assert np.max(np.abs(y_real - y_twin)) < 1e-8
+
+
+def test_heldout_columns_are_the_verification_summary():
+    """The held-out columns are the numbers of PoseErrors.summary over the poses both
+    models reach (to the bit), angles in degrees; none reached is a message."""
+    nominal, real = builtin_machine("stewart-prototype"), builtin_machine("stewart-prototype-real")
+    rng = np.random.default_rng(2)
+    cmd = nominal.home_pose + rng.uniform(-1, 1, (9, 6)) * np.array([20.0, 20.0, 10.0, 0.1, 0.1, 0.1])
+    cmd[2, 2] += 400.0                                           # reached by neither model
+    before, after = pose_errors(nominal, real, cmd), pose_errors(real, real, cmd)
+    common = before.valid & after.valid
+    assert 0 < common.sum() < len(cmd)
+    got = heldout_columns(after, before)
+    a, b = after.summary(common), before.summary(common)
+    deg = float(np.rad2deg(1.0))
+    assert got["heldout_used"] == int(common.sum())
+    assert got["heldout_position_rms_mm"] == a["position_rms_mm"]
+    assert got["heldout_position_max_mm"] == a["position_max_mm"]
+    assert got["heldout_orientation_rms_deg"] == a["orientation_rms_rad"] * deg
+    assert got["heldout_orientation_max_deg"] == a["orientation_max_rad"] * deg
+    assert got["heldout_tilt_rms_deg"] == a["tilt_rms_rad"] * deg
+    assert got["heldout_height_rms_mm"] == a["height_rms_mm"]
+    assert got["heldout_position_rms_before_mm"] == b["position_rms_mm"]
+    assert got["heldout_orientation_rms_before_deg"] == b["orientation_rms_rad"] * deg
+    assert got["heldout_tilt_rms_before_deg"] == b["tilt_rms_rad"] * deg
+    assert got["heldout_height_rms_before_mm"] == b["height_rms_mm"]
+    assert got["heldout_position_rms_before_mm"] > 100 * got["heldout_position_rms_mm"]
+    none = pose_errors(nominal, real, cmd[2:3])
+    assert heldout_columns(none, none) == {"heldout_used": 0, "message": "the real machine reaches none of the "
+                                           "held-out poses with both models"}
 
 
 def test_reported_covariance_covers_the_truth(tmp_path):

@@ -136,9 +136,12 @@ def test_format_is_deterministic_and_typed():
     cols = {"x": np.array([0.1, -2.0, 1e-300]), "n": np.array([1, 0, 3]), "ok": np.array([True, False, True]),
             "s": np.array(["ok", "a,b", ' q"'], dtype=object)}
     text = format_table(cols)
-    assert text == ('# units: length=mm, angle=deg\nx,n,ok,s\n0.1,1,1,ok\n-2.0,0,0,"a,b"\n'
+    assert text == ('x,n,ok,s\n0.1,1,1,ok\n-2.0,0,0,"a,b"\n'
                     '1e-300,3,1," q"""\n')
     assert format_table(cols) == text
+    commented = format_table(cols, units_comment=True, comments=["made by a test"])
+    assert commented == "# units: length=mm, angle=deg\n# made by a test\n" + text
+    assert format_table(cols, comments=["not asked for"]) == text
 
 
 def test_format_rejects_ragged_columns():
@@ -159,13 +162,13 @@ def test_write_read_round_trip_is_exact(rows):
 def test_write_table_atomic(tmp_path):
     path = tmp_path / "out.csv"
     write_table(path, {"x": np.array([1.0, 2.0])})
-    assert path.read_text() == "# units: length=mm, angle=deg\nx\n1.0\n2.0\n"
+    assert path.read_text() == "x\n1.0\n2.0\n"
     assert os.listdir(tmp_path) == ["out.csv"]
     with pytest.raises(PkmcalError, match="cannot write"):
         write_table(tmp_path / "missing-dir" / "out.csv", {"x": np.array([1.0])})
     with pytest.raises(PkmcalError, match="cannot write table"):
         write_table(path, {"x": [1.0], "y": [1.0, 2.0]})
-    assert path.read_text() == "# units: length=mm, angle=deg\nx\n1.0\n2.0\n"  # untouched by the failures
+    assert path.read_text() == "x\n1.0\n2.0\n"  # untouched by the failures
 
 
 def test_file_unit_conversion_closed_form_and_round_trip(tmp_path):
@@ -185,7 +188,7 @@ def test_file_unit_conversion_closed_form_and_round_trip(tmp_path):
     # read_poses: a file in radians and metres comes back as the same internal poses
     machine = builtin_machine("stewart-prototype")
     text = format_table({c: internal[:, k] * (1e-3 if k < 3 else 1.0) for k, c in enumerate(POSE_COLUMNS)},
-                        units={"length": "m", "angle": "rad"})
+                        units={"length": "m", "angle": "rad"}, units_comment=True)
     path = tmp_path / "poses.csv"
     path.write_text(text)
     np.testing.assert_allclose(read_poses(path, machine), internal, rtol=1e-12, atol=1e-12)

@@ -42,7 +42,7 @@ def campaign():
     cmd = nominal.home_pose + rng.uniform(-1.0, 1.0, (15, 6)) * HALF
     q = nominal.ik(cmd)
     x = real.fk(q, guess=cmd).poses
-    y = setup.sensor.predict(x)
+    y = setup.sensor.predict(real.frame(x))
     exact = identify(real, setup, q=q, y=y, method="ik-residual")
     estimates = {True: [], False: []}
     chi2 = []

@@ -10,7 +10,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from pkmcal.errors import PkmcalError
-from pkmcal.identification.verification import pose_errors, verify
+from pkmcal.identification.verification import pose_errors, pose_errors_many, verify
 from pkmcal.mechanisms.library import stewart_prototype, stewart_prototype_real
 
 NOMINAL = stewart_prototype()
@@ -77,6 +77,28 @@ def test_report_summaries_and_outputs():
     # without a nominal model: no "before"
     only = verify(REAL, REAL, _poses(5)).to_dict()
     assert "before" not in only and "after" in only
+
+
+def test_many_models_at_once_give_each_model_its_own_numbers():
+    """pose_errors_many does one FK and one limit check for K models: each result must hold
+    exactly (bit for bit) what its own pose_errors call gives, dropped poses included."""
+    poses = _poses(12, seed=5)
+    poses[3, 2] += 300.0                       # beyond the stroke: IK NaN or real limits
+    poses[7, 3] += 0.6                         # a tilt the real machine's joints refuse
+    third = NOMINAL.with_params(NOMINAL.params + np.random.default_rng(1).uniform(-0.2, 0.2, 42), name="third")
+    models = (NOMINAL, REAL, third)
+    together = pose_errors_many(models, REAL, poses, ("leg_collision",))
+    assert len(together) == 3
+    for model, got in zip(models, together):
+        alone = pose_errors(model, REAL, poses, ("leg_collision",))
+        assert got.model == alone.model and got.dropped == alone.dropped
+        assert got.dropped, "the test poses must drop some poses"
+        for field in ("reached", "position", "orientation", "tilt", "height", "valid"):
+            np.testing.assert_array_equal(getattr(got, field), getattr(alone, field), err_msg=field)
+    # and verify's before/after (computed together) are those of separate calls
+    rep = verify(third, REAL, poses, nominal=NOMINAL, ignore_limits=("leg_collision",))
+    np.testing.assert_array_equal(rep.after.position, together[2].position)
+    np.testing.assert_array_equal(rep.before.position, together[0].position)
 
 
 def test_no_reachable_pose_is_an_error():

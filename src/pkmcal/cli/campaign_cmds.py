@@ -31,7 +31,7 @@ from pkmcal.identification.redundant_campaign import (
 from pkmcal.identification.simulation import perturb_machine, simulate_campaign
 from pkmcal.identification.verification import verify
 from pkmcal.cli.import_options import import_options
-from pkmcal.cli.options import check_output, emit, examples, output_option, quiet_option, to_stdout
+from pkmcal.cli.options import check_output, emit, examples, output_option, quiet_option, to_stdout, units_comment_option
 from pkmcal.cli.option_types import SEED, FiniteFloat
 from pkmcal.io.atomic import atomic_write_text
 from pkmcal.io.limits import MAX_MAGNITUDE
@@ -64,10 +64,11 @@ from pkmcal.sensors.library import BUILTIN_SETUPS
 @click.option("--ignore-limit", "ignore_limits", multiple=True, metavar="NAME",
               help="A limit of the real machine not to check (e.g. leg_collision); repeatable.")
 @output_option("MEAS.csv", "Measurement CSV")
+@units_comment_option
 @quiet_option
 @import_options
 def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_real, setup_spec, poses, seed,
-                 ignore_limits, output, quiet, mapping) -> None:
+                 ignore_limits, output, units_comment, quiet, mapping) -> None:
     """Simulate measuring POSES.csv on a real machine commanded with the nominal MACHINE.
 
     The actuators are commanded by MACHINE's inverse kinematics; the real machine goes where
@@ -126,7 +127,8 @@ def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_rea
     if result.dropped:
         comments.append("dropped rows of the pose file: " + ", ".join(
             f"{k + 1} ({why})" for k, why in result.dropped.items()))
-    text = format_table(measurement_columns(result.measurements, nominal, setup), comments=comments)
+    text = format_table(measurement_columns(result.measurements, nominal, setup), comments=comments,
+                        units_comment=units_comment)
     real_text = machine_to_text(real) if save_real is not None else None
     if real_text is not None:
         atomic_write_text(save_real, real_text)

@@ -3,7 +3,9 @@
 * ``--format linuxcnc``: LinuxCNC ``genhexkins`` HAL ``setp`` lines for the base and
   platform joints and the leg offsets / joint limits homing needs
   (:func:`pkmcal.io.export_linuxcnc.linuxcnc_hal`; strut length L_i = ‖p + R a_i − b_i‖,
-  paper 1 eq. 1, paper 2 eq. 1).
+  paper 1 eq. 1, paper 2 eq. 1); with ``--ini FILE`` also the INI sections ``[TRAJ]``,
+  ``[KINS]``, ``[JOINT_0..5]`` (limits, HOME_OFFSET, HOME) that match them
+  (:func:`pkmcal.io.export_linuxcnc.linuxcnc_ini`; ``pkmcal import linuxcnc`` reads both).
 * ``--format json``: the identified parameters ρ with their standard deviations σ_i and
   correlations ρ_ij = Σ_ij / (σ_i σ_j) from the machine file's covariance Σ, units,
   conventions and calibration metadata (:func:`calibration_json`).
@@ -110,33 +112,52 @@ def format_calibration_json(machine: Mechanism, source: str | None = None) -> st
 
 @click.command("export", epilog=examples(
     "pkmcal export calibrated.yaml --format linuxcnc -o kinematics.hal",
+    "pkmcal export calibrated.yaml --format linuxcnc -o kinematics.hal --ini joints.ini",
     "pkmcal export calibrated.yaml --format json -o calibrated.json",
     "pkmcal export stewart-prototype --format linuxcnc"))
 @click.argument("calibrated", metavar="CALIBRATED.yaml")
 @click.option("--format", "fmt", type=click.Choice(["linuxcnc", "json"]), required=True,
               help="linuxcnc: genhexkins HAL setp lines (hexapods); json: parameters with std and correlation.")
 @output_option("FILE", "File to write")
-def export_cmd(calibrated: str, fmt: str, output: str | None) -> None:
+@click.option("--ini", "ini", metavar="FILE.ini",
+              help="linuxcnc: also write the INI sections [TRAJ], [KINS], [JOINT_0..5] (joint limits, HOME_OFFSET, "
+                   "HOME) matching the HAL file, to merge into the machine's INI file.")
+def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None) -> None:
     """Export the machine in CALIBRATED.yaml (a machine file or built-in name) for a controller.
 
     linuxcnc: 'setp genhexkins.base.N.x|y|z' and 'setp genhexkins.platform.N.x|y|z'
     (N = 0..5 = leg N+1, mm) and comment lines with each joint's leg offset L0 (HOME_OFFSET),
-    joint limits and home strut length. json: every parameter (mm, deg) with its std, the
-    correlation matrix, units, conventions and the file's calibration metadata.
+    joint limits and home strut length; --ini FILE writes them as INI sections too. json:
+    every parameter (mm, deg) with its std, the correlation matrix, units, conventions and
+    the file's calibration metadata.
     """
     check_output(output, [calibrated])
+    if ini is not None:
+        if fmt != "linuxcnc":
+            raise PkmcalError("--ini writes LinuxCNC INI sections; use it with --format linuxcnc")
+        if ini == "-" or not ini.strip():
+            raise PkmcalError(f"--ini '{ini}': give a file name (the HAL text goes to -o or standard output)")
+        check_output(ini, [calibrated])
+        if output is not None and os.path.abspath(ini) == os.path.abspath(output):
+            raise PkmcalError("-o and --ini name the same file; choose two paths")
     from pkmcal.io.machine_file import load_machine
 
     machine = load_machine(calibrated)
+    ini_text = None
     if fmt == "linuxcnc":
-        from pkmcal.io.export_linuxcnc import linuxcnc_hal
+        from pkmcal.io.export_linuxcnc import linuxcnc_hal, linuxcnc_ini
 
         text = linuxcnc_hal(machine)
+        ini_text = linuxcnc_ini(machine) if ini is not None else None
     else:
         text = format_calibration_json(machine, source=os.fspath(calibrated))
+    if ini_text is not None:
+        emit(ini_text, ini)
     emit(text, output)
     if not to_stdout(output):
         click.echo(f"wrote {output} ({fmt})", err=True)
+    if ini_text is not None:
+        click.echo(f"wrote {ini} (LinuxCNC INI sections [TRAJ], [KINS], [JOINT_0..5])", err=True)
 
 
 __all__ = ["calibration_json", "export_cmd", "format_calibration_json"]

@@ -26,11 +26,13 @@ from pkmcal.identification.redundant_campaign import (
     sensor_calibration_block,
 )
 from pkmcal.identification.residuals import METHODS, default_method
+from pkmcal.identification.robust import DEFAULT_F_SCALE, LOSSES, OUTLIER_SIGMA
 from pkmcal.cli._limits import unreachable_notes
 from pkmcal.cli.import_options import import_options
+from pkmcal.cli.option_types import FiniteFloat
 from pkmcal.cli.options import DeprecatedArgument, check_output, emit, examples, output_option, poses_file, to_stdout
 from pkmcal.io.atomic import check_output_path
-from pkmcal.io.measurements import load_measurements
+from pkmcal.io.measurements import CLIPPED_POLICIES, apply_clipped_policy, clipped_named_in_errors, load_measurements
 from pkmcal.io.tables import read_poses
 from pkmcal.sensors.library import BUILTIN_SETUPS
 
@@ -119,7 +121,10 @@ def fit_summary(result, free_line: str | None = None) -> str:
     whitened = ("whitened (noise model): chi2 = sum |W r|^2 = "
                 f"{u.chi2:.6g} with the weights at the solution, chi2/dof = {u.chi2:.6g}/{u.dof} = "
                 f"{u.reduced_chi2:.4g}, rms whitened residual sqrt(chi2/M) = {result.rms_whitened:.4g}")
-    cost = (f"solver cost 1/2 sum |W0 r|^2 = {result.cost:.6g} (weights from the start, held fixed while solving)"
+    extra = "".join([f", {result.loss} loss" if result.loss != "linear" else "",
+                     " + 1/2 sum of the squared prior rows" if len(result.priors) else ""])
+    cost = (f"solver cost 1/2 sum |W0 r|^2 = {result.cost:.6g} (weights from the start, held fixed while solving"
+            f"{extra})"
             if result.weighted else
             f"solver cost 1/2 sum r^2 = {result.cost:.6g} (plain least squares on the raw residuals)")
     lines = [
@@ -136,9 +141,34 @@ def fit_summary(result, free_line: str | None = None) -> str:
     ]
     for d in rep.null_space:
         lines.append(f"  unobservable: {format_direction(d)}")
+    lines.extend(robust_lines(result))
     for w in result.warnings:
         lines.append(w if w.startswith("warning: ") else f"note: {w}")
     return "\n".join(lines)
+
+
+def robust_lines(result) -> list[str]:
+    """The fit summary's lines on the normalised residuals, the loss and the priors."""
+    out = []
+    sc = result.screening
+    if sc is not None and sc.sigma.size:
+        j = int(np.argmax(sc.sigma))
+        out.append(f"normalised residuals sqrt(|W r|^2/k) per pose (noise sigmas): median {np.median(sc.sigma):.3g}, "
+                   f"max {sc.sigma[j]:.3g} (pose {int(sc.pose_numbers[j])}); {len(sc.flagged)} beyond "
+                   f"{sc.threshold:g} sigma" + (f"; rejection at {sc.reject:g} sigma: {len(sc.rejected)} pose(s) "
+                                                f"dropped in {sc.rounds} fit(s)" if sc.reject is not None else ""))
+    if result.loss != "linear":
+        out.append(f"loss: {result.loss} on the whitened rows, f_scale {sc.f_scale:g} sigma (scipy least_squares); "
+                   "chi2 and the covariance over the poses within the threshold")
+    pr = result.priors
+    if len(pr):
+        std = dict(zip(result.free, result.std))
+        out.append(f"priors (maximum a posteriori; the covariance is the posterior one), {len(pr)} parameter(s):")
+        for e in pr.to_dict(result.estimate, std):
+            post = "-" if e["posterior_std"] is None else f"{e['posterior_std']:.4g}"
+            out.append(f"  {e['parameter']}: prior {e['mean']:.6g} ± {e['std']:.4g} {e['unit']} -> {e['estimate']:.6g} "
+                       f"± {post} (pull {e['pull']:+.2f}; {e['source']})")
+    return out
 
 
 def radian_hints(nominal, setup, meas) -> list[str]:
@@ -182,7 +212,9 @@ def radian_hints(nominal, setup, meas) -> list[str]:
     "pkmcal identify stewart-prototype meas.csv --setup indicators-prototype -o calibrated.yaml",
     "pkmcal identify stewart-prototype meas.csv --setup indicators-prototype -o hexapod-A.yaml --name hexapod-A-2026",
     "pkmcal identify stewart-prototype meas.csv --setup indicators-prototype -o - --unweighted > cal-unweighted.yaml",
-    "pkmcal identify stewart-prototype meas.csv --setup indicators-prototype -o calibrated.yaml --json"))
+    "pkmcal identify stewart-prototype meas.csv --setup indicators-prototype -o calibrated.yaml --json",
+    "pkmcal identify stewart-prototype meas.csv --setup indicators-prototype -o cal-robust.yaml --loss soft_l1 --reject 4",
+    "pkmcal identify stewart-prototype meas.csv --setup indicators-prototype -o cal-prior.yaml --prior 'L0_*=±0.5'"))
 @click.argument("machine")
 @click.argument("measurements", metavar="MEAS.csv")
 @click.option("--setup", "setup_spec", required=True, metavar="SETUP.yaml",
@@ -212,9 +244,33 @@ def radian_hints(nominal, setup, meas) -> list[str]:
 @click.option("--json", "as_json", is_flag=True, help="Print the fit as JSON instead of a table.")
 @click.option("--report", "report_dir", metavar="DIR",
               help="Also write the HTML calibration report (report.html and its figures) into folder DIR.")
+@click.option("--loss", type=click.Choice(LOSSES), default="linear", show_default=True,
+              help="Robust loss of scipy.optimize.least_squares on the noise-whitened residual rows: soft_l1, huber "
+                   "or cauchy bound (cauchy: shrink) the influence of outlying poses; linear is least squares. "
+                   "Chi2 and the covariance are then taken over the poses within the outlier threshold (the "
+                   "robust estimator's sandwich covariance, stated in the output).")
+@click.option("--f-scale", "f_scale", type=FiniteFloat(min=0.0, min_open=True), metavar="SIGMAS",
+              help="Where the robust loss turns from quadratic, in noise sigmas of the whitened rows. Default: 95 %% "
+                   "efficiency at Gaussian noise (" + ", ".join(f"{k} {v:g}" for k, v in DEFAULT_F_SCALE.items())
+                   + ").")
+@click.option("--reject", type=FiniteFloat(min=0.0, min_open=True), metavar="K",
+              help="Drop the poses beyond K sigma (normalised residual sqrt(|W r|^2/k) of the pose) and refit, "
+                   "until none is left; each round drops those at least half as far out as the worst. The output "
+                   "lists them with their round. Without it, poses beyond "
+                   f"{OUTLIER_SIGMA:g} sigma are listed as a warning and kept.")
+@click.option("--prior", "prior", multiple=True, metavar="NAME=MEAN±STD",
+              help="Gaussian prior on a parameter (maximum a posteriori; repeatable): a name or pattern, the mean "
+                   "and std in mm (degrees for angles), e.g. 'L0_*=640±0.5' or 'L0_*=640+-0.5'; 'b1.z=±0.2' "
+                   "centres it on the machine's value. Adds to the setup's prior: list, replacing its prior of "
+                   "the same parameter. A prior pins a direction the data cannot see: the automatic gauge does "
+                   "not fix it. The covariance is then the posterior one.")
+@click.option("--clipped", type=click.Choice(CLIPPED_POLICIES), default="drop", show_default=True,
+              help="Poses with an actuator reading outside its stroke or at one of its ends (a clipped or stuck "
+                   "actuator): listed with a warning and left out (drop), used (keep), or an error.")
 @import_options
 def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fix, free, output, name, as_json,
-                 report_dir=None, mapping=None, keep=None) -> None:
+                 report_dir=None, mapping=None, keep=None, loss="linear", f_scale=None, reject=None,
+                 prior=(), clipped="drop") -> None:
     """Identify MACHINE's kinematic parameters from MEAS.csv and write CALIBRATED.yaml.
 
     Units: mm, degrees in files and tables. Unidentifiable combinations are fixed
@@ -224,6 +280,13 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     (SOURCE_DATE_EPOCH fixes it), the pkmcal version, the command line and the SHA-256 of
     every input file. With -o - the machine file goes to standard output and the table to
     standard error.
+
+    Every fit lists its poses beyond the outlier threshold (pose numbers: data rows of
+    MEAS.csv counted from 1; how many noise sigmas; the worst residual row); --reject
+    drops them and refits, --loss bounds their influence. --prior and the setup's prior:
+    add Gaussian priors (maximum a posteriori). The fit summary and --json say which
+    covariance is reported (JSON: covariance_kind, covariance_in_file; outliers, priors,
+    normalised_residuals).
     """
     inputs = [machine, measurements, setup_spec]
     check_output(output, inputs)
@@ -238,7 +301,8 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
 
     nominal = load_machine(machine)
     setup = load_setup(setup_spec, nominal)
-    meas = load_measurements(measurements, nominal, setup, mapping)
+    meas, clipped_found, clipped_lines = apply_clipped_policy(load_measurements(measurements, nominal, setup, mapping),
+                                                              nominal, clipped)
     if method is None:
         method = default_method(setup, nominal)
     if keep is not None and method != "actuator-subset":
@@ -256,19 +320,24 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     if fix_names == ["auto"]:
         fix_names = "auto"
     free_opt = _names(free)
-    result = identify(fit_machine, fit_setup, fit_meas, method=method, free=merged_free(free_opt, fit_setup),
-                      fix=fix_names, weighted=not unweighted, form=form)
-    if baseline is not None:
-        result = baseline_result(result, nominal, baseline)
-    if not result.success:
-        raise PkmcalError(f"the fit did not converge ({result.message}); nothing written")
-    u = result.uncertainty
-    if u.dof <= 0:
-        raise PkmcalError(
-            f"{len(result.used_poses)} poses give {u.dof + len(result.free)} residuals for {len(result.free)} free "
-            f"parameters{' (after fixing the gauge)' if result.gauge else ''}: no degree of freedom is left to check "
-            "the fit (chi2/dof undefined); measure more poses or fix parameters; nothing written")
-    hints = radian_hints(nominal, setup, meas)
+    from pkmcal.identification.priors import parse_prior
+
+    priors = tuple(parse_prior(p) for p in prior)
+    with clipped_named_in_errors(clipped_lines):
+        result = identify(fit_machine, fit_setup, fit_meas, method=method, free=merged_free(free_opt, fit_setup),
+                          fix=fix_names, weighted=not unweighted, form=form, loss=loss, f_scale=f_scale,
+                          reject=reject, priors=priors)
+        if baseline is not None:
+            result = baseline_result(result, nominal, baseline)
+        if not result.success:
+            raise PkmcalError(f"the fit did not converge ({result.message}); nothing written")
+        u = result.uncertainty
+        if u.dof <= 0:
+            raise PkmcalError(
+                f"{len(result.used_poses)} poses give {u.dof + len(result.free)} residuals for {len(result.free)} free "
+                f"parameters{' (after fixing the gauge)' if result.gauge else ''}: no degree of freedom is left to "
+                "check the fit (chi2/dof undefined); measure more poses or fix parameters; nothing written")
+    hints = [f"warning: {w}" for w in clipped_lines] + radian_hints(nominal, setup, meas)
     if hints:
         import dataclasses
 
@@ -283,6 +352,8 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
 
         d = finite_or_null(result.to_dict())
         d["free_rule"] = free_line
+        d["clipped"] = [c.to_dict("deg" if nominal.actuator_is_angle[nominal.actuator_names.index(c.actuator)] else "mm")
+                        for c in clipped_found]
         d["output"] = output
     emit(text, output)
     if report is not None:
@@ -333,6 +404,14 @@ def _with_calibration_record(result, machine: str, measurements: str, setup_spec
         # undefined (null) without degrees of freedom
         "reduced_chi2": float(u.reduced_chi2) if np.isfinite(u.reduced_chi2) else None, "std": u.description,
     }
+    if result.loss != "linear":
+        record["loss"] = result.loss
+    sc = result.screening
+    if sc is not None and sc.rejected:
+        record["rejected_poses"] = [o.pose for o in sc.rejected]
+    if len(result.priors):
+        record["priors"] = {e["parameter"]: f"{e['mean']!r} ± {e['std']!r} {e['unit']}"
+                            for e in result.priors.to_dict(result.estimate, {})}
     if getattr(result.sensor, "kind", "") == "planar-tool":  # read back by 'pkmcal verify'
         record["sensor"] = sensor_calibration_block(result.sensor)
     return dataclasses.replace(mech, name=new_name, metadata={**dict(mech.metadata), "calibration": record})

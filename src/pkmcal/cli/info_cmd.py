@@ -138,7 +138,7 @@ def info_cmd(machine: str, n_poses: int | None, poses: str | None, seed: int) ->
     if n_poses > 100_000:
         raise PkmcalError(f"--n-poses {n_poses}: at most 100000")
     mech = load_machine(machine)
-    summary = mech.summary() if hasattr(mech, "summary") else mech.name
+    summary = mech.summary()
     click.echo(summary)
     home = np.asarray(mech.home_pose, dtype=float)
     angle = np.array(mech.pose_is_angle)

@@ -20,7 +20,7 @@ import numpy as np
 
 from pkmcal.errors import PkmcalError
 from pkmcal.cli.import_options import import_options
-from pkmcal.cli.options import check_output, emit, examples, output_option, to_stdout
+from pkmcal.cli.options import check_output, emit, examples, output_option, to_stdout, units_comment_option
 from pkmcal.io.atomic import atomic_writer
 from pkmcal.io.tables import LENGTH_COLUMNS, column_kinds, format_table, from_file_units, read_table, to_file_units
 from pkmcal.mechanisms.base import Mechanism
@@ -61,8 +61,9 @@ def parse_pose_option(text: str, mech: Mechanism, option: str) -> np.ndarray:
 @click.argument("machine")
 @click.argument("poses", metavar="POSES.csv")
 @output_option("LEGS.csv", "Output CSV")
+@units_comment_option
 @import_options
-def ik_cmd(machine: str, poses: str, output: str | None, mapping=None) -> None:
+def ik_cmd(machine: str, poses: str, output: str | None, units_comment: bool = False, mapping=None) -> None:
     """Inverse kinematics: leg lengths and readings of the poses in POSES.csv.
 
     MACHINE is a built-in name (see 'pkmcal machines') or a machine YAML file. POSES.csv has
@@ -88,14 +89,15 @@ def ik_cmd(machine: str, poses: str, output: str | None, mapping=None) -> None:
             with np.errstate(all="ignore"):
                 readings = mech.ik(internal)
                 limits = mech.check_limits(internal)
-                lengths = mech.leg_lengths(internal) if hasattr(mech, "leg_lengths") else None
+                lengths = mech.leg_lengths(internal) if "leg-lengths" in mech.abilities else None
             columns: dict[str, np.ndarray] = {n: file_poses[:, k] for k, n in enumerate(mech.pose_names)}
             if lengths is not None:
                 columns.update({f"l{i + 1}": lengths[:, i] for i in range(lengths.shape[1])})
             readings = to_file_units(readings, mech.actuator_is_angle)
             columns.update({n: readings[:, i] for i, n in enumerate(mech.actuator_names)})
             columns["reachable"] = limits.verdicts()
-            text = format_table(columns, head=start == 0)
+            text = format_table(columns, head=start == 0, units_comment=units_comment,
+                                comments=(f"pkmcal ik {mech.name} {poses}",))
             if fh is None:
                 click.echo(text, nl=False)
             else:
@@ -113,8 +115,10 @@ def ik_cmd(machine: str, poses: str, output: str | None, mapping=None) -> None:
 @output_option("POSES.csv", "Output CSV")
 @click.option("--guess", metavar="X,Y,Z,A,B,C", help="Start pose of the Newton iteration (mm, deg); "
               "default: the machine's home pose.")
+@units_comment_option
 @import_options
-def fk_cmd(machine: str, legs: str, output: str | None, guess: str | None, mapping=None) -> None:
+def fk_cmd(machine: str, legs: str, output: str | None, guess: str | None, units_comment: bool = False,
+           mapping=None) -> None:
     """Forward kinematics: the poses that give the readings in LEGS.csv.
 
     LEGS.csv has columns lambda1..lambda6 (actuator readings, mm) or l1..l6 (leg lengths,
@@ -141,7 +145,7 @@ def fk_cmd(machine: str, legs: str, output: str | None, guess: str | None, mappi
     mech = load_machine(machine)
     start = None if guess is None else parse_pose_option(guess, mech, "--guess")
     groups = [mech.actuator_names]
-    if hasattr(mech, "fk_lengths"):
+    if "leg-lengths" in mech.abilities:
         groups.append(LENGTH_COLUMNS[: mech.n_actuators])
     rotary = mech.actuator_is_angle
     kinds = column_kinds(mech.actuator_names, rotary)
@@ -165,7 +169,7 @@ def fk_cmd(machine: str, legs: str, output: str | None, guess: str | None, mappi
     columns["iterations"] = np.asarray(result.iterations, dtype=int)
     columns["same_branch"] = (same & conv).astype(int)
     columns["reachable"] = verdicts.tolist()
-    text = format_table(columns)
+    text = format_table(columns, units_comment=units_comment, comments=(f"pkmcal fk {mech.name} {legs}",))
     emit(text, output)
     n = len(table)
     iters = np.asarray(result.iterations)

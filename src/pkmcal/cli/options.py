@@ -6,6 +6,8 @@ spellings kept working with a deprecation note.
   ``-o -``, it goes to standard output (commands with a natural stdout; ``plan``,
   ``identify`` and ``reproduce`` included) and the human summary to standard error, so the
   output stays machine-readable.
+* ``--units-comment``: a written CSV starts with its units line and comments (default: a
+  plain CSV that pandas and csv read with their defaults).
 * ``-q/--quiet``: no progress bar (bars appear only on a terminal anyway, see
   :mod:`pkmcal.progress`) and no progress notes.
 * Deprecated spellings print one ``pkmcal: deprecated: ...`` line on standard error and
@@ -70,6 +72,17 @@ def quiet_option(command):
                              "and standard error are terminals).")(command)
 
 
+def units_comment_option(command):
+    """``--units-comment``: begin a written CSV with its ``# units:`` line and the comment lines
+    saying how it was made. Off by default, so that every CSV pkmcal writes is a plain table
+    that ``pandas.read_csv`` and ``csv.DictReader`` read with their defaults
+    (:func:`pkmcal.io.tables.format_table`); pkmcal reads both."""
+    return click.option("--units-comment", is_flag=True,
+                        help="Begin the CSV with '# units: length=mm, angle=deg' and comment lines on how it was "
+                             "made (pkmcal reads them; pandas/csv then need comment='#'). Default: a plain CSV, "
+                             "in mm and degrees.")(command)
+
+
 def examples(*commands: str) -> str:
     """The epilog of a command's ``--help``: an Examples section, one command line each (not
     rewrapped; ``tests/test_cli_examples.py`` runs every one of them)."""
@@ -116,4 +129,4 @@ def poses_file(option: str | None, positional: str | None, command: str) -> str:
 
 
 __all__ = ["DeprecatedArgument", "STDOUT", "check_output", "count_or_poses_file", "deprecated", "emit", "examples",
-           "output_option", "poses_file", "quiet_option", "summary_echo", "to_stdout"]
+           "output_option", "poses_file", "quiet_option", "summary_echo", "to_stdout", "units_comment_option"]

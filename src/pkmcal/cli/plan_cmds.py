@@ -28,6 +28,7 @@ from pkmcal.cli.options import (
     poses_file,
     quiet_option,
     summary_echo,
+    units_comment_option,
 )
 from pkmcal.errors import PkmcalError
 from pkmcal.io.tables import format_table, to_file_units
@@ -92,11 +93,12 @@ def _format_indices(ind: dict[str, float]) -> str:
 @click.option("--sight-cone", type=FiniteFloat(min=0.0, max=180.0), metavar="DEG",
               help="Full-pose/position: half-angle of the target's line-of-sight cone.")
 @output_option("POSES.csv", "CSV of the chosen poses")
+@units_comment_option
 @quiet_option
 @import_options
 def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, index, algorithm, seed,
              stroke_margin, tilt_margin, clearance_margin, margin, indicator_travel, plate_radius, sight_cone,
-             output, quiet, mapping=None) -> None:
+             output, units_comment=False, quiet=False, mapping=None) -> None:
     """Choose N poses of MACHINE to measure with SETUP (paper 2 §4, paper 1 §IV).
 
     Every candidate is checked on the nominal machine (stroke, joint tilts, leg collision,
@@ -134,7 +136,7 @@ def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, 
     cols = {name: poses[:, i] for i, name in enumerate(mech.pose_names)}
     cols.update({name: commands[:, i] for i, name in enumerate(mech.actuator_names)})
     sel = plan.selection
-    emit(format_table(cols, comments=[
+    emit(format_table(cols, units_comment=units_comment, comments=[
         f"pkmcal plan {mech.name} --setup {setup_spec} --n {n_poses} --algorithm {sel.algorithm} "
         f"--seed {seed}; maximised {sel.criterion}",
         f"safety margin: {plan.describe_margin()}",

@@ -41,6 +41,7 @@ import numpy as np
 
 from pkmcal.errors import PkmcalError
 from pkmcal.identification.identifiability import (
+    RANK_RTOL,
     WEAK_RATIO,
     IdentifiabilityReport,
     ScaledJacobian,
@@ -56,6 +57,17 @@ from pkmcal.identification.residuals import (
     single_threaded_blas,
     whitening,
 )
+from pkmcal.identification.priors import NO_PRIORS, PriorObjective, ResolvedPriors, check_free, resolve
+from pkmcal.identification.robust import (
+    OUTLIER_SIGMA,
+    ROBUST_UNITS,
+    Screening,
+    check_loss,
+    masked_loss,
+    robust_dict,
+    robust_uncertainty,
+    screen,
+)
 from pkmcal.identification.uncertainty import Uncertainty, embed, parameter_uncertainty
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.sensors.base import MeasurementSetup, Sensor
@@ -70,6 +82,27 @@ MAX_DROPPED_FRACTION = 0.1
 #: took 6 and 5 to the same cost and estimate (all digits printed; 2026-11-22). A relative
 #: parameter change of 1e-10 is ~1e-8 mm on a 100 mm parameter, far below any noise.
 TOLERANCE = 1e-10
+
+
+class _DeferredTuple:
+    """A dataclass field (descriptor) holding a tuple that may be given as a zero-argument
+    callable instead, called once on first read: the engine defers the weak-direction
+    warnings, which need the SVD of the identifiability analysis, until someone reads them
+    (``dataclasses.replace`` and ``==`` read them, so they see the full tuple)."""
+
+    def __set_name__(self, owner, name):
+        self._slot = "_deferred_" + name
+
+    def __get__(self, obj, owner=None):
+        if obj is None:
+            return ()                                   # the field's default
+        value = obj.__dict__[self._slot]
+        if callable(value):
+            value = obj.__dict__[self._slot] = tuple(value())
+        return value
+
+    def __set__(self, obj, value):
+        obj.__dict__[self._slot] = value if callable(value) else tuple(value)
 
 
 @dataclass(frozen=True)
@@ -94,7 +127,12 @@ class IdentificationResult:
     cost : ½ Σ ‖W r‖²; ``nfev``, ``njev``, ``status``, ``success``, ``message`` from the solver.
     identifiability : the report on the candidate parameters at the start (a property,
         computed on first use from ``identifiability_analysis`` when not needed by the fit).
-    warnings : human-readable notes (dropped poses, auto-fixed gauge, …).
+    warnings : human-readable notes (dropped poses, auto-fixed gauge, outliers, weak
+        directions, …); the weak-direction ones come from the identifiability report, so
+        when the fit did not need that report they are computed on first read, with it.
+    screening : per-pose normalised residuals and the outliers (:mod:`.robust`; None when
+        the noise model cannot whiten); ``priors`` the Gaussian priors of the fit
+        (:mod:`.priors`); ``loss`` the scipy loss of the fit ("linear": least squares).
     """
 
     mechanism: Mechanism
@@ -121,9 +159,15 @@ class IdentificationResult:
     message: str
     identifiability_analysis: Callable[[], IdentifiabilityReport] = field(repr=False, compare=False)
     gauge: tuple[str, ...] = ()
-    warnings: tuple[str, ...] = field(default_factory=tuple)
+    warnings: tuple[str, ...] = _DeferredTuple()
     #: Unit of each residual row ("mm", "rad", or "1" for whitened / mixed rows).
     residual_units: tuple[str, ...] = ()
+    screening: Screening | None = None
+    priors: ResolvedPriors = NO_PRIORS
+    loss: str = "linear"
+    #: (N,) the file's pose numbers (1-based data rows, docs/conventions.md) of the N poses
+    #: given; None: 1 … N
+    pose_numbers: np.ndarray | None = None
 
     @cached_property
     def identifiability(self) -> IdentifiabilityReport:
@@ -182,6 +226,10 @@ class IdentificationResult:
         flags = tuple(self.mechanism.param_is_angle) + tuple(self.sensor.param_is_angle)
         return tuple(n for n, a in zip(self.names, flags) if a)
 
+    def pose_number(self, i: int) -> int:
+        """The file's number of pose index ``i`` (0-based in the poses given)."""
+        return int(i) + 1 if self.pose_numbers is None else int(self.pose_numbers[i])
+
     def to_dict(self) -> dict:
         """A JSON-ready summary. Units as every pkmcal JSON states them (docs/conventions.md):
         parameters in file units (mm, degrees for angle parameters, each with its ``unit``),
@@ -211,7 +259,7 @@ class IdentificationResult:
             "nfev": self.nfev,
             "njev": self.njev,
             "n_poses": int(len(self.used_poses)),
-            "dropped_poses": [int(i) + 1 for i in self.dropped],
+            "dropped_poses": [int(self.pose_number(i)) for i in self.dropped],
             "free": list(self.free),
             "fixed": list(self.fixed),
             "gauge": list(self.gauge),
@@ -237,6 +285,7 @@ class IdentificationResult:
             "residual_units": [{"rad": "deg"}.get(un, un) for un in self.residual_units],
             "identifiability": self.identifiability.to_dict(),
             "warnings": list(self.warnings),
+            **robust_dict(self),
             "units": {
                 "cost": ("1: 1/2 sum |W0 r|^2, residuals whitened with the weights at the start (held fixed "
                          "during the fit)") if self.weighted else
@@ -248,6 +297,7 @@ class IdentificationResult:
                 "birge_ratio": "1: chi2 / chi2_expected",
                 "rms_residual": rms_unit,
                 "residual_rms_whitened_mixed": "1", "rms_whitened": "1",
+                **ROBUST_UNITS,
             },
         }
 
@@ -358,7 +408,8 @@ class _Solution:
 
 
 def _least_squares(obj: "_Objective", x0: np.ndarray, *, jac: str, method: str, ftol: float, xtol: float,
-                   gtol: float, max_nfev: int | None) -> _Solution:
+                   gtol: float, max_nfev: int | None, loss: str = "linear", f_scale: float = 1.0,
+                   n_data: int = 0) -> _Solution:
     """Solve the whitened problem with the analytic Jacobian or a scipy finite-difference one.
 
     Levenberg–Marquardt is MINPACK's ``lmder`` in every case, with the same tolerances,
@@ -370,7 +421,9 @@ def _least_squares(obj: "_Objective", x0: np.ndarray, *, jac: str, method: str, 
     and Jacobians included; 2-core Xeon, 2026-11-22, second session). With
     ``jac="2-point"`` / ``"3-point"`` it is called
     through :func:`scipy.optimize.least_squares`, whose finite-difference Jacobian feeds
-    the same ``lmder``. ``trf`` / ``dogbox`` always use ``least_squares``.
+    the same ``lmder``. ``trf`` / ``dogbox`` always use ``least_squares``. A robust ``loss``
+    applies to the first ``n_data`` residuals (:func:`~pkmcal.identification.robust.masked_loss`),
+    from the least-squares solution.
     """
     from scipy.optimize import least_squares, leastsq  # on first use: scipy.optimize takes ~0.3 s to import
 
@@ -382,10 +435,30 @@ def _least_squares(obj: "_Objective", x0: np.ndarray, *, jac: str, method: str, 
         status, message = _MINPACK_STATUS.get(int(ier), (-1, f"MINPACK returned info={ier}"))
         return _Solution(x=np.asarray(x, dtype=float), cost=0.5 * float(f @ f), nfev=int(info["nfev"]),
                          njev=int(info["njev"]), status=status, message=message)
-    sol = least_squares(obj.fun, x0, jac=obj.jac if jac == "analytic" else jac, method=method, x_scale="jac",
-                        ftol=ftol, xtol=xtol, gtol=gtol, max_nfev=max_nfev)
-    return _Solution(x=sol.x, cost=float(sol.cost), nfev=int(sol.nfev), njev=int(sol.njev or 0),
-                     status=int(sol.status), message=str(sol.message))
+    start = None
+    if loss != "linear":
+        # from the nominal machine every pose is many σ off (the machine's errors are what is
+        # identified), where a robust loss is flat and the trust region stops far from the
+        # minimum: start from the least-squares solution (soft_l1 from nominal stopped 168 σ
+        # away on a 100-pose fk-residual fit with a 5 mm outlier; 0.4 σ from least squares).
+        # A redescending loss (cauchy) is not convex: it finds the minimum of the basin the
+        # least-squares fit is in, and a gross outlier that drags that fit far needs --reject
+        start = _least_squares(obj, x0, jac=jac, method="lm" if obj.fun(x0).size >= n else "trf", ftol=ftol,
+                               xtol=xtol, gtol=gtol, max_nfev=max_nfev)
+        x0 = start.x
+    robust = {} if loss == "linear" else {"loss": masked_loss(loss, n_data), "f_scale": f_scale}
+    x_scale = "jac"
+    if start is not None:
+        # variables scaled by the least-squares Jacobian: scaled by the robust one (which
+        # down-weights the outlying rows) the trust region collapsed, steps below xtol far
+        # from the minimum (soft_l1, a 20 mm outlier among 100 poses: 716 σ off; 0.4 σ so)
+        col = np.linalg.norm(obj.jac(x0), axis=0)
+        x_scale = 1.0 / np.where(col > 0, col, 1.0)
+    sol = least_squares(obj.fun, x0, jac=obj.jac if jac == "analytic" else jac, method=method, x_scale=x_scale,
+                        ftol=ftol, xtol=xtol, gtol=gtol, max_nfev=max_nfev, **robust)
+    extra = (0, 0) if start is None else (start.nfev, start.njev)
+    return _Solution(x=sol.x, cost=float(sol.cost), nfev=int(sol.nfev) + extra[0],
+                     njev=int(sol.njev or 0) + extra[1], status=int(sol.status), message=str(sol.message))
 
 
 def _gauss_newton_step(obj: "_Objective", x0: np.ndarray) -> _Solution:
@@ -469,6 +542,12 @@ def identify(
     y: np.ndarray | None = None,
     commanded: np.ndarray | None = None,
     max_dropped_fraction: float = MAX_DROPPED_FRACTION,
+    loss: str = "linear",
+    f_scale: float | None = None,
+    priors=None,
+    reject: float | None = None,
+    outlier_sigma: float = OUTLIER_SIGMA,
+    exclude=None,
 ) -> IdentificationResult:
     """Identify the kinematic (and free sensor) parameters from measured poses.
 
@@ -495,6 +574,18 @@ def identify(
         for comparison only.
     solver : ``"auto"`` (LM when there are at least as many residuals as unknowns),
         ``"lm"``, ``"trf"`` or ``"dogbox"`` (scipy.optimize.least_squares methods).
+    loss, f_scale : ``"linear"`` (least squares) or a robust loss of
+        :func:`scipy.optimize.least_squares` (``"soft_l1"``, ``"huber"``, ``"cauchy"``) on
+        the whitened rows, ``f_scale`` in noise σ (default: 95 % efficiency;
+        :mod:`.robust`). Needs a noise-weighted fit (trust-region solver).
+    priors : Gaussian priors (:class:`~pkmcal.identification.priors.Prior` or
+        ``"NAME=MEAN±STD"`` strings, file units), added to the setup's ``priors``
+        (maximum a posteriori, :mod:`.priors`). Needs a noise-weighted fit.
+    reject : drop the poses beyond ``reject`` σ and refit until none is left
+        (:func:`~pkmcal.identification.robust.identify_rejecting`).
+    outlier_sigma : threshold (σ of the per-pose normalised residual) of the outlier
+        screening when ``reject`` is not given.
+    exclude : indices of poses to leave out of the fit (the rejection's).
 
     Returns
     -------
@@ -509,14 +600,24 @@ def identify(
     ----------
     Paper 1 (Agheli & Nategh) §V; paper 2 (Saputra et al.) §2.2–3; paper 3 (Jeon et al.) §2.
     """
+    kw = dict(method=method, free=free, fix=fix, weighted=weighted, form=form, jac=jac, solver=solver, ftol=ftol,
+              xtol=xtol, gtol=gtol, max_nfev=max_nfev, q=q, y=y, commanded=commanded,
+              max_dropped_fraction=max_dropped_fraction, loss=loss, f_scale=f_scale,
+              priors=tuple(getattr(setup, "priors", ()) or ()) + tuple(priors or ()))
     with single_threaded_blas():
-        return _identify(machine, setup, measurements, method=method, free=free, fix=fix, weighted=weighted,
-                         form=form, jac=jac, solver=solver, ftol=ftol, xtol=xtol, gtol=gtol, max_nfev=max_nfev,
-                         q=q, y=y, commanded=commanded, max_dropped_fraction=max_dropped_fraction)
+        if reject is not None:
+            from pkmcal.identification.robust import identify_rejecting
+
+            n = len(measurement_arrays(measurements)[0]) if measurements is not None else len(np.asarray(q))
+            return identify_rejecting(lambda exclude, round_: _identify(machine, setup, measurements, **kw,
+                                                                        outlier_sigma=reject, exclude=exclude,
+                                                                        round_=round_), reject, n)
+        return _identify(machine, setup, measurements, **kw, outlier_sigma=outlier_sigma, exclude=exclude)
 
 
 def _identify(machine, setup, measurements, *, method, free, fix, weighted, form, jac, solver, ftol, xtol, gtol,
-              max_nfev, q, y, commanded, max_dropped_fraction) -> IdentificationResult:
+              max_nfev, q, y, commanded, max_dropped_fraction, loss="linear", f_scale=None, priors=(),
+              outlier_sigma=OUTLIER_SIGMA, exclude=None, round_=1) -> IdentificationResult:
     if method is None:
         method = default_method(setup, machine)
     if method not in METHODS:
@@ -532,10 +633,24 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
     notes: list[str] = []
     n_total = model.n_poses
     used = np.arange(n_total)
+    # the file's pose numbers (1-based data rows), kept when poses were left out before the fit
+    numbers = np.asarray(getattr(measurements, "pose_numbers", np.arange(1, n_total + 1)), dtype=int)
+    f_scale = check_loss(loss, f_scale)
+    if exclude is not None and len(exclude):
+        used = np.setdiff1d(used, np.asarray(exclude, dtype=int))
+        model = model.subset(used)
 
     cand, explicit = candidate_parameters(model, free, fix)
     if not cand:
         raise PkmcalError("no free parameters to identify (check --free / --fix)")
+    names = model.names
+    prior = resolve(priors, names, tuple(model.mechanism.param_is_angle) + tuple(model.sensor.param_is_angle),
+                    model.theta0)
+    check_free(prior, {names[i] for i in cand})
+    if not weighted and (len(prior) or loss != "linear"):
+        raise PkmcalError(("Gaussian priors weigh the prior against the noise model" if len(prior) else
+                           f"the {loss} loss's f_scale is in noise sigmas") +
+                          ": they need the noise-weighted fit; leave out --unweighted")
     sensor_free = any(i >= model.n_mech for i in cand)   # else the sensor columns of J are not needed
     meth = make_method(method, model, weighted, form=form)
     meth.sensor_columns = sensor_free
@@ -544,19 +659,19 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
     theta0 = model.theta0
     ev0 = meth.evaluate(theta0, jac=True, cov=True)
     if not ev0.converged.all():
-        bad = np.flatnonzero(~ev0.converged)
+        bad = used[np.flatnonzero(~ev0.converged)]
         if len(bad) > max_dropped_fraction * n_total:
             raise PkmcalError(
                 f"the pose could not be solved for {len(bad)} of {n_total} poses at the nominal machine "
-                f"(poses {', '.join(str(i + 1) for i in bad[:10])}{' ...' if len(bad) > 10 else ''}"
+                f"(poses {', '.join(str(numbers[i]) for i in bad[:10])}{' ...' if len(bad) > 10 else ''}"
                 f"{_where(measurements, bad[:3])}): "
                 "check that the measurements belong to this machine and setup, or give commanded poses"
             )
         notes.append(f"dropped {len(bad)} pose(s) whose pose could not be solved at the nominal machine "
                      "(FK or pose solve not converged, or converged on another assembly mode than its start "
-                     "pose): " + ", ".join(str(i + 1) for i in bad) + _where(measurements, bad))
-        used = np.flatnonzero(ev0.converged)
-        model = model.subset(used)
+                     "pose): " + ", ".join(str(numbers[i]) for i in bad) + _where(measurements, bad))
+        model = model.subset(np.flatnonzero(ev0.converged))
+        used = used[np.flatnonzero(ev0.converged)]
         meth = make_method(method, model, weighted, form=form)
         meth.sensor_columns = sensor_free
         ev0 = meth.evaluate(theta0, jac=True, cov=True)
@@ -564,7 +679,6 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
     W = whitening(ev0.cov, f"{method} residual") if weighted and not meth.prewhitened else None
     Jw0 = ev0.J if W is None else W @ ev0.J
 
-    names = model.names
     rows = Jw0.reshape(-1, Jw0.shape[-1])
     cand_names = tuple(names[i] for i in cand)
     angle_names = tuple(n for n, a in zip(names, tuple(model.mechanism.param_is_angle)
@@ -585,18 +699,32 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
         if okd.any():
             judged = Jd[okd].reshape(-1, Jd.shape[-1])[:, cand]
             basis = f"{meth.name} at the {int(okd.sum())} commanded poses (noise-free, nominal machine)"
+    judged, basis = prior.augment(judged, cand, basis)   # a prior pins its direction (.priors)
     scaled = ScaledJacobian(judged)
 
+    done: list[IdentifiabilityReport] = []
+
     def analyse() -> IdentifiabilityReport:
-        import dataclasses
+        """The full analysis (one SVD), computed once: the fit, the result's report and its
+        deferred warnings share it. One BLAS thread also when deferred, outside
+        :func:`identify`: a threaded SVD of this 42 × 42 triangle took 100 ms instead of
+        0.3 ms on a loaded 2-core machine (2026-11-23)."""
+        if not done:
+            import dataclasses
 
-        rep = scaled.analyse(cand_names, tuple(model.mechanism.param_names))
-        return dataclasses.replace(rep, basis=basis, angle_names=tuple(n for n in cand_names if n in angle_names))
+            with single_threaded_blas():
+                rep = scaled.analyse(cand_names, tuple(model.mechanism.param_names))
+            done.append(dataclasses.replace(rep, basis=basis,
+                                            angle_names=tuple(n for n in cand_names if n in angle_names)))
+        return done[0]
 
-    # the full analysis (an SVD) only when the cheap certificate cannot prove that no
-    # direction is weak (σ/σ₁ > WEAK_RATIO everywhere, hence full rank); otherwise the result
-    # computes the report on first use
-    report = None if scaled.certainly_full_rank(WEAK_RATIO) else analyse()
+    # The full analysis runs before the fit only when the cheap certificate cannot prove
+    # full rank (a gauge may have to be fixed). Otherwise the result computes it on first
+    # use of its report, and of its warnings when the certificate could not also prove
+    # that no direction is weak (σ/σ₁ > WEAK_RATIO everywhere): the same report, the same
+    # warnings, its SVD paid only by those who read them.
+    report = None if scaled.certainly_full_rank(RANK_RTOL) else analyse()
+    no_weak = report is None and scaled.certainly_full_rank(WEAK_RATIO)
     auto = (fix is None and not explicit) or (isinstance(fix, str) and fix == "auto")
     if report is not None and not report.identifiable:
         if not auto:
@@ -607,8 +735,9 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
         notes.append(f"fixed the gauge automatically (rank {report.rank} of {report.n_params}): "
                      f"{', '.join(report.fixed)}")
         cand = [i for i in cand if names[i] not in report.fixed]
+        check_free(prior, {names[i] for i in cand}, tuple(report.fixed))
     free_idx = np.array(cand, dtype=int)
-    M = rows.shape[0]
+    M = rows.shape[0] + len(prior)
     if M < len(free_idx):
         raise PkmcalError(f"{model.n_poses} poses give {M} residuals for {len(free_idx)} free parameters: "
                           "measure more poses or fix parameters")
@@ -618,20 +747,29 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
                      "measure more poses")
 
     obj = _Objective(meth, theta0, free_idx, W)
+    if len(prior):
+        obj = PriorObjective(obj, prior, free_idx)
     lsq_method = _solver_args(solver, M, len(free_idx))
+    if loss != "linear":
+        if solver == "auto":
+            lsq_method = "trf"
+        if meth.single_step or lsq_method == "lm":
+            raise PkmcalError(f"the {loss} loss needs an iterative trust-region solver: not with "
+                              + (f"method '{method}'" if meth.single_step else "solver 'lm'; use solver trf"))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         if meth.single_step:
             sol = _gauss_newton_step(obj, theta0[free_idx])
         else:
             sol = _least_squares(obj, theta0[free_idx], jac=jac, method=lsq_method, ftol=ftol, xtol=xtol,
-                                 gtol=gtol, max_nfev=max_nfev)
+                                 gtol=gtol, max_nfev=max_nfev, loss=loss, f_scale=f_scale, n_data=rows.shape[0])
     theta = obj.theta(sol.x)
     ev = meth.evaluate(theta, jac=True, cov=True)   # only the free columns of ev.J are used
     if not ev.converged.all():
         bad = used[np.flatnonzero(~ev.converged)]
         notes.append("the pose could not be solved at the identified machine for pose(s) "
-                     + ", ".join(str(i + 1) for i in bad) + _where(measurements, bad) + "; their residuals are unreliable")
+                     + ", ".join(str(numbers[i]) for i in bad) + _where(measurements, bad)
+                     + "; their residuals are unreliable")
 
     # covariance with weights recomputed at the solution (module docstring); the weighted
     # projection's residual is already whitened (cov = I)
@@ -642,7 +780,7 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
         if not meth.prewhitened:
             W_end = whitening(ev.cov, f"{method} residual")
             J_free, r_w = W_end @ J_free, (W_end @ ev.r[..., None])[..., 0]
-        unc = parameter_uncertainty(free_names, J_free, r_w, weighted=True)
+        z = r_w
     else:
         try:
             W_end = whitening(ev.cov, f"{method} residual")
@@ -650,23 +788,40 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
             W_end = None
         unc = parameter_uncertainty(free_names, J_free, ev.r, weighted=False, W=W_end, cov_rows=ev.cov)
         r_w = ev.r
+        z = None if W_end is None else (W_end @ ev.r[..., None])[..., 0]
+    where = getattr(measurements, "where", None) if getattr(measurements, "source", None) is not None else None
+    screening = None if z is None else screen(z, used, meth.row_names(), outlier_sigma, where=where, round_=round_,
+                                              numbers=numbers, loss=loss, f_scale=f_scale)
+    if weighted:
+        inliers = screening.inliers if loss != "linear" else np.ones(len(used), dtype=bool)
+        if loss == "linear" and not len(prior):
+            unc = parameter_uncertainty(free_names, J_free, r_w, weighted=True)
+        else:
+            unc = robust_uncertainty(free_names, J_free, r_w, inliers, loss, f_scale,
+                                     *prior.rows(free_idx, theta[free_idx]))
+    if screening is not None:
+        notes.extend(screening.warnings())
 
-    notes.extend(fit_warnings(report, free_names, unc, angle_names))
+    n_fit_notes = len(notes)     # the fit's warnings (weak directions, χ²) go here, maybe deferred
+
+    def all_notes() -> tuple[str, ...]:
+        found = fit_warnings(report if report is not None or no_weak else analyse(), free_names, unc, angle_names)
+        return tuple(notes[:n_fit_notes] + found + notes[n_fit_notes:])
+
     mech_cal, sensor_cal = model.split(theta)
     p = model.n_mech
     mech_free = free_idx[free_idx < p]
     if mech_free.size:
         sel = np.flatnonzero(free_idx < p)
         cov_mech = embed(unc.covariance[np.ix_(sel, sel)], mech_free, p)
-        try:
-            mech_cal = model.mechanism.with_params(theta[:p], covariance=cov_mech)
-        except TypeError:
-            notes.append(f"machine type {type(model.mechanism).__name__} does not store a covariance")
+        mech_cal = model.mechanism.with_params(theta[:p], covariance=cov_mech)
 
     free_set = set(free_idx.tolist())
     fixed = tuple(n for i, n in enumerate(names) if i not in free_set)
     is_dropped = np.ones(n_total, dtype=bool)
     is_dropped[used] = False
+    if exclude is not None and len(exclude):
+        is_dropped[np.asarray(exclude, dtype=int)] = False   # rejected, listed in screening.outliers
     dropped = np.flatnonzero(is_dropped)
     return IdentificationResult(
         mechanism=mech_cal,
@@ -691,10 +846,14 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
         status=sol.status,
         success=sol.success,
         message=sol.message,
-        identifiability_analysis=analyse if report is None else (lambda: report),
+        identifiability_analysis=analyse,
         gauge=tuple(report.fixed) if report is not None and not report.identifiable else (),
-        warnings=tuple(notes),
+        warnings=all_notes() if report is not None or no_weak else all_notes,
         residual_units=meth.row_units(),
+        screening=screening,
+        priors=prior,
+        loss=loss,
+        pose_numbers=numbers,
     )
 
 

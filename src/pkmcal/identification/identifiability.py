@@ -211,24 +211,39 @@ class ScaledJacobian:
 
     def certainly_full_rank(self, rtol: float = RANK_RTOL) -> bool:
         """True only if J has rank P in the sense of :meth:`analyse` (σ_P > rtol·σ_1),
-        proven without an SVD.
+        proven without an SVD (:meth:`condition_bound` · rtol < 1).
 
-        σ_1 ≤ ‖R‖_F and σ_P = 1/‖R⁻¹‖_2 ≥ 1/‖R⁻¹‖_F, so ‖R‖_F ‖R⁻¹‖_F < 1/rtol implies
-        σ_P/σ_1 > rtol. The bound is within a factor P of the 2-norm condition number;
         False means "run the full analysis", not "rank deficient". The triangular inverse
         costs ~0.02 ms for P = 42, the SVD of R ~0.4 ms (2-core Xeon, 2026-11-22), which is
         why :func:`~pkmcal.identification.engine.identify` asks this first.
         """
+        kappa = self.condition_bound()
+        return bool(np.isfinite(kappa) and kappa * rtol < 1.0)
+
+    def condition_bound(self) -> float:
+        """An upper bound of the 2-norm condition number σ_1/σ_P of J_s, without an SVD
+        (inf when none is proven: fewer rows than columns, a zero column or pivot).
+
+        σ_1 ≤ ‖R‖_F and σ_P = 1/‖R⁻¹‖_2 ≥ 1/‖R⁻¹‖_F, so σ_1/σ_P ≤ ‖R‖_F ‖R⁻¹‖_F, within a
+        factor P of the condition number. Computed once and kept: the engine asks it
+        against two thresholds (rank, weak directions).
+        """
+        kappa = getattr(self, "_kappa", None)
+        if kappa is None:
+            kappa = self._kappa = self._condition_bound()
+        return kappa
+
+    def _condition_bound(self) -> float:
         M, P = self.J.shape
         if M < P or P == 0 or not np.all(self.col > 0) or not np.all(np.diag(self.R) != 0):
-            return False
+            return float("inf")
         from scipy.linalg.lapack import dtrtri
 
         Rinv, info = dtrtri(self.R, lower=0)
         if info != 0:
-            return False
-        kappa = np.linalg.norm(self.R) * np.linalg.norm(Rinv)
-        return bool(np.isfinite(kappa) and kappa * rtol < 1.0)
+            return float("inf")
+        kappa = float(np.linalg.norm(self.R) * np.linalg.norm(Rinv))
+        return kappa if np.isfinite(kappa) else float("inf")
 
     def analyse(self, names, mechanism_names=(), *, rtol: float = RANK_RTOL,
                 weak_ratio: float = WEAK_RATIO) -> IdentifiabilityReport:
@@ -304,7 +319,11 @@ def design_jacobian(machine, sensor, noise, poses: np.ndarray, method: str, weig
 
     poses = machine.as_pose_array(poses)
     with np.errstate(invalid="ignore"):
-        model = Model(machine, sensor, noise, machine.ik(poses), sensor.predict(poses), poses)
+        # the plain ik-residual's Jacobian and covariance do not depend on q (only its
+        # residual q − IK does, which is not returned): no IK pass for readings unused
+        q = np.zeros((len(poses), machine.n_actuators)) if method == "ik-residual" and form == "plain" \
+            else machine.ik(poses)
+        model = Model(machine, sensor, noise, q, sensor.predict(machine.frame(poses)), poses)
     meth = make_method(method, model, weighted, form=form)
     meth.sensor_columns = sensor_columns
     whiten = weighted and not meth.prewhitened            # the weighted projection is already whitened
@@ -355,7 +374,8 @@ def _identifiability(machine, setup, poses, *, method, free, fix, weighted) -> I
         method = default_method(setup, machine)
     J, ok, names = design_jacobian(machine, setup.sensor, setup.noise, poses, method, weighted)
     with np.errstate(invalid="ignore"):
-        model = Model(machine, setup.sensor, setup.noise, machine.ik(poses[:1]), setup.sensor.predict(poses[:1]))
+        model = Model(machine, setup.sensor, setup.noise, machine.ik(poses[:1]),
+                      setup.sensor.predict(machine.frame(poses[:1])))
     cand, _ = candidate_parameters(model, free, None if fix == "auto" else fix)
     rows = J[ok].reshape(-1, J.shape[-1])[:, cand]
     if rows.shape[0] == 0:

@@ -48,7 +48,6 @@ from pkmcal.identification.redundant_campaign import (
 from pkmcal.identification.residuals import Model, make_method
 from pkmcal.identification.simulation import SimulationResult
 from pkmcal.mechanisms.base import LimitReport, Mechanism
-from pkmcal.mechanisms.planar import PlanarMechanism
 from pkmcal.sensors.base import MeasurementSetup, NoiseModel, Sensor
 
 #: The paper-3 fits :func:`fit_redundant` knows (the reproduction's and benchmark's rows).
@@ -112,8 +111,20 @@ class ActuatorSubset(Mechanism):
     def params(self):
         return self.base.params
 
-    def with_params(self, params, name=None):
+    def with_params(self, params, name=None, covariance=None):
         return ActuatorSubset(self.base.with_params(params), self.keep)
+
+    @property
+    def kind(self) -> str:  # type: ignore[override]
+        return self.base.kind
+
+    @property
+    def abilities(self):  # type: ignore[override]
+        return self.base.abilities
+
+    @property
+    def frame_depends_on_params(self) -> bool:  # type: ignore[override]
+        return self.base.frame_depends_on_params
 
     @property
     def home_pose(self):
@@ -123,16 +134,32 @@ class ActuatorSubset(Mechanism):
     def home(self):
         return self.base.home_pose
 
-    def ik(self, poses):
-        return self.base.ik(poses)[:, list(self.keep)]
+    def workspace_box(self):
+        return self.base.workspace_box()
 
-    def actuator_pose_jacobian(self, poses):
-        return self.base.actuator_pose_jacobian(poses)[:, list(self.keep)]
+    def summary(self) -> str:
+        return f"{self.name}: {self.base.kind} seen through actuators {', '.join(self.actuator_names)}"
 
-    def actuator_param_jacobian(self, poses):
-        return self.base.actuator_param_jacobian(poses)[:, list(self.keep)]
+    def ik(self, poses, params=None):
+        return self.base.ik(poses, params)[:, list(self.keep)]
 
-    fk = PlanarMechanism.fk
+    def actuator_pose_jacobian(self, poses, params=None):
+        return self.base.actuator_pose_jacobian(poses, params)[:, list(self.keep)]
+
+    def actuator_param_jacobian(self, poses, params=None):
+        return self.base.actuator_param_jacobian(poses, params)[:, list(self.keep)]
+
+    def frame(self, poses, params=None):
+        return self.base.frame(poses, params)
+
+    def frame_jacobians(self, poses, params=None):
+        return self.base.frame_jacobians(poses, params)
+
+    def pose_jacobian_from_twist(self, J_twist, poses, params=None):
+        return self.base.pose_jacobian_from_twist(J_twist, poses, params)
+
+    def poses_from_frame(self, frame):
+        return self.base.poses_from_frame(frame)
 
     def noise(self, noise: NoiseModel) -> NoiseModel:
         """``noise`` (of the full machine) with the actuator standard deviations of ``keep``."""

@@ -65,12 +65,19 @@ def commands_for_targets(mechanism: Mechanism, sensor, targets: np.ndarray, angl
     stiffness K and load F, paper 3 ref. [7]) the commands are pre-deflected so that the
     model's equilibrium is x: c = IK(x) − Γ (ΓᵀKΓ)⁻¹ J_fᵀ F at x, which satisfies
     Γᵀ K (IK(x) − c) = J_fᵀ F exactly (:mod:`pkmcal.mechanisms.statics`)."""
-    poses = sensor.poses_for_readings(targets, angles)
+    targets = np.atleast_2d(np.asarray(targets, dtype=float))
+    ang = np.array(mechanism.pose_is_angle, dtype=bool)
+    ref = np.tile(mechanism.home_pose, (targets.shape[0], 1))    # the plate rotation at the angles
+    if angles is not None:
+        ref[:, ang] = np.reshape(angles, (targets.shape[0], -1))
+    poses = mechanism.poses_from_frame(sensor.frame_for_readings(targets, mechanism.frame(ref).R))
+    poses[:, ang] = ref[:, ang]                                     # the given angles, exactly
     c = mechanism.ik(poses)
     if statics is not None and statics.load is not None:
         K = statics.stiffness_for(mechanism)
         G = mechanism.actuator_pose_jacobian(poses)
-        b = np.einsum("nki,k->ni", sensor.tool_pose_jacobian(poses), statics.load)
+        Jf = mechanism.pose_jacobian_from_twist(sensor.tool_frame_jacobian(mechanism.frame(poses)), poses)
+        b = np.einsum("nki,k->ni", Jf, statics.load)
         dx = np.linalg.solve(np.einsum("nli,l,nlj->nij", G, K, G), b[..., None])
         c = c - (G @ dx)[..., 0]
     return poses, c
@@ -121,7 +128,7 @@ def simulate_redundant_campaign(
     poses, readings, ok, dropped = _settle(real, setup, commands, commanded, ignore_limits)
     kept = np.flatnonzero(ok)
     q_true = readings[kept]
-    y_true = sensor.predict(poses[kept]) if len(kept) else np.zeros((0, sensor.n_readings))
+    y_true = sensor.predict(real.frame(poses[kept])) if len(kept) else np.zeros((0, sensor.n_readings))
     return SimulationResult(commanded=commanded, kept=kept, dropped=dropped, real_poses=poses[kept],
                             actuator_true=q_true, sensor_true=y_true, actuator_readings=q_true + e_q[kept],
                             sensor_readings=y_true + e_y[kept], setup=setup)
@@ -194,12 +201,12 @@ def tool_errors(model: Mechanism, model_sensor, real: Mechanism, setup: Measurem
     ``model_statics``: the model also knows stiffness and load and pre-deflects its
     commands (:func:`commands_for_targets`)."""
     x_c = model.as_pose_array(poses)
-    targets = (setup.sensor if target_sensor is None else target_sensor).predict(x_c)
+    targets = (setup.sensor if target_sensor is None else target_sensor).predict(model.frame(x_c))
     angles = x_c[:, 2] if model.n_dof == 3 else None
     with np.errstate(invalid="ignore"):
         x_m, commands = commands_for_targets(model, model_sensor, targets, angles, model_statics)
     x_eq, _, ok, dropped = _settle(real, setup, commands, x_m, ignore_limits)
-    y = setup.sensor.predict(x_eq)
+    y = setup.sensor.predict(real.frame(x_eq))
     tool = np.where(ok, np.linalg.norm(y - targets, axis=1), np.nan)
     angle = np.where(ok, x_eq[:, 2] - x_c[:, 2], np.nan) if model.n_dof == 3 else np.full(len(x_c), np.nan)
     return ToolErrors(model=name, tool=tool, angle=angle, valid=ok, dropped=dropped)
@@ -323,7 +330,6 @@ def baseline_result(result, nominal: Mechanism, method: str):
     """The engine's result of a baseline fit as a result of ``nominal``'s kind (covariance
     kept; ``method`` named)."""
     mech = result.mechanism
-    notes = result.warnings
     base = getattr(mech, "base", None)
     if base is not None:
         names = tuple(nominal.param_names)
@@ -331,8 +337,7 @@ def baseline_result(result, nominal: Mechanism, method: str):
         idx = np.array([names.index(result.free[i]) for i in sel], dtype=int)
         cov = embed(np.asarray(result.covariance)[np.ix_(sel, sel)], idx, len(names)) if sel else None
         mech = base.with_params(base.params, covariance=cov)
-        notes = tuple(w for w in notes if "does not store a covariance" not in w)
-    return dataclasses.replace(result, mechanism=mech, method=method, warnings=notes)
+    return dataclasses.replace(result, mechanism=mech, method=method)
 
 
 # -- what the following errors say about the load deflection ------------------------------
@@ -351,7 +356,8 @@ def load_deflection_estimate(mechanism: Mechanism, sensor, poses: np.ndarray, fo
     G = mechanism.actuator_pose_jacobian(x)
     e = np.asarray(following_errors, dtype=float)
     dx = np.linalg.solve(np.swapaxes(G, 1, 2) @ G, np.einsum("nli,nl->ni", G, e)[..., None])[..., 0]
-    return np.einsum("nki,ni->nk", sensor.tool_pose_jacobian(x), dx)
+    Jf = mechanism.pose_jacobian_from_twist(sensor.tool_frame_jacobian(mechanism.frame(x)), x)
+    return np.einsum("nki,ni->nk", Jf, dx)
 
 
 def compliance_warning(nominal: Mechanism, calibrated: Mechanism, sensor, commanded: np.ndarray, rest_poses: np.ndarray,

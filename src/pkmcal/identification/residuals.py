@@ -9,10 +9,16 @@ the engine are θ = [ρ; s]. A *method* eliminates x_j and returns, for all N po
 * ``cov`` (N, k, k)  the covariance the sensor and actuator noise induce on r (first order),
 
 with, per pose, A = ∂IK/∂x (l×n), B = ∂IK/∂ρ (l×p), H = ∂h/∂x (m×n), G = ∂h/∂s (m×s),
-Σ_q = diag(σ_q²), Σ_y = diag(σ_y²):
+Σ_q = diag(σ_q²), Σ_y = diag(σ_y²). The sensor reads the platform frame F(x, ρ) of the
+mechanism (``Mechanism.frame``), so H = (∂h/∂twist) · T with T = ∂twist/∂x
+(``Mechanism.pose_jacobian_from_twist``), and where the frame depends on ρ (a tool offset
+of the mechanism: ``Mechanism.frame_depends_on_params``) ∂h/∂ρ = (∂h/∂twist) · T_ρ enters
+the ρ columns. Parameters are passed explicitly: ``mech.ik_and_jacobians(x, params=ρ)``,
+``sensor.predict(frame, params=s)``; no machine or sensor object is built per evaluation.
 
 ``ik-residual`` (paper 1 §V, eq. 3; x measured by a full-pose sensor)
-    x̂_j solves h(x̂_j, s) = y_j (Newton; x̂ = y for identity sensor transforms);
+    x̂_j = the pose of the frame the readings determine (``Sensor.invert``, closed form;
+    ``Mechanism.poses_from_frame``);
     r_j = q_j − IK(x̂_j, ρ);  ∂r/∂ρ = −B;  ∂r/∂s = A H⁻¹ G  (x̂ moves with s);
     Σ_j = Σ_q + A H⁻¹ Σ_y H⁻ᵀ Aᵀ.
     ``form="squared"`` is the paper's own residual (L_q² − ‖l(x̂, ρ)‖²) with L_q = q + L0
@@ -37,9 +43,12 @@ with, per pose, A = ∂IK/∂x (l×n), B = ∂IK/∂ρ (l×p), H = ∂h/∂x (m�
     ∂r/∂θ = U⊥ᵀ ∂e/∂θ (the x-dependence is projected out; the derivative of U⊥ is dropped,
     which leaves the gradient Jᵀr of the cost exact at x*). Weighted, cov = I.
 
-Each method keeps the eliminated poses (and the Jacobian pieces A, B, H A⁻¹ computed from
-them) for the last θ it was evaluated at, so that the residual and the Jacobian at one
-point share one pose solve (``Method._at``).
+A :class:`Method` object is the objective of one fit and owns that fit's scratch: the
+eliminated poses (and the Jacobian pieces A, B, H A⁻¹ computed from them) of the last θ it
+was evaluated at, so that the residual and the Jacobian the solver asks for separately at
+one point share one pose solve (``Method._at``); the warm-start poses of the fk-residual's
+FK and the projection's pose solve; the ik-residual's measured poses at the last s.
+Machines and sensors hold no state.
 """
 
 from __future__ import annotations
@@ -114,9 +123,6 @@ class Model:
             raise PkmcalError(f"machine and sensor both have parameters named {', '.join(dup)}")
         self.sigma_q = np.broadcast_to(np.asarray(self.noise.actuator_std, dtype=float), (self.q.shape[1],)).copy()
         self.sigma_y = np.broadcast_to(np.asarray(self.noise.reading_std, dtype=float), (self.y.shape[1],)).copy()
-        # split() at the start parameters returns the given objects themselves
-        self._mech_cache = (np.asarray(self.mechanism.params, dtype=float).tobytes(), self.mechanism)
-        self._sensor_cache = (np.asarray(self.sensor.params, dtype=float).tobytes(), self.sensor)
 
     @property
     def n_poses(self) -> int:
@@ -134,25 +140,16 @@ class Model:
     def theta0(self) -> np.ndarray:
         return np.concatenate([self.mechanism.params, self.sensor.params])
 
-    def split(self, theta: np.ndarray) -> tuple[Mechanism, Sensor]:
-        """The machine and sensor at θ = [ρ; s]; each object is reused while its own
-        parameters are unchanged (a finite-difference column moves only one of them)."""
+    def parts(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(ρ (p,), s (s,)) of θ = [ρ; s] (views)."""
         theta = np.asarray(theta, dtype=float)
-        p = self.n_mech
-        rho, s = theta[:p], theta[p:]
-        # keyed by the bytes (a copy: θ is often the caller's scratch buffer, overwritten
-        # at the next step); bytes compare in ~0.1 µs, np.array_equal in ~3 µs
-        key = rho.tobytes()
-        mech = self._mech_cache
-        if mech[0] != key:
-            mech = (key, self.mechanism.with_params(rho.copy()))
-            self._mech_cache = mech
-        key = s.tobytes()
-        sens = self._sensor_cache
-        if sens[0] != key:
-            sens = (key, self.sensor.with_params(s.copy()))
-            self._sensor_cache = sens
-        return mech[1], sens[1]
+        return theta[:self.n_mech], theta[self.n_mech:]
+
+    def split(self, theta: np.ndarray) -> tuple[Mechanism, Sensor]:
+        """The machine and sensor objects at θ = [ρ; s] (for results; the methods pass ρ and
+        s explicitly instead)."""
+        rho, s = self.parts(theta)
+        return self.mechanism.with_params(rho.copy()), self.sensor.with_params(s.copy())
 
     def subset(self, keep: np.ndarray) -> "Model":
         """The same model on the poses ``keep`` (boolean or index array)."""
@@ -257,26 +254,18 @@ def _sandwich(M: np.ndarray, sigma: np.ndarray) -> np.ndarray:
     return Ms @ np.swapaxes(M, 1, 2)
 
 
-def invert_sensor(sensor: Sensor, y: np.ndarray, start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Poses x̂ (N, 6) with h(x̂) = y by batched Newton (needs m = 6); and a converged flag."""
-    if sensor.is_identity:
-        return np.array(y, dtype=float), np.ones(len(y), dtype=bool)
-    x = np.array(start, dtype=float)
-    if tuple(sensor.reading_names) == ("x", "y", "z", "a", "b", "c"):
-        x = np.array(y, dtype=float)
-    conv = np.zeros(len(x), dtype=bool)
-    for _ in range(_POSE_MAX_ITER):
-        res = sensor.reading_residual(y, sensor.predict(x))
-        conv = np.max(np.abs(res), axis=1) <= _POSE_TOL * (1.0 + np.max(np.abs(y), axis=1))
-        if conv.all():
-            break
-        H = sensor.pose_jacobian(x)
-        try:
-            x = x + np.linalg.solve(H, res[..., None])[..., 0]
-        except np.linalg.LinAlgError:
-            raise PkmcalError("the full-pose sensor's pose Jacobian is singular at a measured pose; "
-                              "check the sensor's world/tool transforms") from None
-    return x, conv
+def sensor_pose_jacobian(mech: Mechanism, sensor: Sensor, x: np.ndarray, frame, rho, s) -> np.ndarray:
+    """H = ∂h/∂x (N, m, n) = (∂h/∂twist) · T at poses x with frames ``frame``."""
+    return mech.pose_jacobian_from_twist(sensor.frame_jacobian(frame, s), x, rho)
+
+
+def sensor_mech_jacobian(mech: Mechanism, sensor: Sensor, x: np.ndarray, frame, rho, s) -> np.ndarray | None:
+    """∂h/∂ρ (N, m, p) at fixed x = (∂h/∂twist) · T_ρ, or None when the frame does not
+    depend on ρ (``Mechanism.frame_depends_on_params``)."""
+    if not mech.frame_depends_on_params:
+        return None
+    _, T_rho = mech.frame_jacobians(x, rho)
+    return None if T_rho is None else sensor.frame_jacobian(frame, s) @ T_rho
 
 
 # -- the methods ------------------------------------------------------------------------
@@ -355,10 +344,19 @@ class IKResidual(Method):
                 f"the '{sensor.kind}' sensor gives {sensor.n_readings} ({', '.join(sensor.reading_names)}): "
                 "use --method fk-residual or projection"
             )
-        if form == "squared" and not hasattr(mech, "length_param_jacobian"):
+        if not sensor.invertible:
+            raise PkmcalError(f"method 'ik-residual' needs a sensor whose readings determine the platform frame "
+                              f"(full pose); the '{sensor.kind}' sensor's do not: use --method fk-residual or "
+                              "projection")
+        if mech.frame_depends_on_params:
+            raise PkmcalError(f"method 'ik-residual' needs a platform frame independent of the machine's "
+                              f"parameters; machine '{mech.name}' has a parametrised tool frame: use --method "
+                              "fk-residual or projection")
+        if form == "squared" and "leg-lengths" not in mech.abilities:
             raise PkmcalError(f"ik-residual form 'squared' needs leg lengths; machine '{mech.name}' has none")
         self.form = form
-        self._cache = None
+        #: this fit's measured poses at the last sensor parameters s (they depend on s only)
+        self._measured: tuple[np.ndarray, dict] | None = None
 
     def rows_per_pose(self) -> int:
         return self.model.mechanism.n_actuators
@@ -371,19 +369,32 @@ class IKResidual(Method):
             return ("1",) * self.rows_per_pose()
         return tuple("rad" if a else "mm" for a in self.model.mechanism.actuator_is_angle)
 
-    def _measured_poses(self, sensor) -> dict:
-        """x̂ and converged, and on demand H⁻¹ and H⁻¹G: cached while the sensor parameters
-        do not change (they depend on s only, not on ρ)."""
-        if self._cache is None or self._cache[0] is not sensor:   # Model.split reuses unchanged sensors
-            x, conv = invert_sensor(sensor, self.model.y, self.model.start_poses())
-            self._cache = (sensor, {"sensor": sensor, "x": x, "conv": conv})
-        return self._cache[1]
+    def _measured_poses(self, rho, s) -> dict:
+        """x̂ (the poses of the frames the readings determine) and converged, and on demand
+        H⁻¹ and H⁻¹G: kept while the sensor parameters s do not change (they depend on s
+        only, the frame not on ρ)."""
+        last = self._measured
+        if last is None or not np.array_equal(last[0], s):
+            m = self.model
+            if "pose-convention" in m.mechanism.abilities and m.sensor.reads_pose(s):
+                # the readings are the pose (declared by both): x̂ = y, H = I, bit for bit
+                x = np.array(m.y, dtype=float)
+                frame, identity = m.mechanism.frame(x, rho), True
+            else:
+                frame, identity = m.sensor.invert(m.y, s), False
+                x = m.mechanism.poses_from_frame(frame)
+            conv = np.all(np.isfinite(x), axis=1)
+            last = self._measured = (np.array(s), {"x": x, "conv": conv, "frame": frame, "rho": rho, "s": s,
+                                                   "identity": identity})
+        return last[1]
 
     def _Hinv(self, poses: dict) -> np.ndarray | None:
-        """H⁻¹ (N, n, m), or None for an identity sensor (H = I)."""
-        if poses["sensor"].is_identity:
+        """H⁻¹ (N, n, m), or None when the readings are the pose (H = I)."""
+        if poses["identity"]:
             return None
-        return self._piece(poses, "Hinv", lambda: np.linalg.inv(poses["sensor"].pose_jacobian(poses["x"])))
+        m = self.model
+        return self._piece(poses, "Hinv", lambda: np.linalg.inv(
+            sensor_pose_jacobian(m.mechanism, m.sensor, poses["x"], poses["frame"], poses["rho"], poses["s"])))
 
     def _AHinv(self, A: np.ndarray, poses: dict) -> np.ndarray:
         """A H⁻¹: how the sensor noise moves the actuator residual."""
@@ -392,7 +403,7 @@ class IKResidual(Method):
 
     def _HinvG(self, poses: dict) -> np.ndarray:
         def compute():
-            G = poses["sensor"].param_jacobian(poses["x"])
+            G = self.model.sensor.param_jacobian(poses["frame"], poses["s"])
             Hinv = self._Hinv(poses)
             return G if Hinv is None else Hinv @ G
 
@@ -400,19 +411,20 @@ class IKResidual(Method):
 
     def _solve(self, theta):
         # IK with its Jacobians in one pass: a solver asks for the Jacobian at most points
-        mech, sensor = self.model.split(theta)
-        poses = self._measured_poses(sensor)
-        q, A, B = mech.ik_and_jacobians(poses["x"])
-        return {"mech": mech, "poses": poses, "q": q, "AB": (A, B)}
+        rho, s = self.model.parts(theta)
+        poses = self._measured_poses(rho, s)
+        q, A, B = self.model.mechanism.ik_and_jacobians(poses["x"], rho)
+        return {"rho": rho, "poses": poses, "q": q, "AB": (A, B)}
 
     def evaluate(self, theta, jac=True, cov=True):
         m = self.model
+        mech = m.mechanism
         st = self._at(theta, self._solve)
-        mech, poses, q_model = st["mech"], st["poses"], st["q"]
+        rho, poses, q_model = st["rho"], st["poses"], st["q"]
         x, conv = poses["x"], poses["conv"]
         r = m.q - q_model
         need_Js = jac and self.sensor_columns
-        A, B = self._piece(st, "AB", lambda: mech.actuator_jacobians(x)) if (jac or cov) else (None, None)
+        A, B = st["AB"] if (jac or cov) else (None, None)
         J = C = None
         if jac:
             Js = A @ self._HinvG(poses) if need_Js else None
@@ -422,11 +434,11 @@ class IKResidual(Method):
             C = _diag_cov(m.sigma_q, m.n_poses) + _sandwich(AH, m.sigma_y)
         if self.form == "squared":
             # r² = L_q² − L(x)², L_q = q + L0, L0 = L(x) − IK(x) (offset, independent of x).
-            L = mech.leg_lengths(x)
+            L = mech.leg_lengths(x, rho)
             Lq = m.q + (L - q_model)
             r = Lq**2 - L**2
             if jac:
-                dL = mech.length_param_jacobian(x)                     # ∂L/∂ρ
+                dL = mech.length_param_jacobian(x, rho)                # ∂L/∂ρ
                 dL0 = dL - B                                            # ∂L0/∂ρ
                 Jr = 2.0 * Lq[..., None] * dL0 - 2.0 * L[..., None] * dL
                 J = _full_jacobian(Jr, None if Js is None else 2.0 * L[..., None] * Js, len(m.sensor.param_names))
@@ -463,36 +475,42 @@ class FKResidual(Method):
 
     def _solve(self, theta):
         m = self.model
-        mech, sensor = m.split(theta)
-        fk = mech.fk_precise(m.q, guess=self._guess)
+        rho, s = m.parts(theta)
+        fk = m.mechanism.fk_precise(m.q, self._guess, rho)
         x = fk.poses
         ok = fk.ok & np.all(np.isfinite(x), axis=1)
-        # warm start the next evaluation from the converged poses
+        # warm start the next evaluation from the converged poses (this fit's scratch)
         self._guess = np.where(ok[:, None], x, self._guess)
         x = np.where(ok[:, None], x, self._guess)
-        return {"mech": mech, "sensor": sensor, "x": x, "ok": ok,
-                "r": sensor.reading_residual(m.y, sensor.predict(x))}
+        frame = m.mechanism.frame(x, rho)
+        return {"rho": rho, "s": s, "x": x, "frame": frame, "ok": ok,
+                "r": m.sensor.reading_residual(m.y, m.sensor.predict(frame, s))}
 
     @staticmethod
-    def _HAi(A, sensor, x):
+    def _HAi(A, H):
         """H A⁻¹ (m×n per pose) by one batched solve with m right-hand sides (m ≪ p); NaN
         where A is singular (never at a converged FK pose, whose Newton steps solved it)."""
         from pkmcal.identification._small_linalg import solve_right  # compiled: numba on first use
 
-        return solve_right(A, sensor.pose_jacobian(x))[0]
+        return solve_right(A, H)[0]
 
     def evaluate(self, theta, jac=True, cov=True):
         m = self.model
+        mech, sensor = m.mechanism, m.sensor
         st = self._at(theta, self._solve)
-        mech, sensor, x, ok, r = (st[k] for k in ("mech", "sensor", "x", "ok", "r"))
+        rho, s, x, frame, ok, r = (st[k] for k in ("rho", "s", "x", "frame", "ok", "r"))
         J = C = None
         if jac or cov:
-            A, B = self._piece(st, "AB", lambda: mech.actuator_jacobians(x))
-            HAi = self._piece(st, "HAi", lambda: self._HAi(A, sensor, x))
+            A, B = self._piece(st, "AB", lambda: mech.actuator_jacobians(x, rho))
+            HAi = self._piece(st, "HAi", lambda: self._HAi(A, sensor_pose_jacobian(mech, sensor, x, frame, rho, s)))
         if jac:
-            # ∂r/∂ρ = H A⁻¹ B, ∂r/∂s = −G (skipped when no sensor parameter is free)
-            J = _full_jacobian(HAi @ B, -sensor.param_jacobian(x) if self.sensor_columns else None,
-                               len(m.sensor.param_names))
+            # ∂r/∂ρ = H A⁻¹ B (− ∂h/∂ρ at fixed x), ∂r/∂s = −G (skipped when no sensor parameter is free)
+            Jr = HAi @ B
+            Gr = sensor_mech_jacobian(mech, sensor, x, frame, rho, s)
+            if Gr is not None:
+                Jr = Jr - Gr
+            J = _full_jacobian(Jr, -sensor.param_jacobian(frame, s) if self.sensor_columns else None,
+                               len(sensor.param_names))
         if cov:
             C = _diag_cov(m.sigma_y, m.n_poses) + _sandwich(HAi, m.sigma_q)
         return Evaluation(r=r, J=J, cov=C, converged=ok, poses=x)
@@ -554,22 +572,27 @@ class Projection(Method):
         unit = "1" if self.weighted or (any(flags) and not all(flags)) else ("rad" if all(flags) else "mm")
         return (unit,) * self.rows_per_pose()
 
-    def _stacked(self, mech, sensor, x):
+    def _stacked_and_Q(self, rho, s, x, Q: bool = True):
+        """(e (N, m+l), Q (N, m+l, n) or None): the whitened stacked residual and its pose
+        Jacobian W [H; A] at poses x."""
         m = self.model
-        ey = sensor.reading_residual(m.y, sensor.predict(x))
-        eq = m.q - mech.ik(x)
-        return np.concatenate([ey, eq], axis=1) * self._w
+        mech, sensor = m.mechanism, m.sensor
+        frame = mech.frame(x, rho)
+        ey = sensor.reading_residual(m.y, sensor.predict(frame, s))
+        eq = m.q - mech.ik(x, rho)
+        e = np.concatenate([ey, eq], axis=1) * self._w
+        if not Q:
+            return e, None
+        H = sensor_pose_jacobian(mech, sensor, x, frame, rho, s)
+        return e, np.concatenate([H, mech.actuator_pose_jacobian(x, rho)], axis=1) * self._w[:, None]
 
-    def _Q(self, mech, sensor, x):
-        return np.concatenate([sensor.pose_jacobian(x), mech.actuator_pose_jacobian(x)], axis=1) * self._w[:, None]
-
-    def solve_poses(self, mech, sensor) -> tuple[np.ndarray, np.ndarray]:
-        """x_j* = argmin ‖e_j(x)‖ for every pose by batched Gauss–Newton (warm started)."""
+    def solve_poses(self, rho, s) -> tuple[np.ndarray, np.ndarray]:
+        """x_j* = argmin ‖e_j(x)‖ for every pose by batched Gauss–Newton (warm started from
+        this fit's last poses)."""
         x = self._x.copy()
         conv = np.zeros(len(x), dtype=bool)
         for _ in range(_POSE_MAX_ITER):
-            e = self._stacked(mech, sensor, x)
-            Q = self._Q(mech, sensor, x)
+            e, Q = self._stacked_and_Q(rho, s, x)
             QtQ = np.swapaxes(Q, 1, 2) @ Q
             step = np.linalg.solve(QtQ, (np.swapaxes(Q, 1, 2) @ e[..., None]))[..., 0]
             x = x + step
@@ -581,40 +604,49 @@ class Projection(Method):
         return x, ok
 
     def _solve(self, theta):
-        mech, sensor = self.model.split(theta)
+        rho, s = self.model.parts(theta)
         if self.hold_poses:
             x, ok = self.model.commanded.copy(), np.ones(self.model.n_poses, dtype=bool)
         else:
-            x, ok = self.solve_poses(mech, sensor)
-        return {"mech": mech, "sensor": sensor, "x": x, "ok": ok}
+            x, ok = self.solve_poses(rho, s)
+        return {"rho": rho, "s": s, "x": x, "ok": ok}
 
-    def _projector(self, mech, sensor, x):
+    def _projector(self, rho, s, x):
         """(e (N, m+l), U⊥ᵀ (N, k, m+l)): the stacked whitened residual and the orthonormal
         complement of range(Q) (complete QR of Q, eq. 7)."""
-        Qfull, _ = np.linalg.qr(self._Q(mech, sensor, x), mode="complete")
-        return self._stacked(mech, sensor, x), np.swapaxes(Qfull[:, :, mech.n_dof:], 1, 2)
+        e, Q = self._stacked_and_Q(rho, s, x)
+        Qfull, _ = np.linalg.qr(Q, mode="complete")
+        return e, np.swapaxes(Qfull[:, :, self.model.mechanism.n_dof:], 1, 2)
 
-    def _param_jacobian(self, mech, sensor, x, Ut):
+    def _param_jacobian(self, rho, s, x, Ut):
         """U⊥ᵀ ∂e/∂θ = −U⊥ᵀ W [∂h/∂θ; ∂IK/∂θ] (eq. 10)."""
+        m = self.model
+        mech, sensor = m.mechanism, m.sensor
         ms = sensor.n_readings
-        de = np.zeros((len(x), ms + mech.n_actuators, self.model.n_mech + len(sensor.params)))
-        de[:, ms:, : self.model.n_mech] = -mech.actuator_param_jacobian(x)
-        de[:, :ms, self.model.n_mech:] = -sensor.param_jacobian(x)
+        frame = mech.frame(x, rho)
+        de = np.zeros((len(x), ms + mech.n_actuators, m.n_mech + len(sensor.param_names)))
+        de[:, ms:, : m.n_mech] = -mech.actuator_param_jacobian(x, rho)
+        de[:, :ms, m.n_mech:] = -sensor.param_jacobian(frame, s)
+        Gr = sensor_mech_jacobian(mech, sensor, x, frame, rho, s)
+        if Gr is not None:
+            de[:, :ms, : m.n_mech] = -Gr
         return Ut @ (de * self._w[:, None])
 
-    def project(self, mech, sensor, x, jac: bool = True):
-        """Paper 3 eq. 7–10 at the given poses ``x`` (not re-solved): (r (N, k), J (N, k, P)
-        or None, U⊥ᵀ (N, k, m+l)) with r = U⊥ᵀ e(x, θ), J = U⊥ᵀ ∂e/∂θ = −U⊥ᵀ W [∂h/∂θ; ∂IK/∂θ]."""
-        e, Ut = self._projector(mech, sensor, x)
-        return (Ut @ e[..., None])[..., 0], self._param_jacobian(mech, sensor, x, Ut) if jac else None, Ut
+    def project(self, theta, x, jac: bool = True):
+        """Paper 3 eq. 7–10 at θ and the given poses ``x`` (not re-solved): (r (N, k), J
+        (N, k, P) or None, U⊥ᵀ (N, k, m+l)) with r = U⊥ᵀ e(x, θ), J = U⊥ᵀ ∂e/∂θ =
+        −U⊥ᵀ W [∂h/∂θ; ∂IK/∂θ]."""
+        rho, s = self.model.parts(theta)
+        e, Ut = self._projector(rho, s, x)
+        return (Ut @ e[..., None])[..., 0], self._param_jacobian(rho, s, x, Ut) if jac else None, Ut
 
     def evaluate(self, theta, jac=True, cov=True):
         st = self._at(theta, self._solve)
-        mech, sensor, x, ok = st["mech"], st["sensor"], st["x"], st["ok"]
+        rho, s, x, ok = st["rho"], st["s"], st["x"], st["ok"]
         # the projector is computed once per θ, for the residual and then the Jacobian
-        e, Ut = self._piece(st, "projector", lambda: self._projector(mech, sensor, x))
+        e, Ut = self._piece(st, "projector", lambda: self._projector(rho, s, x))
         r = self._piece(st, "r", lambda: (Ut @ e[..., None])[..., 0])
-        J = self._piece(st, "J", lambda: self._param_jacobian(mech, sensor, x, Ut)) if jac else None
+        J = self._piece(st, "J", lambda: self._param_jacobian(rho, s, x, Ut)) if jac else None
         C = None
         if cov:
             # whitened e has covariance diag((w σ)²); projected: U⊥ᵀ diag(.) U⊥ (= I if weighted)
@@ -626,10 +658,11 @@ def default_method(setup, mechanism: Mechanism | None = None) -> str:
     """The method used when none is named, the one rule for every command and function
     (``identify``, ``identifiability``, ``plan``, ``observability``, the demo): ``projection``
     for a redundantly actuated machine (paper 3), else ``ik-residual`` for a full-pose sensor
-    (paper 1) and ``fk-residual`` otherwise (paper 2)."""
+    (paper 1: the sensor's readings determine the platform frame, ``Sensor.invertible``) and
+    ``fk-residual`` otherwise (paper 2)."""
     if mechanism is not None and mechanism.n_actuators != mechanism.n_dof:
         return "projection"
-    return "ik-residual" if setup.sensor.kind == "full-pose" else "fk-residual"
+    return "ik-residual" if setup.sensor.invertible else "fk-residual"
 
 
 def make_method(name: str, model: Model, weighted: bool = True, form: str = "plain") -> Method:

@@ -22,13 +22,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from pkmcal.conventions import euler_to_matrix
 from pkmcal.errors import PkmcalError
 from pkmcal.io.measurements import Measurements
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.progress import Progress
 from pkmcal.sensors.base import MeasurementSetup, Sensor
-from pkmcal.sensors.indicators import MIN_NORMAL_Z, IndicatorSensor
 
 
 def as_rng(rng: np.random.Generator | int | None) -> np.random.Generator:
@@ -96,11 +94,10 @@ class SimulationResult:
         return "\n".join(lines)
 
 
-def _unreadable(sensor: Sensor, poses: np.ndarray) -> np.ndarray:
-    """True where the sensor cannot read the pose (indicator plane near vertical)."""
-    if isinstance(sensor, IndicatorSensor):
-        return ~(np.abs(euler_to_matrix(poses[:, 3:6])[:, 2, 2]) >= MIN_NORMAL_Z)
-    return np.zeros(len(poses), dtype=bool)
+def _unreadable(real: Mechanism, sensor: Sensor, poses: np.ndarray) -> np.ndarray:
+    """True where the sensor cannot read the real machine's frame at the pose
+    (:meth:`Sensor.readable`, e.g. an indicator plane near vertical)."""
+    return ~sensor.readable(real.frame(poses))[0]
 
 
 def campaign_inputs(nominal: Mechanism, real: Mechanism, setup: MeasurementSetup, commanded_poses: np.ndarray,
@@ -157,7 +154,7 @@ def simulate_campaign(
 
     kept = np.flatnonzero(ok)
     real_poses = poses[kept]
-    y_true = sensor.predict(real_poses) if len(kept) else np.zeros((0, sensor.n_readings))
+    y_true = sensor.predict(real.frame(real_poses)) if len(kept) else np.zeros((0, sensor.n_readings))
     q_true = q[kept]
     return SimulationResult(
         commanded=commanded,
@@ -191,7 +188,7 @@ def _reach(nominal: Mechanism, real: Mechanism, sensor: Sensor, commanded: np.nd
     ok = finite & fk.ok
     poses = np.where(ok[:, None], fk.poses, commanded)   # placeholders where not ok, never kept
     ok = drop_limit_violations(real, poses, ok, ignore_limits, dropped)
-    unread = ok & _unreadable(sensor, poses)
+    unread = ok & _unreadable(real, sensor, poses)
     for k in np.flatnonzero(unread):
         dropped[int(k)] = "not-readable-by-sensor"
     return q, poses, ok & ~unread, dropped
@@ -241,8 +238,10 @@ def drop_limit_violations(
 ) -> np.ndarray:
     """``ok`` (N,) with the poses outside ``real``'s limits (all but ``ignore_limits``) turned
     False; each such pose that was ok gets the reason ``"real-limits: name+name"`` in
-    ``dropped`` (updated in place). An ignored name that is not a limit is a user error."""
-    report = real.check_limits(poses)
+    ``dropped`` (updated in place). An ignored name that is not a limit is a user error.
+    Only the verdicts are used: a hexapod checks without its margins (same verdicts, faster)."""
+
+    report = real.check_limits(poses, margins=False)
     unknown = [n for n in ignore_limits if n not in report.violations]
     if unknown:
         raise PkmcalError(f"machine '{real.name}' has no limit {', '.join(unknown)}; "

@@ -46,6 +46,8 @@ import numpy as np
 KINDS = {
     "gls": "a-priori (noise model) covariance of the noise-weighted fit",
     "sandwich": "sandwich covariance of the unweighted fit under the noise model",
+    "map": "posterior covariance (J^T W J + P)^-1 of the maximum-a-posteriori fit (noise model and Gaussian priors)",
+    "robust": "noise-model covariance of the robust fit, A^-1 B A^-1 on the inlier poses (pkmcal.identification.robust)",
 }
 
 
@@ -54,8 +56,10 @@ class Uncertainty:
     """Covariances of the free parameters ``names`` (internal units: mm, rad).
 
     ``kind`` says what ``covariance_prior`` is (:data:`KINDS`): ``"gls"`` for a
-    noise-weighted fit, ``"sandwich"`` for an unweighted one; ``chi2_expected`` is E[χ²]
-    under the noise model (module docstring; NaN when the noise model is unknown)."""
+    noise-weighted fit, ``"sandwich"`` for an unweighted one, ``"map"`` with Gaussian priors
+    (:mod:`.priors`), ``"robust"`` with a robust loss (:mod:`.robust`); ``chi2_expected`` is
+    E[χ²] under the noise model (module docstring; NaN when the noise model is unknown);
+    ``note`` details the kind (loss, priors) in :attr:`description`."""
 
     names: tuple[str, ...]
     covariance_prior: np.ndarray
@@ -64,11 +68,12 @@ class Uncertainty:
     dof: int
     kind: str = "gls"
     chi2_expected: float = float("nan")
+    note: str = ""
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
             raise ValueError(f"unknown covariance kind {self.kind!r}; one of {', '.join(KINDS)}")
-        if self.kind == "gls" and not np.isfinite(self.chi2_expected) and self.dof > 0:
+        if self.kind != "sandwich" and not np.isfinite(self.chi2_expected) and self.dof > 0:
             object.__setattr__(self, "chi2_expected", float(self.dof))
 
     @property
@@ -99,9 +104,10 @@ class Uncertainty:
     def description(self) -> str:
         """Which covariance :attr:`covariance` (and :attr:`std`) is, in one line."""
         e = self.chi2_expected
-        why = (f" (= dof {self.dof})" if self.kind == "gls" else
+        why = (f" (= dof {self.dof})" if self.kind != "sandwich" else
                f" (dof {self.dof}: an unweighted fit leaves more whitened residual)") if np.isfinite(e) else ""
-        return (f"{KINDS[self.kind]} x max(1, chi2/E[chi2]) = x {self.inflation:.4g}; chi2 {self.chi2:.6g}, "
+        note = f" [{self.note}]" if self.note else ""
+        return (f"{KINDS[self.kind]}{note} x max(1, chi2/E[chi2]) = x {self.inflation:.4g}; chi2 {self.chi2:.6g}, "
                 f"E[chi2] {e:.6g}{why}")
 
     @property

@@ -10,11 +10,23 @@ platform joints in platform coordinates (``genhexkins.platform.N.x|y|z``). That 
 pkmcal's leg length L_i = ‖p + R a_i − b_i‖ (paper 1 eq. 1, paper 2 eq. 1) with N = i − 1 and
 the same pose convention (:mod:`pkmcal.conventions`), so the joints are copied unchanged.
 
-genhexkins' joints are strut *lengths*; pkmcal's actuator readings are λ_i = L_i − L0_i. The
-leg offsets L0_i have no genhexkins pin: they enter LinuxCNC through homing, as the joint
-position assigned at the home switch (``[JOINT_N] HOME_OFFSET`` in the INI file). The export
-writes them, the stroke as joint limits, and the strut lengths at pkmcal's home pose as
-comment lines with the INI settings they imply. See ``docs/conventions.md``.
+genhexkins' joints are strut *lengths*; pkmcal's actuator readings are λ_i = L_i − L0_i
+(L_i = L0_i + g_i λ_i with a leg gain g_i, 1 unless the machine carries gains). The leg
+offsets L0_i have no genhexkins pin: they enter LinuxCNC through homing, as the joint
+position assigned at the home switch (``[JOINT_N] HOME_OFFSET`` in the INI file). The INI
+settings that match the machine (:func:`joint_settings`):
+
+    HOME_OFFSET_N = L0_i + g_i λ_switch,i     (λ_switch: the reading at the home switch; 0
+                                               unless metadata.linuxcnc.home_switch_reading)
+    MIN_LIMIT_N, MAX_LIMIT_N = L0_i + g_i λ_min,i, L0_i + g_i λ_max,i      (the stroke)
+    HOME_N = L_i at pkmcal's home pose;       [TRAJ] HOME = the home pose X Y Z A B C
+
+:func:`linuxcnc_hal` writes the ``setp`` lines (and these values as comments),
+:func:`linuxcnc_ini` the INI sections ``[TRAJ]``, ``[KINS]`` and ``[JOINT_0..5]`` to merge
+into the machine's INI file; :mod:`pkmcal.io.import_linuxcnc` reads both back. A leg gain
+g_i ≠ 1 means the controller's strut scale is off by g_i: divide the joint's
+encoder/stepgen scale (counts per mm, e.g. ``[JOINT_N] SCALE``) by g_i (the INI lists the
+gains). See ``docs/conventions.md``.
 
 The text is safe by construction for ``halcmd -f``, which reads a file with ``fgets`` into
 a 1024-byte buffer (``MAX_CMD_LEN``) and treats ``#`` to the end of the line as a comment:
@@ -62,6 +74,82 @@ def _num(v: float) -> str:
     return repr(v + 0.0)  # + 0.0 turns -0.0 into 0.0
 
 
+def _check_hexapod(machine) -> None:
+    if not isinstance(machine, Hexapod):
+        raise PkmcalError(
+            f"LinuxCNC export supports 6-UPS hexapods (genhexkins); machine '{getattr(machine, 'name', machine)}' "
+            f"is a {type(machine).__name__}"
+        )
+
+
+def leg_gains(machine: Hexapod) -> np.ndarray:
+    """g_i (6,): mm of strut length per reading unit, ``legs[i].gain`` of the machine file
+    (issue 11 item 1b) when the machine carries gains (``Hexapod.gain``), else ones."""
+    gain = getattr(machine, "gain", None)
+    return np.ones(6) if gain is None else np.asarray(gain, dtype=float).reshape(6)
+
+
+def home_switch_reading(machine: Hexapod) -> np.ndarray:
+    """λ_switch (6,): the actuator readings at the home switches,
+    ``metadata.linuxcnc.home_switch_reading`` (written by ``pkmcal import linuxcnc
+    --offsets zero``), else zeros (readings zeroed at the switch)."""
+    meta = (getattr(machine, "metadata", None) or {}).get("linuxcnc") or {}
+    value = meta.get("home_switch_reading") if isinstance(meta, dict) else None
+    if value is None:
+        return np.zeros(6)
+    arr = np.asarray(value, dtype=float)
+    if arr.shape != (6,) or not np.all(np.isfinite(arr)):
+        raise PkmcalError(f"machine '{machine.name}': metadata.linuxcnc.home_switch_reading must be 6 finite "
+                          f"numbers (mm), got {value!r}")
+    return arr
+
+
+def joint_settings(machine: Hexapod) -> dict[str, np.ndarray]:
+    """The INI values of joints 0..5 (mm; module docstring): ``HOME_OFFSET``, ``MIN_LIMIT``,
+    ``MAX_LIMIT``, ``HOME`` (each (6,)), and the gains ``gain``."""
+    _check_hexapod(machine)
+    g = leg_gains(machine)
+    return {"HOME_OFFSET": machine.offset + g * home_switch_reading(machine),
+            "MIN_LIMIT": machine.offset + g * machine.stroke[:, 0],
+            "MAX_LIMIT": machine.offset + g * machine.stroke[:, 1],
+            "HOME": machine.leg_lengths(machine.home_pose)[0],
+            "gain": g}
+
+
+def _home_pose_text(machine: Hexapod) -> str:
+    """X Y Z A B C of the home pose (mm, degrees), each angle as the degree text that reads
+    back to the same radians (:func:`pkmcal.io._yaml.rad_to_deg_text`)."""
+    from pkmcal.io._yaml import rad_to_deg_text
+
+    return " ".join([_num(v) for v in machine.home_pose[:3]]
+                    + [rad_to_deg_text(float(v) + 0.0) for v in machine.home_pose[3:]])
+
+
+def linuxcnc_ini(machine: Hexapod) -> str:
+    """INI sections (``[TRAJ]``, ``[KINS]``, ``[JOINT_0]`` .. ``[JOINT_5]``) matching
+    :func:`linuxcnc_hal` for ``machine``: units, home pose, joint limits, home offsets and
+    home positions (:func:`joint_settings`), values written exactly. Merge them into the
+    machine's INI file (keep its other keys: velocities, accelerations, homing speeds)."""
+    s = joint_settings(machine)
+    lines = comment_lines(f"genhexkins joints of machine '{machine.name}', written by pkmcal {__version__}, "
+                          "to match the HAL file of the same export.")
+    lines += [
+        "# Merge these keys into the machine's INI file (LinuxCNC uses the first of repeated keys).",
+        "# Joint N = strut length of pkmcal leg N+1 (mm): HOME_OFFSET = L0 + gain * (reading at the",
+        "# home switch), MIN_LIMIT/MAX_LIMIT = L0 + gain * stroke, HOME = strut length at the home",
+        "# pose [TRAJ] HOME (X Y Z mm, A B C degrees).",
+    ]
+    if np.any(s["gain"] != 1.0):
+        lines.append("# Leg gains differ from 1: divide each joint's encoder/stepgen scale (counts per mm) by its gain:")
+        lines += [f"#   joint {n}: gain {_num(g)}" for n, g in enumerate(s["gain"])]
+    lines += ["", "[TRAJ]", "LINEAR_UNITS = mm", "ANGULAR_UNITS = degree", f"HOME = {_home_pose_text(machine)}",
+              "", "[KINS]", "KINEMATICS = genhexkins", "JOINTS = 6"]
+    for n in range(6):
+        lines += ["", f"[JOINT_{n}]", "TYPE = LINEAR"]
+        lines += [f"{key} = {_num(s[key][n])}" for key in ("MIN_LIMIT", "MAX_LIMIT", "HOME_OFFSET", "HOME")]
+    return "\n".join(lines) + "\n"
+
+
 def linuxcnc_hal(machine: Hexapod) -> str:
     """HAL text (``setp`` lines and comments) configuring genhexkins for ``machine``.
 
@@ -72,12 +160,7 @@ def linuxcnc_hal(machine: Hexapod) -> str:
     home pose (``HOME``). Run it (``halcmd -f``, or a ``[HAL] HALFILE``) after the HAL file
     that loads genhexkins (``loadrt genhexkins``).
     """
-    if not isinstance(machine, Hexapod):
-        raise PkmcalError(
-            f"LinuxCNC export supports 6-UPS hexapods (genhexkins); machine '{getattr(machine, 'name', machine)}' "
-            f"is a {type(machine).__name__}"
-        )
-    L_home = machine.leg_lengths(machine.home_pose)[0]
+    s = joint_settings(machine)
     home_file = poses_to_file_units(machine.home_pose)
     lines = comment_lines(f"genhexkins configuration for machine '{machine.name}', written by pkmcal {__version__}.")
     lines += [
@@ -104,11 +187,12 @@ def linuxcnc_hal(machine: Hexapod) -> str:
         "# lambda_i = 0 set [JOINT_N] HOME_OFFSET = L0 below (else L0 + the reading at the switch).",
         "# MIN_LIMIT/MAX_LIMIT = L0 + stroke; HOME = strut length at pkmcal's home pose",
         f"# x y z a b c = {' '.join(_num(v) for v in home_file)} (mm, deg).",
+        "# 'pkmcal export --format linuxcnc --ini FILE' writes these as INI sections [JOINT_N].",
     ]
     for n in range(6):
-        lo, hi = machine.offset[n] + machine.stroke[n]
+        home_offset = "" if s["HOME_OFFSET"][n] == machine.offset[n] else f" HOME_OFFSET={_num(s['HOME_OFFSET'][n])}"
         lines.append(
-            f"# pkmcal.joint.{n} leg={n + 1} L0={_num(machine.offset[n])} MIN_LIMIT={_num(lo)} "
-            f"MAX_LIMIT={_num(hi)} HOME={_num(L_home[n])}"
+            f"# pkmcal.joint.{n} leg={n + 1} L0={_num(machine.offset[n])} MIN_LIMIT={_num(s['MIN_LIMIT'][n])} "
+            f"MAX_LIMIT={_num(s['MAX_LIMIT'][n])} HOME={_num(s['HOME'][n])}{home_offset}"
         )
     return "\n".join(lines) + "\n"

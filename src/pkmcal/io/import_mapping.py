@@ -6,12 +6,15 @@ An :class:`ImportMapping` says how to read it, without editing the file:
 
 * ``rename``: header cell (as written, matched case-insensitively after stripping) → pkmcal
   column name (``X_mm=x,Leg1=lambda1``); column order never matters;
+* ``quaternion_order``: the order of positional quaternion columns ``q1..q4``, ``xyzw``
+  (default, scalar last) or ``wxyz`` (:mod:`pkmcal.io.orientation`);
 * ``length_unit`` / ``angle_unit``: the units of the file's length / angle columns, replacing
   what its ``# units:`` line says (or the default mm, deg). Values are converted to mm and
   degrees on reading: v_mm = f · v (f = 1000 for m, 25.4 for in, ...), v_deg = v · 180/π for
   rad.
 
-The command line builds one from ``--columns``, ``--length-unit`` and ``--angle-unit``
+The command line builds one from ``--columns``, ``--length-unit``, ``--angle-unit`` and
+``--quaternion-order``
 (:func:`pkmcal.cli.import_options.import_options`); :func:`pkmcal.io.tables.read_table`
 applies it.
 """
@@ -22,6 +25,7 @@ from dataclasses import dataclass, field
 from typing import Mapping
 
 from pkmcal.errors import PkmcalError
+from pkmcal.io.orientation import QUATERNION_ORDERS
 
 #: Length units accepted on the command line (the ``# units:`` line also accepts ``inch``, ``µm``).
 LENGTH_UNIT_CHOICES = ("mm", "m", "cm", "um", "in")
@@ -39,6 +43,7 @@ class ImportMapping:
     rename: Mapping[str, str] = field(default_factory=dict)
     length_unit: str | None = None
     angle_unit: str | None = None
+    quaternion_order: str | None = None
 
     @property
     def units(self) -> dict[str, str]:
@@ -51,7 +56,8 @@ class ImportMapping:
         return out
 
     def __bool__(self) -> bool:
-        return bool(self.rename) or self.length_unit is not None or self.angle_unit is not None
+        return (bool(self.rename) or self.length_unit is not None or self.angle_unit is not None
+                or self.quaternion_order is not None)
 
     def describe(self) -> str:
         """One line for logs and file comments, e.g. ``columns X_mm=x; length unit m``."""
@@ -62,6 +68,8 @@ class ImportMapping:
             parts.append(f"length unit {self.length_unit}")
         if self.angle_unit is not None:
             parts.append(f"angle unit {self.angle_unit}")
+        if self.quaternion_order is not None:
+            parts.append(f"quaternion order {self.quaternion_order}")
         return "; ".join(parts) or "no mapping"
 
 
@@ -90,14 +98,18 @@ def parse_column_mapping(text: str | None, option: str = "--columns") -> dict[st
     return out
 
 
-def make_mapping(columns: str | None, length_unit: str | None, angle_unit: str | None) -> ImportMapping | None:
+def make_mapping(columns: str | None, length_unit: str | None, angle_unit: str | None,
+                 quaternion_order: str | None = None) -> ImportMapping | None:
     """The mapping of the command-line options (None when none is given)."""
     for name, value, choices in (("--length-unit", length_unit, LENGTH_UNIT_CHOICES),
-                                 ("--angle-unit", angle_unit, ANGLE_UNIT_CHOICES)):
+                                 ("--angle-unit", angle_unit, ANGLE_UNIT_CHOICES),
+                                 ("--quaternion-order", quaternion_order, QUATERNION_ORDERS)):
         if value is not None and value not in choices:
-            raise PkmcalError(f"{name} '{value}': unknown unit; choose one of {', '.join(choices)}")
-    mapping = ImportMapping(rename=parse_column_mapping(columns), length_unit=length_unit, angle_unit=angle_unit)
+            raise PkmcalError(f"{name} '{value}': unknown value; choose one of {', '.join(choices)}")
+    mapping = ImportMapping(rename=parse_column_mapping(columns), length_unit=length_unit, angle_unit=angle_unit,
+                            quaternion_order=quaternion_order)
     return mapping if mapping else None
 
 
-__all__ = ["ANGLE_UNIT_CHOICES", "ImportMapping", "LENGTH_UNIT_CHOICES", "make_mapping", "parse_column_mapping"]
+__all__ = ["ANGLE_UNIT_CHOICES", "ImportMapping", "LENGTH_UNIT_CHOICES", "QUATERNION_ORDERS", "make_mapping",
+           "parse_column_mapping"]

@@ -111,9 +111,11 @@ class LegSpec(_Model):
 
     @field_validator("offset")
     @classmethod
-    def _positive_offset(cls, v: float) -> float:
-        if not v > 0:
-            raise ValueError(f"{v!r} mm is not a leg offset: L0 is the leg length at reading 0, give a positive length")
+    def _non_negative_offset(cls, v: float) -> float:
+        # L0 = 0 is genhexkins' convention (the reading is the strut length itself)
+        if not v >= 0:
+            raise ValueError(f"{v!r} mm is not a leg offset: L0 is the leg length at reading 0, give a length >= 0 "
+                             "(0 when the readings are the leg lengths themselves, as LinuxCNC's joints)")
         return v
 
     @field_validator("stroke")
@@ -204,9 +206,9 @@ class UncertaintySpec(_Model):
 
 
 class HexapodFile(_Model):
-    """The ``kind: hexapod`` machine file."""
+    """The ``kind: 6-UPS`` machine file (``kind: hexapod``, the default, is the same kind)."""
 
-    kind: Literal["hexapod"] = "hexapod"
+    kind: Literal["hexapod", "6-UPS"] = "hexapod"
     name: Name | None = None
     description: Description = ""
     legs: list[LegSpec]
@@ -571,6 +573,9 @@ def _metadata_to_file(metadata: dict) -> dict:
 #: Machine kinds: kind → (file data → machine, machine class, machine → file data).
 _KINDS: dict[str, tuple[Callable[[object, dict, dict], Mechanism], type, Callable[[Any], dict]]] = {
     "hexapod": (_hexapod_from_file, Hexapod, _hexapod_to_file),
+    # the registry key of the Gough–Stewart hexapod (Hexapod.kind); files keep writing
+    # "hexapod" (first entry) until the machine-file registry (issue 12 item 2) switches them
+    "6-UPS": (_hexapod_from_file, Hexapod, _hexapod_to_file),
 }
 
 

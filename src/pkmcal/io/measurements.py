@@ -11,13 +11,14 @@ extra columns are ignored):
   (position; mm) or ``d1..dK`` (indicators; mm);
 * optional commanded pose ``cmd_x..cmd_c`` (mm, degrees).
 
-Inside, angles are radians (:mod:`pkmcal.conventions`). Files are written with a units
-line, the header and every float as its shortest round-trip text, so the same data always
-give the same bytes, atomically.
+Inside, angles are radians (:mod:`pkmcal.conventions`). Files are written as a plain CSV
+(a units line and comments only when asked), the header and every float as its shortest
+round-trip text, so the same data always give the same bytes, atomically.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 from dataclasses import dataclass
 
@@ -26,6 +27,7 @@ import numpy as np
 from pkmcal.conventions import POSE_COLUMNS
 from pkmcal.errors import InputFileError, PkmcalError
 from pkmcal.io.import_mapping import ImportMapping
+from pkmcal.io.orientation import euler_triples, orientation_given
 from pkmcal.io.tables import DEFAULT_ALIASES, check_magnitudes, column_kinds, from_file_units, mapped_name, read_table, to_file_units, write_table
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.sensors.base import MeasurementSetup
@@ -45,7 +47,9 @@ class Measurements:
     ``actuators`` (N, l) actuator readings; ``readings`` (N, m) sensor readings;
     ``commanded`` (N, n) commanded poses or None; ``source`` the file they came from (None
     when simulated); ``lines`` (N,) 1-based line of each row in ``source`` (None if not read);
-    ``notes`` what the loader did that the user should know (e.g. leg lengths converted).
+    ``notes`` what the loader did that the user should know (e.g. leg lengths converted);
+    ``rows`` (N,) the pose numbers: data rows of ``source`` counted from 1 (None: 1..N), kept
+    by :meth:`subset` so that poses keep their numbers when others are left out.
     """
 
     actuators: np.ndarray
@@ -54,6 +58,7 @@ class Measurements:
     source: str | None = None
     lines: np.ndarray | None = None
     notes: tuple[str, ...] = ()
+    rows: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         a = np.asarray(self.actuators, dtype=float)
@@ -71,6 +76,20 @@ class Measurements:
 
     def __len__(self) -> int:
         return self.actuators.shape[0]
+
+    @property
+    def pose_numbers(self) -> np.ndarray:
+        """(N,) the pose numbers (data rows of the file, from 1; docs/conventions.md)."""
+        return np.arange(1, len(self) + 1) if self.rows is None else np.asarray(self.rows, dtype=int)
+
+    def subset(self, keep) -> "Measurements":
+        """The poses selected by ``keep`` (a boolean mask or indices), with their lines and
+        pose numbers."""
+        idx = np.arange(len(self))[keep]
+        return Measurements(actuators=self.actuators[idx], readings=self.readings[idx],
+                            commanded=None if self.commanded is None else self.commanded[idx], source=self.source,
+                            lines=None if self.lines is None else np.asarray(self.lines)[idx], notes=self.notes,
+                            rows=self.pose_numbers[idx])
 
     def where(self, k: int) -> str:
         """Where pose ``k`` (0-based) comes from, for error messages: 'file, line 12' or 'pose 3'."""
@@ -113,9 +132,14 @@ def load_measurements(path: str | os.PathLike, machine: Mechanism, setup: Measur
     except UnicodeDecodeError as exc:
         raise InputFileError(src, f"not a UTF-8 text file (byte {exc.start}); save it as UTF-8 CSV") from None
     header = _header(text, mapping)
-    with_cmd = [c for c in cmd_cols if c in header]
+    given = set(header)
+    order = (mapping.quaternion_order if mapping is not None else None) or "xyzw"
+    for triple in euler_triples(cmd_cols):
+        if orientation_given(header, triple, order):
+            given.update(triple)      # cmd_a..cmd_c given as a quaternion or rotation vector
+    with_cmd = [c for c in cmd_cols if c in given]
     if with_cmd and len(with_cmd) != len(cmd_cols):
-        missing = [c for c in cmd_cols if c not in header]
+        missing = [c for c in cmd_cols if c not in given]
         raise InputFileError(src, f"has commanded-pose columns {', '.join(with_cmd)} but not {', '.join(missing)}; "
                                   f"give all of {', '.join(cmd_cols)} (mm, deg) or none")
     columns = reading_cols + (cmd_cols if with_cmd else ())
@@ -144,7 +168,7 @@ def load_measurements(path: str | os.PathLike, machine: Mechanism, setup: Measur
     if with_cmd:
         commanded = from_file_units(table[list(cmd_cols)], machine.pose_is_angle)
     return Measurements(actuators=actuators, readings=readings, commanded=commanded, source=src, lines=table.lines,
-                        notes=notes)
+                        notes=notes, rows=np.arange(1, len(table) + 1))
 
 
 def _units(sensor) -> str:
@@ -191,7 +215,127 @@ def save_measurements(
     machine: Mechanism,
     setup: MeasurementSetup,
     comments: tuple[str, ...] = (),
+    units_comment: bool = False,
 ) -> None:
-    """Write ``measurements`` as a measurement CSV (atomic, deterministic bytes, full precision)."""
-    write_table(path, measurement_columns(measurements, machine, setup),
+    """Write ``measurements`` as a measurement CSV (atomic, deterministic bytes, full
+    precision; a plain CSV, or with ``units_comment`` a units line and ``comments`` first)."""
+    write_table(path, measurement_columns(measurements, machine, setup), units_comment=units_comment,
                 comments=(f"pkmcal measurements: machine {machine.name}, sensor {setup.sensor.kind}",) + tuple(comments))
+
+
+# -- clipped readings ---------------------------------------------------------------------
+
+#: What :func:`apply_clipped_policy` does with poses whose readings are clipped.
+CLIPPED_POLICIES = ("drop", "keep", "error")
+#: A reading within this relative distance (× max(1, |end|)) of a stroke end is "at the end".
+END_TOLERANCE = 1e-9
+
+
+@dataclass(frozen=True)
+class ClippedReading:
+    """One actuator reading outside its stroke, or at one of its ends (file units).
+
+    ``pose`` the pose number (data row from 1), ``line`` its line in the file (or None),
+    ``actuator`` the column name, ``reading`` and ``stroke`` (min, max) in file units (mm;
+    degrees for rotary actuators), ``kind`` ``"outside"`` or ``"at-end"``."""
+
+    pose: int
+    line: int | None
+    actuator: str
+    reading: float
+    stroke: tuple[float, float]
+    kind: str
+
+    def describe(self, unit: str = "mm") -> str:
+        where = f"pose {self.pose}" + (f" (line {self.line})" if self.line is not None else "")
+        what = ("outside its stroke" if self.kind == "outside" else "at an end of its stroke (stuck or clipped?)")
+        return (f"{where}: {self.actuator} = {self.reading!r} {unit} is {what} "
+                f"[{self.stroke[0]!r}, {self.stroke[1]!r}] {unit}")
+
+    def to_dict(self, unit: str = "mm") -> dict:
+        """JSON-ready, every number with its unit (docs/conventions.md, "Units in JSON")."""
+        return {"pose": self.pose, "line": self.line, "actuator": self.actuator, f"reading_{unit}": self.reading,
+                f"stroke_{unit}": list(self.stroke), "kind": self.kind, "units": {"pose": "1", "line": "1"}}
+
+
+def clipped_readings(measurements: Measurements, machine: Mechanism,
+                     rel_tol: float = END_TOLERANCE) -> list[ClippedReading]:
+    """Every actuator reading outside the machine's stroke [λ_min, λ_max] or within
+    ``rel_tol``·max(1, |end|) of an end, in pose order (none for a machine without a
+    stroke). A real reading never stands exactly at an end by chance: there, the actuator
+    was clipped by its controller, saturated, or stuck at a stop, and the pose it gives is
+    not the pose the machine reached."""
+    stroke = getattr(machine, "stroke", None)
+    if stroke is None:
+        return []
+    stroke = np.asarray(stroke, dtype=float)
+    lam = measurements.actuators
+    lo, hi = stroke[:, 0], stroke[:, 1]
+    tol_lo = rel_tol * np.maximum(1.0, np.abs(lo))
+    tol_hi = rel_tol * np.maximum(1.0, np.abs(hi))
+    outside = (lam < lo - tol_lo) | (lam > hi + tol_hi)
+    at_end = ~outside & ((np.abs(lam - lo) <= tol_lo) | (np.abs(lam - hi) <= tol_hi))
+    flagged = outside | at_end
+    if not flagged.any():
+        return []
+    is_angle = machine.actuator_is_angle
+    lam_file = to_file_units(lam, is_angle)
+    stroke_file = to_file_units(stroke.T, is_angle).T
+    numbers = measurements.pose_numbers
+    out = []
+    for k, j in zip(*np.nonzero(flagged)):
+        out.append(ClippedReading(
+            pose=int(numbers[k]), line=None if measurements.lines is None else int(measurements.lines[k]),
+            actuator=machine.actuator_names[j], reading=float(lam_file[k, j]),
+            stroke=(float(stroke_file[j, 0]), float(stroke_file[j, 1])),
+            kind="outside" if outside[k, j] else "at-end"))
+    return out
+
+
+def apply_clipped_policy(measurements: Measurements, machine: Mechanism, policy: str = "drop",
+                         ) -> tuple[Measurements, list[ClippedReading], list[str]]:
+    """``(measurements to use, clipped readings, warning lines)`` under ``policy``:
+
+    * ``drop`` (default): poses with a clipped reading are left out (they keep their pose
+      numbers, :meth:`Measurements.subset`), one warning per reading and one summary;
+    * ``keep``: the same warnings, every pose used;
+    * ``error``: :class:`~pkmcal.errors.PkmcalError` naming the first readings.
+
+    Dropping every pose is an error (nothing would be left to fit)."""
+    if policy not in CLIPPED_POLICIES:
+        raise PkmcalError(f"--clipped '{policy}': choose one of {', '.join(CLIPPED_POLICIES)}")
+    found = clipped_readings(measurements, machine)
+    if not found:
+        return measurements, [], []
+    src = measurements.source or "the measurements"
+    unit = {name: ("deg" if a else "mm") for name, a in zip(machine.actuator_names, machine.actuator_is_angle)}
+    lines = [f"{src}: {c.describe(unit[c.actuator])}" for c in found]
+    poses = sorted({c.pose for c in found})
+    if policy == "error":
+        shown = "; ".join(lines[:3]) + (f"; and {len(lines) - 3} more" if len(lines) > 3 else "")
+        raise PkmcalError(f"{len(found)} clipped actuator reading(s) in {len(poses)} pose(s): {shown}; "
+                          "remove those poses, or use --clipped drop (leave them out) or keep")
+    if policy == "keep":
+        lines.append(f"{src}: {len(poses)} pose(s) with clipped readings are used (--clipped keep): "
+                     f"{', '.join(map(str, poses))}")
+        return measurements, found, lines
+    keep = ~np.isin(measurements.pose_numbers, poses)
+    if not keep.any():
+        raise PkmcalError(f"{src}: every pose has a clipped actuator reading ({lines[0]}); check the stroke in the "
+                          "machine file and the reading columns (--clipped keep uses them anyway)")
+    lines.append(f"{src}: {len(poses)} pose(s) with clipped readings left out (--clipped drop, the default; "
+                 f"--clipped keep uses them): {', '.join(map(str, poses))}")
+    return measurements.subset(keep), found, lines
+
+
+@contextlib.contextmanager
+def clipped_named_in_errors(lines: list[str]):
+    """A :class:`~pkmcal.errors.PkmcalError` raised inside (a fit that fails, too few poses)
+    also says which poses :func:`apply_clipped_policy` left out (its last line), so that
+    the one error line explains itself."""
+    try:
+        yield
+    except PkmcalError as exc:
+        if not lines:
+            raise
+        raise PkmcalError(f"{exc} ({lines[-1]})") from None

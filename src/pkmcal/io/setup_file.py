@@ -42,6 +42,15 @@ A tracker on the tool point of a planar machine (paper 3 §3), with the physics 
       load: [0, -30]              # in-plane force on the tool point, N (base frame)
       backlash: 1.0e-4            # optional dead band per actuator, mm (linear) or rad (rotary); one or one per actuator
 
+Any setup may give Gaussian priors on parameters (maximum a posteriori identification,
+:mod:`pkmcal.identification.priors`): names or shell patterns, each ``[mean, std]`` or
+``"mean ± std"`` (``+-`` also), or ``"± std"`` centred on the machine file's value; mm,
+degrees for angle parameters::
+
+    prior:
+      L0_*: [640, 0.5]
+      b1.z: "± 0.2"
+
 Built-in setups (:data:`pkmcal.sensors.library.BUILTIN_SETUPS`, re-exported here) are usable by
 name wherever a setup file is. A planar-tool setup is bound to its machine's pose dimension
 (2 or 3) by :func:`bind_setup` (``load_setup(path, machine)`` does it).
@@ -180,6 +189,7 @@ class _Setup(_Strict):
     free: list[StrictStr] | None = None
     noise: _Noise
     simulation: _Simulation | None = None
+    prior: dict[StrictStr, Union[tuple[Number, Number], StrictStr]] | None = None
 
     @field_validator("free")
     @classmethod
@@ -297,7 +307,28 @@ def load_setup(path: str | os.PathLike, machine=None) -> MeasurementSetup:
         _fail(path, lines, loc, what)
     raw_noise = data.get("noise") if isinstance(data.get("noise"), dict) else {}
     setup = _build(path, lines, spec, raw_noise)
+    if spec.prior:
+        import dataclasses
+
+        setup = dataclasses.replace(setup, priors=_priors(path, lines, spec.prior))
     return setup if machine is None else bind_setup(setup, machine, path)
+
+
+def _priors(path, lines, prior: dict) -> tuple:
+    """The ``prior:`` mapping as :class:`~pkmcal.identification.priors.Prior` objects
+    (file units; each names the file and line it came from, for later errors)."""
+    from pkmcal.identification.priors import Prior, parse_value
+
+    out = []
+    for pattern, value in prior.items():
+        line = _line_of(lines, ("prior", pattern))
+        source = f"{path}, line {line}" if line is not None else str(path)
+        try:
+            out.append(parse_value(value, pattern, source, str(path)) if isinstance(value, str) else
+                       Prior(pattern, float(value[0]), float(value[1]), source, str(path)))
+        except PkmcalError as exc:
+            _fail(path, lines, ("prior", pattern), str(exc).split("): ", 1)[-1])
+    return tuple(out)
 
 
 def _describe(err: dict) -> str:
@@ -522,6 +553,9 @@ def setup_to_yaml(setup: MeasurementSetup) -> str:
         if setup.simulation.backlash is not None:
             sim["backlash"] = _values(setup.simulation.backlash, False)
         doc["simulation"] = sim
+    if setup.priors:
+        doc["prior"] = {p.pattern: (f"± {p.std!r}" if p.mean is None else FlowList([float(p.mean), float(p.std)]))
+                        for p in setup.priors}
     head = "# pkmcal measurement setup: mm, angles in degrees (transforms, orientation_deg noise)\n"
     if noise.distribution == "uniform":
         head += "# uniform noise: values are half-widths h (std = h/sqrt(3))\n"

@@ -10,8 +10,9 @@ number. Errors name the file, the 1-based line (as an editor shows it) and the c
 Values are returned in pkmcal's file units (mm, degrees): a table in other units (m, µm,
 inch; rad) is converted on reading for the columns whose ``kinds`` are given.
 :func:`format_table` writes the reverse: header, every float as its shortest round-trip
-``repr``, ``\\n`` line ends, so equal data give identical bytes; :func:`write_table` writes
-it atomically.
+``repr``, ``\\n`` line ends, so equal data give identical bytes, and no comment line unless
+asked (``units_comment``), so that ``pandas.read_csv`` and ``csv.DictReader`` read every
+file pkmcal writes with their defaults; :func:`write_table` writes it atomically.
 """
 
 from __future__ import annotations
@@ -217,7 +218,8 @@ def read_table(
             if mapping is not None:
                 _check_renamed(src, header, mapping, header_line)
                 units.update(mapping.units)
-            chosen, idx = _choose_columns(src, header, header_line, columns, either, aliases, mapping, wanted_hint)
+            chosen, idx, sources = _choose_columns(src, header, header_line, columns, either, aliases, mapping,
+                                                   wanted_hint)
             continue
         rows.append(cells)
         row_lines.append(number)
@@ -234,15 +236,43 @@ def read_table(
     if not blocks:
         raise InputFileError(src, "no data rows after the header; add one row per pose", line=header_line)
     values = blocks[0] if len(blocks) == 1 else np.concatenate(blocks)
+    lines = all_lines[0] if len(all_lines) == 1 else np.concatenate(all_lines)
+    rotvec_kinds = {c: "angle" for o in sources if o.kind == "rotvec" for c in o.columns}
     for k, name in enumerate(chosen):
-        quantity = kinds.get(name)
+        quantity = kinds.get(name) or rotvec_kinds.get(name)
         if quantity is not None and quantity in units:
             factor = UNITS[quantity][units[quantity]]
             if factor != 1.0:
                 values[:, k] = np.rad2deg(values[:, k]) if units[quantity] == "rad" else values[:, k] * factor
-    return Table(path=src, columns=tuple(chosen), values=values,
-                 lines=all_lines[0] if len(all_lines) == 1 else np.concatenate(all_lines),
-                 header=tuple(header), units=units)
+    if sources:
+        chosen, values = _euler_from_sources(src, header, idx, chosen, values, lines, sources)
+    return Table(path=src, columns=tuple(chosen), values=values, lines=lines, header=tuple(header), units=units)
+
+
+def _euler_from_sources(src, header, idx, chosen, values, lines, sources):
+    """``(names, values)`` with each orientation source's columns replaced, where the triple
+    was asked for, by its a, b, c in degrees (:mod:`pkmcal.io.orientation`)."""
+    from pkmcal.io.orientation import euler_from_quaternions, euler_from_rotvecs
+
+    names, parts = [], []
+    by_first = {o.columns[0]: o for o in sources}
+    skip = {c for o in sources for c in o.columns[1:]}
+    for k, name in enumerate(chosen):
+        if name in skip:
+            continue
+        o = by_first.get(name)
+        if o is None:
+            names.append(name)
+            parts.append(values[:, k:k + 1])
+            continue
+        cols = [chosen.index(c) for c in o.columns]
+        if o.kind == "quaternion":
+            euler = euler_from_quaternions(values[:, cols], src, lines, o.columns, [header[idx[j]] for j in cols])
+        else:
+            euler = euler_from_rotvecs(values[:, cols])
+        names.extend(o.euler)
+        parts.append(euler)
+    return names, np.concatenate(parts, axis=1)
 
 
 #: Rows parsed at a time by :func:`read_table`.
@@ -286,7 +316,12 @@ def _text_lines(src: str, text: str | None):
 
 
 def _choose_columns(src, header, header_line, columns, either, aliases, mapping, wanted_hint):
-    """``(chosen, idx)``: the canonical names read and their cells' indices in the header."""
+    """``(chosen, idx, sources)``: the canonical names read, their cells' indices in the
+    header, and the orientations read from quaternion or rotation-vector columns instead of
+    Euler angles (:func:`pkmcal.io.orientation.find_sources`; their columns are read in
+    place of the triple, in x, y, z(, w) order)."""
+    from pkmcal.io.orientation import alternatives_hint, euler_triples, find_sources
+
     canon = [mapped_name(h, mapping, aliases) for h in header]
     present: dict[str, int] = {}
     for i, name in enumerate(canon):
@@ -305,10 +340,21 @@ def _choose_columns(src, header, header_line, columns, either, aliases, mapping,
             msg += "; separate the columns with commas"
         return msg
 
-    missing = [c for c in columns if c not in present]
+    order = (mapping.quaternion_order if mapping is not None else None) or "xyzw"
+    sources = find_sources(src, header, present, columns, order, header_line)
+    read: list[str] = []
+    for c in columns:
+        source = next((o for o in sources if c in o.euler), None)
+        if source is None:
+            read.append(c)
+        elif c == source.euler[0]:
+            read.extend(source.columns)
+    missing = [c for c in read if c not in present]
     if missing:
-        raise InputFileError(src, missing_message(missing, _describe_columns(columns)), line=header_line)
-    chosen: list[str] = list(columns)
+        msg = missing_message(missing, _describe_columns(columns))
+        hints = [alternatives_hint(t, order) for t in euler_triples(columns) if any(c in missing for c in t)]
+        raise InputFileError(src, "; ".join([msg] + hints), line=header_line)
+    chosen: list[str] = read
     if either:
         group = next((g for g in either if all(c in present for c in g)), None)
         if group is None:
@@ -317,7 +363,7 @@ def _choose_columns(src, header, header_line, columns, either, aliases, mapping,
             raise InputFileError(src, missing_message([c for c in best if c not in present], options),
                                  line=header_line)
         chosen += list(group)
-    return chosen, [present[c] for c in chosen]
+    return chosen, [present[c] for c in chosen], sources
 
 
 def _block_values(src: str, header: Sequence[str], idx: Sequence[int], rows: list[list[str]],
@@ -384,14 +430,21 @@ def _text_cell(text: str) -> str:
     return s
 
 
-def format_table(columns: Mapping[str, Sequence], *, units: Mapping[str, str] | None = FILE_UNITS,
-                 comments: Sequence[str] = (), head: bool = True) -> str:
-    """CSV text of named columns (all the same length): optional ``# units:`` line and
-    comments, a header, then rows. Floats are written as ``repr`` (shortest exact), integers
-    and booleans as integers, anything else as text (quoted only when it must be). Every
-    comment, header name and text cell is one line (control characters escaped), so no
-    value can add a line. ``head=False`` gives the rows only: the text of a table written in
-    pieces is the ``head=True`` text of its first rows followed by the others'."""
+def format_table(columns: Mapping[str, Sequence], *, units_comment: bool = False,
+                 units: Mapping[str, str] | None = FILE_UNITS, comments: Sequence[str] = (),
+                 head: bool = True) -> str:
+    """CSV text of named columns (all the same length): a header, then rows; with
+    ``units_comment``, first a ``# units:`` line (of ``units``) and the ``comments``.
+
+    Without ``units_comment`` (the default) the text is a plain CSV that ``pandas.read_csv``
+    and ``csv.DictReader`` read with their default arguments into the named columns (a
+    leading comment line would become their header); the units are those of the
+    documentation (mm, degrees; ``docs/file-formats.md``). Floats are written as ``repr``
+    (shortest exact, so reading gives the same doubles), integers and booleans as integers,
+    anything else as text (quoted only when it must be). Every comment, header name and text
+    cell is one line (control characters escaped), so no value can add a line.
+    ``head=False`` gives the rows only: the text of a table written in pieces is the
+    ``head=True`` text of its first rows followed by the others'."""
     names = list(columns)
     if not names:
         raise ValueError("a table needs at least one column")
@@ -401,9 +454,10 @@ def format_table(columns: Mapping[str, Sequence], *, units: Mapping[str, str] | 
         raise ValueError(f"columns have different lengths: {sorted(n_rows)}")
     lines = []
     if head:
-        if units:
-            lines.append("# units: " + ", ".join(f"{q}={u}" for q, u in units.items()))
-        lines.extend(f"# {one_line(c)}" for c in comments)
+        if units_comment:
+            if units:
+                lines.append("# units: " + ", ".join(f"{q}={u}" for q, u in units.items()))
+            lines.extend(f"# {one_line(c)}" for c in comments)
         lines.append(",".join(_text_cell(n) for n in names))
     lines.extend(",".join(row) for row in zip(*cols))
     return "\n".join(lines) + "\n" if lines else ""

@@ -1,18 +1,28 @@
 """The mechanism interface shared by every machine pkmcal calibrates.
 
-A mechanism is an immutable description of a machine: a vector of named kinematic
-parameters ρ, and pure, vectorised functions of N poses:
+A mechanism is an immutable description of a machine (value equality): what it is
+(``kind``), its pose coordinates x, actuators q and named kinematic parameters ρ (with
+units and angle flags), and pure, vectorised functions of N poses in which ρ may be given
+explicitly (``params=``, default the machine's own; the identification engine passes the
+trial ρ and never builds a machine per evaluation):
 
-* ``ik(poses)``                    → actuator readings q (N, l)
-* ``actuator_pose_jacobian(poses)`` → ∂q/∂pose (N, l, n) at fixed ρ
-* ``actuator_param_jacobian(poses)``→ ∂q/∂ρ (N, l, p) at fixed pose
-* ``fk(readings)``                 → poses (N, n), with per-pose convergence and
+* ``ik(poses, params)``                 → actuator readings q (N, l)
+* ``ik_and_jacobians(poses, params)``   → (q, A = ∂q/∂x (N, l, n), B = ∂q/∂ρ (N, l, p))
+* ``frame(poses, params)``              → the platform frame (p, R) of each pose
+  (:class:`~pkmcal.mechanisms.frame.Frame`), the only thing a sensor sees
+* ``frame_jacobians(poses, params)``    → (T = ∂twist/∂x (N, 6, n), T_ρ = ∂twist/∂ρ (N, 6, p)
+  or None when the frame does not depend on ρ), twist = (δp, δω) as in :mod:`.frame`
+* ``poses_from_frame(frame)``           → the pose coordinates of frames (the inverse map)
+* ``fk(readings, guess, params)``       → poses (N, n), with per-pose convergence and
   same-assembly-mode flags (:class:`FKResult`)
+* ``check_limits(poses)``               → :class:`LimitReport`
 
 This is everything the identification engine needs: every calibration model in pkmcal is
-the closure equation ``q = IK(x, ρ)`` plus a sensor model ``y = h(x, θ)``, with the pose x
-of each measurement as a nuisance unknown. The hexapod (n = l = 6) and the redundantly
-actuated planar machines (l > n) are both implementations of this class.
+the closure equation ``q = IK(x, ρ)`` plus a sensor model ``y = h(frame(x), s)``, with the
+pose x of each measurement as a nuisance unknown; the engine composes the sensor's twist
+Jacobian with T (:meth:`Mechanism.pose_jacobian_from_twist`). Optional features are
+declared in :attr:`Mechanism.abilities`, never probed. The hexapod (n = l = 6) and the
+redundantly actuated planar machines (l > n) implement this class.
 """
 
 from __future__ import annotations
@@ -23,6 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pkmcal.errors import PkmcalError
+from pkmcal.mechanisms.frame import Frame
 
 
 @dataclass(frozen=True)
@@ -111,18 +122,38 @@ class Mechanism(ABC):
     """Abstract parallel mechanism (see module docstring)."""
 
     name: str
+    #: Registry key, written in machine files and shown by ``pkmcal machines`` (``6-UPS``,
+    #: ``planar-2dof-3act``, ...).
+    kind: str = ""
     #: Names of the pose coordinates, e.g. ("x", "y", "z", "a", "b", "c").
     pose_names: tuple[str, ...]
     #: True for pose coordinates that are angles (degrees in files, radians inside).
     pose_is_angle: tuple[bool, ...]
     #: Names of the actuator readings, e.g. ("lambda1", ..., "lambda6").
     actuator_names: tuple[str, ...]
+    #: Optional features, asked as ``"x" in mech.abilities``: ``"leg-lengths"`` (has
+    #: ``leg_lengths``, ``fk_lengths``, ``length_param_jacobian``), ``"drawing"`` (has
+    #: ``draw_segments``), ``"linuxcnc"`` (exportable to a LinuxCNC kinematics module),
+    #: ``"pose-convention"`` (the pose coordinates are the platform frame's x, y, z, a, b, c
+    #: of :mod:`pkmcal.conventions`: ``frame`` is ``Frame.from_poses``), ``"planar"``.
+    abilities: frozenset[str] = frozenset()
+    #: True when the platform frame depends on ρ (a tool offset): then
+    #: :meth:`frame_jacobians` gives T_ρ and the engine adds (∂y/∂twist) · T_ρ to ∂y/∂ρ.
+    frame_depends_on_params: bool = False
+    #: Parameter names or shell patterns held at their values unless freed by name
+    #: (none today; e.g. actuator gains, which only special campaigns can identify).
+    default_fixed: tuple[str, ...] = ()
 
     @property
     def actuator_is_angle(self) -> tuple[bool, ...]:
         """True for actuator readings that are angles (rotary actuators: radians inside,
         degrees in files and on the command line); all False (linear, mm) by default."""
         return (False,) * self.n_actuators
+
+    @property
+    def actuator_units(self) -> tuple[str, ...]:
+        """File unit of each actuator reading: "deg" for angles, else "mm"."""
+        return tuple("deg" if a else "mm" for a in self.actuator_is_angle)
 
     @property
     def n_dof(self) -> int:
@@ -144,13 +175,20 @@ class Mechanism(ABC):
         return (False,) * len(self.param_names)
 
     @property
+    def param_units(self) -> tuple[str, ...]:
+        """File unit of each parameter: "deg" for angles, else "mm" (a dimensionless
+        parameter, e.g. a gain, declares "1")."""
+        return tuple("deg" if a else "mm" for a in self.param_is_angle)
+
+    @property
     @abstractmethod
     def params(self) -> np.ndarray:
         """The kinematic parameter vector ρ (p,) in internal units."""
 
     @abstractmethod
-    def with_params(self, params: np.ndarray, name: str | None = None) -> "Mechanism":
-        """A copy of this machine with the parameter vector replaced."""
+    def with_params(self, params: np.ndarray, name: str | None = None, covariance=None) -> "Mechanism":
+        """A copy of this machine with the parameter vector replaced (and ``name``,
+        ``covariance`` (p, p) of the parameters, default none)."""
 
     @property
     @abstractmethod
@@ -158,38 +196,84 @@ class Mechanism(ABC):
         """The pose (n,) the FK starts from by default."""
 
     @abstractmethod
-    def ik(self, poses: np.ndarray) -> np.ndarray:
-        """Actuator readings q (N, l) of poses (N, n)."""
+    def workspace_box(self) -> np.ndarray:
+        """The box (n, 2) [min, max] of the pose coordinates (internal units) in which
+        planning and ``pkmcal info`` search for poses."""
 
     @abstractmethod
-    def actuator_pose_jacobian(self, poses: np.ndarray) -> np.ndarray:
+    def summary(self) -> str:
+        """A few human-readable lines describing the machine."""
+
+    # -- kinematics, ρ explicit ---------------------------------------------------------
+
+    @abstractmethod
+    def ik(self, poses: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
+        """Actuator readings q (N, l) of poses (N, n), at parameters ``params`` (default
+        :attr:`params`)."""
+
+    @abstractmethod
+    def actuator_pose_jacobian(self, poses: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
         """∂q/∂pose (N, l, n), with respect to the pose coordinates of :attr:`pose_names`."""
 
     @abstractmethod
-    def actuator_param_jacobian(self, poses: np.ndarray) -> np.ndarray:
+    def actuator_param_jacobian(self, poses: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
         """∂q/∂ρ (N, l, p) at fixed pose."""
 
-    def actuator_jacobians(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def actuator_jacobians(self, poses: np.ndarray, params: np.ndarray | None = None
+                           ) -> tuple[np.ndarray, np.ndarray]:
         """``(∂q/∂pose, ∂q/∂ρ)`` together; a mechanism overrides this when one pass over the
         poses computes both more cheaply than two."""
-        return self.actuator_pose_jacobian(poses), self.actuator_param_jacobian(poses)
+        return self.actuator_pose_jacobian(poses, params), self.actuator_param_jacobian(poses, params)
 
-    def ik_and_jacobians(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(q, ∂q/∂pose, ∂q/∂ρ)`` together, for a solver that needs all three at every
-        point; a mechanism overrides this when one pass computes them more cheaply."""
-        return (self.ik(poses), *self.actuator_jacobians(poses))
+    def ik_and_jacobians(self, poses: np.ndarray, params: np.ndarray | None = None
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(q, A = ∂q/∂pose, B = ∂q/∂ρ)`` together, the identification's hot path; a
+        mechanism overrides this when one pass computes them more cheaply."""
+        return (self.ik(poses, params), *self.actuator_jacobians(poses, params))
 
     @abstractmethod
-    def fk(self, readings: np.ndarray, guess: np.ndarray | None = None) -> FKResult:
-        """Poses (N, n) whose IK reproduces ``readings`` (N, l)."""
+    def frame(self, poses: np.ndarray, params: np.ndarray | None = None) -> Frame:
+        """The platform frames (p, R) of poses (N, n) in the base frame."""
 
-    def fk_precise(self, readings: np.ndarray, guess: np.ndarray | None = None) -> FKResult:
+    @abstractmethod
+    def frame_jacobians(self, poses: np.ndarray, params: np.ndarray | None = None
+                        ) -> tuple[np.ndarray, np.ndarray | None]:
+        """``(T, T_ρ)``: T = ∂(δp, δω)/∂pose (N, 6, n) and T_ρ = ∂(δp, δω)/∂ρ (N, 6, p), or
+        None when the frame does not depend on ρ (the twist of :mod:`.frame`)."""
+
+    def pose_jacobian_from_twist(self, J_twist: np.ndarray, poses: np.ndarray,
+                                 params: np.ndarray | None = None) -> np.ndarray:
+        """∂y/∂pose (N, m, n) = J_twist (N, m, 6) · T: a sensor's twist Jacobian pulled back
+        to the pose coordinates. A mechanism overrides this with the product written out
+        (T is sparse: the hexapod's is diag(I, E), a planar machine's a column selection)."""
+        T, _ = self.frame_jacobians(poses, params)
+        return J_twist @ T
+
+    @abstractmethod
+    def poses_from_frame(self, frame: Frame) -> np.ndarray:
+        """The pose coordinates (N, n) of platform frames (the inverse of :meth:`frame` on
+        frames the machine can take)."""
+
+    def fk(self, readings: np.ndarray, guess: np.ndarray | None = None,
+           params: np.ndarray | None = None, **options) -> FKResult:
+        """Poses (N, n) whose IK (at ``params``, default :attr:`params`) reproduces
+        ``readings`` (N, l), from ``guess`` (one pose or one per reading; default home).
+
+        Default: the shared batched Gauss–Newton solver with backtracking, per-pose
+        convergence and branch check (:func:`pkmcal.mechanisms.solver.solve_fk`; its
+        keyword ``options`` tol, max_iter, res_tol)."""
+        from pkmcal.mechanisms.solver import solve_fk
+
+        return solve_fk(self, readings, guess, params, **options)
+
+    def fk_precise(self, readings: np.ndarray, guess: np.ndarray | None = None,
+                   params: np.ndarray | None = None) -> FKResult:
         """FK exact to rounding, not just to the convergence tolerance, for residuals that a
         least-squares solver evaluates at 1e-12 tolerances or differentiates numerically.
         Default :meth:`fk`, for mechanisms whose FK already stops at a rounding-level step."""
-        return self.fk(readings, guess)
+        return self.fk(readings, guess, params=params)
 
-    def assembly_signs(self, poses: np.ndarray) -> np.ndarray:
+    def assembly_signs(self, poses: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
         """Signs (N, k) in {−1, 0, +1} that tell the assembly modes of poses (N, n) apart:
         two poses are on the same branch when every sign agrees (0: singular, undecided).
 
@@ -202,27 +286,30 @@ class Mechanism(ABC):
         if self.n_actuators != self.n_dof:
             return np.zeros((poses.shape[0], 0), dtype=np.int8)
         with np.errstate(invalid="ignore"):
-            A = self.actuator_pose_jacobian(poses)
+            A = self.actuator_pose_jacobian(poses, params)
             good = np.all(np.isfinite(A), axis=(1, 2))
             det = np.zeros(poses.shape[0])
             if np.any(good):
                 det[good] = np.linalg.det(A[good])
         return np.sign(det).astype(np.int8)[:, None]
 
-    def same_branch(self, poses: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    def same_branch(self, poses: np.ndarray, reference: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
         """(N,) True where each of ``poses`` (N, n) is on the assembly mode of its
         ``reference`` (one pose (n,) or one per pose (N, n)): the signs of
         :meth:`assembly_signs` agree wherever both are non-zero."""
         poses = self.as_pose_array(poses)
         ref = self.as_pose_array(reference)
-        s = self.assembly_signs(poses)
-        r = self.assembly_signs(ref)
+        s = self.assembly_signs(poses, params)
+        r = self.assembly_signs(ref, params)
         r = np.broadcast_to(r, s.shape) if r.shape[0] == 1 else r
         return np.all((s == r) | (s == 0) | (r == 0), axis=1)
 
     @abstractmethod
-    def check_limits(self, poses: np.ndarray) -> LimitReport:
-        """Which of the machine's limits each pose violates."""
+    def check_limits(self, poses: np.ndarray, *, margins: bool = True) -> LimitReport:
+        """Which of the machine's limits each pose violates. ``margins=False`` says that the
+        caller reads only the verdicts: a mechanism may then leave
+        :attr:`LimitReport.margins` empty and take a faster path (the hexapod's compiled
+        kernel for small batches)."""
 
     # -- conveniences shared by every mechanism ---------------------------------------
 
@@ -243,6 +330,15 @@ class Mechanism(ABC):
                 )
             out.extend(h for h in hits if h not in out)
         return np.array(out, dtype=int)
+
+    def as_param_vector(self, params: np.ndarray) -> np.ndarray:
+        """``params`` as a float vector (p,) in the order of :attr:`param_names`; a clear
+        error for a vector of another length."""
+        rho = np.asarray(params, dtype=float)
+        if rho.shape != (len(self.param_names),):
+            raise PkmcalError(f"machine '{self.name}' has {len(self.param_names)} parameters; "
+                              f"got an array of shape {rho.shape}")
+        return rho
 
     def as_pose_array(self, poses: np.ndarray) -> np.ndarray:
         """``poses`` as a float array (N, n); a single pose (n,) becomes (1, n)."""

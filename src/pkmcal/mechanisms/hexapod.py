@@ -29,9 +29,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from pkmcal.conventions import POSE_COLUMNS, euler_to_matrix
+from pkmcal.conventions import POSE_COLUMNS, euler_pose_jacobian, euler_rate_matrix, euler_to_matrix, matrix_to_euler
 from pkmcal.errors import PkmcalError
 from pkmcal.mechanisms.base import FKResult, LimitReport, Mechanism
+from pkmcal.mechanisms.frame import Frame
 
 def _kernels():
     """The compiled kernels (:mod:`._hexapod_kernels`), imported on first use: numba takes
@@ -122,9 +123,11 @@ class Hexapod(Mechanism):
     description: str = ""
     metadata: dict = field(default_factory=dict, compare=False)
 
+    kind = "6-UPS"
     pose_names = POSE_COLUMNS
     pose_is_angle = (False, False, False, True, True, True)
     actuator_names = tuple(f"lambda{i + 1}" for i in range(N_LEGS))
+    abilities = frozenset({"leg-lengths", "drawing", "linuxcnc", "pose-convention"})
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -165,8 +168,9 @@ class Hexapod(Mechanism):
     def with_params(self, params: np.ndarray, name: str | None = None, covariance=None) -> "Hexapod":
         """This machine with parameters ρ (42,) (and ``name``, ``covariance``, default none).
 
-        On the identification hot path (one call per residual evaluation), so it does not
-        go through ``dataclasses.replace``: only the changed fields are validated and
+        Cheap (studies and simulations build many machines; the identification passes ρ
+        explicitly instead), so it does not go through ``dataclasses.replace``: only the
+        changed fields are validated and
         frozen; the others (axes, stroke, limits, home, workspace, description, metadata)
         are this machine's already-validated objects, shared. The home pose is kept, not
         recomputed from the new parameters (as with ``replace``, since home is never None
@@ -210,6 +214,33 @@ class Hexapod(Mechanism):
     def home_pose(self) -> np.ndarray:
         return self.home
 
+    def _geometry(self, params) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(b (6, 3), a (6, 3), L0 (6,))`` of parameters ρ (42,), C-contiguous as the
+        compiled kernels take them; this machine's own arrays for ``params=None``."""
+        if params is None:
+            return self.base, self.platform, self.offset
+        rho = self.as_param_vector(params).reshape(N_LEGS, PARAMS_PER_LEG)
+        return (np.ascontiguousarray(rho[:, 0:3]), np.ascontiguousarray(rho[:, 3:6]),
+                np.ascontiguousarray(rho[:, 6]))
+
+    def workspace_box(self) -> np.ndarray:
+        """:attr:`workspace` when given, else home ± (s, s, s/2, s/r, s/r, s/r) with s the
+        mean actuator stroke and r the platform-joint radius (docs/planning.md's default
+        box shape); an error when the machine cannot move (no stroke) or orient (r = 0)."""
+        if self.workspace is not None:
+            return self.workspace.copy()
+        s = float(np.mean(self.stroke[:, 1] - self.stroke[:, 0]))
+        r = self.platform_radius
+        if not s > 0:
+            raise PkmcalError(f"machine '{self.name}': the actuators have no stroke (mean {s:g} mm), so the "
+                              "platform cannot move; check the legs' 'stroke: [min, max]'")
+        if not r > 1e-9 * s:
+            raise PkmcalError(f"machine '{self.name}': every platform joint is at the platform origin (radius "
+                              f"{r:g} mm), so the legs cannot set the platform's orientation; check the legs' "
+                              "'platform:' joints")
+        half = np.array([s, s, s / 2, s / r, s / r, s / r])
+        return np.stack([self.home - half, self.home + half], axis=1)
+
     @property
     def platform_radius(self) -> float:
         """Mean distance of the platform joints from the platform origin (mm)."""
@@ -225,16 +256,18 @@ class Hexapod(Mechanism):
 
     # -- kinematics ---------------------------------------------------------------------
 
-    def leg_vectors(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def leg_vectors(self, poses: np.ndarray, params: np.ndarray | None = None
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(R, Ra, l)``: rotations (N, 3, 3), platform joints in {F} relative to p
         (N, 6, 3) = R a_i, and leg vectors l_i = p + R a_i − b_i (N, 6, 3)."""
         poses = self.as_pose_array(poses)
+        base, platform, _ = self._geometry(params)
         R = euler_to_matrix(poses[:, 3:6])
-        Ra = np.einsum("nrc,ic->nir", R, self.platform)
-        legs = poses[:, None, 0:3] + Ra - self.base[None]
+        Ra = np.einsum("nrc,ic->nir", R, platform)
+        legs = poses[:, None, 0:3] + Ra - base[None]
         return R, Ra, legs
 
-    def leg_lengths(self, poses: np.ndarray) -> np.ndarray:
+    def leg_lengths(self, poses: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
         """Leg lengths L (N, 6) = ‖p + R a_i − b_i‖, mm.
 
         Batches of :data:`COMPILED_FROM` poses or more run the compiled kernel; smaller ones
@@ -245,53 +278,85 @@ class Hexapod(Mechanism):
         """
         poses = self.as_pose_array(poses)
         if poses.shape[0] < COMPILED_FROM:
-            legs = self.leg_vectors(poses)[2]
+            legs = self.leg_vectors(poses, params)[2]
             return np.sqrt(np.einsum("nik,nik->ni", legs, legs))
-        return _kernels().ik_lengths(poses, self.base, self.platform)
+        base, platform, _ = self._geometry(params)
+        return _kernels().ik_lengths(poses, base, platform)
 
-    def ik(self, poses: np.ndarray) -> np.ndarray:
+    def ik(self, poses: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
         """Actuator readings λ = L − L0 (N, 6), mm."""
-        return self.leg_lengths(poses) - self.offset
+        return self.leg_lengths(poses, params) - self._geometry(params)[2]
 
-    def twist_jacobian(self, poses: np.ndarray) -> np.ndarray:
+    def twist_jacobian(self, poses: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
         """∂L/∂(δp, δω) (N, 6, 6): row i = [u_iᵀ, ((R a_i) × u_i)ᵀ] (NumPy; the compiled
         :meth:`actuator_jacobians` is tested against it)."""
-        _, Ra, legs = self.leg_vectors(poses)
+        _, Ra, legs = self.leg_vectors(poses, params)
         u = legs / np.linalg.norm(legs, axis=2, keepdims=True)
         return np.concatenate([u, np.cross(Ra, u)], axis=2)
 
-    def actuator_jacobians(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def actuator_jacobians(self, poses: np.ndarray, params: np.ndarray | None = None
+                           ) -> tuple[np.ndarray, np.ndarray]:
         """``(A, B)`` = (∂λ/∂(x, y, z, a, b, c) (N, 6, 6), ∂λ/∂ρ (N, 6, 42)) in one compiled
         pass: A = twist Jacobian · diag(I, E(a, b, c)), row i of the twist Jacobian
         [u_iᵀ, ((R a_i) × u_i)ᵀ]; B row i non-zero only on leg i's 7 columns,
         [−u_iᵀ, u_iᵀ R, −1]."""
-        return _kernels().actuator_jacobians(self.as_pose_array(poses), self.base, self.platform)
+        base, platform, _ = self._geometry(params)
+        return _kernels().actuator_jacobians(self.as_pose_array(poses), base, platform)
 
-    def ik_and_jacobians(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def ik_and_jacobians(self, poses: np.ndarray, params: np.ndarray | None = None
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(λ, A, B)`` of :meth:`ik` and :meth:`actuator_jacobians` in one compiled pass,
         whatever the batch size (the identification's hot path)."""
-        L, A, B = _kernels().lengths_and_jacobians(self.as_pose_array(poses), self.base, self.platform)
-        return L - self.offset, A, B
+        base, platform, offset = self._geometry(params)
+        L, A, B = _kernels().lengths_and_jacobians(self.as_pose_array(poses), base, platform)
+        return L - offset, A, B
 
-    def actuator_pose_jacobian(self, poses: np.ndarray) -> np.ndarray:
+    def actuator_pose_jacobian(self, poses: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
         """∂λ/∂(x, y, z, a, b, c) (N, 6, 6), see :meth:`actuator_jacobians`."""
-        return self.actuator_jacobians(poses)[0]
+        return self.actuator_jacobians(poses, params)[0]
 
-    def actuator_param_jacobian(self, poses: np.ndarray) -> np.ndarray:
+    def actuator_param_jacobian(self, poses: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
         """∂λ/∂ρ (N, 6, 42), see :meth:`actuator_jacobians`."""
-        return self.actuator_jacobians(poses)[1]
+        return self.actuator_jacobians(poses, params)[1]
 
-    def length_param_jacobian(self, poses: np.ndarray) -> np.ndarray:
+    def length_param_jacobian(self, poses: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
         """∂L/∂ρ (N, 6, 42): as :meth:`actuator_param_jacobian` with the L0 columns zero
         (a leg's length at a given pose does not depend on its offset)."""
-        J = self.actuator_param_jacobian(poses)
+        J = self.actuator_param_jacobian(poses, params)
         J[:, :, PARAMS_PER_LEG - 1 :: PARAMS_PER_LEG] = 0.0
         return J
+
+    # -- the platform frame ----------------------------------------------------------------
+
+    def frame(self, poses: np.ndarray, params: np.ndarray | None = None) -> Frame:
+        """The platform frame of each pose: p = (x, y, z), R = Rz(c) Ry(b) Rx(a) (the pose
+        convention; independent of ρ)."""
+        return Frame.from_poses(self.as_pose_array(poses))
+
+    def frame_jacobians(self, poses: np.ndarray, params: np.ndarray | None = None) -> tuple[np.ndarray, None]:
+        """``(T, None)``: T = ∂(δp, δω)/∂(x, y, z, a, b, c) = diag(I, E(a, b, c)) (N, 6, 6),
+        E = :func:`~pkmcal.conventions.euler_rate_matrix`; the frame does not depend on ρ."""
+        poses = self.as_pose_array(poses)
+        T = np.zeros((poses.shape[0], 6, 6))
+        T[:, 0:3, 0:3] = np.eye(3)
+        T[:, 3:6, 3:6] = euler_rate_matrix(poses[:, 3:6])
+        return T, None
+
+    def pose_jacobian_from_twist(self, J_twist: np.ndarray, poses: np.ndarray,
+                                 params: np.ndarray | None = None) -> np.ndarray:
+        """J_twist · diag(I, E) written out (:func:`~pkmcal.conventions.euler_pose_jacobian`)."""
+        return euler_pose_jacobian(J_twist, self.as_pose_array(poses))
+
+    def poses_from_frame(self, frame: Frame) -> np.ndarray:
+        """(x, y, z, a, b, c) of frames: p and the Euler angles of R
+        (:func:`~pkmcal.conventions.matrix_to_euler`, |b| ≤ 90°)."""
+        return np.concatenate([frame.p, matrix_to_euler(frame.R)], axis=1)
 
     def fk(
         self,
         readings: np.ndarray,
         guess: np.ndarray | None = None,
+        params: np.ndarray | None = None,
         *,
         tol: float = FK_TOL_MM,
         max_iter: int = FK_MAX_ITER,
@@ -302,15 +367,17 @@ class Hexapod(Mechanism):
         ``guess`` is one pose (6,) or one per reading (N, 6); default the home pose.
         """
         readings = np.asarray(readings, dtype=float)
-        return self.fk_lengths(readings + self.offset, guess, tol=tol, max_iter=max_iter, polish=polish)
+        return self.fk_lengths(readings + self._geometry(params)[2], guess, params, tol=tol, max_iter=max_iter,
+                               polish=polish)
 
-    def fk_precise(self, readings: np.ndarray, guess: np.ndarray | None = None) -> FKResult:
+    def fk_precise(self, readings: np.ndarray, guess: np.ndarray | None = None,
+                   params: np.ndarray | None = None) -> FKResult:
         """:meth:`fk` plus one polishing Newton step per converged pose, so that the poses are
         exact to rounding (the identification's FK; see ``_hexapod_kernels.fk_newton``)."""
-        return self.fk(readings, guess, polish=1)
+        return self.fk(readings, guess, params=params, polish=1)
 
-    def fk_lengths(self, lengths, guess=None, *, tol: float = FK_TOL_MM, max_iter: int = FK_MAX_ITER,
-                   polish: int = 0) -> FKResult:
+    def fk_lengths(self, lengths, guess=None, params: np.ndarray | None = None, *, tol: float = FK_TOL_MM,
+                   max_iter: int = FK_MAX_ITER, polish: int = 0) -> FKResult:
         """As :meth:`fk`, from leg lengths L (N, 6) instead of readings.
 
         Branch check (:attr:`FKResult.same_branch`): the returned pose must be on the
@@ -333,46 +400,47 @@ class Hexapod(Mechanism):
         if g.ndim == 1 or g.shape[0] == 1:
             guesses = guesses[:1]  # one guess for all: the kernel broadcasts it
         K = _kernels()
-        poses, conv, iters, res, sign = K.fk_newton_signed(lengths, guesses, self.base, self.platform, tol, max_iter,
-                                                           polish)
-        ref_sign = K.twist_det_signs(guesses, self.base, self.platform)
+        base, platform, _ = self._geometry(params)
+        poses, conv, iters, res, sign = K.fk_newton_signed(lengths, guesses, base, platform, tol, max_iter, polish)
+        ref_sign = K.twist_det_signs(guesses, base, platform)
         ref_sign = np.broadcast_to(ref_sign, conv.shape) if ref_sign.shape[0] == 1 else ref_sign
         same = (sign == ref_sign) | (sign == 0) | (ref_sign == 0)
         retry = np.flatnonzero(conv & ~same)
         if retry.size:
             gr = np.ascontiguousarray(guesses[retry] if guesses.shape[0] > 1 else np.repeat(guesses, retry.size, 0))
-            x, ok = self._fk_continuation(lengths[retry], gr, tol, max_iter, polish)
-            s_new = K.twist_det_signs(x, self.base, self.platform)
+            x, ok = self._fk_continuation(lengths[retry], gr, tol, max_iter, polish, params)
+            s_new = K.twist_det_signs(x, base, platform)
             r_ref = ref_sign[retry]
             better = ok & ((s_new == r_ref) | (s_new == 0) | (r_ref == 0))
             take = retry[better]
             if take.size:
                 poses[take] = x[better]
                 same[take] = True
-                res[take] = np.max(np.abs(self.leg_lengths(x[better]) - lengths[take]), axis=1)
+                res[take] = np.max(np.abs(self.leg_lengths(x[better], params) - lengths[take]), axis=1)
         return FKResult(poses=poses, converged=conv, iterations=iters, residual=res, same_branch=same)
 
-    def _fk_continuation(self, lengths, guesses, tol, max_iter, polish) -> tuple[np.ndarray, np.ndarray]:
+    def _fk_continuation(self, lengths, guesses, tol, max_iter, polish, params=None) -> tuple[np.ndarray, np.ndarray]:
         """Poses (M, 6) and converged (M,) of FK by continuation from ``guesses`` (M, 6): leg
         lengths L(guess) + t (L − L(guess)), t = 1/K, 2/K, …, 1, each solved by Newton from
         the previous step's pose (see :meth:`fk_lengths`)."""
         K = _kernels()
-        start = self.leg_lengths(guesses)
+        base, platform, _ = self._geometry(params)
+        start = self.leg_lengths(guesses, params)
         x = np.array(guesses, dtype=float)
         ok = np.ones(len(x), dtype=bool)
         for t in np.arange(1, FK_CONTINUATION_STEPS + 1) / FK_CONTINUATION_STEPS:
             target = np.ascontiguousarray(start + t * (lengths - start))
-            x, conv, _, _ = K.fk_newton(target, x, self.base, self.platform, tol, max_iter,
-                                        polish if t == 1.0 else 0)
+            x, conv, _, _ = K.fk_newton(target, x, base, platform, tol, max_iter, polish if t == 1.0 else 0)
             ok &= conv
         return x, ok
 
-    def assembly_signs(self, poses: np.ndarray) -> np.ndarray:
+    def assembly_signs(self, poses: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
         """sign det J (N, 1) of the twist Jacobian ∂L/∂(δp, δω) (module docstring), compiled;
         it changes sign only through a singularity, so two poses with different signs are on
         different assembly modes. 0 where singular to working precision."""
         poses = self.as_pose_array(poses)
-        return _kernels().twist_det_signs(poses, self.base, self.platform)[:, None]
+        base, platform, _ = self._geometry(params)
+        return _kernels().twist_det_signs(poses, base, platform)[:, None]
 
     # -- limits -------------------------------------------------------------------------
 
@@ -394,12 +462,15 @@ class Hexapod(Mechanism):
         margin within :data:`EXACT_VERDICT_TOL` of zero (or NaN), or an undecided
         certificate, is recomputed by the NumPy formulas (:meth:`_limit_margins_numpy`), so
         the verdicts are exactly theirs whatever the rounding (the kernel agrees with them
-        to ~1e-13, tested); smaller batches use the NumPy formulas directly.
+        to ~1e-13, tested); smaller batches use the NumPy formulas directly, except without
+        ``margins``: the verdicts-only callers (candidates, simulation, verification) run
+        where the compiled FK is loaded anyway, and the kernel checked the 15–20 poses of a
+        study trial in about half the NumPy time (2026-11-23).
         """
         poses = self.as_pose_array(poses)
         finite = np.all(np.isfinite(poses), axis=1)
         safe = np.where(finite[:, None], poses, self.home)
-        if len(poses) < LIMITS_COMPILED_FROM:
+        if len(poses) < LIMITS_COMPILED_FROM and margins:
             result = self._limit_margins_numpy(safe, margin)
         else:
             result = self._limit_margins_compiled(safe, finite, margin, margins)
@@ -479,15 +550,13 @@ class Hexapod(Mechanism):
 
     def _leg_pairs(self) -> np.ndarray:
         """Leg pairs (i, j) whose segments can collide: pairs sharing a joint centre
-        (3-6 designs) meet by construction and are left out."""
-        pairs = []
-        for i in range(N_LEGS):
-            for j in range(i + 1, N_LEGS):
-                shared = (np.linalg.norm(self.base[i] - self.base[j]) < 1e-6
-                          or np.linalg.norm(self.platform[i] - self.platform[j]) < 1e-6)
-                if not shared:
-                    pairs.append((i, j))
-        return np.array(pairs, dtype=int).reshape(-1, 2)
+        (3-6 designs) meet by construction and are left out. In (i, j) order, i < j; one
+        vectorised pass (every limit check asks: the 30 scalar norms of a loop took ~0.15 ms,
+        a tenth of a study trial's limit checks, 2026-11-23)."""
+        i, j = np.triu_indices(N_LEGS, 1)
+        shared = ((np.linalg.norm(self.base[i] - self.base[j], axis=1) < 1e-6)
+                  | (np.linalg.norm(self.platform[i] - self.platform[j], axis=1) < 1e-6))
+        return np.stack([i[~shared], j[~shared]], axis=1).astype(int).reshape(-1, 2)
 
     def _min_leg_distance(self, tops: np.ndarray) -> np.ndarray:
         """Minimum distance (N,) between the leg segments b_i → top_i over leg pairs."""

@@ -50,10 +50,9 @@ from typing import ClassVar
 import numpy as np
 
 from pkmcal.errors import PkmcalError
-from pkmcal.mechanisms.base import FKResult, LimitReport, Mechanism
-
-FK_TOL = 1e-11
-FK_MAX_ITER = 40
+from pkmcal.mechanisms.base import LimitReport, Mechanism
+from pkmcal.mechanisms.frame import Frame
+from pkmcal.mechanisms.solver import FK_MAX_ITER, FK_TOL  # noqa: F401  (their FK: the shared solver)
 
 
 def _e(t):
@@ -70,8 +69,9 @@ def _frozen(a, shape=None) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class PlanarMechanism(Mechanism):
-    """Common machinery of the planar machines: a named parameter vector, generic FK
-    (Gauss–Newton least squares over all l actuators, batched over poses), workspace box."""
+    """Common machinery of the planar machines: a named parameter vector, the platform frame
+    in the plane z = 0, workspace box; FK is the shared solver (:mod:`.solver`: Gauss–Newton
+    least squares over all l actuators, batched over poses)."""
 
     name: str
     rho: np.ndarray
@@ -82,6 +82,8 @@ class PlanarMechanism(Mechanism):
     #: Free-form information kept in the machine file (e.g. the ``calibration`` block).
     metadata: dict = field(default_factory=dict)
 
+    #: A platform frame in the plane z = 0 turning about z only (what the planar-tool sensor reads).
+    abilities: ClassVar[frozenset[str]] = frozenset({"planar"})
     #: Parameter names, in the order of ``rho`` (set by each machine class).
     _names: ClassVar[tuple[str, ...]] = ()
     #: Parameters that are link lengths: a machine is impossible unless they are positive.
@@ -141,54 +143,51 @@ class PlanarMechanism(Mechanism):
                 return name, f"{self.p(name)!r} mm is not a link length: give a positive length (mm)"
         return None
 
-    def fk(self, readings: np.ndarray, guess: np.ndarray | None = None, *, tol: float = FK_TOL,
-           max_iter: int = FK_MAX_ITER, res_tol: float = 1e-3) -> FKResult:
-        """Poses minimising ‖q − IK(x)‖ over all l actuators (Gauss–Newton, batched).
+    def workspace_box(self) -> np.ndarray:
+        """The workspace box (n, 2) of the machine file (mm, rad)."""
+        return self.workspace.copy()
 
-        With l > n the readings of a real machine are not exactly consistent; ``converged``
-        is then True where the Gauss–Newton step has vanished and the remaining
-        max |q − IK(x)| (``residual``) is below ``res_tol`` (mm or rad). Steps are
-        backtracked so that ‖q − IK(x)‖ never grows; IK is NaN outside a chain's reach.
-        ``same_branch``: the pose is on the guess's assembly mode (:meth:`assembly_signs`)."""
-        q = np.atleast_2d(np.asarray(readings, dtype=float))
-        if q.ndim != 2 or q.shape[1] != self.n_actuators:
-            raise PkmcalError(f"machine '{self.name}' needs {self.n_actuators} actuator readings per pose; "
-                              f"got an array of shape {q.shape}")
-        g = self.home if guess is None else np.asarray(guess, dtype=float)
-        x = np.array(np.broadcast_to(g, (q.shape[0], self.n_dof)), dtype=float)
-        it = np.zeros(q.shape[0], dtype=int)
-        done = np.zeros(q.shape[0], dtype=bool)
-        steps = 0.5 ** np.arange(12)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            r = q - self.ik(x)
-            f = np.where(np.all(np.isfinite(r), axis=1), np.sum(r**2, axis=1), np.inf)
-            for _ in range(max_iter):
-                G = self.actuator_pose_jacobian(x)
-                dx = np.linalg.solve(np.swapaxes(G, 1, 2) @ G + 1e-12 * np.eye(self.n_dof),
-                                     np.swapaxes(G, 1, 2) @ np.nan_to_num(r)[..., None])[..., 0]
-                dx = np.where(np.isfinite(dx) & ~done[:, None], dx, 0.0)
-                # backtracking line search on ||q - IK(x)||² (IK is NaN outside the reach)
-                xc = x[None] + steps[:, None, None] * dx[None]
-                rc = q[None] - self.ik(xc.reshape(-1, self.n_dof)).reshape(len(steps), *q.shape)
-                fc = np.where(np.all(np.isfinite(rc), axis=2), np.sum(rc**2, axis=2), np.inf)
-                ok = fc <= f[None] * (1.0 + 1e-12) + 1e-300
-                k = np.argmax(ok, axis=0)
-                any_ok = ok.any(axis=0)
-                sel = np.arange(q.shape[0])
-                take = any_ok & ~done
-                x = np.where(take[:, None], xc[k, sel], x)
-                r = np.where(take[:, None], rc[k, sel], r)
-                f = np.where(take, fc[k, sel], f)
-                it += ~done
-                small = np.max(np.abs(dx), axis=1) <= tol * (1.0 + np.max(np.abs(x), axis=1))
-                done |= small | ~any_ok
-                if done.all():
-                    break
-        with np.errstate(invalid="ignore"):
-            res = np.max(np.abs(q - self.ik(x)), axis=1)
-        ok = done & np.isfinite(res) & (res <= res_tol)
-        return FKResult(poses=x, converged=ok, iterations=it, residual=res,
-                        same_branch=self.same_branch(x, np.broadcast_to(g, x.shape)))
+    def _rho(self, params) -> np.ndarray:
+        """ρ (p,): this machine's for ``params=None``."""
+        return self.rho if params is None else self.as_param_vector(params)
+
+    # -- the platform frame: p = (x, y, 0), R = Rz(φ) (R = I for the translating plate) ---
+
+    #: Twist rows (δp_x, δp_y, δω_z) = (0, 1, 5) that the pose coordinates move, in order.
+    _TWIST_ROWS: ClassVar[tuple[int, ...]] = (0, 1)
+
+    def frame(self, poses: np.ndarray, params: np.ndarray | None = None) -> Frame:
+        """The plate frame: p = (x, y, 0), R = Rz(φ), or I for a translating plate."""
+        x = self.as_pose_array(poses)
+        p = np.zeros((x.shape[0], 3))
+        p[:, 0:2] = x[:, 0:2]
+        R = np.zeros((x.shape[0], 3, 3))
+        if self.n_dof == 3:
+            c, s = np.cos(x[:, 2]), np.sin(x[:, 2])
+            R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1] = c, -s, s, c
+            R[:, 2, 2] = 1.0
+        else:
+            R[:] = np.eye(3)
+        return Frame(p=p, R=R)
+
+    def frame_jacobians(self, poses: np.ndarray, params: np.ndarray | None = None) -> tuple[np.ndarray, None]:
+        """``(T, None)``: T (N, 6, n) selects the twist rows δp_x, δp_y (and δω_z = δφ); the
+        frame does not depend on ρ."""
+        x = self.as_pose_array(poses)
+        T = np.zeros((x.shape[0], 6, self.n_dof))
+        T[:, list(self._TWIST_ROWS), np.arange(self.n_dof)] = 1.0
+        return T, None
+
+    def pose_jacobian_from_twist(self, J_twist: np.ndarray, poses: np.ndarray,
+                                 params: np.ndarray | None = None) -> np.ndarray:
+        """J_twist · T: the columns δp_x, δp_y (and δω_z) of the twist Jacobian."""
+        return J_twist[..., list(self._TWIST_ROWS)]
+
+    def poses_from_frame(self, frame: Frame) -> np.ndarray:
+        """(x, y) or (x, y, φ = atan2(R₁₀, R₀₀)) of plate frames."""
+        if self.n_dof == 2:
+            return frame.p[:, 0:2].copy()
+        return np.concatenate([frame.p[:, 0:2], np.arctan2(frame.R[:, 1, 0], frame.R[:, 0, 0])[:, None]], axis=1)
 
     @property
     def actuator_is_angle(self) -> tuple[bool, ...]:
@@ -247,14 +246,14 @@ class Planar2Dof3Act(PlanarMechanism):
     _lengths: ClassVar[tuple[str, ...]] = ("l11", "l12", "l21", "l22", "l31", "l32")
     min_transmission: float = np.deg2rad(15.0)
 
+    kind = "planar-2dof-3act"
     pose_names = ("x", "y")
     pose_is_angle = (False, False)
     actuator_names = ("q1", "q2", "q3")
     _actuator_unit: ClassVar[str] = "rotary, rad"
 
-
-    def _unpack(self):
-        r = self.rho
+    def _unpack(self, params=None):
+        r = self._rho(params)
         l1 = r[[0, 2, 4]]
         l2 = r[[1, 3, 5]]
         B = r[6:12].reshape(3, 2)
@@ -262,10 +261,10 @@ class Planar2Dof3Act(PlanarMechanism):
         dq = r[15:18]
         return l1, l2, B, D, dq
 
-    def _chains(self, poses):
+    def _chains(self, poses, params=None):
         """Per chain: (w, theta, g, s) with w = C − B, g = C − A, s = l1 gᵀe'(θ)."""
         x = self.as_pose_array(poses)
-        l1, l2, B, D, _ = self._unpack()
+        l1, l2, B, D, _ = self._unpack(params)
         u = _e(P2_BETA)
         C = x[:, None, :] + (D[:, None] * u)[None]
         w = C - B[None]
@@ -281,20 +280,20 @@ class Planar2Dof3Act(PlanarMechanism):
         s = l1 * np.einsum("nik,nik->ni", g, ep)
         return w, theta, g, s, cosg
 
-    def ik(self, poses: np.ndarray) -> np.ndarray:
+    def ik(self, poses: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
         """Encoder readings q_i = θ_i + dq_i (N, 3), rad."""
-        _, theta, _, _, _ = self._chains(poses)
-        return theta + self._unpack()[4]
+        _, theta, _, _, _ = self._chains(poses, params)
+        return theta + self._unpack(params)[4]
 
-    def actuator_pose_jacobian(self, poses: np.ndarray) -> np.ndarray:
+    def actuator_pose_jacobian(self, poses: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
         """Γ = ∂q/∂(x, y) (N, 3, 2) = gᵀ/s."""
-        _, _, g, s, _ = self._chains(poses)
+        _, _, g, s, _ = self._chains(poses, params)
         return g / s[..., None]
 
-    def actuator_param_jacobian(self, poses: np.ndarray) -> np.ndarray:
+    def actuator_param_jacobian(self, poses: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
         """H = ∂q/∂ρ (N, 3, 18) at fixed pose (module docstring)."""
-        _, theta, g, s, _ = self._chains(poses)
-        l1, l2, _, _, _ = self._unpack()
+        _, theta, g, s, _ = self._chains(poses, params)
+        l1, l2, _, _, _ = self._unpack(params)
         N = g.shape[0]
         J = np.zeros((N, 3, len(self._names)))
         i = np.arange(3)
@@ -307,7 +306,7 @@ class Planar2Dof3Act(PlanarMechanism):
         J[:, i, 15 + i] = 1.0
         return J
 
-    def assembly_signs(self, poses: np.ndarray) -> np.ndarray:
+    def assembly_signs(self, poses: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
         """None (N, 0): each chain's working mode (elbow σ_i) is fixed by the IK, so every
         pose whose IK reproduces the readings has it; and three chains determine the
         translating plate uniquely (two circles about A_i − D_i u_i meet in at most two
@@ -315,18 +314,18 @@ class Planar2Dof3Act(PlanarMechanism):
         reproduce the third reading and is reported not converged."""
         return np.zeros((self.as_pose_array(poses).shape[0], 0), dtype=np.int8)
 
-    def check_limits(self, poses: np.ndarray) -> LimitReport:
+    def check_limits(self, poses: np.ndarray, *, margins: bool = True) -> LimitReport:
         """Workspace box, reach of every chain, and transmission angle (angle between the
         proximal and distal link, |sin| ≥ sin(min_transmission), away from singularity)."""
         x = self.as_pose_array(poses)
         _, _, g, s, cosg = self._chains(x)
         l1, l2, _, _, _ = self._unpack()
-        margins = {
+        limit_margins = {
             "workspace": self._workspace_margin(x),
             "reach": np.min(1.0 - np.abs(cosg), axis=1),
             "transmission": np.min(np.abs(s) / (l1 * l2), axis=1) - np.sin(self.min_transmission),
         }
-        return LimitReport(violations={k: ~(m >= 0) for k, m in margins.items()}, margins=margins)
+        return LimitReport(violations={k: ~(m >= 0) for k, m in limit_margins.items()}, margins=limit_margins)
 
 
 #: Paper 3 Table 1 nominal values, mm (l32 and B1, B2.y: see docs/redundant-machines.md).
@@ -372,23 +371,24 @@ class Planar3Dof4Act(PlanarMechanism):
     _lengths: ClassVar[tuple[str, ...]] = ("L3", "rho11", "rho12", "rho21", "rho22")
     min_leg_angle: float = np.deg2rad(15.0)
 
+    kind = "planar-3dof-4act"
     pose_names = ("x", "y", "phi")
     pose_is_angle = (False, False, True)
     actuator_names = ("q1", "q2", "q3", "q4")
     _actuator_unit: ClassVar[str] = "linear, mm"
+    _TWIST_ROWS: ClassVar[tuple[int, ...]] = (0, 1, 5)
 
-
-    def _unpack(self):
-        r = self.rho
+    def _unpack(self, params=None):
+        r = self._rho(params)
         L3, y = r[0], r[1:3]
         alpha = r[3:5]
         rho = r[5:9]
         dq = r[9:13]
         return L3, y, alpha, rho, dq
 
-    def _geometry(self, poses):
+    def _geometry(self, poses, params=None):
         x = self.as_pose_array(poses)
-        L3, yw, alpha, rho, _ = self._unpack()
+        L3, yw, alpha, rho, _ = self._unpack(params)
         ephi = _e(x[:, 2])
         C = np.stack([x[:, :2] - 0.5 * L3 * ephi, x[:, :2] + 0.5 * L3 * ephi], axis=1)    # (N, 2, 2)
         O = np.stack([np.zeros(2), yw], axis=1)                                            # (2 ways, 2)
@@ -402,28 +402,28 @@ class Planar3Dof4Act(PlanarMechanism):
         s = a + _TAU * root
         return x, ephi, d, nrm, a, b, root, s
 
-    def ik(self, poses: np.ndarray) -> np.ndarray:
+    def ik(self, poses: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
         """Encoder readings q = s + dq (N, 4), mm."""
-        *_, s = self._geometry(poses)
-        return s + self._unpack()[4]
+        *_, s = self._geometry(poses, params)
+        return s + self._unpack(params)[4]
 
     def _dsdC(self, d, nrm, b, root):
         """∂s_ij/∂C_i (N, 4, 2) = d_i − τ_j (b/√) n_i."""
         return d[_WAY][None] - (_TAU * b / root)[..., None] * nrm[_WAY][None]
 
-    def actuator_pose_jacobian(self, poses: np.ndarray) -> np.ndarray:
+    def actuator_pose_jacobian(self, poses: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
         """Γ = ∂q/∂(x, y, φ) (N, 4, 3); ∂C_i/∂φ = ∓(L3/2) e'(φ)."""
-        x, ephi, d, nrm, a, b, root, s = self._geometry(poses)
-        L3 = self._unpack()[0]
+        x, ephi, d, nrm, a, b, root, s = self._geometry(poses, params)
+        L3 = self._unpack(params)[0]
         dsdC = self._dsdC(d, nrm, b, root)
         eperp = np.stack([-ephi[:, 1], ephi[:, 0]], axis=-1)
         dCdphi = (0.5 * L3) * _SIDE[None, :, None] * eperp[:, None, :]
         return np.concatenate([dsdC, np.einsum("nik,nik->ni", dsdC, dCdphi)[..., None]], axis=2)
 
-    def actuator_param_jacobian(self, poses: np.ndarray) -> np.ndarray:
+    def actuator_param_jacobian(self, poses: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
         """H = ∂q/∂ρ (N, 4, 13) at fixed pose."""
-        x, ephi, d, nrm, a, b, root, s = self._geometry(poses)
-        L3, yw, alpha, rho, _ = self._unpack()
+        x, ephi, d, nrm, a, b, root, s = self._geometry(poses, params)
+        L3, yw, alpha, rho, _ = self._unpack(params)
         N = x.shape[0]
         J = np.zeros((N, 4, len(self._names)))
         dsdC = self._dsdC(d, nrm, b, root)
@@ -439,25 +439,25 @@ class Planar3Dof4Act(PlanarMechanism):
         J[:, i, 9 + i] = 1.0
         return J
 
-    def assembly_signs(self, poses: np.ndarray) -> np.ndarray:
+    def assembly_signs(self, poses: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
         """sign b_i (N, 2): the side of guide-way i on which the plate joint C_i lies. The IK
         s_ij = a + τ_j √(ρ_ij² − b²) depends on b only through b², so C_i mirrored across its
         way gives the same readings: that is the assembly-mode change this flags."""
-        b = self._geometry(poses)[5]
+        b = self._geometry(poses, params)[5]
         with np.errstate(invalid="ignore"):
             return np.sign(np.nan_to_num(b[:, [0, 2]])).astype(np.int8)
 
-    def check_limits(self, poses: np.ndarray) -> LimitReport:
+    def check_limits(self, poses: np.ndarray, *, margins: bool = True) -> LimitReport:
         """Workspace box, leg reach (|b| < ρ) and leg angle to the way ≥ ``min_leg_angle``
         (a leg parallel to its way is a singularity), slider order on each way."""
         x, ephi, d, nrm, a, b, root, s = self._geometry(poses)
         rho = self._unpack()[3]
-        margins = {
+        limit_margins = {
             "workspace": self._workspace_margin(x),
             "reach": np.min(rho - np.abs(b), axis=1),
             "leg_angle": np.min(np.abs(b) / rho, axis=1) - np.sin(self.min_leg_angle),
         }
-        return LimitReport(violations={k: ~(m >= 0) for k, m in margins.items()}, margins=margins)
+        return LimitReport(violations={k: ~(m >= 0) for k, m in limit_margins.items()}, margins=limit_margins)
 
 
 #: Paper 3 Table 2 nominal L3 and our reconstructed way and leg dimensions, mm / rad.

@@ -130,14 +130,17 @@ class StaticsModel:
         return np.broadcast_to(k, (mechanism.n_actuators,)).copy()
 
 
-def _load_terms(load_point, load, x):
-    """(p_t (N, 2) or None, J_f (N, 2, n) or None, F (2,) or None)."""
+def _load_terms(mechanism, load_point, load, x):
+    """(p_t (N, 2) or None, J_f (N, 2, n) or None, F (2,) or None): the tool point of the
+    frames of x and J_f = ∂p_t/∂twist · T."""
     if load is None:
         return None, None, None
     if load_point is None:
         raise PkmcalError("a load needs the point it acts on (load_point: a planar tool sensor)")
     F = np.asarray(load, dtype=float)
-    return load_point.tool_point(x), load_point.tool_pose_jacobian(x), F
+    frame = mechanism.frame(x)
+    Jf = mechanism.pose_jacobian_from_twist(load_point.tool_frame_jacobian(frame), x)
+    return load_point.tool_point(frame), Jf, F
 
 
 def _balance_and_jacobian(mechanism: Mechanism, commands, stiffness, poses, load, load_point):
@@ -146,7 +149,7 @@ def _balance_and_jacobian(mechanism: Mechanism, commands, stiffness, poses, load
     K = np.broadcast_to(np.asarray(stiffness, dtype=float), (mechanism.n_actuators,))
     G = mechanism.actuator_pose_jacobian(x)
     g = np.einsum("nli,nl->ni", G, K * (mechanism.ik(x) - commands))
-    _, Jf, F = _load_terms(load_point, load, x)
+    _, Jf, F = _load_terms(mechanism, load_point, load, x)
     if F is not None:
         g = g - np.einsum("nki,k->ni", Jf, F)
     return g, G
@@ -162,7 +165,7 @@ def potential_energy(mechanism: Mechanism, commands, stiffness, poses, load=None
     x = mechanism.as_pose_array(poses)
     K = np.broadcast_to(np.asarray(stiffness, dtype=float), (mechanism.n_actuators,))
     U = 0.5 * np.sum(K * (mechanism.ik(x) - commands) ** 2, axis=1)
-    pt, _, F = _load_terms(load_point, load, x)
+    pt, _, F = _load_terms(mechanism, load_point, load, x)
     if F is not None:
         U = U - pt @ F
     return U
@@ -261,8 +264,9 @@ def linear_response(
     K = np.broadcast_to(np.asarray(stiffness, dtype=float), (nominal.n_actuators,))
     G = nominal.actuator_pose_jacobian(x)
     H = nominal.actuator_param_jacobian(x)
-    Jf = nominal_sensor.tool_pose_jacobian(x)
-    Jr = nominal_sensor.param_jacobian(x)
+    frame = nominal.frame(x)
+    Jf = nominal.pose_jacobian_from_twist(nominal_sensor.tool_frame_jacobian(frame), x)
+    Jr = nominal_sensor.param_jacobian(frame)
     Hd = H @ np.asarray(delta_rho, dtype=float)
     A = np.einsum("nli,l,nlj->nij", G, K, G)
     b = -np.einsum("nli,l,nl->ni", G, K, Hd)

@@ -47,8 +47,8 @@ def raw_blocks(mechanism: Mechanism, setup: MeasurementSetup, poses: np.ndarray,
     """Whitened residual Jacobians W_j J_j (N, k, P) of all parameters at the nominal machine
     (J_j itself when not ``weighted``), a converged flag (N,) and the parameter names."""
     poses = mechanism.as_pose_array(poses)
-    model = Model(mechanism, setup.sensor, setup.noise, mechanism.ik(poses), setup.sensor.predict(poses),
-                  commanded=poses)
+    model = Model(mechanism, setup.sensor, setup.noise, mechanism.ik(poses),
+                  setup.sensor.predict(mechanism.frame(poses)), commanded=poses)
     ev = make_method(method, model, weighted=weighted).evaluate(model.theta0, jac=True, cov=weighted)
     W = whitening(ev.cov, f"{method} residual") if weighted and method != "projection" else None
     J = ev.J if W is None else W @ ev.J
@@ -98,7 +98,7 @@ def planning_model(mechanism: Mechanism, setup: MeasurementSetup, *, method: str
     J, ok, names = raw_blocks(mechanism, setup, reference, method)
     J = J[ok]
     model = Model(mechanism, setup.sensor, setup.noise, mechanism.ik(reference[:1]),
-                  setup.sensor.predict(reference[:1]))
+                  setup.sensor.predict(mechanism.frame(reference[:1])))
     cand, _ = candidate_parameters(model, free, None)
     rows = J.reshape(-1, J.shape[-1])[:, cand]
     report = analyse_jacobian(rows, tuple(names[i] for i in cand), tuple(mechanism.param_names))

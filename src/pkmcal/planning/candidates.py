@@ -55,6 +55,7 @@ import numpy as np
 from pkmcal.conventions import POSE_COLUMNS, euler_to_matrix
 from pkmcal.errors import InputFileError, PkmcalError
 from pkmcal.mechanisms.base import Mechanism
+from pkmcal.mechanisms.frame import Frame
 from pkmcal.planning.indices import blas_single_threaded
 from pkmcal.sensors.base import MeasurementSetup
 from pkmcal.sensors.indicators import MIN_NORMAL_Z
@@ -134,12 +135,12 @@ def measurability_violations(setup: MeasurementSetup, poses: np.ndarray,
         R = euler_to_matrix(poses[:, 3:6])
         safe = np.where(facing[:, None], poses, np.zeros(6))
         if spec.travel is not None:
-            z = sensor.predict(safe)
+            z = sensor.predict(Frame.from_poses(safe))
             lo, hi = spec.travel
             out["indicator_travel"] = facing & ~np.all((z >= lo) & (z <= hi), axis=1)
         if spec.plate_radius is not None:
             # touch point under indicator k (IndicatorSensor.touch_points, {F}); in {P} minus p, Rᵀ.
-            pts = sensor.touch_points(safe)
+            pts = sensor.touch_points(Frame.from_poses(safe))
             local = np.einsum("nji,nkj->nki", R, pts - poses[:, None, 0:3])
             out["indicator_off_plate"] = facing & np.any(np.linalg.norm(local[..., :2], axis=-1)
                                                          > spec.plate_radius, axis=1)

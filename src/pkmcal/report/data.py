@@ -174,6 +174,55 @@ class Residuals:
             raise PkmcalError(f"report: residual units must be 'mm', 'rad' or '1'; got {sorted(bad)}")
 
 
+@dataclass(frozen=True)
+class OutlierRow:
+    """A pose beyond the outlier threshold (:mod:`pkmcal.identification.robust`): ``pose``
+    its data row of the measurement file (1-based), ``sigma`` its normalised residual
+    √(‖W r‖²/k) in noise σ, ``reading`` its worst residual row and ``reading_sigma`` that
+    row in σ, ``dropped`` whether the fit left it out, ``round`` the fit round (1-based)."""
+
+    pose: int
+    sigma: float
+    reading: str
+    reading_sigma: float
+    dropped: bool
+    round: int
+
+
+@dataclass(frozen=True)
+class Screening:
+    """The outlier screening of the fit: ``threshold`` (σ), ``loss`` and ``f_scale`` (σ) of
+    the fit, ``reject`` the rejection threshold (None: no rejection), ``rounds`` the fits
+    made, ``outliers`` the poses beyond the threshold or rejected, ``max_sigma`` and
+    ``median_sigma`` of the per-pose normalised residuals of the final fit."""
+
+    threshold: float
+    loss: str = "linear"
+    f_scale: float = 1.0
+    reject: float | None = None
+    rounds: int = 1
+    outliers: tuple[OutlierRow, ...] = ()
+    max_sigma: float = float("nan")
+    median_sigma: float = float("nan")
+
+
+@dataclass(frozen=True)
+class PriorRow:
+    """A Gaussian prior of the fit (:mod:`pkmcal.identification.priors`), in ``unit`` (mm, or
+    deg for angle parameters, as in files): ``mean`` ± ``std``, the ``estimate`` and its
+    ``posterior_std`` (NaN when not estimated), ``pull`` (estimate − mean)/std (1), and
+    ``source`` where the prior was written."""
+
+    parameter: str
+    unit: str
+    mean: float
+    std: float
+    estimate: float
+    posterior_std: float
+    pull: float
+    source: str = ""
+
+
 @dataclass(frozen=True, eq=False)
 class HeldOutErrors:
     """Errors at held-out poses (not used for identification), before and after.
@@ -259,7 +308,8 @@ class ReportData:
     ``held_out_poses`` (K, 6) the verification poses, drawn in the pose cloud;
     ``held_out_total`` how many held-out poses were given and ``held_out_dropped``
     (pose number, reason) of those left out of the comparison (pose numbers: 1-based
-    rows of the held-out set), so that the report says why fewer poses were compared.
+    rows of the held-out set), so that the report says why fewer poses were compared;
+    ``screening`` the outlier screening of the fit, ``priors`` its Gaussian priors.
     """
 
     title: str
@@ -279,8 +329,11 @@ class ReportData:
     held_out_poses: np.ndarray | None = None
     held_out_total: int | None = None
     held_out_dropped: tuple[tuple[int, str], ...] = ()
+    screening: Screening | None = None
+    priors: tuple[PriorRow, ...] = ()
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "priors", tuple(self.priors))
         object.__setattr__(self, "held_out_dropped", tuple((int(k), str(w)) for k, w in self.held_out_dropped))
         object.__setattr__(self, "poses", _array(self.poses, "poses", 2))
         if self.held_out_poses is not None:

@@ -14,7 +14,17 @@ import numpy as np
 
 from pkmcal.identification.identifiability import format_direction
 from pkmcal.mechanisms.base import Mechanism
-from pkmcal.report.data import ErrorMap, HeldOutErrors, Identifiability, ParameterTable, ReportData, Residuals
+from pkmcal.report.data import (
+    ErrorMap,
+    HeldOutErrors,
+    Identifiability,
+    OutlierRow,
+    ParameterTable,
+    PriorRow,
+    ReportData,
+    Residuals,
+    Screening,
+)
 from pkmcal.sensors.base import MeasurementSetup, Sensor
 
 
@@ -105,11 +115,33 @@ def _compliance_facts(nominal, result, setup, commanded) -> tuple[tuple[str, str
 
     poses = np.asarray(commanded, dtype=float)
     if result.method != "projection" or not is_redundant(nominal) or poses.ndim != 2 \
-            or len(poses) <= int(np.max(result.used_poses, initial=-1)) or not hasattr(result.sensor, "tool_pose_jacobian"):
+            or len(poses) <= int(np.max(result.used_poses, initial=-1)) or "tool-point" not in result.sensor.abilities:
         return ()
     std = float(np.max(np.asarray(setup.noise.reading_std, dtype=float)))
     text = compliance_warning(nominal, result.mechanism, result.sensor, poses[result.used_poses], result.poses, std)
     return () if text is None else (("warning", text),)
+
+
+def screening_from_result(result) -> Screening | None:
+    """Report view of the fit's outlier screening (None when the fit had no noise model)."""
+    sc = getattr(result, "screening", None)
+    if sc is None:
+        return None
+    rows = tuple(OutlierRow(o.pose, o.sigma, o.reading, o.reading_sigma, o.dropped, o.round) for o in sc.outliers)
+    return Screening(threshold=sc.threshold, loss=sc.loss, f_scale=sc.f_scale, reject=sc.reject, rounds=sc.rounds,
+                     outliers=rows, max_sigma=float(np.max(sc.sigma)) if sc.sigma.size else np.nan,
+                     median_sigma=float(np.median(sc.sigma)) if sc.sigma.size else np.nan)
+
+
+def priors_from_result(result) -> tuple[PriorRow, ...]:
+    """Report view of the fit's Gaussian priors (file units)."""
+    priors = getattr(result, "priors", None)
+    if priors is None or not len(priors):
+        return ()
+    std = dict(zip(result.free, result.std))
+    return tuple(PriorRow(e["parameter"], e["unit"], e["mean"], e["std"], e["estimate"],
+                          np.nan if e["posterior_std"] is None else e["posterior_std"], e["pull"], e["source"])
+                 for e in priors.to_dict(result.estimate, std))
 
 
 def report_data_from_results(
@@ -157,7 +189,7 @@ def report_data_from_results(
              *_compliance_facts(nominal, result, setup, commanded))
     return ReportData(
         title=title or f"pkmcal calibration report: {nominal.name}",
-        machine_summary=nominal.summary() if hasattr(nominal, "summary") else nominal.name,
+        machine_summary=nominal.summary(),
         nominal=nominal,
         identified=result.mechanism if identified is None else identified,
         poses=np.asarray(poses, dtype=float),
@@ -176,4 +208,6 @@ def report_data_from_results(
         setup_summary=setup_summary,
         facts=facts,
         held_out_poses=held_out_poses,
+        screening=screening_from_result(result),
+        priors=priors_from_result(result),
     )

@@ -222,6 +222,52 @@ def _parameter_rows(t) -> tuple[list[str], list[list[str]]]:
     return header, rows
 
 
+def _outlier_section(data: ReportData) -> str:
+    """The Outliers section: threshold, loss, rejection and one row per flagged pose."""
+    sc = data.screening
+    out = ['<h2 id="outliers">Outliers</h2>']
+    if sc is None:
+        out.append("<p>No noise model to normalise the residuals with: no outlier screening.</p>")
+        return "\n".join(out)
+    text = (f"Normalised residual of each pose: √(‖W r‖²/k) over its k residual rows, whitened with the noise "
+            f"model (1 on average for a pose as noisy as the setup says); median {_fmt(sc.median_sigma, '.3g')}, "
+            f"max {_fmt(sc.max_sigma, '.3g')}. Threshold {sc.threshold:g} σ. ")
+    if sc.loss != "linear":
+        text += (f"Robust loss {sc.loss} (scipy.optimize.least_squares) with f_scale {sc.f_scale:g} σ: flagged poses "
+                 "are down-weighted, and χ² and the covariance are taken over the poses within the threshold. ")
+    if sc.reject is not None:
+        text += (f"Rejection at {sc.reject:g} σ: {sum(o.dropped for o in sc.outliers)} pose(s) dropped in "
+                 f"{sc.rounds} fit(s), each refit without them. ")
+    out.append(f"<p>{_esc(text)}Pose numbers: data rows of the measurement file, counted from 1.</p>")
+    if not sc.outliers:
+        out.append(f"<p>No pose beyond {sc.threshold:g} σ.</p>")
+        return "\n".join(out)
+    rows = [[str(o.pose), _fmt(o.sigma, ".3g"), _esc(o.reading), _fmt(o.reading_sigma, "+.3g"),
+             "dropped" if o.dropped else ("down-weighted" if sc.loss != "linear" else "kept"), str(o.round)]
+            for o in sc.outliers]
+    out.append(_table(["pose", "σ (pose)", "worst row", "σ (row)", "in the fit", "round"], rows, left=3))
+    if any(not o.dropped for o in sc.outliers) and sc.loss == "linear":
+        out.append('<p class="warn">Poses beyond the threshold are still in the fit and pull the estimate: check '
+                   "them, drop them (identify --reject K) or bound their influence (identify --loss soft_l1).</p>")
+    return "\n".join(out)
+
+
+def _prior_section(data: ReportData) -> str:
+    """The Priors section (only when the fit had Gaussian priors)."""
+    if not data.priors:
+        return ""
+    rows = [[_esc(p.parameter), p.unit, _fmt(p.mean, ".6g"), _fmt(p.std, ".4g"), _fmt(p.estimate, ".6g"),
+             _fmt(p.posterior_std, ".4g"), _fmt(p.pull, "+.2f"), _esc(p.source)] for p in data.priors]
+    return "\n".join([
+        '<h2 id="priors">Priors</h2>',
+        "<p>Gaussian priors (maximum a posteriori): each adds the residual row (θ − μ)/σ to the fit, and the "
+        "standard deviations of this report are the posterior ones, (JᵀWJ + P)⁻¹. A parameter whose "
+        "posterior σ is close to its prior σ is determined by the prior, not by the measurements; "
+        "pull = (estimate − mean)/σ.</p>",
+        _table(["parameter", "unit", "prior mean", "prior σ", "estimate", "posterior σ", "pull", "source"], rows,
+               left=2)])
+
+
 def render_html(data: ReportData, figs: list[F.RenderedFigure]) -> str:
     """The report page (a string) for ``data`` with the rendered figures ``figs``."""
     by_name = {f.name: f for f in figs}
@@ -233,7 +279,9 @@ def render_html(data: ReportData, figs: list[F.RenderedFigure]) -> str:
         f"<title>{_esc(data.title)}</title>\n<style>{CSS}</style>\n</head>\n<body>")
     add(f"<h1>{_esc(data.title)}</h1>")
     add('<nav><a href="#machine">Machine</a><a href="#plan">Pose plan</a><a href="#identifiability">'
-        'Identifiability</a><a href="#parameters">Parameters</a><a href="#residuals">Residuals</a>'
+        'Identifiability</a><a href="#parameters">Parameters</a>'
+        + ('<a href="#priors">Priors</a>' if data.priors else '')
+        + '<a href="#residuals">Residuals</a><a href="#outliers">Outliers</a>'
         '<a href="#verification">Verification</a></nav>')
     if data.held_out is not None and data.held_out.n_poses:
         headline, held_rows = _held_out_rows(data)
@@ -295,6 +343,8 @@ def render_html(data: ReportData, figs: list[F.RenderedFigure]) -> str:
             add("<h3>Strongest correlations</h3>")
             add(_table(["parameter", "parameter", "correlation"], strong, left=2))
 
+    add(_prior_section(data))
+
     # -- residuals ---------------------------------------------------------------------
     r = data.residuals
     add('<h2 id="residuals">Residuals</h2>')
@@ -315,6 +365,7 @@ def render_html(data: ReportData, figs: list[F.RenderedFigure]) -> str:
             "(pose numbers: data rows of the measurement file, counted from 1).</p>")
     add(fig("residuals-per-pose"))
     add(fig("residuals-per-reading"))
+    add(_outlier_section(data))
 
     # -- verification ------------------------------------------------------------------
     add('<h2 id="verification">Verification on held-out poses</h2>')

@@ -112,7 +112,7 @@ class KnownStiffnessModel:
 
     def residual(self, x) -> np.ndarray:
         _, mech, sensor, xe = self.state(x)
-        r = np.concatenate([self.y - sensor.predict(xe), self.q - mech.ik(xe)], axis=1)
+        r = np.concatenate([self.y - sensor.predict(mech.frame(xe)), self.q - mech.ik(xe)], axis=1)
         return (r * self.w).ravel()
 
     def jacobian(self, x) -> np.ndarray:
@@ -134,8 +134,9 @@ class KnownStiffnessModel:
             Gt[:, :, j] = (self._g(tp, xe) - self._g(tm, xe)) / (2.0 * h)
         dx = -np.linalg.solve(Gx, Gt)                                   # (N, n, k)
         p = len(self.mech0.params)
-        Hx = sensor.pose_jacobian(xe)
-        Hs = sensor.param_jacobian(xe)
+        frame = mech.frame(xe)
+        Hx = mech.pose_jacobian_from_twist(sensor.frame_jacobian(frame), xe)
+        Hs = sensor.param_jacobian(frame)
         G = mech.actuator_pose_jacobian(xe)
         Hr = mech.actuator_param_jacobian(xe)
         Jy = Hx @ dx

@@ -103,7 +103,7 @@ def table7_evidence(tol: float = 0.0015) -> tuple[tuple[str, ...], ...]:
 
 def _fk_readings(machine, sensor, q, cmd):
     fk = machine.fk(q, guess=cmd)
-    return sensor.predict(fk.poses), fk.converged
+    return sensor.predict(machine.frame(fk.poses)), fk.converged
 
 
 def _metrics(nominal, real, sensor, sim, fitted, verify_poses) -> dict[str, float]:
@@ -114,9 +114,9 @@ def _metrics(nominal, real, sensor, sim, fitted, verify_poses) -> dict[str, floa
     ss0, ss1 = np.sum((y[ok] - y0[ok]) ** 2), np.sum((y[ok] - y1[ok]) ** 2)
     pb, pa = pose_errors(nominal, real, verify_poses, IGNORE), pose_errors(fitted, real, verify_poses, IGNORE)
     m = pb.valid & pa.valid
-    hc = sensor.predict(verify_poses[m])
-    db = np.mean(np.abs(sensor.predict(pb.reached[m]) - hc))
-    da = np.mean(np.abs(sensor.predict(pa.reached[m]) - hc))
+    hc = sensor.predict(real.frame(verify_poses[m]))
+    db = np.mean(np.abs(sensor.predict(real.frame(pb.reached[m])) - hc))
+    da = np.mean(np.abs(sensor.predict(real.frame(pa.reached[m])) - hc))
     out = {"E_E": 100 * (1 - ss1 / ss0), "D_E": 100 * (1 - da / db)}
     for tag, pe in (("b", pb), ("a", pa)):
         d = np.abs(pe.reached[m] - verify_poses[m])

@@ -79,12 +79,12 @@ def _measures(fit, real, sensor, heldout):
     pe = pose_errors(fit.mechanism, real, heldout, IGNORE)
     ok = pe.valid
     level = sensor.with_params(np.r_[sensor.zero, np.zeros(6)])
-    target = level.predict(heldout[ok])
+    target = level.predict(real.frame(heldout[ok]))
     out = {
         "rms": fit.rms_residual,
         "param": float(np.mean(np.abs(fit.estimate[:len(real.params)] - real.params))),
-        "base": float(np.mean(np.abs(level.predict(pe.reached[ok]) - target))),
-        "plate": float(np.mean(np.abs(sensor.predict(pe.reached[ok]) - target))),
+        "base": float(np.mean(np.abs(level.predict(real.frame(pe.reached[ok])) - target))),
+        "plate": float(np.mean(np.abs(sensor.predict(real.frame(pe.reached[ok])) - target))),
         "plate_xyz": float("nan"), "plate_abc": float("nan"), "sd_xyz": float("nan"), "sd_abc": float("nan"),
     }
     if "plate.x" in fit.free:

@@ -11,7 +11,7 @@ sensor reads in its world frame {W}, in which {F} sits at (p_w, R_w) (params
     ∂y_pos/∂p_w = I,     ∂y_pos/∂(world abc) = −[R_w v]× E(world abc)
 
 (δω a small base-frame rotation of the platform, E = :func:`~pkmcal.conventions.euler_rate_matrix`).
-:class:`PointChain` computes these once per pose batch for both sensors.
+:class:`PointChain` computes these for a batch of frames for both sensors.
 """
 
 from __future__ import annotations
@@ -19,7 +19,8 @@ from __future__ import annotations
 import numpy as np
 
 from pkmcal.conventions import POSE_COLUMNS, euler_rate_matrix, euler_to_matrix
-from pkmcal.sensors._common import as_poses, skew
+from pkmcal.mechanisms.frame import Frame
+from pkmcal.sensors._common import skew
 from pkmcal.sensors.base import ParamGroup
 
 #: Angle flags of a transform (x, y, z, a, b, c): the last three are angles.
@@ -31,11 +32,10 @@ WORLD_GROUP = ParamGroup("world", WORLD_PARAM_NAMES, TRANSFORM_IS_ANGLE)
 
 class PointChain:
     """y_pos = p_w + R_w (p + R t) and its derivatives (module docstring) for one sensor's
-    ``world`` (6,) and point ``t`` (3,). The frames of the last pose batch are kept, since a
-    fit asks for the readings, ∂y/∂x and ∂y/∂θ at the same poses; a sensor may store more
-    quantities of that batch in the same dict (see :meth:`frames`)."""
+    ``world`` (6,) and point ``t`` (3,); :meth:`at` computes the quantities of one batch of
+    frames, which the caller passes to the other methods (no state is kept between calls)."""
 
-    __slots__ = ("world", "point", "Rw", "Ew", "who", "_last")
+    __slots__ = ("world", "point", "Rw", "Ew", "who")
 
     def __init__(self, world: np.ndarray, point: np.ndarray, who: str) -> None:
         self.world = world
@@ -43,22 +43,12 @@ class PointChain:
         self.who = who
         self.Rw = euler_to_matrix(world[3:6])      # R_w and E(world abc): once per sensor,
         self.Ew = euler_rate_matrix(world[3:6])    # not per pose batch
-        self._last: tuple[bytes, dict] | None = None
 
-    def frames(self, poses) -> dict:
-        """The batch dict: ``poses`` (N, 6, a private copy), ``R`` (N, 3, 3), ``Rt`` = R t and
-        ``v`` = p + R t (N, 3); the same dict again for the same poses."""
-        poses = as_poses(poses, self.who)
-        key = poses.tobytes()
-        last = self._last
-        if last is not None and last[0] == key:
-            return last[1]
-        poses = poses.copy()                                         # the cache owns its poses
-        R = euler_to_matrix(poses[:, 3:6])
+    def at(self, frame: Frame) -> dict:
+        """The batch dict of ``frame``: ``R`` (N, 3, 3), ``Rt`` = R t and ``v`` = p + R t (N, 3)."""
+        R = frame.R
         Rt = R @ self.point
-        fr = {"poses": poses, "R": R, "Rt": Rt, "v": poses[:, 0:3] + Rt}
-        self._last = (key, fr)
-        return fr
+        return {"R": R, "Rt": Rt, "v": frame.p + Rt}
 
     def RwR(self, fr: dict) -> np.ndarray:
         """R_w R (N, 3, 3) = ∂y_pos/∂t (once per batch)."""

@@ -1,11 +1,21 @@
-"""The sensor interface: what an external measuring device reads at a pose.
+"""The sensor interface: what an external measuring device reads of the platform frame.
 
-A sensor model is ``y = h(x, θ)``: the readings y (m,) it gives when the platform frame is
-at pose x (internal units: mm, radians, pose convention of :mod:`pkmcal.conventions`),
-with θ the sensor's own parameters (e.g. an unknown world→base transform, a target offset
-on the platform, indicator zero offsets). Every sensor supplies analytic derivatives
-∂h/∂x (with respect to the pose coordinates x, y, z, a, b, c, like
-:meth:`pkmcal.mechanisms.base.Mechanism.actuator_pose_jacobian`) and ∂h/∂θ.
+A sensor model is ``y = h(F, θ)``: the readings y (m,) it gives when the platform frame is
+F = (p, R) in the base frame (:class:`~pkmcal.mechanisms.frame.Frame`; mm, rotation
+matrices), with θ the sensor's own parameters (e.g. an unknown world→base transform, a
+target offset on the platform, indicator zero offsets). A sensor never sees a machine's
+pose coordinates, so it works with any mechanism whose frame it can read. Every sensor
+supplies analytic derivatives with respect to the frame's twist (δp, δω) (δω a base-frame
+rotation vector, :mod:`pkmcal.mechanisms.frame`), ``frame_jacobian`` (N, m, 6), and with
+respect to θ, ``param_jacobian`` (N, m, s); the engine composes the pose Jacobian
+∂y/∂x = frame_jacobian · T with the mechanism's T = ∂twist/∂x. Parameters θ may be given
+explicitly (``params=``; default the sensor's own), as the engine does.
+
+Declared, not probed: ``readable(frame)`` says which frames the sensor can read and why
+not; ``works_with(mechanism)`` whether it can measure a machine at all; ``invertible``
+whether the readings determine the frame (``invert``: the full-pose sensor of paper 1);
+``abilities`` optional features (``"tool-point"``: a planar tool point with
+``tool_point``/``tool_frame_jacobian``).
 
 The actuators are the machine's own sensor: their readings are ``q = IK(x, ρ)``, with the
 noise given by :class:`NoiseModel`. A :class:`MeasurementSetup` bundles a sensor with the
@@ -30,6 +40,8 @@ import numpy as np
 from pkmcal.sensors._common import check_free, check_params
 
 if TYPE_CHECKING:
+    from pkmcal.mechanisms.base import Mechanism
+    from pkmcal.mechanisms.frame import Frame
     from pkmcal.mechanisms.statics import StaticsModel
 
 
@@ -53,6 +65,10 @@ class Sensor(ABC):
     free: tuple[str, ...] | None
     #: :attr:`default_free` of a sensor whose ``free`` is None.
     free_when_unset: tuple[str, ...] = ()
+    #: True when the readings determine the platform frame (:meth:`invert`).
+    invertible: bool = False
+    #: Optional features, asked as ``"x" in sensor.abilities`` (module docstring).
+    abilities: frozenset[str] = frozenset()
 
     @property
     @abstractmethod
@@ -97,7 +113,7 @@ class Sensor(ABC):
         """Sensor parameters estimated by default (the rest are held at their values)."""
         return self.free_when_unset if self.free is None else self.free
 
-    def with_params(self, params: np.ndarray) -> "Sensor":
+    def with_params(self, params: np.ndarray) -> Sensor:
         """A copy of this sensor with θ replaced."""
         theta = check_params(params, self.param_names, self.kind)
         parts, i = {}, 0
@@ -125,25 +141,57 @@ class Sensor(ABC):
 
     __hash__ = None  # type: ignore[assignment]  # equal by array values: not hashable
 
-    @property
-    def is_identity(self) -> bool:
-        """True when the readings are the pose itself (h(x) = x up to angle wrapping, so
-        ∂h/∂x = I): the identification then skips inverting the sensor."""
+    def _theta(self, params) -> np.ndarray | None:
+        """θ as a float vector (s,), or None for ``params=None`` (the sensor's own)."""
+        if params is None:
+            return None
+        theta = np.asarray(params, dtype=float)
+        if theta.shape != (len(self.param_names),):
+            check_params(theta, self.param_names, self.kind)   # raises with the names
+        return theta
+
+    @abstractmethod
+    def predict(self, frame: Frame, params: np.ndarray | None = None) -> np.ndarray:
+        """Readings y (N, m) of the platform frames, at θ = ``params`` (default own)."""
+
+    @abstractmethod
+    def frame_jacobian(self, frame: Frame, params: np.ndarray | None = None) -> np.ndarray:
+        """∂y/∂(δp, δω) (N, m, 6): the readings' derivative with respect to the frame's twist."""
+
+    @abstractmethod
+    def param_jacobian(self, frame: Frame, params: np.ndarray | None = None) -> np.ndarray:
+        """∂y/∂θ (N, m, s)."""
+
+    def readable(self, frame: Frame) -> tuple[np.ndarray, str]:
+        """``(ok, reason)``: ok (N,) True where the sensor can read the frame; ``reason``
+        why the others cannot (a short phrase). Default: every frame."""
+        return np.ones(len(frame), dtype=bool), ""
+
+    def works_with(self, mechanism: Mechanism) -> str | None:
+        """None when this sensor can measure ``mechanism``, else why not (a sentence).
+
+        Default (the spatial sensors): any machine whose platform frame moves in space, not a
+        planar machine (``"planar"`` in its abilities), whose frame keeps z, roll and pitch
+        fixed: their readings would carry rows that nothing moves; a planar machine is
+        measured by the planar-tool sensor."""
+        if "planar" in mechanism.abilities:
+            return (f"a '{self.kind}' sensor cannot measure machine '{mechanism.name}' ({mechanism.n_dof} pose "
+                    "coordinates, a planar machine); use a 'planar-tool' setup")
+        return None
+
+    def reads_pose(self, params: np.ndarray | None = None) -> bool:
+        """True when, at θ = ``params``, the readings are exactly the frame's x, y, z, a, b, c
+        in the pose convention of :mod:`pkmcal.conventions` (no transform): on a mechanism
+        with the ``"pose-convention"`` ability they are then the pose itself (∂y/∂x = I), which
+        the ik-residual uses as such, bit for bit. Default False."""
         return False
 
-    @abstractmethod
-    def predict(self, poses: np.ndarray) -> np.ndarray:
-        """Readings y (N, m) at poses (N, n); n = 6 for the hexapod, n = the mechanism's
-        pose dimension for planar machines (2 or 3)."""
+    def invert(self, readings: np.ndarray, params: np.ndarray | None = None) -> Frame:
+        """The platform frames whose readings are ``readings`` (N, m); only for
+        :attr:`invertible` sensors."""
+        from pkmcal.errors import PkmcalError
 
-    @abstractmethod
-    def pose_jacobian(self, poses: np.ndarray) -> np.ndarray:
-        """∂y/∂pose (N, m, n): (x, y, z, a, b, c) for the hexapod (n = 6), the mechanism's
-        pose coordinates otherwise."""
-
-    @abstractmethod
-    def param_jacobian(self, poses: np.ndarray) -> np.ndarray:
-        """∂y/∂θ (N, m, s)."""
+        raise PkmcalError(f"the '{self.kind}' sensor's readings do not determine the platform frame")
 
     def reading_residual(self, measured: np.ndarray, predicted: np.ndarray) -> np.ndarray:
         """``measured − predicted`` (N, m); sensors with angle readings wrap them to (−π, π]."""
@@ -191,8 +239,11 @@ class MeasurementSetup:
     """A sensor and the noise of its readings and of the actuators; optionally the physics
     that only a simulation uses (``simulation``: a
     :class:`~pkmcal.mechanisms.statics.StaticsModel`, actuator stiffness and tool load of a
-    redundantly actuated machine; the identifier never reads it)."""
+    redundantly actuated machine; the identifier never reads it); ``priors``: Gaussian
+    priors on parameters (:class:`~pkmcal.identification.priors.Prior`, the setup file's
+    ``prior:``), which the identification adds to its own."""
 
     sensor: Sensor
     noise: NoiseModel
-    simulation: "StaticsModel | None" = None
+    simulation: StaticsModel | None = None
+    priors: tuple = ()

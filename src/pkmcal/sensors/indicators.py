@@ -23,7 +23,7 @@ a' = n'/n'_z and g_k = ∂z_k/∂n' = ((p'_x − x_k)/n'_z, (p'_y − y_k)/n'_z,
     ∂z_k/∂p' = a'ᵀ,     ∂z_k/∂δω' = (n' × g_k)ᵀ,     ∂z_k/∂ζ_k = −1,
 
 and in the base frame (δp' = R_Wᵀ δp, δω' = R_Wᵀ δω) the twist Jacobian rows are
-(R_W a', R_W (n' × g_k)), the Euler pose Jacobian the twist one times diag(I, E(a, b, c)).
+(R_W a', R_W (n' × g_k)) (the twist Jacobian; the engine composes it with the mechanism's T).
 The plate parameters (a plate displacement δp_W and small base-frame rotation δφ about
 p_W, with v = p − p_W):
 
@@ -43,9 +43,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pkmcal.conventions import euler_pose_jacobian, euler_rate_matrix, euler_to_matrix
+from pkmcal.conventions import euler_rate_matrix, euler_to_matrix
 from pkmcal.errors import PkmcalError
-from pkmcal.sensors._common import as_poses
+from pkmcal.mechanisms.frame import Frame, z_axes
 from pkmcal.sensors._frames import TRANSFORM_IS_ANGLE
 from pkmcal.sensors.base import ParamGroup, Sensor
 
@@ -56,17 +56,9 @@ PLATE_PARAM_NAMES = tuple(f"plate.{c}" for c in ("x", "y", "z", "a", "b", "c"))
 MIN_NORMAL_Z = 1e-3
 
 
-def plane_normals(abc: np.ndarray) -> np.ndarray:
-    """n = R e_z (N, 3), the third column of R = Rz(c) Ry(b) Rx(a) (:func:`euler_to_matrix`):
-    (c_c s_b c_a + s_c s_a, s_c s_b c_a − c_c s_a, c_b c_a), without forming R."""
-    c, s = np.cos(abc), np.sin(abc)
-    ca, sa = c[:, 0], s[:, 0]
-    cb_ca, sb_ca = c[:, 1] * ca, s[:, 1] * ca
-    n = np.empty(abc.shape)
-    n[:, 0] = c[:, 2] * sb_ca + s[:, 2] * sa
-    n[:, 1] = s[:, 2] * sb_ca - c[:, 2] * sa
-    n[:, 2] = cb_ca
-    return n
+#: n = R e_z of Euler angles without forming R (the sensor reads :attr:`Frame.z_axis`,
+#: which is this for the frames of poses).
+plane_normals = z_axes
 
 
 @dataclass(frozen=True, eq=False)
@@ -128,40 +120,54 @@ class IndicatorSensor(Sensor):
         """True when the plate frame is the base frame (every plate parameter exactly 0)."""
         return not np.any(self.plate)
 
-    def _in_plate(self, poses):
-        """Poses (N, 6), plate-frame positions p' (N, 3) and normals n' (N, 3) (module
-        docstring); p' = p and n' = n, unchanged bits, for the identity plate."""
-        poses = as_poses(poses, self.kind)
-        n = plane_normals(poses[:, 3:6])
-        if self.plate_is_identity:
-            return poses, poses[:, 0:3], n
-        Rw = euler_to_matrix(self.plate[3:6])
-        return poses, (poses[:, 0:3] - self.plate[0:3]) @ Rw, n @ Rw
+    def _plate(self, params) -> tuple[np.ndarray, np.ndarray]:
+        """(zero offsets ζ (K,), plate pose (6,)) of θ = ``params`` (own for None)."""
+        theta = self._theta(params)
+        if theta is None:
+            return self.zero, self.plate
+        k = self.n_indicators
+        return theta[:k], theta[k:k + 6]
 
-    def _plane(self, poses):
-        """Poses (N, 6), plate-frame p' and n' (N, 3), N_k (N, K): numerators of eq. (6)."""
-        poses, p, n = self._in_plate(poses)
+    def _in_plate(self, frame: Frame, plate: np.ndarray):
+        """Plate-frame positions p' (N, 3) and normals n' (N, 3) of the frames (module
+        docstring); p' = p and n' = n = R e_z, unchanged bits, for the identity plate."""
+        n = frame.z_axis
+        if not np.any(plate):
+            return frame.p, n
+        Rw = euler_to_matrix(plate[3:6])
+        return (frame.p - plate[0:3]) @ Rw, n @ Rw
+
+    def readable(self, frame: Frame) -> tuple[np.ndarray, str]:
+        """Frames whose platform plane is (near) vertical to the plate (|n'_z| <
+        :data:`MIN_NORMAL_Z`) cannot be read."""
+        _, n = self._in_plate(frame, self.plate)
+        return np.abs(n[:, 2]) >= MIN_NORMAL_Z, "indicator plane near vertical"
+
+    def _plane(self, frame: Frame, plate: np.ndarray):
+        """Plate-frame p' and n' (N, 3), N_k (N, K): numerators of eq. (6)."""
+        p, n = self._in_plate(frame, plate)
         bad = np.abs(n[:, 2]) < MIN_NORMAL_Z
         if bad.any():
             k = int(np.argmax(bad))
             tilt = np.rad2deg(np.arccos(np.clip(n[k, 2], -1, 1)))
             raise PkmcalError(
-                f"indicators cannot read pose {k} (x y z a b c = "
-                f"{' '.join(f'{v:.6g}' for v in np.r_[poses[k, :3], np.rad2deg(poses[k, 3:])])} mm/deg): "
+                f"indicators cannot read pose {k} (platform origin x y z = "
+                f"{' '.join(f'{v:.6g}' for v in frame.p[k])} mm): "
                 f"its platform plane is tilted {tilt:.3f}° (near vertical); remove the pose"
             )
         num = (np.einsum("nk,nk->n", n, p) - self.plane_offset)[:, None] - n[:, 0:2] @ self.positions.T
-        return poses, p, n, num
+        return p, n, num
 
-    def predict(self, poses: np.ndarray) -> np.ndarray:
+    def predict(self, frame: Frame, params: np.ndarray | None = None) -> np.ndarray:
         """Readings z_k − ζ_k (N, K), mm: eq. (6)."""
-        _, _, n, num = self._plane(poses)
-        return num / n[:, 2:3] - self.zero
+        zero, plate = self._plate(params)
+        _, n, num = self._plane(frame, plate)
+        return num / n[:, 2:3] - zero
 
-    def touch_points(self, poses: np.ndarray) -> np.ndarray:
+    def touch_points(self, frame: Frame) -> np.ndarray:
         """Where each indicator touches the platform plane (N, K, 3), base frame, mm:
         p_W + R_W (x_k, y_k, z_k + ζ_k)."""
-        z = self.predict(poses) + self.zero
+        z = self.predict(frame) + self.zero
         pts = np.stack([np.broadcast_to(self.positions[:, 0], z.shape),
                         np.broadcast_to(self.positions[:, 1], z.shape), z], axis=-1)
         if self.plate_is_identity:
@@ -182,29 +188,31 @@ class IndicatorSensor(Sensor):
         Jt[..., 5] = nx * gy - ny * gx
         return Jt, np.stack([gx, gy, gz], axis=-1)
 
-    def pose_jacobian(self, poses: np.ndarray) -> np.ndarray:
-        """∂z/∂(x, y, z, a, b, c) (N, K, 6) (module docstring)."""
-        poses, p, n, num = self._plane(poses)
+    def frame_jacobian(self, frame: Frame, params: np.ndarray | None = None) -> np.ndarray:
+        """∂z/∂(δp, δω) (N, K, 6) (module docstring)."""
+        _, plate = self._plate(params)
+        p, n, num = self._plane(frame, plate)
         Jt, _ = self._plate_twist(p, n, num)
-        if not self.plate_is_identity:                                  # rows (R_W a', R_W (n' × g_k))
-            Rw = euler_to_matrix(self.plate[3:6])
+        if np.any(plate):                                               # rows (R_W a', R_W (n' × g_k))
+            Rw = euler_to_matrix(plate[3:6])
             Jt[..., 0:3] = Jt[..., 0:3] @ Rw.T
             Jt[..., 3:6] = Jt[..., 3:6] @ Rw.T
-        return euler_pose_jacobian(Jt, poses)
+        return Jt
 
-    def param_jacobian(self, poses: np.ndarray) -> np.ndarray:
+    def param_jacobian(self, frame: Frame, params: np.ndarray | None = None) -> np.ndarray:
         """∂z/∂θ (N, K, K + 6): −I for the zero offsets, then the plate pose (module docstring)."""
-        poses, p, n, num = self._plane(poses)
+        _, plate = self._plate(params)
+        p, n, num = self._plane(frame, plate)
         k = self.n_indicators
-        J = np.zeros((poses.shape[0], k, k + 6))
+        J = np.zeros((len(frame), k, k + 6))
         J[:, :, :k] = -np.eye(k)
         _, g = self._plate_twist(p, n, num)
-        Rw = euler_to_matrix(self.plate[3:6])
+        Rw = euler_to_matrix(plate[3:6])
         a = (n / n[:, 2:3]) @ Rw.T                                      # R_W a' (N, 3)
         g_base = g @ Rw.T                                               # R_W g_k (N, K, 3)
         n_base = n @ Rw.T                                               # = n (N, 3)
-        v = poses[:, 0:3] - self.plate[0:3]
+        v = frame.p - plate[0:3]
         J[:, :, k:k + 3] = -a[:, None, :]
         dphi = np.cross(a, v)[:, None, :] + np.cross(g_base, n_base[:, None, :])
-        J[:, :, k + 3:k + 6] = dphi @ euler_rate_matrix(self.plate[3:6])
+        J[:, :, k + 3:k + 6] = dphi @ euler_rate_matrix(plate[3:6])
         return J

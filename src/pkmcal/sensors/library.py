@@ -127,15 +127,13 @@ def bind_setup(setup: MeasurementSetup, machine, source: object = "setup") -> Me
     of the wrong length, is a :class:`PkmcalError` naming ``source``."""
     import dataclasses
 
-    planar_machine = machine.n_dof in (2, 3)
     sensor = setup.sensor
-    if isinstance(sensor, PlanarToolSensor) != planar_machine:
-        want = "planar-tool" if planar_machine else "full-pose, position or indicators"
-        raise PkmcalError(f"{source}: a '{sensor.kind}' sensor cannot measure machine '{machine.name}' "
-                          f"({machine.n_dof} pose coordinates); use a '{want}' setup")
-    if isinstance(sensor, PlanarToolSensor) and sensor.n_pose != machine.n_dof:
+    if isinstance(sensor, PlanarToolSensor) and sensor.n_pose != machine.n_dof and "planar" in machine.abilities:
         sensor = dataclasses.replace(sensor, n_pose=machine.n_dof)
         setup = dataclasses.replace(setup, sensor=sensor)
+    why = sensor.works_with(machine)      # declared by the sensor, not probed here
+    if why is not None:
+        raise PkmcalError(f"{source}: {why}")
     a = np.asarray(setup.noise.actuator_std, dtype=float)
     if a.ndim and a.size not in (1, machine.n_actuators):
         raise PkmcalError(f"{source}: {a.size} actuator noise values but machine '{machine.name}' has "

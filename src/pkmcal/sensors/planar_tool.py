@@ -13,7 +13,11 @@ them when the tracker's frame is unknown):
     ∂y/∂(x, y) = R(c_w),   ∂y/∂φ = R(c_w) R'(φ) t,   ∂y/∂t = R(c_w) R(φ),
     ∂y/∂p_w = I,           ∂y/∂c_w = R'(c_w) p_t.
 
-Pose Jacobians are (N, 2, n) with n = 2 or 3, the mechanism's pose dimension.
+The sensor reads the plate frame (p, R) (:class:`~pkmcal.mechanisms.frame.Frame`; p in the
+plane z = 0, R = Rz(φ)): p_t = (p + R (t, 0))_xy, and its twist Jacobian is (I 0 | rows x, y
+of −[R t]×), which the mechanism's T turns into the pose Jacobian above (∂/∂φ = the δω_z
+column). ``n_pose`` (2 or 3) is the pose dimension of the machines it measures
+(:meth:`PlanarToolSensor.works_with`).
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pkmcal.errors import PkmcalError
+from pkmcal.mechanisms.frame import Frame
 from pkmcal.sensors.base import ParamGroup, Sensor
 
 PLANAR_TARGET_NAMES = ("target.x", "target.y")
@@ -61,6 +66,7 @@ class PlanarToolSensor(Sensor):
     free: tuple[str, ...] | None = None
 
     kind = "planar-tool"
+    abilities = frozenset({"tool-point"})
 
     def __post_init__(self) -> None:
         if self.n_pose not in (2, 3):
@@ -83,59 +89,67 @@ class PlanarToolSensor(Sensor):
             p[self.param_names.index(k)] += v
         return self.with_params(p)
 
-    def _poses(self, poses):
-        x = np.atleast_2d(np.asarray(poses, dtype=float))
-        if x.shape[-1] != self.n_pose:
-            raise PkmcalError(f"planar tool sensor expects poses with {self.n_pose} coordinates; got shape {x.shape}")
-        return x
+    def works_with(self, mechanism) -> str | None:
+        """A planar machine (``"planar"`` in its abilities) with ``n_pose`` pose coordinates."""
+        if "planar" not in mechanism.abilities:
+            return (f"a 'planar-tool' sensor cannot measure machine '{mechanism.name}' ({mechanism.n_dof} pose "
+                    "coordinates, not a planar machine); use a 'full-pose', 'position' or 'indicators' setup")
+        if mechanism.n_dof != self.n_pose:
+            return (f"the planar-tool sensor is set up for {self.n_pose} pose coordinates; machine "
+                    f"'{mechanism.name}' has {mechanism.n_dof}")
+        return None
 
-    def tool_point(self, poses: np.ndarray) -> np.ndarray:
-        """p_t (N, 2) in the machine's base frame (the point a load acts on)."""
-        x = self._poses(poses)
-        if self.n_pose == 2:
-            return x + self.target
-        return x[:, :2] + np.einsum("nij,j->ni", _rot(x[:, 2]), self.target)
+    def _parts(self, params) -> tuple[np.ndarray, np.ndarray]:
+        """(target (2,), world (3,)) of θ = ``params`` (own for None)."""
+        theta = self._theta(params)
+        if theta is None:
+            return self.target, self.world
+        return theta[0:2], theta[2:5]
 
-    def predict(self, poses: np.ndarray) -> np.ndarray:
+    def tool_point(self, frame: Frame, params: np.ndarray | None = None) -> np.ndarray:
+        """p_t (N, 2) in the machine's base frame (the point a load acts on): the x, y of
+        p + R (t, 0)."""
+        target, _ = self._parts(params)
+        return frame.p[:, 0:2] + np.einsum("nij,j->ni", frame.R[:, 0:2, 0:2], target)
+
+    def predict(self, frame: Frame, params: np.ndarray | None = None) -> np.ndarray:
         """Readings y = p_w + R(c_w) p_t (N, 2)."""
-        return self.world[:2] + self.tool_point(poses) @ _rot(self.world[2]).T
+        _, world = self._parts(params)
+        return world[:2] + self.tool_point(frame, params) @ _rot(world[2]).T
 
-    def tool_pose_jacobian(self, poses: np.ndarray) -> np.ndarray:
-        """∂p_t/∂x (N, 2, n) in the base frame (J_f of paper 3 eq. 3)."""
-        x = self._poses(poses)
-        J = np.zeros((x.shape[0], 2, self.n_pose))
-        J[:, :, :2] = np.eye(2)
-        if self.n_pose == 3:
-            J[:, :, 2] = np.einsum("nij,j->ni", _drot(x[:, 2]), self.target)
+    def tool_frame_jacobian(self, frame: Frame, params: np.ndarray | None = None) -> np.ndarray:
+        """∂p_t/∂(δp, δω) (N, 2, 6) in the base frame: (I 0 | rows x, y of −[R t]×); with the
+        mechanism's T it is J_f of paper 3 eq. 3."""
+        target, _ = self._parts(params)
+        Rt = np.einsum("nij,j->ni", frame.R[:, :, 0:2], target)         # R (t, 0), (N, 3)
+        J = np.zeros((len(frame), 2, 6))
+        J[:, 0, 0] = J[:, 1, 1] = 1.0
+        J[:, 0, 4], J[:, 0, 5] = Rt[:, 2], -Rt[:, 1]                    # −[Rt]× rows 0, 1
+        J[:, 1, 3], J[:, 1, 5] = -Rt[:, 2], Rt[:, 0]
         return J
 
-    def pose_jacobian(self, poses: np.ndarray) -> np.ndarray:
-        """∂y/∂x (N, 2, n)."""
-        return np.einsum("ij,njk->nik", _rot(self.world[2]), self.tool_pose_jacobian(poses))
+    def frame_jacobian(self, frame: Frame, params: np.ndarray | None = None) -> np.ndarray:
+        """∂y/∂(δp, δω) (N, 2, 6) = R(c_w) ∂p_t/∂(δp, δω)."""
+        _, world = self._parts(params)
+        return np.einsum("ij,njk->nik", _rot(world[2]), self.tool_frame_jacobian(frame, params))
 
-    def param_jacobian(self, poses: np.ndarray) -> np.ndarray:
+    def param_jacobian(self, frame: Frame, params: np.ndarray | None = None) -> np.ndarray:
         """∂y/∂(target.x, target.y, world.x, world.y, world.c) (N, 2, 5)."""
-        x = self._poses(poses)
-        N = x.shape[0]
-        Rw = _rot(self.world[2])
-        J = np.zeros((N, 2, 5))
-        if self.n_pose == 2:
-            J[:, :, 0:2] = Rw
-        else:
-            J[:, :, 0:2] = np.einsum("ij,njk->nik", Rw, _rot(x[:, 2]))
+        _, world = self._parts(params)
+        Rw = _rot(world[2])
+        J = np.zeros((len(frame), 2, 5))
+        J[:, :, 0:2] = np.einsum("ij,njk->nik", Rw, frame.R[:, 0:2, 0:2])
         J[:, :, 2:4] = np.eye(2)
-        J[:, :, 4] = self.tool_point(x) @ _drot(self.world[2]).T
+        J[:, :, 4] = self.tool_point(frame, params) @ _drot(world[2]).T
         return J
 
-    def poses_for_readings(self, readings: np.ndarray, angles: np.ndarray | None = None) -> np.ndarray:
-        """Poses (N, n) whose reading is ``readings`` (N, 2); for n = 3 the plate angles φ
-        (N,) are given (closed-form inverse of :meth:`predict`)."""
+    def frame_for_readings(self, readings: np.ndarray, R: np.ndarray) -> Frame:
+        """The plate frames with rotations R (N, 3, 3) whose reading is ``readings`` (N, 2)
+        (closed-form inverse of :meth:`predict` at a given plate rotation):
+        p = (R(c_w)ᵀ (y − p_w) − R₂ t, 0)."""
         y = np.atleast_2d(np.asarray(readings, dtype=float))
         p_t = (y - self.world[:2]) @ _rot(self.world[2])          # R(c_w)ᵀ (y − p_w)
-        if self.n_pose == 2:
-            return p_t - self.target
-        if angles is None:
-            raise PkmcalError("poses_for_readings: a 3-d.o.f. planar machine needs the plate angle of each pose")
-        phi = np.broadcast_to(np.asarray(angles, dtype=float), (y.shape[0],))
-        xy = p_t - np.einsum("nij,j->ni", _rot(phi), self.target)
-        return np.concatenate([xy, phi[:, None]], axis=1)
+        R = np.broadcast_to(np.asarray(R, dtype=float), (y.shape[0], 3, 3))
+        p = np.zeros((y.shape[0], 3))
+        p[:, 0:2] = p_t - np.einsum("nij,j->ni", R[:, 0:2, 0:2], self.target)
+        return Frame(p=p, R=np.array(R))

@@ -11,7 +11,7 @@ and held by default):
     ∂y/∂p = R_w,   ∂y/∂δω = −R_w [R t]×,   ∂y/∂t = R_w R,
     ∂y/∂p_w = I,   ∂y/∂(world abc) = −[R_w (p + R t)]× E(world abc)
 
-with the Euler pose Jacobian the twist one times diag(I, E(a, b, c)). This is the chain of
+(the twist Jacobian; the engine composes it with the mechanism's T). This is the chain of
 :mod:`pkmcal.sensors._frames` with the point t = target, the position rows of
 :class:`~pkmcal.sensors.full_pose.FullPoseSensor` whose tool origin is the target.
 """
@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pkmcal.conventions import euler_pose_jacobian
+from pkmcal.mechanisms.frame import Frame
 from pkmcal.sensors._frames import WORLD_GROUP, PointChain
 from pkmcal.sensors.base import ParamGroup, Sensor
 
@@ -60,21 +60,28 @@ class PositionSensor(Sensor):
     def reading_names(self) -> tuple[str, ...]:
         return ("px", "py", "pz")
 
-    def predict(self, poses: np.ndarray) -> np.ndarray:
+    def _chain_of(self, params) -> PointChain:
+        """The chain of θ = ``params`` (this sensor's own for None)."""
+        theta = self._theta(params)
+        return self._chain if theta is None else PointChain(theta[3:9], theta[0:3], self.kind)
+
+    def predict(self, frame: Frame, params: np.ndarray | None = None) -> np.ndarray:
         """Readings (N, 3): the target point in {W}, mm."""
-        return self._chain.position(self._chain.frames(poses))
+        chain = self._chain_of(params)
+        return chain.position(chain.at(frame))
 
-    def pose_jacobian(self, poses: np.ndarray) -> np.ndarray:
-        """∂y/∂(x, y, z, a, b, c) (N, 3, 6)."""
-        fr = self._chain.frames(poses)
-        Jt = np.empty((fr["poses"].shape[0], 3, 6))
-        self._chain.twist_jacobian(fr, Jt)
-        return euler_pose_jacobian(Jt, fr["poses"])
+    def frame_jacobian(self, frame: Frame, params: np.ndarray | None = None) -> np.ndarray:
+        """∂y/∂(δp, δω) (N, 3, 6)."""
+        chain = self._chain_of(params)
+        Jt = np.empty((len(frame), 3, 6))
+        chain.twist_jacobian(chain.at(frame), Jt)
+        return Jt
 
-    def param_jacobian(self, poses: np.ndarray) -> np.ndarray:
+    def param_jacobian(self, frame: Frame, params: np.ndarray | None = None) -> np.ndarray:
         """∂y/∂θ (N, 3, 9), θ = target.x, target.y, target.z, world.x … world.c."""
-        fr = self._chain.frames(poses)
-        J = np.empty((fr["poses"].shape[0], 3, 9))
-        J[:, :, 0:3] = self._chain.RwR(fr)
-        self._chain.world_jacobian(fr, J[:, :, 3:9])
+        chain = self._chain_of(params)
+        fr = chain.at(frame)
+        J = np.empty((len(frame), 3, 9))
+        J[:, :, 0:3] = chain.RwR(fr)
+        chain.world_jacobian(fr, J[:, :, 3:9])
         return J

@@ -40,7 +40,7 @@ import numpy as np
 from pkmcal.errors import PkmcalError
 from pkmcal.identification.engine import IdentificationResult, identify
 from pkmcal.identification.simulation import parameter_errors, simulate_campaign
-from pkmcal.identification.verification import PoseErrors, pose_errors
+from pkmcal.identification.verification import PoseErrors, pose_errors_many
 from pkmcal.planning.candidates import generate_candidates
 from pkmcal.planning.plan import plan_poses
 from pkmcal.planning.selection import select, select_random
@@ -88,6 +88,7 @@ class Context:
     pools: tuple[np.ndarray, ...]
     pool_blocks: tuple[np.ndarray | None, ...]
     heldout: tuple[np.ndarray, ...]
+    error_index: tuple[tuple[np.ndarray, ...], ...] = ()
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -143,16 +144,19 @@ def prepare(study: Study, progress=None) -> Context:
                     campaigns.append(Campaign(len(campaigns), mi, si, pi, ni, n, pool_index, chosen))
                     if progress is not None:
                         progress(len(campaigns))
-    return Context(study, tuple(campaigns), tuple(pools), tuple(blocks), tuple(heldout))
+    error_index = tuple(tuple(m.error_index()) for m in study.machines)
+    return Context(study, tuple(campaigns), tuple(pools), tuple(blocks), tuple(heldout), error_index)
 
 
-def real_machine(spec: MachineSpec, seed: int, machine_index: int, trial: int):
-    """The real machine of a trial (module docstring, step 1)."""
+def real_machine(spec: MachineSpec, seed: int, machine_index: int, trial: int,
+                 error_index: tuple[np.ndarray, ...] | None = None):
+    """The real machine of a trial (module docstring, step 1); ``error_index`` is
+    ``spec.error_index()`` when the caller has it already (:class:`Context`)."""
     if spec.real is not None:
         return spec.real
     rng = rng_for(seed, KEY_REAL, machine_index, trial)
     delta = np.zeros(len(spec.nominal.params))
-    for g, idx in zip(spec.errors, spec.error_index()):
+    for g, idx in zip(spec.errors, spec.error_index() if error_index is None else error_index):
         delta[idx] = parameter_errors(idx.size, g.size, rng, "gaussian" if g.distribution == "normal" else "uniform")
     return spec.nominal.with_params(spec.nominal.params + delta, name=f"{spec.nominal.name}-real-{trial}")
 
@@ -183,9 +187,36 @@ def pseudo_truth(fit: IdentificationResult, truth_full: np.ndarray, nominal, set
     return ref.estimate, True, ref.rms_residual
 
 
-def evaluate(fit: IdentificationResult, truth_full: np.ndarray, is_angle: np.ndarray, nominal, real, setup, sim,
-             method: str, weighted: bool, heldout: np.ndarray, before: PoseErrors, ignore: tuple[str, ...]) -> dict:
-    """The metric columns of one fit (module docstring, steps 4–6)."""
+def _abs_stats(values: np.ndarray, scale: float = 1.0) -> tuple[float, float]:
+    """(rms, max) of |values| times ``scale``: the numbers (and operations) of
+    :meth:`PoseErrors.summary`'s ``*_rms_*`` and ``*_max_*`` keys, without its other ten."""
+    v = np.abs(values)
+    return float(np.sqrt(np.mean(v**2))) * scale, float(np.max(v)) * scale
+
+
+def heldout_columns(after: PoseErrors, before: PoseErrors) -> dict:
+    """The held-out columns of one fit (module docstring, step 6): errors after and before
+    calibration over the poses the real machine reaches through both models."""
+    common = after.valid & before.valid
+    out: dict = {"heldout_used": int(common.sum())}
+    if not common.any():
+        out["message"] = "the real machine reaches none of the held-out poses with both models"
+        return out
+    for model, suffix in ((after, ""), (before, "_before")):
+        p_rms, p_max = _abs_stats(model.position[common])
+        o_rms, o_max = _abs_stats(model.orientation[common], DEG)
+        out[f"heldout_position_rms{suffix}_mm"] = p_rms
+        out[f"heldout_orientation_rms{suffix}_deg"] = o_rms
+        out[f"heldout_tilt_rms{suffix}_deg"] = _abs_stats(model.tilt[common], DEG)[0]
+        out[f"heldout_height_rms{suffix}_mm"] = _abs_stats(model.height[common])[0]
+        if not suffix:
+            out.update(heldout_position_max_mm=p_max, heldout_orientation_max_deg=o_max)
+    return out
+
+
+def evaluate(fit: IdentificationResult, truth_full: np.ndarray, is_angle: np.ndarray, nominal, setup, sim,
+             method: str, weighted: bool) -> dict:
+    """The parameter and fit columns of one fit (module docstring, steps 4–5)."""
     truth, refit, refit_rms = pseudo_truth(fit, truth_full, nominal, setup, sim, method, weighted)
     free = fit.free_index
     e = fit.estimate[free] - truth[free]
@@ -212,25 +243,15 @@ def evaluate(fit: IdentificationResult, truth_full: np.ndarray, is_angle: np.nda
     out.update(coverage_fraction=float(inside.mean()), all_within_95=bool(inside.all()), ellipsoid_d2=d2,
                ellipsoid_within_95=None if not np.isfinite(d2) else bool(d2 <= chi2_95(len(free))),
                error_nsigma_rms=float(np.sqrt(np.mean(z * z))))
-    after = pose_errors(fit.mechanism, real, heldout, ignore)
-    common = after.valid & before.valid
-    out["heldout_used"] = int(common.sum())
-    if common.any():
-        a, b = after.summary(common), before.summary(common)
-        out.update(heldout_position_rms_mm=a["position_rms_mm"], heldout_position_max_mm=a["position_max_mm"],
-                   heldout_orientation_rms_deg=a["orientation_rms_rad"] * DEG,
-                   heldout_orientation_max_deg=a["orientation_max_rad"] * DEG,
-                   heldout_tilt_rms_deg=a["tilt_rms_rad"] * DEG, heldout_height_rms_mm=a["height_rms_mm"],
-                   heldout_position_rms_before_mm=b["position_rms_mm"],
-                   heldout_orientation_rms_before_deg=b["orientation_rms_rad"] * DEG,
-                   heldout_tilt_rms_before_deg=b["tilt_rms_rad"] * DEG, heldout_height_rms_before_mm=b["height_rms_mm"])
-    else:
-        out["message"] = "the real machine reaches none of the held-out poses with both models"
     return out
 
 
 def run_trial(ctx: Context, campaign: Campaign, trial: int) -> list[str]:
-    """The CSV lines (one per method, in method order) of trial ``trial`` of ``campaign``."""
+    """The CSV lines (one per method, in method order) of trial ``trial`` of ``campaign``.
+
+    Every method is fitted first; then the held-out poses are verified once for the
+    nominal model and every calibrated one together (:func:`pose_errors_many`: one FK and
+    one limit check of the real machine for all, the same numbers as separate calls)."""
     st = ctx.study
     mspec, sspec, pspec = st.machines[campaign.machine], st.setups[campaign.setup], st.plans[campaign.plan]
     nominal, setup = mspec.nominal, sspec.setup
@@ -240,10 +261,15 @@ def run_trial(ctx: Context, campaign: Campaign, trial: int) -> list[str]:
     rows = [dict(base, config=ctx.config_index(campaign.index, k), method=me.label,
                  identification=me.resolved(setup, nominal), weighted=me.weighted)
             for k, me in enumerate(st.methods)]
+
+    def all_failed(exc: PkmcalError) -> list[str]:
+        return [format_row(dict(r, failed=True, message=str(exc)), ctx.names) for r in rows]
+
     ignore = mspec.ignore_limits
     heldout = ctx.heldout[campaign.machine]
     try:
-        real = real_machine(mspec, st.seed, campaign.machine, trial)
+        real = real_machine(mspec, st.seed, campaign.machine, trial,
+                            ctx.error_index[campaign.machine] if ctx.error_index else None)
         rng = rng_for(st.seed, KEY_TRIAL, campaign.machine, campaign.setup, campaign.plan, campaign.n_index, trial)
         poses = campaign.poses
         if poses is None:
@@ -258,26 +284,35 @@ def run_trial(ctx: Context, campaign: Campaign, trial: int) -> list[str]:
         sim = simulate_campaign(nominal, real, setup, poses, rng, ignore_limits=ignore)
         if len(sim.kept) == 0:
             raise PkmcalError(f"the real machine reaches none of the {len(poses)} planned poses ({sim.summary()})")
-        before = pose_errors(nominal, real, heldout, ignore)
     except PkmcalError as exc:
-        for r in rows:
-            r.update(failed=True, message=str(exc))
-        return [format_row(r, ctx.names) for r in rows]
+        return all_failed(exc)
     truth_full = np.concatenate([real.params, setup.sensor.params])
     is_angle = np.array(tuple(nominal.param_is_angle) + tuple(setup.sensor.param_is_angle), dtype=bool)
-    for r, me in zip(rows, st.methods):
+    out = [dict(r) for r in rows]
+    fits: list[tuple[int, IdentificationResult]] = []
+    for k, (r, me) in enumerate(zip(out, st.methods)):
         try:
-            fit = identify(nominal, setup, sim.measurements, method=r["identification"], weighted=me.weighted,
-                           free=me.free, fix=me.fix)
-            r.update(evaluate(fit, truth_full, is_angle, nominal, real, setup, sim, r["identification"], me.weighted,
-                              heldout, before, ignore))
+            fits.append((k, identify(nominal, setup, sim.measurements, method=r["identification"],
+                                     weighted=me.weighted, free=me.free, fix=me.fix)))
+        except PkmcalError as exc:
+            r.update(failed=True, message=str(exc), poses_measured=len(sim.kept))
+    try:
+        before, *afters = pose_errors_many((nominal,) + tuple(f.mechanism for _, f in fits), real, heldout, ignore)
+    except PkmcalError as exc:
+        return all_failed(exc)
+    for (k, fit), after in zip(fits, afters):
+        r, me = out[k], st.methods[k]
+        try:
+            r.update(evaluate(fit, truth_full, is_angle, nominal, setup, sim, r["identification"], me.weighted))
+            r.update(heldout_columns(after, before))
             if st.extra_metrics is not None:
                 r.update(st.extra_metrics(nominal, real, setup, sim, fit, heldout))
         except PkmcalError as exc:
             r.update(failed=True, message=str(exc), poses_measured=len(sim.kept))
+    for r in out:
         if r.get("message"):
             r["failed"] = True
-    return [format_row(r, ctx.names) for r in rows]
+    return [format_row(r, ctx.names) for r in out]
 
 
 def run_batch(ctx: Context, campaign: int, first: int, last: int) -> tuple[int, int, int, list[str], float]:

@@ -1,0 +1,98 @@
+"""The shared batched forward-kinematics solver of every mechanism.
+
+Forward kinematics finds, for each of N actuator-reading sets q_j (l,), the pose x_j (n,)
+with IK(x_j, ρ) = q_j. One solver serves every mechanism, from its IK and pose Jacobian
+A = ∂q/∂x alone (:class:`~pkmcal.mechanisms.base.Mechanism`):
+
+    minimise f(x) = ‖q − IK(x, ρ)‖²   by Gauss–Newton, batched over the poses:
+    Δx = (AᵀA + εI)⁻¹ Aᵀ (q − IK(x)),   ε = 1e-12 (keeps a singular AᵀA solvable),
+
+each step backtracked (x + t Δx, t = 1, ½, …, 2⁻¹¹, the first t with f not larger; IK is
+NaN outside a chain's reach and then counts as f = ∞). For l = n this is Newton's method on
+q = IK(x) (AᵀA Δx = Aᵀr ⇔ A Δx = r for regular A); for l > n (redundant actuation) the
+readings of a real machine are not exactly consistent and the solver returns the
+least-squares pose. Per pose: it stops when the step is below ``tol`` relative to the
+pose's size (or no step decreases f); it has converged when it stopped and the largest
+remaining |q − IK(x)| is at most ``res_tol``.
+
+Branch check: the pose must be on the assembly mode of its start pose (the guess), i.e.
+every sign of :meth:`Mechanism.assembly_signs` (the mechanism's declared branch signature:
+by default sign det A when l = n) agrees at both (:meth:`Mechanism.same_branch`); the
+result's ``same_branch`` flags the poses where it does not (``FKResult.ok`` False).
+
+A mechanism may override ``fk`` where a closed form or a compiled solver is faster (the
+hexapod's Newton on SO(3), ``_hexapod_kernels.fk_newton``, tested against this solver).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from pkmcal.errors import PkmcalError
+
+if TYPE_CHECKING:
+    from pkmcal.mechanisms.base import FKResult, Mechanism
+
+#: Step-size tolerance (relative to 1 + max |x|) and iteration cap of :func:`solve_fk`.
+FK_TOL = 1e-11
+FK_MAX_ITER = 40
+#: Largest remaining max |q − IK(x)| (mm or rad) of a converged pose.
+FK_RES_TOL = 1e-3
+#: Backtracking step factors t of a Gauss–Newton step.
+_STEPS = 0.5 ** np.arange(12)
+
+
+def solve_fk(mechanism: Mechanism, readings: np.ndarray, guess: np.ndarray | None = None,
+             params: np.ndarray | None = None, *, tol: float = FK_TOL, max_iter: int = FK_MAX_ITER,
+             res_tol: float = FK_RES_TOL) -> FKResult:
+    """Poses (N, n) minimising ‖q − IK(x, ρ)‖ over all l actuators (module docstring).
+
+    ``readings`` (N, l); ``guess`` one pose (n,) or one per reading (N, n), default the home
+    pose; ``params`` ρ (default the mechanism's)."""
+    from pkmcal.mechanisms.base import FKResult
+
+    m = mechanism
+    q = np.atleast_2d(np.asarray(readings, dtype=float))
+    if q.ndim != 2 or q.shape[1] != m.n_actuators:
+        raise PkmcalError(f"machine '{m.name}' needs {m.n_actuators} actuator readings per pose; "
+                          f"got an array of shape {q.shape}")
+    n = m.n_dof
+    g = m.home_pose if guess is None else np.asarray(guess, dtype=float)
+    x = np.array(np.broadcast_to(g, (q.shape[0], n)), dtype=float)
+    it = np.zeros(q.shape[0], dtype=int)
+    done = np.zeros(q.shape[0], dtype=bool)
+    sel = np.arange(q.shape[0])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = q - m.ik(x, params)
+        f = np.where(np.all(np.isfinite(r), axis=1), np.sum(r**2, axis=1), np.inf)
+        for _ in range(max_iter):
+            A = m.actuator_pose_jacobian(x, params)
+            At = np.swapaxes(A, 1, 2)
+            dx = np.linalg.solve(At @ A + 1e-12 * np.eye(n), At @ np.nan_to_num(r)[..., None])[..., 0]
+            dx = np.where(np.isfinite(dx) & ~done[:, None], dx, 0.0)
+            # backtracking line search on ‖q − IK(x)‖² (IK is NaN outside the reach)
+            xc = x[None] + _STEPS[:, None, None] * dx[None]
+            rc = q[None] - m.ik(xc.reshape(-1, n), params).reshape(len(_STEPS), *q.shape)
+            fc = np.where(np.all(np.isfinite(rc), axis=2), np.sum(rc**2, axis=2), np.inf)
+            ok = fc <= f[None] * (1.0 + 1e-12) + 1e-300
+            k = np.argmax(ok, axis=0)
+            any_ok = ok.any(axis=0)
+            take = any_ok & ~done
+            x = np.where(take[:, None], xc[k, sel], x)
+            r = np.where(take[:, None], rc[k, sel], r)
+            f = np.where(take, fc[k, sel], f)
+            it += ~done
+            small = np.max(np.abs(dx), axis=1) <= tol * (1.0 + np.max(np.abs(x), axis=1))
+            done |= small | ~any_ok
+            if done.all():
+                break
+    with np.errstate(invalid="ignore"):
+        res = np.max(np.abs(q - m.ik(x, params)), axis=1)
+    converged = done & np.isfinite(res) & (res <= res_tol)
+    return FKResult(poses=x, converged=converged, iterations=it, residual=res,
+                    same_branch=m.same_branch(x, np.broadcast_to(g, x.shape), params))
+
+
+__all__ = ["FK_MAX_ITER", "FK_RES_TOL", "FK_TOL", "solve_fk"]
