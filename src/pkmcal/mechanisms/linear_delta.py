@@ -63,7 +63,8 @@ from typing import ClassVar
 import numpy as np
 
 from pkmcal.errors import PkmcalError
-from pkmcal.mechanisms.base import FKResult, LimitReport, Mechanism
+from pkmcal.mechanisms.base import FKResult, LimitReport
+from pkmcal.mechanisms.translating import TranslatingMechanism
 from pkmcal.mechanisms.trilateration import trilaterate
 
 TOWERS = ("a", "b", "c")
@@ -109,7 +110,7 @@ def _frames(g: dict[str, np.ndarray]):
 
 
 @dataclass(frozen=True, eq=False)
-class LinearDelta(Mechanism):
+class LinearDelta(TranslatingMechanism):
     """A linear delta (module docstring). ``rho`` (21,) internal units (mm, rad) in the
     order of :data:`PARAM_NAMES`; ``reading_reference`` (3,) H^fw (mm), default the
     switch readings of ``rho`` itself; ``travel`` (3,) the rail length below each switch
@@ -317,15 +318,16 @@ class LinearDelta(Mechanism):
                 Bj[:, i, -3:] = -w[:, i] / D[:, i, None] + W[i] / D_sw[i]
         return lam, A, Bj
 
-    def actuator_pose_jacobian(self, poses: np.ndarray) -> np.ndarray:
-        return self.ik_and_jacobians(poses)[1]
+    def actuator_pose_jacobian(self, poses: np.ndarray, params=None) -> np.ndarray:
+        return self.ik_and_jacobians(poses, params)[1]
 
-    def actuator_param_jacobian(self, poses: np.ndarray) -> np.ndarray:
-        return self.ik_and_jacobians(poses)[2]
+    def actuator_param_jacobian(self, poses: np.ndarray, params=None) -> np.ndarray:
+        return self.ik_and_jacobians(poses, params)[2]
 
-    def fk(self, readings: np.ndarray, guess: np.ndarray | None = None, params=None) -> FKResult:
-        """Closed-form FK (trilateration, module docstring); ``guess`` is not needed and only
-        checks the assembly mode (the effector below its carriage joints)."""
+    def fk(self, readings: np.ndarray, guess: np.ndarray | None = None, params=None, **options) -> FKResult:
+        """Closed-form FK (trilateration, module docstring): exact, so neither ``guess`` nor
+        the shared solver's ``options`` apply; the solution is the effector below its
+        carriage joints, the branch the IK takes."""
         lam = np.asarray(readings, dtype=float)
         lam = lam[None, :] if lam.ndim == 1 else lam
         if lam.ndim != 2 or lam.shape[1] != 3:
@@ -347,17 +349,17 @@ class LinearDelta(Mechanism):
         return FKResult(poses=poses, converged=conv, iterations=np.zeros(len(lam), dtype=int),
                         residual=np.where(ok, res, np.inf))
 
-    def assembly_signs(self, poses: np.ndarray) -> np.ndarray:
+    def assembly_signs(self, poses: np.ndarray, params=None) -> np.ndarray:
         """One sign per tower: +1 where the effector is below the carriage joint along the
         rail's arm (w·u > 0, the branch the IK and FK choose), −1 above, 0 at the arm ⊥ rail
         singularity."""
         poses = self.as_pose_array(poses)
-        g = _towers(self.rho)
+        g = _towers(self._rho(params))
         e_r, _, u, *_ = _frames(g)
         _, w = self._rail_positions(poses - g["tool"][None, :], g, u, g["radius"][:, None] * e_r)
         return np.sign(np.nan_to_num(np.einsum("ntk,tk->nt", w, u))).astype(np.int8)
 
-    def check_limits(self, poses: np.ndarray, margin: float = 0.0) -> LimitReport:
+    def check_limits(self, poses: np.ndarray, margin: float = 0.0, *, margins: bool = True) -> LimitReport:
         """``reach`` (an arm cannot reach its rail), ``travel`` (a reading beyond the switch
         or the rail's end), ``arm_angle`` (an arm flatter than :attr:`min_arm_angle`),
         ``print_radius`` and ``min_z``; margins in mm (rad for the arm angle)."""

@@ -44,7 +44,8 @@ from typing import ClassVar
 import numpy as np
 
 from pkmcal.errors import PkmcalError
-from pkmcal.mechanisms.base import FKResult, LimitReport, Mechanism
+from pkmcal.mechanisms.base import FKResult, LimitReport
+from pkmcal.mechanisms.translating import TranslatingMechanism
 from pkmcal.mechanisms.trilateration import trilaterate
 
 ARMS = ("a", "b", "c")
@@ -88,7 +89,7 @@ def _geometry(g: dict):
 
 
 @dataclass(frozen=True, eq=False)
-class RotaryDelta(Mechanism):
+class RotaryDelta(TranslatingMechanism):
     """A rotary delta (module docstring). ``rho`` (27,) internal units (mm, rad) in the
     order of :data:`PARAM_NAMES`; ``motor_range`` (2,) the motor angles' limits (rad);
     ``max_joint_angle`` the largest angle of a forearm from the vertical at the effector
@@ -263,14 +264,15 @@ class RotaryDelta(Mechanism):
             Bj[:, :, -3:] = -A                                 # dq = −dt
         return lam, A, Bj
 
-    def actuator_pose_jacobian(self, poses: np.ndarray) -> np.ndarray:
-        return self.ik_and_jacobians(poses)[1]
+    def actuator_pose_jacobian(self, poses: np.ndarray, params=None) -> np.ndarray:
+        return self.ik_and_jacobians(poses, params)[1]
 
-    def actuator_param_jacobian(self, poses: np.ndarray) -> np.ndarray:
-        return self.ik_and_jacobians(poses)[2]
+    def actuator_param_jacobian(self, poses: np.ndarray, params=None) -> np.ndarray:
+        return self.ik_and_jacobians(poses, params)[2]
 
-    def fk(self, readings: np.ndarray, guess: np.ndarray | None = None, params=None) -> FKResult:
-        """Closed-form FK (module docstring); ``guess`` is not needed."""
+    def fk(self, readings: np.ndarray, guess: np.ndarray | None = None, params=None, **options) -> FKResult:
+        """Closed-form FK (module docstring): exact, so neither ``guess`` nor the shared
+        solver's ``options`` apply."""
         lam = np.asarray(readings, dtype=float)
         lam = lam[None, :] if lam.ndim == 1 else lam
         if lam.ndim != 2 or lam.shape[1] != 3:
@@ -285,20 +287,20 @@ class RotaryDelta(Mechanism):
         return FKResult(poses=np.where(conv[:, None], poses, np.nan), converged=conv,
                         iterations=np.zeros(len(lam), dtype=int), residual=np.where(ok, res, np.inf))
 
-    def assembly_signs(self, poses: np.ndarray) -> np.ndarray:
+    def assembly_signs(self, poses: np.ndarray, params=None) -> np.ndarray:
         """Per arm, the sign of G (module docstring): +1 on the elbow-out branch the IK
         chooses, 0 at the singularity."""
         poses = self.as_pose_array(poses)
-        lam, A, _ = self.ik_and_jacobians(poses)
-        g = _arms(self.rho)
-        S, _, _, v1, v2, _ = _geometry(g)
+        rho = self._rho(params)
+        g = _arms(rho)
+        _, _, _, v1, v2, _ = _geometry(g)
+        lam = self.ik(poses, rho)
         phi = lam + g["zero"][None, :]
-        E = self.elbows(lam)
-        w = E - (poses - g["tool"][None, :])[:, None, :]
+        w = self.elbows(lam, rho) - (poses - g["tool"][None, :])[:, None, :]
         G = np.einsum("ntk,ntk->nt", w, -np.sin(phi)[..., None] * v1[None] + np.cos(phi)[..., None] * v2[None])
         return np.sign(np.nan_to_num(-G)).astype(np.int8)
 
-    def check_limits(self, poses: np.ndarray, margin: float = 0.0) -> LimitReport:
+    def check_limits(self, poses: np.ndarray, margin: float = 0.0, *, margins: bool = True) -> LimitReport:
         """``reach``, ``motor_range`` (rad; ``margin`` in rad), ``joint_angle`` (a forearm
         more than :attr:`max_joint_angle` from the vertical), ``workspace`` (the cylinder)."""
         poses = self.as_pose_array(poses)
