@@ -265,11 +265,16 @@ def test_missing_limits_need_an_ini_or_the_option(tmp_path):
         machine_from_linuxcnc(hal, ini)
 
 
-def test_gains_enter_the_joint_limits_and_home_offset():
-    """HOME_OFFSET = L0 + g·λ_switch and the limits L0 + g·stroke (the hook for legs[i].gain)."""
+def test_gains_enter_the_joint_limits_and_home_offset(monkeypatch):
+    """HOME_OFFSET = L0 + g·λ_switch and the limits L0 + g·stroke, with the gains of
+    export_linuxcnc.leg_gains (the one place the export reads them; all 1 for today's
+    hexapod model)."""
+    from pkmcal.io import export_linuxcnc
+
     m = builtin_machine("stewart-prototype")
+    np.testing.assert_array_equal(export_linuxcnc.leg_gains(m), np.ones(6))
     g = np.array([1.0, 1.01, 0.99, 1.0, 1.02, 0.98])
-    object.__setattr__(m, "gain", g)
+    monkeypatch.setattr(export_linuxcnc, "leg_gains", lambda machine: g)
     s = joint_settings(m)
     np.testing.assert_array_equal(s["MIN_LIMIT"], m.offset + g * m.stroke[:, 0])
     np.testing.assert_array_equal(s["MAX_LIMIT"], m.offset + g * m.stroke[:, 1])

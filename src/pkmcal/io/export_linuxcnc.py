@@ -83,17 +83,17 @@ def _check_hexapod(machine) -> None:
 
 
 def leg_gains(machine: Hexapod) -> np.ndarray:
-    """g_i (6,): mm of strut length per reading unit, ``legs[i].gain`` of the machine file
-    (issue 11 item 1b) when the machine carries gains (``Hexapod.gain``), else ones."""
-    gain = getattr(machine, "gain", None)
-    return np.ones(6) if gain is None else np.asarray(gain, dtype=float).reshape(6)
+    """g_i (6,): mm of strut length per reading unit. The hexapod model reads strut-length
+    changes in mm (L_i = L0_i + λ_i): every gain is 1. The one place the export reads
+    gains, so that per-leg gains of the machine file enter here."""
+    return np.ones(machine.n_actuators)
 
 
 def home_switch_reading(machine: Hexapod) -> np.ndarray:
     """λ_switch (6,): the actuator readings at the home switches,
     ``metadata.linuxcnc.home_switch_reading`` (written by ``pkmcal import linuxcnc
     --offsets zero``), else zeros (readings zeroed at the switch)."""
-    meta = (getattr(machine, "metadata", None) or {}).get("linuxcnc") or {}
+    meta = (machine.metadata or {}).get("linuxcnc") or {}
     value = meta.get("home_switch_reading") if isinstance(meta, dict) else None
     if value is None:
         return np.zeros(6)

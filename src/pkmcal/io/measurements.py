@@ -265,7 +265,7 @@ def clipped_readings(measurements: Measurements, machine: Mechanism,
     stroke). A real reading never stands exactly at an end by chance: there, the actuator
     was clipped by its controller, saturated, or stuck at a stop, and the pose it gives is
     not the pose the machine reached."""
-    stroke = getattr(machine, "stroke", None)
+    stroke = machine.reading_range()
     if stroke is None:
         return []
     stroke = np.asarray(stroke, dtype=float)

@@ -304,6 +304,12 @@ class Mechanism(ABC):
         r = np.broadcast_to(r, s.shape) if r.shape[0] == 1 else r
         return np.all((s == r) | (s == 0) | (r == 0), axis=1)
 
+    def reading_range(self) -> np.ndarray | None:
+        """(l, 2) [min, max] of each actuator reading (internal units) where the machine
+        states one (a hexapod's stroke), else None: what a reading outside it, or stuck at
+        one of its ends, is judged against (:func:`pkmcal.io.measurements.clipped_readings`)."""
+        return None
+
     @abstractmethod
     def check_limits(self, poses: np.ndarray, *, margins: bool = True) -> LimitReport:
         """Which of the machine's limits each pose violates. ``margins=False`` says that the

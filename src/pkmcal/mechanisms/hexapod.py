@@ -444,6 +444,10 @@ class Hexapod(Mechanism):
 
     # -- limits -------------------------------------------------------------------------
 
+    def reading_range(self) -> np.ndarray:
+        """The stroke (6, 2), mm."""
+        return self.stroke
+
     def check_limits(self, poses: np.ndarray, margin: float = 0.0, *, margins: bool = True) -> LimitReport:
         """Reachability of N poses against every limit of the machine.
 
