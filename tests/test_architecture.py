@@ -32,7 +32,6 @@ PROBE = re.compile(
 #: the registry); pipeline = item 3 (one simulate/verify/perturb); workspace = item 1's
 #: ``workspace_box()`` and ``check_limits(margin=)`` adopted by planning.
 ALLOWED = {
-    ("cli/campaign_cmds.py", "isinstance(nominal, PlanarMechanism)", "pipeline: one perturb"),
     ("cli/campaign_cmds.py", "type(real) is not type(nominal)", "registries: compare kinds"),
     ("cli/campaign_cmds.py", "type(other) is not type(cal)", "registries: compare kinds"),
     ("cli/export_cmd.py", 'getattr(machine, "covariance", None)', "registries: declared covariance"),

@@ -24,7 +24,6 @@ import numpy as np
 from pkmcal.errors import PkmcalError
 from pkmcal.identification.redundant_campaign import (
     is_redundant,
-    perturb_planar,
     simulate_redundant_campaign,
     verify_redundant,
 )
@@ -37,7 +36,6 @@ from pkmcal.io.atomic import atomic_write_text
 from pkmcal.io.limits import MAX_MAGNITUDE
 from pkmcal.io.measurements import measurement_columns
 from pkmcal.io.tables import format_table, read_poses
-from pkmcal.mechanisms.planar import PlanarMechanism
 from pkmcal.sensors.library import BUILTIN_SETUPS
 
 
@@ -101,8 +99,7 @@ def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_rea
     commanded = read_poses(poses, nominal, mapping)
     rng = np.random.default_rng(seed)
     if random_errors is not None:
-        perturb = perturb_planar if isinstance(nominal, PlanarMechanism) else perturb_machine
-        real = perturb(nominal, random_errors, rng, distribution=error_distribution,
+        real = perturb_machine(nominal, random_errors, rng, distribution=error_distribution,
                        name=f"{nominal.name}-random-{random_errors:g}mm-seed{seed}")
     else:
         real = load_machine(real_spec)

@@ -34,7 +34,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pkmcal.errors import PkmcalError
-from pkmcal.identification.simulation import SimulationResult, campaign_inputs, drop_limit_violations, parameter_errors
+from pkmcal.identification.simulation import (
+    SimulationResult,
+    campaign_inputs,
+    drop_limit_violations,
+    perturb_machine,
+)
 from pkmcal.identification.uncertainty import embed
 from pkmcal.identification.verification import error_stats
 from pkmcal.io.tables import from_file_units, to_file_units
@@ -136,13 +141,9 @@ def simulate_redundant_campaign(
 
 def perturb_planar(machine, magnitude_mm: float, rng, distribution: str = "uniform", name: str | None = None,
                    radius_mm: float = 1000.0):
-    """A random real machine: lengths (and linear encoder offsets) plus errors of size
-    ``magnitude_mm``, angle parameters (way directions, rotary encoder offsets) plus
-    ``magnitude_mm / radius_mm`` rad (the same displacement at ``radius_mm`` = 1 m)."""
-    p = machine.params
-    delta = parameter_errors(p.shape, magnitude_mm, rng, distribution)
-    delta = np.where(np.array(machine.param_is_angle, dtype=bool), delta / radius_mm, delta)
-    return machine.with_params(p + delta, name=name or f"{machine.name}-perturbed")
+    """:func:`~pkmcal.identification.simulation.perturb_machine` (its angle rule was this
+    function's; kept under this name for callers of the planar campaigns)."""
+    return perturb_machine(machine, magnitude_mm, rng, distribution, name, radius_mm)
 
 
 def calibrated_sensor(machine: Mechanism, sensor):

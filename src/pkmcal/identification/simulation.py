@@ -200,14 +200,21 @@ def perturb_machine(
     rng: np.random.Generator | int | None = None,
     distribution: str = "uniform",
     name: str | None = None,
+    radius_mm: float = 1000.0,
 ) -> Mechanism:
     """A random "real" machine: every kinematic parameter plus an error of size ``magnitude_mm``.
 
     ``distribution="uniform"``: errors U(−m, m) (paper 1 §IV: ±5 mm); ``"gaussian"``: N(0, m²).
-    The home pose is kept, so the real machine is commanded as the nominal one is.
+    Lengths (and linear encoder offsets) get errors in mm; angle parameters
+    (:attr:`~pkmcal.mechanisms.base.Mechanism.param_is_angle`: tower angles, leans, way
+    directions, rotary encoder offsets) ``magnitude_mm / radius_mm`` rad, the same
+    displacement at ``radius_mm`` = 1 m. One rule for every machine: a hexapod, whose
+    parameters are all lengths, draws exactly as before. The home pose is kept, so the real
+    machine is commanded as the nominal one is.
     """
     p = machine.params
     delta = parameter_errors(p.shape, magnitude_mm, rng, distribution)
+    delta = np.where(np.array(machine.param_is_angle, dtype=bool), delta / radius_mm, delta)
     return machine.with_params(p + delta, name=name or f"{machine.name}-perturbed")
 
 

@@ -359,6 +359,10 @@ class LinearDelta(TranslatingMechanism):
         _, w = self._rail_positions(poses - g["tool"][None, :], g, u, g["radius"][:, None] * e_r)
         return np.sign(np.nan_to_num(np.einsum("ntk,tk->nt", w, u))).astype(np.int8)
 
+    def reading_range(self) -> np.ndarray:
+        """(3, 2): from the rail's end to the switch, [H^fw − travel, H^fw] (mm)."""
+        return np.stack([self.reading_reference - self.travel, self.reading_reference], axis=1)
+
     def check_limits(self, poses: np.ndarray, margin: float = 0.0, *, margins: bool = True) -> LimitReport:
         """``reach`` (an arm cannot reach its rail), ``travel`` (a reading beyond the switch
         or the rail's end), ``arm_angle`` (an arm flatter than :attr:`min_arm_angle`),

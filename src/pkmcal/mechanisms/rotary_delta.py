@@ -300,6 +300,11 @@ class RotaryDelta(TranslatingMechanism):
         G = np.einsum("ntk,ntk->nt", w, -np.sin(phi)[..., None] * v1[None] + np.cos(phi)[..., None] * v2[None])
         return np.sign(np.nan_to_num(-G)).astype(np.int8)
 
+    def reading_range(self) -> np.ndarray:
+        """(3, 2): the motor range less the zero offsets (rad)."""
+        zero = _arms(self.rho)["zero"]
+        return np.stack([self.motor_range[0] - zero, self.motor_range[1] - zero], axis=1)
+
     def check_limits(self, poses: np.ndarray, margin: float = 0.0, *, margins: bool = True) -> LimitReport:
         """``reach``, ``motor_range`` (rad; ``margin`` in rad), ``joint_angle`` (a forearm
         more than :attr:`max_joint_angle` from the vertical), ``workspace`` (the cylinder)."""

@@ -249,7 +249,7 @@ def workspace_box(mechanism: Mechanism, setup: MeasurementSetup | None = None, *
     if ws is not None:
         return np.array(ws, dtype=float).reshape(mechanism.n_dof, 2)
     if mechanism.n_dof != 6:
-        raise PkmcalError(f"machine '{mechanism.name}' has no workspace box; give candidate poses (--candidates)")
+        return np.asarray(mechanism.workspace_box(), dtype=float)   # declared by the machine (its print volume, ...)
     home = np.asarray(mechanism.home_pose, dtype=float)
     half = default_box_shape(mechanism)
     reach = np.empty(6)
