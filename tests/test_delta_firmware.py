@@ -210,3 +210,38 @@ def test_bad_marlin_lines_name_the_line(tmp_path):
         read_marlin(_write(tmp_path, "m.gcode", "M665 L217 R95\n"))
     with pytest.raises(InputFileError, match="must be ≤ 0"):
         read_marlin(_write(tmp_path, "m.gcode", "M665 L217 R95 H300\nM666 X0.5\n"))
+
+
+def test_cli_klipper_and_marlin_both_ways(tmp_path):
+    from click.testing import CliRunner
+
+    from pkmcal.cli.main import cli
+    from pkmcal.io.machine_file import load_machine
+
+    run = CliRunner().invoke
+    res = run(cli, ["export", "kossel-mini", "--format", "klipper", "-o", str(tmp_path / "saved.cfg")])
+    assert res.exit_code == 0, res.output
+    cfg = tmp_path / "printer.cfg"
+    cfg.write_text("[printer]\nkinematics: delta\nprint_radius: 90\n\n" + (tmp_path / "saved.cfg").read_text())
+    res = run(cli, ["import", "klipper", str(cfg), "-o", str(tmp_path / "k.yaml"), "--name", "kossel-mini"])
+    assert res.exit_code == 0, res.output
+    kossel, back = load_machine("kossel-mini"), load_machine(str(tmp_path / "k.yaml"))
+    np.testing.assert_array_equal(back.params, kossel.params)
+    np.testing.assert_array_equal(back.reading_reference, kossel.reading_reference)
+    res = run(cli, ["export", "kossel-mini", "--format", "marlin", "-o", str(tmp_path / "m.gcode")])
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "m.gcode").read_text().splitlines()[:2] == ["M665 L215 R105.2 H250 X0 Y0 Z0 A0 B0 C0",
+                                                                   "M666 X0 Y0 Z0"]
+    res = run(cli, ["import", "marlin", str(tmp_path / "m.gcode"), "-o", str(tmp_path / "m.yaml")])
+    assert res.exit_code == 0, res.output
+    np.testing.assert_allclose(load_machine(str(tmp_path / "m.yaml")).params, kossel.params, rtol=0, atol=1e-12)
+    # a parameter the firmware cannot hold is named on stderr; a hexapod is refused
+    rho = kossel.params
+    rho[PARAM_NAMES.index("lean_tangential_c")] = np.deg2rad(0.2)
+    from pkmcal.io.machine_file import save_machine
+
+    save_machine(kossel.with_params(rho), tmp_path / "leaning.yaml")
+    res = run(cli, ["export", str(tmp_path / "leaning.yaml"), "--format", "klipper"])
+    assert res.exit_code == 0 and "lean_tangential_c = 0.2 deg cannot be represented" in res.output
+    res = run(cli, ["export", "stewart-prototype", "--format", "marlin"])
+    assert res.exit_code == 2 and "exports linear delta printers" in res.output

@@ -114,10 +114,13 @@ def format_calibration_json(machine: Mechanism, source: str | None = None) -> st
     "pkmcal export calibrated.yaml --format linuxcnc -o kinematics.hal",
     "pkmcal export calibrated.yaml --format linuxcnc -o kinematics.hal --ini joints.ini",
     "pkmcal export calibrated.yaml --format json -o calibrated.json",
-    "pkmcal export stewart-prototype --format linuxcnc"))
+    "pkmcal export stewart-prototype --format linuxcnc",
+    "pkmcal export kossel-mini --format klipper",
+    "pkmcal export kossel-mini --format marlin"))
 @click.argument("calibrated", metavar="CALIBRATED.yaml")
-@click.option("--format", "fmt", type=click.Choice(["linuxcnc", "json"]), required=True,
-              help="linuxcnc: genhexkins HAL setp lines (hexapods); json: parameters with std and correlation.")
+@click.option("--format", "fmt", type=click.Choice(["linuxcnc", "json", "klipper", "marlin"]), required=True,
+              help="linuxcnc: genhexkins HAL setp lines (hexapods); json: parameters with std and correlation; "
+                   "klipper: the printer.cfg sections of a linear delta; marlin: its M665/M666 lines.")
 @output_option("FILE", "File to write")
 @click.option("--ini", "ini", metavar="FILE.ini",
               help="linuxcnc: also write the INI sections [TRAJ], [KINS], [JOINT_0..5] (joint limits, HOME_OFFSET, "
@@ -129,7 +132,10 @@ def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None) -
     (N = 0..5 = leg N+1, mm) and comment lines with each joint's leg offset L0 (HOME_OFFSET),
     joint limits and home strut length; --ini FILE writes them as INI sections too. json:
     every parameter (mm, deg) with its std, the correlation matrix, units, conventions and
-    the file's calibration metadata.
+    the file's calibration metadata. klipper / marlin (linear deltas): the [printer]
+    delta_radius and [stepper_a|b|c] angle, arm_length, position_endstop sections, or the
+    M665/M666 lines; every identified parameter the firmware cannot hold (rail leans,
+    unequal radii, a tool offset) is listed on standard error with the value dropped.
     """
     check_output(output, [calibrated])
     if ini is not None:
@@ -149,6 +155,8 @@ def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None) -
 
         text = linuxcnc_hal(machine)
         ini_text = linuxcnc_ini(machine) if ini is not None else None
+    elif fmt in ("klipper", "marlin"):
+        text = _delta_firmware_text(machine, fmt)
     else:
         text = format_calibration_json(machine, source=os.fspath(calibrated))
     if ini_text is not None:
@@ -158,6 +166,23 @@ def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None) -
         click.echo(f"wrote {output} ({fmt})", err=True)
     if ini_text is not None:
         click.echo(f"wrote {ini} (LinuxCNC INI sections [TRAJ], [KINS], [JOINT_0..5])", err=True)
+
+
+def _delta_firmware_text(machine, fmt: str) -> str:
+    """The Klipper or Marlin text of a linear delta; what it cannot hold, on standard error."""
+    if machine.kind != "linear-delta":
+        raise PkmcalError(f"--format {fmt} exports linear delta printers; machine '{machine.name}' is a "
+                          f"{machine.kind or 'machine of another kind'}")
+    from pkmcal.io.delta_firmware import firmware_subset, klipper_text, marlin_text
+
+    fw, dropped = firmware_subset(machine)
+    angles = dict(zip(machine.param_names, machine.param_is_angle))
+    for d in dropped:
+        click.echo(f"pkmcal: warning: {d.describe(angles[d.name])}", err=True)
+    if dropped:
+        click.echo(f"pkmcal: note: the firmware uses the machine without these {len(dropped)} parameter(s); for the "
+                   "best machine it can hold, identify again with them fixed (e.g. --fix 'lean_*')", err=True)
+    return klipper_text(fw) if fmt == "klipper" else marlin_text(fw)
 
 
 __all__ = ["calibration_json", "export_cmd", "format_calibration_json"]

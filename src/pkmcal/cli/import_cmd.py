@@ -1,5 +1,9 @@
 """``pkmcal import``: a machine file from a controller's configuration.
 
+``pkmcal import klipper printer.cfg -o DELTA.yaml`` and ``pkmcal import marlin M503.txt -o
+DELTA.yaml`` read a linear delta printer's firmware settings
+(:mod:`pkmcal.io.delta_firmware`); the inverses of ``pkmcal export --format klipper|marlin``.
+
 ``pkmcal import linuxcnc HAL [INI] -o MACHINE.yaml`` reads LinuxCNC's genhexkins joints
 (``setp genhexkins.base.N.*`` / ``platform.N.*``) and the INI file's units, home pose and
 joint limits (:func:`pkmcal.io.import_linuxcnc.machine_from_linuxcnc`); the inverse of
@@ -20,11 +24,14 @@ _OFFSET_HELP = ("home-offset (default): L0 = [JOINT_N] HOME_OFFSET, readings zer
 
 @click.group("import", epilog=examples(
     "pkmcal import linuxcnc examples/linuxcnc/hexapod.hal examples/linuxcnc/hexapod.ini -o imported.yaml",
-    "pkmcal import linuxcnc examples/linuxcnc/hexapod.hal examples/linuxcnc/hexapod.ini --offsets zero"))
+    "pkmcal import linuxcnc examples/linuxcnc/hexapod.hal examples/linuxcnc/hexapod.ini --offsets zero",
+    "pkmcal import klipper examples/klipper/printer.cfg -o delta.yaml",
+    "pkmcal import marlin examples/marlin/m503.txt"))
 def import_group() -> None:
-    """Make a machine file from a controller's configuration (LinuxCNC genhexkins HAL and INI).
+    """Make a machine file from a controller's configuration (LinuxCNC, Klipper, Marlin).
 
-    Run 'pkmcal import linuxcnc --help' for the files it reads and how.
+    linuxcnc: genhexkins HAL and INI (hexapods); klipper: printer.cfg of a delta printer;
+    marlin: its M665/M666 settings. Run 'pkmcal import NAME --help' for what each reads.
     """
 
 
@@ -87,4 +94,64 @@ def linuxcnc_cmd(hal: str, ini: str | None, output: str | None, offsets: str, jo
         click.echo(f"wrote {output}", err=True)
 
 
-__all__ = ["import_group", "linuxcnc_cmd"]
+def _write_delta(machine, output: str | None, source: str) -> None:
+    from pkmcal.io.machine_file import machine_to_text, save_machine
+
+    if to_stdout(output):
+        click.echo(machine_to_text(machine), nl=False)
+    else:
+        save_machine(machine, output)
+    click.echo(f"machine '{machine.name}': linear delta from {source}", err=True)
+    if not to_stdout(output):
+        click.echo(f"wrote {output}", err=True)
+
+
+def _delta_name(path: str, name: str | None) -> str:
+    from pathlib import Path
+
+    from pkmcal.errors import one_line
+
+    return name if name is not None else one_line(Path(path).stem)
+
+
+@import_group.command("klipper", epilog=examples(
+    "pkmcal import klipper examples/klipper/printer.cfg -o delta.yaml",
+    "pkmcal import klipper examples/klipper/printer.cfg --name my-kossel"))
+@click.argument("config", metavar="PRINTER.cfg")
+@output_option("DELTA.yaml", "Machine file to write")
+@click.option("--name", metavar="NAME", help="Machine name (default: the config file's name).")
+def klipper_cmd(config: str, output: str | None, name: str | None) -> None:
+    """Read a Klipper delta printer's printer.cfg as a pkmcal linear-delta machine file.
+
+    Reads [printer] kinematics: delta, delta_radius, print_radius, minimum_z_position and,
+    per [stepper_a|b|c], angle (default 210, 330, 90), arm_length and position_endstop
+    (b and c default to a's), following [include] files, with the SAVE_CONFIG (#*#) block
+    of DELTA_CALIBRATE overriding what is above it. The inverse of 'pkmcal export --format
+    klipper'.
+    """
+    check_output(output, [config])
+    from pkmcal.io.delta_firmware import read_klipper
+
+    _write_delta(read_klipper(config).machine(_delta_name(config, name)), output, f"Klipper config {config}")
+
+
+@import_group.command("marlin", epilog=examples(
+    "pkmcal import marlin examples/marlin/m503.txt -o delta.yaml"))
+@click.argument("settings", metavar="M503.txt")
+@output_option("DELTA.yaml", "Machine file to write")
+@click.option("--name", metavar="NAME", help="Machine name (default: the file's name).")
+def marlin_cmd(settings: str, output: str | None, name: str | None) -> None:
+    """Read a Marlin delta printer's M665/M666 settings as a pkmcal linear-delta machine file.
+
+    A text file with the printer's M665 and M666 lines (the output of M503, 'echo:' and ';'
+    comments allowed, or a G-code file): M665 L (rod) with trims A B C, R (radius), H
+    (height at home, without the M851 probe z offset), tower angle trims X Y Z; M666 X Y Z
+    endstop adjustments (<= 0). The inverse of 'pkmcal export --format marlin'.
+    """
+    check_output(output, [settings])
+    from pkmcal.io.delta_firmware import read_marlin
+
+    _write_delta(read_marlin(settings).machine(_delta_name(settings, name)), output, f"Marlin settings {settings}")
+
+
+__all__ = ["import_group", "klipper_cmd", "linuxcnc_cmd", "marlin_cmd"]

@@ -59,7 +59,7 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "export": ("pkmcal.cli.export_cmd", "export_cmd",
                "Export the machine in CALIBRATED.yaml (a machine file or built-in name) for a controller."),
     "import": ("pkmcal.cli.import_cmd", "import_group",
-               "Make a machine file from a controller's configuration (LinuxCNC genhexkins HAL and INI)."),
+               "Make a machine file from a controller's configuration (LinuxCNC, Klipper, Marlin)."),
     "demo": ("pkmcal.cli.demo_cmd", "demo",
              "Calibrate the built-in prototype end to end on a simulated 'real' machine."),
     "reproduce": ("pkmcal.cli.reproduce_cmd", "reproduce",

@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pkmcal.errors import InputFileError
+from pkmcal.io._yaml import rad_to_deg_text
 from pkmcal.mechanisms.linear_delta import (
     KLIPPER_TOWER_ANGLES_DEG,
     PARAM_NAMES,
@@ -96,7 +97,9 @@ def firmware_subset(machine: LinearDelta) -> tuple[DeltaFirmware, list[Dropped]]
     for lean in ("lean_radial", "lean_tangential"):
         dropped += [Dropped(f"{lean}_{t}", float(v), 0.0) for t, v in zip(TOWERS, g[lean]) if v != 0.0]
     dropped += [Dropped(n, float(v), 0.0) for n, v in zip(PARAM_NAMES[-3:], rho[-3:]) if v != 0.0]
-    fw = DeltaFirmware(radius=radius, angles_deg=tuple(float(a) for a in np.rad2deg(g["angle"])),
+    # the shortest degree value whose radians are the machine's (exact for 8 in 9 angles;
+    # the others to one rounding): machine → config → machine keeps the angles
+    fw = DeltaFirmware(radius=radius, angles_deg=tuple(float(rad_to_deg_text(a)) for a in g["angle"]),
                        arms=tuple(float(a) for a in g["arm"]), endstops=tuple(float(e) for e in g["endstop"]),
                        print_radius=float(machine.print_radius), min_z=float(machine.min_z))
     return fw, dropped
