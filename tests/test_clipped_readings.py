@@ -13,7 +13,6 @@ from click.testing import CliRunner
 from pkmcal.cli.main import cli
 from pkmcal.errors import PkmcalError
 from pkmcal.io.measurements import Measurements, apply_clipped_policy, clipped_readings
-from pkmcal.io.tables import format_table
 from pkmcal.mechanisms.library import builtin_machine
 
 MACHINE = builtin_machine("stewart-prototype")          # stroke [0, 50] mm on every leg
