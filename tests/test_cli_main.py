@@ -54,3 +54,21 @@ def test_python_dash_m_pkmcal_is_the_pkmcal_command():
     bad = subprocess.run([sys.executable, "-m", "pkmcal", "ik", "no-such-machine", "poses.csv"],
                          capture_output=True, text=True)
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1, bad.stderr
+
+
+def test_machines_lists_every_builtin_with_its_kind_and_imports_no_numpy():
+    """The listing comes from a plain-text catalogue (no NumPy, pydantic, numba), and the
+    kind it shows is the kind of the machine the name builds."""
+    from pkmcal.mechanisms.catalogue import BUILTIN_CATALOGUE
+    from pkmcal.mechanisms.library import builtin_machine
+
+    code = ("import sys; from pkmcal.cli.main import main; sys.argv = ['pkmcal', 'machines']\n"
+            "try:\n    main()\nexcept SystemExit:\n    pass\n"
+            "import json; print(json.dumps(sorted({m.split('.')[0] for m in sys.modules if m.split('.')[0] in "
+            "('numpy', 'scipy', 'numba', 'pydantic', 'matplotlib', 'yaml')})))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert json.loads(out.strip().splitlines()[-1]) == []
+    listing = {line.split()[0]: line.split()[1] for line in out.strip().splitlines()[:-1]}
+    for name, (kind, _) in BUILTIN_CATALOGUE.items():
+        assert listing[name] == kind == builtin_machine(name).kind, name
+    assert listing["symmetric:KEY=VALUE,..."] == builtin_machine("symmetric:base_radius=150").kind

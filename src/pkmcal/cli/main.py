@@ -37,7 +37,7 @@ from pkmcal.errors import PkmcalError, name_sources, one_line, recorded_sources
 #: checks that the two agree, so that the listing never needs to import a command.
 COMMANDS: dict[str, tuple[str, str, str]] = {
     "machines": ("pkmcal.cli.machines_cmd", "machines",
-                 "List the built-in machines (usable by name wherever a machine file is accepted)."),
+                 "List the built-in machines with their kinds (usable by name wherever a machine file is accepted)."),
     "info": ("pkmcal.cli.info_cmd", "info_cmd",
              "Describe MACHINE (default: stewart-prototype): summary, workspace, IK→FK round trip."),
     "ik": ("pkmcal.cli.kinematics_cmds", "ik_cmd",

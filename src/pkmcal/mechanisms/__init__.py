@@ -1,17 +1,30 @@
-"""Mechanisms: what moves. Every machine implements :class:`~pkmcal.mechanisms.base.Mechanism`."""
+"""Mechanisms: what moves. Every machine implements :class:`~pkmcal.mechanisms.base.Mechanism`.
 
-from pkmcal.mechanisms.base import FKResult, LimitReport, Mechanism
-from pkmcal.mechanisms.hexapod import Hexapod, HexapodLimits
-from pkmcal.mechanisms.library import BUILTIN_MACHINES, DEFAULT_MACHINE, builtin_machine, symmetric_hexapod
+The names below are imported on first use (PEP 562), so that importing a light submodule
+(:mod:`pkmcal.mechanisms.catalogue`, which ``pkmcal machines`` prints) loads no NumPy.
+"""
 
-__all__ = [
-    "BUILTIN_MACHINES",
-    "DEFAULT_MACHINE",
-    "FKResult",
-    "Hexapod",
-    "HexapodLimits",
-    "LimitReport",
-    "Mechanism",
-    "builtin_machine",
-    "symmetric_hexapod",
-]
+from __future__ import annotations
+
+import importlib
+
+_EXPORTS = {
+    "FKResult": "pkmcal.mechanisms.base",
+    "LimitReport": "pkmcal.mechanisms.base",
+    "Mechanism": "pkmcal.mechanisms.base",
+    "Hexapod": "pkmcal.mechanisms.hexapod",
+    "HexapodLimits": "pkmcal.mechanisms.hexapod",
+    "BUILTIN_MACHINES": "pkmcal.mechanisms.library",
+    "DEFAULT_MACHINE": "pkmcal.mechanisms.library",
+    "builtin_machine": "pkmcal.mechanisms.library",
+    "symmetric_hexapod": "pkmcal.mechanisms.library",
+}
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(_EXPORTS[name]), name)
+    raise AttributeError(f"module 'pkmcal.mechanisms' has no attribute {name!r}")
+
+
+__all__ = sorted(_EXPORTS)

@@ -30,6 +30,7 @@ import numpy as np
 
 from pkmcal.errors import PkmcalError
 from pkmcal.mechanisms.base import Mechanism
+from pkmcal.mechanisms.catalogue import BUILTIN_CATALOGUE, SYMMETRIC_PREFIX
 from pkmcal.mechanisms.hexapod import Hexapod, HexapodLimits
 from pkmcal.mechanisms.planar import planar_2dof_3act, planar_3dof_4act
 
@@ -157,17 +158,20 @@ def symmetric_hexapod(
 
 
 #: Built-in machines by name → (factory, one-line description).
-BUILTIN_MACHINES: dict[str, tuple[Callable[[], Mechanism], str]] = {
-    "stewart-prototype": (stewart_prototype, "paper 2 prototype, Table 3 (default machine)"),
-    "stewart-prototype-real": (stewart_prototype_real, "paper 2 prototype with Table 4 deviations"),
-    "planar-2dof-3act": (planar_2dof_3act, "paper 3 case 1: 2-dof planar, 3 rotary actuators (redundant)"),
-    "planar-3dof-4act": (planar_3dof_4act, "paper 3 case 2: 3-dof planar, 4 linear actuators (redundant)"),
-    "kossel-mini": (kossel_mini, "linear delta printer, Marlin's Kossel Mini example configuration"),
-    "delta-picker": (delta_picker, "rotary pick-and-place delta, illustrative dimensions"),
+_FACTORIES: dict[str, Callable[[], Mechanism]] = {
+    "stewart-prototype": stewart_prototype,
+    "stewart-prototype-real": stewart_prototype_real,
+    "planar-2dof-3act": planar_2dof_3act,
+    "planar-3dof-4act": planar_3dof_4act,
+    "kossel-mini": kossel_mini,
+    "delta-picker": delta_picker,
 }
+#: name → (factory, description); the names, kinds and descriptions are those of
+#: :data:`pkmcal.mechanisms.catalogue.BUILTIN_CATALOGUE`.
+BUILTIN_MACHINES: dict[str, tuple[Callable[[], Mechanism], str]] = {
+    name: (_FACTORIES[name], text) for name, (_, text) in BUILTIN_CATALOGUE.items()}
 
 DEFAULT_MACHINE = "stewart-prototype"
-SYMMETRIC_PREFIX = "symmetric:"
 
 
 #: What each ``symmetric:`` key must be: (test, the rule in words).
