@@ -129,21 +129,14 @@ class LinearDelta(TranslatingMechanism):
     metadata: dict = field(default_factory=dict)
 
     kind: ClassVar[str] = "linear-delta"
-    pose_names: ClassVar[tuple[str, ...]] = ("x", "y", "z")
-    pose_is_angle: ClassVar[tuple[bool, ...]] = (False, False, False)
-    actuator_names: ClassVar[tuple[str, ...]] = ("lambda1", "lambda2", "lambda3")
+    PARAM_NAMES: ClassVar[tuple[str, ...]] = PARAM_NAMES
+    PARAM_IS_ANGLE: ClassVar[tuple[bool, ...]] = PARAM_IS_ANGLE
+    LABEL: ClassVar[str] = "linear delta"
     #: Parameters held unless freed by name (exactly absorbed by the tower positions).
     default_fixed: ClassVar[tuple[str, ...]] = TOOL_PARAMS
 
     def __post_init__(self) -> None:
-        rho = np.array(self.rho, dtype=float)
-        if rho.shape != (len(PARAM_NAMES),):
-            raise PkmcalError(f"linear delta '{self.name}' has {len(PARAM_NAMES)} parameters; got {rho.shape}")
-        rho.setflags(write=False)
-        object.__setattr__(self, "rho", rho)
-        problem = self.parameter_problem()
-        if problem is not None:
-            raise PkmcalError(f"linear delta '{self.name}': {problem[0]} {problem[1]}")
+        self._freeze_params()
         ref = self.switch_positions() if self.reading_reference is None else np.array(self.reading_reference,
                                                                                        dtype=float)
         if ref.shape != (3,) or not np.all(np.isfinite(ref)):
@@ -167,24 +160,6 @@ class LinearDelta(TranslatingMechanism):
     __hash__ = None  # type: ignore[assignment]
 
     # -- declarations --------------------------------------------------------------------
-
-    @property
-    def param_names(self) -> tuple[str, ...]:
-        return PARAM_NAMES
-
-    @property
-    def param_is_angle(self) -> tuple[bool, ...]:
-        return PARAM_IS_ANGLE
-
-    @property
-    def params(self) -> np.ndarray:
-        return self.rho.copy()
-
-    def with_params(self, params: np.ndarray, name: str | None = None, covariance=None) -> "LinearDelta":
-        """The same machine with parameters ``params``; the readings still refer to this
-        machine's firmware configuration (``reading_reference`` is kept)."""
-        return replace(self, rho=np.asarray(params, dtype=float), name=self.name if name is None else name,
-                       covariance=covariance)
 
     def as_firmware_reference(self, name: str | None = None) -> "LinearDelta":
         """This machine with its own parameters as the firmware configuration (after an
@@ -237,14 +212,6 @@ class LinearDelta(TranslatingMechanism):
         return "\n".join(lines)
 
     # -- kinematics ------------------------------------------------------------------------
-
-    def _rho(self, params) -> np.ndarray:
-        if params is None:
-            return self.rho
-        params = np.asarray(params, dtype=float)
-        if params.shape != (len(PARAM_NAMES),):
-            raise PkmcalError(f"linear delta '{self.name}' has {len(PARAM_NAMES)} parameters; got {params.shape}")
-        return params
 
     @staticmethod
     def _rail_positions(q: np.ndarray, g: dict, u: np.ndarray, B: np.ndarray):

@@ -38,7 +38,7 @@ the three spheres of radius b_i about them, below the elbows.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
@@ -107,22 +107,15 @@ class RotaryDelta(TranslatingMechanism):
     metadata: dict = field(default_factory=dict)
 
     kind: ClassVar[str] = "rotary-delta"
-    pose_names: ClassVar[tuple[str, ...]] = ("x", "y", "z")
-    pose_is_angle: ClassVar[tuple[bool, ...]] = (False, False, False)
-    actuator_names: ClassVar[tuple[str, ...]] = ("lambda1", "lambda2", "lambda3")
+    PARAM_NAMES: ClassVar[tuple[str, ...]] = PARAM_NAMES
+    PARAM_IS_ANGLE: ClassVar[tuple[bool, ...]] = PARAM_IS_ANGLE
+    LABEL: ClassVar[str] = "rotary delta"
     #: Parameters held unless freed by name (the tool offset: exactly absorbed by the
     #: shoulders' positions for a sensor that sees the tool point only).
     default_fixed: ClassVar[tuple[str, ...]] = TOOL_PARAMS
 
     def __post_init__(self) -> None:
-        rho = np.array(self.rho, dtype=float)
-        if rho.shape != (len(PARAM_NAMES),):
-            raise PkmcalError(f"rotary delta '{self.name}' has {len(PARAM_NAMES)} parameters; got {rho.shape}")
-        rho.setflags(write=False)
-        object.__setattr__(self, "rho", rho)
-        problem = self.parameter_problem()
-        if problem is not None:
-            raise PkmcalError(f"rotary delta '{self.name}': {problem[0]} {problem[1]}")
+        self._freeze_params()
 
     def __eq__(self, other: object) -> bool:
         if type(other) is not type(self):
@@ -138,22 +131,6 @@ class RotaryDelta(TranslatingMechanism):
     @property
     def actuator_is_angle(self) -> tuple[bool, ...]:
         return (True, True, True)
-
-    @property
-    def param_names(self) -> tuple[str, ...]:
-        return PARAM_NAMES
-
-    @property
-    def param_is_angle(self) -> tuple[bool, ...]:
-        return PARAM_IS_ANGLE
-
-    @property
-    def params(self) -> np.ndarray:
-        return self.rho.copy()
-
-    def with_params(self, params: np.ndarray, name: str | None = None, covariance=None) -> "RotaryDelta":
-        return replace(self, rho=np.asarray(params, dtype=float), name=self.name if name is None else name,
-                       covariance=covariance)
 
     @property
     def home_pose(self) -> np.ndarray:
@@ -196,14 +173,6 @@ class RotaryDelta(TranslatingMechanism):
         return "\n".join(lines)
 
     # -- kinematics ------------------------------------------------------------------------
-
-    def _rho(self, params) -> np.ndarray:
-        if params is None:
-            return self.rho
-        params = np.asarray(params, dtype=float)
-        if params.shape != (len(PARAM_NAMES),):
-            raise PkmcalError(f"rotary delta '{self.name}' has {len(PARAM_NAMES)} parameters; got {params.shape}")
-        return params
 
     @staticmethod
     def _angles(q, g, S, v1, v2):
