@@ -89,7 +89,15 @@ def free_statement(result, free_opt: list[str] | None, setup) -> str:
     mech_free = [n for n in result.free if names.index(n) < p]
     sensor_free = [n for n in result.free if names.index(n) >= p]
     setup_free = set(setup.sensor.default_free)
-    src = "--free" if free_opt is not None else "all, no --free given"
+    from pkmcal.identification.residuals import default_fixed_parameters
+
+    held_by_machine = [n for n in default_fixed_parameters(result.mechanism) if n not in result.free]
+    if free_opt is not None:
+        src = "--free"
+    elif held_by_machine:
+        src = f"all but {', '.join(held_by_machine)}, which the machine holds unless freed by name; no --free given"
+    else:
+        src = "all, no --free given"
     text = f"free parameters: {len(mech_free)} of {p} machine parameters ({src})"
     if sensor_free:
         parts = [f"{n} ({'setup free:' if n in setup_free else '--free'})" for n in sensor_free]

@@ -215,12 +215,25 @@ def _match(names: tuple[str, ...], patterns, what: str) -> list[int]:
     return out
 
 
+def default_fixed_parameters(mechanism) -> tuple[str, ...]:
+    """The parameters the mechanism holds unless they are freed by name (its
+    ``default_fixed`` names and patterns: a delta's tool offset, which a sensor of the tool
+    point cannot tell from the towers' positions)."""
+    from fnmatch import fnmatchcase
+
+    return tuple(n for n in mechanism.param_names if any(fnmatchcase(n, pat) for pat in mechanism.default_fixed))
+
+
 def candidate_parameters(model: Model, free=None, fix=None) -> tuple[list[int], bool]:
     """Indices of the parameters to estimate before any automatic gauge, and whether the
-    choice was explicit (``free`` or a ``fix`` list given)."""
+    choice was explicit (``free`` or a ``fix`` list given). Without ``free``: every machine
+    parameter but those it holds by default (:func:`default_fixed_parameters`), and the
+    sensor's ``default_free``."""
     names = model.names
     if free is None:
-        cand = list(range(model.n_mech)) + [names.index(n) for n in model.sensor.default_free]
+        held = set(default_fixed_parameters(model.mechanism))
+        cand = [i for i in range(model.n_mech) if names[i] not in held] + \
+            [names.index(n) for n in model.sensor.default_free]
         explicit = False
     else:
         cand = sorted(_match(names, free, "--free"))
