@@ -28,8 +28,9 @@ def _poses(m, n, rng):
 def test_noise_free_position_campaign_predicts_the_real_machine(name):
     nominal = load_machine(name)
     setup = load_setup("laser-tracker", nominal)
-    setup = dataclasses.replace(setup, noise=dataclasses.replace(setup.noise, reading_std=0.0 * setup.noise.reading_std,
-                                                                 actuator_std=0.0 * np.asarray(setup.noise.actuator_std)))
+    noise_free = dataclasses.replace(setup.noise, reading_std=0.0 * setup.noise.reading_std,
+                                     actuator_std=0.0 * np.asarray(setup.noise.actuator_std))
+    setup = dataclasses.replace(setup, noise=noise_free)
     rng = np.random.default_rng(3)
     real = perturb_machine(nominal, 0.3, rng, name="real")
     sim = simulate_campaign(nominal, real, setup, _poses(nominal, 80, rng), rng)

@@ -130,14 +130,21 @@ def _num(v: float, angle: bool):
     return RawFloat(rad_to_deg_text(v)) if angle else float(v)
 
 
-def _rho(path, lines, section: str, entries: dict, per: tuple[str, ...], angle: dict[str, bool], tool) -> np.ndarray:
-    """ρ in the module's order from the per-tower/arm mappings and the tool offset."""
-    missing = [t for t in ("a", "b", "c") if t not in entries]
+def _rho(path, lines, section: str, entries: dict, layout, tool) -> np.ndarray:
+    """ρ in the layout's order (:class:`~pkmcal.mechanisms.translating.ArmLayout`) from
+    the per-arm mappings of the file (degrees for angles) and the tool offset."""
+    missing = [a for a in layout.arms if a not in entries]
     if missing:
         raise InputFileError(path, f"{section}: missing {', '.join(missing)}; give all three (a, b, c)",
                              line=_line_of((section,), lines))
-    values = [_value(getattr(entries[t], p), angle[p]) for t in ("a", "b", "c") for p in per]
+    values = [_value(getattr(entries[a], p), p in layout.angles) for a in layout.arms for p in layout.params]
     return np.array(values + [float(v) for v in (tool or (0.0, 0.0, 0.0))])
+
+
+def _arm_table(rho: np.ndarray, layout) -> dict:
+    """The per-arm mappings of the file (inverse of :func:`_rho`; angles as exact degree text)."""
+    g = layout.split(rho)
+    return {a: {p: _num(g[p][i], p in layout.angles) for p in layout.params} for i, a in enumerate(layout.arms)}
 
 
 def _build(path, lines, cls, kwargs: dict, section: str):
@@ -159,7 +166,7 @@ def _linear_from_file(path: object, data: dict, lines: dict[tuple, int]) -> ld.L
         spec = _LinearFile.model_validate(data)
     except ValidationError as exc:
         raise _validation_error(path, exc, lines) from None
-    rho = _rho(path, lines, "towers", spec.towers, ld.TOWER_PARAMS, ld.TOWER_PARAM_IS_ANGLE, spec.tool)
+    rho = _rho(path, lines, "towers", spec.towers, ld.LAYOUT, spec.tool)
     kw: dict[str, Any] = {}
     lim = spec.limits
     if lim is not None:
@@ -184,8 +191,7 @@ def _linear_to_file(m: ld.LinearDelta) -> dict:
     if m.description:
         out["description"] = m.description
     rho = m.rho
-    out["towers"] = {t: {p: _num(rho[ld.param_position(p, i)], ld.TOWER_PARAM_IS_ANGLE[p]) for p in ld.TOWER_PARAMS}
-                     for i, t in enumerate(ld.TOWERS)}
+    out["towers"] = _arm_table(rho, ld.LAYOUT)
     out["tool"] = FlowList(float(v) for v in rho[-3:])
     out["reading_reference"] = FlowList(float(v) for v in m.reading_reference)
     out["limits"] = {"print_radius": float(m.print_radius), "min_z": float(m.min_z),
@@ -202,7 +208,7 @@ def _rotary_from_file(path: object, data: dict, lines: dict[tuple, int]) -> rd.R
         spec = _RotaryFile.model_validate(data)
     except ValidationError as exc:
         raise _validation_error(path, exc, lines) from None
-    rho = _rho(path, lines, "arms", spec.arms, rd.ARM_PARAMS, rd.ARM_PARAM_IS_ANGLE, spec.tool)
+    rho = _rho(path, lines, "arms", spec.arms, rd.LAYOUT, spec.tool)
     kw: dict[str, Any] = {}
     lim = spec.limits
     if lim is not None:
@@ -230,8 +236,7 @@ def _rotary_to_file(m: rd.RotaryDelta) -> dict:
     if m.description:
         out["description"] = m.description
     rho = m.rho
-    out["arms"] = {t: {p: _num(rho[rd.param_position(p, i)], rd.ARM_PARAM_IS_ANGLE[p]) for p in rd.ARM_PARAMS}
-                   for i, t in enumerate(rd.ARMS)}
+    out["arms"] = _arm_table(rho, rd.LAYOUT)
     out["tool"] = FlowList(float(v) for v in rho[-3:])
     out["limits"] = {"motor_range": FlowList(RawFloat(rad_to_deg_text(v)) for v in m.motor_range),
                      "max_joint_angle": RawFloat(rad_to_deg_text(m.max_joint_angle)),

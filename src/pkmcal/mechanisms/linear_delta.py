@@ -64,33 +64,24 @@ import numpy as np
 
 from pkmcal.errors import PkmcalError
 from pkmcal.mechanisms.base import FKResult, LimitReport
-from pkmcal.mechanisms.translating import TranslatingMechanism
+from pkmcal.mechanisms.translating import ArmLayout, TranslatingMechanism
 from pkmcal.mechanisms.trilateration import trilaterate
 
-TOWERS = ("a", "b", "c")
-#: Per-tower parameters, in this order for each tower (angles: θ, α, β).
-TOWER_PARAMS = ("angle", "radius", "arm", "endstop", "lean_radial", "lean_tangential")
-TOWER_PARAM_IS_ANGLE = {"angle": True, "radius": False, "arm": False, "endstop": False, "lean_radial": True,
-                "lean_tangential": True}
-TOOL_PARAMS = ("tool.x", "tool.y", "tool.z")
-PARAM_NAMES = tuple(f"{p}_{t}" for t in TOWERS for p in TOWER_PARAMS) + TOOL_PARAMS
-PARAM_IS_ANGLE = tuple(TOWER_PARAM_IS_ANGLE[p] for _ in TOWERS for p in TOWER_PARAMS) + (False,) * 3
+#: The parameter vector: per tower (angles: θ, α, β) ``angle, radius, arm, endstop,
+#: lean_radial, lean_tangential``, then the tool offset.
+LAYOUT = ArmLayout(("angle", "radius", "arm", "endstop", "lean_radial", "lean_tangential"),
+                   frozenset({"angle", "lean_radial", "lean_tangential"}))
+TOWERS = LAYOUT.arms
+TOWER_PARAMS = LAYOUT.params
+TOOL_PARAMS = LAYOUT.tool
+PARAM_NAMES = LAYOUT.names
+PARAM_IS_ANGLE = LAYOUT.is_angle
 #: Klipper's default tower angles (degrees): stepper_a, b, c.
 KLIPPER_TOWER_ANGLES_DEG = (210.0, 330.0, 90.0)
 #: FK is converged where the IK of its pose reproduces the readings within this (mm).
 FK_TOL = 1e-9
-_NP = len(TOWER_PARAMS)
-
-
-def param_position(param: str, tower: int) -> int:
-    return tower * _NP + TOWER_PARAMS.index(param)
-
-
-def _towers(rho: np.ndarray) -> dict[str, np.ndarray]:
-    """Per-tower arrays (3,) of every tower parameter, plus the tool offset (3,)."""
-    out = {p: rho[[param_position(p, i) for i in range(3)]] for p in TOWER_PARAMS}
-    out["tool"] = rho[-3:]
-    return out
+param_position = LAYOUT.position
+_towers = LAYOUT.split
 
 
 def _frames(g: dict[str, np.ndarray]):
@@ -227,14 +218,11 @@ class LinearDelta(TranslatingMechanism):
 
     def _switch(self, g, u, B) -> tuple[np.ndarray, np.ndarray]:
         """S (3,) the rail position of each switch, and w (3, 3) there (tower i at the
-        nozzle pose (0, 0, E_i))."""
-        S = np.empty(3)
-        W = np.empty((3, 3))
-        for i in range(3):   # three towers, not poses
-            q = np.array([[0.0, 0.0, g["endstop"][i]]]) - g["tool"][None, :]
-            s, w = self._rail_positions(q, g, u, B)
-            S[i], W[i] = s[0, i], w[0, i]
-        return S, W
+        nozzle pose (0, 0, E_i)): the diagonal of the three poses' rail positions."""
+        q = np.stack([np.zeros(3), np.zeros(3), g["endstop"]], axis=1) - g["tool"][None, :]
+        s, w = self._rail_positions(q, g, u, B)
+        k = np.arange(3)
+        return s[k, k], w[k, k]
 
     def switch_positions(self, params=None) -> np.ndarray:
         """S (3,): the rail position of each tower's switch (module docstring), mm."""
@@ -337,8 +325,9 @@ class LinearDelta(TranslatingMechanism):
         poses = self.as_pose_array(poses)
         g = _towers(self.rho)
         e_r, _, u, *_ = _frames(g)
-        s, w = self._rail_positions(poses - g["tool"][None, :], g, u, g["radius"][:, None] * e_r)
-        lam = self.ik(poses)
+        B = g["radius"][:, None] * e_r
+        s, w = self._rail_positions(poses - g["tool"][None, :], g, u, B)
+        lam = s - self._switch(g, u, B)[0][None, :] + self.reading_reference[None, :]   # the IK's readings
         reach = np.all(np.isfinite(s), axis=1)
         hi = self.reading_reference[None, :]
         lo = hi - self.travel[None, :]
@@ -348,9 +337,9 @@ class LinearDelta(TranslatingMechanism):
         angle_m = np.min(np.where(np.isfinite(elev), elev, -np.inf), axis=1, initial=np.inf) - self.min_arm_angle
         radius_m = self.print_radius - np.hypot(poses[:, 0], poses[:, 1]) - margin
         z_m = poses[:, 2] - self.min_z
-        margins = {"reach": np.where(reach, 0.0, -np.inf), "travel": travel_m, "arm_angle": angle_m,
-                   "print_radius": radius_m, "min_z": z_m}
-        return LimitReport(violations={k: ~(v >= 0) for k, v in margins.items()}, margins=margins)
+        limit_margins = {"reach": np.where(reach, 0.0, -np.inf), "travel": travel_m, "arm_angle": angle_m,
+                         "print_radius": radius_m, "min_z": z_m}
+        return LimitReport(violations={k: ~(v >= 0) for k, v in limit_margins.items()}, margins=limit_margins)
 
 
 def klipper_delta(name: str, delta_radius: float, arm_length: float | tuple, position_endstop: float | tuple,
@@ -368,5 +357,5 @@ def klipper_delta(name: str, delta_radius: float, arm_length: float | tuple, pos
     return LinearDelta(name=name, rho=rho, **limits)
 
 
-__all__ = ["KLIPPER_TOWER_ANGLES_DEG", "LinearDelta", "PARAM_NAMES", "TOWERS", "TOWER_PARAMS", "TOWER_PARAM_IS_ANGLE",
+__all__ = ["KLIPPER_TOWER_ANGLES_DEG", "LAYOUT", "LinearDelta", "PARAM_NAMES", "TOWERS", "TOWER_PARAMS",
            "klipper_delta", "param_position"]

@@ -45,31 +45,23 @@ import numpy as np
 
 from pkmcal.errors import PkmcalError
 from pkmcal.mechanisms.base import FKResult, LimitReport
-from pkmcal.mechanisms.translating import TranslatingMechanism
+from pkmcal.mechanisms.translating import ArmLayout, TranslatingMechanism
 from pkmcal.mechanisms.trilateration import trilaterate
 
-ARMS = ("a", "b", "c")
-#: Per-arm parameters, in this order for each arm.
-ARM_PARAMS = ("angle", "radius", "height", "upper", "forearm", "zero", "axis_yaw", "axis_tilt")
-ARM_PARAM_IS_ANGLE = {"angle": True, "radius": False, "height": False, "upper": False, "forearm": False, "zero": True,
-              "axis_yaw": True, "axis_tilt": True}
-TOOL_PARAMS = ("tool.x", "tool.y", "tool.z")
-PARAM_NAMES = tuple(f"{p}_{t}" for t in ARMS for p in ARM_PARAMS) + TOOL_PARAMS
-PARAM_IS_ANGLE = tuple(ARM_PARAM_IS_ANGLE[p] for _ in ARMS for p in ARM_PARAMS) + (False,) * 3
+#: The parameter vector: per arm ``angle, radius, height, upper, forearm, zero, axis_yaw,
+#: axis_tilt``, then the tool offset.
+LAYOUT = ArmLayout(("angle", "radius", "height", "upper", "forearm", "zero", "axis_yaw", "axis_tilt"),
+                   frozenset({"angle", "zero", "axis_yaw", "axis_tilt"}))
+ARMS = LAYOUT.arms
+ARM_PARAMS = LAYOUT.params
+TOOL_PARAMS = LAYOUT.tool
+PARAM_NAMES = LAYOUT.names
+PARAM_IS_ANGLE = LAYOUT.is_angle
 NOMINAL_ANGLES_DEG = (90.0, 210.0, 330.0)
 #: FK is converged where the IK of its pose reproduces the readings within this (rad).
 FK_TOL = 1e-10
-_NP = len(ARM_PARAMS)
-
-
-def param_position(param: str, arm: int) -> int:
-    return arm * _NP + ARM_PARAMS.index(param)
-
-
-def _arms(rho: np.ndarray) -> dict[str, np.ndarray]:
-    out = {p: rho[[param_position(p, i) for i in range(3)]] for p in ARM_PARAMS}
-    out["tool"] = rho[-3:]
-    return out
+param_position = LAYOUT.position
+_arms = LAYOUT.split
 
 
 def _geometry(g: dict):
@@ -292,9 +284,9 @@ class RotaryDelta(TranslatingMechanism):
         r = np.hypot(poses[:, 0], poses[:, 1])
         ws_m = np.minimum.reduce([self.workspace_radius - r, poses[:, 2] - self.z_range[0],
                                   self.z_range[1] - poses[:, 2]])
-        margins = {"reach": np.where(reach, 0.0, -np.inf), "motor_range": motor_m, "joint_angle": joint_m,
-                   "workspace": ws_m}
-        return LimitReport(violations={k: ~(v >= 0) for k, v in margins.items()}, margins=margins)
+        limit_margins = {"reach": np.where(reach, 0.0, -np.inf), "motor_range": motor_m, "joint_angle": joint_m,
+                         "workspace": ws_m}
+        return LimitReport(violations={k: ~(v >= 0) for k, v in limit_margins.items()}, margins=limit_margins)
 
 
 def symmetric_rotary_delta(name: str, radius: float, upper: float, forearm: float, height: float = 0.0,
@@ -310,5 +302,4 @@ def symmetric_rotary_delta(name: str, radius: float, upper: float, forearm: floa
     return RotaryDelta(name=name, rho=rho, **limits)
 
 
-__all__ = ["ARMS", "ARM_PARAMS", "ARM_PARAM_IS_ANGLE", "PARAM_NAMES", "RotaryDelta", "param_position",
-           "symmetric_rotary_delta"]
+__all__ = ["ARMS", "ARM_PARAMS", "LAYOUT", "PARAM_NAMES", "RotaryDelta", "param_position", "symmetric_rotary_delta"]

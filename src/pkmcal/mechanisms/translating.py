@@ -9,13 +9,44 @@ sensor's twist Jacobian pulls back to the pose by keeping its δp columns.
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from pkmcal.errors import PkmcalError
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.mechanisms.frame import Frame
+
+
+@dataclass(frozen=True)
+class ArmLayout:
+    """The parameter vector ρ of a delta: the same named parameters for each of its three
+    arms (towers) ``a, b, c`` in turn, ``<parameter>_<arm>``, then the tool offset
+    ``tool.x, tool.y, tool.z`` (mm). ``angles``: the per-arm parameters that are angles."""
+
+    params: tuple[str, ...]
+    angles: frozenset[str]
+    arms: tuple[str, ...] = ("a", "b", "c")
+    tool: tuple[str, ...] = ("tool.x", "tool.y", "tool.z")
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(f"{p}_{a}" for a in self.arms for p in self.params) + self.tool
+
+    @property
+    def is_angle(self) -> tuple[bool, ...]:
+        return tuple(p in self.angles for _ in self.arms for p in self.params) + (False,) * len(self.tool)
+
+    def position(self, param: str, arm: int) -> int:
+        """Index in ρ of ``param`` of arm number ``arm`` (0, 1, 2)."""
+        return arm * len(self.params) + self.params.index(param)
+
+    def split(self, rho: np.ndarray) -> dict[str, np.ndarray]:
+        """Per-arm arrays (3,) of every per-arm parameter, and ``"tool"`` (3,)."""
+        per_arm = np.asarray(rho)[: len(self.arms) * len(self.params)].reshape(len(self.arms), len(self.params))
+        out = {p: per_arm[:, k] for k, p in enumerate(self.params)}
+        out["tool"] = np.asarray(rho)[-len(self.tool):]
+        return out
 
 
 class TranslatingMechanism(Mechanism):
@@ -93,4 +124,4 @@ class TranslatingMechanism(Mechanism):
         return np.array(frame.p, dtype=float)
 
 
-__all__ = ["TranslatingMechanism"]
+__all__ = ["ArmLayout", "TranslatingMechanism"]
