@@ -351,6 +351,11 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
 
         result = dataclasses.replace(result, warnings=tuple(result.warnings) + tuple(hints))
     free_line = free_statement(result, free_opt, fit_setup)
+    geometry = None
+    if result.mechanism.point_sets or "leg-lengths" in result.mechanism.abilities:
+        from pkmcal.identification.geometry import readable_geometry
+
+        geometry = readable_geometry(nominal, result.mechanism, "the covariance written to the machine file")
     text = machine_to_text(_with_calibration_record(result, machine, measurements, setup_spec, name))
     _check_loads_back(text, "(standard output)" if to_stdout(output) else output)
     report = None if report_dir is None else _report_data(nominal, result, setup, meas, measurements,
@@ -363,6 +368,8 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
         d["clipped"] = [c.to_dict("deg" if nominal.actuator_is_angle[nominal.actuator_names.index(c.actuator)] else "mm")
                         for c in clipped_found]
         d["output"] = output
+        if geometry is not None:
+            d["geometry"] = finite_or_null(geometry.to_dict())
     emit(text, output)
     if report is not None:
         from pkmcal.report import write_report
@@ -376,6 +383,8 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
         err = to_stdout(output)
         click.echo(result_table(result), err=err)
         click.echo(fit_summary(result, free_line), err=err)
+        if geometry is not None:
+            click.echo(geometry.format(), err=err)
         if not err:
             click.echo(f"wrote {output}" + (f" and {written.html}" if report is not None else ""))
         elif report is not None:

@@ -28,7 +28,9 @@ redundantly actuated planar machines (l > n) implement this class.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from types import MappingProxyType
 
 import numpy as np
 
@@ -143,6 +145,10 @@ class Mechanism(ABC):
     #: Parameter names or shell patterns held at their values unless freed by name
     #: (none today; e.g. actuator gains, which only special campaigns can identify).
     default_fixed: tuple[str, ...] = ()
+    #: Named sets of points among the parameters: set name → point labels, each label P
+    #: with parameters ``P.x, P.y, P.z`` (mm). Shown gauge-free after an identification
+    #: (:mod:`pkmcal.identification.geometry`); none by default.
+    point_sets: Mapping[str, tuple[str, ...]] = MappingProxyType({})
 
     @property
     def actuator_is_angle(self) -> tuple[bool, ...]:

@@ -26,6 +26,7 @@ formulas (:meth:`Hexapod._limit_margins_numpy`), which decide every pose near a 
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from types import MappingProxyType
 
 import numpy as np
 
@@ -128,6 +129,8 @@ class Hexapod(Mechanism):
     pose_is_angle = (False, False, False, True, True, True)
     actuator_names = tuple(f"lambda{i + 1}" for i in range(N_LEGS))
     abilities = frozenset({"leg-lengths", "drawing", "linuxcnc", "pose-convention"})
+    point_sets = MappingProxyType({"base joints": tuple(f"b{i + 1}" for i in range(N_LEGS)),
+                                   "platform joints": tuple(f"a{i + 1}" for i in range(N_LEGS))})
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
