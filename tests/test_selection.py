@@ -16,6 +16,7 @@ from pkmcal.planning import _selection_kernels as kernels
 from pkmcal.planning.indices import information_matrix, log_det_information, observability_indices
 from pkmcal.planning.plan import plan_poses, pose_set_indices
 from pkmcal.planning.selection import (
+    _detmax_exchange,
     _DState,
     levy_steps,
     select,
@@ -78,6 +79,28 @@ def test_default_pool_path_and_determinism():
     # the exchange over all candidates repairs a small pool: within 1 % of the full run
     assert log_det_information(G, a.chosen) >= log_det_information(G, full.chosen) - 0.01 * abs(
         log_det_information(G, full.chosen))
+
+
+@pytest.mark.parametrize("work_size", [40, 600])
+def test_working_set_exchange_stops_where_the_exchange_over_all_candidates_would(work_size):
+    """The DETMAX stop rule checked by brute force over all N = 600 candidates: the best
+    candidate to add, once added, is itself the best pose to remove (or no swap gains),
+    also when the updates ran on working sets of 40 (several rounds) instead of all N."""
+    G = np.ascontiguousarray(blocks(5, N=600, m=2, p=6))
+    start = list(range(0, 80, 10))
+    chosen, exchanges, _ = _detmax_exchange(G, G.reshape(-1, 6), list(start), 500, work_size, None)
+    assert exchanges > 0 and len(set(chosen)) == len(start)
+    M = information_matrix(G, chosen)
+    ld = np.linalg.slogdet(M)[1]
+    others = np.setdiff1d(np.arange(len(G)), chosen)
+    gains = [np.linalg.slogdet(M + G[j].T @ G[j])[1] - ld for j in others]
+    k = int(others[int(np.argmax(gains))])
+    M2 = M + G[k].T @ G[k]
+    pool = chosen + [k]
+    after = [np.linalg.slogdet(M2 - G[i].T @ G[i])[1] for i in pool]
+    r = int(np.argmax(after))
+    assert pool[r] == k or after[r] - ld <= 1e-10
+    assert log_det_information(G, chosen) > log_det_information(G, start)
 
 
 def test_default_at_least_as_good_as_cuckoo_and_detmax_on_O1():

@@ -111,16 +111,28 @@ def _batch_logdet(S: np.ndarray, sign: float, identity: bool = True) -> np.ndarr
     return np.where(s > 0, ld, -np.inf)
 
 
-def _all_S(flatF: np.ndarray, N: int, m: int, M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """M⁻¹ and S_j = G_j M⁻¹ G_jᵀ (N, m, m) for all candidates (one GEMM)."""
+def _whitened(flatF: np.ndarray, M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(L⁻¹, G L⁻ᵀ (N·m, p)) with M = L Lᵀ (one GEMM over all candidate rows)."""
     try:
         L = np.linalg.cholesky(M)
     except np.linalg.LinAlgError:
         raise PkmcalError("the candidate poses do not identify every parameter (singular information matrix); "
                           "use more poses or more varied candidates") from None
     Linv = np.linalg.inv(L)
-    W = (flatF @ Linv.T).reshape(N, m, -1)
+    return Linv, flatF @ Linv.T
+
+
+def _all_S(flatF: np.ndarray, N: int, m: int, M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """M⁻¹ and S_j = G_j M⁻¹ G_jᵀ (N, m, m) for all candidates."""
+    Linv, W = _whitened(flatF, M)
+    W = W.reshape(N, m, -1)
     return Linv.T @ Linv, np.einsum("nip,njp->nij", W, W, optimize=True)
+
+
+def _leverages(flatF: np.ndarray, N: int, M: np.ndarray) -> np.ndarray:
+    """tr(G_j M⁻¹ G_jᵀ) = ‖G_j L⁻ᵀ‖²_F (N,) for all candidates."""
+    W = _whitened(flatF, M)[1]
+    return np.einsum("ij,ij->i", W, W).reshape(N, -1).sum(axis=1)
 
 
 class _DState:
@@ -129,7 +141,7 @@ class _DState:
     def __init__(self, G: np.ndarray, M: np.ndarray, flatF: np.ndarray | None = None):
         self.G = G
         self.N, self.m, self.p = G.shape
-        self.flatF = np.asfortranarray(G.reshape(self.N * self.m, self.p)) if flatF is None else flatF
+        self.flatF = G.reshape(self.N * self.m, self.p) if flatF is None else flatF   # a view (G is C-ordered)
         self.M = np.array(M, dtype=float)
         self.updates = 0
         self.refresh()
@@ -159,6 +171,81 @@ class _DState:
         return np.where(np.isnan(self.gain), -np.inf, self.gain)
 
 
+#: Working-set size of the DETMAX exchange (at least; :func:`_detmax_exchange`).
+_WORK_MIN = 10_000
+
+
+def _detmax_exchange(G: np.ndarray, flatF: np.ndarray, chosen: list[int], max_ex: int, work_size: int,
+                     progress: Callable[[int], None] | None) -> tuple[list[int], int, int]:
+    """DETMAX exchanges of the set ``chosen`` over all N candidates of G: add the candidate
+    of largest gain, remove the pose of least loss; stop when that is the one just added or
+    nothing improves. Returns (chosen, exchanges, candidates evaluated).
+
+    Each exchange is two rank-m updates of the candidates' S_j, which reads all of G
+    (N·m·p numbers: 200 MB at 100,000 full-pose candidates of 42 parameters). So the
+    updates run on a *working set*: the ``work_size`` candidates of largest gain at the
+    current design (and the chosen ones), from the exact S_j of all N (one GEMM). When the
+    exchange stops on the working set, the exact gains of all N are recomputed at the final
+    design: if the best candidate is in the working set, the working set's stop is the
+    stop over all N (the same add step, so the same decision); otherwise the exchange goes
+    on from a new working set around it. The result is therefore a DETMAX optimum over all
+    N candidates with the same stopping rule; with N ≤ ``work_size`` the path is that of
+    exchanging over all N directly."""
+    N, m, _ = G.shape
+    in_set = np.zeros(N, dtype=bool)
+    in_set[chosen] = True
+    M = information_matrix(G, np.array(chosen))
+    exchanges = evaluations = 0
+    last_work = None
+    while exchanges < max_ex:
+        if N <= work_size:
+            work = np.arange(N)
+        else:
+            _, S_all = _all_S(flatF, N, m, M)
+            gain_all = np.empty(N)
+            _kernels().gains_of(np.ascontiguousarray(S_all), gain_all)
+            gain_all = np.where(np.isnan(gain_all) | in_set, -np.inf, gain_all)
+            evaluations += N
+            best = int(np.argmax(gain_all))
+            if last_work is not None and last_work[best]:
+                break          # the working set's stop is the stop over all N
+            work = np.union1d(np.argpartition(-gain_all, work_size - 1)[:work_size], np.flatnonzero(in_set))
+        last_work = np.zeros(N, dtype=bool)
+        last_work[work] = True
+        state = _DState(np.ascontiguousarray(G[work]), M)
+        pos = {int(j): i for i, j in enumerate(work)}
+        w_in = in_set[work]
+        stopped = False
+        while exchanges < max_ex:
+            gain = state.gains()
+            evaluations += len(work)
+            gain[w_in] = -np.inf
+            k = int(np.argmax(gain))
+            if not np.isfinite(gain[k]):
+                stopped = True
+                break
+            state.update(k, 1.0)
+            cand = np.array([pos[c] for c in chosen] + [k])
+            loss = _batch_logdet(state.S[cand], -1.0)
+            r = int(np.argmax(loss))
+            if cand[r] == k or gain[k] + loss[r] <= 1e-10:
+                state.update(k, -1.0)
+                stopped = True
+                break
+            state.update(int(cand[r]), -1.0)
+            k_all, r_all = int(work[k]), int(work[cand[r]])
+            w_in[k], w_in[cand[r]] = True, False
+            in_set[k_all], in_set[r_all] = True, False
+            chosen[chosen.index(r_all)] = k_all
+            exchanges += 1
+            if progress is not None:
+                progress(exchanges)
+        M = state.M
+        if N <= work_size or not stopped:
+            break
+    return chosen, exchanges, evaluations
+
+
 @blas_single_threaded
 def select_default(G: np.ndarray, n: int, *, index: str = "O1", pool: int | None = None,
                    max_exchanges: int | None = None, progress: Progress | None = None) -> Selection:
@@ -176,19 +263,20 @@ def select_default(G: np.ndarray, n: int, *, index: str = "O1", pool: int | None
        still held only by δ.
     3. DETMAX exchange on the exact M of the chosen set over *all* N candidates: add the
        candidate of largest gain, remove the pose of least loss log det(I − S_i); stop
-       when that is the one just added (paper 2 §4 iv) or nothing improves.
+       when that is the one just added (paper 2 §4 iv) or nothing improves. Above
+       max(10,000, 5·pool) candidates the updates run on a working set of the largest
+       gains, re-checked against all N when it stops (:func:`_detmax_exchange`).
     4. For ``index`` O2..O5: paper 2's add/remove exchange on that index started from the
        D-optimal set, the add step scoring exactly the (at most 256) candidates of largest
        eigenvalue bound (:meth:`_IndexScorer.best_add`).
     """
     G, N, m, p = _check(G, n)
     _need_rank(n, m, p)
-    flatF = np.asfortranarray(G.reshape(N * m, p))
+    flatF = G.reshape(N * m, p)   # a view: a Fortran copy costs more than the GEMMs it would feed
     K = max(2000, 20 * n) if pool is None else max(int(pool), n)
     evaluations = 0
     if K < N:
-        _, S_all = _all_S(flatF, N, m, information_matrix(G))
-        lev = np.trace(S_all, axis1=1, axis2=2)
+        lev = _leverages(flatF, N, information_matrix(G))
         pool_idx = np.sort(np.argpartition(-lev, K - 1)[:K])
         evaluations += N
     else:
@@ -229,31 +317,9 @@ def select_default(G: np.ndarray, n: int, *, index: str = "O1", pool: int | None
         if progress is not None:
             progress(step + 1, total)
     chosen = [int(i) for i in pool_idx[np.flatnonzero(in_pool)]]
-    in_set = np.zeros(N, dtype=bool)
-    in_set[chosen] = True
-    state = _DState(G, information_matrix(G, np.array(chosen)), flatF)
-    exchanges = 0
-    for it in range(max_ex):
-        gain = state.gains()
-        evaluations += N
-        gain[in_set] = -np.inf
-        k = int(np.argmax(gain))
-        if not np.isfinite(gain[k]):
-            break
-        state.update(k, 1.0)
-        cand = np.array(chosen + [k])
-        loss = _batch_logdet(state.S[cand], -1.0)
-        r = int(np.argmax(loss))
-        if cand[r] == k or gain[k] + loss[r] <= 1e-10:
-            state.update(k, -1.0)
-            break
-        state.update(int(cand[r]), -1.0)
-        in_set[k] = True
-        in_set[cand[r]] = False
-        chosen[chosen.index(int(cand[r]))] = k
-        exchanges += 1
-        if progress is not None:
-            progress(n + it + 1, total)
+    chosen, exchanges, n_eval = _detmax_exchange(G, flatF, chosen, max_ex, max(_WORK_MIN, 5 * K),
+                                                 None if progress is None else (lambda i: progress(n + i, total)))
+    evaluations += n_eval
     out = np.array(sorted(chosen))
     message = f"greedy D-optimal start ({len(Gp)} pool) + {exchanges} DETMAX exchanges"
     index = check_index_name(index)
