@@ -34,7 +34,6 @@ PROBE = re.compile(
 ALLOWED = {
     ("cli/campaign_cmds.py", "type(real) is not type(nominal)", "registries: compare kinds"),
     ("cli/campaign_cmds.py", "type(other) is not type(cal)", "registries: compare kinds"),
-    ("cli/export_cmd.py", 'getattr(machine, "covariance", None)', "registries: declared covariance"),
     ("cli/export_cmd.py", 'getattr(machine, "metadata", {})', "registries: declared metadata"),
     ("cli/export_cmd.py", 'getattr(machine, "description", "")', "registries: declared description"),
     ("cli/export_cmd.py", 'hasattr(machine, "stroke")', "registries: export abilities"),
@@ -43,7 +42,6 @@ ALLOWED = {
     ("cli/info_cmd.py", 'hasattr(mech, "base")', "registries: kind's info lines"),
     ("cli/info_cmd.py", 'getattr(mech, "workspace", None)', "workspace: workspace_box()"),
     ("demo.py", "isinstance(machine, Hexapod)", "registries: abilities"),
-    ("demo.py", 'getattr(result.mechanism, "covariance", None)', "registries: declared covariance"),
     ("identification/redundant_campaign.py", 'getattr(machine, "metadata", {})', "pipeline: one verify"),
     ("identification/redundant_campaign.py", 'getattr(mech, "base", None)', "pipeline: baselines in reproduce/"),
     ("io/export_linuxcnc.py", "isinstance(machine, Hexapod)", "registries: 'linuxcnc' ability"),

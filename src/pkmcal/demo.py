@@ -235,7 +235,7 @@ def run_demo(config: DemoConfig = DemoConfig(), progress: Progress | None = None
     step("identify")
     result = identify(nominal, setup, sim.measurements, method=method)
     calibrated = result.mechanism.with_params(result.mechanism.params, name=f"{nominal.name}-calibrated",
-                                              covariance=getattr(result.mechanism, "covariance", None))
+                                              covariance=result.mechanism.covariance)
     calibrated = replace(calibrated, description=f"{nominal.name} calibrated by pkmcal demo (seed {config.seed}, "
                                                  f"{len(result.used_poses)} poses, {method})")
     step("identify", f"{len(result.free)} parameters, {result.method}, rms residual "

@@ -57,7 +57,7 @@ def calibration_json(machine: Mechanism, source: str | None = None) -> dict:
     angle = np.array(machine.param_is_angle, dtype=bool)
     scale = np.where(angle, np.rad2deg(1.0), 1.0)
     values = np.asarray(machine.params, dtype=float) * scale
-    cov = getattr(machine, "covariance", None)
+    cov = machine.covariance
     std = np.full(len(names), np.nan)
     corr_block = None
     if cov is not None:

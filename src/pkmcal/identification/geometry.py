@@ -166,7 +166,7 @@ def readable_geometry(nominal: Mechanism, calibrated: Mechanism, covariance_kind
     ``calibrated.covariance`` (None: no σ), which ``covariance_kind`` names."""
     names = list(calibrated.param_names)
     rho0, rho = nominal.params, calibrated.params
-    cov = getattr(calibrated, "covariance", None)
+    cov = calibrated.covariance
     sets = []
     for set_name, labels in calibrated.point_sets.items():
         idx = np.array([[names.index(f"{lab}.{a}") for a in "xyz"] for lab in labels])

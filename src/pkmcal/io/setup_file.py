@@ -80,7 +80,15 @@ from pkmcal.io._yaml import (
 from pkmcal.io.atomic import atomic_write_text
 from pkmcal.io.limits import MAX_DESCRIPTION_CHARS, magnitude_problem
 from pkmcal.mechanisms.statics import StaticsModel
-from pkmcal.sensors import FullPoseSensor, IndicatorSensor, MeasurementSetup, NoiseModel, PlanarToolSensor, PositionSensor
+from pkmcal.sensors import (
+    DistanceSensor,
+    FullPoseSensor,
+    IndicatorSensor,
+    MeasurementSetup,
+    NoiseModel,
+    PlanarToolSensor,
+    PositionSensor,
+)
 from pkmcal.sensors.library import (  # noqa: F401  (re-exported: the built-ins used to live here)
     BUILTIN_SETUPS,
     PLANAR_ACTUATORS,
@@ -177,7 +185,7 @@ class _Simulation(_Strict):
 
 
 class _Setup(_Strict):
-    sensor: Literal["full-pose", "position", "indicators", "planar-tool"]
+    sensor: Literal["full-pose", "position", "indicators", "planar-tool", "distance"]
     description: Annotated[StrictStr, AfterValidator(_one_line)] = ""
     indicators: list[tuple[Number, Number]] | None = None
     plane_offset: Number | None = None
@@ -186,6 +194,9 @@ class _Setup(_Strict):
     world: _Transform | None = None
     tool: _Transform | None = None
     target: _Point | None = None
+    pivots: list[tuple[Number, Number, Number]] | None = None
+    ball: _Point | None = None
+    lengths: list[Number] | None = None
     free: list[StrictStr] | None = None
     noise: _Noise
     simulation: _Simulation | None = None
@@ -207,12 +218,14 @@ _SENSOR_KEYS = {
     "position": ("target", "world"),
     "indicators": ("indicators", "plane_offset", "zero", "plate"),
     "planar-tool": ("target", "world"),
+    "distance": ("pivots", "ball", "lengths"),
 }
 _NOISE_KEYS = {
     "full-pose": ("position", "orientation", "orientation_deg"),
     "position": ("reading",),
     "indicators": ("reading",),
     "planar-tool": ("reading",),
+    "distance": ("reading",),
 }
 
 
@@ -303,7 +316,7 @@ def load_setup(path: str | os.PathLike, machine=None) -> MeasurementSetup:
         else:
             what = _describe(err)
             if err["type"] == "literal_error" and loc == ("sensor",):
-                what = "must be one of full-pose, position, indicators, planar-tool"
+                what = "must be one of full-pose, position, indicators, planar-tool, distance"
         _fail(path, lines, loc, what)
     raw_noise = data.get("noise") if isinstance(data.get("noise"), dict) else {}
     setup = _build(path, lines, spec, raw_noise)
@@ -359,7 +372,7 @@ def _build(path, lines, spec: _Setup, raw_noise: dict | None = None) -> Measurem
     (its numbers keep their text, which pydantic drops: degree values are converted from
     that text, so that a setup written by :func:`setup_to_yaml` reads back exactly)."""
     kind = spec.sensor
-    for key in ("indicators", "plane_offset", "zero", "plate", "world", "tool", "target"):
+    for key in ("indicators", "plane_offset", "zero", "plate", "world", "tool", "target", "pivots", "ball", "lengths"):
         if getattr(spec, key) is not None and key not in _SENSOR_KEYS[kind]:
             _fail(path, lines, (key,), f"does not apply to sensor '{kind}' (its keys: {', '.join(_SENSOR_KEYS[kind])})")
     noise = spec.noise
@@ -405,6 +418,19 @@ def _build(path, lines, spec: _Setup, raw_noise: dict | None = None) -> Measurem
             if noise.reading is None:
                 _fail(path, lines, ("noise", "reading"), "is missing; give the tracker noise (mm)")
             reading_std = _expand(path, lines, noise.reading, 2, ("noise", "reading"), "mm")
+        elif kind == "distance":
+            if not spec.pivots:
+                _fail(path, lines, ("pivots",), "is missing; give the pivot points [[x, y, z], ...] in mm (base frame), "
+                      "at least one")
+            k = len(spec.pivots)
+            if spec.lengths is not None and len(spec.lengths) != k:
+                _fail(path, lines, ("lengths",), f"give one reference length per pivot ({k}); got {len(spec.lengths)}")
+            ball = None if spec.ball is None else [spec.ball.x, spec.ball.y, spec.ball.z]
+            sensor = DistanceSensor(pivots=np.array(spec.pivots, dtype=float), ball=ball,
+                                    lengths=spec.lengths, free=free)
+            if noise.reading is None:
+                _fail(path, lines, ("noise", "reading"), "is missing; give the distance noise (mm)")
+            reading_std = _expand(path, lines, noise.reading, k, ("noise", "reading"), "mm")
         elif kind == "position":
             target = None if spec.target is None else [spec.target.x, spec.target.y, spec.target.z]
             sensor = PositionSensor(target=target, world=tf(spec.world), free=free)
@@ -527,6 +553,11 @@ def setup_to_yaml(setup: MeasurementSetup) -> str:
         doc["target"] = _group_dict(s, "target")
         if np.any(s.world != 0):
             doc["world"] = _group_dict(s, "world")
+    elif s.kind == "distance":
+        doc["pivots"] = [FlowList(float(v) for v in row) for row in s.pivots.reshape(-1, 3)]
+        doc["ball"] = _group_dict(s, "ball")
+        if np.any(s.lengths != 0):
+            doc["lengths"] = FlowList(float(v) for v in s.lengths)
     elif isinstance(s, FullPoseSensor):
         if np.any(s.world != 0):
             doc["world"] = _group_dict(s, "world")

@@ -149,6 +149,9 @@ class Mechanism(ABC):
     #: with parameters ``P.x, P.y, P.z`` (mm). Shown gauge-free after an identification
     #: (:mod:`pkmcal.identification.geometry`); none by default.
     point_sets: Mapping[str, tuple[str, ...]] = MappingProxyType({})
+    #: Covariance (p, p) of the parameters (mm², rad²; zero rows for fixed ones) of an
+    #: identified machine, None otherwise (every concrete mechanism holds it as a field).
+    covariance: np.ndarray | None = None
 
     @property
     def actuator_is_angle(self) -> tuple[bool, ...]:

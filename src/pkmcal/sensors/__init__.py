@@ -4,6 +4,8 @@
 * :class:`PositionSensor` (``position``): one target point, 3D laser tracker
 * :class:`IndicatorSensor` (``indicators``): K ≥ 3 dial indicators under the platform (paper 2)
 * :class:`PlanarToolSensor` (``planar-tool``): tracker on the tool point of a planar machine (paper 3)
+* :class:`DistanceSensor` (``distance``): distances from base pivots to a ball on the platform
+  (double ballbar, string potentiometer, interferometer to a fixed point)
 
 ``base`` holds the interface (θ declared as :class:`ParamGroup` fields, from which names,
 angle flags, ``with_params`` and value equality follow), ``_common`` the shared argument
@@ -12,15 +14,18 @@ full-pose and position sensors; each other module is one sensor.
 """
 
 from pkmcal.sensors.base import MeasurementSetup, NoiseModel, ParamGroup, Sensor
+from pkmcal.sensors.distance import DistanceSensor
 from pkmcal.sensors.full_pose import FullPoseSensor
 from pkmcal.sensors.indicators import IndicatorSensor
 from pkmcal.sensors.planar_tool import PlanarToolSensor
 from pkmcal.sensors.position import PositionSensor
 
 #: Sensor classes by the ``kind`` written in setup files.
-SENSOR_KINDS = {cls.kind: cls for cls in (FullPoseSensor, PositionSensor, IndicatorSensor, PlanarToolSensor)}
+SENSOR_KINDS = {cls.kind: cls for cls in (FullPoseSensor, PositionSensor, IndicatorSensor, PlanarToolSensor,
+                                          DistanceSensor)}
 
 __all__ = [
+    "DistanceSensor",
     "FullPoseSensor",
     "IndicatorSensor",
     "MeasurementSetup",
