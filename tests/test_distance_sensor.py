@@ -178,3 +178,56 @@ def test_identifiability_of_one_ballbar_on_a_hexapod():
     assert ranks[4].rank == 39 and ranks[1].rank == 36
     base_only = [d for d in ranks[1].null_space if all(n.startswith("b") for n in d)]
     assert len(base_only) >= 1
+
+
+@pytest.mark.parametrize("plane", ["xy", "yz", "zx"])
+def test_circle_frames_put_the_ball_on_the_circle(plane):
+    """Every circle-test frame puts the ball at the bar length from pivot 1 (the reading is
+    0: the bar at its reference length), in the plane through the pivot, the platform at its
+    home orientation; the angles are equally spaced."""
+    s = DistanceSensor(pivots=[[5.0, -3.0, 310.0]], ball=BALL, lengths=[60.0])
+    home = frames_of(np.array([1.0, 2.0, 300.0, 0.05, -0.02, 0.1]))
+    frames = s.circle_frames(24, home, plane)
+    np.testing.assert_allclose(s.predict(frames), 0.0, atol=1e-12)
+    np.testing.assert_allclose(frames.R, np.broadcast_to(home.R[0], (24, 3, 3)), atol=0)
+    ball = frames.p + frames.R @ BALL
+    normal = "xyz".index(next(a for a in "xyz" if a not in plane))
+    np.testing.assert_allclose(ball[:, normal], [5.0, -3.0, 310.0][normal], atol=1e-12)
+    i, j = DistanceSensor.CIRCLE_PLANES[plane]
+    angles = np.arctan2(ball[:, j] - [5.0, -3.0, 310.0][j], ball[:, i] - [5.0, -3.0, 310.0][i])
+    np.testing.assert_allclose(np.diff(np.unwrap(angles)), 2 * np.pi / 24, atol=1e-12)
+
+
+def test_circle_radius_defaults_to_the_home_distance_and_errors():
+    home = frames_of(np.array([0.0, 0.0, 300.0, 0.0, 0.0, 0.0]))
+    s = DistanceSensor(pivots=[[0.0, 40.0, 300.0]])            # ball at the platform origin
+    np.testing.assert_allclose(s.predict(s.circle_frames(8, home)), 40.0, atol=1e-12)
+    with pytest.raises(PkmcalError, match="circle plane"):
+        s.circle_frames(8, home, "xx")
+    with pytest.raises(PkmcalError, match="no radius"):
+        DistanceSensor(pivots=[[0.0, 0.0, 300.0]]).circle_frames(8, home)
+
+
+def test_plan_circle_command(tmp_path):
+    from click.testing import CliRunner
+
+    from pkmcal.cli.main import cli
+    from pkmcal.io.tables import read_table
+
+    setup = tmp_path / "ballbar.yaml"
+    setup.write_text("sensor: distance\npivots: [[0, 0, 315]]\nball: {x: 0, y: 0, z: 0}\nlengths: [30]\n"
+                     "noise: {reading: 0.001, actuator: 0.005}\n")
+    out = tmp_path / "circle.csv"
+    run = CliRunner().invoke(cli, ["plan", "stewart-prototype", "--setup", str(setup), "--algorithm", "circle",
+                                   "--n", "36", "-o", str(out)])
+    assert run.exit_code == 0, run.output
+    table = read_table(out, ("x", "y", "z"))
+    xy = np.stack([table["x"], table["y"]], axis=1)
+    np.testing.assert_allclose(np.hypot(*xy.T), 30.0, atol=1e-9)
+    np.testing.assert_allclose(table["z"], 315.0, atol=1e-9)
+    bad = CliRunner().invoke(cli, ["plan", "stewart-prototype", "--setup", "laser-tracker", "--algorithm", "circle",
+                                   "--n", "36", "-o", str(tmp_path / "x.csv")])
+    assert bad.exit_code == 2 and "ballbar circle test" in bad.output
+    far = CliRunner().invoke(cli, ["plan", "stewart-prototype", "--setup", str(setup), "--algorithm", "circle",
+                                   "--n", "36", "--circle-plane", "yz", "-o", str(tmp_path / "y.csv")])
+    assert far.exit_code == 2 and "circle-test poses" in far.output and "cannot be measured" in far.output

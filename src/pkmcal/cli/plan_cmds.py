@@ -57,7 +57,8 @@ def _format_indices(ind: dict[str, float]) -> str:
     "pkmcal plan stewart-prototype --setup full-pose-paper1 --n 20 --algorithm cuckoo --n-candidates 500 -o cuckoo.csv",
     "pkmcal plan stewart-prototype --setup indicators-prototype --n 50 --algorithm random --seed 9 -o heldout.csv",
     "pkmcal plan stewart-prototype --setup indicators-prototype --n 30 --tilt-margin 5 -o cautious.csv",
-    "pkmcal plan planar-3dof-4act --setup planar-tracker --n 12 -o planar-poses.csv"))
+    "pkmcal plan planar-3dof-4act --setup planar-tracker --n 12 -o planar-poses.csv",
+    "pkmcal plan stewart-prototype --setup examples/setup-ballbar.yaml --algorithm circle --n 36 -o circle.csv"))
 @click.argument("machine")
 @click.option("--setup", "setup_spec", required=True, metavar="SETUP.yaml", help=_SETUP_HELP)
 @click.option("--n", "n_poses", type=click.IntRange(min=1), default=30, show_default=True, help="Number of poses to choose.")
@@ -72,7 +73,10 @@ def _format_indices(ind: dict[str, float]) -> str:
                    "then polishes the set on this index if given.")
 @click.option("--algorithm", type=click.Choice(ALGORITHMS, case_sensitive=False), default="default", show_default=True,
               help="default: D-optimal exchange (O1); detmax / cuckoo: paper 2 add/remove search on --index; "
-                   "corners: random corners of the workspace box (paper 1); random.")
+                   "corners: random corners of the workspace box (paper 1); random; circle: the ballbar circle "
+                   "test of a distance setup (N poses on the circle about pivot 1, in order).")
+@click.option("--circle-plane", type=click.Choice(("xy", "yz", "zx")), default="xy", show_default=True,
+              help="--algorithm circle: the base-frame plane of the circle (through pivot 1).")
 @click.option("--seed", type=SEED, default=0, show_default=True, help="Random seed (same seed, same poses).")
 @click.option("--stroke-margin", type=FiniteFloat(min=0.0), metavar="MM",
               help=f"Hexapods: keep every leg reading this far inside its stroke, at both ends. Default "
@@ -96,7 +100,7 @@ def _format_indices(ind: dict[str, float]) -> str:
 @units_comment_option
 @quiet_option
 @import_options
-def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, index, algorithm, seed,
+def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, index, algorithm, circle_plane, seed,
              stroke_margin, tilt_margin, clearance_margin, margin, indicator_travel, plate_radius, sight_cone,
              output, units_comment=False, quiet=False, mapping=None) -> None:
     """Choose N poses of MACHINE to measure with SETUP (paper 2 §4, paper 1 §IV).
@@ -130,7 +134,7 @@ def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, 
         plan = plan_poses(mech, setup, n_poses, algorithm=algorithm, index=index.upper() if index else None,
                           candidates=candidates, n_candidates=n_candidates, grid=grid, seed=seed, margin=safety,
                           measurability=_measurability(indicator_travel, plate_radius, sight_cone),
-                          progress=bar.stage)
+                          progress=bar.stage, circle_plane=circle_plane)
     poses = to_file_units(plan.poses, mech.pose_is_angle)
     commands = to_file_units(plan.commands, mech.actuator_is_angle)
     cols = {name: poses[:, i] for i, name in enumerate(mech.pose_names)}

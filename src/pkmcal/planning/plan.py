@@ -98,13 +98,14 @@ def plan_poses(mechanism: Mechanism, setup: MeasurementSetup, n: int, *, algorit
                n_candidates: int = 2000, grid: int | None = None, seed: int | None = None,
                margin: SafetyMargin | float | None = None,
                measurability: Measurability = Measurability(), method: str | None = None,
-               model: PlanningModel | None = None, progress: Stages | None = None,
+               model: PlanningModel | None = None, progress: Stages | None = None, circle_plane: str = "xy",
                chunk_size: int = CHUNK_SIZE, chunk_map: Callable = map) -> Plan:
     """Choose ``n`` poses to measure (paper 2 §4, paper 1 §IV).
 
     ``candidates``: an array (N, 6) (mm, rad) or a CSV path (x, y, z, a, b, c in mm, deg);
     default ``n_candidates`` random poses of the workspace box, or with ``grid=k`` the k^6
-    grid of the box. ``algorithm="corners"``
+    grid of the box. ``algorithm="circle"`` measures the ballbar circle test of a distance
+    setup (``n`` poses in the ``circle_plane``, all of them, in order). ``algorithm="corners"``
     ignores them and draws among the 64 corners of the largest all-reachable box. Every
     candidate is checked (limits with the safety margin, measurability) before selection.
 
@@ -143,6 +144,19 @@ def plan_poses(mechanism: Mechanism, setup: MeasurementSetup, n: int, *, algorit
         cand = generate_candidates(mechanism, setup, kind="corners", box=box,
                                    progress=announce("candidates"), **chunked)
         box = corner_box(mechanism, box, setup, **kw)
+    elif algorithm == "circle":
+        if candidates is not None or grid is not None:
+            raise PkmcalError("--algorithm circle measures the ballbar's circle; do not give --candidates or --grid")
+        if "circle-test" not in setup.sensor.abilities:
+            raise PkmcalError(f"--algorithm circle is the ballbar circle test; the setup's '{setup.sensor.kind}' "
+                              "sensor has none (use a 'sensor: distance' setup)")
+        home = nominal.frame(np.asarray(nominal.home_pose, dtype=float)[None, :])
+        circle = nominal.poses_from_frame(setup.sensor.circle_frames(n, home, circle_plane))
+        cand = generate_candidates(mechanism, setup, kind="file", poses=circle, progress=announce("candidates"),
+                                   **chunked)
+        if len(cand.poses) < n:
+            raise PkmcalError(f"{n - len(cand.poses)} of the {n} circle-test poses ({circle_plane} plane about pivot 1) "
+                              f"cannot be measured ({cand.describe()}); move the pivot or shorten the bar")
     elif candidates is None:
         announce("workspace box")
         box = workspace_box(mechanism, setup, **kw)

@@ -28,6 +28,8 @@ information matrix of a set is M = Σ_j G_jᵀ G_j.
 * ``random`` — n distinct candidates drawn uniformly.
 * ``corners`` (paper 1 §IV) is ``random`` applied to the 2^6 workspace-box corners; the
   corners are built in :mod:`pkmcal.planning.candidates`.
+* ``circle`` — a ballbar circle test (ISO 230-4): every candidate, in order; the caller
+  makes the candidates the circle's poses (:meth:`~pkmcal.sensors.distance.DistanceSensor.circle_frames`).
 
 ``select`` and the ``select_*`` functions run with BLAS limited to one thread
 (:func:`~pkmcal.identification.residuals.single_threaded_blas`).
@@ -53,10 +55,10 @@ from pkmcal.planning.indices import (
     observability_indices,
 )
 
-ALGORITHMS = ("default", "detmax", "cuckoo", "corners", "random")
+ALGORITHMS = ("default", "detmax", "cuckoo", "corners", "random", "circle")
 #: Which index each algorithm maximises (documented in docs/planning.md and ``--help``).
 OPTIMISED_INDEX = {"default": "O1 (or --index, after the D-optimal start)", "detmax": "any (default O4)",
-                   "cuckoo": "any (default O4)", "corners": "none", "random": "none"}
+                   "cuckoo": "any (default O4)", "corners": "none", "random": "none", "circle": "none"}
 Progress = Callable[[int, int], None]
 #: Greedy start of the default algorithm: M₀ = δI with δ = _DELTA_REL · mean per-pose
 #: information per parameter.
@@ -552,6 +554,12 @@ def select(G: np.ndarray, n: int, *, algorithm: str = "default", index: str | No
         if positions is None:
             raise PkmcalError("cuckoo search needs the candidates' pose coordinates")
         return select_cuckoo(G, n, positions=positions, index=index or "O4", rng=rng, progress=progress)
+    if algorithm == "circle":
+        if n != G.shape[0]:
+            raise PkmcalError(f"a circle test measures all its {G.shape[0]} poses, not {n} of them")
+        chosen = np.arange(n)
+        return Selection(chosen, algorithm, "none", observability_indices(G, chosen),
+                         message="every pose of the ballbar circle test, in order")
     if algorithm in ("random", "corners"):
         chosen = select_random(G.shape[0], n, rng)
         return Selection(chosen, algorithm, "none", observability_indices(G, chosen))

@@ -15,6 +15,12 @@ with u_k = v_k / d_k (δω a small base-frame rotation: δ(R t) = δω × R t, a
 u·(δω × a) = δω·(a × u)). A distance says nothing about the direction of v_k, so one
 instrument sees far less than a tracker; the identifiability analysis says what it misses
 on each machine. The readings are defined away from d_k = 0 (``readable``).
+
+Circle test (ISO 230-4, the ballbar's usual use; ability ``"circle-test"``,
+:meth:`DistanceSensor.circle_frames`): n ball positions equally spaced on the circle about
+pivot 1 of radius ℓ_1 (or, when ℓ_1 = 0, the distance from pivot 1 to the ball at the
+machine's home), in a plane through the pivot (xy, yz or zx of the base frame), the platform
+keeping its home orientation: the platform frames are (b − R t, R).
 """
 
 from __future__ import annotations
@@ -51,6 +57,9 @@ class DistanceSensor(Sensor):
     free: tuple[str, ...] | None = None
 
     kind = "distance"
+    abilities = frozenset({"circle-test"})
+    #: Planes of the circle test: their two in-plane axes (indices of x, y, z).
+    CIRCLE_PLANES = {"xy": (0, 1), "yz": (1, 2), "zx": (2, 0)}
 
     def __post_init__(self) -> None:
         if self.pivots is None:
@@ -127,3 +136,23 @@ class DistanceSensor(Sensor):
         t, c, _ = self._parts(None)
         d = self._geometry(frame, t, c)[2]
         return np.all(d > MIN_DISTANCE_MM, axis=1), f"the ball is within {MIN_DISTANCE_MM:g} mm of a pivot"
+
+    def circle_frames(self, n: int, home: Frame, plane: str = "xy") -> Frame:
+        """The platform frames (n) of a circle test about pivot 1 (module docstring), the
+        platform at the orientation of ``home`` (one frame); ball angles 0, 2π/n, …"""
+        if plane not in self.CIRCLE_PLANES:
+            raise PkmcalError(f"unknown circle plane '{plane}'; use one of {', '.join(self.CIRCLE_PLANES)}")
+        if n < 1:
+            raise PkmcalError(f"a circle test needs at least one pose, not {n}")
+        t, c, lengths = self._parts(None)
+        R = home.R[0]
+        radius = float(lengths[0]) if lengths[0] != 0 else float(np.linalg.norm(home.p[0] + R @ t - c[0]))
+        if not radius > MIN_DISTANCE_MM:
+            raise PkmcalError("the circle test has no radius: give the ballbar length (lengths: [...]) or move "
+                              "pivot 1 away from the ball's home position")
+        phi = 2.0 * np.pi * np.arange(n) / n
+        i, j = self.CIRCLE_PLANES[plane]
+        ball = np.tile(c[0], (n, 1))
+        ball[:, i] += radius * np.cos(phi)
+        ball[:, j] += radius * np.sin(phi)
+        return Frame(p=ball - R @ t, R=np.broadcast_to(R, (n, 3, 3)).copy())
