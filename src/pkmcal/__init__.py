@@ -11,6 +11,28 @@ The package is laid out by concern:
 * :mod:`pkmcal.io`, :mod:`pkmcal.cli`   the edges: files and the command line
 
 Units and the pose convention are defined once, in :mod:`pkmcal.conventions`.
+
+The public API (:mod:`pkmcal.api`, docs/api.md) is available here: ``pkmcal.load_machine``,
+``pkmcal.plan``, ``pkmcal.simulate``, ``pkmcal.identify``, ``pkmcal.verify``,
+``pkmcal.export``, ... Those names are imported on first use (PEP 562), so that
+``import pkmcal`` (and ``pkmcal --help``) stays cheap.
 """
 
 __version__ = "0.1.0"
+
+_API = ("EXPORT_FORMATS", "export", "identifiability", "identify", "load_machine", "load_measurements",
+        "load_setup", "perturb", "plan", "save_machine", "save_measurements", "save_setup", "simulate", "verify")
+
+__all__ = ["__version__", *_API]
+
+
+def __getattr__(name: str):
+    if name in _API:
+        from pkmcal import api
+
+        return getattr(api, name)
+    raise AttributeError(f"module 'pkmcal' has no attribute '{name}'")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -106,6 +106,22 @@ class _DeferredTuple:
 
 
 @dataclass(frozen=True)
+class ParameterEstimate:
+    """One parameter of a fit, in file units (``unit``: "mm", or "deg" for angles):
+    ``initial`` and ``value`` (the estimate), ``std`` its 1σ (the covariance the fit summary
+    names; None unless ``status`` is "estimated"), ``status`` "estimated", "held" (fixed by
+    the user, the setup or the machine's defaults) or "gauge" (fixed by the engine: the data
+    cannot see it, so its value is a convention, not a measurement)."""
+
+    name: str
+    unit: str
+    initial: float
+    value: float
+    std: float | None
+    status: str
+
+
+@dataclass(frozen=True)
 class IdentificationResult:
     """Outcome of :func:`identify` (numbers in internal units: mm, rad).
 
@@ -225,6 +241,24 @@ class IdentificationResult:
         """The parameters that are angles (the machine's and the sensor's ``param_is_angle``)."""
         flags = tuple(self.mechanism.param_is_angle) + tuple(self.sensor.param_is_angle)
         return tuple(n for n, a in zip(self.names, flags) if a)
+
+    @property
+    def parameters(self) -> tuple[ParameterEstimate, ...]:
+        """One :class:`ParameterEstimate` per parameter of :attr:`names`, in that order, in
+        file units: names, values and uncertainties line up (``std`` is over :attr:`free`
+        only; here a held or gauge parameter has ``std`` None, never a number)."""
+        angles = set(self.angle_names())
+        deg = float(np.rad2deg(1.0))
+        gauge, free = set(self.gauge), {n: k for k, n in enumerate(self.free)}
+        out = []
+        for i, n in enumerate(self.names):
+            s = deg if n in angles else 1.0
+            k = free.get(n)
+            out.append(ParameterEstimate(
+                name=n, unit="deg" if n in angles else "mm", initial=float(self.initial[i]) * s,
+                value=float(self.estimate[i]) * s, std=None if k is None else float(self.std[k]) * s,
+                status="estimated" if k is not None else "gauge" if n in gauge else "held"))
+        return tuple(out)
 
     def pose_number(self, i: int) -> int:
         """The file's number of pose index ``i`` (0-based in the poses given)."""
@@ -632,6 +666,9 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
     model = Model(machine, setup.sensor, setup.noise, q, y, commanded)
     notes: list[str] = []
     n_total = model.n_poses
+    if n_total == 0:
+        raise PkmcalError("there are no measured poses to identify from (an empty measurement set; a simulation "
+                          "whose real machine reached none of the poses lists why in its dropped poses)")
     used = np.arange(n_total)
     # the file's pose numbers (1-based data rows), kept when poses were left out before the fit
     numbers = np.asarray(getattr(measurements, "pose_numbers", np.arange(1, n_total + 1)), dtype=int)
