@@ -550,3 +550,13 @@ def test_cached_evaluation_equals_fresh(nominal, real, method):
         evs.append(ev)
     for field_ in ("r", "J", "cov", "poses"):
         np.testing.assert_array_equal(getattr(evs[0], field_), getattr(evs[1], field_))
+
+
+def test_identify_with_no_poses_is_a_clear_error():
+    """A simulation whose real machine reached none of its poses gives empty measurements:
+    identify says so instead of failing inside scipy."""
+    from pkmcal.sensors.library import builtin_setup
+
+    m = builtin_machine("stewart-prototype")
+    with pytest.raises(PkmcalError, match="no measured poses"):
+        identify(m, builtin_setup("full-pose-paper1", m), (np.zeros((0, 6)), np.zeros((0, 6))))
