@@ -815,6 +815,15 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
     if weighted:
         r_w = ev.r
         if not meth.prewhitened:
+            if not ev.converged.all() and not np.all(np.isfinite(ev.cov)):
+                bad = used[np.flatnonzero(~ev.converged)]
+                raise PkmcalError(
+                    f"the fit ended at a machine that cannot take {len(bad)} of the {len(used)} poses (no pose "
+                    f"solves their readings: poses {', '.join(str(numbers[i]) for i in bad[:10])}"
+                    f"{' ...' if len(bad) > 10 else ''}), so no covariance can be computed there and the fit is not "
+                    "to be trusted; check those poses' readings (--reject K drops outliers), hold weak parameters "
+                    "(--fix, --prior; 'pkmcal identifiability' lists them), or start from a nominal machine closer "
+                    "to the real one")
             W_end = whitening(ev.cov, f"{method} residual")
             J_free, r_w = W_end @ J_free, (W_end @ ev.r[..., None])[..., 0]
         z = r_w

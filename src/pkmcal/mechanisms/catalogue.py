@@ -16,6 +16,7 @@ BUILTIN_CATALOGUE: dict[str, tuple[str, str]] = {
     "planar-3dof-4act": ("planar-3dof-4act", "paper 3 case 2: 3-dof planar, 4 linear actuators (redundant)"),
     "kossel-mini": ("linear-delta", "linear delta printer, Marlin's Kossel Mini example configuration"),
     "delta-picker": ("rotary-delta", "rotary pick-and-place delta, illustrative dimensions"),
+    "servo-stewart": ("6-RSS", "rotary (servo) Stewart platform, illustrative hobby dimensions"),
 }
 
 #: The generator of symmetric hexapods, ``symmetric:KEY=VALUE,...``.

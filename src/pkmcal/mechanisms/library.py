@@ -18,6 +18,10 @@
   joint radius) 150 mm, upper arms 350 mm, forearms 800 mm, motors −40…100°, ball joints
   within 60° of vertical; its working cylinder (every pose in it reachable): radius 300 mm
   between z = −950 and −680 mm.
+* ``servo-stewart``: a rotary (6-RSS) Stewart platform of illustrative hobby dimensions
+  (servo horns 25 mm, rods 180 mm, crank pivots in pairs ±10° on a 100 mm circle, platform
+  joints in pairs ±50° on a 70 mm circle, servos −60…60°; not a particular product):
+  :func:`pkmcal.mechanisms.rss_hexapod.symmetric_rss_hexapod`.
 
 Other planar/redundant machines register themselves in :data:`BUILTIN_MACHINES`.
 """
@@ -116,6 +120,15 @@ def delta_picker():
                                   "(upper arm 350 mm, forearm 800 mm)")
 
 
+def servo_stewart():
+    """The rotary hobby Stewart platform (module docstring)."""
+    from pkmcal.mechanisms.rss_hexapod import symmetric_rss_hexapod
+
+    return symmetric_rss_hexapod("servo-stewart", base_radius=100.0, platform_radius=70.0, crank=25.0, rod=180.0,
+                                 description="rotary (servo) Stewart platform, illustrative hobby dimensions "
+                                 "(horns 25 mm, rods 180 mm)")
+
+
 def symmetric_hexapod(
     base_radius: float = 152.5,
     platform_radius: float = 70.0,
@@ -165,6 +178,7 @@ _FACTORIES: dict[str, Callable[[], Mechanism]] = {
     "planar-3dof-4act": planar_3dof_4act,
     "kossel-mini": kossel_mini,
     "delta-picker": delta_picker,
+    "servo-stewart": lambda: servo_stewart(),
 }
 #: name → (factory, description); the names, kinds and descriptions are those of
 #: :data:`pkmcal.mechanisms.catalogue.BUILTIN_CATALOGUE`.

@@ -1,0 +1,158 @@
+"""Machine files of rotary hexapods: ``kind: 6-RSS``
+(:class:`~pkmcal.mechanisms.rss_hexapod.RSSHexapod`), registered with
+:func:`pkmcal.io.machine_file.register_machine_kind`::
+
+    kind: 6-RSS
+    name: servo-stewart
+    legs:                 # exactly 6; lengths mm, angles degrees; tilt and zero default 0
+      - {pivot: [98.48, -17.36, 0], beta: -100, crank: 25, rod: 180, platform: [45, -53.62, 0]}
+      - ...
+    limits: {motor_range: [-60, 60], max_joint_angle: 60}   # crank angles φ, rod cone; degrees
+    home: {x: 0, y: 0, z: 172.77, a: 0, b: 0, c: 0}         # optional (default: the cranks level on average)
+    workspace: {x: [-20, 20], ...}                          # optional planning box (mm, degrees)
+    uncertainty: {...}                                      # written by 'pkmcal identify'
+
+The parameters are those of the module docstring (``s<i>.x``, ``beta_<i>``, ``crank_<i>``,
+``a<i>.x``, ``zero_<i>``, ...). Floats are written exactly (:mod:`pkmcal.io._yaml`): a
+save/load round trip is bit-exact.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from pydantic import StrictStr, ValidationError, field_validator
+
+from pkmcal.errors import InputFileError, PkmcalError, one_line
+from pkmcal.io._yaml import FlowList, RawFloat, deg_to_rad, rad_to_deg_text
+from pkmcal.io.machine_file import (
+    Deg,
+    DegRange,
+    Description,
+    Length,
+    Name,
+    PoseSpec,
+    UncertaintySpec,
+    Vec3,
+    WorkspaceSpec,
+    _covariance_from_spec,
+    _line_of,
+    _metadata_from_spec,
+    _metadata_to_file,
+    _Model,
+    _uncertainty_to_file,
+    _validation_error,
+    register_machine_kind,
+)
+from pkmcal.mechanisms import rss_hexapod as rss
+
+
+class _Leg(_Model):
+    pivot: Vec3
+    beta: Deg
+    tilt: Deg = 0.0
+    crank: Length
+    rod: Length
+    platform: Vec3
+    zero: Deg = 0.0
+
+
+class _Limits(_Model):
+    motor_range: DegRange | None = None
+    max_joint_angle: Deg | None = None
+
+
+class _File(_Model):
+    kind: Literal["6-RSS"]
+    name: Name | None = None
+    description: Description | None = None
+    legs: list[_Leg]
+    limits: _Limits | None = None
+    home: PoseSpec | None = None
+    workspace: WorkspaceSpec | None = None
+    uncertainty: UncertaintySpec | None = None
+    calibration: dict[StrictStr, Any] | None = None
+    metadata: dict[StrictStr, Any] | None = None
+
+    @field_validator("legs", mode="before")
+    @classmethod
+    def _six_legs(cls, v):
+        if isinstance(v, list) and len(v) != rss.N_LEGS:
+            raise ValueError(f"{len(v)} legs given, a 6-RSS hexapod needs exactly {rss.N_LEGS}; list one entry "
+                             f"per leg, legs 1 to {rss.N_LEGS} in order")
+        return v
+
+
+def _pose(values) -> np.ndarray:
+    return np.array([values.x, values.y, values.z, deg_to_rad(values.a), deg_to_rad(values.b), deg_to_rad(values.c)])
+
+
+def _from_file(path: object, data: dict, lines: dict[tuple, int]) -> rss.RSSHexapod:
+    try:
+        spec = _File.model_validate(data)
+    except ValidationError as exc:
+        raise _validation_error(path, exc, lines) from None
+    rho = np.array([v for leg in spec.legs for v in (*leg.pivot, deg_to_rad(leg.beta), deg_to_rad(leg.tilt),
+                                                    float(leg.crank), float(leg.rod), *leg.platform,
+                                                    deg_to_rad(leg.zero))], dtype=float)
+    kw: dict[str, Any] = {}
+    if spec.limits is not None:
+        if spec.limits.motor_range is not None:
+            kw["motor_range"] = tuple(deg_to_rad(v) for v in spec.limits.motor_range)
+        if spec.limits.max_joint_angle is not None:
+            kw["max_joint_angle"] = deg_to_rad(spec.limits.max_joint_angle)
+    if spec.home is not None:
+        kw["home"] = _pose(spec.home)
+    if spec.workspace is not None:
+        w = spec.workspace
+        kw["workspace"] = np.array([list(w.x), list(w.y), list(w.z), [deg_to_rad(v) for v in w.a],
+                                    [deg_to_rad(v) for v in w.b], [deg_to_rad(v) for v in w.c]], dtype=float)
+    if spec.uncertainty is not None:
+        kw["covariance"] = _covariance_from_spec(path, spec.uncertainty, lines, rss.PARAM_NAMES, rss.PARAM_IS_ANGLE)
+    name = spec.name if spec.name is not None else one_line(Path(str(path)).stem)
+    try:
+        return rss.RSSHexapod(name=name, rho=rho, description=spec.description or "",
+                              metadata=_metadata_from_spec(spec), **kw)
+    except PkmcalError as exc:
+        text = str(exc).split(": ", 1)[-1]
+        where = None
+        param = text.split(" ")[1] if text.startswith("parameter ") else ""
+        if "_" in param:
+            key, leg = param.rsplit("_", 1)
+            if leg.isdigit():
+                where = _line_of(("legs", int(leg) - 1, key), lines)
+        raise InputFileError(path, f"legs: {text}", line=where) from None
+
+
+def _to_file(m: rss.RSSHexapod) -> dict:
+    out: dict[str, Any] = {"kind": "6-RSS", "name": m.name}
+    if m.description:
+        out["description"] = m.description
+    g = rss._legs(m.rho)
+    deg = lambda v: RawFloat(rad_to_deg_text(v))  # noqa: E731
+    legs = []
+    for i in range(rss.N_LEGS):
+        leg: dict[str, Any] = {"pivot": FlowList(float(v) for v in g["S"][i]), "beta": deg(g["beta"][i])}
+        if g["tilt"][i] != 0:
+            leg["tilt"] = deg(g["tilt"][i])
+        leg.update({"crank": float(g["crank"][i]), "rod": float(g["rod"][i]),
+                    "platform": FlowList(float(v) for v in g["a"][i])})
+        if g["zero"][i] != 0:
+            leg["zero"] = deg(g["zero"][i])
+        legs.append(leg)
+    out["legs"] = legs
+    out["limits"] = {"motor_range": FlowList(deg(v) for v in m.motor_range), "max_joint_angle": deg(m.max_joint_angle)}
+    out["home"] = {**{k: float(v) for k, v in zip("xyz", m.home[:3])}, **{k: deg(v) for k, v in zip("abc", m.home[3:])}}
+    if m.workspace is not None:
+        ws = {k: FlowList(float(v) for v in m.workspace[i]) for i, k in enumerate("xyz")}
+        ws.update({k: FlowList(deg(v) for v in m.workspace[3 + i]) for i, k in enumerate("abc")})
+        out["workspace"] = ws
+    if m.covariance is not None:
+        out["uncertainty"] = _uncertainty_to_file(m.covariance, rss.PARAM_NAMES, rss.PARAM_IS_ANGLE)
+    out.update(_metadata_to_file(m.metadata))
+    return out
+
+
+register_machine_kind("6-RSS", _from_file, rss.RSSHexapod, _to_file)
