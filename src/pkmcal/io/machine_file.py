@@ -657,6 +657,7 @@ def machine_to_text(machine: Mechanism) -> str:
 def _register_planar_kinds() -> None:
     from pkmcal.io import delta_machine_file  # noqa: F401  (registers the delta kinds)
     from pkmcal.io import planar_machine_file  # noqa: F401  (registers the planar kinds)
+    from pkmcal.io import pus_machine_file  # noqa: F401  (registers the 6-PUS kind)
     from pkmcal.io import rss_machine_file  # noqa: F401  (registers the 6-RSS kind)
 
 

@@ -17,6 +17,7 @@ BUILTIN_CATALOGUE: dict[str, tuple[str, str]] = {
     "kossel-mini": ("linear-delta", "linear delta printer, Marlin's Kossel Mini example configuration"),
     "delta-picker": ("rotary-delta", "rotary pick-and-place delta, illustrative dimensions"),
     "servo-stewart": ("6-RSS", "rotary (servo) Stewart platform, illustrative hobby dimensions"),
+    "hexaslide": ("6-PUS", "sliding-joint hexapod on six vertical rails, illustrative dimensions"),
 }
 
 #: The generator of symmetric hexapods, ``symmetric:KEY=VALUE,...``.

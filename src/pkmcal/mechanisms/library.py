@@ -22,6 +22,10 @@
   (servo horns 25 mm, rods 180 mm, crank pivots in pairs ±10° on a 100 mm circle, platform
   joints in pairs ±50° on a 70 mm circle, servos −60…60°; not a particular product):
   :func:`pkmcal.mechanisms.rss_hexapod.symmetric_rss_hexapod`.
+* ``hexaslide``: a sliding-joint (6-PUS) hexapod of illustrative dimensions: six vertical
+  rails in pairs ±10° on a 150 mm circle, carriages 0…150 mm, legs 200 mm rising to platform
+  joints in pairs ±50° on a 70 mm circle:
+  :func:`pkmcal.mechanisms.pus_hexapod.symmetric_pus_hexapod`.
 
 Other planar/redundant machines register themselves in :data:`BUILTIN_MACHINES`.
 """
@@ -129,6 +133,15 @@ def servo_stewart():
                                  "(horns 25 mm, rods 180 mm)")
 
 
+def hexaslide():
+    """The vertical-rail sliding-joint hexapod (module docstring)."""
+    from pkmcal.mechanisms.pus_hexapod import symmetric_pus_hexapod
+
+    return symmetric_pus_hexapod("hexaslide", rail_radius=150.0, platform_radius=70.0, leg=200.0, stroke=150.0,
+                                 description="sliding-joint hexapod on six vertical rails, illustrative dimensions "
+                                 "(legs 200 mm, stroke 150 mm)")
+
+
 def symmetric_hexapod(
     base_radius: float = 152.5,
     platform_radius: float = 70.0,
@@ -179,6 +192,7 @@ _FACTORIES: dict[str, Callable[[], Mechanism]] = {
     "kossel-mini": kossel_mini,
     "delta-picker": delta_picker,
     "servo-stewart": lambda: servo_stewart(),
+    "hexaslide": lambda: hexaslide(),
 }
 #: name → (factory, description); the names, kinds and descriptions are those of
 #: :data:`pkmcal.mechanisms.catalogue.BUILTIN_CATALOGUE`.

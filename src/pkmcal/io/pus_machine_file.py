@@ -1,0 +1,158 @@
+"""Machine files of sliding-joint hexapods: ``kind: 6-PUS``
+(:class:`~pkmcal.mechanisms.pus_hexapod.PUSHexapod`), registered with
+:func:`pkmcal.io.machine_file.register_machine_kind`::
+
+    kind: 6-PUS
+    name: hexaslide
+    legs:           # exactly 6; mm and degrees; tilt_x, tilt_y, offset default 0, branch -1
+      - {rail_origin: [147.72, -26.05, 0], rail: [0, 0, 1], leg: 200, platform: [45.0, -53.62, 0],
+         stroke: [0, 150], branch: -1}
+      - ...
+    limits: {max_joint_angle: 60}
+    home: {x: 0, y: 0, z: 244.37, a: 0, b: 0, c: 0}      # optional (default: mid-stroke on average)
+    workspace: {x: [-20, 20], ...}                       # optional planning box (mm, degrees)
+
+``rail`` is the nominal rail direction (fixed; normalised on load); the parameters
+``tilt_x_<i>``, ``tilt_y_<i>`` tilt the rail from it (see the mechanism's docstring).
+Floats are written exactly (:mod:`pkmcal.io._yaml`): a save/load round trip is bit-exact.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from pydantic import StrictStr, ValidationError, field_validator
+
+from pkmcal.errors import InputFileError, PkmcalError, one_line
+from pkmcal.io._yaml import FlowList, RawFloat, deg_to_rad, rad_to_deg_text
+from pkmcal.io.machine_file import (
+    Deg,
+    Description,
+    Length,
+    Name,
+    PoseSpec,
+    UncertaintySpec,
+    Vec3,
+    WorkspaceSpec,
+    _covariance_from_spec,
+    _line_of,
+    _metadata_from_spec,
+    _metadata_to_file,
+    _Model,
+    _uncertainty_to_file,
+    _validation_error,
+    register_machine_kind,
+)
+from pkmcal.mechanisms import pus_hexapod as pus
+
+
+class _Leg(_Model):
+    rail_origin: Vec3
+    rail: Vec3
+    tilt_x: Deg = 0.0
+    tilt_y: Deg = 0.0
+    leg: Length
+    platform: Vec3
+    offset: Length = 0.0
+    stroke: tuple[Length, Length]
+    branch: Literal[-1, 1] = -1
+
+
+class _Limits(_Model):
+    max_joint_angle: Deg | None = None
+
+
+class _File(_Model):
+    kind: Literal["6-PUS"]
+    name: Name | None = None
+    description: Description | None = None
+    legs: list[_Leg]
+    limits: _Limits | None = None
+    home: PoseSpec | None = None
+    workspace: WorkspaceSpec | None = None
+    uncertainty: UncertaintySpec | None = None
+    calibration: dict[StrictStr, Any] | None = None
+    metadata: dict[StrictStr, Any] | None = None
+
+    @field_validator("legs", mode="before")
+    @classmethod
+    def _six_legs(cls, v):
+        if isinstance(v, list) and len(v) != pus.N_LEGS:
+            raise ValueError(f"{len(v)} legs given, a 6-PUS hexapod needs exactly {pus.N_LEGS}; list one entry "
+                             f"per leg, legs 1 to {pus.N_LEGS} in order")
+        return v
+
+
+def _pose(v) -> np.ndarray:
+    return np.array([v.x, v.y, v.z, deg_to_rad(v.a), deg_to_rad(v.b), deg_to_rad(v.c)])
+
+
+def _from_file(path: object, data: dict, lines: dict[tuple, int]) -> pus.PUSHexapod:
+    try:
+        spec = _File.model_validate(data)
+    except ValidationError as exc:
+        raise _validation_error(path, exc, lines) from None
+    legs = spec.legs
+    rho = np.array([v for leg in legs for v in (*leg.rail_origin, deg_to_rad(leg.tilt_x), deg_to_rad(leg.tilt_y),
+                                                float(leg.leg), *leg.platform, float(leg.offset))], dtype=float)
+    kw: dict[str, Any] = {}
+    if spec.limits is not None and spec.limits.max_joint_angle is not None:
+        kw["max_joint_angle"] = deg_to_rad(spec.limits.max_joint_angle)
+    if spec.home is not None:
+        kw["home"] = _pose(spec.home)
+    if spec.workspace is not None:
+        w = spec.workspace
+        kw["workspace"] = np.array([list(w.x), list(w.y), list(w.z), [deg_to_rad(v) for v in w.a],
+                                    [deg_to_rad(v) for v in w.b], [deg_to_rad(v) for v in w.c]], dtype=float)
+    if spec.uncertainty is not None:
+        kw["covariance"] = _covariance_from_spec(path, spec.uncertainty, lines, pus.PARAM_NAMES, pus.PARAM_IS_ANGLE)
+    name = spec.name if spec.name is not None else one_line(Path(str(path)).stem)
+    try:
+        return pus.PUSHexapod(name=name, rho=rho, rails=[leg.rail for leg in legs],
+                              stroke=[leg.stroke for leg in legs], branches=[leg.branch for leg in legs],
+                              description=spec.description or "", metadata=_metadata_from_spec(spec), **kw)
+    except PkmcalError as exc:
+        text = str(exc).split(": ", 1)[-1]
+        where = None
+        param = text.split(" ")[1] if text.startswith("parameter ") else ""
+        if "_" in param and param.rsplit("_", 1)[-1].isdigit():
+            key, leg = param.rsplit("_", 1)
+            where = _line_of(("legs", int(leg) - 1, key), lines)
+        raise InputFileError(path, f"legs: {text}", line=where) from None
+
+
+def _to_file(m: pus.PUSHexapod) -> dict:
+    out: dict[str, Any] = {"kind": "6-PUS", "name": m.name}
+    if m.description:
+        out["description"] = m.description
+    g = pus._legs(m.rho)
+    deg = lambda v: RawFloat(rad_to_deg_text(v))  # noqa: E731
+    legs = []
+    for i in range(pus.N_LEGS):
+        leg: dict[str, Any] = {"rail_origin": FlowList(float(v) for v in g["O"][i]),
+                               "rail": FlowList(float(v) for v in m.rails[i])}
+        for key, short in (("tilt_x", "tx"), ("tilt_y", "ty")):
+            if g[short][i] != 0:
+                leg[key] = deg(g[short][i])
+        leg.update({"leg": float(g["leg"][i]), "platform": FlowList(float(v) for v in g["a"][i])})
+        if g["offset"][i] != 0:
+            leg["offset"] = float(g["offset"][i])
+        leg["stroke"] = FlowList(float(v) for v in m.stroke[i])
+        leg["branch"] = int(m.branches[i])
+        legs.append(leg)
+    out["legs"] = legs
+    out["limits"] = {"max_joint_angle": deg(m.max_joint_angle)}
+    out["home"] = {**{k: float(v) for k, v in zip("xyz", m.home[:3])}, **{k: deg(v) for k, v in zip("abc", m.home[3:])}}
+    if m.workspace is not None:
+        ws = {k: FlowList(float(v) for v in m.workspace[i]) for i, k in enumerate("xyz")}
+        ws.update({k: FlowList(deg(v) for v in m.workspace[3 + i]) for i, k in enumerate("abc")})
+        out["workspace"] = ws
+    if m.covariance is not None:
+        out["uncertainty"] = _uncertainty_to_file(m.covariance, pus.PARAM_NAMES, pus.PARAM_IS_ANGLE)
+    out.update(_metadata_to_file(m.metadata))
+    return out
+
+
+register_machine_kind("6-PUS", _from_file, pus.PUSHexapod, _to_file)
