@@ -42,6 +42,15 @@ A tracker on the tool point of a planar machine (paper 3 §3), with the physics 
       load: [0, -30]              # in-plane force on the tool point, N (base frame)
       backlash: 1.0e-4            # optional dead band per actuator, mm (linear) or rad (rotary); one or one per actuator
 
+A delta printer's Z probe (Klipper's ``[probe]``/``[bltouch]`` offsets; the bed a plane of
+the base frame), :mod:`pkmcal.sensors.z_probe`::
+
+    sensor: z-probe
+    probe_offset: [0.0, 0.0, 1.25]    # Klipper's x_offset, y_offset, z_offset, mm (optional, default 0)
+    bed: {z: 0, a: 0, b: 0}           # optional: bed height (mm) and tilts about x and y (deg)
+    free: [bed.a, bed.b]              # optional (default none): also probe.x/y/z, bed.z
+    noise: {reading: 0.005, actuator: 0.0036}   # probe trigger std, carriage std (mm)
+
 Any setup may give Gaussian priors on parameters (maximum a posteriori identification,
 :mod:`pkmcal.identification.priors`): names or shell patterns, each ``[mean, std]`` or
 ``"mean ± std"`` (``+-`` also), or ``"± std"`` centred on the machine file's value; mm,
@@ -81,6 +90,7 @@ from pkmcal.io.atomic import atomic_write_text
 from pkmcal.io.limits import MAX_DESCRIPTION_CHARS, magnitude_problem
 from pkmcal.mechanisms.statics import StaticsModel
 from pkmcal.sensors import FullPoseSensor, IndicatorSensor, MeasurementSetup, NoiseModel, PlanarToolSensor, PositionSensor
+from pkmcal.sensors.z_probe import MAX_BED_TILT_DEG, ZProbeSensor
 from pkmcal.sensors.library import (  # noqa: F401  (re-exported: the built-ins used to live here)
     BUILTIN_SETUPS,
     PLANAR_ACTUATORS,
@@ -176,8 +186,23 @@ class _Simulation(_Strict):
     backlash: Values | None = None
 
 
+class _Bed(_Strict):
+    """The z-probe's bed plane: height z (mm), tilts a, b (degrees, within ±45)."""
+
+    z: Number = 0.0
+    a: Number = 0.0
+    b: Number = 0.0
+
+    @field_validator("a", "b")
+    @classmethod
+    def _a_bed(cls, v):
+        if not abs(v) <= MAX_BED_TILT_DEG:
+            raise ValueError(f"a bed tilt of {v!r} deg is not a bed; give at most {MAX_BED_TILT_DEG:g} deg")
+        return v
+
+
 class _Setup(_Strict):
-    sensor: Literal["full-pose", "position", "indicators", "planar-tool"]
+    sensor: Literal["full-pose", "position", "indicators", "planar-tool", "z-probe"]
     description: Annotated[StrictStr, AfterValidator(_one_line)] = ""
     indicators: list[tuple[Number, Number]] | None = None
     plane_offset: Number | None = None
@@ -186,6 +211,8 @@ class _Setup(_Strict):
     world: _Transform | None = None
     tool: _Transform | None = None
     target: _Point | None = None
+    probe_offset: tuple[Number, Number, Number] | None = None
+    bed: _Bed | None = None
     free: list[StrictStr] | None = None
     noise: _Noise
     simulation: _Simulation | None = None
@@ -207,12 +234,14 @@ _SENSOR_KEYS = {
     "position": ("target", "world"),
     "indicators": ("indicators", "plane_offset", "zero", "plate"),
     "planar-tool": ("target", "world"),
+    "z-probe": ("probe_offset", "bed"),
 }
 _NOISE_KEYS = {
     "full-pose": ("position", "orientation", "orientation_deg"),
     "position": ("reading",),
     "indicators": ("reading",),
     "planar-tool": ("reading",),
+    "z-probe": ("reading",),
 }
 
 
@@ -298,12 +327,12 @@ def load_setup(path: str | os.PathLike, machine=None) -> MeasurementSetup:
                 "(N/mm or N*mm/rad; N)" if loc == ("simulation", "stiffness") else "")
         elif err["type"] == "extra_forbidden":
             model = {(): _Setup, ("noise",): _Noise, ("world",): _Transform, ("tool",): _Transform, ("plate",): _Transform,
-                     ("target",): _Point, ("simulation",): _Simulation}.get(loc[:-1], _Setup)
+                     ("target",): _Point, ("simulation",): _Simulation, ("bed",): _Bed}.get(loc[:-1], _Setup)
             what = f"is not a setup key here; remove or correct it (allowed: {', '.join(model.model_fields)})"
         else:
             what = _describe(err)
             if err["type"] == "literal_error" and loc == ("sensor",):
-                what = "must be one of full-pose, position, indicators, planar-tool"
+                what = "must be one of full-pose, position, indicators, planar-tool, z-probe"
         _fail(path, lines, loc, what)
     raw_noise = data.get("noise") if isinstance(data.get("noise"), dict) else {}
     setup = _build(path, lines, spec, raw_noise)
@@ -359,7 +388,7 @@ def _build(path, lines, spec: _Setup, raw_noise: dict | None = None) -> Measurem
     (its numbers keep their text, which pydantic drops: degree values are converted from
     that text, so that a setup written by :func:`setup_to_yaml` reads back exactly)."""
     kind = spec.sensor
-    for key in ("indicators", "plane_offset", "zero", "plate", "world", "tool", "target"):
+    for key in ("indicators", "plane_offset", "zero", "plate", "world", "tool", "target", "probe_offset", "bed"):
         if getattr(spec, key) is not None and key not in _SENSOR_KEYS[kind]:
             _fail(path, lines, (key,), f"does not apply to sensor '{kind}' (its keys: {', '.join(_SENSOR_KEYS[kind])})")
     noise = spec.noise
@@ -405,6 +434,13 @@ def _build(path, lines, spec: _Setup, raw_noise: dict | None = None) -> Measurem
             if noise.reading is None:
                 _fail(path, lines, ("noise", "reading"), "is missing; give the tracker noise (mm)")
             reading_std = _expand(path, lines, noise.reading, 2, ("noise", "reading"), "mm")
+        elif kind == "z-probe":
+            bed = None if spec.bed is None else [spec.bed.z, spec.bed.a, spec.bed.b]
+            sensor = ZProbeSensor(probe_offset=spec.probe_offset, bed=bed, free=free)
+            if noise.reading is None:
+                _fail(path, lines, ("noise", "reading"), "is missing; give the probe's trigger noise (mm), e.g. the "
+                      "standard deviation PROBE_ACCURACY reports")
+            reading_std = _expand(path, lines, noise.reading, 1, ("noise", "reading"), "mm")
         elif kind == "position":
             target = None if spec.target is None else [spec.target.x, spec.target.y, spec.target.z]
             sensor = PositionSensor(target=target, world=tf(spec.world), free=free)
@@ -527,6 +563,10 @@ def setup_to_yaml(setup: MeasurementSetup) -> str:
         doc["target"] = _group_dict(s, "target")
         if np.any(s.world != 0):
             doc["world"] = _group_dict(s, "world")
+    elif isinstance(s, ZProbeSensor):
+        doc["probe_offset"] = FlowList(float(v) for v in s.probe_offset)
+        if np.any(s.bed != 0):
+            doc["bed"] = _group_dict(s, "bed")
     elif isinstance(s, FullPoseSensor):
         if np.any(s.world != 0):
             doc["world"] = _group_dict(s, "world")

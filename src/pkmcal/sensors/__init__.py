@@ -4,6 +4,7 @@
 * :class:`PositionSensor` (``position``): one target point, 3D laser tracker
 * :class:`IndicatorSensor` (``indicators``): K ≥ 3 dial indicators under the platform (paper 2)
 * :class:`PlanarToolSensor` (``planar-tool``): tracker on the tool point of a planar machine (paper 3)
+* :class:`ZProbeSensor` (``z-probe``): a delta printer's Z probe, the height of a probe point above the bed
 
 ``base`` holds the interface (θ declared as :class:`ParamGroup` fields, from which names,
 angle flags, ``with_params`` and value equality follow), ``_common`` the shared argument
@@ -16,9 +17,11 @@ from pkmcal.sensors.full_pose import FullPoseSensor
 from pkmcal.sensors.indicators import IndicatorSensor
 from pkmcal.sensors.planar_tool import PlanarToolSensor
 from pkmcal.sensors.position import PositionSensor
+from pkmcal.sensors.z_probe import ZProbeSensor
 
 #: Sensor classes by the ``kind`` written in setup files.
-SENSOR_KINDS = {cls.kind: cls for cls in (FullPoseSensor, PositionSensor, IndicatorSensor, PlanarToolSensor)}
+SENSOR_KINDS = {cls.kind: cls for cls in (FullPoseSensor, PositionSensor, IndicatorSensor, PlanarToolSensor,
+                                              ZProbeSensor)}
 
 __all__ = [
     "FullPoseSensor",
@@ -30,4 +33,5 @@ __all__ = [
     "PositionSensor",
     "SENSOR_KINDS",
     "Sensor",
+    "ZProbeSensor",
 ]
