@@ -544,11 +544,26 @@ def _group_dict(sensor, field: str) -> dict:
             for name, v, ang in zip(group.names, getattr(sensor, field), group.is_angle)}
 
 
+def _z_probe_keys(s: ZProbeSensor) -> dict:
+    """The z-probe's keys: ``probe_offset`` (mm) and, unless 0, ``bed`` (mm, degrees)."""
+    doc: dict = {"probe_offset": FlowList(float(v) for v in s.probe_offset)}
+    if np.any(s.bed != 0):
+        doc["bed"] = _group_dict(s, "bed")
+    return doc
+
+
+#: The sensor-specific keys written for a sensor kind (the kinds without an entry are written
+#: by the branches of :func:`setup_to_yaml`).
+_KIND_KEYS = {ZProbeSensor.kind: _z_probe_keys}
+
+
 def setup_to_yaml(setup: MeasurementSetup) -> str:
     """YAML text of a setup (full precision; :func:`load_setup` reads it back)."""
     s, noise = setup.sensor, setup.noise
     doc: dict = {"sensor": s.kind}
-    if isinstance(s, IndicatorSensor):
+    if s.kind in _KIND_KEYS:      # by the declared kind, as the loader reads it (no type probe)
+        doc.update(_KIND_KEYS[s.kind](s))
+    elif isinstance(s, IndicatorSensor):
         doc["indicators"] = [FlowList(float(v) for v in row) for row in s.positions]
         doc["plane_offset"] = float(s.plane_offset)
         if np.any(s.zero != 0):
@@ -563,10 +578,6 @@ def setup_to_yaml(setup: MeasurementSetup) -> str:
         doc["target"] = _group_dict(s, "target")
         if np.any(s.world != 0):
             doc["world"] = _group_dict(s, "world")
-    elif isinstance(s, ZProbeSensor):
-        doc["probe_offset"] = FlowList(float(v) for v in s.probe_offset)
-        if np.any(s.bed != 0):
-            doc["bed"] = _group_dict(s, "bed")
     elif isinstance(s, FullPoseSensor):
         if np.any(s.world != 0):
             doc["world"] = _group_dict(s, "world")
