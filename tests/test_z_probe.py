@@ -390,3 +390,35 @@ def test_priors_on_the_arms_give_a_fit_within_its_sigma():
     alone = identify(nominal, setup, meas, free=free)
     arm_pos = [fit.free.index(f"arm_{t}") for t in "abc"]
     assert np.all(fit.std[arm_pos] < alone.std[arm_pos])
+
+
+def test_named_direction_sigma_is_the_covariance_of_its_amount():
+    """Independent check of the named-direction verdict: on a full-rank whitened J with
+    unit-norm scaling D = diag(1/‖J_:,i‖), the amount of d in θ is the coordinate along d in
+    the scaled columns, ε = cᵀθ with c = D⁻²d/‖D⁻¹d‖², so σ_ε² = cᵀ(JᵀJ)⁻¹c; a direction in
+    the null space is unidentifiable; one only partly a gauge change is judged on the rest."""
+    from pkmcal.identification.identifiability import describe_named, named_directions_report
+    from pkmcal.mechanisms.base import NamedDirection
+
+    rng = np.random.default_rng(3)
+    J = rng.standard_normal((40, 5)) * np.array([1.0, 10.0, 0.1, 3.0, 1.0])
+    d = {"p0": 2.0, "p1": -0.5, "p3": 1.0}
+    nd = NamedDirection("a test direction", d, "1", 1e-6, "test", "measure more")
+    (entry,) = named_directions_report(J, ["p0", "p1", "p2", "p3", "p4"], [nd])
+    dv = np.array([2.0, -0.5, 0.0, 1.0, 0.0])
+    D2 = np.sum(J**2, axis=0)                                  # D⁻² (D = diag(1/‖J_:,i‖))
+    c = D2 * dv / (dv @ (D2 * dv))
+    expected = np.sqrt(c @ np.linalg.inv(J.T @ J) @ c)
+    assert entry["sigma"] == pytest.approx(expected, rel=1e-10)
+    assert entry["status"] == "not determined" and "measure more" in describe_named(entry)
+    # a direction along which no reading changes
+    Jn = J.copy()
+    Jn[:, 4] = Jn[:, 0] * 2.0 - Jn[:, 1] * 0.5 + Jn[:, 3]            # p4 ≡ d: d − p4 is a gauge change
+    null_dir = NamedDirection("null", {"p0": 2.0, "p1": -0.5, "p3": 1.0, "p4": -1.0}, "1", 1.0, "t", "r")
+    entries = named_directions_report(Jn, ["p0", "p1", "p2", "p3", "p4"], [null_dir, nd])
+    assert entries[0]["status"] == "unidentifiable" and entries[0]["sigma"] == float("inf")
+    # d itself equals a change of p4 alone (modulo the gauge): judged as that change
+    only = named_directions_report(Jn[:, [0, 1, 2, 3]], ["p0", "p1", "p2", "p3"], [nd])[0]
+    assert entries[1]["sigma"] < 10 * only["sigma"] and np.isfinite(entries[1]["sigma"])
+    # a direction with a parameter that is not a candidate is left out
+    assert named_directions_report(J[:, :3], ["p0", "p1", "p2"], [nd]) == []

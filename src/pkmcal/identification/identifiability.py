@@ -31,9 +31,11 @@ engine fits them; columns: the candidate parameters) is analysed as follows.
   modulo the gauge: in scaled coordinates u = D⁻¹d/‖D⁻¹d‖, its part u' = u − N Nᵀu off the
   null space N of J_s (a gauge change is not a change of d), and with W an orthonormal
   basis of u'⊥ (every other direction, the gauge included, free to compensate), the
-  visibility v = ‖(I − P_{J_s W}) J_s u‖ (P the projector onto the range of J_s W). On the
-  noise-whitened J, σ = 1/(v ‖D⁻¹d‖) is the standard deviation of the direction's amount
-  that the measurements leave (linearised at the nominal machine). It is *unidentifiable*
+  visibility v = ‖(I − P_{J_s W}) J_s u‖ (P the projector onto the range of J_s W). The
+  direction's amount is its coordinate in the unit-norm columns, ε = dᵀD⁻²θ/‖D⁻¹d‖² (the
+  amount of a direction depends on what counts as "the rest"; this choice is free of the
+  parameters' units). On the noise-whitened J, σ = 1/(v ‖D⁻¹d‖) is the standard deviation
+  of ε that the measurements leave (linearised at the nominal machine). It is *unidentifiable*
   when u' = 0 or v/σ_1 is at most ``rtol``; *weak* below
   ``weak_ratio``; *not determined* when σ exceeds the tolerance the machine declares for it
   (a genuine but noise-swamped direction); else *identified*.
