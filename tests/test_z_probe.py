@@ -39,7 +39,7 @@ from pkmcal.io.measurements import Measurements, load_measurements
 from pkmcal.io.setup_file import load_setup, setup_to_yaml
 from pkmcal.mechanisms.frame import Frame
 from pkmcal.mechanisms.linear_delta import PARAM_NAMES
-from pkmcal.sensors.base import MeasurementSetup, NoiseModel
+from pkmcal.sensors.base import NoiseModel
 from pkmcal.sensors.z_probe import ZProbeSensor
 
 KLIPPER_SET = tuple(f"{p}_{t}" for p in ("angle", "radius", "arm", "endstop") for t in "abc")
@@ -319,14 +319,24 @@ def _noise_free(setup):
     return dataclasses.replace(setup, noise=NoiseModel(reading_std=np.zeros(1), actuator_std=np.array(0.0)))
 
 
-def test_noise_free_probing_recovers_the_identifiable_parameters():
+def _campaign(seed, n, noisy):
+    """A probing campaign on a kossel-mini whose Klipper parameters (but the gauge) are off by
+    ~0.5 mm / 0.3°: n points on the bed, with the setup's trigger and carriage noise if
+    ``noisy``. Returns (nominal, setup, free names, real machine, measurements, rng)."""
     nominal = load_machine("kossel-mini")
     setup = load_setup("z-probe-klipper", nominal)
-    rng = np.random.default_rng(21)
-    free = [n for n in KLIPPER_SET if n not in GAUGE]
+    rng = np.random.default_rng(seed)
+    free = [name for name in KLIPPER_SET if name not in GAUGE]
     real = _real(nominal, rng, free)
-    lam, cmd = probe_triggers(nominal, real, setup.sensor, _disc(60, 80, rng))
-    meas = Measurements(actuators=lam, readings=np.zeros((60, 1)), commanded=cmd)
+    lam, cmd = probe_triggers(nominal, real, setup.sensor, _disc(n, 80, rng), noise=0.005 if noisy else 0.0, rng=rng)
+    if noisy:
+        lam = lam + rng.standard_normal(lam.shape) * float(setup.noise.actuator_std)
+    meas = Measurements(actuators=lam, readings=np.zeros((n, 1)), commanded=cmd)
+    return nominal, setup, free, real, meas, rng
+
+
+def test_noise_free_probing_recovers_the_identifiable_parameters():
+    nominal, setup, free, real, meas, rng = _campaign(21, 60, noisy=False)
     fit = identify(nominal, _noise_free(setup), meas, free=free, weighted=False, xtol=1e-15, ftol=1e-15,
                    gtol=1e-15)
     assert fit.success and fit.rms_residual < 1e-9
@@ -370,14 +380,7 @@ def test_z_heights_alone_do_not_determine_the_arm_scale(tmp_path):
 
 
 def test_priors_on_the_arms_give_a_fit_within_its_sigma():
-    nominal = load_machine("kossel-mini")
-    setup = load_setup("z-probe-klipper", nominal)
-    rng = np.random.default_rng(5)
-    free = [n for n in KLIPPER_SET if n not in GAUGE]
-    real = _real(nominal, rng, free)
-    lam, cmd = probe_triggers(nominal, real, setup.sensor, _disc(80, 80, rng), noise=0.005, rng=rng)
-    lam = lam + rng.standard_normal(lam.shape) * float(setup.noise.actuator_std)
-    meas = Measurements(actuators=lam, readings=np.zeros((80, 1)), commanded=cmd)
+    nominal, setup, free, real, meas, rng = _campaign(5, 80, noisy=True)
     arms = real.params[[PARAM_NAMES.index(f"arm_{t}") for t in "abc"]]
     measured = arms + 0.1 * rng.standard_normal(3)           # rods measured to ±0.1 mm
     priors = tuple(Prior(f"arm_{t}", float(v), 0.1) for t, v in zip("abc", measured))

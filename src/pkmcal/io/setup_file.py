@@ -90,7 +90,6 @@ from pkmcal.io.atomic import atomic_write_text
 from pkmcal.io.limits import MAX_DESCRIPTION_CHARS, magnitude_problem
 from pkmcal.mechanisms.statics import StaticsModel
 from pkmcal.sensors import FullPoseSensor, IndicatorSensor, MeasurementSetup, NoiseModel, PlanarToolSensor, PositionSensor
-from pkmcal.sensors.z_probe import MAX_BED_TILT_DEG, ZProbeSensor
 from pkmcal.sensors.library import (  # noqa: F401  (re-exported: the built-ins used to live here)
     BUILTIN_SETUPS,
     PLANAR_ACTUATORS,
@@ -101,6 +100,7 @@ from pkmcal.sensors.library import (  # noqa: F401  (re-exported: the built-ins 
     bind_setup,
     builtin_setup,
 )
+from pkmcal.sensors.z_probe import MAX_BED_TILT_DEG, ZProbeSensor
 
 def _plausible(v: float) -> float:
     problem = magnitude_problem(float(v), None)
