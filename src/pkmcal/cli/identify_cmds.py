@@ -18,7 +18,7 @@ import click
 import numpy as np
 
 from pkmcal.errors import PkmcalError
-from pkmcal.identification.identifiability import format_direction
+from pkmcal.identification.identifiability import describe_named, format_direction
 from pkmcal.identification.redundant_campaign import (
     BASELINES,
     baseline_inputs,
@@ -538,6 +538,8 @@ def identifiability_cmd(machine, poses_arg, setup_spec, poses, method, fix, free
         click.echo(f"suggested gauge (fix these): {', '.join(rep.fixed)}")
     for w in rep.weak:
         click.echo(f"weak (ratio {w['ratio']:.2g}): {format_direction(w['direction'])}")
+    for entry in rep.named:   # the machine's named directions in its words (identifiability.describe_named)
+        click.echo(describe_named(entry))
     if rep.unseen:
         click.echo(f"not seen at all: {', '.join(rep.unseen)}")
     for n in notes:

@@ -25,6 +25,20 @@ engine fits them; columns: the candidate parameters) is analysed as follows.
   ``Mechanism.param_names`` (for the hexapod: b1, a1, then b2, a2, ... — paper 2 fixes b1,
   b2, a1, a2), leg offsets (``L0_*``) after all joints, sensor parameters last (they
   describe the measuring set-up, which the calibration should determine).
+* **Named directions** (issue 13, item 5): a machine declares directions its users know by
+  name (:meth:`~pkmcal.mechanisms.base.Mechanism.named_directions`: a delta's common scale
+  of arms and radius). A direction d (all of whose parameters are candidates) is judged
+  modulo the gauge: in scaled coordinates u = D⁻¹d/‖D⁻¹d‖, its part u' = u − N Nᵀu off the
+  null space N of J_s (a gauge change is not a change of d), and with W an orthonormal
+  basis of u'⊥ (every other direction, the gauge included, free to compensate), the
+  visibility v = ‖(I − P_{J_s W}) J_s u‖ (P the projector onto the range of J_s W). The
+  direction's amount is its coordinate in the unit-norm columns, ε = dᵀD⁻²θ/‖D⁻¹d‖² (the
+  amount of a direction depends on what counts as "the rest"; this choice is free of the
+  parameters' units). On the noise-whitened J, σ = 1/(v ‖D⁻¹d‖) is the standard deviation
+  of ε that the measurements leave (linearised at the nominal machine). It is *unidentifiable*
+  when u' = 0 or v/σ_1 is at most ``rtol``; *weak* below
+  ``weak_ratio``; *not determined* when σ exceeds the tolerance the machine declares for it
+  (a genuine but noise-swamped direction); else *identified*.
 """
 
 from __future__ import annotations
@@ -70,6 +84,10 @@ class IdentifiabilityReport:
     n_unsolved: int = 0
     #: The candidate parameters that are angles (rad here; degrees in :meth:`to_dict`).
     angle_names: tuple[str, ...] = ()
+    #: One dict per named direction of the machine (module docstring): ``meaning``,
+    #: ``status``, ``ratio``, ``sigma`` (of the amount, in ``unit``), ``tolerance``,
+    #: ``tolerance_why``, ``remedy``, ``direction``.
+    named: list = field(default_factory=list)
 
     @property
     def n_params(self) -> int:
@@ -112,13 +130,16 @@ class IdentifiabilityReport:
             "parameters": list(self.names),
             "basis": self.basis,
             "n_unsolved_poses": self.n_unsolved,
+            "named": [{k: (v if k != "sigma" or np.isfinite(v) else None) for k, v in d.items()} for d in self.named],
             "units": {"n_params": "1", "n_rows": "1", "rank": "1", "rank_rtol": "1", "condition_number": "1",
                       "singular_values": "1 (of the column-scaled, whitened Jacobian)",
                       "null_space": "coefficients of each direction in file units (mm; deg for angle "
                                     "parameters), 1 on the gauge parameter it is named after",
                       "weak": "ratio: 1 (sigma/sigma_1); direction: coefficients in file units (mm, deg), "
                               "largest 1",
-                      "n_unsolved_poses": "1"},
+                      "n_unsolved_poses": "1",
+                      "named": "sigma and tolerance in each entry's unit (1: relative); ratio: 1; direction: "
+                               "internal units (mm, rad) per unit amount; sigma null when unidentifiable"},
         }
 
     def describe(self, limit: int = 3) -> str:
@@ -129,6 +150,72 @@ class IdentifiabilityReport:
         more = "" if len(self.null_space) <= limit else f" and {len(self.null_space) - limit} more"
         return (f"rank {self.rank} of {self.n_params}: unobservable combinations {'; '.join(parts)}{more}; "
                 f"fix e.g. {', '.join(self.fixed)}")
+
+
+def describe_named(entry: dict) -> str:
+    """One line of a named direction's verdict, e.g. "a common scale of the arm lengths and
+    the radius: not determined by these measurements (sigma 1.8 % ...); add ..."."""
+    unit, sigma = entry["unit"], entry["sigma"]
+
+    def amount(v):
+        return f"{100 * v:.2g} %" if unit == "1" else f"{v:.3g} {unit}"
+
+    if entry["status"] == "unidentifiable":
+        return f"{entry['meaning']}: cannot be seen by these measurements (no reading changes along it); " \
+               f"{entry['remedy']}"
+    text = (f"sigma {amount(sigma)} with this setup's noise, tolerance {amount(entry['tolerance'])} "
+            f"({entry['tolerance_why']}); ratio {entry['ratio']:.2g}")
+    if entry["status"] == "identified":
+        return f"{entry['meaning']}: identified ({text})"
+    words = {"weak": "weakly seen by these measurements", "not determined": "not determined by these measurements"}
+    return f"{entry['meaning']}: {words[entry['status']]} ({text}); {entry['remedy']}"
+
+
+def named_directions_report(J: np.ndarray, names, directions, *, rtol: float = RANK_RTOL,
+                            weak_ratio: float = WEAK_RATIO) -> list[dict]:
+    """The verdict on each named direction (module docstring) of the whitened candidate
+    Jacobian ``J`` (M, P) of parameters ``names``; directions with a parameter that is not
+    a candidate are left out (they cannot move)."""
+    from scipy.linalg import null_space
+
+    names = list(names)
+    J = np.asarray(J, dtype=float)
+    col = np.linalg.norm(J, axis=0)
+    scale = np.where(col > 0, 1.0 / np.where(col > 0, col, 1.0), 1.0)
+    Js = J * scale
+    if not Js.size:
+        return []
+    _, sv_all, Vt = np.linalg.svd(Js, full_matrices=True)
+    smax = float(sv_all[0]) if sv_all.size else 0.0
+    rank = int(np.sum(sv_all > rtol * smax)) if smax > 0 else 0
+    N = Vt[rank:].T                                        # null space of J_s (P, d)
+    out = []
+    for nd in directions:
+        if not nd.direction or not all(n in names for n in nd.direction) or not smax > 0:
+            continue
+        d = np.zeros(len(names))
+        for n, c in nd.direction.items():
+            d[names.index(n)] = c
+        ds = d / scale                                     # the direction in scaled coordinates
+        size = np.linalg.norm(ds)
+        u = ds / size
+        u_off = u - N @ (N.T @ u)                          # the part that is not a gauge change
+        if np.linalg.norm(u_off) > rtol:
+            A = Js @ null_space(u_off[None, :])            # every other direction, the gauge too, free
+            U, sv, _ = np.linalg.svd(A, full_matrices=False)
+            U = U[:, sv > rtol * smax]
+            b = Js @ u
+            v = float(np.linalg.norm(b - U @ (U.T @ b)))
+        else:
+            v = 0.0
+        ratio = v / smax
+        sigma = float("inf") if ratio <= rtol else 1.0 / (size * v)
+        status = ("unidentifiable" if ratio <= rtol else "weak" if ratio < weak_ratio
+                  else "not determined" if sigma > nd.tolerance else "identified")
+        out.append({"meaning": nd.meaning, "status": status, "ratio": ratio, "sigma": sigma, "unit": nd.unit,
+                    "tolerance": nd.tolerance, "tolerance_why": nd.tolerance_why, "remedy": nd.remedy,
+                    "direction": dict(nd.direction)})
+    return out
 
 
 def format_direction(direction: dict[str, float], digits: int = 3) -> str:
@@ -383,7 +470,9 @@ def _identifiability(machine, setup, poses, *, method, free, fix, weighted) -> I
 
         raise PkmcalError(f"none of the {len(poses)} poses can be evaluated on machine '{machine.name}' "
                           "(outside the reach of its chains, or the pose cannot be solved): no identifiability")
-    rep = analyse_jacobian(rows, tuple(names[i] for i in cand), tuple(machine.param_names))
+    cand_names = tuple(names[i] for i in cand)
+    rep = analyse_jacobian(rows, cand_names, tuple(machine.param_names))
+    named = named_directions_report(rows, cand_names, machine.named_directions()) if weighted else []
     angles = tuple(n for n, a in zip(names, tuple(machine.param_is_angle) + tuple(setup.sensor.param_is_angle)) if a)
     return dataclasses.replace(rep, basis=f"{method} at {int(ok.sum())} planned poses (noise-free, nominal machine)",
-                               n_unsolved=int(np.count_nonzero(~ok)), angle_names=angles)
+                               n_unsolved=int(np.count_nonzero(~ok)), angle_names=angles, named=named)

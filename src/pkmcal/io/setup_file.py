@@ -42,6 +42,15 @@ A tracker on the tool point of a planar machine (paper 3 §3), with the physics 
       load: [0, -30]              # in-plane force on the tool point, N (base frame)
       backlash: 1.0e-4            # optional dead band per actuator, mm (linear) or rad (rotary); one or one per actuator
 
+A delta printer's Z probe (Klipper's ``[probe]``/``[bltouch]`` offsets; the bed a plane of
+the base frame), :mod:`pkmcal.sensors.z_probe`::
+
+    sensor: z-probe
+    probe_offset: [0.0, 0.0, 1.25]    # Klipper's x_offset, y_offset, z_offset, mm (optional, default 0)
+    bed: {z: 0, a: 0, b: 0}           # optional: bed height (mm) and tilts about x and y (deg)
+    free: [bed.a, bed.b]              # optional (default none): also probe.x/y/z, bed.z
+    noise: {reading: 0.005, actuator: 0.0036}   # probe trigger std, carriage std (mm)
+
 Any setup may give Gaussian priors on parameters (maximum a posteriori identification,
 :mod:`pkmcal.identification.priors`): names or shell patterns, each ``[mean, std]`` or
 ``"mean ± std"`` (``+-`` also), or ``"± std"`` centred on the machine file's value; mm,
@@ -99,6 +108,7 @@ from pkmcal.sensors.library import (  # noqa: F401  (re-exported: the built-ins 
     bind_setup,
     builtin_setup,
 )
+from pkmcal.sensors.z_probe import MAX_BED_TILT_DEG, ZProbeSensor
 
 def _plausible(v: float) -> float:
     problem = magnitude_problem(float(v), None)
@@ -184,8 +194,23 @@ class _Simulation(_Strict):
     backlash: Values | None = None
 
 
+class _Bed(_Strict):
+    """The z-probe's bed plane: height z (mm), tilts a, b (degrees, within ±45)."""
+
+    z: Number = 0.0
+    a: Number = 0.0
+    b: Number = 0.0
+
+    @field_validator("a", "b")
+    @classmethod
+    def _a_bed(cls, v):
+        if not abs(v) <= MAX_BED_TILT_DEG:
+            raise ValueError(f"a bed tilt of {v!r} deg is not a bed; give at most {MAX_BED_TILT_DEG:g} deg")
+        return v
+
+
 class _Setup(_Strict):
-    sensor: Literal["full-pose", "position", "indicators", "planar-tool", "distance"]
+    sensor: Literal["full-pose", "position", "indicators", "planar-tool", "distance", "z-probe"]
     description: Annotated[StrictStr, AfterValidator(_one_line)] = ""
     indicators: list[tuple[Number, Number]] | None = None
     plane_offset: Number | None = None
@@ -197,6 +222,8 @@ class _Setup(_Strict):
     pivots: list[tuple[Number, Number, Number]] | None = None
     ball: _Point | None = None
     lengths: list[Number] | None = None
+    probe_offset: tuple[Number, Number, Number] | None = None
+    bed: _Bed | None = None
     free: list[StrictStr] | None = None
     noise: _Noise
     simulation: _Simulation | None = None
@@ -219,6 +246,7 @@ _SENSOR_KEYS = {
     "indicators": ("indicators", "plane_offset", "zero", "plate"),
     "planar-tool": ("target", "world"),
     "distance": ("pivots", "ball", "lengths"),
+    "z-probe": ("probe_offset", "bed"),
 }
 _NOISE_KEYS = {
     "full-pose": ("position", "orientation", "orientation_deg"),
@@ -226,6 +254,7 @@ _NOISE_KEYS = {
     "indicators": ("reading",),
     "planar-tool": ("reading",),
     "distance": ("reading",),
+    "z-probe": ("reading",),
 }
 
 
@@ -311,12 +340,12 @@ def load_setup(path: str | os.PathLike, machine=None) -> MeasurementSetup:
                 "(N/mm or N*mm/rad; N)" if loc == ("simulation", "stiffness") else "")
         elif err["type"] == "extra_forbidden":
             model = {(): _Setup, ("noise",): _Noise, ("world",): _Transform, ("tool",): _Transform, ("plate",): _Transform,
-                     ("target",): _Point, ("simulation",): _Simulation}.get(loc[:-1], _Setup)
+                     ("target",): _Point, ("simulation",): _Simulation, ("bed",): _Bed}.get(loc[:-1], _Setup)
             what = f"is not a setup key here; remove or correct it (allowed: {', '.join(model.model_fields)})"
         else:
             what = _describe(err)
             if err["type"] == "literal_error" and loc == ("sensor",):
-                what = "must be one of full-pose, position, indicators, planar-tool, distance"
+                what = "must be one of full-pose, position, indicators, planar-tool, distance, z-probe"
         _fail(path, lines, loc, what)
     raw_noise = data.get("noise") if isinstance(data.get("noise"), dict) else {}
     setup = _build(path, lines, spec, raw_noise)
@@ -372,7 +401,8 @@ def _build(path, lines, spec: _Setup, raw_noise: dict | None = None) -> Measurem
     (its numbers keep their text, which pydantic drops: degree values are converted from
     that text, so that a setup written by :func:`setup_to_yaml` reads back exactly)."""
     kind = spec.sensor
-    for key in ("indicators", "plane_offset", "zero", "plate", "world", "tool", "target", "pivots", "ball", "lengths"):
+    for key in ("indicators", "plane_offset", "zero", "plate", "world", "tool", "target", "pivots", "ball",
+                "lengths", "probe_offset", "bed"):
         if getattr(spec, key) is not None and key not in _SENSOR_KEYS[kind]:
             _fail(path, lines, (key,), f"does not apply to sensor '{kind}' (its keys: {', '.join(_SENSOR_KEYS[kind])})")
     noise = spec.noise
@@ -431,6 +461,13 @@ def _build(path, lines, spec: _Setup, raw_noise: dict | None = None) -> Measurem
             if noise.reading is None:
                 _fail(path, lines, ("noise", "reading"), "is missing; give the distance noise (mm)")
             reading_std = _expand(path, lines, noise.reading, k, ("noise", "reading"), "mm")
+        elif kind == "z-probe":
+            bed = None if spec.bed is None else [spec.bed.z, spec.bed.a, spec.bed.b]
+            sensor = ZProbeSensor(probe_offset=spec.probe_offset, bed=bed, free=free)
+            if noise.reading is None:
+                _fail(path, lines, ("noise", "reading"), "is missing; give the probe's trigger noise (mm), e.g. the "
+                      "standard deviation PROBE_ACCURACY reports")
+            reading_std = _expand(path, lines, noise.reading, 1, ("noise", "reading"), "mm")
         elif kind == "position":
             target = None if spec.target is None else [spec.target.x, spec.target.y, spec.target.z]
             sensor = PositionSensor(target=target, world=tf(spec.world), free=free)
@@ -534,11 +571,35 @@ def _group_dict(sensor, field: str) -> dict:
             for name, v, ang in zip(group.names, getattr(sensor, field), group.is_angle)}
 
 
+def _z_probe_keys(s: ZProbeSensor) -> dict:
+    """The z-probe's keys: ``probe_offset`` (mm) and, unless 0, ``bed`` (mm, degrees)."""
+    doc: dict = {"probe_offset": FlowList(float(v) for v in s.probe_offset)}
+    if np.any(s.bed != 0):
+        doc["bed"] = _group_dict(s, "bed")
+    return doc
+
+
+def _distance_keys(s: DistanceSensor) -> dict:
+    """The distance sensor's keys: ``pivots``, ``ball`` and, unless 0, ``lengths`` (mm)."""
+    doc: dict = {"pivots": [FlowList(float(v) for v in row) for row in s.pivots.reshape(-1, 3)],
+                 "ball": _group_dict(s, "ball")}
+    if np.any(s.lengths != 0):
+        doc["lengths"] = FlowList(float(v) for v in s.lengths)
+    return doc
+
+
+#: The sensor-specific keys written for a sensor kind (the kinds without an entry are written
+#: by the branches of :func:`setup_to_yaml`).
+_KIND_KEYS = {ZProbeSensor.kind: _z_probe_keys, DistanceSensor.kind: _distance_keys}
+
+
 def setup_to_yaml(setup: MeasurementSetup) -> str:
     """YAML text of a setup (full precision; :func:`load_setup` reads it back)."""
     s, noise = setup.sensor, setup.noise
     doc: dict = {"sensor": s.kind}
-    if isinstance(s, IndicatorSensor):
+    if s.kind in _KIND_KEYS:      # by the declared kind, as the loader reads it (no type probe)
+        doc.update(_KIND_KEYS[s.kind](s))
+    elif isinstance(s, IndicatorSensor):
         doc["indicators"] = [FlowList(float(v) for v in row) for row in s.positions]
         doc["plane_offset"] = float(s.plane_offset)
         if np.any(s.zero != 0):
@@ -553,11 +614,6 @@ def setup_to_yaml(setup: MeasurementSetup) -> str:
         doc["target"] = _group_dict(s, "target")
         if np.any(s.world != 0):
             doc["world"] = _group_dict(s, "world")
-    elif s.kind == "distance":
-        doc["pivots"] = [FlowList(float(v) for v in row) for row in s.pivots.reshape(-1, 3)]
-        doc["ball"] = _group_dict(s, "ball")
-        if np.any(s.lengths != 0):
-            doc["lengths"] = FlowList(float(v) for v in s.lengths)
     elif isinstance(s, FullPoseSensor):
         if np.any(s.world != 0):
             doc["world"] = _group_dict(s, "world")

@@ -120,6 +120,26 @@ class LimitReport:
         return labels[inverse.reshape(-1)].tolist()
 
 
+@dataclass(frozen=True)
+class NamedDirection:
+    """A parameter direction a machine's users know by name, for the identifiability report
+    to say in their words whether the measurements see it (issue 13, item 5).
+
+    ``meaning`` the words ("a common scale of the arm lengths and the radius");
+    ``direction`` {parameter name: coefficient} (internal units per unit ``amount``);
+    ``unit`` the unit of the amount ("1" for a relative change, "rad", "mm");
+    ``tolerance`` the amount's standard deviation beyond which the measurements are said
+    not to determine it (with ``tolerance_why``, the reason for that figure);
+    ``remedy`` what measurement or prior would fix it."""
+
+    meaning: str
+    direction: dict
+    unit: str
+    tolerance: float
+    tolerance_why: str
+    remedy: str
+
+
 class Mechanism(ABC):
     """Abstract parallel mechanism (see module docstring)."""
 
@@ -152,6 +172,11 @@ class Mechanism(ABC):
     #: Covariance (p, p) of the parameters (mm², rad²; zero rows for fixed ones) of an
     #: identified machine, None otherwise (every concrete mechanism holds it as a field).
     covariance: np.ndarray | None = None
+
+    def named_directions(self) -> tuple[NamedDirection, ...]:
+        """Parameter directions known by name (:class:`NamedDirection`), which the
+        identifiability report judges one by one; none by default."""
+        return ()
 
     @property
     def actuator_is_angle(self) -> tuple[bool, ...]:

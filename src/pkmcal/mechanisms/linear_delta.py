@@ -63,7 +63,7 @@ from typing import ClassVar
 import numpy as np
 
 from pkmcal.errors import PkmcalError
-from pkmcal.mechanisms.base import FKResult, LimitReport
+from pkmcal.mechanisms.base import FKResult, LimitReport, NamedDirection
 from pkmcal.mechanisms.translating import ArmLayout, TranslatingMechanism
 from pkmcal.mechanisms.trilateration import trilaterate
 
@@ -162,6 +162,21 @@ class LinearDelta(TranslatingMechanism):
         """Where FK starts and the workspace's centre: the centre, at half the lowest switch
         height (the firmware homes to the top; this is inside the print volume)."""
         return np.array([0.0, 0.0, 0.5 * float(np.min(_towers(self.rho)["endstop"]))])
+
+    def named_directions(self) -> tuple[NamedDirection, ...]:
+        """The common scale ε of the three arms and radii (arm_i += ε L_i, radius_i += ε r_i):
+        what Z-probe heights barely see (issue 13; Klipper's DELTA_CALIBRATE leaves the arms
+        alone without DELTA_ANALYZE's printed distances)."""
+        g = _towers(self.rho)
+        direction = {f"arm_{t}": float(g["arm"][i]) for i, t in enumerate(TOWERS)}
+        direction.update({f"radius_{t}": float(g["radius"][i]) for i, t in enumerate(TOWERS)})
+        arm = float(np.mean(g["arm"]))
+        return (NamedDirection(
+            meaning="a common scale of the arm lengths and the radius", direction=direction, unit="1",
+            tolerance=1e-3,
+            tolerance_why=f"0.1 % of the size, {1e-3 * arm:.2g} mm of a {arm:.4g} mm arm: a 100 mm print 0.1 mm off",
+            remedy="add measurements that see a length (printed-object distances, a ballbar, a position sensor) or "
+                   "priors on the measured arm lengths, e.g. --prior 'arm_*=" + f"{arm:.6g}" + "±0.1'"),)
 
     def parameter_problem(self) -> tuple[str, str] | None:
         """``(name, why)`` of the first parameter that makes the machine impossible."""

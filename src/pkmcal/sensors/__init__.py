@@ -6,6 +6,7 @@
 * :class:`PlanarToolSensor` (``planar-tool``): tracker on the tool point of a planar machine (paper 3)
 * :class:`DistanceSensor` (``distance``): distances from base pivots to a ball on the platform
   (double ballbar, string potentiometer, interferometer to a fixed point)
+* :class:`ZProbeSensor` (``z-probe``): a delta printer's Z probe, the height of a probe point above the bed
 
 ``base`` holds the interface (θ declared as :class:`ParamGroup` fields, from which names,
 angle flags, ``with_params`` and value equality follow), ``_common`` the shared argument
@@ -19,10 +20,11 @@ from pkmcal.sensors.full_pose import FullPoseSensor
 from pkmcal.sensors.indicators import IndicatorSensor
 from pkmcal.sensors.planar_tool import PlanarToolSensor
 from pkmcal.sensors.position import PositionSensor
+from pkmcal.sensors.z_probe import ZProbeSensor
 
 #: Sensor classes by the ``kind`` written in setup files.
 SENSOR_KINDS = {cls.kind: cls for cls in (FullPoseSensor, PositionSensor, IndicatorSensor, PlanarToolSensor,
-                                          DistanceSensor)}
+                                          DistanceSensor, ZProbeSensor)}
 
 __all__ = [
     "DistanceSensor",
@@ -35,4 +37,5 @@ __all__ = [
     "PositionSensor",
     "SENSOR_KINDS",
     "Sensor",
+    "ZProbeSensor",
 ]

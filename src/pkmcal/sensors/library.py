@@ -20,6 +20,7 @@ from pkmcal.sensors.full_pose import FullPoseSensor
 from pkmcal.sensors.indicators import IndicatorSensor
 from pkmcal.sensors.planar_tool import PlanarToolSensor
 from pkmcal.sensors.position import PositionSensor
+from pkmcal.sensors.z_probe import ZProbeSensor
 
 SQRT3 = math.sqrt(3.0)
 
@@ -74,6 +75,23 @@ def _planar_tracker(kind: str, machine=None) -> MeasurementSetup:
     )
 
 
+#: ``z-probe-klipper``: a delta printer's Z probe as Klipper uses it (bed z = 0, level; probe
+#: offset 0: give yours in a setup file). Probe σ 0.005 mm: the BLTouch maker's stated
+#: repeatability (Antclabs, standard deviation about 0.005 mm), also typical of a good
+#: inductive probe's PROBE_ACCURACY; a nominal assumption, replace it by your PROBE_ACCURACY
+#: standard deviation. Carriages σ 0.0036 mm: one step of an 80 steps/mm tower (a 20-tooth
+#: GT2 pulley at 16 microsteps) as a uniform quantisation, 0.0125 mm / √12.
+Z_PROBE_KLIPPER_STD = 0.005
+Z_PROBE_KLIPPER_CARRIAGE_STD = 0.0125 / math.sqrt(12.0)
+
+
+def _z_probe_klipper() -> MeasurementSetup:
+    return MeasurementSetup(
+        ZProbeSensor(),
+        NoiseModel(reading_std=np.array([Z_PROBE_KLIPPER_STD]), actuator_std=np.array(Z_PROBE_KLIPPER_CARRIAGE_STD)),
+    )
+
+
 #: Built-in setups by name → (factory, one-line description).
 BUILTIN_SETUPS = {
     "indicators-prototype": (
@@ -89,6 +107,11 @@ BUILTIN_SETUPS = {
     "laser-tracker": (
         _laser_tracker,
         "3D laser tracker on one target point (offset free, initial 0): noise std 0.01 mm, 0.005 mm (legs)",
+    ),
+    "z-probe-klipper": (
+        _z_probe_klipper,
+        "delta printer Z probe as Klipper uses it (bed z = 0 and level, probe offset 0): std 0.005 mm "
+        "(nominal, BLTouch spec), carriages 0.0036 mm (one 0.0125 mm step, uniform)",
     ),
     "planar-tracker": (
         lambda machine=None: _planar_tracker("auto", machine),

@@ -1,0 +1,65 @@
+"""``pkmcal import klipper-probe``: Klipper's Z-probe results as a measurement file.
+
+``pkmcal import klipper-probe LOG_OR_CFG --machine DELTA.yaml -o MEAS.csv`` reads the probe
+lines of a Klipper console log or the ``#*#`` DELTA_CALIBRATE block of a printer.cfg
+(:mod:`pkmcal.io.klipper_probe`) and writes the measurement CSV that ``pkmcal identify
+DELTA.yaml MEAS.csv --setup PROBE.yaml`` fits: ``lambda1..3`` (carriage positions),
+``probe_z`` and the firmware's pose ``cmd_x..cmd_z``. Registered in the ``import`` group.
+"""
+
+from __future__ import annotations
+
+import click
+
+from pkmcal.cli.options import check_output, examples, output_option, to_stdout
+
+
+@click.command("klipper-probe", epilog=examples(
+    "pkmcal import klipper-probe examples/klipper/probe-console.log --machine kossel-mini -o probe-meas.csv",
+    "pkmcal import klipper-probe examples/klipper/probe-console.log --machine kossel-mini --setup z-probe-klipper"))
+@click.argument("source", metavar="LOG_OR_CFG")
+@click.option("--machine", "machine_spec", required=True, metavar="DELTA.yaml",
+              help="The printer's machine file (from 'pkmcal import klipper printer.cfg'), or a built-in name: its "
+                   "parameters are the firmware configuration the probe ran with.")
+@click.option("--setup", "setup_spec", default="z-probe-klipper", show_default=True, metavar="PROBE.yaml",
+              help="The z-probe setup: its probe_offset is Klipper's [probe] x_offset, y_offset, z_offset.")
+@output_option("MEAS.csv", "Measurement file to write")
+def klipper_probe_cmd(source: str, machine_spec: str, setup_spec: str, output: str | None) -> None:
+    """Read Klipper's Z-probe results as a pkmcal measurement file (z-probe sensor).
+
+    LOG_OR_CFG: a console or klippy log with 'probe at X,Y is z=Z' lines (older Klipper:
+    the nozzle position) or 'probe: at X,Y bed will contact at z=Z' lines (later Klipper:
+    the probe point; the setup's probe offset is added back), from PROBE, PROBE_ACCURACY,
+    DELTA_CALIBRATE or BED_MESH_CALIBRATE; or a printer.cfg whose SAVE_CONFIG (#*#) block
+    holds DELTA_CALIBRATE's [delta_calibrate] heightN and heightN_pos (steps below the
+    endstops, converted with each stepper's rotation_distance, microsteps,
+    full_steps_per_rotation and gear_ratio). The carriage positions are those of MACHINE
+    at the logged positions; probe_z is 0 at every trigger (the probe point on the bed).
+    """
+    check_output(output, [source])
+    from pkmcal.io.klipper_probe import read_klipper_probe
+    from pkmcal.io.machine_file import load_machine
+    from pkmcal.io.measurements import measurement_columns, save_measurements
+    from pkmcal.io.setup_file import load_setup
+    from pkmcal.io.tables import format_table
+
+    machine = load_machine(machine_spec)
+    setup = load_setup(setup_spec, machine)
+    if setup.sensor.kind != "z-probe":
+        from pkmcal.errors import PkmcalError
+
+        raise PkmcalError(f"--setup {setup_spec}: a '{setup.sensor.kind}' setup; Klipper's probe results are read "
+                          "with a 'sensor: z-probe' setup")
+    result = read_klipper_probe(source, machine, setup.sensor.probe_offset)
+    comment = (f"from Klipper probe results {source}",)
+    if to_stdout(output):
+        click.echo(format_table(measurement_columns(result.measurements, machine, setup)), nl=False)
+    else:
+        save_measurements(output, result.measurements, machine, setup, comments=comment)
+    for note in result.notes:
+        click.echo(f"note: {note}", err=True)
+    if not to_stdout(output):
+        click.echo(f"wrote {output}: {len(result.measurements)} pose(s)", err=True)
+
+
+__all__ = ["klipper_probe_cmd"]
