@@ -47,12 +47,9 @@ def _fmt(v: float, angle: bool) -> str:
 
 
 def _angle_names(result) -> set[str]:
-    """Names of the angle parameters (shown in degrees), from the sensor's ``param_is_angle``
-    and the machine's (a machine without the flags, the hexapod, has only lengths)."""
-    sensor, mech = result.sensor, result.mechanism
-    angles = {n for n, a in zip(sensor.param_names, sensor.param_is_angle) if a}
-    angles.update(n for n, a in zip(mech.param_names, mech.param_is_angle) if a)
-    return angles
+    """Names of the angle parameters (shown in degrees): the machine's, the sensor's and the
+    sessions' offsets of rotary actuators (``IdentificationResult.angle_names``)."""
+    return set(result.angle_names())
 
 
 def result_table(result) -> str:
@@ -89,6 +86,10 @@ def free_statement(result, free_opt: list[str] | None, setup) -> str:
     mech_free = [n for n in result.free if names.index(n) < p]
     sensor_free = [n for n in result.free if names.index(n) >= p]
     setup_free = set(setup.sensor.default_free)
+    several = result.sessions is not None and result.sessions.several
+    if several:   # NAME@LABEL of the setup's free: names, and the sessions' actuator offsets
+        setup_free = set(result.sensor.default_free)
+        offsets = {n for n in names[p + len(result.sensor.param_names):]}
     from pkmcal.identification.residuals import default_fixed_parameters
 
     held_by_machine = [n for n in default_fixed_parameters(result.mechanism) if n not in result.free]
@@ -100,11 +101,13 @@ def free_statement(result, free_opt: list[str] | None, setup) -> str:
         src = "all, no --free given"
     text = f"free parameters: {len(mech_free)} of {p} machine parameters ({src})"
     if sensor_free:
-        parts = [f"{n} ({'setup free:' if n in setup_free else '--free'})" for n in sensor_free]
+        parts = [f"{n} ({'setup free:' if n in setup_free else 'session offsets' if several and n in offsets else '--free'})"
+                 for n in sensor_free]
         text += "; sensor: " + ", ".join(parts)
     else:
         text += "; no sensor parameter"
-    held = [n for n in setup_free if n not in result.free]
+    held = [n for n in (result.sensor.default_free if several else setup.sensor.default_free)
+            if n not in result.free]
     if held:
         text += f"; setup-free sensor parameters held: {', '.join(held)} (--fix or gauge)"
     return text + ". Rule: --free adds to the setup's free: list, it does not replace it"
@@ -150,9 +153,31 @@ def fit_summary(result, free_line: str | None = None) -> str:
     for d in rep.null_space:
         lines.append(f"  unobservable: {format_direction(d)}")
     lines.extend(robust_lines(result))
+    lines.extend(session_lines(result))
     for w in result.warnings:
         lines.append(w if w.startswith("warning: ") else f"note: {w}")
     return "\n".join(lines)
+
+
+def session_lines(result) -> list[str]:
+    """The fit summary's lines on the sessions: poses per session and each session's
+    identified sensor (setup-file keys, mm and degrees; ``dq`` the re-homing offsets)."""
+    values = result.session_values()
+    if not values:
+        return []
+    ses = result.sessions
+    counts = dict(zip(ses.labels, ses.counts()))
+    out = [f"sessions: {len(values)} ({', '.join(f'{lab}: {int(counts[lab])} poses' for lab in ses.labels)}), "
+           "each with its own sensor parameters NAME@LABEL"
+           + ("; actuator zero offsets dq_i@LABEL after the first" if ses.offsets else "")]
+    for lab, groups in values.items():
+        parts = []
+        for key, v in groups.items():
+            text = (", ".join(f"{k} {x:.6g}" for k, x in v.items()) if isinstance(v, dict)
+                    else ", ".join(f"{x:.6g}" for x in v))
+            parts.append(f"{key}: {text}")
+        out.append(f"  session {lab} (mm, deg): " + "; ".join(parts))
+    return out
 
 
 def robust_lines(result) -> list[str]:
@@ -275,10 +300,14 @@ def radian_hints(nominal, setup, meas) -> list[str]:
 @click.option("--clipped", type=click.Choice(CLIPPED_POLICIES), default="drop", show_default=True,
               help="Poses with an actuator reading outside its stroke or at one of its ends (a clipped or stuck "
                    "actuator): listed with a warning and left out (drop), used (keep), or an error.")
+@click.option("--session-offsets", "session_offsets", is_flag=True,
+              help="With a 'session' column of several sessions: estimate actuator zero offsets dq_i@LABEL for "
+                   "every session but the first (the actuators re-homed between sessions; the first session's "
+                   "zeros are the machine's). Same as the setup's 'sessions: {actuator_offsets: true}'.")
 @import_options
 def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fix, free, output, name, as_json,
                  report_dir=None, mapping=None, keep=None, loss="linear", f_scale=None, reject=None,
-                 prior=(), clipped="drop") -> None:
+                 prior=(), clipped="drop", session_offsets=False) -> None:
     """Identify MACHINE's kinematic parameters from MEAS.csv and write CALIBRATED.yaml.
 
     Units: mm, degrees in files and tables. Unidentifiable combinations are fixed
@@ -295,6 +324,11 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     add Gaussian priors (maximum a posteriori). The fit summary and --json say which
     covariance is reported (JSON: covariance_kind, covariance_in_file; outliers, priors,
     normalised_residuals).
+
+    Sessions: a 'session' column in MEAS.csv (free text labels) gives each session its own
+    sensor parameters, named NAME@LABEL (world.x@2); the machine is shared. A name or
+    pattern without @ in --free/--fix means that parameter in every session. The fit
+    summary and --json ('sessions') give each session's identified sensor, mm and degrees.
     """
     inputs = [machine, measurements, setup_spec]
     check_output(output, inputs)
@@ -334,7 +368,7 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     with clipped_named_in_errors(clipped_lines):
         result = identify(fit_machine, fit_setup, fit_meas, method=method, free=merged_free(free_opt, fit_setup),
                           fix=fix_names, weighted=not unweighted, form=form, loss=loss, f_scale=f_scale,
-                          reject=reject, priors=priors)
+                          reject=reject, priors=priors, session_offsets=True if session_offsets else None)
         if baseline is not None:
             result = baseline_result(result, nominal, baseline)
         if not result.success:

@@ -313,6 +313,46 @@ def setup_values(sensor: Sensor, angle=None) -> dict:
     return out
 
 
+def sensor_from_values(sensor: Sensor, values: dict, angle=None) -> Sensor:
+    """``sensor`` with the θ fields that ``values`` gives (setup-file form, the reverse of
+    :func:`setup_values`; file units, angles through ``angle(degrees)``, default
+    ``np.deg2rad``): a transform's coordinates not given are 0, as in setup files; a field
+    not given keeps ``sensor``'s values. ``dq`` (re-homing offsets) is not a sensor field and
+    is skipped. Raises :class:`PkmcalError` naming the key for an unknown key or a value that
+    is not a finite number."""
+    angle = angle or (lambda v: float(np.deg2rad(v)))
+    fields_ = {g.field: g for g in sensor.param_groups}
+    unknown = [k for k in values if k not in fields_ and k != "dq"]
+    if unknown:
+        raise PkmcalError(f"'{unknown[0]}' is not a parameter group of the '{sensor.kind}' sensor "
+                          f"(its groups: {', '.join(fields_) or 'none'})")
+
+    def number(v, key: str) -> float:
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(float(v)):
+            raise PkmcalError(f"'{key}' must be a finite number; got {v!r}")
+        return v
+
+    theta = []
+    for g in sensor.param_groups:
+        given = values.get(g.field)
+        if given is None:
+            theta.extend(getattr(sensor, g.field))
+            continue
+        if all("." in n for n in g.names):
+            keys = [n.split(".", 1)[1] for n in g.names]
+            if not isinstance(given, dict) or any(k not in keys for k in given):
+                bad = next((k for k in given if k not in keys), None) if isinstance(given, dict) else None
+                raise PkmcalError(f"'{g.field}' is a mapping of {', '.join(keys)}" +
+                                  (f"; '{bad}' is not one of them" if bad is not None else ""))
+            raw = [number(given.get(k, 0.0), f"{g.field}.{k}") for k in keys]
+        else:
+            if not isinstance(given, list) or len(given) != len(g.names):
+                raise PkmcalError(f"'{g.field}' is a list of {len(g.names)} numbers")
+            raw = [number(v, f"{g.field}[{i}]") for i, v in enumerate(given)]
+        theta.extend(angle(v) if a else float(v) for v, a in zip(raw, g.is_angle))
+    return sensor.with_params(np.array(theta, dtype=float))
+
+
 def session_setup_values(sensor: Sensor, offsets: dict | None = None, actuator_is_angle=(), angle=None) -> dict:
     """{label: setup-file keys} of every session of a :class:`SessionSensor`
     (:func:`setup_values`), with ``dq`` the session's re-homing offsets (``offsets[label]``,
@@ -338,4 +378,4 @@ def session_sensors(sensor: Sensor) -> dict[str, Sensor]:
 
 
 __all__ = ["SESSION_SEPARATOR", "SessionSensor", "Sessions", "offset_names", "session_name", "session_sensors",
-           "session_setup_values", "setup_values"]
+           "sensor_from_values", "session_setup_values", "setup_values"]
