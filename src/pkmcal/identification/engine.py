@@ -416,6 +416,37 @@ class _Objective:
         return J.reshape(-1, J.shape[-1])
 
 
+def _registered(model: Model, cand: list[int], notes: list[str], **kw) -> Model:
+    """Several sessions: the model with each session's free sensor parameters started from
+    a registration on its own poses with the machine held at its values (and no offsets) —
+    a fit of those columns only, cheap, in which the sessions do not interact.
+    From the values given, a joint fit of sessions whose frames differ by a large rotation
+    can stop in a local minimum (two position-sensor sessions whose worlds differ by 0.2 rad
+    about z: rms 85 mm from the given start, 1e-13 mm from the registered one). Unchanged
+    when no sensor parameter or no machine parameter is free, or the registration fails."""
+    p, s = model.n_mech, model.n_sensor
+    sensor_free = [model.names[i] for i in cand if i >= p]
+    if not any(i < p for i in cand) or not any(p <= i < p + s for i in cand):
+        return model
+    sensors = model.sensor.sensors
+    setup = MeasurementSetup(sensors[0], model.noise, session_sensors=tuple(zip(model.sessions.labels, sensors)))
+    try:
+        reg = _identify(model.mechanism, setup, None, free=sensor_free, fix="auto", form="plain", jac="analytic",
+                        solver="auto", ftol=TOLERANCE, xtol=TOLERANCE, gtol=TOLERANCE, q=model.q, y=model.y,
+                        commanded=model.commanded, sessions=model.sessions, session_offsets=False,
+                        register=False, **kw)
+    except PkmcalError:
+        return model
+    if not reg.success:
+        return model
+    notes.append("sessions: the fit started from each session's sensor parameters registered on its poses with "
+                 "the machine held (rms residual there " + ", ".join(f"{v:.3g} {u}" for u, v in reg.rms_by_unit().items())
+                 + ")")
+    start = SessionSensor(reg.sensor.sensors, model.sessions)
+    out = Model(model.mechanism, start, model.noise, model.q, model.y, model.commanded, model.sessions)
+    return out
+
+
 def _where(measurements, idx) -> str:
     """' [file, line 12; ...]' for poses ``idx`` when the measurements know their source."""
     where = getattr(measurements, "where", None)
@@ -673,7 +704,7 @@ def identify(
 def _identify(machine, setup, measurements, *, method, free, fix, weighted, form, jac, solver, ftol, xtol, gtol,
               max_nfev, q, y, commanded, max_dropped_fraction, loss="linear", f_scale=None, priors=(),
               outlier_sigma=OUTLIER_SIGMA, exclude=None, round_=1, sessions=None,
-              session_offsets=None) -> IdentificationResult:
+              session_offsets=None, register: bool = True) -> IdentificationResult:
     if method is None:
         method = default_method(setup, machine)
     if method not in METHODS:
@@ -703,6 +734,10 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
     cand, explicit = candidate_parameters(model, free, fix)
     if not cand:
         raise PkmcalError("no free parameters to identify (check --free / --fix)")
+    theta_given = model.theta0             # the values given (reported as ``initial``)
+    if register and ses is not None:
+        model = _registered(model, cand, notes, method=method, weighted=weighted, max_nfev=max_nfev,
+                            max_dropped_fraction=max_dropped_fraction)
     names = model.names
     prior = resolve(priors, names, model.param_is_angle, model.theta0)
     check_free(prior, {names[i] for i in cand})
@@ -890,7 +925,7 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
         names=names,
         free=free_names,
         fixed=fixed,
-        initial=theta0,
+        initial=theta_given,
         estimate=theta,
         uncertainty=unc,
         residuals=ev.r,
