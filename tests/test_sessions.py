@@ -424,3 +424,11 @@ def test_session_sensor_bound_to_its_poses(nominal):
     with pytest.raises(PkmcalError, match="session labels for"):
         Model(nominal, ss, NOISE_FULL, np.zeros((2, 6)), np.zeros((2, 6)), sessions=Sessions.from_labels(["1", "2", "2"]))
     assert replace(ss).session("2") == FullPoseSensor()
+
+
+def test_prior_without_label_applies_to_every_session(nominal, real):
+    q, y, cmd, labels = two_sessions(nominal, real, true_sensors("full-pose"))
+    e_y, e_q = NOISE_FULL.sample(np.random.default_rng(4), y.shape, q.shape)
+    res = identify(nominal, start_setup("full-pose"), q=q + e_q, y=y + e_y, commanded=cmd, sessions=labels,
+                   priors=["tool.z=30±0.01"])
+    assert {e["parameter"] for e in res.priors.to_dict(res.estimate, {})} == {"tool.z@A", "tool.z@B"}

@@ -43,6 +43,13 @@ the ρ columns. Parameters are passed explicitly: ``mech.ik_and_jacobians(x, par
     ∂r/∂θ = U⊥ᵀ ∂e/∂θ (the x-dependence is projected out; the derivative of U⊥ is dropped,
     which leaves the gradient Jᵀr of the cost exact at x*). Weighted, cov = I.
 
+Several sessions (:mod:`pkmcal.sensors.sessions`): s is the stacked per-session sensor
+parameters, read through a session sensor bound to the poses (one evaluation per session),
+and with re-homing offsets δq (θ = [ρ; s; δq]) each method reads the actuators as
+q_j + δq_{s(j)} (:meth:`Model.q_at`): ik-residual ∂r/∂δq = I (squared form 2 L_q),
+fk-residual x = FK(q + δq) so ∂r/∂δq = −H A⁻¹, projection ∂e/∂δq = W [0; I], each pose's
+block in its session's columns (:meth:`Model.offset_jacobian`); the first session has none.
+
 A :class:`Method` object is the objective of one fit and owns that fit's scratch: the
 eliminated poses (and the Jacobian pieces A, B, H A⁻¹ computed from them) of the last θ it
 was evaluated at, so that the residual and the Jacobian the solver asks for separately at
