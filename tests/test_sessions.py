@@ -432,3 +432,22 @@ def test_prior_without_label_applies_to_every_session(nominal, real):
     res = identify(nominal, start_setup("full-pose"), q=q + e_q, y=y + e_y, commanded=cmd, sessions=labels,
                    priors=["tool.z=30±0.01"])
     assert {e["parameter"] for e in res.priors.to_dict(res.estimate, {})} == {"tool.z@A", "tool.z@B"}
+
+
+def test_identify_report_with_sessions_and_offsets(tmp_path):
+    """The HTML report takes a fit with sessions and offsets (their units from the result)."""
+    setup = tmp_path / "setup.yaml"
+    setup.write_text("sensor: full-pose\ntool: {z: 30}\nfree: [world.x, world.y, world.z, world.a, world.b, world.c]\n"
+                     "noise: {position: 0.01, orientation_deg: 0.0057, actuator: 0.005}\n"
+                     "sessions: {actuator_offsets: true}\n")
+    _poses_csv(tmp_path / "poses.csv")
+    run = CliRunner().invoke
+    res = run(cli, ["simulate", "stewart-prototype", "--real", "stewart-prototype-real", "--setup", str(setup),
+                    "--poses", str(tmp_path / "poses.csv"), "--sessions", "2", "--session-offsets", "0.3",
+                    "-o", str(tmp_path / "m.csv")])
+    assert res.exit_code == 0, res.output
+    res = run(cli, ["identify", "stewart-prototype", str(tmp_path / "m.csv"), "--setup", str(setup),
+                    "-o", str(tmp_path / "cal.yaml"), "--report", str(tmp_path / "rep")])
+    assert res.exit_code == 0, res.output
+    html = (tmp_path / "rep" / "report.html").read_text()
+    assert "dq_1@2" in html and "world.x@2" in html
