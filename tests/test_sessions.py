@@ -20,6 +20,8 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 from helpers import assert_jacobian_matches_fd, random_poses
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from test_engine import _fd_model
 
 from pkmcal.cli.main import cli
@@ -267,7 +269,7 @@ def test_session_column_round_trip_and_default_readers(nominal, real, tmp_path):
     import pandas
 
     df = pandas.read_csv(path)
-    assert list(df.columns)[:2] == ["session", "lambda1"] and list(df["session"]) == labels
+    assert list(df.columns)[0] == "lambda1" and list(df.columns)[-1] == "session" and list(df["session"]) == labels
     with open(path, newline="") as fh:
         rows = list(csv.DictReader(fh))
     assert [r["session"] for r in rows] == labels and float(rows[0]["lambda1"]) == q[0, 0]
@@ -285,8 +287,8 @@ def test_empty_session_label_names_the_line(nominal, real, tmp_path):
     save_measurements(path, Measurements(q, y, cmd, sessions=labels), nominal, setup, comments=("a comment",),
                       units_comment=True)
     lines = path.read_text().splitlines()
-    assert lines[0].startswith("# units") and lines[3].startswith("session,")
-    lines[5] = "  ," + lines[5].split(",", 1)[1]           # the second data row, line 6
+    assert lines[0].startswith("# units") and lines[3].endswith(",session")
+    lines[5] = lines[5].rsplit(",", 1)[0] + ",  "          # the second data row, line 6
     path.write_text("\n".join(lines) + "\n")
     with pytest.raises(InputFileError, match=r"m\.csv, line 6, column 'session': empty session label"):
         load_measurements(path, nominal, setup)
@@ -394,7 +396,7 @@ def test_simulate_sessions_then_identify(tmp_path):
     import pandas
 
     df = pandas.read_csv(tmp_path / "m.csv")
-    assert list(df.columns)[0] == "session" and sorted(set(df["session"])) == [1, 2]
+    assert list(df.columns)[-1] == "session" and sorted(set(df["session"])) == [1, 2]
     res = run(cli, ["identify", "stewart-prototype", str(tmp_path / "m.csv"), "--setup", str(fit_setup),
                     "-o", str(tmp_path / "cal.yaml"), "--json", "--session-offsets"])
     assert res.exit_code == 0, res.output
@@ -451,3 +453,30 @@ def test_identify_report_with_sessions_and_offsets(tmp_path):
     assert res.exit_code == 0, res.output
     html = (tmp_path / "rep" / "report.html").read_text()
     assert "dq_1@2" in html and "world.x@2" in html
+
+
+#: Session labels as instruments and people write them: text without line breaks, not
+#: empty, no surrounding spaces (stripped on reading), commas, quotes and '#' allowed.
+LABELS = st.text(st.characters(blacklist_categories=("Cc", "Cs", "Zl", "Zp")), min_size=1, max_size=12).map(
+    str.strip).filter(lambda t: t != "")
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(per_pose=st.lists(st.sampled_from(["1", "2", "x, y", '"q"', "2026-05-01-am"]) | LABELS, min_size=1,
+                         max_size=12))
+def test_session_labels_round_trip_any_text(nominal, tmp_path, per_pose):
+    """Any labels: written, read back exactly, in order of first appearance; the groups
+    partition the poses."""
+    setup = start_setup("full-pose")
+    n = len(per_pose)
+    x = random_poses(nominal, n, 1)
+    meas = Measurements(nominal.ik(x), setup.sensor.predict(nominal.frame(x)), sessions=per_pose)
+    path = tmp_path / "m.csv"
+    save_measurements(path, meas, nominal, setup)
+    back = load_measurements(path, nominal, setup)
+    assert [back.sessions.labels[k] for k in back.sessions.index] == per_pose
+    assert back.sessions.labels == tuple(dict.fromkeys(per_pose))
+    covered = np.concatenate([np.arange(n)[g] for g in back.sessions.groups])
+    assert sorted(covered) == list(range(n))
+    with open(path, newline="", encoding="utf-8") as fh:
+        assert [r["session"] for r in csv.DictReader(fh)] == per_pose

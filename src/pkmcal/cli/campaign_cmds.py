@@ -94,7 +94,7 @@ def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_rea
     has the encoder readings q1..ql at equilibrium (mm, or deg for rotary actuators; the
     following error is q - IK(cmd)), the tracker's px, py and the commanded pose cmd_<pose>.
 
-    With --sessions S the file has a 'session' column (first) and the summary lists each
+    With --sessions S the file has a 'session' column (last) and the summary lists each
     session's true sensor parameters (and actuator offsets), mm and degrees.
     """
     if (real_spec is None) == (random_errors is None):

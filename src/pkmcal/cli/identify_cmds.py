@@ -455,7 +455,10 @@ def _with_calibration_record(result, machine: str, measurements: str, setup_spec
         record["priors"] = {e["parameter"]: f"{e['mean']!r} ± {e['std']!r} {e['unit']}"
                             for e in result.priors.to_dict(result.estimate, {})}
     if getattr(result.sensor, "kind", "") == "planar-tool":  # read back by 'pkmcal verify'
-        record["sensor"] = sensor_calibration_block(result.sensor)
+        from pkmcal.sensors.sessions import session_sensors
+
+        # several sessions: the first session's tracker (the reference; every one is in the summary)
+        record["sensor"] = sensor_calibration_block(next(iter(session_sensors(result.sensor).values())))
     return dataclasses.replace(mech, name=new_name, metadata={**dict(mech.metadata), "calibration": record})
 
 

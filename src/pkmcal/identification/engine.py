@@ -440,7 +440,8 @@ def _registered(model: Model, cand: list[int], notes: list[str], **kw) -> Model:
     if not reg.success:
         return model
     notes.append("sessions: the fit started from each session's sensor parameters registered on its poses with "
-                 "the machine held (rms residual there " + ", ".join(f"{v:.3g} {u}" for u, v in reg.rms_by_unit().items())
+                 "the machine held (rms residual there " + ", ".join(
+                     f"{v:.3g} " + ("(whitened or mixed rows)" if u == "1" else u) for u, v in reg.rms_by_unit().items())
                  + ")")
     start = SessionSensor(reg.sensor.sensors, model.sessions)
     out = Model(model.mechanism, start, model.noise, model.q, model.y, model.commanded, model.sessions)

@@ -325,8 +325,10 @@ def design_jacobian(machine, sensor, noise, poses: np.ndarray, method: str, weig
         # residual q − IK does, which is not returned): no IK pass for readings unused
         q = np.zeros((len(poses), machine.n_actuators)) if method == "ik-residual" and form == "plain" \
             else machine.ik(poses)
-        if sessions is not None and sessions.several:
-            sensor = sensor.bound(sessions)
+        if sessions is not None:
+            from pkmcal.sensors.sessions import bind_sessions
+
+            sensor = bind_sessions(sensor, sessions)
         model = Model(machine, sensor, noise, q, sensor.predict(machine.frame(poses)), poses, sessions)
     meth = make_method(method, model, weighted, form=form)
     meth.sensor_columns = sensor_columns

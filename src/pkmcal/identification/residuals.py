@@ -70,7 +70,7 @@ import numpy as np
 from pkmcal.errors import PkmcalError
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.sensors.base import NoiseModel, Sensor
-from pkmcal.sensors.sessions import Sessions, SessionSensor, offset_names
+from pkmcal.sensors.sessions import Sessions, bind_sessions, offset_names
 
 METHODS = ("ik-residual", "fk-residual", "projection", "projection-single")
 IK_FORMS = ("plain", "squared")
@@ -145,16 +145,10 @@ class Model:
         """Several sessions: the session sensor bound to these poses, and the offset names."""
         ses = self.sessions
         self.offset_names: tuple[str, ...] = ()
-        if ses is None or not ses.several:
-            if isinstance(self.sensor, SessionSensor):
-                raise PkmcalError("a sensor of several sessions needs the session of every pose")
-            return
-        if len(ses) != n_pose:
+        if ses is not None and len(ses) != n_pose:
             raise PkmcalError(f"{len(ses)} session labels for {n_pose} measured poses")
-        if not isinstance(self.sensor, SessionSensor):
-            self.sensor = SessionSensor.start(self.sensor, ses)
-        self.sensor = self.sensor.bound(ses)
-        if ses.offsets:
+        self.sensor = bind_sessions(self.sensor, ses)
+        if ses is not None and ses.several and ses.offsets:
             self.offset_names = offset_names(self.mechanism.n_actuators, ses.labels)
 
     @property

@@ -231,7 +231,7 @@ def _header(text: str, mapping: ImportMapping | None = None) -> set[str]:
 
 def measurement_columns(measurements: Measurements, machine: Mechanism, setup: MeasurementSetup) -> dict:
     """The columns of a measurement file (file units: mm, degrees), in order: ``session``
-    first when the measurements have sessions."""
+    last when the measurements have sessions."""
     sensor = setup.sensor
     if measurements.actuators.shape[1] != machine.n_actuators:
         raise PkmcalError(f"{measurements.actuators.shape[1]} actuator readings per pose, but machine "
@@ -247,12 +247,13 @@ def measurement_columns(measurements: Measurements, machine: Mechanism, setup: M
                               f"'{machine.name}' has {machine.n_dof}")
         groups.append((command_columns(machine), machine.pose_is_angle, measurements.commanded))
     cols: dict = {}
-    if measurements.sessions is not None:
-        labels = measurements.sessions.labels
-        cols[SESSION_COLUMN] = [labels[k] for k in measurements.sessions.index]
     for names, is_angle, values in groups:
         file_values = to_file_units(values, is_angle)
         cols.update({name: file_values[:, j] for j, name in enumerate(names)})
+    if measurements.sessions is not None:
+        # last: a row never starts with a label, which could start with '#' (a comment line)
+        labels = measurements.sessions.labels
+        cols[SESSION_COLUMN] = [labels[k] for k in measurements.sessions.index]
     return cols
 
 

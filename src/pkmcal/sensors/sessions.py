@@ -370,6 +370,19 @@ def session_setup_values(sensor: Sensor, offsets: dict | None = None, actuator_i
     return out
 
 
+def bind_sessions(sensor: Sensor, sessions: Sessions | None) -> Sensor:
+    """The sensor of the poses of ``sessions``: with several sessions a
+    :class:`SessionSensor` bound to them (``sensor`` itself when it is one, rebound; every
+    session starting from ``sensor`` when it is a plain sensor); with one session or None
+    the plain ``sensor`` (names as without sessions)."""
+    several = sessions is not None and sessions.several
+    if isinstance(sensor, SessionSensor):
+        if not several:
+            raise PkmcalError("a sensor of several sessions needs the session of every pose")
+        return sensor.bound(sessions)
+    return SessionSensor.start(sensor, sessions) if several else sensor
+
+
 def session_sensors(sensor: Sensor) -> dict[str, Sensor]:
     """{label: sensor of that session}: one entry ``{"": sensor}`` for a one-session sensor."""
     if isinstance(sensor, SessionSensor):
@@ -377,5 +390,5 @@ def session_sensors(sensor: Sensor) -> dict[str, Sensor]:
     return {"": sensor}
 
 
-__all__ = ["SESSION_SEPARATOR", "SessionSensor", "Sessions", "offset_names", "session_name", "session_sensors",
+__all__ = ["SESSION_SEPARATOR", "SessionSensor", "Sessions", "bind_sessions", "offset_names", "session_name", "session_sensors",
            "sensor_from_values", "session_setup_values", "setup_values"]
