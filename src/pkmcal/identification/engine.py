@@ -422,7 +422,8 @@ def _registered(model: Model, cand: list[int], notes: list[str], **kw) -> Model:
     a fit of those columns only, cheap, in which the sessions do not interact.
     From the values given, a joint fit of sessions whose frames differ by a large rotation
     can stop in a local minimum (two position-sensor sessions whose worlds differ by 0.2 rad
-    about z: rms 85 mm from the given start, 1e-13 mm from the registered one). Unchanged
+    about z: rms 85 mm from the given start, 1e-13 mm from the registered one). The
+    registration is an fk-residual fit where the machine has one (not redundant). Unchanged
     when no sensor parameter or no machine parameter is free, or the registration fails."""
     p, s = model.n_mech, model.n_sensor
     sensor_free = [model.names[i] for i in cand if i >= p]
@@ -430,6 +431,11 @@ def _registered(model: Model, cand: list[int], notes: list[str], **kw) -> Model:
         return model
     sensors = model.sensor.sensors
     setup = MeasurementSetup(sensors[0], model.noise, session_sensors=tuple(zip(model.sessions.labels, sensors)))
+    mech = model.mechanism
+    if mech.n_actuators == mech.n_dof:
+        # through FK, which does not depend on the sensor: no pose solve that a far start
+        # (a world frame 1.5 rad and 500 mm away) can break, as the projection's can
+        kw = {**kw, "method": "fk-residual"}
     try:
         reg = _identify(model.mechanism, setup, None, free=sensor_free, fix="auto", form="plain", jac="analytic",
                         solver="auto", ftol=TOLERANCE, xtol=TOLERANCE, gtol=TOLERANCE, q=model.q, y=model.y,
