@@ -19,8 +19,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from helpers import assert_jacobian_matches_fd, random_poses
-from hypothesis import HealthCheck, given, settings
+from helpers import assert_jacobian_matches_fd, fuzz_settings, random_poses
+from hypothesis import given
 from hypothesis import strategies as st
 from test_engine import _fd_model, nominal, real  # noqa: F401  (fixtures: the prototype and its real twin)
 
@@ -450,7 +450,7 @@ LABELS = st.text(st.characters(blacklist_categories=("Cc", "Cs", "Zl", "Zp")), m
     str.strip).filter(lambda t: t != "")
 
 
-@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@fuzz_settings(25)
 @given(per_pose=st.lists(st.sampled_from(["1", "2", "x, y", '"q"', "2026-05-01-am"]) | LABELS, min_size=1,
                          max_size=12))
 def test_session_labels_round_trip_any_text(nominal, tmp_path, per_pose):

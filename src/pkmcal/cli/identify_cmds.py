@@ -47,9 +47,14 @@ def _fmt(v: float, angle: bool) -> str:
 
 
 def _angle_names(result) -> set[str]:
-    """Names of the angle parameters (shown in degrees): the machine's, the sensor's and the
-    sessions' offsets of rotary actuators (``IdentificationResult.angle_names``)."""
-    return set(result.angle_names())
+    """Names of the angle parameters (shown in degrees), from the sensor's ``param_is_angle``
+    and the machine's (a machine without the flags, the hexapod, has only lengths), and the
+    result's own flags where it has them (the sessions' offsets of rotary actuators)."""
+    sensor, mech = result.sensor, result.mechanism
+    angles = {n for n, a in zip(sensor.param_names, sensor.param_is_angle) if a}
+    angles.update(n for n, a in zip(mech.param_names, mech.param_is_angle) if a)
+    angles.update(n for n, a in zip(getattr(result, "names", ()), getattr(result, "param_is_angle", ())) if a)
+    return angles
 
 
 def result_table(result) -> str:
