@@ -484,3 +484,32 @@ def test_far_apart_session_frames_converge(nominal, real, kind, method):
     res = identify(nominal, start_setup(kind), q=q, y=y, commanded=cmd, method=method, sessions=labels)
     assert res.success and res.rms_residual < 1e-9
     assert any("registered on its poses" in w for w in res.warnings)
+
+
+def test_rotary_delta_offsets_in_degrees():
+    """A rotary delta (angle actuators) measured by a tracker in two sessions, re-homed
+    between them: the offsets dq_i@2 are angles, recovered (1e-12 rad) and reported in
+    degrees (JSON unit, session values)."""
+    from pkmcal.identification.simulation import perturb_machine
+    from pkmcal.mechanisms import builtin_machine
+
+    nominal = builtin_machine("delta-picker")
+    assert all(nominal.actuator_is_angle)
+    real = perturb_machine(nominal, 0.3, 1)
+    cmd = nominal.home_pose + np.random.default_rng(0).uniform(-1, 1, (60, 3)) * np.array([60.0, 60.0, 30.0])
+    q = nominal.ik(cmd)
+    dq = np.deg2rad([0.2, -0.3, 0.1])
+    moved = q.copy()
+    moved[30:] += dq
+    fk = real.fk(moved, guess=cmd)
+    assert fk.all_converged
+    frames = real.frame(fk.poses)
+    s1, s2 = PositionSensor(world=[5.0, -3.0, 2.0, 0.01, 0.02, 0.03]), PositionSensor(world=[-40.0, 10.0, 5.0, -0.02,
+                                                                                              0.01, 0.4])
+    y = np.vstack([s1.predict(frames[:30]), s2.predict(frames[30:])])
+    setup = MeasurementSetup(PositionSensor(free=WORLD), NoiseModel(np.full(3, 0.01), np.array(1e-5)))
+    res = identify(nominal, setup, q=q, y=y, commanded=cmd, sessions=["1"] * 30 + ["2"] * 30, session_offsets=True)
+    assert res.rms_residual < 1e-9
+    np.testing.assert_allclose(res.estimate[-3:], dq, rtol=0, atol=1e-12)
+    assert res.to_dict()["parameters"]["dq_1@2"]["unit"] == "deg"
+    np.testing.assert_allclose(res.session_values()["2"]["dq"], [0.2, -0.3, 0.1], atol=1e-9)
