@@ -61,12 +61,25 @@ from pkmcal.sensors.library import BUILTIN_SETUPS
 @click.option("--seed", type=SEED, default=0, show_default=True, help="Random seed (same seed, same bytes).")
 @click.option("--ignore-limit", "ignore_limits", multiple=True, metavar="NAME",
               help="A limit of the real machine not to check (e.g. leg_collision); repeatable.")
+@click.option("--sessions", "n_sessions", type=click.IntRange(min=1), metavar="S",
+              help="Measure in S sessions: the poses split in order into S parts, labelled 1..S in a 'session' "
+                   "column, each read with its own true sensor (e.g. a motion-capture system set up again): "
+                   "session 1 the setup's, session L the setup's 'sessions: {L: {...}}' where given, else the "
+                   "setup's free sensor parameters moved by --session-errors.")
+@click.option("--session-errors", type=FiniteFloat(min=0.0, max=MAX_MAGNITUDE), default=5.0, show_default=True,
+              metavar="MM", help="With --sessions: size of the drawn changes of each later session's free sensor "
+                                 "parameters, U(-MM, MM) mm, angles MM/1000 rad (the --random-errors rule).")
+@click.option("--session-offsets", type=FiniteFloat(min=0.0, max=MAX_MAGNITUDE), metavar="MM",
+              help="With --sessions: re-home the actuators before each later session, their zeros moved by "
+                   "U(-MM, MM) mm (rotary: MM/1000 rad); the file records the readings of the moved zeros "
+                   "(identify --session-offsets estimates them as dq_i@LABEL).")
 @output_option("MEAS.csv", "Measurement CSV")
 @units_comment_option
 @quiet_option
 @import_options
 def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_real, setup_spec, poses, seed,
-                 ignore_limits, output, units_comment, quiet, mapping) -> None:
+                 ignore_limits, output, units_comment, quiet, mapping, n_sessions=None, session_errors=5.0,
+                 session_offsets=None) -> None:
     """Simulate measuring POSES.csv on a real machine commanded with the nominal MACHINE.
 
     The actuators are commanded by MACHINE's inverse kinematics; the real machine goes where
@@ -80,6 +93,9 @@ def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_rea
     MACHINE's IK) and the tool load, both from the setup's 'simulation:' block. The output
     has the encoder readings q1..ql at equilibrium (mm, or deg for rotary actuators; the
     following error is q - IK(cmd)), the tracker's px, py and the commanded pose cmd_<pose>.
+
+    With --sessions S the file has a 'session' column (last) and the summary lists each
+    session's true sensor parameters (and actuator offsets), mm and degrees.
     """
     if (real_spec is None) == (random_errors is None):
         raise PkmcalError("give the real machine with --real REAL, or draw one with --random-errors MM")
@@ -106,7 +122,13 @@ def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_rea
     if type(real) is not type(nominal):
         raise PkmcalError(f"the real machine '{real.name}' is not of the kind of '{nominal.name}' "
                           f"({type(real).__name__} vs {type(nominal).__name__})")
-    if is_redundant(nominal):
+    if session_offsets is not None and n_sessions is None:
+        raise PkmcalError("--session-offsets re-homes the actuators between sessions; give --sessions S too")
+    session_text: list[str] = []
+    if n_sessions is not None:
+        result, session_text = _simulate_sessions(nominal, real, setup, commanded, rng, n_sessions, session_errors,
+                                                  session_offsets, tuple(ignore_limits))
+    elif is_redundant(nominal):
         result = simulate_redundant_campaign(nominal, real, setup, commanded, rng, ignore_limits=tuple(ignore_limits))
     else:
         from pkmcal.progress import ProgressBar
@@ -129,13 +151,45 @@ def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_rea
     real_text = machine_to_text(real) if save_real is not None else None
     if real_text is not None:
         atomic_write_text(save_real, real_text)
-    summary = result.summary()
+    summary = "\n".join([result.summary(), *session_text])
     emit(text, output)
     if to_stdout(output):
         click.echo(summary, err=True)
     else:
         click.echo(summary)
         click.echo(f"wrote {output}" + (f" and {save_real}" if save_real else ""))
+
+
+def _simulate_sessions(nominal, real, setup, commanded, rng, n_sessions: int, errors: float, offsets_mm,
+                       ignore_limits) -> tuple:
+    """``simulate --sessions``: the campaign in sessions (:func:`simulate_sessions`) and the
+    summary lines of each session's true sensor and offsets (file units)."""
+    from pkmcal.identification.simulation import session_sensors_drawn, simulate_sessions
+    from pkmcal.sensors.sessions import SessionSensor, Sessions, session_setup_values
+
+    sensors = session_sensors_drawn(setup.sensor, n_sessions, errors, rng, dict(setup.session_sensors))
+    offsets = None
+    if offsets_mm is not None:
+        if is_redundant(nominal):
+            raise PkmcalError("--session-offsets: a redundantly actuated machine settles at equilibrium under its "
+                              "encoders; re-homing is not simulated there")
+        delta = rng.uniform(-offsets_mm, offsets_mm, size=(n_sessions, nominal.n_actuators))
+        offsets = np.where(np.array(nominal.actuator_is_angle, dtype=bool), delta / 1000.0, delta)
+        offsets[0] = 0.0
+    extra = {"simulate": simulate_redundant_campaign} if is_redundant(nominal) else {}
+    result = simulate_sessions(nominal, real, setup, commanded, sensors, rng, offsets,
+                               ignore_limits=ignore_limits, **extra)
+    labels = tuple(str(s + 1) for s in range(n_sessions))
+    truth = SessionSensor(sensors, Sessions(labels, np.zeros(0, dtype=np.intp)))
+    values = session_setup_values(truth, None if offsets is None else dict(zip(labels[1:], offsets[1:])),
+                                  nominal.actuator_is_angle)
+    counts = result.sessions.counts()
+    lines = [f"{n_sessions} sessions (column 'session'), true sensor of each (mm, deg):"]
+    for (lab, groups), n in zip(values.items(), counts):
+        parts = [f"{key}: " + (", ".join(f"{k} {v!r}" for k, v in val.items()) if isinstance(val, dict)
+                               else ", ".join(repr(v) for v in val)) for key, val in groups.items()]
+        lines.append(f"  session {lab} ({int(n)} poses): " + "; ".join(parts))
+    return result, lines
 
 
 @click.command("verify", epilog=examples(

@@ -48,10 +48,12 @@ def _fmt(v: float, angle: bool) -> str:
 
 def _angle_names(result) -> set[str]:
     """Names of the angle parameters (shown in degrees), from the sensor's ``param_is_angle``
-    and the machine's (a machine without the flags, the hexapod, has only lengths)."""
+    and the machine's (a machine without the flags, the hexapod, has only lengths), and the
+    result's own flags where it has them (the sessions' offsets of rotary actuators)."""
     sensor, mech = result.sensor, result.mechanism
     angles = {n for n, a in zip(sensor.param_names, sensor.param_is_angle) if a}
     angles.update(n for n, a in zip(mech.param_names, mech.param_is_angle) if a)
+    angles.update(n for n, a in zip(getattr(result, "names", ()), getattr(result, "param_is_angle", ())) if a)
     return angles
 
 
@@ -89,6 +91,10 @@ def free_statement(result, free_opt: list[str] | None, setup) -> str:
     mech_free = [n for n in result.free if names.index(n) < p]
     sensor_free = [n for n in result.free if names.index(n) >= p]
     setup_free = set(setup.sensor.default_free)
+    several = result.sessions is not None and result.sessions.several
+    if several:   # NAME@LABEL of the setup's free: names, and the sessions' actuator offsets
+        setup_free = set(result.sensor.default_free)
+        offsets = {n for n in names[p + len(result.sensor.param_names):]}
     from pkmcal.identification.residuals import default_fixed_parameters
 
     held_by_machine = [n for n in default_fixed_parameters(result.mechanism) if n not in result.free]
@@ -100,11 +106,13 @@ def free_statement(result, free_opt: list[str] | None, setup) -> str:
         src = "all, no --free given"
     text = f"free parameters: {len(mech_free)} of {p} machine parameters ({src})"
     if sensor_free:
-        parts = [f"{n} ({'setup free:' if n in setup_free else '--free'})" for n in sensor_free]
+        parts = [f"{n} ({'setup free:' if n in setup_free else 'session offsets' if several and n in offsets else '--free'})"
+                 for n in sensor_free]
         text += "; sensor: " + ", ".join(parts)
     else:
         text += "; no sensor parameter"
-    held = [n for n in setup_free if n not in result.free]
+    held = [n for n in (result.sensor.default_free if several else setup.sensor.default_free)
+            if n not in result.free]
     if held:
         text += f"; setup-free sensor parameters held: {', '.join(held)} (--fix or gauge)"
     return text + ". Rule: --free adds to the setup's free: list, it does not replace it"
@@ -150,9 +158,31 @@ def fit_summary(result, free_line: str | None = None) -> str:
     for d in rep.null_space:
         lines.append(f"  unobservable: {format_direction(d)}")
     lines.extend(robust_lines(result))
+    lines.extend(session_lines(result))
     for w in result.warnings:
         lines.append(w if w.startswith("warning: ") else f"note: {w}")
     return "\n".join(lines)
+
+
+def session_lines(result) -> list[str]:
+    """The fit summary's lines on the sessions: poses per session and each session's
+    identified sensor (setup-file keys, mm and degrees; ``dq`` the re-homing offsets)."""
+    values = result.session_values()
+    if not values:
+        return []
+    ses = result.sessions
+    counts = dict(zip(ses.labels, ses.counts()))
+    out = [f"sessions: {len(values)} ({', '.join(f'{lab}: {int(counts[lab])} poses' for lab in ses.labels)}), "
+           "each with its own sensor parameters NAME@LABEL"
+           + ("; actuator zero offsets dq_i@LABEL after the first" if ses.offsets else "")]
+    for lab, groups in values.items():
+        parts = []
+        for key, v in groups.items():
+            text = (", ".join(f"{k} {x:.6g}" for k, x in v.items()) if isinstance(v, dict)
+                    else ", ".join(f"{x:.6g}" for x in v))
+            parts.append(f"{key}: {text}")
+        out.append(f"  session {lab} (mm, deg): " + "; ".join(parts))
+    return out
 
 
 def robust_lines(result) -> list[str]:
@@ -275,10 +305,14 @@ def radian_hints(nominal, setup, meas) -> list[str]:
 @click.option("--clipped", type=click.Choice(CLIPPED_POLICIES), default="drop", show_default=True,
               help="Poses with an actuator reading outside its stroke or at one of its ends (a clipped or stuck "
                    "actuator): listed with a warning and left out (drop), used (keep), or an error.")
+@click.option("--session-offsets", "session_offsets", is_flag=True,
+              help="With a 'session' column of several sessions: estimate actuator zero offsets dq_i@LABEL for "
+                   "every session but the first (the actuators re-homed between sessions; the first session's "
+                   "zeros are the machine's). Same as the setup's 'sessions: {actuator_offsets: true}'.")
 @import_options
 def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fix, free, output, name, as_json,
                  report_dir=None, mapping=None, keep=None, loss="linear", f_scale=None, reject=None,
-                 prior=(), clipped="drop") -> None:
+                 prior=(), clipped="drop", session_offsets=False) -> None:
     """Identify MACHINE's kinematic parameters from MEAS.csv and write CALIBRATED.yaml.
 
     Units: mm, degrees in files and tables. Unidentifiable combinations are fixed
@@ -295,6 +329,11 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     add Gaussian priors (maximum a posteriori). The fit summary and --json say which
     covariance is reported (JSON: covariance_kind, covariance_in_file; outliers, priors,
     normalised_residuals).
+
+    Sessions: a 'session' column in MEAS.csv (free text labels) gives each session its own
+    sensor parameters, named NAME@LABEL (world.x@2); the machine is shared. A name or
+    pattern without @ in --free/--fix means that parameter in every session. The fit
+    summary and --json ('sessions') give each session's identified sensor, mm and degrees.
     """
     inputs = [machine, measurements, setup_spec]
     check_output(output, inputs)
@@ -334,7 +373,7 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     with clipped_named_in_errors(clipped_lines):
         result = identify(fit_machine, fit_setup, fit_meas, method=method, free=merged_free(free_opt, fit_setup),
                           fix=fix_names, weighted=not unweighted, form=form, loss=loss, f_scale=f_scale,
-                          reject=reject, priors=priors)
+                          reject=reject, priors=priors, session_offsets=True if session_offsets else None)
         if baseline is not None:
             result = baseline_result(result, nominal, baseline)
         if not result.success:
@@ -430,7 +469,10 @@ def _with_calibration_record(result, machine: str, measurements: str, setup_spec
         record["priors"] = {e["parameter"]: f"{e['mean']!r} ± {e['std']!r} {e['unit']}"
                             for e in result.priors.to_dict(result.estimate, {})}
     if getattr(result.sensor, "kind", "") == "planar-tool":  # read back by 'pkmcal verify'
-        record["sensor"] = sensor_calibration_block(result.sensor)
+        from pkmcal.sensors.sessions import session_sensors
+
+        # several sessions: the first session's tracker (the reference; every one is in the summary)
+        record["sensor"] = sensor_calibration_block(next(iter(session_sensors(result.sensor).values())))
     return dataclasses.replace(mech, name=new_name, metadata={**dict(mech.metadata), "calibration": record})
 
 

@@ -393,7 +393,8 @@ def analyse_jacobian(
 
 
 def design_jacobian(machine, sensor, noise, poses: np.ndarray, method: str, weighted: bool = True,
-                    form: str = "plain", sensor_columns: bool = True) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+                    form: str = "plain", sensor_columns: bool = True,
+                    sessions=None) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
     """The engine's whitened residual Jacobian W_j J_j (N, k, P) of all parameters for
     noise-free readings simulated at ``poses`` (N, n) on the nominal machine (q = IK(x),
     y = h(x)), a flag (N,) of the poses whose nuisance pose was solved, and the parameter
@@ -401,7 +402,8 @@ def design_jacobian(machine, sensor, noise, poses: np.ndarray, method: str, weig
     analyses and ``pkmcal identify`` judges its free set on when the measurements carry
     their commanded poses (same method, same weights, same candidate parameters).
     ``sensor_columns=False`` skips the sensor parameters' columns (NaN), as the engine does
-    when none of them is a candidate."""
+    when none of them is a candidate. ``sessions``: the session of every pose
+    (:class:`~pkmcal.sensors.sessions.Sessions`), with ``sensor`` a session sensor."""
     from pkmcal.identification.residuals import Model, make_method, whitening
 
     poses = machine.as_pose_array(poses)
@@ -410,7 +412,11 @@ def design_jacobian(machine, sensor, noise, poses: np.ndarray, method: str, weig
         # residual q − IK does, which is not returned): no IK pass for readings unused
         q = np.zeros((len(poses), machine.n_actuators)) if method == "ik-residual" and form == "plain" \
             else machine.ik(poses)
-        model = Model(machine, sensor, noise, q, sensor.predict(machine.frame(poses)), poses)
+        if sessions is not None:
+            from pkmcal.sensors.sessions import bind_sessions
+
+            sensor = bind_sessions(sensor, sessions)
+        model = Model(machine, sensor, noise, q, sensor.predict(machine.frame(poses)), poses, sessions)
     meth = make_method(method, model, weighted, form=form)
     meth.sensor_columns = sensor_columns
     whiten = weighted and not meth.prewhitened            # the weighted projection is already whitened

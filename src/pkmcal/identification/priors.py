@@ -153,6 +153,8 @@ def resolve(priors, names: tuple[str, ...], is_angle: tuple[bool, ...], theta0: 
     seen_in: dict[tuple[int, str], str] = {}
     for p in items:
         hits = [i for i, n in enumerate(names) if fnmatchcase(n, p.pattern)]
+        if not hits and "@" not in p.pattern:   # several sessions: that parameter in every session
+            hits = [i for i, n in enumerate(names) if fnmatchcase(n, p.pattern + "@*")]
         if not hits:
             import difflib
 

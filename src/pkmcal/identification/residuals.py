@@ -43,6 +43,13 @@ the ρ columns. Parameters are passed explicitly: ``mech.ik_and_jacobians(x, par
     ∂r/∂θ = U⊥ᵀ ∂e/∂θ (the x-dependence is projected out; the derivative of U⊥ is dropped,
     which leaves the gradient Jᵀr of the cost exact at x*). Weighted, cov = I.
 
+Several sessions (:mod:`pkmcal.sensors.sessions`): s is the stacked per-session sensor
+parameters, read through a session sensor bound to the poses (one evaluation per session),
+and with re-homing offsets δq (θ = [ρ; s; δq]) each method reads the actuators as
+q_j + δq_{s(j)} (:meth:`Model.q_at`): ik-residual ∂r/∂δq = I (squared form 2 L_q),
+fk-residual x = FK(q + δq) so ∂r/∂δq = −H A⁻¹, projection ∂e/∂δq = W [0; I], each pose's
+block in its session's columns (:meth:`Model.offset_jacobian`); the first session has none.
+
 A :class:`Method` object is the objective of one fit and owns that fit's scratch: the
 eliminated poses (and the Jacobian pieces A, B, H A⁻¹ computed from them) of the last θ it
 was evaluated at, so that the residual and the Jacobian the solver asks for separately at
@@ -63,6 +70,7 @@ import numpy as np
 from pkmcal.errors import PkmcalError
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.sensors.base import NoiseModel, Sensor
+from pkmcal.sensors.sessions import Sessions, bind_sessions, offset_names
 
 METHODS = ("ik-residual", "fk-residual", "projection", "projection-single")
 IK_FORMS = ("plain", "squared")
@@ -86,7 +94,14 @@ class Evaluation:
 
 @dataclass
 class Model:
-    """A machine, a sensor, their noise and the measured data, with θ = [ρ; s] packing."""
+    """A machine, a sensor, their noise and the measured data, with θ = [ρ; s; δq] packing.
+
+    ``sessions`` (:class:`~pkmcal.sensors.sessions.Sessions`, the session of every pose):
+    with several sessions the sensor is a :class:`~pkmcal.sensors.sessions.SessionSensor`
+    (s the stacked per-session parameters, ``NAME@LABEL``), bound here to these poses, and
+    with ``sessions.offsets`` the sessions after the first have actuator zero offsets δq
+    (``dq_i@LABEL``, re-homing): the actuators then read q_j, and the machine's own readings
+    are q_j + δq_{s(j)} (:meth:`q_at`). One session (or None): no δq, names as always."""
 
     mechanism: Mechanism
     sensor: Sensor
@@ -94,6 +109,7 @@ class Model:
     q: np.ndarray
     y: np.ndarray
     commanded: np.ndarray | None = None
+    sessions: Sessions | None = None
 
     def __post_init__(self) -> None:
         self.q = np.asarray(self.q, dtype=float)
@@ -117,12 +133,23 @@ class Model:
             self.commanded = self.mechanism.as_pose_array(self.commanded)
             if self.commanded.shape[0] != n_pose:
                 raise PkmcalError(f"{self.commanded.shape[0]} commanded poses for {n_pose} measured poses")
+        self._bind_sessions(n_pose)
         names = self.names
         if len(set(names)) != len(names):
             dup = sorted({n for n in names if names.count(n) > 1})
             raise PkmcalError(f"machine and sensor both have parameters named {', '.join(dup)}")
         self.sigma_q = np.broadcast_to(np.asarray(self.noise.actuator_std, dtype=float), (self.q.shape[1],)).copy()
         self.sigma_y = np.broadcast_to(np.asarray(self.noise.reading_std, dtype=float), (self.y.shape[1],)).copy()
+
+    def _bind_sessions(self, n_pose: int) -> None:
+        """Several sessions: the session sensor bound to these poses, and the offset names."""
+        ses = self.sessions
+        self.offset_names: tuple[str, ...] = ()
+        if ses is not None and len(ses) != n_pose:
+            raise PkmcalError(f"{len(ses)} session labels for {n_pose} measured poses")
+        self.sensor = bind_sessions(self.sensor, ses)
+        if ses is not None and ses.several and ses.offsets:
+            self.offset_names = offset_names(self.mechanism.n_actuators, ses.labels)
 
     @property
     def n_poses(self) -> int:
@@ -133,28 +160,67 @@ class Model:
         return len(self.mechanism.param_names)
 
     @property
+    def n_sensor(self) -> int:
+        return len(self.sensor.param_names)
+
+    @property
+    def n_offsets(self) -> int:
+        """Number of re-homing offsets δq (0 without them)."""
+        return len(self.offset_names)
+
+    @property
     def names(self) -> tuple[str, ...]:
-        return tuple(self.mechanism.param_names) + tuple(self.sensor.param_names)
+        return tuple(self.mechanism.param_names) + tuple(self.sensor.param_names) + self.offset_names
+
+    @property
+    def param_is_angle(self) -> tuple[bool, ...]:
+        """Angle flags of :attr:`names` (an offset is an angle for a rotary actuator)."""
+        off = tuple(self.mechanism.actuator_is_angle) * (self.n_offsets // max(self.mechanism.n_actuators, 1))
+        return tuple(self.mechanism.param_is_angle) + tuple(self.sensor.param_is_angle) + off
 
     @property
     def theta0(self) -> np.ndarray:
-        return np.concatenate([self.mechanism.params, self.sensor.params])
+        return np.concatenate([self.mechanism.params, self.sensor.params, np.zeros(self.n_offsets)])
 
     def parts(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(ρ (p,), s (s,)) of θ = [ρ; s] (views)."""
+        """(ρ (p,), s (s,)) of θ = [ρ; s; δq] (views)."""
         theta = np.asarray(theta, dtype=float)
-        return theta[:self.n_mech], theta[self.n_mech:]
+        return theta[:self.n_mech], theta[self.n_mech:self.n_mech + self.n_sensor]
+
+    def q_at(self, theta: np.ndarray) -> np.ndarray:
+        """The actuator readings of the machine's own zeros, q_j + δq_{s(j)} (N, l); ``q``
+        itself without offsets."""
+        if not self.n_offsets:
+            return self.q
+        l = self.mechanism.n_actuators
+        dq = np.zeros((self.sessions.n_sessions, l))
+        dq[1:] = np.asarray(theta, dtype=float)[self.n_mech + self.n_sensor:].reshape(-1, l)
+        return self.q + dq[self.sessions.index]
+
+    def offset_jacobian(self, dr_dq: np.ndarray) -> np.ndarray | None:
+        """∂r/∂δq (N, k, o) from ∂r/∂q (N, k, l) (the same matrix for every pose may be
+        given as (k, l)): pose j's block in the columns of its session's δq; None without
+        offsets."""
+        if not self.n_offsets:
+            return None
+        l = self.mechanism.n_actuators
+        M = np.broadcast_to(dr_dq, (self.n_poses,) + np.shape(dr_dq)[-2:])
+        out = np.zeros(M.shape[:2] + (self.n_offsets,))
+        for k, g in enumerate(self.sessions.groups[1:]):
+            out[g, :, k * l:(k + 1) * l] = M[g]
+        return out
 
     def split(self, theta: np.ndarray) -> tuple[Mechanism, Sensor]:
-        """The machine and sensor objects at θ = [ρ; s] (for results; the methods pass ρ and
-        s explicitly instead)."""
+        """The machine and sensor objects at θ = [ρ; s; δq] (for results; the methods pass ρ
+        and s explicitly instead)."""
         rho, s = self.parts(theta)
         return self.mechanism.with_params(rho.copy()), self.sensor.with_params(s.copy())
 
     def subset(self, keep: np.ndarray) -> "Model":
-        """The same model on the poses ``keep`` (boolean or index array)."""
+        """The same model on the poses ``keep`` (boolean or index array), with their sessions."""
         return Model(self.mechanism, self.sensor, self.noise, self.q[keep], self.y[keep],
-                     None if self.commanded is None else self.commanded[keep])
+                     None if self.commanded is None else self.commanded[keep],
+                     None if self.sessions is None else self.sessions.subset(keep))
 
     def start_poses(self) -> np.ndarray:
         """Starting poses (N, n) for the FK / pose solves: the commanded poses, else home."""
@@ -209,6 +275,9 @@ def _match(names: tuple[str, ...], patterns, what: str) -> list[int]:
     out: list[int] = []
     for pat in patterns:
         hits = [i for i, n in enumerate(names) if fnmatchcase(n, pat)]
+        if not hits and "@" not in pat:
+            # several sessions: a sensor parameter named without @LABEL is that parameter in every session
+            hits = [i for i, n in enumerate(names) if fnmatchcase(n, pat + "@*")]
         if not hits:
             raise PkmcalError(f"{what}: no parameter matches '{pat}'; the parameters are {', '.join(names)}")
         out.extend(h for h in hits if h not in out)
@@ -228,15 +297,17 @@ def candidate_parameters(model: Model, free=None, fix=None) -> tuple[list[int], 
     """Indices of the parameters to estimate before any automatic gauge, and whether the
     choice was explicit (``free`` or a ``fix`` list given). Without ``free``: every machine
     parameter but those it holds by default (:func:`default_fixed_parameters`), and the
-    sensor's ``default_free``."""
+    sensor's ``default_free``. The sessions' actuator offsets, when the model has them, are
+    candidates in both cases (``fix`` holds them)."""
     names = model.names
+    offsets = list(range(model.n_mech + model.n_sensor, len(names)))
     if free is None:
         held = set(default_fixed_parameters(model.mechanism))
         cand = [i for i in range(model.n_mech) if names[i] not in held] + \
-            [names.index(n) for n in model.sensor.default_free]
+            [names.index(n) for n in model.sensor.default_free] + offsets
         explicit = False
     else:
-        cand = sorted(_match(names, free, "--free"))
+        cand = sorted(set(_match(names, free, "--free")) | set(offsets))
         explicit = True
     if fix is not None and not (isinstance(fix, str) and fix == "auto"):
         drop = set(_match(names, fix, "--fix"))
@@ -252,12 +323,17 @@ def _diag_cov(sigma: np.ndarray, n: int) -> np.ndarray:
     return np.broadcast_to(np.diag(sigma**2), (n, sigma.size, sigma.size))
 
 
-def _full_jacobian(J_mech: np.ndarray, J_sensor: np.ndarray | None, n_sensor: int) -> np.ndarray:
-    """[J_mech, J_sensor] (N, k, p + s); the sensor columns NaN when not computed."""
+def _full_jacobian(J_mech: np.ndarray, J_sensor: np.ndarray | None, n_sensor: int,
+                   J_offsets: np.ndarray | None = None) -> np.ndarray:
+    """[J_mech, J_sensor, J_offsets] (N, k, p + s + o); the sensor columns NaN when not
+    computed; no offset columns for ``J_offsets=None``."""
     N, k, p = J_mech.shape
-    J = np.empty((N, k, p + n_sensor))
+    n_off = 0 if J_offsets is None else J_offsets.shape[-1]
+    J = np.empty((N, k, p + n_sensor + n_off))
     J[..., :p] = J_mech
-    J[..., p:] = np.nan if J_sensor is None else J_sensor
+    J[..., p:p + n_sensor] = np.nan if J_sensor is None else J_sensor
+    if n_off:
+        J[..., p + n_sensor:] = J_offsets
     return J
 
 
@@ -427,7 +503,7 @@ class IKResidual(Method):
         rho, s = self.model.parts(theta)
         poses = self._measured_poses(rho, s)
         q, A, B = self.model.mechanism.ik_and_jacobians(poses["x"], rho)
-        return {"rho": rho, "poses": poses, "q": q, "AB": (A, B)}
+        return {"rho": rho, "poses": poses, "q": q, "AB": (A, B), "q_meas": self.model.q_at(theta)}
 
     def evaluate(self, theta, jac=True, cov=True):
         m = self.model
@@ -435,26 +511,28 @@ class IKResidual(Method):
         st = self._at(theta, self._solve)
         rho, poses, q_model = st["rho"], st["poses"], st["q"]
         x, conv = poses["x"], poses["conv"]
-        r = m.q - q_model
+        q_meas = st["q_meas"]          # the readings, shifted by the session's offsets δq
+        r = q_meas - q_model
         need_Js = jac and self.sensor_columns
         A, B = st["AB"] if (jac or cov) else (None, None)
         J = C = None
         if jac:
             Js = A @ self._HinvG(poses) if need_Js else None
-            J = _full_jacobian(-B, Js, len(m.sensor.param_names))
+            J = _full_jacobian(-B, Js, m.n_sensor, m.offset_jacobian(np.eye(m.q.shape[1])))
         if cov:
             AH = self._AHinv(A, poses)
             C = _diag_cov(m.sigma_q, m.n_poses) + _sandwich(AH, m.sigma_y)
         if self.form == "squared":
             # r² = L_q² − L(x)², L_q = q + L0, L0 = L(x) − IK(x) (offset, independent of x).
             L = mech.leg_lengths(x, rho)
-            Lq = m.q + (L - q_model)
+            Lq = q_meas + (L - q_model)
             r = Lq**2 - L**2
             if jac:
                 dL = mech.length_param_jacobian(x, rho)                # ∂L/∂ρ
                 dL0 = dL - B                                            # ∂L0/∂ρ
                 Jr = 2.0 * Lq[..., None] * dL0 - 2.0 * L[..., None] * dL
-                J = _full_jacobian(Jr, None if Js is None else 2.0 * L[..., None] * Js, len(m.sensor.param_names))
+                J = _full_jacobian(Jr, None if Js is None else 2.0 * L[..., None] * Js, m.n_sensor,
+                                   m.offset_jacobian(2.0 * Lq[:, :, None] * np.eye(m.q.shape[1])))
             if cov:
                 AH = self._AHinv(A, poses)
                 C = _diag_cov(m.sigma_q, m.n_poses) * (2 * Lq)[:, :, None] * (2 * Lq)[:, None, :] \
@@ -489,7 +567,7 @@ class FKResidual(Method):
     def _solve(self, theta):
         m = self.model
         rho, s = m.parts(theta)
-        fk = m.mechanism.fk_precise(m.q, self._guess, rho)
+        fk = m.mechanism.fk_precise(m.q_at(theta), self._guess, rho)
         x = fk.poses
         ok = fk.ok & np.all(np.isfinite(x), axis=1)
         # warm start the next evaluation from the converged poses (this fit's scratch)
@@ -517,13 +595,14 @@ class FKResidual(Method):
             A, B = self._piece(st, "AB", lambda: mech.actuator_jacobians(x, rho))
             HAi = self._piece(st, "HAi", lambda: self._HAi(A, sensor_pose_jacobian(mech, sensor, x, frame, rho, s)))
         if jac:
-            # ∂r/∂ρ = H A⁻¹ B (− ∂h/∂ρ at fixed x), ∂r/∂s = −G (skipped when no sensor parameter is free)
+            # ∂r/∂ρ = H A⁻¹ B (− ∂h/∂ρ at fixed x), ∂r/∂s = −G (skipped when no sensor parameter
+            # is free), ∂r/∂δq = −H A⁻¹ (x = FK(q + δq): A ∂x/∂δq = I)
             Jr = HAi @ B
             Gr = sensor_mech_jacobian(mech, sensor, x, frame, rho, s)
             if Gr is not None:
                 Jr = Jr - Gr
             J = _full_jacobian(Jr, -sensor.param_jacobian(frame, s) if self.sensor_columns else None,
-                               len(sensor.param_names))
+                               m.n_sensor, m.offset_jacobian(-HAi) if m.n_offsets else None)
         if cov:
             C = _diag_cov(m.sigma_y, m.n_poses) + _sandwich(HAi, m.sigma_q)
         return Evaluation(r=r, J=J, cov=C, converged=ok, poses=x)
@@ -585,27 +664,29 @@ class Projection(Method):
         unit = "1" if self.weighted or (any(flags) and not all(flags)) else ("rad" if all(flags) else "mm")
         return (unit,) * self.rows_per_pose()
 
-    def _stacked_and_Q(self, rho, s, x, Q: bool = True):
+    def _stacked_and_Q(self, rho, s, x, q, Q: bool = True):
         """(e (N, m+l), Q (N, m+l, n) or None): the whitened stacked residual and its pose
-        Jacobian W [H; A] at poses x."""
+        Jacobian W [H; A] at poses x, with the actuator readings ``q`` (δq applied)."""
         m = self.model
         mech, sensor = m.mechanism, m.sensor
         frame = mech.frame(x, rho)
         ey = sensor.reading_residual(m.y, sensor.predict(frame, s))
-        eq = m.q - mech.ik(x, rho)
+        eq = q - mech.ik(x, rho)
         e = np.concatenate([ey, eq], axis=1) * self._w
         if not Q:
             return e, None
         H = sensor_pose_jacobian(mech, sensor, x, frame, rho, s)
         return e, np.concatenate([H, mech.actuator_pose_jacobian(x, rho)], axis=1) * self._w[:, None]
 
-    def solve_poses(self, rho, s) -> tuple[np.ndarray, np.ndarray]:
+    def solve_poses(self, rho, s, q=None) -> tuple[np.ndarray, np.ndarray]:
         """x_j* = argmin ‖e_j(x)‖ for every pose by batched Gauss–Newton (warm started from
-        this fit's last poses)."""
+        this fit's last poses); ``q`` the actuator readings with δq applied (default the
+        model's)."""
+        q = self.model.q if q is None else q
         x = self._x.copy()
         conv = np.zeros(len(x), dtype=bool)
         for _ in range(_POSE_MAX_ITER):
-            e, Q = self._stacked_and_Q(rho, s, x)
+            e, Q = self._stacked_and_Q(rho, s, x, q)
             QtQ = np.swapaxes(Q, 1, 2) @ Q
             step = np.linalg.solve(QtQ, (np.swapaxes(Q, 1, 2) @ e[..., None]))[..., 0]
             x = x + step
@@ -618,28 +699,32 @@ class Projection(Method):
 
     def _solve(self, theta):
         rho, s = self.model.parts(theta)
+        q = self.model.q_at(theta)
         if self.hold_poses:
             x, ok = self.model.commanded.copy(), np.ones(self.model.n_poses, dtype=bool)
         else:
-            x, ok = self.solve_poses(rho, s)
-        return {"rho": rho, "s": s, "x": x, "ok": ok}
+            x, ok = self.solve_poses(rho, s, q)
+        return {"rho": rho, "s": s, "x": x, "ok": ok, "q": q}
 
-    def _projector(self, rho, s, x):
+    def _projector(self, rho, s, x, q):
         """(e (N, m+l), U⊥ᵀ (N, k, m+l)): the stacked whitened residual and the orthonormal
         complement of range(Q) (complete QR of Q, eq. 7)."""
-        e, Q = self._stacked_and_Q(rho, s, x)
+        e, Q = self._stacked_and_Q(rho, s, x, q)
         Qfull, _ = np.linalg.qr(Q, mode="complete")
         return e, np.swapaxes(Qfull[:, :, self.model.mechanism.n_dof:], 1, 2)
 
     def _param_jacobian(self, rho, s, x, Ut):
-        """U⊥ᵀ ∂e/∂θ = −U⊥ᵀ W [∂h/∂θ; ∂IK/∂θ] (eq. 10)."""
+        """U⊥ᵀ ∂e/∂θ = −U⊥ᵀ W [∂h/∂θ; ∂IK/∂θ] (eq. 10), and U⊥ᵀ W [0; I] for the offsets δq
+        (e's actuator rows are q + δq − IK)."""
         m = self.model
         mech, sensor = m.mechanism, m.sensor
         ms = sensor.n_readings
         frame = mech.frame(x, rho)
-        de = np.zeros((len(x), ms + mech.n_actuators, m.n_mech + len(sensor.param_names)))
+        de = np.zeros((len(x), ms + mech.n_actuators, m.n_mech + m.n_sensor + m.n_offsets))
         de[:, ms:, : m.n_mech] = -mech.actuator_param_jacobian(x, rho)
-        de[:, :ms, m.n_mech:] = -sensor.param_jacobian(frame, s)
+        de[:, :ms, m.n_mech:m.n_mech + m.n_sensor] = -sensor.param_jacobian(frame, s)
+        if m.n_offsets:
+            de[:, ms:, m.n_mech + m.n_sensor:] = m.offset_jacobian(np.eye(mech.n_actuators))
         Gr = sensor_mech_jacobian(mech, sensor, x, frame, rho, s)
         if Gr is not None:
             de[:, :ms, : m.n_mech] = -Gr
@@ -650,14 +735,14 @@ class Projection(Method):
         (N, k, P) or None, U⊥ᵀ (N, k, m+l)) with r = U⊥ᵀ e(x, θ), J = U⊥ᵀ ∂e/∂θ =
         −U⊥ᵀ W [∂h/∂θ; ∂IK/∂θ]."""
         rho, s = self.model.parts(theta)
-        e, Ut = self._projector(rho, s, x)
+        e, Ut = self._projector(rho, s, x, self.model.q_at(theta))
         return (Ut @ e[..., None])[..., 0], self._param_jacobian(rho, s, x, Ut) if jac else None, Ut
 
     def evaluate(self, theta, jac=True, cov=True):
         st = self._at(theta, self._solve)
         rho, s, x, ok = st["rho"], st["s"], st["x"], st["ok"]
         # the projector is computed once per θ, for the residual and then the Jacobian
-        e, Ut = self._piece(st, "projector", lambda: self._projector(rho, s, x))
+        e, Ut = self._piece(st, "projector", lambda: self._projector(rho, s, x, st["q"]))
         r = self._piece(st, "r", lambda: (Ut @ e[..., None])[..., 0])
         J = self._piece(st, "J", lambda: self._param_jacobian(rho, s, x, Ut)) if jac else None
         C = None

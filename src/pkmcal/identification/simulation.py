@@ -8,6 +8,12 @@ y = h(x_r, θ) + e_y and the encoders q + e_q, with e_y, e_q drawn from the setu
 :class:`~pkmcal.sensors.base.NoiseModel` (Gaussian, or uniform of half-width h = √3·std).
 Encoder noise is a reading error: the machine moves to FK(q), the file records q + e_q.
 
+Several sessions (:func:`simulate_sessions`): the commanded poses split in order into
+sessions, each read by its own sensor (another world/tool frame: the instrument set up
+again), and optionally measured after re-homing, the actuator zeros of session s moved by
+δq_s: the real machine goes to FK(q + δq_s, ρ_real) while the file records q (+ e_q), so
+that IK(x, ρ_real) = q + δq_s (:mod:`pkmcal.sensors.sessions`).
+
 Poses the real machine cannot reach — FK not converged, or converged on another assembly
 mode than the commanded pose (:attr:`~pkmcal.mechanisms.base.FKResult.same_branch`: a
 mirror solution, not where the machine goes), real pose outside the real machine's limits,
@@ -27,6 +33,7 @@ from pkmcal.io.measurements import Measurements
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.progress import Progress
 from pkmcal.sensors.base import MeasurementSetup, Sensor
+from pkmcal.sensors.sessions import Sessions
 
 
 def as_rng(rng: np.random.Generator | int | None) -> np.random.Generator:
@@ -58,6 +65,8 @@ class SimulationResult:
     actuator_readings: np.ndarray
     sensor_readings: np.ndarray
     setup: MeasurementSetup
+    #: the session of each kept pose (:func:`simulate_sessions`); None: one session
+    sessions: Sessions | None = None
 
     @property
     def measurements(self) -> Measurements:
@@ -67,6 +76,7 @@ class SimulationResult:
             readings=self.sensor_readings,
             commanded=self.commanded[self.kept],
             source=None,
+            sessions=self.sessions,
         )
 
     def subset(self, positions: np.ndarray | slice) -> "SimulationResult":
@@ -78,7 +88,8 @@ class SimulationResult:
         take = lambda a: a[positions]  # noqa: E731
         return replace(self, kept=take(self.kept), real_poses=take(self.real_poses),
                        actuator_true=take(self.actuator_true), sensor_true=take(self.sensor_true),
-                       actuator_readings=take(self.actuator_readings), sensor_readings=take(self.sensor_readings))
+                       actuator_readings=take(self.actuator_readings), sensor_readings=take(self.sensor_readings),
+                       sessions=None if self.sessions is None else self.sessions.subset(positions))
 
     def summary(self) -> str:
         """Lines for the terminal: poses kept, dropped with reasons."""
@@ -129,6 +140,7 @@ def simulate_campaign(
     rng: np.random.Generator | int | None = None,
     ignore_limits: tuple[str, ...] = (),
     progress: Progress | None = None,
+    actuator_offset: np.ndarray | None = None,
 ) -> SimulationResult:
     """Simulate measuring ``commanded_poses`` (N, 6; mm, rad) on ``real`` commanded by ``nominal``.
 
@@ -137,7 +149,8 @@ def simulate_campaign(
     checked (e.g. ``("leg_collision",)``: a parameter perturbation of a few mm can bring
     the modelled legs of a tight design such as ``stewart-prototype`` into contact).
     The poses are simulated in chunks of :data:`CHUNK_POSES`, ``progress(done, N)`` called
-    after each.
+    after each. ``actuator_offset`` (l,): the actuators' zeros moved by δq (re-homing): the
+    real machine goes to FK(q + δq), the readings are q (module docstring).
     """
     commanded, e_y, e_q = campaign_inputs(nominal, real, setup, commanded_poses, rng)
     sensor = setup.sensor
@@ -145,7 +158,7 @@ def simulate_campaign(
     parts, dropped = [], {}
     for start in range(0, max(n, 1), CHUNK_POSES):
         q_c, poses_c, ok_c, dropped_c = _reach(nominal, real, sensor, commanded[start:start + CHUNK_POSES],
-                                               ignore_limits)
+                                               ignore_limits, actuator_offset)
         parts.append((q_c, poses_c, ok_c))
         dropped.update({start + k: why for k, why in dropped_c.items()})
         if progress is not None:
@@ -170,16 +183,19 @@ def simulate_campaign(
 
 
 def _reach(nominal: Mechanism, real: Mechanism, sensor: Sensor, commanded: np.ndarray,
-           ignore_limits: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[int, str]]:
+           ignore_limits: tuple[str, ...], actuator_offset: np.ndarray | None = None,
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[int, str]]:
     """Where ``real`` goes for each of the ``commanded`` poses (one chunk): the commands
-    q = IK(x_c, ρ_nom) (N, l), the real poses (N, n; the commanded pose where not reached),
-    whether each was reached and read, and the reasons of the others by position."""
+    q = IK(x_c, ρ_nom) (N, l), the real poses (N, n; the commanded pose where not reached;
+    FK of q + ``actuator_offset`` when given), whether each was reached and read, and the
+    reasons of the others by position."""
     q = nominal.ik(commanded)
     dropped: dict[int, str] = {}
     finite = np.all(np.isfinite(q), axis=1)
     for k in np.flatnonzero(~finite):
         dropped[int(k)] = "nominal-ik-failed"
-    fk = real.fk(np.where(finite[:, None], q, 0.0), guess=commanded)
+    moved = q if actuator_offset is None else q + np.asarray(actuator_offset, dtype=float)
+    fk = real.fk(np.where(finite[:, None], moved, 0.0), guess=commanded)
     bad_fk = finite & ~fk.converged
     for k in np.flatnonzero(bad_fk):
         dropped[int(k)] = f"fk-not-converged (residual {fk.residual[k]:.3g})"
@@ -192,6 +208,74 @@ def _reach(nominal: Mechanism, real: Mechanism, sensor: Sensor, commanded: np.nd
     for k in np.flatnonzero(unread):
         dropped[int(k)] = "not-readable-by-sensor"
     return q, poses, ok & ~unread, dropped
+
+
+def simulate_sessions(
+    nominal: Mechanism,
+    real: Mechanism,
+    setup: MeasurementSetup,
+    commanded_poses: np.ndarray,
+    sensors: tuple[Sensor, ...],
+    rng: np.random.Generator | int | None = None,
+    offsets: np.ndarray | None = None,
+    simulate=None,
+    **kw,
+) -> SimulationResult:
+    """The campaign of :func:`simulate_campaign` measured in S = len(``sensors``) sessions:
+    the commanded poses split in order into S parts of (nearly) equal size, labelled
+    ``1 … S``, part s read by ``sensors[s]`` and, with ``offsets`` (S, l), measured with the
+    actuator zeros moved by ``offsets[s]`` (re-homing; row 0 is normally zero). One seeded
+    generator draws the parts' noise in turn (same seed, same bytes). ``simulate`` replaces
+    :func:`simulate_campaign` (same arguments; e.g. the redundant machines' equilibrium
+    campaign, which takes no offsets); ``kw`` goes to it."""
+    commanded = nominal.as_pose_array(commanded_poses)
+    gen = as_rng(rng)
+    n_ses = len(sensors)
+    if n_ses < 1 or n_ses > max(len(commanded), 1):
+        raise PkmcalError(f"{n_ses} sessions for {len(commanded)} commanded poses: give 1 to {len(commanded)}")
+    simulate = simulate or simulate_campaign
+    parts = np.array_split(np.arange(len(commanded)), n_ses)
+    results = []
+    for s, (idx, sensor) in enumerate(zip(parts, sensors)):
+        extra = {} if offsets is None else {"actuator_offset": np.asarray(offsets, dtype=float)[s]}
+        results.append(simulate(nominal, real, replace(setup, sensor=sensor), commanded[idx], gen, **kw, **extra))
+    starts = [int(idx[0]) if len(idx) else 0 for idx in parts]
+    cat = lambda name: np.concatenate([getattr(r, name) for r in results])  # noqa: E731
+    kept = np.concatenate([r.kept + a for r, a in zip(results, starts)])
+    labels = tuple(str(s + 1) for s in range(n_ses))
+    return SimulationResult(
+        commanded=commanded, kept=kept,
+        dropped=dict(sorted({k + a: why for r, a in zip(results, starts) for k, why in r.dropped.items()}.items())),
+        real_poses=cat("real_poses"), actuator_true=cat("actuator_true"), sensor_true=cat("sensor_true"),
+        actuator_readings=cat("actuator_readings"), sensor_readings=cat("sensor_readings"), setup=setup,
+        sessions=Sessions(labels, np.concatenate([np.full(len(r.kept), s, dtype=np.intp)
+                                                  for s, r in enumerate(results)])))
+
+
+def session_sensors_drawn(sensor: Sensor, n_sessions: int, magnitude_mm: float,
+                          rng: np.random.Generator | int | None = None, given: dict | None = None,
+                          radius_mm: float = 1000.0) -> tuple[Sensor, ...]:
+    """The true sensors of ``n_sessions`` sessions: session ``"1"`` is ``sensor``; a session
+    whose label ``given`` names has that sensor; every other one is ``sensor`` with its free
+    parameters (``default_free``: the unknown frames) moved by U(−m, m) mm, angles
+    m/``radius_mm`` rad (the rule of :func:`perturb_machine`), m = ``magnitude_mm``."""
+    gen = as_rng(rng)
+    given = given or {}
+    free = [sensor.param_names.index(n) for n in sensor.default_free]
+    is_angle = np.array(sensor.param_is_angle, dtype=bool)[free]
+    out = []
+    for s in range(n_sessions):
+        label = str(s + 1)
+        if label in given:
+            out.append(given[label])
+        elif s == 0:
+            out.append(sensor)
+        else:
+            theta = sensor.params
+            delta = gen.uniform(-magnitude_mm, magnitude_mm, size=len(free))
+            theta[free] += np.where(is_angle, delta / radius_mm, delta)
+            out.append(sensor.with_params(theta))
+    return tuple(out)
 
 
 def perturb_machine(

@@ -9,7 +9,11 @@ extra columns are ignored):
   rotary actuators, :attr:`Mechanism.actuator_is_angle`);
 * the sensor's readings: ``x,y,z,a,b,c`` (full-pose; mm, degrees), ``px,py,pz``
   (position; mm) or ``d1..dK`` (indicators; mm);
-* optional commanded pose ``cmd_x..cmd_c`` (mm, degrees).
+* optional commanded pose ``cmd_x..cmd_c`` (mm, degrees);
+* optional ``session``: a free-text label per row (``1``, ``2026-05-01-am``): the
+  measurement session of the pose (each session its own sensor parameters,
+  :mod:`pkmcal.sensors.sessions`); labels are kept in order of first appearance, and the
+  pose numbers stay the file's data rows. Without the column the file is one session.
 
 Inside, angles are radians (:mod:`pkmcal.conventions`). Files are written as a plain CSV
 (a units line and comments only when asked), the header and every float as its shortest
@@ -31,6 +35,10 @@ from pkmcal.io.orientation import euler_triples, orientation_given
 from pkmcal.io.tables import DEFAULT_ALIASES, check_magnitudes, column_kinds, from_file_units, mapped_name, read_table, to_file_units, write_table
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.sensors.base import MeasurementSetup
+from pkmcal.sensors.sessions import Sessions
+
+#: The optional column of the measurement session of each row (free text).
+SESSION_COLUMN = "session"
 
 #: Commanded-pose columns of a 6-DOF machine (in general ``cmd_`` + the machine's pose names).
 COMMAND_COLUMNS = tuple(f"cmd_{c}" for c in POSE_COLUMNS)
@@ -49,7 +57,9 @@ class Measurements:
     when simulated); ``lines`` (N,) 1-based line of each row in ``source`` (None if not read);
     ``notes`` what the loader did that the user should know (e.g. leg lengths converted);
     ``rows`` (N,) the pose numbers: data rows of ``source`` counted from 1 (None: 1..N), kept
-    by :meth:`subset` so that poses keep their numbers when others are left out.
+    by :meth:`subset` so that poses keep their numbers when others are left out;
+    ``sessions`` the session of each pose (:class:`~pkmcal.sensors.sessions.Sessions`, the
+    file's ``session`` column; None: one session), kept by :meth:`subset`.
     """
 
     actuators: np.ndarray
@@ -59,6 +69,7 @@ class Measurements:
     lines: np.ndarray | None = None
     notes: tuple[str, ...] = ()
     rows: np.ndarray | None = None
+    sessions: Sessions | None = None
 
     def __post_init__(self) -> None:
         a = np.asarray(self.actuators, dtype=float)
@@ -73,6 +84,10 @@ class Measurements:
             if c.ndim != 2 or c.shape[0] != a.shape[0]:
                 raise PkmcalError(f"commanded poses must have shape ({a.shape[0]}, n); got {c.shape}")
             object.__setattr__(self, "commanded", c)
+        if self.sessions is not None and not isinstance(self.sessions, Sessions):
+            object.__setattr__(self, "sessions", Sessions.from_labels(self.sessions))
+        if self.sessions is not None and len(self.sessions) != a.shape[0]:
+            raise PkmcalError(f"{len(self.sessions)} session labels for {a.shape[0]} poses")
 
     def __len__(self) -> int:
         return self.actuators.shape[0]
@@ -89,7 +104,8 @@ class Measurements:
         return Measurements(actuators=self.actuators[idx], readings=self.readings[idx],
                             commanded=None if self.commanded is None else self.commanded[idx], source=self.source,
                             lines=None if self.lines is None else np.asarray(self.lines)[idx], notes=self.notes,
-                            rows=self.pose_numbers[idx])
+                            rows=self.pose_numbers[idx],
+                            sessions=None if self.sessions is None else self.sessions.subset(idx))
 
     def where(self, k: int) -> str:
         """Where pose ``k`` (0-based) comes from, for error messages: 'file, line 12' or 'pose 3'."""
@@ -167,8 +183,35 @@ def load_measurements(path: str | os.PathLike, machine: Mechanism, setup: Measur
     commanded = None
     if with_cmd:
         commanded = from_file_units(table[list(cmd_cols)], machine.pose_is_angle)
+    sessions = _sessions(src, text, mapping, table.lines) if SESSION_COLUMN in header else None
     return Measurements(actuators=actuators, readings=readings, commanded=commanded, source=src, lines=table.lines,
-                        notes=notes, rows=np.arange(1, len(table) + 1))
+                        notes=notes, rows=np.arange(1, len(table) + 1), sessions=sessions)
+
+
+def _sessions(src: str, text: str, mapping: ImportMapping | None, lines: np.ndarray) -> Sessions:
+    """The ``session`` labels of the data rows at ``lines`` (the rows the table read, in
+    order): each cell stripped, as text; an empty label is an error naming its line."""
+    from pkmcal.io.tables import _split
+
+    col = None
+    labels: dict[int, str] = {}
+    for number, line in enumerate(text.splitlines(), start=1):
+        stripped = line.strip()
+        if not stripped or stripped.startswith("#"):
+            continue
+        cells = _split(line)
+        if col is None:
+            names = [mapped_name(c.strip().strip('"'), mapping, DEFAULT_ALIASES) for c in cells]
+            col, header_cell = names.index(SESSION_COLUMN), cells[names.index(SESSION_COLUMN)]
+            continue
+        labels[number] = cells[col].strip() if col < len(cells) else ""
+    per_pose = [labels[int(n)] for n in lines]
+    empty = next((k for k, lab in enumerate(per_pose) if not lab), None)
+    if empty is not None:
+        raise InputFileError(src, "empty session label; give every row its session (free text, e.g. 1, 2 or "
+                                  "2026-05-01-am), or remove the column for a one-session file",
+                             line=int(lines[empty]), column=header_cell)
+    return Sessions.from_labels(per_pose)
 
 
 def _units(sensor) -> str:
@@ -187,7 +230,8 @@ def _header(text: str, mapping: ImportMapping | None = None) -> set[str]:
 
 
 def measurement_columns(measurements: Measurements, machine: Mechanism, setup: MeasurementSetup) -> dict:
-    """The columns of a measurement file (file units: mm, degrees), in order."""
+    """The columns of a measurement file (file units: mm, degrees), in order: ``session``
+    last when the measurements have sessions."""
     sensor = setup.sensor
     if measurements.actuators.shape[1] != machine.n_actuators:
         raise PkmcalError(f"{measurements.actuators.shape[1]} actuator readings per pose, but machine "
@@ -202,10 +246,14 @@ def measurement_columns(measurements: Measurements, machine: Mechanism, setup: M
             raise PkmcalError(f"commanded poses have {measurements.commanded.shape[1]} coordinates, but machine "
                               f"'{machine.name}' has {machine.n_dof}")
         groups.append((command_columns(machine), machine.pose_is_angle, measurements.commanded))
-    cols: dict[str, np.ndarray] = {}
+    cols: dict = {}
     for names, is_angle, values in groups:
         file_values = to_file_units(values, is_angle)
         cols.update({name: file_values[:, j] for j, name in enumerate(names)})
+    if measurements.sessions is not None:
+        # last: a row never starts with a label, which could start with '#' (a comment line)
+        labels = measurements.sessions.labels
+        cols[SESSION_COLUMN] = [labels[k] for k in measurements.sessions.index]
     return cols
 
 

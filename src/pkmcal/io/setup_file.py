@@ -60,6 +60,13 @@ degrees for angle parameters::
       L0_*: [640, 0.5]
       b1.z: "± 0.2"
 
+Measurements in several sessions (a ``session`` column; each session its own sensor
+parameters ``NAME@LABEL``, :mod:`pkmcal.sensors.sessions`) may have re-homed actuators
+between sessions: ``sessions: {actuator_offsets: true}`` estimates zero offsets
+``dq_i@LABEL`` for every session but the first. ``sessions:`` may also give the sensor of
+named sessions (``"2": {world: {x: 1.5, ...}}``, as the calibrated file's ``setup:`` writes
+them), the starting values of those sessions.
+
 Built-in setups (:data:`pkmcal.sensors.library.BUILTIN_SETUPS`, re-exported here) are usable by
 name wherever a setup file is. A planar-tool setup is bound to its machine's pose dimension
 (2 or 3) by :func:`bind_setup` (``load_setup(path, machine)`` does it).
@@ -228,6 +235,7 @@ class _Setup(_Strict):
     noise: _Noise
     simulation: _Simulation | None = None
     prior: dict[StrictStr, Union[tuple[Number, Number], StrictStr]] | None = None
+    sessions: dict | None = None    # checked by _sessions (labels are free text)
 
     @field_validator("free")
     @classmethod
@@ -353,7 +361,36 @@ def load_setup(path: str | os.PathLike, machine=None) -> MeasurementSetup:
         import dataclasses
 
         setup = dataclasses.replace(setup, priors=_priors(path, lines, spec.prior))
-    return setup if machine is None else bind_setup(setup, machine, path)
+    setup = setup if machine is None else bind_setup(setup, machine, path)
+    return setup if spec.sessions is None else _sessions(path, lines, spec.sessions, setup)
+
+
+def _sessions(path, lines, sessions: dict, setup: MeasurementSetup) -> MeasurementSetup:
+    """The setup with its ``sessions:`` mapping (several measurement sessions,
+    :mod:`pkmcal.sensors.sessions`): ``actuator_offsets: true|false`` (re-homing offsets for
+    the sessions after the first), and ``LABEL: {world: {...}, tool: {...}, zero: [...], ...}``
+    the sensor of a named session (a calibrated file's identified sessions; file units),
+    the starting values of that session when the measurements have it. A ``dq`` list there
+    (identified offsets) is information: offsets start from 0."""
+    import dataclasses
+
+    from pkmcal.sensors.sessions import sensor_from_values
+
+    offsets = sessions.get("actuator_offsets", False)
+    if not isinstance(offsets, bool):
+        _fail(path, lines, ("sessions", "actuator_offsets"), f"must be true or false; got {offsets!r}")
+    named = []
+    for label, values in sessions.items():
+        if label == "actuator_offsets":
+            continue
+        if not isinstance(values, dict):
+            _fail(path, lines, ("sessions", label), "give the session's sensor parameters as a mapping "
+                  "(e.g. world: {x: 0, y: 0, z: 0, a: 0, b: 0, c: 0}), or actuator_offsets: true|false")
+        try:
+            named.append((str(label), sensor_from_values(setup.sensor, values, deg_to_rad)))
+        except PkmcalError as exc:
+            _fail(path, lines, ("sessions", label), str(exc))
+    return dataclasses.replace(setup, session_offsets=offsets, session_sensors=tuple(named))
 
 
 def _priors(path, lines, prior: dict) -> tuple:

@@ -89,6 +89,7 @@ def parameter_table(nominal: Mechanism, result, true_machine: Mechanism | None =
     NaN where not given."""
     p = len(nominal.param_names)
     sensor_angle = dict(zip(result.sensor.param_names, result.sensor.param_is_angle))
+    sensor_angle.update(zip(result.names, result.param_is_angle))   # + the sessions' offsets dq_i@LABEL
     flags = tuple(nominal.param_is_angle) + tuple(sensor_angle[n] for n in result.names[p:])
     free_set = {n: k for k, n in enumerate(result.free)}
     shown = list(range(p)) + [i for i in range(p, len(result.names))

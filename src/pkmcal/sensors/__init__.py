@@ -11,7 +11,8 @@
 ``base`` holds the interface (θ declared as :class:`ParamGroup` fields, from which names,
 angle flags, ``with_params`` and value equality follow), ``_common`` the shared argument
 checks and 3-D helpers, ``_frames`` the world ← base ← platform ← point chain of the
-full-pose and position sensors; each other module is one sensor.
+full-pose and position sensors, ``sessions`` several measurement sessions in one fit (a
+copy of a sensor's parameters per session, ``NAME@LABEL``); each other module is one sensor.
 """
 
 from pkmcal.sensors.base import MeasurementSetup, NoiseModel, ParamGroup, Sensor

@@ -241,9 +241,17 @@ class MeasurementSetup:
     :class:`~pkmcal.mechanisms.statics.StaticsModel`, actuator stiffness and tool load of a
     redundantly actuated machine; the identifier never reads it); ``priors``: Gaussian
     priors on parameters (:class:`~pkmcal.identification.priors.Prior`, the setup file's
-    ``prior:``), which the identification adds to its own."""
+    ``prior:``), which the identification adds to its own; ``session_offsets`` and
+    ``session_sensors`` the setup's ``sessions:`` (several measurement sessions)."""
 
     sensor: Sensor
     noise: NoiseModel
     simulation: StaticsModel | None = None
     priors: tuple = ()
+    #: the setup's ``sessions: {actuator_offsets: true}``: with several sessions in the
+    #: measurements, the sessions after the first get actuator zero offsets (re-homing;
+    #: :mod:`pkmcal.sensors.sessions`)
+    session_offsets: bool = False
+    #: ((label, sensor), ...): the sensors of named sessions (a calibrated file's
+    #: ``sessions:``), the starting values of those sessions in a multi-session fit
+    session_sensors: tuple = ()
