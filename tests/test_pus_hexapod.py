@@ -117,7 +117,7 @@ def test_machine_file_round_trip_and_errors(machine, tmp_path):
     bad.write_text(text.replace("leg: 200.0", "leg: -5.0", 1))
     with pytest.raises(InputFileError, match="leg_1 must be positive"):
         load_machine(bad)
-    with pytest.raises(PkmcalError, match="60 numbers"):
+    with pytest.raises(PkmcalError, match="60 parameters"):
         PUSHexapod(name="x", rho=np.zeros(10), rails=np.tile([0, 0, 1.0], (6, 1)), stroke=np.tile([0, 1.0], (6, 1)))
 
 

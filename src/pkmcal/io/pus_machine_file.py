@@ -26,7 +26,7 @@ import numpy as np
 from pydantic import StrictStr, ValidationError, field_validator
 
 from pkmcal.errors import InputFileError, PkmcalError, one_line
-from pkmcal.io._yaml import FlowList, RawFloat, deg_to_rad, rad_to_deg_text
+from pkmcal.io._yaml import FlowList, deg_to_rad
 from pkmcal.io.machine_file import (
     Deg,
     Description,
@@ -36,15 +36,13 @@ from pkmcal.io.machine_file import (
     UncertaintySpec,
     Vec3,
     WorkspaceSpec,
-    _covariance_from_spec,
-    _line_of,
     _metadata_from_spec,
     _metadata_to_file,
     _Model,
-    _uncertainty_to_file,
     _validation_error,
     register_machine_kind,
 )
+from pkmcal.io.spatial_machine_file import degrees, leg_line, pose_extras, pose_extras_to_file, six_legs
 from pkmcal.mechanisms import pus_hexapod as pus
 
 
@@ -79,14 +77,7 @@ class _File(_Model):
     @field_validator("legs", mode="before")
     @classmethod
     def _six_legs(cls, v):
-        if isinstance(v, list) and len(v) != pus.N_LEGS:
-            raise ValueError(f"{len(v)} legs given, a 6-PUS hexapod needs exactly {pus.N_LEGS}; list one entry "
-                             f"per leg, legs 1 to {pus.N_LEGS} in order")
-        return v
-
-
-def _pose(v) -> np.ndarray:
-    return np.array([v.x, v.y, v.z, deg_to_rad(v.a), deg_to_rad(v.b), deg_to_rad(v.c)])
+        return six_legs(v, "6-PUS")
 
 
 def _from_file(path: object, data: dict, lines: dict[tuple, int]) -> pus.PUSHexapod:
@@ -100,14 +91,7 @@ def _from_file(path: object, data: dict, lines: dict[tuple, int]) -> pus.PUSHexa
     kw: dict[str, Any] = {}
     if spec.limits is not None and spec.limits.max_joint_angle is not None:
         kw["max_joint_angle"] = deg_to_rad(spec.limits.max_joint_angle)
-    if spec.home is not None:
-        kw["home"] = _pose(spec.home)
-    if spec.workspace is not None:
-        w = spec.workspace
-        kw["workspace"] = np.array([list(w.x), list(w.y), list(w.z), [deg_to_rad(v) for v in w.a],
-                                    [deg_to_rad(v) for v in w.b], [deg_to_rad(v) for v in w.c]], dtype=float)
-    if spec.uncertainty is not None:
-        kw["covariance"] = _covariance_from_spec(path, spec.uncertainty, lines, pus.PARAM_NAMES, pus.PARAM_IS_ANGLE)
+    kw.update(pose_extras(path, spec, lines, pus.PARAM_NAMES, pus.PARAM_IS_ANGLE))
     name = spec.name if spec.name is not None else one_line(Path(str(path)).stem)
     try:
         return pus.PUSHexapod(name=name, rho=rho, rails=[leg.rail for leg in legs],
@@ -115,12 +99,7 @@ def _from_file(path: object, data: dict, lines: dict[tuple, int]) -> pus.PUSHexa
                               description=spec.description or "", metadata=_metadata_from_spec(spec), **kw)
     except PkmcalError as exc:
         text = str(exc).split(": ", 1)[-1]
-        where = None
-        param = text.split(" ")[1] if text.startswith("parameter ") else ""
-        if "_" in param and param.rsplit("_", 1)[-1].isdigit():
-            key, leg = param.rsplit("_", 1)
-            where = _line_of(("legs", int(leg) - 1, key), lines)
-        raise InputFileError(path, f"legs: {text}", line=where) from None
+        raise InputFileError(path, f"legs: {text}", line=leg_line(text, lines)) from None
 
 
 def _to_file(m: pus.PUSHexapod) -> dict:
@@ -128,7 +107,7 @@ def _to_file(m: pus.PUSHexapod) -> dict:
     if m.description:
         out["description"] = m.description
     g = pus._legs(m.rho)
-    deg = lambda v: RawFloat(rad_to_deg_text(v))  # noqa: E731
+    deg = degrees
     legs = []
     for i in range(pus.N_LEGS):
         leg: dict[str, Any] = {"rail_origin": FlowList(float(v) for v in g["O"][i]),
@@ -144,13 +123,7 @@ def _to_file(m: pus.PUSHexapod) -> dict:
         legs.append(leg)
     out["legs"] = legs
     out["limits"] = {"max_joint_angle": deg(m.max_joint_angle)}
-    out["home"] = {**{k: float(v) for k, v in zip("xyz", m.home[:3])}, **{k: deg(v) for k, v in zip("abc", m.home[3:])}}
-    if m.workspace is not None:
-        ws = {k: FlowList(float(v) for v in m.workspace[i]) for i, k in enumerate("xyz")}
-        ws.update({k: FlowList(deg(v) for v in m.workspace[3 + i]) for i, k in enumerate("abc")})
-        out["workspace"] = ws
-    if m.covariance is not None:
-        out["uncertainty"] = _uncertainty_to_file(m.covariance, pus.PARAM_NAMES, pus.PARAM_IS_ANGLE)
+    out.update(pose_extras_to_file(m, pus.PARAM_NAMES, pus.PARAM_IS_ANGLE))
     out.update(_metadata_to_file(m.metadata))
     return out
 

@@ -26,7 +26,7 @@ import numpy as np
 from pydantic import StrictStr, ValidationError, field_validator
 
 from pkmcal.errors import InputFileError, PkmcalError, one_line
-from pkmcal.io._yaml import FlowList, RawFloat, deg_to_rad, rad_to_deg_text
+from pkmcal.io._yaml import FlowList, deg_to_rad
 from pkmcal.io.machine_file import (
     Deg,
     DegRange,
@@ -37,15 +37,13 @@ from pkmcal.io.machine_file import (
     UncertaintySpec,
     Vec3,
     WorkspaceSpec,
-    _covariance_from_spec,
-    _line_of,
     _metadata_from_spec,
     _metadata_to_file,
     _Model,
-    _uncertainty_to_file,
     _validation_error,
     register_machine_kind,
 )
+from pkmcal.io.spatial_machine_file import degrees, leg_line, pose_extras, pose_extras_to_file, six_legs
 from pkmcal.mechanisms import rss_hexapod as rss
 
 
@@ -79,14 +77,7 @@ class _File(_Model):
     @field_validator("legs", mode="before")
     @classmethod
     def _six_legs(cls, v):
-        if isinstance(v, list) and len(v) != rss.N_LEGS:
-            raise ValueError(f"{len(v)} legs given, a 6-RSS hexapod needs exactly {rss.N_LEGS}; list one entry "
-                             f"per leg, legs 1 to {rss.N_LEGS} in order")
-        return v
-
-
-def _pose(values) -> np.ndarray:
-    return np.array([values.x, values.y, values.z, deg_to_rad(values.a), deg_to_rad(values.b), deg_to_rad(values.c)])
+        return six_legs(v, "6-RSS")
 
 
 def _from_file(path: object, data: dict, lines: dict[tuple, int]) -> rss.RSSHexapod:
@@ -103,27 +94,14 @@ def _from_file(path: object, data: dict, lines: dict[tuple, int]) -> rss.RSSHexa
             kw["motor_range"] = tuple(deg_to_rad(v) for v in spec.limits.motor_range)
         if spec.limits.max_joint_angle is not None:
             kw["max_joint_angle"] = deg_to_rad(spec.limits.max_joint_angle)
-    if spec.home is not None:
-        kw["home"] = _pose(spec.home)
-    if spec.workspace is not None:
-        w = spec.workspace
-        kw["workspace"] = np.array([list(w.x), list(w.y), list(w.z), [deg_to_rad(v) for v in w.a],
-                                    [deg_to_rad(v) for v in w.b], [deg_to_rad(v) for v in w.c]], dtype=float)
-    if spec.uncertainty is not None:
-        kw["covariance"] = _covariance_from_spec(path, spec.uncertainty, lines, rss.PARAM_NAMES, rss.PARAM_IS_ANGLE)
+    kw.update(pose_extras(path, spec, lines, rss.PARAM_NAMES, rss.PARAM_IS_ANGLE))
     name = spec.name if spec.name is not None else one_line(Path(str(path)).stem)
     try:
         return rss.RSSHexapod(name=name, rho=rho, description=spec.description or "",
                               metadata=_metadata_from_spec(spec), **kw)
     except PkmcalError as exc:
         text = str(exc).split(": ", 1)[-1]
-        where = None
-        param = text.split(" ")[1] if text.startswith("parameter ") else ""
-        if "_" in param:
-            key, leg = param.rsplit("_", 1)
-            if leg.isdigit():
-                where = _line_of(("legs", int(leg) - 1, key), lines)
-        raise InputFileError(path, f"legs: {text}", line=where) from None
+        raise InputFileError(path, f"legs: {text}", line=leg_line(text, lines)) from None
 
 
 def _to_file(m: rss.RSSHexapod) -> dict:
@@ -131,7 +109,7 @@ def _to_file(m: rss.RSSHexapod) -> dict:
     if m.description:
         out["description"] = m.description
     g = rss._legs(m.rho)
-    deg = lambda v: RawFloat(rad_to_deg_text(v))  # noqa: E731
+    deg = degrees
     legs = []
     for i in range(rss.N_LEGS):
         leg: dict[str, Any] = {"pivot": FlowList(float(v) for v in g["S"][i]), "beta": deg(g["beta"][i])}
@@ -144,13 +122,7 @@ def _to_file(m: rss.RSSHexapod) -> dict:
         legs.append(leg)
     out["legs"] = legs
     out["limits"] = {"motor_range": FlowList(deg(v) for v in m.motor_range), "max_joint_angle": deg(m.max_joint_angle)}
-    out["home"] = {**{k: float(v) for k, v in zip("xyz", m.home[:3])}, **{k: deg(v) for k, v in zip("abc", m.home[3:])}}
-    if m.workspace is not None:
-        ws = {k: FlowList(float(v) for v in m.workspace[i]) for i, k in enumerate("xyz")}
-        ws.update({k: FlowList(deg(v) for v in m.workspace[3 + i]) for i, k in enumerate("abc")})
-        out["workspace"] = ws
-    if m.covariance is not None:
-        out["uncertainty"] = _uncertainty_to_file(m.covariance, rss.PARAM_NAMES, rss.PARAM_IS_ANGLE)
+    out.update(pose_extras_to_file(m, rss.PARAM_NAMES, rss.PARAM_IS_ANGLE))
     out.update(_metadata_to_file(m.metadata))
     return out
 

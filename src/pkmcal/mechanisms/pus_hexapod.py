@@ -35,16 +35,18 @@ Forward kinematics: the shared batched solver (:mod:`pkmcal.mechanisms.solver`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import ClassVar
 
 import numpy as np
 
-from pkmcal.conventions import POSE_COLUMNS, euler_pose_jacobian, euler_rate_matrix, matrix_to_euler
+from pkmcal.conventions import euler_pose_jacobian
 from pkmcal.errors import PkmcalError
-from pkmcal.mechanisms.base import LimitReport, Mechanism
+from pkmcal.mechanisms.base import LimitReport
 from pkmcal.mechanisms.frame import Frame
+from pkmcal.mechanisms.param_vector import ParameterVector
+from pkmcal.mechanisms.spatial import SpatialPlatform, twist_signs
 
 N_LEGS = 6
 LEG_PARAMS = ("r{i}.x", "r{i}.y", "r{i}.z", "tilt_x_{i}", "tilt_y_{i}", "leg_{i}",
@@ -88,7 +90,7 @@ def _directions(Q: np.ndarray, tx: np.ndarray, ty: np.ndarray):
 
 
 @dataclass(frozen=True, eq=False)
-class PUSHexapod(Mechanism):
+class PUSHexapod(ParameterVector, SpatialPlatform):
     """A 6-PUS hexapod (module docstring). ``rho`` (60,) in the order of
     :data:`PARAM_NAMES`; ``rails`` (6, 3) the nominal rail directions (unit, fixed);
     ``branches`` (6,) ±1 the IK branch of each leg; ``stroke`` (6, 2) the readings' range
@@ -110,10 +112,10 @@ class PUSHexapod(Mechanism):
     metadata: dict = field(default_factory=dict, compare=False)
 
     kind: ClassVar[str] = "6-PUS"
-    pose_names = POSE_COLUMNS
-    pose_is_angle = (False, False, False, True, True, True)
+    PARAM_NAMES: ClassVar[tuple[str, ...]] = PARAM_NAMES
+    PARAM_IS_ANGLE: ClassVar[tuple[bool, ...]] = PARAM_IS_ANGLE
+    LABEL: ClassVar[str] = "6-PUS hexapod"
     actuator_names = tuple(f"lambda{i + 1}" for i in range(N_LEGS))
-    abilities = frozenset({"pose-convention"})
     point_sets = MappingProxyType({"rail origins": tuple(f"r{i + 1}" for i in range(N_LEGS)),
                                    "platform joints": tuple(f"a{i + 1}" for i in range(N_LEGS))})
 
@@ -127,7 +129,6 @@ class PUSHexapod(Mechanism):
             return arr
 
         set_ = object.__setattr__
-        set_(self, "rho", frozen(self.rho, (len(PARAM_NAMES),), "a 6-PUS parameter vector"))
         rails = frozen(self.rails, (N_LEGS, 3), "rails")
         if np.any(np.linalg.norm(rails, axis=1) < 1e-12):
             raise PkmcalError(f"machine '{self.name}': a rail direction is the zero vector")
@@ -141,9 +142,7 @@ class PUSHexapod(Mechanism):
         if np.any(self.branches == 0):
             raise PkmcalError(f"machine '{self.name}': each branch is +1 or -1")
         set_(self, "_Q", rail_frames(self.rails))
-        problem = self.parameter_problem()
-        if problem is not None:
-            raise PkmcalError(f"machine '{self.name}': parameter {problem[0]} {problem[1]}")
+        self._freeze_params()
         set_(self, "home", frozen(self._default_home() if self.home is None else self.home, (6,), "home"))
         if self.workspace is not None:
             set_(self, "workspace", frozen(self.workspace, (6, 2), "workspace"))
@@ -171,25 +170,6 @@ class PUSHexapod(Mechanism):
                     and same(self.covariance, other.covariance) and self.description == other.description)
 
     __hash__ = None  # type: ignore[assignment]
-
-    @property
-    def param_names(self) -> tuple[str, ...]:
-        return PARAM_NAMES
-
-    @property
-    def param_is_angle(self) -> tuple[bool, ...]:
-        return PARAM_IS_ANGLE
-
-    @property
-    def params(self) -> np.ndarray:
-        return self.rho.copy()
-
-    def with_params(self, params: np.ndarray, name: str | None = None, covariance=None) -> "PUSHexapod":
-        return replace(self, rho=np.asarray(params, dtype=float), name=self.name if name is None else name,
-                       covariance=covariance)
-
-    def _rho(self, params) -> np.ndarray:
-        return self.rho if params is None else np.asarray(params, dtype=float)
 
     @property
     def home_pose(self) -> np.ndarray:
@@ -291,30 +271,8 @@ class PUSHexapod(Mechanism):
         poses = self.as_pose_array(poses)
         g, u, _, _, Ra, d, s, _ = self._loop(poses, self._rho(params))
         w = d - s[..., None] * u[None]
-        J = np.concatenate([w, np.cross(Ra, w)], axis=2)
-        with np.errstate(invalid="ignore"):
-            good = np.all(np.isfinite(J), axis=(1, 2))
-            det = np.zeros(len(poses))
-            det[good] = np.linalg.det(J[good])
-        return np.concatenate([np.sign(np.nan_to_num(-np.einsum("nkj,kj->nk", w, u))), np.sign(det)[:, None]],
+        return np.concatenate([np.sign(np.nan_to_num(-np.einsum("nkj,kj->nk", w, u))), twist_signs(w, Ra)[:, None]],
                               axis=1).astype(np.int8)
-
-    def frame(self, poses: np.ndarray, params: np.ndarray | None = None) -> Frame:
-        return Frame.from_poses(self.as_pose_array(poses))
-
-    def frame_jacobians(self, poses: np.ndarray, params: np.ndarray | None = None) -> tuple[np.ndarray, None]:
-        poses = self.as_pose_array(poses)
-        T = np.zeros((poses.shape[0], 6, 6))
-        T[:, 0:3, 0:3] = np.eye(3)
-        T[:, 3:6, 3:6] = euler_rate_matrix(poses[:, 3:6])
-        return T, None
-
-    def pose_jacobian_from_twist(self, J_twist: np.ndarray, poses: np.ndarray,
-                                 params: np.ndarray | None = None) -> np.ndarray:
-        return euler_pose_jacobian(J_twist, self.as_pose_array(poses))
-
-    def poses_from_frame(self, frame: Frame) -> np.ndarray:
-        return np.concatenate([frame.p, matrix_to_euler(frame.R)], axis=1)
 
     def reading_range(self) -> np.ndarray:
         return self.stroke.copy()

@@ -44,10 +44,12 @@ from typing import ClassVar
 
 import numpy as np
 
-from pkmcal.conventions import POSE_COLUMNS, euler_pose_jacobian, euler_rate_matrix, matrix_to_euler
+from pkmcal.conventions import euler_pose_jacobian
 from pkmcal.errors import PkmcalError
-from pkmcal.mechanisms.base import LimitReport, Mechanism
+from pkmcal.mechanisms.base import LimitReport
 from pkmcal.mechanisms.frame import Frame
+from pkmcal.mechanisms.param_vector import ParameterVector
+from pkmcal.mechanisms.spatial import SpatialPlatform, twist_signs
 
 N_LEGS = 6
 LEG_PARAMS = ("s{i}.x", "s{i}.y", "s{i}.z", "beta_{i}", "tilt_{i}", "crank_{i}", "rod_{i}",
@@ -76,7 +78,7 @@ def _crank_planes(beta: np.ndarray, tilt: np.ndarray) -> tuple[np.ndarray, np.nd
 
 
 @dataclass(frozen=True, eq=False)
-class RSSHexapod(Mechanism):
+class RSSHexapod(ParameterVector, SpatialPlatform):
     """A 6-RSS rotary hexapod (module docstring). ``rho`` (66,) in the order of
     :data:`PARAM_NAMES` (mm, rad); ``motor_range`` (2,) the crank angles' limits φ (rad);
     ``max_joint_angle`` the largest angle between a rod and the platform's z axis at its
@@ -96,23 +98,15 @@ class RSSHexapod(Mechanism):
     metadata: dict = field(default_factory=dict, compare=False)
 
     kind: ClassVar[str] = "6-RSS"
-    pose_names = POSE_COLUMNS
-    pose_is_angle = (False, False, False, True, True, True)
+    PARAM_NAMES: ClassVar[tuple[str, ...]] = PARAM_NAMES
+    PARAM_IS_ANGLE: ClassVar[tuple[bool, ...]] = PARAM_IS_ANGLE
+    LABEL: ClassVar[str] = "6-RSS hexapod"
     actuator_names = tuple(f"lambda{i + 1}" for i in range(N_LEGS))
-    abilities = frozenset({"pose-convention"})
     point_sets = MappingProxyType({"crank pivots": tuple(f"s{i + 1}" for i in range(N_LEGS)),
                                    "platform joints": tuple(f"a{i + 1}" for i in range(N_LEGS))})
 
     def __post_init__(self) -> None:
-        rho = np.array(self.rho, dtype=float).reshape(-1)
-        if rho.shape != (len(PARAM_NAMES),):
-            raise PkmcalError(f"machine '{self.name}': a 6-RSS hexapod has {len(PARAM_NAMES)} parameters, "
-                              f"got {rho.size}")
-        rho.flags.writeable = False
-        object.__setattr__(self, "rho", rho)
-        problem = self.parameter_problem()
-        if problem is not None:
-            raise PkmcalError(f"machine '{self.name}': parameter {problem[0]} {problem[1]}")
+        self._freeze_params()
         if self.home is None:
             object.__setattr__(self, "home", self._default_home())
         home = np.array(self.home, dtype=float).reshape(6)
@@ -150,29 +144,6 @@ class RSSHexapod(Mechanism):
                     and self.description == other.description)
 
     __hash__ = None  # type: ignore[assignment]
-
-    # -- parameters ------------------------------------------------------------------------
-
-    @property
-    def param_names(self) -> tuple[str, ...]:
-        return PARAM_NAMES
-
-    @property
-    def param_is_angle(self) -> tuple[bool, ...]:
-        return PARAM_IS_ANGLE
-
-    @property
-    def params(self) -> np.ndarray:
-        return self.rho.copy()
-
-    def with_params(self, params: np.ndarray, name: str | None = None, covariance=None) -> "RSSHexapod":
-        from dataclasses import replace
-
-        return replace(self, rho=np.asarray(params, dtype=float), name=self.name if name is None else name,
-                       covariance=covariance)
-
-    def _rho(self, params) -> np.ndarray:
-        return self.rho if params is None else np.asarray(params, dtype=float)
 
     @property
     def actuator_is_angle(self) -> tuple[bool, ...]:
@@ -310,31 +281,7 @@ class RSSHexapod(Mechanism):
         cph, sph = np.cos(phi)[..., None], np.sin(phi)[..., None]
         w = d + g["crank"][None, :, None] * (cph * v1[None] + sph * v2[None])
         G = np.einsum("nkj,nkj->nk", w, -sph * v1[None] + cph * v2[None])
-        J = np.concatenate([w, np.cross(Ra, w)], axis=2)
-        with np.errstate(invalid="ignore"):
-            good = np.all(np.isfinite(J), axis=(1, 2))
-            det = np.zeros(len(poses))
-            det[good] = np.linalg.det(J[good])
-        return np.concatenate([np.sign(np.nan_to_num(G)), np.sign(det)[:, None]], axis=1).astype(np.int8)
-
-    # -- the platform frame ----------------------------------------------------------------
-
-    def frame(self, poses: np.ndarray, params: np.ndarray | None = None) -> Frame:
-        return Frame.from_poses(self.as_pose_array(poses))
-
-    def frame_jacobians(self, poses: np.ndarray, params: np.ndarray | None = None) -> tuple[np.ndarray, None]:
-        poses = self.as_pose_array(poses)
-        T = np.zeros((poses.shape[0], 6, 6))
-        T[:, 0:3, 0:3] = np.eye(3)
-        T[:, 3:6, 3:6] = euler_rate_matrix(poses[:, 3:6])
-        return T, None
-
-    def pose_jacobian_from_twist(self, J_twist: np.ndarray, poses: np.ndarray,
-                                 params: np.ndarray | None = None) -> np.ndarray:
-        return euler_pose_jacobian(J_twist, self.as_pose_array(poses))
-
-    def poses_from_frame(self, frame: Frame) -> np.ndarray:
-        return np.concatenate([frame.p, matrix_to_euler(frame.R)], axis=1)
+        return np.concatenate([np.sign(np.nan_to_num(G)), twist_signs(w, Ra)[:, None]], axis=1).astype(np.int8)
 
     # -- limits ----------------------------------------------------------------------------
 

@@ -4,18 +4,18 @@ is (p, I). Its twist Jacobian T = ∂(δp, δω)/∂(x, y, z) is [I; 0], indepen
 sensor's twist Jacobian pulls back to the pose by keeping its δp columns.
 
 :class:`TranslatingMechanism` also holds what the deltas share besides: three actuators
-``lambda1..3``, and a named parameter vector ``rho`` (the class's :attr:`PARAM_NAMES`,
-:attr:`PARAM_IS_ANGLE`), frozen, checked by ``parameter_problem()`` when built."""
+``lambda1..3``, and a named parameter vector ``rho``
+(:class:`~pkmcal.mechanisms.param_vector.ParameterVector`)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
-from pkmcal.errors import PkmcalError
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.mechanisms.frame import Frame
+from pkmcal.mechanisms.param_vector import ParameterVector
 
 
 @dataclass(frozen=True)
@@ -49,7 +49,7 @@ class ArmLayout:
         return out
 
 
-class TranslatingMechanism(Mechanism):
+class TranslatingMechanism(ParameterVector, Mechanism):
     """The frame part of the contract for a platform that does not rotate, and the
     parameter vector of a dataclass subclass with fields ``name``, ``rho``, ``covariance``."""
 
@@ -57,51 +57,6 @@ class TranslatingMechanism(Mechanism):
     pose_names = ("x", "y", "z")
     pose_is_angle = (False, False, False)
     actuator_names = ("lambda1", "lambda2", "lambda3")
-    #: Set by each subclass: its parameter names and angle flags, and what it is called.
-    PARAM_NAMES: tuple[str, ...] = ()
-    PARAM_IS_ANGLE: tuple[bool, ...] = ()
-    LABEL = "machine"
-
-    def _freeze_params(self) -> None:
-        """``rho`` as a read-only float array of the right length, then the geometry
-        checked (``parameter_problem``): call from ``__post_init__``."""
-        rho = self._rho(np.array(self.rho, dtype=float))      # a checked copy
-        rho.setflags(write=False)
-        object.__setattr__(self, "rho", rho)
-        problem = self.parameter_problem()
-        if problem is not None:
-            raise PkmcalError(f"{self.LABEL} '{self.name}': {problem[0]} {problem[1]}")
-
-    def parameter_problem(self) -> tuple[str, str] | None:
-        """``(name, why)`` of the first parameter that makes the machine impossible."""
-        return None
-
-    def _rho(self, params) -> np.ndarray:
-        """``params`` (default the machine's) as a checked float vector."""
-        if params is None:
-            return self.rho
-        params = np.asarray(params, dtype=float)
-        if params.shape != (len(self.PARAM_NAMES),):
-            raise PkmcalError(f"{self.LABEL} '{self.name}' has {len(self.PARAM_NAMES)} parameters; got {params.shape}")
-        return params
-
-    @property
-    def param_names(self) -> tuple[str, ...]:
-        return self.PARAM_NAMES
-
-    @property
-    def param_is_angle(self) -> tuple[bool, ...]:
-        return self.PARAM_IS_ANGLE
-
-    @property
-    def params(self) -> np.ndarray:
-        return self.rho.copy()
-
-    def with_params(self, params: np.ndarray, name: str | None = None, covariance=None):
-        """The same machine with parameters ``params`` (and ``name``, ``covariance``)."""
-        return replace(self, rho=np.asarray(params, dtype=float), name=self.name if name is None else name,
-                       covariance=covariance)
-
     def frame(self, poses: np.ndarray, params: np.ndarray | None = None) -> Frame:
         """(p, I) of poses (N, 3)."""
         p = self.as_pose_array(poses)
