@@ -116,7 +116,8 @@ def register_sensor(machine: Mechanism, setup: MeasurementSetup, measurements, f
 class Predicted:
     """Held-out errors of one model (module docstring), per pose (N,): ``residuals`` (N, m)
     measured − predicted (mm, rad), ``position`` (mm) and ``orientation`` (rad) or None
-    where the sensor reads no such thing; ``ok`` False where the FK failed (NaN rows)."""
+    where the sensor reads no such thing; ``ok`` False where the FK failed (NaN rows);
+    ``poses`` (N, n) the FK poses (internal units)."""
 
     label: str
     machine: str
@@ -127,6 +128,7 @@ class Predicted:
     ok: np.ndarray
     reason: tuple[str, ...]
     registration: str = ""
+    poses: np.ndarray | None = None
 
     def summary(self, mask: np.ndarray) -> dict:
         """``{n_poses, position_mean_mm, position_rms_mm, position_max_mm, orientation_mean_deg,
@@ -152,29 +154,80 @@ def _stats(values: np.ndarray | None) -> dict:
     return {"mean": float(np.mean(v)), "rms": float(np.sqrt(np.mean(v**2))), "max": float(np.max(v))}
 
 
-def predict(machine: Mechanism, sensor: Sensor, measurements, label: str, registration: str = "") -> Predicted:
+#: Steps of the parameter continuation of :func:`held_out_fk`.
+CONTINUATION_STEPS = 8
+
+
+def held_out_fk(machine: Mechanism, q: np.ndarray, start: np.ndarray, reference: Mechanism | None = None
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(poses (N, n), ok (N,), branch_changed (N,))``: FK of ``machine`` at the readings
+    ``q`` from ``start`` (N, n). A calibration whose gauge moved the machine's frames far
+    from the nominal ones (an identified base joint 200 mm from its drawing) leaves the
+    commanded poses, given in the nominal frames, too far for Newton; for the poses that
+    fail, the FK is continued from the ``reference`` (nominal) machine's solution along
+    ρ(t) = ρ_ref + t (ρ − ρ_ref), t = 1/8 … 1, each step warm-started from the last, as
+    the fit itself moved."""
+    with np.errstate(all="ignore"):
+        fk = machine.fk_precise(q, start)
+        x = np.asarray(fk.poses, dtype=float).copy()
+        ok = fk.ok & np.all(np.isfinite(x), axis=1)
+        branch = np.asarray(fk.branch_changed, dtype=bool).copy()
+        if ok.all() or reference is None or type(reference) is not type(machine) or \
+                len(reference.params) != len(machine.params):
+            return x, ok, branch
+        bad = np.flatnonzero(~ok)
+        ref = reference.fk(q[bad], start[bad])
+        xb, good = np.asarray(ref.poses, dtype=float), ref.ok & np.all(np.isfinite(ref.poses), axis=1)
+        rho0, rho1 = np.asarray(reference.params, dtype=float), np.asarray(machine.params, dtype=float)
+        for t in np.arange(1, CONTINUATION_STEPS + 1) / CONTINUATION_STEPS:
+            step = machine.fk(q[bad], np.where(good[:, None], xb, start[bad]), params=rho0 + t * (rho1 - rho0))
+            good &= step.ok
+            xb = np.where(good[:, None], step.poses, xb)
+        final = machine.fk_precise(q[bad], np.where(good[:, None], xb, start[bad]))
+        good &= final.ok & np.all(np.isfinite(final.poses), axis=1)
+    x[bad] = np.where(good[:, None], final.poses, x[bad])
+    ok[bad] = good
+    branch[bad] &= ~good
+    return x, ok, branch
+
+
+def predict(machine: Mechanism, sensor: Sensor, measurements, label: str, registration: str = "",
+            reference: Mechanism | None = None) -> Predicted:
     """Errors of ``machine`` + ``sensor`` on ``measurements`` (module docstring), all poses
-    at once; the FK starts from the commanded poses when the file gives them, else home."""
+    at once; the FK starts from the commanded poses when the file gives them, else home
+    (continued from ``reference`` where that fails: :func:`held_out_fk`)."""
     q = np.asarray(measurements.actuators, dtype=float)
     y = np.asarray(measurements.readings, dtype=float)
     start = measurements.commanded if measurements.commanded is not None else machine.home_pose
+    x, ok, branch = held_out_fk(machine, q, np.broadcast_to(start, (len(q), machine.n_dof)).copy(), reference)
     with np.errstate(all="ignore"):
-        fk = machine.fk_precise(q, np.broadcast_to(start, (len(q), machine.n_dof)).copy())
-        ok = fk.ok & np.all(np.isfinite(fk.poses), axis=1)
-        x = np.where(ok[:, None], fk.poses, machine.home_pose)
+        x = np.where(ok[:, None], x, machine.home_pose)
         pred = sensor.predict(machine.frame(x))
     reason = tuple("" if k else ("FK converged on another assembly mode" if b else "FK did not converge")
-                   for k, b in zip(ok, fk.branch_changed))
-    r = sensor.reading_residual(y, pred)
+                   for k, b in zip(ok, branch))
+    r, position, orientation = reading_errors(sensor, y, pred, ok)
+    return Predicted(label, machine.name, sensor, r, position, orientation, ok, reason, registration, x)
+
+
+def reading_errors(sensor: Sensor, measured: np.ndarray, predicted: np.ndarray, ok: np.ndarray | None = None
+                   ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """``(r (N, m), e_p (N,) or None, e_R (N,) or None)`` of readings ``measured`` against
+    ``predicted`` (module docstring): r = measured ⊖ predicted, the position error of what
+    the sensor reads as a position, the rotation angle between the measured and predicted
+    rotations (rad) for a full-pose sensor; NaN where ``ok`` is False."""
+    ok = np.ones(len(measured), dtype=bool) if ok is None else np.asarray(ok, dtype=bool)
+    with np.errstate(invalid="ignore"):
+        r = sensor.reading_residual(measured, predicted)
     r[~ok] = np.nan
     pos_cols, rot_cols = READS.get(sensor.kind, (None, None))
     position = None if pos_cols is None else np.linalg.norm(r[:, pos_cols], axis=1)
     orientation = None
     if rot_cols is not None:
-        orientation = rotation_error(euler_to_matrix(y[:, rot_cols]), euler_to_matrix(np.where(ok[:, None],
-                                                                                                pred[:, rot_cols], 0)))
+        safe = np.where(ok[:, None], predicted[:, rot_cols], 0.0)
+        orientation = rotation_error(euler_to_matrix(np.where(ok[:, None], measured[:, rot_cols], 0.0)),
+                                     euler_to_matrix(safe))
         orientation = np.where(ok, orientation, np.nan)
-    return Predicted(label, machine.name, sensor, r, position, orientation, ok, reason, registration)
+    return r, position, orientation
 
 
 @dataclass(frozen=True)
@@ -298,14 +351,18 @@ def heldout_validation(calibrated: Mechanism, cal_setup: MeasurementSetup, nomin
         models["before"] = predict(nominal, before_sensor, heldout, "before", before_note)
     else:
         notes.append("no 'before' column: " + (before_note or "no nominal machine"))
-    models["after"] = predict(calibrated, cal_setup.sensor, heldout, "after", "the sensor identified with the machine")
+    models["after"] = predict(calibrated, cal_setup.sensor, heldout, "after", "the sensor identified with the machine",
+                              reference=nominal)
     after = models["after"]
-    good = heldout.subset(np.flatnonzero(after.ok)) if not after.ok.all() else heldout
     if not after.ok.any():
         raise PkmcalError(f"the calibrated machine's FK fails at every pose of {source}; check that the measurements "
                           "belong to this machine")
+    # the re-registration starts its FK from the poses just solved (in the calibrated machine's frames)
+    keep = np.flatnonzero(after.ok)
+    good = dataclasses.replace(heldout.subset(keep), commanded=after.poses[keep])
     reg = register_sensor(calibrated, cal_setup, good, what=f"the held-out data ({source})")
-    models["after_reregistered"] = predict(calibrated, reg.sensor, heldout, "after_reregistered", reg.note)
+    models["after_reregistered"] = predict(calibrated, reg.sensor, heldout, "after_reregistered", reg.note,
+                                           reference=nominal)
     order = {k: models[k] for k in MODELS if k in models}
     return HeldoutReport(source, cal_setup.sensor.kind, np.asarray(heldout.pose_numbers, dtype=int), order,
                          tuple(notes), tuple(clipped))

@@ -21,7 +21,7 @@ summaries (``*_deg``; ``*_rad`` are deprecated aliases).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -47,12 +47,15 @@ class PoseErrors:
 
     model: str
     reached: np.ndarray
-    position: np.ndarray
-    orientation: np.ndarray
-    tilt: np.ndarray
-    height: np.ndarray
+    position: np.ndarray | None
+    orientation: np.ndarray | None
+    tilt: np.ndarray | None
+    height: np.ndarray | None
     valid: np.ndarray
     dropped: dict[int, str] = field(default_factory=dict)
+    #: (N, m) reading residuals (true instrument − model's prediction) of a sensor that
+    #: reads neither a position nor an orientation (indicators; compare="sensor" only)
+    reading: np.ndarray | None = None
 
     def summary(self, mask: np.ndarray | None = None) -> dict[str, float]:
         """``{position_mean_mm, position_max_mm, position_rms_mm, orientation_mean_deg, …}``
@@ -62,9 +65,14 @@ class PoseErrors:
         m = self.valid if mask is None else mask
         out: dict[str, float] = {"poses": int(np.count_nonzero(m))}
         for key, (unit, _) in MEASURES.items():
-            out.update(error_stats(getattr(self, key)[m], key, unit))
+            values = getattr(self, key)
+            if values is None:   # not seen by the sensor compared (compare="sensor")
+                continue
+            out.update(error_stats(values[m], key, unit))
             if unit == "rad":
-                out.update(error_stats(np.rad2deg(getattr(self, key)[m]), key, "deg"))
+                out.update(error_stats(np.rad2deg(values[m]), key, "deg"))
+        if self.reading is not None:
+            out.update(error_stats(self.reading[m].reshape(-1), "reading", "mm"))
         return out
 
 
@@ -73,6 +81,21 @@ def error_stats(values: np.ndarray, key: str, unit: str) -> dict[str, float]:
     v = np.abs(values)
     stats = (float(np.mean(v)), float(np.max(v)), float(np.sqrt(np.mean(v**2)))) if v.size else (float("nan"),) * 3
     return {f"{key}_{name}_{unit}": x for name, x in zip(("mean", "max", "rms"), stats)}
+
+
+def frame_errors(p_r: np.ndarray, R_r: np.ndarray, p_c: np.ndarray, R_c: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(e_p, e_R, e_n, e_z)`` (N,) of reached frames (p_r, R_r) against commanded ones
+    (p_c, R_c) (module docstring)."""
+    e_p = np.linalg.norm(p_r - p_c, axis=1)
+    e_R = rotation_error(R_r, R_c)
+    nc, nr = R_c[:, :, 2], R_r[:, :, 2]
+    cross = np.linalg.norm(np.cross(nr, nc), axis=1)
+    e_n = np.arctan2(cross, np.einsum("nk,nk->n", nr, nc))
+    # plane through p_r with normal n_r, height above (x_c, y_c): eq. (6) with d_off = 0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z_plane = (np.einsum("nk,nk->n", nr, p_r) - nr[:, 0] * p_c[:, 0] - nr[:, 1] * p_c[:, 1]) / nr[:, 2]
+    return e_p, e_R, e_n, z_plane - p_c[:, 2]
 
 
 def pose_errors(model: Mechanism, real: Mechanism, poses: np.ndarray, ignore_limits: tuple[str, ...] = ()) -> PoseErrors:
@@ -116,15 +139,7 @@ def pose_errors_many(models: tuple[Mechanism, ...] | list[Mechanism], real: Mech
 
     Rc1 = euler_to_matrix(cmd1[:, 3:6])
     Rc, Rr = (np.tile(Rc1, (k, 1, 1)) if k > 1 else Rc1), euler_to_matrix(reached[:, 3:6])
-    e_p = np.linalg.norm(reached[:, 0:3] - cmd[:, 0:3], axis=1)
-    e_R = rotation_error(Rr, Rc)
-    nc, nr = Rc[:, :, 2], Rr[:, :, 2]
-    cross = np.linalg.norm(np.cross(nr, nc), axis=1)
-    e_n = np.arctan2(cross, np.einsum("nk,nk->n", nr, nc))
-    # plane through p_r with normal n_r, height above (x_c, y_c): eq. (6) with d_off = 0
-    with np.errstate(divide="ignore", invalid="ignore"):
-        z_plane = (np.einsum("nk,nk->n", nr, reached[:, 0:3]) - nr[:, 0] * cmd[:, 0] - nr[:, 1] * cmd[:, 1]) / nr[:, 2]
-    e_z = z_plane - cmd[:, 2]
+    e_p, e_R, e_n, e_z = frame_errors(reached[:, 0:3], Rr, cmd[:, 0:3], Rc)
     nan = np.where(ok, 1.0, np.nan)
     out = []
     for j, model in enumerate(models):
@@ -144,6 +159,10 @@ class VerificationReport:
     real: str
     after: PoseErrors
     before: PoseErrors | None = None
+    #: what is compared (:data:`COMPARES`): "commanded", "aligned" or "sensor"
+    compare: str = "commanded"
+    #: compare="aligned": the alignment of each model ("before", "after")
+    alignment: dict = field(default_factory=dict)
 
     @property
     def common(self) -> np.ndarray:
@@ -192,7 +211,10 @@ class VerificationReport:
         ``units``."""
         mask = self.common
         out: dict = {"poses": int(len(mask)), "used": int(np.count_nonzero(mask)), "real": self.real,
-                     "calibrated": self.after.model, "compared_set": self.compared_set()}
+                     "calibrated": self.after.model, "compared_set": self.compared_set(),
+                     "compare": self.compare, "compared": COMPARES[self.compare]}
+        if self.alignment:
+            out["alignment"] = {k: a.to_dict() for k, a in self.alignment.items()}
         if self.before is not None:
             out["nominal"] = self.before.model
             out["reached_by"] = self.reached_by()
@@ -215,15 +237,17 @@ class VerificationReport:
         d = self.to_dict()
         cols = (["before"] if self.before is not None else []) + ["after"]
         lines = [f"verification on {d['used']} of {d['poses']} held-out poses; real machine '{self.real}'",
-                 f"compared: {d['compared_set']}"]
+                 f"compared ({self.compare}): {d['compared']}", f"poses: {d['compared_set']}"]
         head = f"{'error':<36}" + "".join(f"{c:>14}" for c in cols)
         if self.before is not None:
             head += f"{'reduction':>11}"
         lines.append(head)
-        for key, (unit, text) in MEASURES.items():
+        for key, (unit, text) in {**MEASURES, "reading": ("mm", "reading residual")}.items():
             show_unit = "deg" if unit == "rad" else unit
             for stat in ("mean", "max", "rms"):
                 name = f"{key}_{stat}_{show_unit}"
+                if name not in d["after"]:
+                    continue
                 row = f"{text + ' ' + stat + ' (' + show_unit + ')':<36}"
                 row += "".join(f"{d[c][name]:>14.6g}" for c in cols)
                 if self.before is not None:
@@ -237,19 +261,84 @@ class VerificationReport:
         return "\n".join(lines)
 
 
+#: What :func:`verify` compares, and how the output says it.
+COMPARES = {
+    "commanded": "the real machine's platform pose against the commanded one, each in its model's frames (depends "
+                 "on the gauge when the calibration estimated sensor frames)",
+    "aligned": "the real machine's platform frames against the commanded ones after the best rigid alignment "
+               "T_real = A T_cmd B of the base (A) and platform (B) frames, fitted per model over the poses "
+               "compared (independent of the gauge)",
+    "sensor": "what the true instrument reads at the real machine's pose against what the model predicts it reads "
+              "at the commanded pose (tool point/frame in the world frame; each model with its own registration "
+              "of the instrument; independent of the gauge)",
+}
+
+
+def _aligned(pe: PoseErrors, cmd: np.ndarray, mask: np.ndarray):
+    """``(pe with the errors after the alignment fitted on mask, alignment)``."""
+    from pkmcal.identification.alignment import align_poses
+
+    a = align_poses(pe.reached[mask], cmd[mask])
+    p_c, R_c = a.apply(cmd[:, 0:3], euler_to_matrix(cmd[:, 3:6]))
+    e_p, e_R, e_n, e_z = frame_errors(pe.reached[:, 0:3], euler_to_matrix(pe.reached[:, 3:6]), p_c, R_c)
+    nan = np.where(pe.valid, 1.0, np.nan)
+    return replace(pe, position=e_p * nan, orientation=e_R * nan, tilt=e_n * nan, height=e_z * nan), a
+
+
+def _sensed(pe: PoseErrors, model: Mechanism, sensor, real: Mechanism, true_sensor, cmd: np.ndarray) -> PoseErrors:
+    """``pe`` with the errors of what the instruments read: the true one at the real pose,
+    against the model's registered ``sensor`` at the commanded pose."""
+    from pkmcal.identification.heldout import reading_errors
+
+    with np.errstate(all="ignore"):
+        y_true = true_sensor.predict(real.frame(np.where(pe.valid[:, None], pe.reached, cmd)))
+        y_model = sensor.predict(model.frame(cmd))
+    r, e_p, e_R = reading_errors(sensor, y_true, y_model, pe.valid)
+    return replace(pe, position=e_p, orientation=e_R, tilt=None, height=None,
+                   reading=r if e_p is None else None)
+
+
 def verify(
     calibrated: Mechanism,
     real: Mechanism,
     poses: np.ndarray,
     nominal: Mechanism | None = None,
     ignore_limits: tuple[str, ...] = (),
+    compare: str = "commanded",
+    sensors: tuple | None = None,
+    true_sensor=None,
 ) -> VerificationReport:
-    """Pose errors of ``real`` commanded through ``calibrated`` (and ``nominal``, "before")."""
+    """Pose errors of ``real`` commanded through ``calibrated`` (and ``nominal``, "before").
+
+    ``compare`` (:data:`COMPARES`): ``"commanded"`` the platform poses as commanded;
+    ``"aligned"`` after the best rigid alignment of each model's frames
+    (:mod:`pkmcal.identification.alignment`); ``"sensor"`` the readings of ``true_sensor``
+    (the real instrument) against those each model predicts with its own sensor,
+    ``sensors`` = (calibrated's, nominal's or None)."""
+    if compare not in COMPARES:
+        raise PkmcalError(f"compare must be one of {', '.join(COMPARES)}; got '{compare}'")
+    if compare == "sensor" and (true_sensor is None or sensors is None or sensors[0] is None):
+        raise PkmcalError("comparing what the sensor reads needs the true instrument and the calibrated sensor")
+    if compare == "sensor" and nominal is not None and sensors[1] is None:
+        nominal = None   # no registration of the nominal machine's sensor: no fair 'before'
     if nominal is None:
         after, before = pose_errors(calibrated, real, poses, ignore_limits), None
     else:
         after, before = pose_errors_many((calibrated, nominal), real, poses, ignore_limits)
-    report = VerificationReport(real=real.name, after=after, before=before)
+    report = VerificationReport(real=real.name, after=after, before=before, compare=compare)
+    cmd = calibrated.as_pose_array(poses) if report.common.any() else None
+    if cmd is not None and compare == "aligned":
+        mask = report.common
+        after, a_after = _aligned(after, cmd, mask)
+        alignment = {"after": a_after}
+        if before is not None:
+            before, alignment["before"] = _aligned(before, cmd, mask)
+        report = VerificationReport(real=real.name, after=after, before=before, compare=compare, alignment=alignment)
+    elif cmd is not None and compare == "sensor":
+        after = _sensed(after, calibrated, sensors[0], real, true_sensor, cmd)
+        if before is not None:
+            before = _sensed(before, nominal, sensors[1], real, true_sensor, cmd)
+        report = VerificationReport(real=real.name, after=after, before=before, compare=compare)
     if not report.common.any():
         raise PkmcalError(f"the real machine '{real.name}' reaches none of the {len(after.valid)} held-out poses "
                           f"({'; '.join(sorted(set(report.dropped.values())))}); choose poses inside its workspace")
