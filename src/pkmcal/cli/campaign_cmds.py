@@ -140,12 +140,16 @@ def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_rea
 
 
 @click.command("verify", epilog=examples(
-    "pkmcal verify calibrated.yaml --measurements heldout-meas.csv --setup tracker.yaml",
-    "pkmcal verify calibrated.yaml --measurements heldout-meas.csv --setup calibrated.yaml --json -o verify.json",
-    "pkmcal verify old-cal.yaml --measurements heldout-meas.csv --setup tracker.yaml --nominal stewart-prototype "
-    "--calibration-measurements meas.csv",
+    "pkmcal simulate stewart-prototype --real stewart-prototype-real --setup indicators-prototype --poses heldout.csv "
+    "--seed 3 -o heldout-meas.csv",
+    "pkmcal verify calibrated.yaml --measurements heldout-meas.csv --setup indicators-prototype",
+    "pkmcal verify calibrated.yaml --measurements heldout-meas.csv --setup calibrated.yaml --json -o verify-held.json",
+    "pkmcal verify calibrated.yaml --measurements heldout-meas.csv --setup indicators-prototype --nominal "
+    "stewart-prototype --calibration-measurements meas.csv",
     "pkmcal verify calibrated.yaml --real stewart-prototype-real --nominal stewart-prototype --poses heldout.csv",
-    "pkmcal verify calibrated.yaml --real stewart-prototype-real --setup tracker-true.yaml --poses heldout.csv --json"))
+    "pkmcal verify calibrated.yaml --real stewart-prototype-real --poses heldout.csv --json -o verify.json",
+    "pkmcal verify calibrated.yaml --real stewart-prototype-real --setup indicators-prototype --nominal "
+    "stewart-prototype --poses heldout.csv"))
 @click.argument("calibrated")
 @click.option("--measurements", "meas_path", metavar="HELDOUT.csv",
               help="Measured held-out data (a measurement CSV as identify reads, not used in the fit): predict each "

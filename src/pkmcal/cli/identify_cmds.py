@@ -444,6 +444,8 @@ def setup_json(result, cal_setup) -> dict:
                     ("world", "tool", "plate", "target", "indicators", "plane_offset", "zero", "std")}
     doc["units"]["noise"] = "mm; orientation_deg in deg; actuator mm (deg for rotary actuators)"
     doc["units"]["prior"] = "file units: mm, deg for angle parameters"
+    doc["units"]["simulation"] = ("stiffness N/mm (N*mm/rad for rotary actuators), load N, backlash mm (rad for "
+                                  "rotary actuators)")
     return doc
 
 

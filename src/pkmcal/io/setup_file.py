@@ -461,10 +461,10 @@ def _build(path, lines, spec: _Setup, raw: dict | None = None) -> MeasurementSet
             if noise.orientation is not None:
                 ori = _expand(path, lines, noise.orientation, 3, ("noise", "orientation"), "rad")
             else:
-                raw = (raw_noise or {}).get("orientation_deg", noise.orientation_deg)   # numbers with their text
-                _expand(path, lines, raw, 3, ("noise", "orientation_deg"), "deg")   # checks the count
-                ori = np.broadcast_to(np.array([deg_to_rad(v) for v in (raw if isinstance(raw, list) else [raw])]),
-                                      (3,)).copy()
+                raw_ori = (raw_noise or {}).get("orientation_deg", noise.orientation_deg)   # numbers with their text
+                _expand(path, lines, raw_ori, 3, ("noise", "orientation_deg"), "deg")   # checks the count
+                ori = np.broadcast_to(np.array([deg_to_rad(v) for v in
+                                                (raw_ori if isinstance(raw_ori, list) else [raw_ori])]), (3,)).copy()
             reading_std = np.concatenate([pos, ori])
         sensor = _from_file_units(sensor, raw)
     except InputFileError:
