@@ -161,7 +161,9 @@ def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_rea
               help="With --real: held-out poses x,y,z (mm), a,b,c (deg); planar machines: their pose names (x,y[,phi]).")
 @click.option("--nominal", metavar="NOMINAL",
               help="The nominal machine, for the 'before' column. Default with --measurements: the machine the "
-                   "calibration record names (a built-in, or a file that still exists).")
+                   "calibration record names (a built-in, or a file that still exists). With --real and --compare "
+                   "sensor or aligned, the --poses are in its frames (default: the record's machine) and are carried "
+                   "into the calibrated model's frames, so that both models command the same physical poses.")
 @click.option("--setup", "setup_spec", metavar="SETUP.yaml",
               help="With --measurements: the measurement setup (CALIBRATED.yaml itself works; the sensor identified "
                    "in CALIBRATED.yaml's setup: is used when it has one). With --real: the true instrument, whose "
@@ -273,8 +275,11 @@ def verify_cmd(calibrated, meas_path, real_spec, poses, nominal, setup_spec, cal
         elif setup_spec is not None:
             raise PkmcalError(f"--setup is the true instrument, whose readings --compare sensor compares; with "
                               f"--compare {mode} remove it")
+        frames = nom if nom is not None or mode == "commanded" else _nominal_from_record(cal)[0]
+        if frames is not None and type(frames) is not type(cal):
+            frames = None
         report = verify(cal, real, read_poses(poses, cal, mapping), nominal=nom, ignore_limits=tuple(ignore_limits),
-                        compare=mode, sensors=sensors, true_sensor=true_sensor)
+                        compare=mode, sensors=sensors, true_sensor=true_sensor, frames=frames)
     text = json.dumps(report.to_dict(), indent=2, allow_nan=False) + "\n" if as_json else report.format_table() + "\n"
     emit(text, output)
 

@@ -152,4 +152,28 @@ def align_poses(reached: np.ndarray, commanded: np.ndarray) -> RigidAlignment:
                         euler_to_matrix(commanded[:, 3:6]))
 
 
-__all__ = ["IDENTITY", "RigidAlignment", "align_frames", "align_poses"]
+def transport_poses(model, reference, poses: np.ndarray) -> tuple[np.ndarray, RigidAlignment]:
+    """``(poses in model's frames, alignment)``: the poses (N, 6; mm, rad) given in the frames
+    of ``reference`` (the nominal machine) expressed in the frames of ``model`` (a
+    calibration, whose gauge placed its base and platform frames elsewhere). Both models'
+    FK at the reference's IK of the poses give the same machine seen in two frame pairs,
+    T_ref ≈ A · T_model · B (:func:`align_frames`); the transported pose is A⁻¹ T_ref B⁻¹,
+    the pose the user means, in the model's frames."""
+    from pkmcal.conventions import matrix_to_euler
+    from pkmcal.identification.heldout import held_out_fk
+
+    poses = np.asarray(poses, dtype=float)
+    with np.errstate(all="ignore"):
+        q = reference.ik(poses)
+    good = np.all(np.isfinite(q), axis=1)
+    x_m, ok, _ = held_out_fk(model, np.where(good[:, None], q, 0.0), poses.copy(), reference)
+    ok &= good
+    if not ok.any():
+        return poses, IDENTITY
+    a = align_poses(poses[ok], x_m[ok])
+    R = a.R_A.T @ euler_to_matrix(poses[:, 3:6]) @ a.R_B.T
+    p = (poses[:, 0:3] - a.t_A) @ a.R_A - R @ a.t_B
+    return np.column_stack([p, matrix_to_euler(R)]), a
+
+
+__all__ = ["IDENTITY", "RigidAlignment", "align_frames", "align_poses", "transport_poses"]

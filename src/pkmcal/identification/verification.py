@@ -163,6 +163,9 @@ class VerificationReport:
     compare: str = "commanded"
     #: compare="aligned": the alignment of each model ("before", "after")
     alignment: dict = field(default_factory=dict)
+    #: compare="aligned" / "sensor" with a nominal model: the alignment that carried the
+    #: held-out poses (nominal frames) into the calibrated model's frames ("after")
+    transported: dict = field(default_factory=dict)
 
     @property
     def common(self) -> np.ndarray:
@@ -215,6 +218,12 @@ class VerificationReport:
                      "compare": self.compare, "compared": COMPARES[self.compare]}
         if self.alignment:
             out["alignment"] = {k: a.to_dict() for k, a in self.alignment.items()}
+        if self.transported:
+            out["poses_transported"] = {
+                "note": "the held-out poses are given in the nominal machine's frames; the calibrated model is "
+                        "commanded at the same poses expressed in its own frames (T_nominal = A T_calibrated B, "
+                        "fitted on both models' FK at the nominal IK of the poses)",
+                **{k: (a if isinstance(a, str) else a.to_dict()) for k, a in self.transported.items()}}
         if self.before is not None:
             out["nominal"] = self.before.model
             out["reached_by"] = self.reached_by()
@@ -307,6 +316,7 @@ def verify(
     compare: str = "commanded",
     sensors: tuple | None = None,
     true_sensor=None,
+    frames: Mechanism | None = None,
 ) -> VerificationReport:
     """Pose errors of ``real`` commanded through ``calibrated`` (and ``nominal``, "before").
 
@@ -314,31 +324,51 @@ def verify(
     ``"aligned"`` after the best rigid alignment of each model's frames
     (:mod:`pkmcal.identification.alignment`); ``"sensor"`` the readings of ``true_sensor``
     (the real instrument) against those each model predicts with its own sensor,
-    ``sensors`` = (calibrated's, nominal's or None)."""
+    ``sensors`` = (calibrated's, nominal's or None). With ``"aligned"`` and ``"sensor"``
+    and a nominal model, the poses (in the nominal frames) are carried into the calibrated
+    model's frames first (:func:`~pkmcal.identification.alignment.transport_poses`), so
+    that both models command the same physical poses whatever the calibration's gauge;
+    ``frames`` names the machine whose frames the poses are given in when there is no
+    nominal model (the calibration record's nominal machine), None: the calibrated one's."""
     if compare not in COMPARES:
         raise PkmcalError(f"compare must be one of {', '.join(COMPARES)}; got '{compare}'")
     if compare == "sensor" and (true_sensor is None or sensors is None or sensors[0] is None):
         raise PkmcalError("comparing what the sensor reads needs the true instrument and the calibrated sensor")
     if compare == "sensor" and nominal is not None and sensors[1] is None:
         nominal = None   # no registration of the nominal machine's sensor: no fair 'before'
-    if nominal is None:
-        after, before = pose_errors(calibrated, real, poses, ignore_limits), None
-    else:
-        after, before = pose_errors_many((calibrated, nominal), real, poses, ignore_limits)
-    report = VerificationReport(real=real.name, after=after, before=before, compare=compare)
-    cmd = calibrated.as_pose_array(poses) if report.common.any() else None
-    if cmd is not None and compare == "aligned":
-        mask = report.common
-        after, a_after = _aligned(after, cmd, mask)
-        alignment = {"after": a_after}
-        if before is not None:
-            before, alignment["before"] = _aligned(before, cmd, mask)
-        report = VerificationReport(real=real.name, after=after, before=before, compare=compare, alignment=alignment)
-    elif cmd is not None and compare == "sensor":
-        after = _sensed(after, calibrated, sensors[0], real, true_sensor, cmd)
-        if before is not None:
-            before = _sensed(before, nominal, sensors[1], real, true_sensor, cmd)
+    cmd = calibrated.as_pose_array(poses)
+    transported = {}
+    if compare == "commanded":
+        if nominal is None:
+            after, before = pose_errors(calibrated, real, cmd, ignore_limits), None
+        else:
+            after, before = pose_errors_many((calibrated, nominal), real, cmd, ignore_limits)
         report = VerificationReport(real=real.name, after=after, before=before, compare=compare)
+    else:
+        cmd_cal = cmd
+        reference = nominal if nominal is not None else frames
+        if reference is not None:   # the poses the user means (nominal frames), in the calibration's frames
+            from pkmcal.identification.alignment import transport_poses
+
+            cmd_cal, transported["after"] = transport_poses(calibrated, reference, cmd)
+            transported["frames_of"] = reference.name
+        after = pose_errors(calibrated, real, cmd_cal, ignore_limits)
+        before = None if nominal is None else pose_errors(nominal, real, cmd, ignore_limits)
+        report = VerificationReport(real=real.name, after=after, before=before, compare=compare)
+        mask = report.common
+        if mask.any() and compare == "aligned":
+            after, a_after = _aligned(after, cmd_cal, mask)
+            alignment = {"after": a_after}
+            if before is not None:
+                before, alignment["before"] = _aligned(before, cmd, mask)
+            report = VerificationReport(real=real.name, after=after, before=before, compare=compare,
+                                        alignment=alignment, transported=transported)
+        elif mask.any():
+            after = _sensed(after, calibrated, sensors[0], real, true_sensor, cmd_cal)
+            if before is not None:
+                before = _sensed(before, nominal, sensors[1], real, true_sensor, cmd)
+            report = VerificationReport(real=real.name, after=after, before=before, compare=compare,
+                                        transported=transported)
     if not report.common.any():
         raise PkmcalError(f"the real machine '{real.name}' reaches none of the {len(after.valid)} held-out poses "
                           f"({'; '.join(sorted(set(report.dropped.values())))}); choose poses inside its workspace")
