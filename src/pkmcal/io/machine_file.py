@@ -565,6 +565,18 @@ def _metadata_from_spec(spec: Any) -> dict:
     return metadata
 
 
+def _flow_lists(obj: Any) -> Any:
+    """``obj`` with every list of scalars written on one line (:class:`FlowList`), as
+    :func:`pkmcal.io.setup_file.setup_to_dict` writes them, so that a ``setup:`` mapping
+    read back from a file is written again byte for byte."""
+    if isinstance(obj, dict):
+        return {k: _flow_lists(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        items = [_flow_lists(v) for v in obj]
+        return FlowList(items) if all(not isinstance(v, (dict, list)) for v in items) else items
+    return obj
+
+
 def _metadata_to_file(metadata: dict) -> dict:
     """The ``calibration:`` and ``metadata:`` blocks of a machine file (inverse of
     :func:`_metadata_from_spec`); empty blocks are left out."""
@@ -573,7 +585,7 @@ def _metadata_to_file(metadata: dict) -> dict:
     if "calibration" in meta:
         out["calibration"] = meta.pop("calibration")
     if "setup" in meta:
-        out["setup"] = meta.pop("setup")
+        out["setup"] = _flow_lists(meta.pop("setup"))
     if meta:
         out["metadata"] = meta
     return out
