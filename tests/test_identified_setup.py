@@ -16,9 +16,10 @@ import json
 import numpy as np
 import pytest
 import yaml
-from click.testing import CliRunner
+from helpers import assert_user_error
+from test_json_units import uncovered
+from test_verify_heldout import TRACKER_FREE, TRACKER_TRUE, ok, run
 
-from pkmcal.cli.main import cli
 from pkmcal.identification.engine import identify
 from pkmcal.io._yaml import rad_to_deg_text
 from pkmcal.io.machine_file import load_machine, machine_from_text, machine_to_text
@@ -27,30 +28,7 @@ from pkmcal.io.setup_file import identified_setup, load_setup
 from pkmcal.mechanisms.library import builtin_machine, stewart_prototype
 from pkmcal.sensors import FullPoseSensor
 
-from helpers import assert_user_error
-from test_json_units import uncovered
-
 NOMINAL = stewart_prototype()
-TRACKER_FREE = """sensor: position
-target: {x: 0, y: 0, z: 0}
-world: {x: 0, y: 0, z: 0, a: 0, b: 0, c: 0}
-free: [target.x, target.y, target.z, world.x, world.y, world.z, world.a, world.b, world.c]
-noise: {reading: 0.01, actuator: 0.005}
-"""
-TRACKER_TRUE = """sensor: position
-target: {x: 5, y: -3, z: 20}
-world: {x: 10, y: -5, z: 3, a: 0.5, b: -0.3, c: 4}
-noise: {reading: 0.01, actuator: 0.005}
-"""
-
-
-def run(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args])
-
-
-def ok(res):
-    assert res.exit_code == 0, res.output
-    return res
 
 
 @pytest.fixture(scope="module")

@@ -20,7 +20,9 @@ import numpy as np
 import pytest
 import yaml
 from click.testing import CliRunner
+from helpers import assert_user_error
 from scipy.spatial.transform import Rotation
+from test_json_units import uncovered
 
 from pkmcal.cli.main import cli
 from pkmcal.conventions import euler_to_matrix
@@ -30,9 +32,6 @@ from pkmcal.io.machine_file import load_machine, machine_to_text
 from pkmcal.io.measurements import Measurements, save_measurements
 from pkmcal.io.setup_file import load_setup
 from pkmcal.mechanisms.library import stewart_prototype
-
-from helpers import assert_user_error
-from test_json_units import uncovered
 
 NOMINAL = stewart_prototype()
 REAL = load_machine("stewart-prototype-real")
@@ -241,6 +240,7 @@ def test_alignment_recovers_known_transforms():
     assert np.abs(a.R_A - R_A).max() < 1e-12 and np.abs(a.R_B - R_B).max() < 1e-12
     assert np.abs(a.t_A - t_A).max() < 1e-9 and np.abs(a.t_B - t_B).max() < 1e-9   # mm, at 300 mm scale
     p, R = a.apply(x[:, :3], R_c)
+    assert np.abs(R - R_A @ R_c @ R_B).max() < 1e-12
     assert np.abs(p - p_r).max() < 1e-9
 
 

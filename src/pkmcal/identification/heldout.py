@@ -272,7 +272,7 @@ class HeldoutReport:
     def to_dict(self) -> dict:
         mask = self.common
         out: dict = {"measurements": self.source, "sensor": self.sensor_kind, "measured_as": self.measured_as(),
-                     "n_poses_file": int(len(mask)), "n_poses": int(np.count_nonzero(mask))}
+                     "n_poses_file": len(mask), "n_poses": int(np.count_nonzero(mask))}
         for label, p in self.models.items():
             out[label] = {**p.summary(mask), "machine": p.machine, "registration": p.registration,
                           "sensor_parameters": sensor_values(p.sensor, _free_names(p.sensor))}
@@ -368,5 +368,14 @@ def heldout_validation(calibrated: Mechanism, cal_setup: MeasurementSetup, nomin
                          tuple(notes), tuple(clipped))
 
 
-__all__ = ["HeldoutReport", "MODELS", "Predicted", "Registration", "heldout_validation", "predict",
-           "register_sensor", "sensor_from_values", "sensor_values"]
+__all__ = [
+    "MODELS",
+    "HeldoutReport",
+    "Predicted",
+    "Registration",
+    "heldout_validation",
+    "predict",
+    "register_sensor",
+    "sensor_from_values",
+    "sensor_values",
+]

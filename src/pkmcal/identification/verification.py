@@ -17,6 +17,23 @@ bring the real machine to, so that "before" and "after" compare the same poses; 
 real machine cannot reach through either model (FK not converged or on another assembly
 mode, real limits) is reported with the model that failed. Angles in degrees in the
 summaries (``*_deg``; ``*_rad`` are deprecated aliases).
+
+What is compared (``compare``, :data:`COMPARES`; issue 11 item 4). A calibration that also
+estimated the sensor's frames (a laser tracker with a free tracker frame) fixes a gauge: its
+base and platform frames are a choice, and platform poses "as commanded" compare frames the
+gauge made arbitrary (a correct calibration then looks like a large degradation).
+
+* ``commanded``: the errors above, each model in its own frames (the papers' figures);
+* ``aligned``: the same errors after the best rigid alignment T_r ≈ A·T_c·B of base and
+  platform frames per model (:mod:`pkmcal.identification.alignment`);
+* ``sensor``: what the true instrument reads at the real pose, h_true(F_real(x_r)), against
+  what the model predicts its registered instrument reads at the commanded pose,
+  h_M(F_M(x_c)) (tool point/frame in the world frame; errors as in
+  :mod:`pkmcal.identification.heldout`).
+
+With ``aligned`` and ``sensor`` the poses, given in the nominal machine's frames, are first
+carried into the calibrated model's frames (:func:`~pkmcal.identification.alignment.transport_poses`),
+so that both models command the same physical poses whatever the gauge.
 """
 
 from __future__ import annotations
