@@ -224,8 +224,9 @@ def test_planar_error_paths(tmp_path):
                        "--setup")
     assert_user_error(run("verify", nominal.name, "--real", tmp_path / "real.yaml", "--poses", held, "--setup",
                            nosim), "simulation:")
+    # for a non-redundant machine --setup is the true instrument (verify --compare sensor): it must fit the machine
     assert_user_error(run("verify", "stewart-prototype", "--real", "stewart-prototype", "--poses", held,
-                           "--setup", setup_path), "--setup applies")
+                           "--setup", setup_path), "cannot measure")
 
 
 @pytest.mark.parametrize("sensor_kind", ["planar-tool", "position"])

@@ -17,6 +17,7 @@ a user error nothing is written and the exit code is 2.
 from __future__ import annotations
 
 import json
+import os
 
 import click
 import numpy as np
@@ -34,7 +35,7 @@ from pkmcal.cli.options import check_output, emit, examples, output_option, quie
 from pkmcal.cli.option_types import SEED, FiniteFloat
 from pkmcal.io.atomic import atomic_write_text
 from pkmcal.io.limits import MAX_MAGNITUDE
-from pkmcal.io.measurements import measurement_columns
+from pkmcal.io.measurements import CLIPPED_POLICIES, measurement_columns
 from pkmcal.io.tables import format_table, read_poses
 from pkmcal.sensors.library import BUILTIN_SETUPS
 
@@ -193,39 +194,102 @@ def _simulate_sessions(nominal, real, setup, commanded, rng, n_sessions: int, er
 
 
 @click.command("verify", epilog=examples(
+    "pkmcal simulate stewart-prototype --real stewart-prototype-real --setup indicators-prototype --poses heldout.csv "
+    "--seed 3 -o heldout-meas.csv",
+    "pkmcal verify calibrated.yaml --measurements heldout-meas.csv --setup indicators-prototype",
+    "pkmcal verify calibrated.yaml --measurements heldout-meas.csv --setup calibrated.yaml --json -o verify-held.json",
+    "pkmcal verify calibrated.yaml --measurements heldout-meas.csv --setup indicators-prototype --nominal "
+    "stewart-prototype --calibration-measurements meas.csv",
     "pkmcal verify calibrated.yaml --real stewart-prototype-real --nominal stewart-prototype --poses heldout.csv",
-    "pkmcal verify calibrated.yaml --real stewart-prototype-real --poses heldout.csv --json -o verify.json"))
+    "pkmcal verify calibrated.yaml --real stewart-prototype-real --poses heldout.csv --json -o verify.json",
+    "pkmcal verify calibrated.yaml --real stewart-prototype-real --setup indicators-prototype --nominal "
+    "stewart-prototype --poses heldout.csv"))
 @click.argument("calibrated")
-@click.option("--real", "real_spec", required=True, metavar="REAL", help="The real machine (file or built-in name).")
-@click.option("--poses", required=True, metavar="HELDOUT.csv",
-              help="Held-out poses: x,y,z (mm), a,b,c (deg); planar machines: their pose names (x,y[,phi]).")
-@click.option("--nominal", metavar="NOMINAL", help="The nominal machine, for the 'before' column.")
+@click.option("--measurements", "meas_path", metavar="HELDOUT.csv",
+              help="Measured held-out data (a measurement CSV as identify reads, not used in the fit): predict each "
+                   "measurement from its actuator readings and compare with what was measured.")
+@click.option("--real", "real_spec", metavar="REAL",
+              help="Instead of --measurements: the true machine (file or built-in name) of a simulation, commanded "
+                   "at the --poses through each model.")
+@click.option("--poses", metavar="HELDOUT.csv",
+              help="With --real: held-out poses x,y,z (mm), a,b,c (deg); planar machines: their pose names (x,y[,phi]).")
+@click.option("--nominal", metavar="NOMINAL",
+              help="The nominal machine, for the 'before' column. Default with --measurements: the machine the "
+                   "calibration record names (a built-in, or a file that still exists). With --real and --compare "
+                   "sensor or aligned, the --poses are in its frames (default: the record's machine) and are carried "
+                   "into the calibrated model's frames, so that both models command the same physical poses.")
 @click.option("--setup", "setup_spec", metavar="SETUP.yaml",
-              help="Redundant machines only (required there): the tracker setup with the 'simulation:' "
-                   "stiffness and load the real machine settles under.")
+              help="With --measurements: the measurement setup (CALIBRATED.yaml itself works; the sensor identified "
+                   "in CALIBRATED.yaml's setup: is used when it has one). With --real: the true instrument, whose "
+                   "readings are compared (--compare sensor); redundant machines: the tracker setup with the "
+                   "'simulation:' stiffness and load (required there).")
+@click.option("--calibration-measurements", "calib_meas", metavar="MEAS.csv",
+              help="With --measurements, for a calibrated file without calibration.before_registration: the "
+                   "calibration data on which the nominal machine's sensor frames are registered for 'before'.")
+@click.option("--compare", type=click.Choice(["auto", "sensor", "aligned", "commanded"]), default="auto",
+              show_default=True,
+              help="With --real: what is compared. sensor: the true instrument's readings (--setup) against each "
+                   "model's prediction (tool point/frame in the world frame); aligned: platform frames after the "
+                   "best rigid alignment of base and platform frames; commanded: platform poses as commanded (depends "
+                   "on the gauge when sensor frames were identified). auto: sensor with --setup, else aligned.")
+@click.option("--clipped", type=click.Choice(CLIPPED_POLICIES), default=None,
+              help="With --measurements: held-out poses with a clipped or stuck actuator reading are listed and left "
+                   "out (drop, the default), used (keep), or an error, as identify does.")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
 @click.option("--ignore-limit", "ignore_limits", multiple=True, metavar="NAME",
-              help="A limit of the real machine not to check (e.g. leg_collision); repeatable.")
+              help="With --real: a limit of the real machine not to check (e.g. leg_collision); repeatable.")
 @output_option("FILE", "Write the table/JSON here")
 @import_options
-def verify_cmd(calibrated, real_spec, poses, nominal, setup_spec, as_json, ignore_limits, output, mapping) -> None:
-    """Pose errors of the REAL machine commanded through CALIBRATED (and NOMINAL) on held-out poses.
+def verify_cmd(calibrated, meas_path, real_spec, poses, nominal, setup_spec, calib_meas, compare, clipped, as_json,
+               ignore_limits, output, mapping) -> None:
+    """Validate CALIBRATED on held-out data: measured (--measurements) or a true machine (--real).
 
-    For each pose the actuators are commanded by the model's inverse kinematics and the real
-    machine's pose is compared with the commanded one: position (mm), orientation angle,
-    platform-plane tilt and height error at the platform centre (what indicators see).
-    JSON keys: before/after: {position_mean_mm, position_max_mm, position_rms_mm,
-    orientation_mean_rad, ..., tilt_*_rad, height_*_mm}.
+    --measurements HELDOUT.csv: each held-out measurement is predicted from its actuator
+    readings (FK of CALIBRATED, then the sensor identified with it) and compared with what
+    was measured, per pose and in summary (mean, RMS, max): full-pose sensors position
+    error (mm) and the rotation angle between measured and predicted rotations (deg);
+    position sensors position only; indicators the reading residuals (mm). Beside it:
+    'before', the nominal machine with its sensor frames registered on the calibration
+    data (calibration.before_registration), and 'after_reregistered', CALIBRATED with only
+    the setup's free sensor parameters refitted on the held-out data (what no
+    re-registration of the instrument can remove). Poses whose FK fails are listed. JSON
+    keys: before, after, after_reregistered: {position_mean_mm, position_rms_mm,
+    position_max_mm, orientation_rms_deg (null where the sensor reads no orientation),
+    reading_*_mm, n_poses}; per_pose (the file's pose numbers), failed, clipped.
 
-    Redundantly actuated machines (planar-2dof-3act, planar-3dof-4act): the tool point
-    should read the tracker value of each held-out pose; each model commands it (the
+    --real REAL --poses HELDOUT.csv: for each pose the actuators are commanded by the
+    model's inverse kinematics and the real machine goes where its FK takes it; --compare
+    says what is compared (stated in the output and the JSON key 'compare'). JSON keys:
+    before/after: {position_mean_mm, position_max_mm, position_rms_mm,
+    orientation_mean_deg, ..., tilt_*_deg, height_*_mm}, compare, compared.
+
+    Redundantly actuated machines (planar-2dof-3act, planar-3dof-4act) with --real: the tool
+    point should read the tracker value of each held-out pose; each model commands it (the
     calibrated one with the tracker parameters identified with it), the REAL machine
     settles at static equilibrium under the --setup's stiffness and load, and the tool
     error |reading - target| (mm; plate angle error in deg for 3-dof) is reported. JSON
     keys: before/after: {poses, tool_mean_mm, tool_max_mm, tool_rms_mm[, angle_*_deg]},
     improvement_pct, dropped.
     """
-    check_output(output, [calibrated, real_spec, poses, nominal, setup_spec])
+    if (real_spec is None) == (meas_path is None):
+        raise PkmcalError("give exactly one of --measurements HELDOUT.csv (measured held-out data) or --real REAL "
+                          "(a true machine, with --poses)")
+    check_output(output, [calibrated, real_spec, poses, nominal, setup_spec, meas_path, calib_meas])
+    if meas_path is not None:
+        for name, value in (("--poses", poses), ("--ignore-limit", ignore_limits or None),
+                            ("--compare", None if compare == "auto" else compare)):
+            if value is not None:
+                raise PkmcalError(f"{name} applies to --real; with --measurements the held-out poses are the rows "
+                                  "of HELDOUT.csv")
+        text = _verify_measured(calibrated, meas_path, nominal, setup_spec, calib_meas, clipped or "drop", as_json,
+                                mapping)
+        emit(text, output)
+        return
+    if poses is None:
+        raise PkmcalError("--real needs the held-out poses: give --poses HELDOUT.csv")
+    for name, value in (("--calibration-measurements", calib_meas), ("--clipped", clipped)):
+        if value is not None:
+            raise PkmcalError(f"{name} applies to --measurements (measured held-out data), not to --real")
     from pkmcal.io.machine_file import load_machine
     from pkmcal.io.setup_file import load_setup
 
@@ -240,12 +304,133 @@ def verify_cmd(calibrated, real_spec, poses, nominal, setup_spec, as_json, ignor
         if setup_spec is None:
             raise PkmcalError(f"machine '{cal.name}' is redundantly actuated: give --setup SETUP with the "
                               "'simulation:' stiffness and load the real machine settles under")
+        if compare not in ("auto", "sensor"):
+            raise PkmcalError(f"--compare {compare}: a redundantly actuated machine is verified on what its tracker "
+                              "reads (the tool point); leave out --compare")
         setup = load_setup(setup_spec, cal)
         report = verify_redundant(cal, real, setup, read_poses(poses, cal, mapping), nominal=nom,
                                   ignore_limits=tuple(ignore_limits))
     else:
-        if setup_spec is not None:
-            raise PkmcalError("--setup applies to redundantly actuated machines only; remove it")
-        report = verify(cal, real, read_poses(poses, cal, mapping), nominal=nom, ignore_limits=tuple(ignore_limits))
+        mode = ("sensor" if setup_spec is not None else "aligned") if compare == "auto" else compare
+        sensors = true_sensor = None
+        if mode == "sensor":
+            if setup_spec is None:
+                raise PkmcalError("--compare sensor compares what the true instrument reads: give it with --setup "
+                                  "TRUE-SETUP.yaml (the setup the measurements were simulated with)")
+            true_sensor = load_setup(setup_spec, real).sensor
+            cal_setup = _identified_setup(calibrated, cal, "--compare sensor")
+            if cal_setup.sensor.kind != true_sensor.kind:
+                raise PkmcalError(f"the true instrument ({setup_spec}) is a '{true_sensor.kind}' sensor, the one "
+                                  f"identified in {calibrated} a '{cal_setup.sensor.kind}' sensor; give the same kind")
+            before_sensor = None
+            if nom is not None:
+                before_sensor, _ = _before_sensor(cal, cal_setup, nom, None, None, mapping)
+            sensors = (cal_setup.sensor, before_sensor)
+        elif setup_spec is not None:
+            raise PkmcalError(f"--setup is the true instrument, whose readings --compare sensor compares; with "
+                              f"--compare {mode} remove it")
+        frames = nom if nom is not None or mode == "commanded" else _nominal_from_record(cal)[0]
+        if frames is not None and type(frames) is not type(cal):
+            frames = None
+        report = verify(cal, real, read_poses(poses, cal, mapping), nominal=nom, ignore_limits=tuple(ignore_limits),
+                        compare=mode, sensors=sensors, true_sensor=true_sensor, frames=frames)
     text = json.dumps(report.to_dict(), indent=2, allow_nan=False) + "\n" if as_json else report.format_table() + "\n"
     emit(text, output)
+
+
+def _identified_setup(path: str, cal, what: str):
+    """The setup identified with the calibrated machine (its file's ``setup:``)."""
+    from pkmcal.io.setup_file import load_setup
+
+    if "setup" not in getattr(cal, "metadata", {}) or not os.path.exists(path):
+        raise PkmcalError(f"{what}: {path} has no identified setup (setup:, written by 'pkmcal identify' since "
+                          "2026-12); recalibrate, or compare without the sensor")
+    return load_setup(path, cal)
+
+
+def _nominal_from_record(cal):
+    """The nominal machine the calibration record names, when it is a built-in or a file
+    that still exists; ``(machine or None, why not)``."""
+    from pkmcal.io.machine_file import load_machine
+    from pkmcal.mechanisms.library import is_builtin_name
+
+    record = dict(getattr(cal, "metadata", {}).get("calibration") or {})
+    src = (record.get("inputs") or {}).get("machine") or {}
+    spec = src.get("builtin") or src.get("file")
+    if not isinstance(spec, str):
+        return None, "the calibration record names no nominal machine; give --nominal"
+    if "builtin" in src and is_builtin_name(spec) or os.path.isfile(spec):
+        return load_machine(spec), ""
+    return None, f"the nominal machine of the calibration record ('{spec}') is neither a built-in nor an existing " \
+                 "file; give --nominal"
+
+
+def _before_sensor(cal, cal_setup, nominal, setup, calib_meas, mapping):
+    """``(sensor, note)`` of the nominal machine for 'before': the sensor registered on the
+    calibration data (calibration.before_registration, else a registration on
+    --calibration-measurements), or (None, why)."""
+    from pkmcal.identification.heldout import register_sensor, sensor_from_values
+
+    record = dict(getattr(cal, "metadata", {}).get("calibration") or {})
+    stored = record.get("before_registration")
+    if not cal_setup.sensor.default_free:
+        return cal_setup.sensor, "no free sensor parameter: the sensor as the setup gives it"
+    if calib_meas is not None:
+        from pkmcal.io.measurements import load_measurements
+
+        base = setup if setup is not None else cal_setup
+        reg = register_sensor(nominal, base, load_measurements(calib_meas, nominal, base, mapping),
+                              what=f"the calibration data ({calib_meas})")
+        return reg.sensor, reg.note
+    if isinstance(stored, dict):
+        return (sensor_from_values(cal_setup.sensor, stored, "calibration.before_registration"),
+                f"{', '.join(stored)} registered on the calibration data with the nominal machine held "
+                "(calibration.before_registration)")
+    return None, ("the calibrated file has no calibration.before_registration (written by 'pkmcal identify' since "
+                  "2026-12): give --nominal and --calibration-measurements MEAS.csv to register the nominal machine's "
+                  "sensor frames on the calibration data")
+
+
+def _verify_measured(calibrated, meas_path, nominal, setup_spec, calib_meas, clipped, as_json, mapping) -> str:
+    """``verify --measurements``: the text or JSON of the held-out validation."""
+    from pkmcal.identification.heldout import heldout_validation
+    from pkmcal.io.machine_file import load_machine
+    from pkmcal.io.measurements import apply_clipped_policy, load_measurements
+    from pkmcal.io.setup_file import load_setup
+
+    cal = load_machine(calibrated)
+    given = None if setup_spec is None else load_setup(setup_spec, cal)
+    if "setup" in getattr(cal, "metadata", {}):
+        cal_setup = load_setup(calibrated, cal)
+        if given is not None and given.sensor.kind != cal_setup.sensor.kind:
+            raise PkmcalError(f"--setup {setup_spec} has a '{given.sensor.kind}' sensor, {calibrated} was identified "
+                              f"with a '{cal_setup.sensor.kind}' sensor; give the setup of the calibration")
+    elif given is not None:
+        cal_setup = given
+    else:
+        raise PkmcalError(f"{calibrated} has no identified setup (setup:): give the measurement setup with --setup")
+    if is_redundant(cal):
+        raise PkmcalError(f"machine '{cal.name}' is redundantly actuated: held-out measurements need FK from the "
+                          "actuator readings alone; verify it against a true machine with --real")
+    notes: list[str] = []
+    if nominal is not None:
+        nom, why = load_machine(nominal), ""
+    else:
+        nom, why = _nominal_from_record(cal)
+    if nom is not None and type(nom) is not type(cal):
+        raise PkmcalError(f"machine '{nom.name}' is not of the kind of '{cal.name}' "
+                          f"({type(nom).__name__} vs {type(cal).__name__})")
+    if calib_meas is not None and nom is None:
+        raise PkmcalError(f"--calibration-measurements registers the nominal machine's sensor frames: {why}")
+    before_sensor, note = (None, why) if nom is None else _before_sensor(cal, cal_setup, nom, given, calib_meas,
+                                                                          mapping)
+    held, found, lines = apply_clipped_policy(load_measurements(meas_path, cal, cal_setup, mapping), cal, clipped)
+    unit = {n: ("deg" if a else "mm") for n, a in zip(cal.actuator_names, cal.actuator_is_angle)}
+    notes.extend(f"warning: {w}" for w in lines)
+    report = heldout_validation(cal, cal_setup, nom, before_sensor, held, source=str(meas_path), before_note=note,
+                                notes=notes, clipped=tuple(c.to_dict(unit[c.actuator]) for c in found))
+    if as_json:
+        from pkmcal.io.json_out import finite_or_null
+
+        return json.dumps(finite_or_null(report.to_dict()), indent=2, allow_nan=False) + "\n"
+    return report.format_table() + "\n"

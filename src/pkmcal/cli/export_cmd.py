@@ -86,13 +86,17 @@ def calibration_json(machine: Mechanism, source: str | None = None) -> dict:
                   "actuator_stroke": "mm (deg for rotary actuators): [min, max] reading",
                   "n_poses": "1", "n_free": "1", "reduced_chi2": "1",
                   "rms_residual": "the unit of the fit's residual rows (mm; 1 when whitened or mixed)",
-                  "sensor": "mm; deg for the sensor's angle parameters"},
+                  "sensor": "mm; deg for the sensor's angle parameters",
+                  "before_registration": "mm; deg for the sensor's angle parameters",
+                  "setup": "the identified setup in setup-file units: mm; deg for angles (a, b, c, "
+                           "orientation_deg, angle parameters and their std)"},
         "conventions": CONVENTIONS,
         "parameters": params,
         "n_identified": int(np.count_nonzero(~np.isnan(std))),
         "correlation": corr_block,
         "home_pose": {n: _finite(v) for n, v in zip(machine.pose_names, home)},
         "calibration": meta.pop("calibration", None),
+        "setup": meta.pop("setup", None),
         "metadata": meta or None,
     }
     if hasattr(machine, "stroke"):

@@ -12,6 +12,7 @@ on a user error nothing is written and the exit code is 2.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import click
@@ -309,10 +310,14 @@ def radian_hints(nominal, setup, meas) -> list[str]:
               help="With a 'session' column of several sessions: estimate actuator zero offsets dq_i@LABEL for "
                    "every session but the first (the actuators re-homed between sessions; the first session's "
                    "zeros are the machine's). Same as the setup's 'sessions: {actuator_offsets: true}'.")
+@click.option("--heldout", "heldout", metavar="HELDOUT.csv",
+              help="Held-out measurements (same columns as MEAS.csv, not used in the fit): print the validation of "
+                   "'pkmcal verify CALIBRATED.yaml --measurements HELDOUT.csv' (before / after / "
+                   "after_reregistered) and show it in the --report.")
 @import_options
 def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fix, free, output, name, as_json,
                  report_dir=None, mapping=None, keep=None, loss="linear", f_scale=None, reject=None,
-                 prior=(), clipped="drop", session_offsets=False) -> None:
+                 prior=(), clipped="drop", session_offsets=False, heldout=None) -> None:
     """Identify MACHINE's kinematic parameters from MEAS.csv and write CALIBRATED.yaml.
 
     Units: mm, degrees in files and tables. Unidentifiable combinations are fixed
@@ -334,8 +339,15 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     sensor parameters, named NAME@LABEL (world.x@2); the machine is shared. A name or
     pattern without @ in --free/--fix means that parameter in every session. The fit
     summary and --json ('sessions') give each session's identified sensor, mm and degrees.
+
+    CALIBRATED.yaml also carries the identified sensor under 'setup:' (setup-file form:
+    world/tool/plate/zero... in mm and degrees, with their 1σ 'std:' and the covariance
+    they come from), so that '--setup CALIBRATED.yaml' reuses it anywhere, and under
+    'calibration.before_registration' the sensor's free parameters fitted with the machine
+    held at nominal (the fair "before" of 'pkmcal verify'). --heldout validates the result
+    on measurements the fit did not see.
     """
-    inputs = [machine, measurements, setup_spec]
+    inputs = [machine, measurements, setup_spec] + ([heldout] if heldout is not None else [])
     check_output(output, inputs)
     if to_stdout(output) and as_json:
         raise PkmcalError("-o - puts the machine file on standard output; --json would go there too: "
@@ -386,8 +398,6 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
                 "check the fit (chi2/dof undefined); measure more poses or fix parameters; nothing written")
     hints = [f"warning: {w}" for w in clipped_lines] + radian_hints(nominal, setup, meas)
     if hints:
-        import dataclasses
-
         result = dataclasses.replace(result, warnings=tuple(result.warnings) + tuple(hints))
     free_line = free_statement(result, free_opt, fit_setup)
     geometry = None
@@ -395,10 +405,20 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
         from pkmcal.identification.geometry import readable_geometry
 
         geometry = readable_geometry(nominal, result.mechanism, "the covariance written to the machine file")
-    text = machine_to_text(_with_calibration_record(result, machine, measurements, setup_spec, name))
+    before = _before_registration(nominal, setup, meas, result) if baseline is None else None
+    cal_setup = identified_setup_of(setup, result) if baseline is None else None
+    text = machine_to_text(_with_calibration_record(result, machine, measurements, setup_spec, name,
+                                                    setup=cal_setup, before=before))
     _check_loads_back(text, "(standard output)" if to_stdout(output) else output)
+    validation = None
+    if heldout is not None:
+        if cal_setup is None:
+            raise PkmcalError(f"--heldout: the {baseline} baseline identifies a reduced model; validate the full "
+                              "calibration (leave out --method) on held-out data")
+        validation = _heldout_validation(result.mechanism, cal_setup, nominal, before, heldout, mapping, clipped)
     report = None if report_dir is None else _report_data(nominal, result, setup, meas, measurements,
-                                                           "(standard output)" if to_stdout(output) else output)
+                                                           "(standard output)" if to_stdout(output) else output,
+                                                           validation)
     if as_json:  # everything printed is made before anything is written
         from pkmcal.io.json_out import finite_or_null
 
@@ -409,6 +429,13 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
         d["output"] = output
         if geometry is not None:
             d["geometry"] = finite_or_null(geometry.to_dict())
+        if cal_setup is not None and cal_setup.sensor.param_names:
+            d["setup"] = setup_json(result, cal_setup)
+        if before is not None:
+            d["before_registration"] = {"values": before[0], "note": before[1],
+                                        "units": {"values": "file units: mm, deg for angle parameters"}}
+        if validation is not None:
+            d["heldout"] = validation.to_dict()
     emit(text, output)
     if report is not None:
         from pkmcal.report import write_report
@@ -424,18 +451,139 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
         click.echo(fit_summary(result, free_line), err=err)
         if geometry is not None:
             click.echo(geometry.format(), err=err)
+        if before is not None:
+            click.echo(f"before registration (nominal machine, for 'pkmcal verify'): {before[1]}", err=err)
+        if validation is not None:
+            click.echo(validation.format_table(), err=err)
         if not err:
             click.echo(f"wrote {output}" + (f" and {written.html}" if report is not None else ""))
         elif report is not None:
             click.echo(f"wrote {written.html}", err=True)
 
 
-def _with_calibration_record(result, machine: str, measurements: str, setup_spec: str, name: str | None):
+def identified_setup_of(setup, result):
+    """``setup`` with the identified sensor: with several sessions the first session's
+    (plain, for any poses) and every session's as ``session_sensors`` (label → sensor), as
+    ``--setup CALIBRATED.yaml`` reads them back."""
+    from pkmcal.sensors.sessions import session_sensors
+
+    per = session_sensors(result.sensor)
+    if len(per) == 1:
+        return dataclasses.replace(setup, sensor=result.sensor)
+    return dataclasses.replace(setup, sensor=next(iter(per.values())), session_sensors=tuple(per.items()))
+
+
+def sensor_std(result) -> dict[str, float]:
+    """{name: 1σ} (internal units) of the sensor parameters the fit estimated."""
+    sensor_names = set(result.sensor.param_names)
+    return {n: float(s) for n, s in zip(result.free, result.std) if n in sensor_names}
+
+
+def setup_block(result, cal_setup) -> dict | None:
+    """The ``setup:`` mapping of the calibrated file (:func:`pkmcal.io.setup_file.identified_setup`):
+    the identified sensor, the 1σ of its estimated parameters and which covariance they are;
+    None for a sensor without parameters or one no setup file can describe.
+
+    With several sessions the first session's sensor is the setup's, and ``sessions:`` gives
+    every session's (labels as in the measurement file; ``dq`` its re-homing offsets, with
+    ``actuator_offsets: true`` when they were fitted), the form the setup loader reads back
+    (``--setup CALIBRATED.yaml`` starts each known session there); ``std`` then names the
+    parameters with their sessions (``world.x@2``)."""
+    from pkmcal.io._yaml import RawFloat, rad_to_deg_text
+    from pkmcal.io.setup_file import identified_setup
+    from pkmcal.sensors.sessions import session_sensors, session_setup_values
+
+    if cal_setup is None or not cal_setup.sensor.param_names:
+        return None
+    per = session_sensors(result.sensor)
+    if len(per) == 1:
+        try:
+            return identified_setup(cal_setup, result.sensor, sensor_std(result), result.uncertainty.description)
+        except PkmcalError:   # a sensor kind without a setup-file form
+            return None
+    first = next(iter(per.values()))
+    try:
+        doc = identified_setup(dataclasses.replace(cal_setup, sensor=first), first, None,
+                               result.uncertainty.description)
+    except PkmcalError:
+        return None
+    angles = set(result.angle_names())
+    doc["std"] = {n: float(np.rad2deg(v)) if n in angles else float(v) for n, v in sensor_std(result).items()}
+    offsets = {}
+    for lab in list(per)[1:]:
+        keys = [f"dq_{i + 1}@{lab}" for i in range(result.mechanism.n_actuators)]
+        if keys[0] in result.names:
+            offsets[lab] = np.array([result.estimate[result.names.index(k)] for k in keys])
+    sessions: dict = {"actuator_offsets": True} if offsets else {}
+    sessions.update(session_setup_values(result.sensor, offsets, result.mechanism.actuator_is_angle,
+                                         angle=lambda v: RawFloat(rad_to_deg_text(v))))
+    doc["sessions"] = sessions
+    for n, v in zip(result.free, result.std):
+        if n.startswith("dq_"):
+            doc["std"][n] = float(np.rad2deg(v)) if n in angles else float(v)
+    return doc
+
+
+def setup_json(result, cal_setup) -> dict:
+    """The identified setup for ``--json``: the ``setup:`` mapping of the file as plain
+    JSON values, with its units."""
+    from pkmcal.io._yaml import parse_yaml, dump_yaml, plain
+
+    block = setup_block(result, cal_setup) or {}
+    doc = plain(parse_yaml(dump_yaml(block))[0]) if block else {}
+    doc["units"] = {k: "mm; deg for a, b, c and angle parameters" for k in
+                    ("world", "tool", "plate", "target", "indicators", "plane_offset", "zero", "std")}
+    doc["units"]["noise"] = "mm; orientation_deg in deg; actuator mm (deg for rotary actuators)"
+    doc["units"]["prior"] = "file units: mm, deg for angle parameters"
+    doc["units"]["simulation"] = ("stiffness N/mm (N*mm/rad for rotary actuators), load N, backlash mm (rad for "
+                                  "rotary actuators)")
+    return doc
+
+
+def _before_registration(nominal, setup, meas, result) -> tuple[dict, str] | None:
+    """``(values, note)``: the setup's free sensor parameters fitted on the calibration data
+    with the machine held at nominal (file units), or None where no such fit applies (no
+    free sensor parameter, a redundantly actuated machine)."""
+    from pkmcal.identification.heldout import register_sensor, sensor_values
+
+    if not setup.sensor.default_free or nominal.n_actuators != nominal.n_dof:
+        return None
+    used = meas.subset(np.asarray(result.used_poses, dtype=int)) if len(result.used_poses) < len(meas) else meas
+    what = "the calibration data"
+    if used.sessions is not None and used.sessions.several:     # the first session's frames: the setup's
+        first = used.sessions.labels[0]
+        used = used.subset(np.flatnonzero(used.sessions.index == 0))
+        used = dataclasses.replace(used, sessions=None)
+        what = f"the calibration data of session {first}"
+    reg = register_sensor(nominal, setup, used, what=what)
+    return sensor_values(reg.sensor, setup.sensor.default_free), reg.note
+
+
+def _heldout_validation(calibrated, cal_setup, nominal, before, path: str, mapping, clipped: str):
+    """The held-out validation of ``identify --heldout`` (:mod:`pkmcal.identification.heldout`)."""
+    from pkmcal.identification.heldout import heldout_validation, sensor_from_values
+
+    held, found, lines = apply_clipped_policy(load_measurements(path, calibrated, cal_setup, mapping), calibrated,
+                                              clipped)
+    if before is not None:
+        before_sensor, note = sensor_from_values(cal_setup.sensor, before[0], "before_registration"), before[1]
+    else:   # no free sensor parameter: nothing to register, the sensor as the setup gives it
+        before_sensor, note = cal_setup.sensor, "no free sensor parameter: the sensor as the setup gives it"
+    unit = {n: ("deg" if a else "mm") for n, a in zip(calibrated.actuator_names, calibrated.actuator_is_angle)}
+    return heldout_validation(calibrated, cal_setup, nominal, before_sensor, held, source=str(path),
+                              before_note=note, notes=[f"warning: {w}" for w in lines],
+                              clipped=tuple(c.to_dict(unit[c.actuator]) for c in found))
+
+
+def _with_calibration_record(result, machine: str, measurements: str, setup_spec: str, name: str | None,
+                             setup=None, before=None):
     """The identified machine under its own name with a ``calibration`` record in its
     metadata (kept in the machine file; ``pkmcal export --format json`` shows it): name,
     calibrated-from, UTC date, pkmcal version, command line, the inputs with their SHA-256
-    (:mod:`pkmcal.cli.provenance`), and the fit. ``SOURCE_DATE_EPOCH`` fixes the date, so
-    that the same inputs give the same bytes."""
+    (:mod:`pkmcal.cli.provenance`), and the fit; ``before`` (values, note) is stored as
+    ``calibration.before_registration``. With ``setup`` (the setup with the identified
+    sensor) the identified setup goes under ``setup:`` (:func:`setup_block`).
+    ``SOURCE_DATE_EPOCH`` fixes the date, so that the same inputs give the same bytes."""
     import dataclasses
 
     from pkmcal import __version__
@@ -473,7 +621,14 @@ def _with_calibration_record(result, machine: str, measurements: str, setup_spec
 
         # several sessions: the first session's tracker (the reference; every one is in the summary)
         record["sensor"] = sensor_calibration_block(next(iter(session_sensors(result.sensor).values())))
-    return dataclasses.replace(mech, name=new_name, metadata={**dict(mech.metadata), "calibration": record})
+    if before is not None:
+        record["before_registration"] = dict(before[0])
+    metadata = {k: v for k, v in dict(mech.metadata).items() if k != "setup"}   # a recalibration's old setup
+    metadata["calibration"] = record
+    block = setup_block(result, setup)
+    if block is not None:
+        metadata["setup"] = block
+    return dataclasses.replace(mech, name=new_name, metadata=metadata)
 
 
 def _check_loads_back(text: str, output: str) -> None:
@@ -504,7 +659,7 @@ def _check_report_dir(report_dir: str, inputs) -> None:
         check_output_path(os.path.join(report_dir, REPORT_NAME), inputs)
 
 
-def _report_data(nominal, result, setup, meas, meas_path: str, output: str):
+def _report_data(nominal, result, setup, meas, meas_path: str, output: str, validation=None):
     """The report of ``pkmcal identify``: the measured poses are the commanded ones of the
     file (cmd_x..), else the nominal machine's FK of the actuator readings."""
     from pkmcal.io.setup_file import setup_to_yaml
@@ -522,7 +677,8 @@ def _report_data(nominal, result, setup, meas, meas_path: str, output: str):
         setup_text = setup.sensor.kind
     return report_data_from_results(
         nominal, result, setup, poses, setup_summary=setup_text, commanded=meas.commanded,
-        facts=(("measurement file", str(meas_path)), ("calibrated machine file", str(output))))
+        facts=(("measurement file", str(meas_path)), ("calibrated machine file", str(output))),
+        heldout=validation)
 
 
 @click.command("identifiability", epilog=examples(

@@ -55,7 +55,7 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "identify": ("pkmcal.cli.identify_cmds", "identify_cmd",
                  "Identify MACHINE's kinematic parameters from MEAS.csv and write CALIBRATED.yaml."),
     "verify": ("pkmcal.cli.campaign_cmds", "verify_cmd",
-               "Pose errors of the REAL machine commanded through CALIBRATED (and NOMINAL) on held-out poses."),
+               "Validate CALIBRATED on held-out data: measured (--measurements) or a true machine (--real)."),
     "export": ("pkmcal.cli.export_cmd", "export_cmd",
                "Export the machine in CALIBRATED.yaml (a machine file or built-in name) for a controller."),
     "import": ("pkmcal.cli.import_cmd", "import_group",

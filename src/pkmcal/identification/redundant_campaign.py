@@ -42,7 +42,7 @@ from pkmcal.identification.simulation import (
 )
 from pkmcal.identification.uncertainty import embed
 from pkmcal.identification.verification import error_stats
-from pkmcal.io.tables import from_file_units, to_file_units
+from pkmcal.io.tables import to_file_units
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.mechanisms.statics import StaticsModel, equilibrium
 from pkmcal.sensors.base import MeasurementSetup
@@ -155,14 +155,10 @@ def calibrated_sensor(machine: Mechanism, sensor):
     values = cal.get("sensor") if isinstance(cal, dict) else None
     if not values:
         return sensor
-    p = sensor.params.copy()
-    for k, v in values.items():
-        if k not in sensor.param_names:
-            raise PkmcalError(f"machine '{machine.name}': calibration.sensor.{k} is not a parameter of a "
-                              f"'{sensor.kind}' sensor ({', '.join(sensor.param_names)})")
-        i = sensor.param_names.index(k)
-        p[i] = from_file_units([float(v)], sensor.param_is_angle[i:i + 1])[0]
-    return sensor.with_params(p)
+    from pkmcal.identification.heldout import sensor_from_values
+
+    return sensor_from_values(sensor, {k: float(v) for k, v in values.items()},
+                              f"machine '{machine.name}': calibration.sensor")
 
 
 def sensor_calibration_block(sensor) -> dict:

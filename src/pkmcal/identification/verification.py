@@ -17,11 +17,28 @@ bring the real machine to, so that "before" and "after" compare the same poses; 
 real machine cannot reach through either model (FK not converged or on another assembly
 mode, real limits) is reported with the model that failed. Angles in degrees in the
 summaries (``*_deg``; ``*_rad`` are deprecated aliases).
+
+What is compared (``compare``, :data:`COMPARES`; issue 11 item 4). A calibration that also
+estimated the sensor's frames (a laser tracker with a free tracker frame) fixes a gauge: its
+base and platform frames are a choice, and platform poses "as commanded" compare frames the
+gauge made arbitrary (a correct calibration then looks like a large degradation).
+
+* ``commanded``: the errors above, each model in its own frames (the papers' figures);
+* ``aligned``: the same errors after the best rigid alignment T_r ≈ A·T_c·B of base and
+  platform frames per model (:mod:`pkmcal.identification.alignment`);
+* ``sensor``: what the true instrument reads at the real pose, h_true(F_real(x_r)), against
+  what the model predicts its registered instrument reads at the commanded pose,
+  h_M(F_M(x_c)) (tool point/frame in the world frame; errors as in
+  :mod:`pkmcal.identification.heldout`).
+
+With ``aligned`` and ``sensor`` the poses, given in the nominal machine's frames, are first
+carried into the calibrated model's frames (:func:`~pkmcal.identification.alignment.transport_poses`),
+so that both models command the same physical poses whatever the gauge.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -47,12 +64,15 @@ class PoseErrors:
 
     model: str
     reached: np.ndarray
-    position: np.ndarray
-    orientation: np.ndarray
-    tilt: np.ndarray
-    height: np.ndarray
+    position: np.ndarray | None
+    orientation: np.ndarray | None
+    tilt: np.ndarray | None
+    height: np.ndarray | None
     valid: np.ndarray
     dropped: dict[int, str] = field(default_factory=dict)
+    #: (N, m) reading residuals (true instrument − model's prediction) of a sensor that
+    #: reads neither a position nor an orientation (indicators; compare="sensor" only)
+    reading: np.ndarray | None = None
 
     def summary(self, mask: np.ndarray | None = None) -> dict[str, float]:
         """``{position_mean_mm, position_max_mm, position_rms_mm, orientation_mean_deg, …}``
@@ -62,9 +82,14 @@ class PoseErrors:
         m = self.valid if mask is None else mask
         out: dict[str, float] = {"poses": int(np.count_nonzero(m))}
         for key, (unit, _) in MEASURES.items():
-            out.update(error_stats(getattr(self, key)[m], key, unit))
+            values = getattr(self, key)
+            if values is None:   # not seen by the sensor compared (compare="sensor")
+                continue
+            out.update(error_stats(values[m], key, unit))
             if unit == "rad":
-                out.update(error_stats(np.rad2deg(getattr(self, key)[m]), key, "deg"))
+                out.update(error_stats(np.rad2deg(values[m]), key, "deg"))
+        if self.reading is not None:
+            out.update(error_stats(self.reading[m].reshape(-1), "reading", "mm"))
         return out
 
 
@@ -73,6 +98,21 @@ def error_stats(values: np.ndarray, key: str, unit: str) -> dict[str, float]:
     v = np.abs(values)
     stats = (float(np.mean(v)), float(np.max(v)), float(np.sqrt(np.mean(v**2)))) if v.size else (float("nan"),) * 3
     return {f"{key}_{name}_{unit}": x for name, x in zip(("mean", "max", "rms"), stats)}
+
+
+def frame_errors(p_r: np.ndarray, R_r: np.ndarray, p_c: np.ndarray, R_c: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(e_p, e_R, e_n, e_z)`` (N,) of reached frames (p_r, R_r) against commanded ones
+    (p_c, R_c) (module docstring)."""
+    e_p = np.linalg.norm(p_r - p_c, axis=1)
+    e_R = rotation_error(R_r, R_c)
+    nc, nr = R_c[:, :, 2], R_r[:, :, 2]
+    cross = np.linalg.norm(np.cross(nr, nc), axis=1)
+    e_n = np.arctan2(cross, np.einsum("nk,nk->n", nr, nc))
+    # plane through p_r with normal n_r, height above (x_c, y_c): eq. (6) with d_off = 0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z_plane = (np.einsum("nk,nk->n", nr, p_r) - nr[:, 0] * p_c[:, 0] - nr[:, 1] * p_c[:, 1]) / nr[:, 2]
+    return e_p, e_R, e_n, z_plane - p_c[:, 2]
 
 
 def pose_errors(model: Mechanism, real: Mechanism, poses: np.ndarray, ignore_limits: tuple[str, ...] = ()) -> PoseErrors:
@@ -116,15 +156,7 @@ def pose_errors_many(models: tuple[Mechanism, ...] | list[Mechanism], real: Mech
 
     Rc1 = euler_to_matrix(cmd1[:, 3:6])
     Rc, Rr = (np.tile(Rc1, (k, 1, 1)) if k > 1 else Rc1), euler_to_matrix(reached[:, 3:6])
-    e_p = np.linalg.norm(reached[:, 0:3] - cmd[:, 0:3], axis=1)
-    e_R = rotation_error(Rr, Rc)
-    nc, nr = Rc[:, :, 2], Rr[:, :, 2]
-    cross = np.linalg.norm(np.cross(nr, nc), axis=1)
-    e_n = np.arctan2(cross, np.einsum("nk,nk->n", nr, nc))
-    # plane through p_r with normal n_r, height above (x_c, y_c): eq. (6) with d_off = 0
-    with np.errstate(divide="ignore", invalid="ignore"):
-        z_plane = (np.einsum("nk,nk->n", nr, reached[:, 0:3]) - nr[:, 0] * cmd[:, 0] - nr[:, 1] * cmd[:, 1]) / nr[:, 2]
-    e_z = z_plane - cmd[:, 2]
+    e_p, e_R, e_n, e_z = frame_errors(reached[:, 0:3], Rr, cmd[:, 0:3], Rc)
     nan = np.where(ok, 1.0, np.nan)
     out = []
     for j, model in enumerate(models):
@@ -144,6 +176,13 @@ class VerificationReport:
     real: str
     after: PoseErrors
     before: PoseErrors | None = None
+    #: what is compared (:data:`COMPARES`): "commanded", "aligned" or "sensor"
+    compare: str = "commanded"
+    #: compare="aligned": the alignment of each model ("before", "after")
+    alignment: dict = field(default_factory=dict)
+    #: compare="aligned" / "sensor" with a nominal model: the alignment that carried the
+    #: held-out poses (nominal frames) into the calibrated model's frames ("after")
+    transported: dict = field(default_factory=dict)
 
     @property
     def common(self) -> np.ndarray:
@@ -192,7 +231,16 @@ class VerificationReport:
         ``units``."""
         mask = self.common
         out: dict = {"poses": int(len(mask)), "used": int(np.count_nonzero(mask)), "real": self.real,
-                     "calibrated": self.after.model, "compared_set": self.compared_set()}
+                     "calibrated": self.after.model, "compared_set": self.compared_set(),
+                     "compare": self.compare, "compared": COMPARES[self.compare]}
+        if self.alignment:
+            out["alignment"] = {k: a.to_dict() for k, a in self.alignment.items()}
+        if self.transported:
+            out["poses_transported"] = {
+                "note": "the held-out poses are given in the nominal machine's frames; the calibrated model is "
+                        "commanded at the same poses expressed in its own frames (T_nominal = A T_calibrated B, "
+                        "fitted on both models' FK at the nominal IK of the poses)",
+                **{k: (a if isinstance(a, str) else a.to_dict()) for k, a in self.transported.items()}}
         if self.before is not None:
             out["nominal"] = self.before.model
             out["reached_by"] = self.reached_by()
@@ -215,15 +263,17 @@ class VerificationReport:
         d = self.to_dict()
         cols = (["before"] if self.before is not None else []) + ["after"]
         lines = [f"verification on {d['used']} of {d['poses']} held-out poses; real machine '{self.real}'",
-                 f"compared: {d['compared_set']}"]
+                 f"compared ({self.compare}): {d['compared']}", f"poses: {d['compared_set']}"]
         head = f"{'error':<36}" + "".join(f"{c:>14}" for c in cols)
         if self.before is not None:
             head += f"{'reduction':>11}"
         lines.append(head)
-        for key, (unit, text) in MEASURES.items():
+        for key, (unit, text) in {**MEASURES, "reading": ("mm", "reading residual")}.items():
             show_unit = "deg" if unit == "rad" else unit
             for stat in ("mean", "max", "rms"):
                 name = f"{key}_{stat}_{show_unit}"
+                if name not in d["after"]:
+                    continue
                 row = f"{text + ' ' + stat + ' (' + show_unit + ')':<36}"
                 row += "".join(f"{d[c][name]:>14.6g}" for c in cols)
                 if self.before is not None:
@@ -237,19 +287,105 @@ class VerificationReport:
         return "\n".join(lines)
 
 
+#: What :func:`verify` compares, and how the output says it.
+COMPARES = {
+    "commanded": "the real machine's platform pose against the commanded one, each in its model's frames (depends "
+                 "on the gauge when the calibration estimated sensor frames)",
+    "aligned": "the real machine's platform frames against the commanded ones after the best rigid alignment "
+               "T_real = A T_cmd B of the base (A) and platform (B) frames, fitted per model over the poses "
+               "compared (independent of the gauge)",
+    "sensor": "what the true instrument reads at the real machine's pose against what the model predicts it reads "
+              "at the commanded pose (tool point/frame in the world frame; each model with its own registration "
+              "of the instrument; independent of the gauge)",
+}
+
+
+def _aligned(pe: PoseErrors, cmd: np.ndarray, mask: np.ndarray):
+    """``(pe with the errors after the alignment fitted on mask, alignment)``."""
+    from pkmcal.identification.alignment import align_poses
+
+    a = align_poses(pe.reached[mask], cmd[mask])
+    p_c, R_c = a.apply(cmd[:, 0:3], euler_to_matrix(cmd[:, 3:6]))
+    e_p, e_R, e_n, e_z = frame_errors(pe.reached[:, 0:3], euler_to_matrix(pe.reached[:, 3:6]), p_c, R_c)
+    nan = np.where(pe.valid, 1.0, np.nan)
+    return replace(pe, position=e_p * nan, orientation=e_R * nan, tilt=e_n * nan, height=e_z * nan), a
+
+
+def _sensed(pe: PoseErrors, model: Mechanism, sensor, real: Mechanism, true_sensor, cmd: np.ndarray) -> PoseErrors:
+    """``pe`` with the errors of what the instruments read: the true one at the real pose,
+    against the model's registered ``sensor`` at the commanded pose."""
+    from pkmcal.identification.heldout import reading_errors
+
+    with np.errstate(all="ignore"):
+        y_true = true_sensor.predict(real.frame(np.where(pe.valid[:, None], pe.reached, cmd)))
+        y_model = sensor.predict(model.frame(cmd))
+    r, e_p, e_R = reading_errors(sensor, y_true, y_model, pe.valid)
+    return replace(pe, position=e_p, orientation=e_R, tilt=None, height=None,
+                   reading=r if e_p is None else None)
+
+
 def verify(
     calibrated: Mechanism,
     real: Mechanism,
     poses: np.ndarray,
     nominal: Mechanism | None = None,
     ignore_limits: tuple[str, ...] = (),
+    compare: str = "commanded",
+    sensors: tuple | None = None,
+    true_sensor=None,
+    frames: Mechanism | None = None,
 ) -> VerificationReport:
-    """Pose errors of ``real`` commanded through ``calibrated`` (and ``nominal``, "before")."""
-    if nominal is None:
-        after, before = pose_errors(calibrated, real, poses, ignore_limits), None
+    """Pose errors of ``real`` commanded through ``calibrated`` (and ``nominal``, "before").
+
+    ``compare`` (:data:`COMPARES`): ``"commanded"`` the platform poses as commanded;
+    ``"aligned"`` after the best rigid alignment of each model's frames
+    (:mod:`pkmcal.identification.alignment`); ``"sensor"`` the readings of ``true_sensor``
+    (the real instrument) against those each model predicts with its own sensor,
+    ``sensors`` = (calibrated's, nominal's or None). With ``"aligned"`` and ``"sensor"``
+    and a nominal model, the poses (in the nominal frames) are carried into the calibrated
+    model's frames first (:func:`~pkmcal.identification.alignment.transport_poses`), so
+    that both models command the same physical poses whatever the calibration's gauge;
+    ``frames`` names the machine whose frames the poses are given in when there is no
+    nominal model (the calibration record's nominal machine), None: the calibrated one's."""
+    if compare not in COMPARES:
+        raise PkmcalError(f"compare must be one of {', '.join(COMPARES)}; got '{compare}'")
+    if compare == "sensor" and (true_sensor is None or sensors is None or sensors[0] is None):
+        raise PkmcalError("comparing what the sensor reads needs the true instrument and the calibrated sensor")
+    if compare == "sensor" and nominal is not None and sensors[1] is None:
+        nominal = None   # no registration of the nominal machine's sensor: no fair 'before'
+    cmd = calibrated.as_pose_array(poses)
+    transported = {}
+    if compare == "commanded":
+        if nominal is None:
+            after, before = pose_errors(calibrated, real, cmd, ignore_limits), None
+        else:
+            after, before = pose_errors_many((calibrated, nominal), real, cmd, ignore_limits)
+        report = VerificationReport(real=real.name, after=after, before=before, compare=compare)
     else:
-        after, before = pose_errors_many((calibrated, nominal), real, poses, ignore_limits)
-    report = VerificationReport(real=real.name, after=after, before=before)
+        cmd_cal = cmd
+        reference = nominal if nominal is not None else frames
+        if reference is not None:   # the poses the user means (nominal frames), in the calibration's frames
+            from pkmcal.identification.alignment import transport_poses
+
+            cmd_cal, transported["after"] = transport_poses(calibrated, reference, cmd)
+            transported["frames_of"] = reference.name
+        after = pose_errors(calibrated, real, cmd_cal, ignore_limits)
+        before = None if nominal is None else pose_errors(nominal, real, cmd, ignore_limits)
+        report = VerificationReport(real=real.name, after=after, before=before, compare=compare)
+        mask = report.common
+        if mask.any() and compare == "aligned":
+            after, a_after = _aligned(after, cmd_cal, mask)
+            alignment = {"after": a_after}
+            if before is not None:
+                before, alignment["before"] = _aligned(before, cmd, mask)
+            report = VerificationReport(real=real.name, after=after, before=before, compare=compare,
+                                        alignment=alignment, transported=transported)
+        elif mask.any():
+            after = _sensed(after, calibrated, sensors[0], real, true_sensor, cmd_cal)
+            if before is not None:
+                before = _sensed(before, nominal, sensors[1], real, true_sensor, cmd)
+            report = VerificationReport(real=real.name, after=after, before=before, compare=compare,
+                                        transported=transported)
     if not report.common.any():
         raise PkmcalError(f"the real machine '{real.name}' reaches none of the {len(after.valid)} held-out poses "
                           f"({'; '.join(sorted(set(report.dropped.values())))}); choose poses inside its workspace")

@@ -333,7 +333,17 @@ def _represent_float(dumper: yaml.SafeDumper, data: float):
     return yaml.SafeDumper.represent_float(dumper, data)
 
 
+def _represent_text_float(dumper: yaml.SafeDumper, data: TextFloat):
+    """A float read from a file: its source text when that has more than 17 significant
+    digits (a degree text only :func:`deg_to_rad` maps exactly; module docstring), else
+    as any float."""
+    if math.isfinite(data) and _significant_digits(data.text) > 17:
+        return dumper.represent_scalar(_FLOAT_TAG, data.text)
+    return _represent_float(dumper, float(data))
+
+
 _Dumper.add_representer(RawFloat, _represent_raw)
+_Dumper.add_representer(TextFloat, _represent_text_float)
 _Dumper.add_representer(FlowList, _represent_flow)
 _Dumper.add_representer(float, _represent_float)
 _Dumper.add_representer(np.float64, lambda d, v: _represent_float(d, float(v)))

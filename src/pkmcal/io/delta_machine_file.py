@@ -90,6 +90,7 @@ class _LinearFile(_Model):
     uncertainty: UncertaintySpec | None = None
     calibration: dict[StrictStr, Any] | None = None
     metadata: dict[StrictStr, Any] | None = None
+    setup: dict[StrictStr, Any] | None = None
 
 
 class _Arm(_Model):
@@ -120,6 +121,7 @@ class _RotaryFile(_Model):
     uncertainty: UncertaintySpec | None = None
     calibration: dict[StrictStr, Any] | None = None
     metadata: dict[StrictStr, Any] | None = None
+    setup: dict[StrictStr, Any] | None = None
 
 
 def _value(v: float, angle: bool) -> float:

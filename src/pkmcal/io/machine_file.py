@@ -218,6 +218,7 @@ class HexapodFile(_Model):
     uncertainty: UncertaintySpec | None = None
     calibration: dict[StrictStr, Any] | None = None
     metadata: dict[StrictStr, Any] | None = None
+    setup: dict[StrictStr, Any] | None = None
 
     @field_validator("legs", mode="before")
     @classmethod
@@ -551,11 +552,29 @@ def _uncertainty_to_file(covariance: np.ndarray, param_names: tuple[str, ...],
 
 
 def _metadata_from_spec(spec: Any) -> dict:
-    """A machine's metadata from its file: ``metadata:`` plus ``calibration:`` under that key."""
+    """A machine's metadata from its file: ``metadata:`` plus ``calibration:`` and the
+    identified ``setup:`` (written by ``pkmcal identify``, read by
+    :func:`pkmcal.io.setup_file.load_setup`) under those keys. The ``setup:`` mapping keeps
+    its numbers' source text (:class:`~pkmcal.io._yaml.TextFloat`), so that its degree values
+    are written back as read (exact round trip)."""
     metadata: dict = dict(plain(spec.metadata)) if spec.metadata else {}
     if spec.calibration is not None:
         metadata["calibration"] = plain(spec.calibration)
+    if getattr(spec, "setup", None) is not None:
+        metadata["setup"] = spec.setup
     return metadata
+
+
+def _flow_lists(obj: Any) -> Any:
+    """``obj`` with every list of scalars written on one line (:class:`FlowList`), as
+    :func:`pkmcal.io.setup_file.setup_to_dict` writes them, so that a ``setup:`` mapping
+    read back from a file is written again byte for byte."""
+    if isinstance(obj, dict):
+        return {k: _flow_lists(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        items = [_flow_lists(v) for v in obj]
+        return FlowList(items) if all(not isinstance(v, (dict, list)) for v in items) else items
+    return obj
 
 
 def _metadata_to_file(metadata: dict) -> dict:
@@ -565,6 +584,8 @@ def _metadata_to_file(metadata: dict) -> dict:
     out: dict[str, Any] = {}
     if "calibration" in meta:
         out["calibration"] = meta.pop("calibration")
+    if "setup" in meta:
+        out["setup"] = _flow_lists(meta.pop("setup"))
     if meta:
         out["metadata"] = meta
     return out

@@ -69,6 +69,7 @@ class _PlanarFile(_Model):
     uncertainty: UncertaintySpec | None = None
     calibration: dict[StrictStr, Any] | None = None
     metadata: dict[StrictStr, Any] | None = None
+    setup: dict[StrictStr, Any] | None = None
 
 
 #: kind → (class, factory of the built-in machine, its limit field)

@@ -333,6 +333,7 @@ def load_setup(path: str | os.PathLike, machine=None) -> MeasurementSetup:
         raise InputFileError(path, str(exc), line=exc.line) from None
     if not isinstance(data, dict):
         raise InputFileError(path, "a setup file is a YAML mapping starting with 'sensor: full-pose|position|indicators'")
+    data, lines = _setup_mapping(path, data, lines)
     try:
         spec = _Setup.model_validate(data)
     except ValidationError as exc:
@@ -355,8 +356,7 @@ def load_setup(path: str | os.PathLike, machine=None) -> MeasurementSetup:
             if err["type"] == "literal_error" and loc == ("sensor",):
                 what = "must be one of full-pose, position, indicators, planar-tool, distance, z-probe"
         _fail(path, lines, loc, what)
-    raw_noise = data.get("noise") if isinstance(data.get("noise"), dict) else {}
-    setup = _build(path, lines, spec, raw_noise)
+    setup = _build(path, lines, spec, data)
     if spec.prior:
         import dataclasses
 
@@ -391,6 +391,43 @@ def _sessions(path, lines, sessions: dict, setup: MeasurementSetup) -> Measureme
         except PkmcalError as exc:
             _fail(path, lines, ("sessions", label), str(exc))
     return dataclasses.replace(setup, session_offsets=offsets, session_sensors=tuple(named))
+
+
+#: Keys of a machine file (any kind) that a setup file never has: a file with one of them
+#: and no ``sensor:`` is a machine file, whose identified ``setup:`` is the setup.
+_MACHINE_KEYS = ("kind", "legs", "towers", "arms", "parameters", "calibration", "uncertainty", "setup")
+#: Keys of the identified setup in a calibrated machine file that are not setup-file keys:
+#: the 1σ of the estimated sensor parameters and which covariance they come from.
+IDENTIFIED_KEYS = ("std", "covariance_kind")
+
+
+def _setup_mapping(path, data: dict, lines: dict) -> tuple[dict, dict]:
+    """The setup mapping of a parsed file and its key-path → line map: the file itself for
+    a setup file; the ``setup:`` mapping of a calibrated machine file (``pkmcal identify``
+    writes it: docs/file-formats.md), without its :data:`IDENTIFIED_KEYS`, whose ``std``
+    names are checked here. A machine file without ``setup:`` is an error naming it."""
+    if "sensor" in data or not any(k in data for k in _MACHINE_KEYS):
+        return data, lines
+    block = data.get("setup")
+    if block is None:
+        raise InputFileError(path, "is a machine file without an identified setup: give the measurement setup "
+                                   "(a setup file or a built-in name), or a machine file that 'pkmcal identify' "
+                                   "wrote for a setup with sensor parameters", line=lines.get(()))
+    if not isinstance(block, dict):
+        raise InputFileError(path, "key 'setup': expected the identified setup, a mapping 'sensor: ...' as in a "
+                                   "setup file", line=lines.get(("setup",)))
+    sub = {k[1:]: v for k, v in lines.items() if k[:1] == ("setup",)}
+    std = block.get("std")
+    if std is not None and (not isinstance(std, dict) or not all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v >= 0
+            for v in std.values())):
+        raise InputFileError(path, "key 'setup.std': expected a mapping 'parameter: standard deviation' "
+                                   "(mm, degrees; non-negative numbers)", line=sub.get(("std",)))
+    kind = block.get("covariance_kind")
+    if kind is not None and not isinstance(kind, str):
+        raise InputFileError(path, "key 'setup.covariance_kind': expected text (which covariance 'std' is from)",
+                             line=sub.get(("covariance_kind",)))
+    return {k: v for k, v in block.items() if k not in IDENTIFIED_KEYS}, sub
 
 
 def _priors(path, lines, prior: dict) -> tuple:
@@ -433,10 +470,12 @@ def _describe(err: dict) -> str:
     return err["msg"][0].lower() + err["msg"][1:]
 
 
-def _build(path, lines, spec: _Setup, raw_noise: dict | None = None) -> MeasurementSetup:
-    """The setup of a validated file; ``raw_noise`` the file's ``noise`` mapping as parsed
-    (its numbers keep their text, which pydantic drops: degree values are converted from
-    that text, so that a setup written by :func:`setup_to_yaml` reads back exactly)."""
+def _build(path, lines, spec: _Setup, raw: dict | None = None) -> MeasurementSetup:
+    """The setup of a validated file; ``raw`` the file's mapping as parsed (its numbers keep
+    their text, which pydantic drops: degree values are converted from that text, so that
+    a setup written by :func:`setup_to_yaml` reads back exactly)."""
+    raw = raw if isinstance(raw, dict) else {}
+    raw_noise = raw.get("noise") if isinstance(raw.get("noise"), dict) else {}
     kind = spec.sensor
     for key in ("indicators", "plane_offset", "zero", "plate", "world", "tool", "target", "pivots", "ball",
                 "lengths", "probe_offset", "bed"):
@@ -522,12 +561,12 @@ def _build(path, lines, spec: _Setup, raw_noise: dict | None = None) -> Measurem
             if noise.orientation is not None:
                 ori = _expand(path, lines, noise.orientation, 3, ("noise", "orientation"), "rad")
             else:
-                raw = (raw_noise or {}).get("orientation_deg", noise.orientation_deg)   # numbers with their text
-                _expand(path, lines, raw, 3, ("noise", "orientation_deg"), "deg")   # checks the count
-                ori = np.broadcast_to(np.array([deg_to_rad(v) for v in (raw if isinstance(raw, list) else [raw])]),
-                                      (3,)).copy()
+                raw_ori = (raw_noise or {}).get("orientation_deg", noise.orientation_deg)   # numbers with their text
+                _expand(path, lines, raw_ori, 3, ("noise", "orientation_deg"), "deg")   # checks the count
+                ori = np.broadcast_to(np.array([deg_to_rad(v) for v in
+                                                (raw_ori if isinstance(raw_ori, list) else [raw_ori])]), (3,)).copy()
             reading_std = np.concatenate([pos, ori])
-        sensor = _from_file_units(sensor)
+        sensor = _from_file_units(sensor, raw)
     except InputFileError:
         raise
     except PkmcalError as exc:  # e.g. an unknown name in free:
@@ -555,10 +594,22 @@ def _build(path, lines, spec: _Setup, raw_noise: dict | None = None) -> Measurem
     )
 
 
-def _from_file_units(sensor):
+def _from_file_units(sensor, raw: dict | None = None):
     """``sensor``, built with θ as the file gives it (mm, degrees), with the parameters its
-    ``param_is_angle`` declares angles converted to radians (:func:`deg_to_rad`)."""
-    theta = [deg_to_rad(v) if ang else float(v) for v, ang in zip(sensor.params, sensor.param_is_angle)]
+    ``param_is_angle`` declares angles converted to radians (:func:`deg_to_rad`). ``raw``
+    is the file's mapping as parsed: an angle ``world.a`` is converted from the text of
+    ``raw['world']['a']`` when there is one (pydantic keeps only the float), so that the
+    degree text :func:`setup_to_yaml` writes reads back to the same radians exactly."""
+    raw = raw or {}
+
+    def source(name: str, v: float):
+        group, _, coord = name.partition(".")
+        block = raw.get(group)
+        text_value = block.get(coord) if coord and isinstance(block, dict) else None
+        return text_value if isinstance(text_value, float) and float(text_value) == float(v) else v
+
+    theta = [deg_to_rad(source(n, v)) if ang else float(v)
+             for n, v, ang in zip(sensor.param_names, sensor.params, sensor.param_is_angle)]
     return sensor.with_params(np.array(theta))
 
 
@@ -632,6 +683,33 @@ _KIND_KEYS = {ZProbeSensor.kind: _z_probe_keys, DistanceSensor.kind: _distance_k
 
 def setup_to_yaml(setup: MeasurementSetup) -> str:
     """YAML text of a setup (full precision; :func:`load_setup` reads it back)."""
+    head = "# pkmcal measurement setup: mm, angles in degrees (transforms, orientation_deg noise)\n"
+    if setup.noise.distribution == "uniform":
+        head += "# uniform noise: values are half-widths h (std = h/sqrt(3))\n"
+    return head + dump_yaml(setup_to_dict(setup))
+
+
+def identified_setup(setup: MeasurementSetup, sensor, std: dict[str, float] | None = None,
+                     covariance_kind: str | None = None) -> dict:
+    """The ``setup:`` mapping of a calibrated machine file: ``setup`` with the identified
+    ``sensor`` in setup-file form (:func:`setup_to_dict`: mm, degrees), plus ``std`` (1σ of
+    the estimated sensor parameters, internal units in ``std`` → mm / degrees in the file)
+    and ``covariance_kind`` (which covariance those σ are, the words of the fit's
+    ``calibration.std``). :func:`load_setup` of the machine file reads it back as a setup
+    with ``sensor`` exactly."""
+    import dataclasses
+
+    doc = setup_to_dict(dataclasses.replace(setup, sensor=sensor))
+    if std:
+        angles = {n for n, a in zip(sensor.param_names, sensor.param_is_angle) if a}
+        doc["std"] = {n: float(np.rad2deg(v)) if n in angles else float(v) for n, v in std.items()}
+    if covariance_kind is not None:
+        doc["covariance_kind"] = str(covariance_kind)
+    return doc
+
+
+def setup_to_dict(setup: MeasurementSetup) -> dict:
+    """The mapping of a setup file for ``setup`` (exact floats; :func:`setup_to_yaml` dumps it)."""
     s, noise = setup.sensor, setup.noise
     doc: dict = {"sensor": s.kind}
     if s.kind in _KIND_KEYS:      # by the declared kind, as the loader reads it (no type probe)
@@ -680,10 +758,7 @@ def setup_to_yaml(setup: MeasurementSetup) -> str:
     if setup.priors:
         doc["prior"] = {p.pattern: (f"± {p.std!r}" if p.mean is None else FlowList([float(p.mean), float(p.std)]))
                         for p in setup.priors}
-    head = "# pkmcal measurement setup: mm, angles in degrees (transforms, orientation_deg noise)\n"
-    if noise.distribution == "uniform":
-        head += "# uniform noise: values are half-widths h (std = h/sqrt(3))\n"
-    return head + dump_yaml(doc)
+    return doc
 
 
 def save_setup(setup: MeasurementSetup, path: str | os.PathLike) -> None:

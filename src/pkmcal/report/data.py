@@ -309,7 +309,10 @@ class ReportData:
     ``held_out_total`` how many held-out poses were given and ``held_out_dropped``
     (pose number, reason) of those left out of the comparison (pose numbers: 1-based
     rows of the held-out set), so that the report says why fewer poses were compared;
-    ``screening`` the outlier screening of the fit, ``priors`` its Gaussian priors.
+    ``screening`` the outlier screening of the fit, ``priors`` its Gaussian priors;
+    ``measured_validation`` the validation on measured held-out data
+    (:meth:`pkmcal.identification.heldout.HeldoutReport.to_dict`, with its ``rows``: the
+    (quantity, unit, key) lines to show), None when no held-out measurements were given.
     """
 
     title: str
@@ -331,6 +334,7 @@ class ReportData:
     held_out_dropped: tuple[tuple[int, str], ...] = ()
     screening: Screening | None = None
     priors: tuple[PriorRow, ...] = ()
+    measured_validation: dict | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "priors", tuple(self.priors))

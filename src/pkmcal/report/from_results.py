@@ -161,6 +161,7 @@ def report_data_from_results(
     facts: tuple[tuple[str, str], ...] = (),
     held_out_poses: np.ndarray | None = None,
     commanded: np.ndarray | None = None,
+    heldout=None,
 ) -> ReportData:
     """The report of an :class:`~pkmcal.identification.engine.IdentificationResult`.
 
@@ -169,7 +170,9 @@ def report_data_from_results(
     column; ``identified`` the calibrated machine as exported (default ``result.mechanism``);
     ``true_machine`` (and ``true_sensor``) the simulation's real machine (sensor), shown
     beside the estimates; ``commanded`` (N, n) the commanded poses of the measurements, from
-    which a redundant machine's load deflection is estimated (a warning line when visible).
+    which a redundant machine's load deflection is estimated (a warning line when visible);
+    ``heldout`` a :class:`~pkmcal.identification.heldout.HeldoutReport` (validation on
+    measured held-out data), shown in its own section.
     """
     table = parameter_table(nominal, result, true_machine, true_sensor)
     corr = np.asarray(result.correlation, dtype=float)
@@ -211,4 +214,5 @@ def report_data_from_results(
         held_out_poses=held_out_poses,
         screening=screening_from_result(result),
         priors=priors_from_result(result),
+        measured_validation=None if heldout is None else {**heldout.to_dict(), "rows": heldout.summary_rows()},
     )

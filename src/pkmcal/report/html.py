@@ -382,14 +382,42 @@ def render_html(data: ReportData, figs: list[F.RenderedFigure]) -> str:
                     "rms ratio"], held_rows))
         add(fig("held-out"))
         add(fig("held-out-per-pose"))
-    else:
+    elif data.measured_validation is None:
         add("<p>No held-out poses were given.</p>")
+    add(_measured_validation_section(data.measured_validation))
     if data.error_map is not None:
         add("<h3>Error map</h3>")
         add(fig("error-map"))
     add(f'<p class="muted">Written by pkmcal {_esc(__version__)}. Figures are also saved beside this file as SVG '
         "and PNG.</p>\n</body>\n</html>\n")
     return "\n".join(x for x in parts if x)
+
+
+def _measured_validation_section(v: dict | None) -> str:
+    """The section on measured held-out data (``identify --heldout``): before / after /
+    after_reregistered, the poses left out and the registrations."""
+    if v is None:
+        return ""
+    labels = [k for k in ("before", "after", "after_reregistered") if k in v]
+    out = ['<h3 id="measured-validation">Validation on measured held-out data</h3>',
+           f"<p>{v['n_poses']} of {v['n_poses_file']} held-out measurements of {_esc(v['measurements'])} predicted "
+           f"from their actuator readings (FK, then the sensor) and compared with what was measured; "
+           f"{_esc(v['measured_as'])}. <em>before</em>: the nominal machine with its sensor frames registered on the "
+           "calibration data; <em>after</em>: the calibrated machine and the identified sensor; "
+           "<em>after_reregistered</em>: the calibrated machine with only the sensor's free parameters refitted on "
+           "the held-out data (what no re-registration of the instrument removes).</p>"]
+    rows = [[_esc(f"{text} ({unit})")] + ["-" if v[lab][key] is None else f"{v[lab][key]:.4g}" for lab in labels]
+            for text, unit, key in v["rows"]]
+    out.append(_table(["error"] + labels, rows))
+    regs = [[_esc(lab), _esc(v[lab]["registration"])] for lab in labels if v[lab].get("registration")]
+    if regs:
+        out.append(_table(["model", "sensor frames"], regs, left=2))
+    if v["failed"]:
+        out.append("<p>Not compared (held-out pose number, counted from 1: why):</p>")
+        out.append(_table(["pose", "reason"], [[str(f["pose"]), _esc(f["reason"])] for f in v["failed"]], left=2))
+    for n in v["notes"]:
+        out.append(f'<p class="muted">{_esc(n)}</p>')
+    return "\n".join(out)
 
 
 def write_report(data: ReportData, out_dir: str | os.PathLike, png: bool = True) -> ReportFiles:
