@@ -232,3 +232,33 @@ def test_export_refit_needs_a_firmware_format_and_a_linear_delta(tmp_path, monke
     res = runner.invoke(cli, ["export", "stewart-prototype", "--format", "klipper", "--measurements", "meas.csv",
                               "--setup", "z-probe-klipper"])
     assert res.exit_code == 2 and "linear delta" in res.output
+
+
+def test_a_setup_that_frees_the_bed_tilt_has_it_fitted_for_every_model(tmp_path):
+    """The sensor parameters a setup frees (here the bed tilt) are fitted for each model on
+    the fit measurements: the full model's score is then its own fit's residual, and the
+    refit's bed tilt is the real one within the fit's σ."""
+    from pkmcal.sensors.z_probe import ZProbeSensor
+
+    path = tmp_path / "tilted.yaml"
+    path.write_text("sensor: z-probe\nfree: [bed.a, bed.b]\nnoise: {reading: 0.005, actuator: 0.0036}\n")
+    nominal = load_machine("kossel-mini")
+    setup = load_setup(str(path), nominal)
+    rng = np.random.default_rng(8)
+    real = _real(nominal, rng)
+    real_bed = ZProbeSensor(probe_offset=[0.0, 0.0, 0.0], bed=[0.0, np.deg2rad(0.08), np.deg2rad(-0.05)])
+    meas = _probe(nominal, real, real_bed, _disc(60, 80, rng), rng)
+    held = _probe(nominal, real, real_bed, _disc(30, 85, rng), rng)
+    priors = _arm_priors(real, rng)
+    full = identify(nominal, setup, meas, priors=priors)
+    assert {"bed.a", "bed.b"} <= set(full.free)
+    ref = firmware_refit(full.mechanism, setup, meas, held, priors=priors)
+    assert ref.full.fit_rms["mm"] == pytest.approx(full.rms_residual, rel=1e-6)
+    assert {"bed.a", "bed.b"} <= set(ref.free)
+    k = [list(setup.sensor.param_names).index(n) for n in ("bed.a", "bed.b")]
+    sd = full.std[[full.free.index(n) for n in ("bed.a", "bed.b")]]
+    assert np.all(np.abs(ref.refit.sensor.params[k] - real_bed.params[k]) < 4 * sd)
+    # the full model judged with the setup's level bed instead would be far worse
+    level, _ = residual_rms(full.mechanism, setup, meas, "fk-residual")
+    assert level["mm"] > 3 * ref.full.fit_rms["mm"]
+    assert ref.refit.heldout_rms["mm"] < 2.5 * TRIGGER_STD

@@ -6,6 +6,11 @@
   paper 1 eq. 1, paper 2 eq. 1); with ``--ini FILE`` also the INI sections ``[TRAJ]``,
   ``[KINS]``, ``[JOINT_0..5]`` (limits, HOME_OFFSET, HOME) that match them
   (:func:`pkmcal.io.export_linuxcnc.linuxcnc_ini`; ``pkmcal import linuxcnc`` reads both).
+* ``--format klipper`` / ``marlin`` (linear deltas): the firmware's ten numbers
+  (:mod:`pkmcal.io.delta_firmware`), what it cannot hold listed on standard error; with
+  ``--measurements`` (``--setup``, ``--heldout``, ``--json``) the firmware-limited refit is
+  exported instead, with the fit and held-out RMS of the full model, of its firmware numbers
+  and of the refit (:mod:`pkmcal.identification.firmware_refit`).
 * ``--format json``: the identified parameters ρ with their standard deviations σ_i and
   correlations ρ_ij = Σ_ij / (σ_i σ_j) from the machine file's covariance Σ, units,
   conventions and calibration metadata (:func:`calibration_json`).
@@ -116,9 +121,7 @@ def format_calibration_json(machine: Mechanism, source: str | None = None) -> st
     "pkmcal export calibrated.yaml --format json -o calibrated.json",
     "pkmcal export stewart-prototype --format linuxcnc",
     "pkmcal export kossel-mini --format klipper",
-    "pkmcal export kossel-mini --format marlin",
-    "pkmcal export delta-calibrated.yaml --format klipper --measurements probe.csv --setup z-probe-klipper "
-    "--heldout check.csv -o saved.cfg"))
+    "pkmcal export kossel-mini --format marlin"))
 @click.argument("calibrated", metavar="CALIBRATED.yaml")
 @click.option("--format", "fmt", type=click.Choice(["linuxcnc", "json", "klipper", "marlin"]), required=True,
               help="linuxcnc: genhexkins HAL setp lines (hexapods); json: parameters with std and correlation; "
@@ -246,10 +249,7 @@ def _delta_firmware_text(machine, fmt: str, refit=None) -> str:
     if refit is not None:
         for line in refit.lines():
             click.echo(f"pkmcal: {line}", err=True)
-        fw, left = firmware_subset(refit.machine)
-        if left:   # the refit holds every non-firmware parameter at the firmware's value
-            raise PkmcalError("internal error: the firmware-limited refit has parameters the firmware cannot hold: "
-                              + ", ".join(d.name for d in left))
+        fw, _ = firmware_subset(refit.machine)   # nothing left out: leans and tool at 0, one radius
         click.echo("pkmcal: note: the exported settings are the firmware-limited refit: the best machine the "
                    "firmware can hold on these measurements", err=True)
     elif dropped:

@@ -106,16 +106,13 @@ class FirmwareRefit:
 
 
 def dropped_machine(machine):
-    """The machine the firmware's ten numbers describe, with the reading reference of
-    ``machine`` (so that it reads the same measurements): leans and tool offset 0, the
-    radii replaced by their mean (as :func:`pkmcal.io.delta_firmware.firmware_subset`)."""
-    rho = np.array(machine.params, dtype=float)
-    for n in HELD:
-        rho[PARAM_NAMES.index(n)] = 0.0
-    idx = [PARAM_NAMES.index(n) for n in RADII]
-    if not np.all(rho[idx] == rho[idx][0]):
-        rho[idx] = float(np.mean(rho[idx]))
-    return machine.with_params(rho, name=machine.name)
+    """The machine the firmware's ten numbers describe (what an export without a refit
+    writes: :func:`pkmcal.io.delta_firmware.firmware_subset`, leans and tool offset 0, the
+    mean radius), with the reading reference of ``machine`` (so that it reads the same
+    measurements)."""
+    from pkmcal.io.delta_firmware import firmware_subset
+
+    return machine.with_params(firmware_subset(machine)[0].machine(machine.name).params, name=machine.name)
 
 
 def recorded_priors(machine) -> tuple:
