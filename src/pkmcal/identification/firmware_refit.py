@@ -120,7 +120,7 @@ def recorded_priors(machine) -> tuple:
     as :class:`~pkmcal.identification.priors.Prior` objects."""
     from pkmcal.identification.priors import parse_value
 
-    record = (getattr(machine, "metadata", None) or {}).get("calibration") or {}
+    record = (machine.metadata or {}).get("calibration") or {}
     out = []
     for name, text in (record.get("priors") or {}).items():
         value = str(text).rsplit(" ", 1)[0] if str(text).endswith((" mm", " deg")) else str(text)
@@ -182,10 +182,10 @@ def firmware_refit(machine, setup, measurements, heldout=None, *, method: str | 
     from pkmcal.identification.priors import Prior
     from pkmcal.identification.residuals import default_method
 
-    if getattr(machine, "kind", None) != "linear-delta":
+    if machine.kind != "linear-delta":
         raise PkmcalError(f"the firmware-limited refit is for linear deltas; machine '{machine.name}' is a "
-                          f"{getattr(machine, 'kind', None) or 'machine of another kind'}")
-    record = (getattr(machine, "metadata", None) or {}).get("calibration") or {}
+                          f"{machine.kind or 'machine of another kind'}")
+    record = (machine.metadata or {}).get("calibration") or {}
     if method is None:
         method = record.get("method") or default_method(setup, machine)
     notes = []
