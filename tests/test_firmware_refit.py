@@ -27,7 +27,12 @@ from click.testing import CliRunner
 
 from pkmcal.cli.main import cli
 from pkmcal.identification.engine import identify
-from pkmcal.identification.firmware_refit import HELD, dropped_machine, firmware_refit, residual_rms
+from pkmcal.identification.firmware_refit import (
+    HELD,
+    dropped_machine,
+    firmware_refit,
+    residual_rms,
+)
 from pkmcal.identification.priors import Prior
 from pkmcal.io.delta_firmware import firmware_subset, read_klipper
 from pkmcal.io.machine_file import load_machine, machine_to_text
@@ -110,7 +115,7 @@ def _chance_limit(full, n_poses, n_more):
 
 
 def test_noise_free_refit_of_a_firmware_representable_printer_predicts_it_exactly():
-    nominal, setup, real, meas, held, _ = _campaign(11, 0.0, noisy=False)
+    nominal, setup, _, meas, held, _ = _campaign(11, 0.0, noisy=False)
     clean = _noise_free(setup)
     # the full model, fitted on weighted rows with a noise-free setup's weights undefined: use
     # the noisy setup's weights (the data are exact either way)
@@ -123,13 +128,13 @@ def test_noise_free_refit_of_a_firmware_representable_printer_predicts_it_exactl
     y = clean.sensor.predict(cal.frame(cal.fk(held.actuators).poses))
     np.testing.assert_allclose(y, 0.0, rtol=0, atol=1e-8)
     # the refit is a firmware machine: vertical rails, one radius, no tool offset
-    fw, left = firmware_subset(cal)
+    _, left = firmware_subset(cal)
     assert left == []
     assert all(cal.params[PARAM_NAMES.index(n)] == 0.0 for n in HELD)
 
 
 def test_a_printer_without_leans_loses_nothing_to_the_firmware():
-    nominal, setup, real, meas, held, priors = _campaign(3, 0.0)
+    nominal, setup, _, meas, held, priors = _campaign(3, 0.0)
     full = identify(nominal, setup, meas, priors=priors)
     ref = firmware_refit(full.mechanism, setup, meas, held, priors=priors)
     f, r = ref.full.fit_rms["mm"], ref.refit.fit_rms["mm"]
@@ -159,7 +164,7 @@ def test_a_leaning_rail_costs_a_measurable_amount_and_the_refit_beats_dropping_i
 
 
 def _files(tmp_path, seed=5, lean_deg=0.3):
-    nominal, setup, real, meas, held, priors = _campaign(seed, lean_deg, n=40, n_held=20)
+    nominal, _, _, meas, held, priors = _campaign(seed, lean_deg, n=40, n_held=20)
     for name, m in (("meas.csv", meas), ("held.csv", held)):
         rows = np.c_[m.actuators, m.readings, m.commanded]
         (tmp_path / name).write_text("lambda1,lambda2,lambda3,probe_z,cmd_x,cmd_y,cmd_z\n"

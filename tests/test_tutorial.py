@@ -141,7 +141,7 @@ def test_every_tutorial_page_is_checked():
 
 
 def test_tutorial_runs_as_written(tmp_path, monkeypatch):
-    n_run, excerpts, work = run_page(PAGE, tmp_path, monkeypatch)
+    n_run, excerpts, _ = run_page(PAGE, tmp_path, monkeypatch)
     assert files_of(PAGE) == FILES
     assert n_run >= 10
     assert {name for name, _ in excerpts} >= {"indicators.yaml", "meas.csv", "dials_inch.csv", "kinematics.hal"}

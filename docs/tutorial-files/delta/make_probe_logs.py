@@ -109,7 +109,10 @@ def check(*configs: str) -> list[str]:
     (along x, y and the diagonal, at the centre, z = 0.2 mm) as the real printer makes them.
     Readings convert through the switches, which do not move: travel below each switch is
     the same on both configs, λ_cfg − H_cfg = λ − H (H the switch readings)."""
-    text = "".join(open(c, encoding="utf-8").read() + "\n" for c in configs)
+    text = ""
+    for c in configs:
+        with open(c, encoding="utf-8") as fh:
+            text += fh.read() + "\n"
     with tempfile.TemporaryDirectory() as tmp:
         path = os.path.join(tmp, "printer.cfg")
         with open(path, "w", encoding="utf-8") as fh:
@@ -130,8 +133,8 @@ def check(*configs: str) -> list[str]:
     p = np.c_[ends, np.full(6, 0.2)]
     q = real_nozzle(p)
     errs = [np.linalg.norm(q[2 * k + 1] - q[2 * k]) - np.linalg.norm(p[2 * k + 1] - p[2 * k]) for k in range(3)]
-    return [f"first layer (z = 0, {int(inside.sum())} points of the 75 mm disc): the real nozzle {z.mean():+.3f} mm "
-            f"above the bed on average, spread {z.max() - z.min():.3f} mm (max - min), std {np.std(z):.4f} mm",
+    return [(f"first layer (z = 0, {int(inside.sum())} points of the 75 mm disc): the real nozzle {z.mean():+.3f} mm "
+             f"above the bed on average, spread {z.max() - z.min():.3f} mm (max - min), std {np.std(z):.4f} mm"),
             "100 mm printed as: " + ", ".join(f"{100 + e:.3f} mm along {d}" for e, d in
                                                 zip(errs, ("x", "y", "the diagonal")))]
 

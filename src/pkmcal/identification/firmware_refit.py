@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from fnmatch import fnmatchcase
 
 import numpy as np
 
@@ -159,8 +160,6 @@ def _with_sensor_fitted(machine, setup, measurements, method: str, priors):
 
     if not setup.sensor.default_free:
         return setup
-    from fnmatch import fnmatchcase
-
     mine = tuple(p for p in priors if any(fnmatchcase(n, p.pattern) for n in setup.sensor.param_names))
     fit = identify(machine, setup, measurements, method=method, free=list(setup.sensor.default_free), fix="auto",
                    priors=mine)
@@ -192,7 +191,6 @@ def firmware_refit(machine, setup, measurements, heldout=None, *, method: str | 
     if priors is None and not record:
         notes.append("the machine file has no calibration record: the refit uses no priors")
     priors = recorded_priors(machine) if priors is None else tuple(priors)
-    from fnmatch import fnmatchcase
 
     def matches(p: Prior, names) -> list[str]:
         return [n for n in names if fnmatchcase(n, p.pattern)]
@@ -254,5 +252,14 @@ def firmware_refit(machine, setup, measurements, heldout=None, *, method: str | 
                          notes=tuple(notes))
 
 
-__all__ = ["FIRMWARE_FREE", "FirmwareRefit", "HELD", "RADII", "Score", "dropped_machine", "firmware_refit",
-           "recorded_priors", "residual_rms"]
+__all__ = [
+    "FIRMWARE_FREE",
+    "HELD",
+    "RADII",
+    "FirmwareRefit",
+    "Score",
+    "dropped_machine",
+    "firmware_refit",
+    "recorded_priors",
+    "residual_rms",
+]
