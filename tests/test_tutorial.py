@@ -1,5 +1,6 @@
-"""docs/tutorial-indicators.md cannot rot: its commands run, in order, in a copy of
-docs/tutorial-files/, and print what the page shows.
+"""The tutorials cannot rot: every ``docs/tutorial-*.md`` page's commands run, in order, in a
+copy of the folder the page says to copy (its ``cp -r docs/tutorial-files... DIR`` line), and
+print what the page shows.
 
 * Every ``$ pkmcal ...`` line of a ``console`` block (with ``\\`` continuations) is run; it
   must exit with 0, or with 2 where the page shows a ``pkmcal: error:`` line.
@@ -8,15 +9,24 @@ docs/tutorial-files/, and print what the page shows.
   beyond about the tenth are round-off and differ between computers).
 * A block after ``<!-- file: NAME -->`` is an excerpt of the file NAME as the commands left
   it, compared the same way.
-* ``dials_inch.csv`` is ``meas.csv`` of the tutorial in inches (7 decimals).
 
-The page was written with ``SOURCE_DATE_EPOCH=1798761600`` (2027-01-01, the date in the
-calibrated machine's name); so is this run.
+Page by page, besides:
+
+* tutorial-indicators.md: ``dials_inch.csv`` is ``meas.csv`` of the tutorial in inches (7
+  decimals); the shipped setup is the one the page shows.
+* tutorial-delta-printer.md: the probe logs are what ``make_probe_logs.py`` writes (its
+  fixed seed, byte for byte), and the lines the page quotes from that script (the logs'
+  summary and the simulated printer's first layer and 100 mm distances under printer.cfg and
+  under the exported saved.cfg) are what it prints.
+
+The pages were written with ``SOURCE_DATE_EPOCH=1798761600`` (2027-01-01, the date in the
+calibrated machines' names); so is this run.
 """
 
 from __future__ import annotations
 
 import csv
+import importlib.util
 import re
 import shlex
 import shutil
@@ -31,6 +41,10 @@ from pkmcal.io.tables import read_table
 DOCS = Path(__file__).resolve().parent.parent / "docs"
 PAGE = DOCS / "tutorial-indicators.md"
 FILES = DOCS / "tutorial-files"
+DELTA_PAGE = DOCS / "tutorial-delta-printer.md"
+DELTA_FILES = FILES / "delta"
+#: Every tutorial page; each is run by a test below.
+PAGES = sorted(DOCS.glob("tutorial-*.md"))
 NUMBER = re.compile(r"[-+]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][-+]?\d+)?")
 
 
@@ -88,12 +102,21 @@ def check_shown(shown: list[str], actual: str, what: str) -> None:
         assert normalise(line) in got, f"{what}: the page shows\n  {line}\nbut it printed:\n{actual[-3000:]}"
 
 
-def test_tutorial_runs_as_written(tmp_path, monkeypatch):
-    work = tmp_path / "my-calibration"
-    shutil.copytree(FILES, work)
+def files_of(page: Path) -> Path:
+    """The folder the page tells the reader to copy (``cp -r docs/tutorial-files... DIR``)."""
+    m = re.search(r"^cp -r docs/(tutorial-files\S*) \S+", page.read_text(encoding="utf-8"), flags=re.MULTILINE)
+    assert m, f"{page.name}: no 'cp -r docs/tutorial-files... DIR' line"
+    return DOCS / m.group(1)
+
+
+def run_page(page: Path, tmp_path, monkeypatch):
+    """Run the page's commands in a copy of its folder; check their output and the file
+    excerpts. Returns (commands run, excerpts [(name, lines)], the work folder)."""
+    work = tmp_path / "work"
+    shutil.copytree(files_of(page), work)
     monkeypatch.chdir(work)
     monkeypatch.setenv("SOURCE_DATE_EPOCH", "1798761600")
-    text = PAGE.read_text(encoding="utf-8")
+    text = page.read_text(encoding="utf-8")
     runner = CliRunner()
     n_run, excerpts = 0, []
     for kind, label, lines in blocks(text):
@@ -108,13 +131,58 @@ def test_tutorial_runs_as_written(tmp_path, monkeypatch):
             assert res.exit_code == expected, (argv, res.output[-3000:])
             check_shown(shown, res.output, " ".join(argv))
             n_run += 1
-    assert n_run >= 10
     for name, lines in excerpts:
         check_shown(lines, (work / name).read_text(encoding="utf-8"), name)
+    return n_run, excerpts, work
+
+
+def test_every_tutorial_page_is_checked():
+    assert set(PAGES) == {PAGE, DELTA_PAGE}, "a new tutorial page needs its test here"
+
+
+def test_tutorial_runs_as_written(tmp_path, monkeypatch):
+    n_run, excerpts, _ = run_page(PAGE, tmp_path, monkeypatch)
+    assert files_of(PAGE) == FILES
+    assert n_run >= 10
     assert {name for name, _ in excerpts} >= {"indicators.yaml", "meas.csv", "dials_inch.csv", "kinematics.hal"}
     # the shipped setup is the one the page shows, byte for byte (but for the fence)
     shown_setup = next(lines for name, lines in excerpts if name == "indicators.yaml")
     assert (FILES / "indicators.yaml").read_text(encoding="utf-8").splitlines() == shown_setup
+
+
+def _probe_logs_script():
+    spec = importlib.util.spec_from_file_location("make_probe_logs", DELTA_FILES / "make_probe_logs.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_delta_printer_tutorial_runs_as_written(tmp_path, monkeypatch):
+    n_run, excerpts, work = run_page(DELTA_PAGE, tmp_path, monkeypatch)
+    assert files_of(DELTA_PAGE) == DELTA_FILES
+    assert n_run >= 7
+    assert {name for name, _ in excerpts} >= {"probe.log", "saved.cfg"}
+    # the simulated printer under the config before and after, as the page quotes it
+    mk = _probe_logs_script()
+    text = DELTA_PAGE.read_text(encoding="utf-8")
+    quoted = {normalise(line) for line in text.splitlines()}
+    for configs in (("printer.cfg",), ("printer.cfg", "saved.cfg")):
+        for line in mk.check(*(str(work / c) for c in configs)):
+            assert normalise(line) in quoted, f"the page does not show the check line\n  {line}"
+
+
+def test_delta_probe_logs_are_what_the_script_writes(tmp_path, capsys):
+    """make_probe_logs.py (fixed seed) writes the shipped logs byte for byte, and prints the
+    summary the page quotes."""
+    mk = _probe_logs_script()
+    shutil.copy(DELTA_FILES / "printer.cfg", tmp_path)
+    mk.HERE = str(tmp_path)
+    mk.main([])
+    for name in ("probe.log", "check.log"):
+        assert (tmp_path / name).read_bytes() == (DELTA_FILES / name).read_bytes(), name
+    quoted = {normalise(line) for line in DELTA_PAGE.read_text(encoding="utf-8").splitlines()}
+    printed = capsys.readouterr().out.splitlines()
+    assert len(printed) == 2 and all(normalise(line) in quoted for line in printed), printed
 
 
 def test_dials_inch_is_the_tutorials_measurements_in_inches(tmp_path, monkeypatch):

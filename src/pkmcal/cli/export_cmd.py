@@ -6,6 +6,11 @@
   paper 1 eq. 1, paper 2 eq. 1); with ``--ini FILE`` also the INI sections ``[TRAJ]``,
   ``[KINS]``, ``[JOINT_0..5]`` (limits, HOME_OFFSET, HOME) that match them
   (:func:`pkmcal.io.export_linuxcnc.linuxcnc_ini`; ``pkmcal import linuxcnc`` reads both).
+* ``--format klipper`` / ``marlin`` (linear deltas): the firmware's ten numbers
+  (:mod:`pkmcal.io.delta_firmware`), what it cannot hold listed on standard error; with
+  ``--measurements`` (``--setup``, ``--heldout``, ``--json``) the firmware-limited refit is
+  exported instead, with the fit and held-out RMS of the full model, of its firmware numbers
+  and of the refit (:mod:`pkmcal.identification.firmware_refit`).
 * ``--format json``: the identified parameters ρ with their standard deviations σ_i and
   correlations ρ_ij = Σ_ij / (σ_i σ_j) from the machine file's covariance Σ, units,
   conventions and calibration metadata (:func:`calibration_json`).
@@ -129,7 +134,21 @@ def format_calibration_json(machine: Mechanism, source: str | None = None) -> st
 @click.option("--ini", "ini", metavar="FILE.ini",
               help="linuxcnc: also write the INI sections [TRAJ], [KINS], [JOINT_0..5] (joint limits, HOME_OFFSET, "
                    "HOME) matching the HAL file, to merge into the machine's INI file.")
-def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None) -> None:
+@click.option("--measurements", "measurements", metavar="MEAS.csv",
+              help="klipper / marlin: refit the machine with only the firmware's numbers free (rail leans and tool "
+                   "offset at 0) on these measurements, export that refit, and report on standard error the fit "
+                   "rms of the full model, of its firmware numbers without a refit and of the refit.")
+@click.option("--setup", "setup_spec", metavar="SETUP",
+              help="With --measurements: the setup file or built-in name of the measurements (default: the setup "
+                   "of the machine file's calibration record).")
+@click.option("--heldout", "heldout", metavar="HELDOUT.csv",
+              help="With --measurements: measurements not used in any fit; the report adds each model's held-out "
+                   "rms on them.")
+@click.option("--json", "as_json", is_flag=True,
+              help="With --measurements: print the refit report as JSON on standard output (the settings then need "
+                   "-o FILE).")
+def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None, measurements: str | None = None,
+               setup_spec: str | None = None, heldout: str | None = None, as_json: bool = False) -> None:
     """Export the machine in CALIBRATED.yaml (a machine file or built-in name) for a controller.
 
     linuxcnc: 'setp genhexkins.base.N.x|y|z' and 'setp genhexkins.platform.N.x|y|z'
@@ -140,8 +159,25 @@ def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None) -
     delta_radius and [stepper_a|b|c] angle, arm_length, position_endstop sections, or the
     M665/M666 lines; every identified parameter the firmware cannot hold (rail leans,
     unequal radii, a tool offset) is listed on standard error with the value dropped.
+
+    With --measurements MEAS.csv (and --setup, --heldout HELDOUT.csv): the firmware-limited
+    refit. The machine is fitted again with only the firmware's numbers free (one radius,
+    per tower angle, arm, endstop; leans and tool offset held at 0; the calibration's
+    method and priors), the refit is what is exported (the best machine the firmware can
+    hold), and standard error (or --json) shows what dropping the rest costs: the residual
+    rms of the full model, of its firmware numbers without a refit, and of the refit, on
+    MEAS.csv and on HELDOUT.csv.
     """
-    check_output(output, [calibrated])
+    if (setup_spec is not None or heldout is not None or as_json) and measurements is None:
+        raise PkmcalError("--setup, --heldout and --json belong to the firmware-limited refit: give --measurements "
+                          "MEAS.csv too")
+    if measurements is not None and fmt not in ("klipper", "marlin"):
+        raise PkmcalError(f"--measurements refits a linear delta for its firmware: use it with --format klipper or "
+                          f"marlin, not {fmt}")
+    if as_json and to_stdout(output):
+        raise PkmcalError("--json prints the refit report on standard output; write the settings to a file with "
+                          "-o FILE")
+    check_output(output, [calibrated] + [p for p in (measurements, heldout, setup_spec) if p is not None])
     if ini is not None:
         if fmt != "linuxcnc":
             raise PkmcalError("--ini writes LinuxCNC INI sections; use it with --format linuxcnc")
@@ -160,20 +196,51 @@ def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None) -
         text = linuxcnc_hal(machine)
         ini_text = linuxcnc_ini(machine) if ini is not None else None
     elif fmt in ("klipper", "marlin"):
-        text = _delta_firmware_text(machine, fmt)
+        refit = None
+        if measurements is not None:
+            refit = _refit(machine, measurements, setup_spec, heldout, calibrated)
+        text = _delta_firmware_text(machine, fmt, refit)
     else:
         text = format_calibration_json(machine, source=os.fspath(calibrated))
     if ini_text is not None:
         emit(ini_text, ini)
     emit(text, output)
+    if as_json:
+        from pkmcal.io.json_out import finite_or_null
+
+        click.echo(json.dumps(finite_or_null({"firmware_refit": refit.to_dict(), "output": output,
+                                              "format": fmt}), indent=2, allow_nan=False))
     if not to_stdout(output):
         click.echo(f"wrote {output} ({fmt})", err=True)
     if ini_text is not None:
         click.echo(f"wrote {ini} (LinuxCNC INI sections [TRAJ], [KINS], [JOINT_0..5])", err=True)
 
 
-def _delta_firmware_text(machine, fmt: str) -> str:
-    """The Klipper or Marlin text of a linear delta; what it cannot hold, on standard error."""
+def _refit(machine, measurements: str, setup_spec: str | None, heldout: str | None, calibrated: str):
+    """The firmware-limited refit of ``machine`` on the measurement files
+    (:func:`pkmcal.identification.firmware_refit.firmware_refit`)."""
+    if machine.kind != "linear-delta":
+        raise PkmcalError(f"--measurements refits a linear delta for its firmware; machine '{machine.name}' is a "
+                          f"{machine.kind or 'machine of another kind'}")
+    from pkmcal.identification.firmware_refit import firmware_refit
+    from pkmcal.io.measurements import load_measurements
+    from pkmcal.io.setup_file import load_setup
+
+    if setup_spec is None:
+        setup_spec = ((machine.metadata or {}).get("calibration") or {}).get("setup")
+        if setup_spec is None:
+            raise PkmcalError(f"{calibrated} has no calibration record naming its setup: give --setup SETUP (the "
+                              "setup of the measurements, e.g. z-probe-klipper)")
+    setup = load_setup(setup_spec, machine)
+    meas = load_measurements(measurements, machine, setup)
+    held = None if heldout is None else load_measurements(heldout, machine, setup)
+    return firmware_refit(machine, setup, meas, held)
+
+
+def _delta_firmware_text(machine, fmt: str, refit=None) -> str:
+    """The Klipper or Marlin text of a linear delta (or of its firmware-limited ``refit``);
+    what the machine has that the firmware cannot hold, and what the refit costs, on
+    standard error."""
     if machine.kind != "linear-delta":
         raise PkmcalError(f"--format {fmt} exports linear delta printers; machine '{machine.name}' is a "
                           f"{machine.kind or 'machine of another kind'}")
@@ -183,9 +250,16 @@ def _delta_firmware_text(machine, fmt: str) -> str:
     angles = dict(zip(machine.param_names, machine.param_is_angle))
     for d in dropped:
         click.echo(f"pkmcal: warning: {d.describe(angles[d.name])}", err=True)
-    if dropped:
+    if refit is not None:
+        for line in refit.lines():
+            click.echo(f"pkmcal: {line}", err=True)
+        fw, _ = firmware_subset(refit.machine)   # nothing left out: leans and tool at 0, one radius
+        click.echo("pkmcal: note: the exported settings are the firmware-limited refit: the best machine the "
+                   "firmware can hold on these measurements", err=True)
+    elif dropped:
         click.echo(f"pkmcal: note: the firmware uses the machine without these {len(dropped)} parameter(s); for the "
-                   "best machine it can hold, identify again with them fixed (e.g. --fix 'lean_*')", err=True)
+                   "best machine it can hold and what dropping them costs, give the measurements: "
+                   "--measurements MEAS.csv --setup SETUP (and --heldout HELDOUT.csv)", err=True)
     return klipper_text(fw) if fmt == "klipper" else marlin_text(fw)
 
 
