@@ -42,18 +42,19 @@ def identifiability_from_report(report, fixed: tuple[str, ...]) -> Identifiabili
 def residual_units(names: tuple[str, ...], setup: MeasurementSetup, mechanism: Mechanism | None = None,
                    weighted: bool = False) -> tuple[str, ...]:
     """Unit of each residual row. A row named after a reading has that reading's unit, from
-    the declared flags: the sensor's ``reading_is_angle``, the mechanism's
-    ``actuator_is_angle`` ("rad" for angles, "mm" otherwise). Other rows combine readings
-    (the projection's r = U⊥ᵀ W [e_y; e_q], paper 3 eq. 8): "1" when whitened (``weighted``)
-    or when the readings mix lengths and angles, else the readings' common unit."""
+    the declared flags and units: the sensor's ``reading_is_angle`` ("rad" for angles, "mm"
+    otherwise), the mechanism's ``actuator_is_angle`` ("rad") and ``actuator_units`` (mm, or
+    a hexapod's ``actuator_unit``: rev, count, ...). Other rows combine readings (the
+    projection's r = U⊥ᵀ W [e_y; e_q], paper 3 eq. 8): "1" when whitened (``weighted``) or
+    when the readings mix units, else the readings' common unit."""
     sensor = setup.sensor
-    flags = tuple(sensor.reading_is_angle)
-    angle = dict(zip(sensor.reading_names, sensor.reading_is_angle))
+    unit = {n: "rad" if a else "mm" for n, a in zip(sensor.reading_names, sensor.reading_is_angle)}
     if mechanism is not None:
-        flags += tuple(mechanism.actuator_is_angle)
-        angle.update(zip(mechanism.actuator_names, mechanism.actuator_is_angle))
-    combined = "1" if weighted or (any(flags) and not all(flags)) else ("rad" if flags and all(flags) else "mm")
-    return tuple(("rad" if angle[n] else "mm") if n in angle else combined for n in names)
+        unit.update((n, "rad" if a else u) for n, a, u in
+                    zip(mechanism.actuator_names, mechanism.actuator_is_angle, mechanism.actuator_units))
+    kinds = set(unit.values())
+    combined = "1" if weighted or len(kinds) > 1 else (kinds.pop() if kinds else "mm")
+    return tuple(unit.get(n, combined) for n in names)
 
 
 def held_out_from_verification(verification) -> HeldOutErrors | None:
