@@ -205,10 +205,13 @@ class IdentificationResult:
 
     def rms_by_unit(self) -> dict[str, float]:
         """{unit: rms} of the raw residuals over the rows of each unit, angles in degrees:
-        keys "mm", "deg" and "1" (whitened or mixed rows), only those present."""
+        keys "mm", "deg" and "1" (whitened or mixed rows), then any other reading unit (a
+        hexapod's ``actuator_unit``: "rev", ...), only those present."""
         units = self.residual_units or ("1",) * self.residuals.shape[1]
         out = {}
-        for unit, shown, scale in (("mm", "mm", 1.0), ("rad", "deg", float(np.rad2deg(1.0))), ("1", "1", 1.0)):
+        known = (("mm", "mm", 1.0), ("rad", "deg", float(np.rad2deg(1.0))), ("1", "1", 1.0))
+        others = tuple((u, u, 1.0) for u in dict.fromkeys(units) if u not in ("mm", "rad", "1"))
+        for unit, shown, scale in known + others:
             cols = [k for k, un in enumerate(units) if un == unit]
             if cols and self.residuals.size:
                 out[shown] = float(np.sqrt(np.mean(self.residuals[:, cols] ** 2))) * scale
