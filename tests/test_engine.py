@@ -158,7 +158,7 @@ def _fd_model(model, method, form, x):
     scale = np.where(ang, 1.0, L.min())
     # a leg gain g (unit mm per reading unit): λ = (L − L0)/g curves on the scale g/√3 (third
     # derivative 6|λ|/g³); through FK, L0 + g q moves the legs by q per unit of g
-    gain = np.r_[[u.startswith("mm/") for u in mech.param_units], np.zeros(len(sensor.param_is_angle), bool)]
+    gain = np.r_[[u not in ("mm", "deg") for u in mech.param_units], np.zeros(len(sensor.param_is_angle), bool)]
     scale[gain] = min(1.0 / np.sqrt(3.0), L.min() / max(1.0, np.abs(model.q).max()))
     resolution = np.full(len(ang), 1e-5)
     if method == "fk-residual":

@@ -85,7 +85,7 @@ def test_parameters_are_the_papers_42_then_the_gains_held_by_default():
     assert PROTOTYPE.param_names == HEXAPOD_PARAM_NAMES and len(PROTOTYPE.params) == 48
     np.testing.assert_array_equal(PROTOTYPE.params[42:], 1.0)
     assert default_fixed_parameters(PROTOTYPE) == GAIN_NAMES
-    assert PROTOTYPE.param_units == ("mm",) * 42 + ("mm/mm",) * 6
+    assert PROTOTYPE.param_units == ("mm",) * 42 + ("1",) * 6
     assert with_gains(PROTOTYPE, np.full(6, LEAD), "rev").param_units[42:] == ("mm/rev",) * 6
 
 

@@ -225,6 +225,14 @@ def default_fixed_parameters(mechanism) -> tuple[str, ...]:
     return tuple(n for n in mechanism.param_names if any(fnmatchcase(n, pat) for pat in mechanism.default_fixed))
 
 
+def default_estimated_index(mechanism) -> np.ndarray:
+    """Indices of the machine parameters a fit estimates unless told otherwise: all but
+    :func:`default_fixed_parameters` (a hexapod's 42 geometry parameters of papers 1 and 2,
+    without its leg gains)."""
+    held = set(default_fixed_parameters(mechanism))
+    return np.array([i for i, n in enumerate(mechanism.param_names) if n not in held], dtype=int)
+
+
 def candidate_parameters(model: Model, free=None, fix=None) -> tuple[list[int], bool]:
     """Indices of the parameters to estimate before any automatic gauge, and whether the
     choice was explicit (``free`` or a ``fix`` list given). Without ``free``: every machine

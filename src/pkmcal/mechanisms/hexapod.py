@@ -195,9 +195,10 @@ class Hexapod(Mechanism):
 
     @property
     def param_units(self) -> tuple[str, ...]:
-        """mm for the 42 geometry parameters, mm per reading unit (``mm/rev``; ``mm/mm``) for
-        the gains."""
-        return ("mm",) * N_GEOMETRY_PARAMS + (f"mm/{self.actuator_unit}",) * N_LEGS
+        """mm for the 42 geometry parameters; for the gains mm per reading unit (``mm/rev``),
+        "1" for readings in mm (a pure number)."""
+        gain = "1" if self.actuator_unit == "mm" else f"mm/{self.actuator_unit}"
+        return ("mm",) * N_GEOMETRY_PARAMS + (gain,) * N_LEGS
 
     @property
     def actuator_units(self) -> tuple[str, ...]:
