@@ -419,9 +419,13 @@ def test_cli_identify_frees_the_gains_by_name(tmp_path):
     assert res.exit_code == 0, res.output
     free = ["--free", "b*", "--free", "a*", "--free", "L0_*", "--free", "gain_*"]
     res = run("identify", tmp_path / "nominal.yaml", tmp_path / "m.csv", "--setup", tmp_path / "setup.yaml",
-              "--method", "ik-residual", *free, "-o", tmp_path / "cal.yaml")
+              "--method", "ik-residual", *free, "-o", tmp_path / "cal.yaml", "--report", tmp_path / "rep")
     assert res.exit_code == 0, res.output
-    assert "rev" in res.output  # the readings' residuals are in rev
+    assert "rms" in res.output and " rev over lambda1, lambda2" in res.output  # the readings' residuals in rev
+    # the report: residual rows in rev, the gains in mm/rev (not mm)
+    html = next((tmp_path / "rep").glob("*.html")).read_text()
+    assert 'gain_1</td><td class="l">mm/rev</td>' in html
+    assert 'lambda1</td><td class="l">rev</td>' in html
     cal = load_machine(tmp_path / "cal.yaml")
     assert cal.actuator_unit == "rev"
     np.testing.assert_allclose(cal.params[:42], real.params[:42], rtol=0, atol=1e-8)
@@ -436,3 +440,4 @@ def test_cli_identify_frees_the_gains_by_name(tmp_path):
     assert "gain_1, gain_2, gain_3, gain_4, gain_5, gain_6, which the machine holds unless freed by name" \
         in held.output
     np.testing.assert_array_equal(load_machine(tmp_path / "cal42.yaml").gains, LEAD)
+

@@ -90,7 +90,9 @@ def parameter_table(nominal: Mechanism, result, true_machine: Mechanism | None =
     NaN where not given."""
     p = len(nominal.param_names)
     sensor_angle = dict(zip(result.sensor.param_names, result.sensor.param_is_angle))
+    sensor_unit = {n: "deg" if a else "mm" for n, a in sensor_angle.items()}
     flags = tuple(nominal.param_is_angle) + tuple(sensor_angle[n] for n in result.names[p:])
+    units = tuple(nominal.param_units) + tuple(sensor_unit[n] for n in result.names[p:])
     free_set = {n: k for k, n in enumerate(result.free)}
     shown = list(range(p)) + [i for i in range(p, len(result.names))
                               if result.names[i] in free_set or result.names[i] in result.gauge]
@@ -103,7 +105,7 @@ def parameter_table(nominal: Mechanism, result, true_machine: Mechanism | None =
         true = np.r_[t_mech, [t_sens.get(n, np.nan) for n in result.names[p:]]][shown]
     return ParameterTable(names, np.asarray(result.initial)[shown], np.asarray(result.estimate)[shown], std,
                           np.array([n in free_set for n in names]), true=true,
-                          is_angle=np.array(flags, dtype=bool)[shown])
+                          is_angle=np.array(flags, dtype=bool)[shown], param_units=tuple(units[i] for i in shown))
 
 
 def _compliance_facts(nominal, result, setup, commanded) -> tuple[tuple[str, str], ...]:
