@@ -31,8 +31,18 @@ from pkmcal.errors import InputFileError, PkmcalError
 from pkmcal.identification.engine import identify
 from pkmcal.identification.residuals import default_fixed_parameters
 from pkmcal.identification.simulation import perturb_machine, simulate_campaign
-from pkmcal.io.export_linuxcnc import joint_settings, leg_gains, linuxcnc_hal, linuxcnc_ini
-from pkmcal.io.machine_file import load_machine, machine_from_text, machine_to_text, save_machine
+from pkmcal.io.export_linuxcnc import (
+    joint_settings,
+    leg_gains,
+    linuxcnc_hal,
+    linuxcnc_ini,
+)
+from pkmcal.io.machine_file import (
+    load_machine,
+    machine_from_text,
+    machine_to_text,
+    save_machine,
+)
 from pkmcal.io.measurements import load_measurements
 from pkmcal.io.setup_file import builtin_setup
 from pkmcal.io.tables import format_table
@@ -104,7 +114,7 @@ def test_readings_are_lengths_minus_offsets_over_gains_and_fk_inverts_them(gains
     assert fk.ok.all()
     # FK stops at leg errors ≤ 1e-9 mm; at these well-conditioned poses that is < 1e-7 mm, rad
     np.testing.assert_allclose(fk.poses, poses, rtol=0, atol=1e-7)
-    q, A, B = m.ik_and_jacobians(poses)
+    q = m.ik_and_jacobians(poses)[0]
     np.testing.assert_allclose(q, m.ik(poses), rtol=0, atol=1e-12 * np.abs(q).max())
 
 
@@ -403,7 +413,7 @@ def test_cli_identify_frees_the_gains_by_name(tmp_path):
     """simulate (a real machine in rev with 1 % lead errors) → identify --free '*' … 'gain_*'
     → the calibrated file has the real gains (to the data's 1e-12 noise) with their σ, and its
     unit; without --free the gains are held and the summary says so."""
-    run = lambda *a: CliRunner().invoke(cli, [str(v) for v in a])  # noqa: E731
+    run = lambda *a: CliRunner().invoke(cli, [str(v) for v in a])
     nominal = with_gains(PROTOTYPE, np.full(6, LEAD), "rev")
     nominal = replace(nominal, limits=replace(nominal.limits, leg_diameter=None))  # see COLLISION
     real = real_with_gain_errors(nominal, 11)

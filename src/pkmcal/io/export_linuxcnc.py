@@ -196,8 +196,8 @@ def linuxcnc_hal(machine: Hexapod) -> str:
     if np.any(s["gain"] != 1.0) or machine.actuator_unit != "mm":
         unit = one_line(machine.actuator_unit)
         lines += [f"# Readings in {unit} with leg gains (mm of strut per {unit}): strut length L_i = L0_i + gain_i *",
-                  f"# lambda_i, so HOME_OFFSET = L0 + gain * (reading at the switch) and MIN_LIMIT/MAX_LIMIT =",
-                  f"# L0 + gain * stroke (the gains: 'gain=' below and in the INI comments)."]
+                  "# lambda_i, so HOME_OFFSET = L0 + gain * (reading at the switch) and MIN_LIMIT/MAX_LIMIT =",
+                  "# L0 + gain * stroke (the gains: 'gain=' below and in the INI comments)."]
     for n in range(6):
         home_offset = "" if s["HOME_OFFSET"][n] == machine.offset[n] else f" HOME_OFFSET={_num(s['HOME_OFFSET'][n])}"
         lines.append(
