@@ -451,3 +451,19 @@ def test_cli_identify_frees_the_gains_by_name(tmp_path):
         in held.output
     np.testing.assert_array_equal(load_machine(tmp_path / "cal42.yaml").gains, LEAD)
 
+
+
+def test_clipped_readings_are_reported_in_the_readings_unit(tmp_path):
+    """A reading at the end of a stroke in rev is named with its unit, in text and JSON."""
+    from pkmcal.io.measurements import Measurements, clipped_readings
+
+    m = with_gains(PROTOTYPE, np.full(6, LEAD), "rev")
+    lam = m.ik(poses_near_home(m, 3, 2))
+    lam[1, 2] = m.stroke[2, 1]  # stuck at the top of its stroke
+    meas = Measurements(actuators=lam, readings=np.zeros((3, 6)))
+    (found,) = clipped_readings(meas, m)
+    assert found.actuator == "lambda3" and found.kind == "at-end" and found.pose == 2
+    assert found.describe("rev").endswith("[0.0, 10.0] rev")
+    d = found.to_dict("rev")
+    assert d["reading"] == 10.0 and d["stroke"] == [0.0, 10.0] and d["units"]["reading"] == "rev"
+    assert "reading_mm" in found.to_dict("mm")

@@ -260,9 +260,18 @@ class ClippedReading:
                 f"[{self.stroke[0]!r}, {self.stroke[1]!r}] {unit}")
 
     def to_dict(self, unit: str = "mm") -> dict:
-        """JSON-ready, every number with its unit (docs/conventions.md, "Units in JSON")."""
-        return {"pose": self.pose, "line": self.line, "actuator": self.actuator, f"reading_{unit}": self.reading,
-                f"stroke_{unit}": list(self.stroke), "kind": self.kind, "units": {"pose": "1", "line": "1"}}
+        """JSON-ready, every number with its unit (docs/conventions.md, "Units in JSON"):
+        ``reading_mm``/``stroke_mm`` (``_deg`` for rotary actuators), or for readings in a
+        unit of their own (a hexapod's ``actuator_unit``) ``reading``/``stroke`` with that
+        unit in ``units``."""
+        units = {"pose": "1", "line": "1"}
+        if unit in ("mm", "deg"):
+            reading, stroke = f"reading_{unit}", f"stroke_{unit}"
+        else:
+            reading, stroke = "reading", "stroke"
+            units.update(reading=unit, stroke=unit)
+        return {"pose": self.pose, "line": self.line, "actuator": self.actuator, reading: self.reading,
+                stroke: list(self.stroke), "kind": self.kind, "units": units}
 
 
 def clipped_readings(measurements: Measurements, machine: Mechanism,
