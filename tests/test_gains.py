@@ -467,3 +467,16 @@ def test_clipped_readings_are_reported_in_the_readings_unit(tmp_path):
     d = found.to_dict("rev")
     assert d["reading"] == 10.0 and d["stroke"] == [0.0, 10.0] and d["units"]["reading"] == "rev"
     assert "reading_mm" in found.to_dict("mm")
+
+
+def test_residual_units_of_readings_in_their_own_unit():
+    """Actuator residual rows carry the readings' unit; a label that reads like an angle unit
+    ("deg" of a motor, never converted) is marked as a reading unit, so the report does not
+    treat it as an angle."""
+    from pkmcal.report.from_results import residual_units
+
+    setup = builtin_setup("full-pose-paper1")
+    names = ("lambda1", "x", "a")
+    assert residual_units(names, setup, PROTOTYPE) == ("mm", "mm", "rad")
+    assert residual_units(names, setup, with_gains(PROTOTYPE, np.full(6, LEAD), "rev")) == ("rev", "mm", "rad")
+    assert residual_units(names, setup, with_gains(PROTOTYPE, np.full(6, 0.01), "deg"))[0] == "deg (reading)"

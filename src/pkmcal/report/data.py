@@ -182,9 +182,10 @@ class Residuals:
             raise PkmcalError(
                 f"report: residuals have {values.shape[1]} columns but {len(self.names)} names, {len(self.units)} units"
             )
-        bad = [u for u in self.units if not (isinstance(u, str) and u.strip())]
+        bad = [u for u in self.units if not (isinstance(u, str) and u.strip()) or u == "deg"]
         if bad:
-            raise PkmcalError(f"report: residual units must be 'mm', 'rad', '1' or a reading unit; got {bad}")
+            raise PkmcalError(f"report: residual units must be 'mm', 'rad' (angles are radians here), '1' or a "
+                              f"reading unit; got {bad}")
 
 
 @dataclass(frozen=True)

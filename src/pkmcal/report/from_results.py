@@ -50,7 +50,9 @@ def residual_units(names: tuple[str, ...], setup: MeasurementSetup, mechanism: M
     sensor = setup.sensor
     unit = {n: "rad" if a else "mm" for n, a in zip(sensor.reading_names, sensor.reading_is_angle)}
     if mechanism is not None:
-        unit.update((n, "rad" if a else u) for n, a, u in
+        # a reading unit that is only a label (a hexapod's actuator_unit: rev, count; "deg" of a
+        # motor, never converted) is marked as one where it reads like a unit the report converts
+        unit.update((n, "rad" if a else (f"{u} (reading)" if u in ("deg", "rad") else u)) for n, a, u in
                     zip(mechanism.actuator_names, mechanism.actuator_is_angle, mechanism.actuator_units))
     kinds = set(unit.values())
     combined = "1" if weighted or len(kinds) > 1 else (kinds.pop() if kinds else "mm")
