@@ -49,7 +49,6 @@ ALLOWED = {
     ("io/machine_file.py", "isinstance(machine, cls)", "registries: generic machine loader"),
     ("io/machine_file.py", 'getattr(back, "metadata", {}) != getattr(machine, "metadata", {})',
      "registries: generic machine loader"),
-    ("io/measurements.py", 'getattr(machine, "offset", None)', "registries: 'leg-lengths' ability"),
     ("io/planar_machine_file.py", "type(m) is cls", "registries: generic machine loader"),
     ("io/setup_file.py", "isinstance(s, IndicatorSensor)", "registries: generic setup loader"),
     ("io/setup_file.py", "isinstance(s, PositionSensor)", "registries: generic setup loader"),

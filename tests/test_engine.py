@@ -91,7 +91,7 @@ def test_noise_free_recovery(nominal, real, setup_name, method, n):
     if setup_name == "full-pose":
         # no gauge freedom: the parameters themselves are recovered
         assert res.gauge == ()
-        np.testing.assert_allclose(res.estimate[:42], real.params, atol=1e-6)
+        np.testing.assert_allclose(res.estimate[:48], real.params, atol=1e-6)
     else:
         assert len(res.gauge) == 42 + len(setup.sensor.default_free) - res.identifiability.rank > 0
         assert any("gauge" in w for w in res.warnings)
@@ -107,7 +107,7 @@ def test_ik_residual_squared_form_recovers(nominal, real):
     q, y = simulate(nominal, real, setup.sensor, cmd)
     for weighted in (True, False):
         res = identify(nominal, setup, q=q, y=y, method="ik-residual", form="squared", weighted=weighted)
-        np.testing.assert_allclose(res.estimate[:42], real.params, atol=1e-6)
+        np.testing.assert_allclose(res.estimate[:48], real.params, atol=1e-6)
 
 
 def test_free_sensor_parameters_recovered(nominal, real):
@@ -156,6 +156,10 @@ def _fd_model(model, method, form, x):
     M = max(L.max(), np.abs(x[:, :3]).max(), np.abs(model.y).max())
     ang = np.r_[mech.param_is_angle, sensor.param_is_angle].astype(bool)
     scale = np.where(ang, 1.0, L.min())
+    # a leg gain g (unit mm per reading unit): λ = (L − L0)/g curves on the scale g/√3 (third
+    # derivative 6|λ|/g³); through FK, L0 + g q moves the legs by q per unit of g
+    gain = np.r_[[u not in ("mm", "deg") for u in mech.param_units], np.zeros(len(sensor.param_is_angle), bool)]
+    scale[gain] = min(1.0 / np.sqrt(3.0), L.min() / max(1.0, np.abs(model.q).max()))
     resolution = np.full(len(ang), 1e-5)
     if method == "fk-residual":
         scale = scale / (1.0 + kappa) ** 2
@@ -209,7 +213,7 @@ def test_jacobian_matches_finite_differences(nominal, real, setup_name, method, 
     model = Model(nominal, setup.sensor, setup.noise, q, y, cmd)
     meth = make_method(method, model, form=form)
     theta = model.theta0 + np.random.default_rng(3).normal(0, 0.3, model.theta0.size) * np.r_[
-        np.ones(42), 0.01 * np.ones(len(setup.sensor.param_names))]
+        np.ones(42), 0.01 * np.ones(6), 0.01 * np.ones(len(setup.sensor.param_names))]  # joints, L0, gains
     ev = meth.evaluate(theta)
     _assert_method_jacobian(meth, model, theta, ev.J, *_fd_model(model, method, form, ev.poses))
 
@@ -283,7 +287,7 @@ def test_weighted_and_unweighted(nominal, real):
     fits = {}
     for w in (True, False):
         fits[w] = identify(nominal, setup, q=q, y=y, method="ik-residual", weighted=w)
-        np.testing.assert_allclose(fits[w].estimate[:42], real.params, atol=1e-6)
+        np.testing.assert_allclose(fits[w].estimate[:48], real.params, atol=1e-6)
     diff = fits[False].uncertainty.covariance_prior - fits[True].uncertainty.covariance_prior
     assert np.min(np.linalg.eigvalsh(diff)) > -1e-9 * np.max(np.abs(diff))
     assert np.all(fits[True].uncertainty.std_prior <= fits[False].uncertainty.std_prior * (1 + 1e-9))
@@ -296,7 +300,7 @@ def test_weighted_and_unweighted(nominal, real):
     # each within 6 of its own σ (the unweighted fit's is the sandwich, larger than the
     # weighted one): 84 Gaussian estimates, false failure 84 · 2e-9 < 1e-6
     for r in (rw, ru):
-        assert np.all(np.abs(r.estimate[:42] - real.params) < 6 * r.uncertainty.std_prior[:42] + 1e-3)
+        assert np.all(np.abs(r.estimate[:42] - real.params[:42]) < 6 * r.uncertainty.std_prior[:42] + 1e-3)
 
 
 def test_whitening_gives_unit_covariance():
@@ -328,7 +332,7 @@ def test_result_contents(nominal, real):
     q, y = simulate(nominal, real, setup.sensor, cmd, noise=setup.noise)
     res = identify(nominal, setup, (q, y, cmd))
     cov = res.mechanism.covariance
-    assert cov.shape == (42, 42)
+    assert cov.shape == (48, 48)
     fixed_idx = [res.names.index(n) for n in res.gauge]
     assert np.all(cov[fixed_idx] == 0) and np.all(cov[:, fixed_idx] == 0)
     free_idx = res.free_index
@@ -445,7 +449,7 @@ def test_cli_identify_writes_calibrated_machine(cli_files, real):
     assert res.exit_code == 0, res.output
     assert "gauge (fixed)" in res.output and "a1.x" in res.output and "chi2/dof" in res.output
     cal = load_machine(str(out))
-    assert cal.covariance.shape == (42, 42)
+    assert cal.covariance.shape == (48, 48)
     i = list(cal.param_names).index("a1.x")
     assert cal.covariance[i, i] == 0.0 and cal.covariance[0, 0] > 0
     out2 = d / "cal2.yaml"
@@ -540,7 +544,7 @@ def test_cached_evaluation_equals_fresh(nominal, real, method):
         meth = make_method(method, model)
         if theta is None:
             theta = model.theta0 + np.random.default_rng(4).normal(0, 0.2, model.theta0.size) * np.r_[
-                np.ones(42), 0.01 * np.ones(12)]
+                np.ones(42), 0.01 * np.ones(6), 0.01 * np.ones(12)]
         if order == "cached":
             r = meth.evaluate(theta, jac=False, cov=False).r
             ev = meth.evaluate(theta.copy(), jac=True, cov=True)

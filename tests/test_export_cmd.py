@@ -87,8 +87,12 @@ def test_json_export_parameters_std_correlation(calibrated):
     std = {p["name"]: p["std"] for p in j["parameters"]}
     rec = j["calibration"]
     assert rec["method"] == "fk-residual" and rec["n_free"] == 39 and len(rec["gauge"]) == 3
+    from pkmcal.identification.residuals import default_fixed_parameters
+
+    held = set(default_fixed_parameters(cal))
+    assert held == {f"gain_{i}" for i in range(1, 7)}
     for k, n in enumerate(names):
-        if n in rec["gauge"]:
+        if n in rec["gauge"] or n in held:
             assert std[n] is None  # held fixed: no uncertainty
         else:
             assert std[n] == pytest.approx(np.sqrt(cov[k, k]), rel=1e-15)

@@ -57,8 +57,11 @@ def test_actuator_jacobians_match_numpy_formulas(machine, seed):
     B_ref[:, legs_idx, legs_idx, 0:3] = -u
     B_ref[:, legs_idx, legs_idx, 3:6] = np.einsum("nir,nrc->nic", u, R)
     B_ref[:, legs_idx, legs_idx, 6] = -1.0
+    G_ref = np.zeros((len(poses), 6, 6))
+    G_ref[:, legs_idx, legs_idx] = -machine.ik(poses)  # ∂λ_i/∂g_i = −λ_i/g_i, g = 1
     np.testing.assert_allclose(A, A_ref, rtol=0, atol=1e-12 * np.max(np.abs(A_ref)))
-    np.testing.assert_allclose(B, B_ref.reshape(len(poses), 6, 42), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(B, np.concatenate([B_ref.reshape(len(poses), 6, 42), G_ref], axis=2), rtol=0,
+                               atol=1e-12 * max(1.0, np.max(np.abs(G_ref))))
     assert np.array_equal(machine.actuator_pose_jacobian(poses), A)
     assert np.array_equal(machine.actuator_param_jacobian(poses), B)
 
@@ -118,8 +121,8 @@ def test_deferred_report_equals_full_analysis(machine, setup_name, method):
     from pkmcal.identification.identifiability import design_jacobian
 
     Jd, ok, _ = design_jacobian(machine, setup.sensor, setup.noise, sim.commanded[sim.kept], method)
-    J = Jd[ok].reshape(-1, Jd.shape[-1])[:, :42]
-    ref = analyse_jacobian(J, machine.param_names, machine.param_names)
+    J = Jd[ok].reshape(-1, Jd.shape[-1])[:, :42]  # the 42 geometry columns: the gains are held by default
+    ref = analyse_jacobian(J, machine.param_names[:42], machine.param_names[:42])
     rep = res.identifiability
     assert rep.rank == ref.rank and rep.fixed == ref.fixed
     np.testing.assert_allclose(rep.singular_values, ref.singular_values, rtol=1e-10, atol=1e-12)

@@ -81,7 +81,7 @@ def make_inputs(d: Path) -> None:
     save_machine(nom, d / "machine.yaml")
     save_machine(real, d / "real.yaml")
     save_machine(planar_3dof_4act(), d / "planar.yaml")
-    cal = real.with_params(real.params, name="calibrated", covariance=np.diag(np.full(42, 1e-4)))
+    cal = real.with_params(real.params, name="calibrated", covariance=np.diag(np.r_[np.full(42, 1e-4), np.zeros(6)]))
     save_machine(cal, d / "cal.yaml")
     rng = np.random.default_rng(1)
     p = rng.uniform(-1, 1, (14, 6)) * HALF

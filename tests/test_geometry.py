@@ -115,8 +115,10 @@ def test_sigmas_agree_with_monte_carlo(nominal):
     assert g.sets[0].distances[0].name == "b1–b2"
     assert g.sets[0].distances[0].std == pytest.approx(d12.std(), rel=0.06)
     L0 = draws[:, [names.index(f"L0_{i + 1}") for i in range(6)]]
-    # leg length at fixed readings = L0 + reading: its σ is that of L0
-    np.testing.assert_allclose([d.std for d in g.leg_lengths_at_home], L0.std(axis=0), rtol=0.06)
+    gain = draws[:, [names.index(f"gain_{i + 1}") for i in range(6)]]
+    # leg length at fixed readings λ = L0 + g λ (gain g: mm of leg per reading unit)
+    lam = nominal.ik(nominal.home_pose)[0]
+    np.testing.assert_allclose([d.std for d in g.leg_lengths_at_home], (L0 + gain * lam).std(axis=0), rtol=0.06)
 
 
 def test_identify_prints_geometry_and_json(tmp_path):

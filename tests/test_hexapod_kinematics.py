@@ -340,6 +340,18 @@ def _fd_scales(machine, poses):
     return L.min(), r, M
 
 
+def _param_fd_scales(machine, poses):
+    """(ℓ, G, M) per parameter column of ∂λ/∂ρ: b_i, a_i move leg i's vector along a unit
+    direction (slope 1, scale ℓ of :func:`_fd_scales`); L0_i is linear; λ_i = (L_i − L0_i)/g_i
+    in the gain g_i (= 1 here) has slope |λ_i| / g² and third derivative 6 |λ_i| / g⁴ =
+    2 G / ℓ² with ℓ = g/√3."""
+    assert np.all(machine.gains == 1.0)
+    ell, _, M = _fd_scales(machine, poses)
+    gain = np.arange(len(HEXAPOD_PARAM_NAMES)) >= 42
+    lam = max(float(np.abs(machine.ik(poses)).max()), 1.0)
+    return np.where(gain, 1 / np.sqrt(3.0), ell), np.where(gain, lam, 1.0), max(M, lam)
+
+
 @settings(max_examples=20, deadline=None)
 @given(machines, seeds)
 def test_twist_jacobian_against_finite_differences(machine, seed):
@@ -376,11 +388,10 @@ def test_param_jacobians_against_finite_differences(machine, seed):
     J = machine.actuator_param_jacobian(poses)
     JL = machine.length_param_jacobian(poses)
     assert J.shape == JL.shape == (3, 6, len(HEXAPOD_PARAM_NAMES))
-    # b_i, a_i move leg i's vector along a unit direction (slope 1, scale ℓ); L0_i is linear
-    ell, _, M = _fd_scales(machine, poses)
+    scale, slope, M = _param_fd_scales(machine, poses)
     for jac, f in ((J, lambda rho: machine.with_params(rho).ik(poses)),
                    (JL, lambda rho: machine.with_params(rho).leg_lengths(poses))):
-        assert_jacobian_matches_fd(f, machine.params, jac, scale=ell, slope=1.0, magnitude=M,
+        assert_jacobian_matches_fd(f, machine.params, jac, scale=scale, slope=slope, magnitude=M,
                                    names=HEXAPOD_PARAM_NAMES)
 
 
@@ -389,16 +400,18 @@ def test_fd_check_has_teeth():
     or one column off by 1e-5 relative, on every machine kind of the suite."""
     for machine in (PROTOTYPE, REAL, symmetric_hexapod(base_radius=240.0, offset=260.0)):
         poses = box_poses(machine, 3, 1)
-        ell, _, M = _fd_scales(machine, poses)
+        scale, slope, M = _param_fd_scales(machine, poses)
         J = machine.actuator_param_jacobian(poses)
 
         def f(rho):
             return machine.with_params(rho).ik(poses)
 
-        check = dict(scale=ell, slope=1.0, magnitude=M)
+        check = dict(scale=scale, slope=slope, magnitude=M)
         _, tol = assert_jacobian_matches_fd(f, machine.params, J, **check)
-        assert np.max(tol) < 1e-7  # about 200 times below the 1e-5 wrong column of a unit slope
-        for k in (0, 11, 18, 40):  # b1.x, a2.y, a3.y, a6.z
+        assert np.max(tol[..., :42]) < 1e-7  # about 200 times below the 1e-5 wrong column of a unit slope
+        # the gain columns' slopes are |λ| (up to ~60 here): 1e-5 of them is ≥ 100 × their tolerance
+        assert np.all(tol[..., 42:] < 1e-7 * np.maximum(np.abs(J[..., 42:]), 1.0).max())
+        for k in (0, 11, 18, 40, 43):  # b1.x, a2.y, a3.y, a6.z, gain_2
             for wrong in (-J[..., k], J[..., k] * (1.0 + 1e-5)):
                 bad = J.copy()
                 bad[..., k] = wrong
@@ -410,10 +423,16 @@ def test_fd_check_has_teeth():
 
 
 def test_param_jacobian_is_block_diagonal_per_leg():
-    J = PROTOTYPE.actuator_param_jacobian(box_poses(PROTOTYPE, 5, 2)).reshape(5, 6, 6, 7)
+    poses = box_poses(PROTOTYPE, 5, 2)
+    lam, _, full = PROTOTYPE.ik_and_jacobians(poses)
+    J = full[:, :, :42].reshape(5, 6, 6, 7)
     off = ~np.eye(6, dtype=bool)
     assert np.all(J[:, off] == 0.0)
     assert np.all(J[:, np.arange(6), np.arange(6), 6] == -1.0)
+    # the gain columns: leg i's only, −λ_i / g_i (g = 1)
+    G = full[:, :, 42:]
+    assert np.all(G[:, off] == 0.0)
+    assert np.array_equal(G[:, np.arange(6), np.arange(6)], -lam)
 
 
 # -- symmetry -------------------------------------------------------------------------------
@@ -536,13 +555,13 @@ def test_with_params_equals_the_validated_constructor():
     rng = np.random.default_rng(3)
     axes = rng.normal(size=(6, 3))  # not unit: normalised once, by the constructor
     m = replace(PROTOTYPE, base_axis=axes, platform_axis=-axes, metadata={"k": 1})
-    rho = m.params + rng.normal(0.0, 1e-2, 42)
-    cov = np.diag(rng.uniform(1.0, 2.0, 42))
+    rho = m.params + rng.normal(0.0, 1e-2, 48)
+    cov = np.diag(rng.uniform(1.0, 2.0, 48))
+    geo = rho[:42].reshape(6, 7)
     for kwargs in ({}, {"name": "fitted", "covariance": cov}):
         fast = m.with_params(rho, **kwargs)
-        slow = replace(m, name=kwargs.get("name", m.name), base=rho.reshape(6, 7)[:, :3],
-                       platform=rho.reshape(6, 7)[:, 3:6], offset=rho.reshape(6, 7)[:, 6],
-                       covariance=kwargs.get("covariance"))
+        slow = replace(m, name=kwargs.get("name", m.name), base=geo[:, :3], platform=geo[:, 3:6], offset=geo[:, 6],
+                       gains=rho[42:], covariance=kwargs.get("covariance"))
         assert type(fast) is Hexapod
         for fld in fields(Hexapod):
             if fld.name not in ("base_axis", "platform_axis"):
@@ -566,8 +585,8 @@ def test_with_params_equals_the_validated_constructor():
     new = m.with_params(rho2)
     rho2[:] = 0.0
     np.testing.assert_array_equal(new.params, m.params)
-    with pytest.raises(ValueError):
-        m.with_params(np.zeros(41))
+    with pytest.raises(PkmcalError, match="has 48 parameters; got an array of shape"):
+        m.with_params(np.zeros(42))  # a 42-vector of the papers' parameters: the gains are missing
     with pytest.raises(ValueError):
         m.with_params(rho, covariance=np.eye(3))
 

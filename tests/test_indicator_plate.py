@@ -170,7 +170,7 @@ def test_identification_with_and_without_the_plate():
     surveyed = identify(nominal, MeasurementSetup(sensor, noise), **kw)
     for r in (parallel, surveyed):
         assert r.rms_residual < 1e-9 and r.gauge == ("a1.x", "a1.y", "a2.x")
-    err = lambda r: np.abs(r.estimate[:42] - real.params)  # noqa: E731
+    err = lambda r: np.abs(r.estimate[:42] - real.params[:42])  # noqa: E731  (the gains held)
     assert err(parallel).max() > 2.0                    # base joints moved by the plate's pose
     assert err(surveyed).max() < 1.5                    # only the platform gauge (Table 4 moves a2.x)
     base = ("b1.x", "b1.y", "b1.z", "b2.x", "b2.z", "b3.z")

@@ -391,7 +391,7 @@ def test_kernel_margins_match_the_numpy_formulas(machine, seed, margin):
     table = np.array([np.nan if v is None else v for v in (lim.u_joint_tilt, lim.s_joint_tilt, lim.leg_diameter)]
                      + [lim.singularity_margin, machine.platform_radius, margin, np.deg2rad(margin)])
     on = machine._limits_enabled()
-    out = kernels.limit_margins(poses, machine.base, machine.platform, machine.offset, machine.stroke,
+    out = kernels.limit_margins(poses, machine.base, machine.platform, machine.offset, machine.gains, machine.stroke,
                                 machine.base_axis, machine.platform_axis, machine._leg_pairs(), on, table)
     ref = machine._limit_margins_numpy(poses, margin)
     assert set(ref) == {n for n, enabled in zip(LIMIT_NAMES, on) if enabled}
@@ -438,7 +438,7 @@ def test_poses_on_a_limit_get_the_numpy_verdict():
     lim = M.limits
     table = np.array([lim.u_joint_tilt, lim.s_joint_tilt, lim.leg_diameter, lim.singularity_margin,
                       M.platform_radius, 0.0, 0.0])
-    raw = kernels.limit_margins(edge, M.base, M.platform, M.offset, M.stroke, M.base_axis, M.platform_axis,
+    raw = kernels.limit_margins(edge, M.base, M.platform, M.offset, M.gains, M.stroke, M.base_axis, M.platform_axis,
                                 M._leg_pairs(), M._limits_enabled(), table)
     near = np.any(np.abs(raw[:, :4]) <= EXACT_VERDICT_TOL, axis=1)
     assert near.sum() >= len(a)            # at least one side of every edge is recomputed

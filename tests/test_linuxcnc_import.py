@@ -106,7 +106,7 @@ def test_round_trip_in_genhexkins_convention_keeps_the_home_switch(tmp_path):
     assert linuxcnc_ini(zero).split("[TRAJ]")[1] == linuxcnc_ini(m).split("[TRAJ]")[1]
     np.testing.assert_allclose(zero.leg_lengths(m.home_pose), m.leg_lengths(m.home_pose), rtol=0, atol=0)
     # an identified L0 correction moves HOME_OFFSET by it: HOME_OFFSET = L0 + reading at the switch
-    shifted = zero.with_params(zero.params + np.tile([0, 0, 0, 0, 0, 0, 0.25], 6))
+    shifted = zero.with_params(zero.params + np.r_[np.tile([0, 0, 0, 0, 0, 0, 0.25], 6), np.zeros(6)])
     np.testing.assert_array_equal(joint_settings(shifted)["HOME_OFFSET"], 305.25)
     z2 = tmp_path / "z"
     z2.mkdir()
@@ -265,20 +265,25 @@ def test_missing_limits_need_an_ini_or_the_option(tmp_path):
         machine_from_linuxcnc(hal, ini)
 
 
-def test_gains_enter_the_joint_limits_and_home_offset(monkeypatch):
+def test_gains_enter_the_joint_limits_and_home_offset():
     """HOME_OFFSET = L0 + g·λ_switch and the limits L0 + g·stroke, with the gains of
-    export_linuxcnc.leg_gains (the one place the export reads them; all 1 for today's
-    hexapod model)."""
+    export_linuxcnc.leg_gains (the one place the export reads them: the machine's
+    legs[i].gain, all 1 for the built-in hexapods)."""
+    from dataclasses import replace
+
     from pkmcal.io import export_linuxcnc
 
-    m = builtin_machine("stewart-prototype")
-    np.testing.assert_array_equal(export_linuxcnc.leg_gains(m), np.ones(6))
+    plain = builtin_machine("stewart-prototype")
+    np.testing.assert_array_equal(export_linuxcnc.leg_gains(plain), np.ones(6))
+    assert "Leg gains" not in linuxcnc_ini(plain)
     g = np.array([1.0, 1.01, 0.99, 1.0, 1.02, 0.98])
-    monkeypatch.setattr(export_linuxcnc, "leg_gains", lambda machine: g)
+    m = replace(plain, gains=g)
+    np.testing.assert_array_equal(export_linuxcnc.leg_gains(m), g)
     s = joint_settings(m)
     np.testing.assert_array_equal(s["MIN_LIMIT"], m.offset + g * m.stroke[:, 0])
     np.testing.assert_array_equal(s["MAX_LIMIT"], m.offset + g * m.stroke[:, 1])
-    assert "divide each joint's encoder/stepgen scale (counts per mm) by its gain" in linuxcnc_ini(m)
+    ini = linuxcnc_ini(m)
+    assert "i.e. divide the scale that made the readings by the gain" in ini and "#   joint 2: gain 0.99 mm/mm" in ini
 
 
 def test_leg_offset_zero_is_a_valid_machine_file_and_negative_is_not():

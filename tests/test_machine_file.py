@@ -128,7 +128,7 @@ def test_save_keeps_permissions(tmp_path):
 
 
 def test_save_refuses_unloadable_machine_and_writes_nothing(tmp_path):
-    cov = np.zeros((42, 42))
+    cov = np.zeros((48, 48))
     cov[0, 0], cov[1, 1], cov[0, 1], cov[1, 0] = 1.0, 1.0, 2.0, 2.0  # not positive semi-definite
     m = replace(stewart_prototype(), covariance=cov)
     with pytest.raises(PkmcalError, match="cannot save machine .*correlations must lie in"):
@@ -188,15 +188,19 @@ def machines(draw) -> Hexapod:
     covariance = None
     if draw(st.booleans()):
         k = draw(st.integers(0, 8))
-        idx = draw(st.lists(st.integers(0, 41), min_size=k, max_size=k, unique=True))
+        idx = draw(st.lists(st.integers(0, 47), min_size=k, max_size=k, unique=True))
         a = np.array(draw(st.lists(st.floats(-1, 1), min_size=k * k, max_size=k * k))).reshape(k, k)
         block = a @ a.T
-        covariance = np.zeros((42, 42))
+        covariance = np.zeros((48, 48))
         covariance[np.ix_(idx, idx)] = (block + block.T) / 2
     metadata = draw(st.dictionaries(st.text(min_size=1, max_size=8), json_like, max_size=3))
+    gains = draw(st.one_of(st.none(), st.lists(st.one_of(st.just(1.0), st.floats(1e-6, 1e4)), min_size=6,
+                                                 max_size=6)))
+    unit = draw(st.sampled_from(["mm", "rev", "count", "motor deg", "µm"]))
     return Hexapod(name=draw(one_line_text), base=base, platform=platform, offset=offset, stroke=stroke,
                    base_axis=axes(), platform_axis=axes(), limits=limits, home=home, workspace=workspace,
-                   covariance=covariance, description=draw(one_line_text), metadata=metadata)
+                   covariance=covariance, description=draw(one_line_text), metadata=metadata, gains=gains,
+                   actuator_unit=unit)
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -212,9 +216,11 @@ def test_random_machines_round_trip_exactly(m):
 def test_round_trip_through_files(tmp_path):
     rng = np.random.default_rng(3)
     m = load_machine("stewart-prototype-real")
-    m = m.with_params(m.params + rng.normal(0, 1e-3, 42), name="identified")
+    m = m.with_params(m.params + np.r_[rng.normal(0, 1e-3, 42), np.zeros(6)], name="identified")
     a = rng.normal(size=(42, 42)) * 1e-3
-    m = replace(m, covariance=a @ a.T, metadata={"calibration": {"method": "fk-residual", "n_poses": 40}})
+    cov = np.zeros((48, 48))
+    cov[:42, :42] = a @ a.T  # the gains held: zero rows
+    m = replace(m, covariance=cov, metadata={"calibration": {"method": "fk-residual", "n_poses": 40}})
     path = tmp_path / "identified.yaml"
     save_machine(m, path)
     back = read_machine_file(path)
@@ -228,9 +234,9 @@ def test_written_std_and_correlation_agree_with_the_covariance(k, seed, log_scal
     """The file's σ and ρ, against the written Σ computed independently: σ_i = √Σ_ii,
     ρ_ij = Σ_ij / √(Σ_ii Σ_jj) to 1e-12, exactly symmetric, ones on the diagonal."""
     rng = np.random.default_rng(seed)
-    idx = rng.choice(42, size=k, replace=False)
+    idx = rng.choice(48, size=k, replace=False)
     a = rng.normal(size=(k, k)) * 10.0 ** (log_scale + rng.uniform(-2, 2, (k, 1)))
-    cov = np.zeros((42, 42))
+    cov = np.zeros((48, 48))
     cov[np.ix_(idx, idx)] = a @ a.T
     cov = (cov + cov.T) / 2
     data = yaml.safe_load(machine_to_text(replace(stewart_prototype(), covariance=cov)))["uncertainty"]

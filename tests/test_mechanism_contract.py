@@ -56,7 +56,8 @@ def test_declarations_line_up(name):
     assert isinstance(m.abilities, frozenset)
     p = len(m.param_names)
     assert len(m.param_is_angle) == len(m.param_units) == len(m.params) == p
-    assert set(m.param_units) <= {"mm", "deg", "1"}
+    # mm, degrees, pure numbers, or mm per reading unit (a hexapod's leg gains with readings in rev, ...)
+    assert all(u in {"mm", "deg", "1"} or u.startswith("mm/") for u in m.param_units)
     assert [u == "deg" for u in m.param_units] == list(m.param_is_angle)
     assert len(m.actuator_units) == len(m.actuator_is_angle) == m.n_actuators
     assert len(m.pose_is_angle) == m.n_dof

@@ -51,15 +51,15 @@ def make_report_data(n_poses: int = 24, seed: int = 3, rank_deficient: bool = Fa
     free = np.isin(nominal.param_names, free_names)
     rho = nominal.params.copy()
     for _ in range(6):
-        J = nominal.with_params(rho).actuator_param_jacobian(poses).reshape(-1, 42)[:, free]
+        J = nominal.with_params(rho).actuator_param_jacobian(poses).reshape(-1, free.size)[:, free]
         r = (q - nominal.with_params(rho).ik(poses)).ravel()
         rho[free] += np.linalg.lstsq(J, r, rcond=None)[0]
     identified = nominal.with_params(rho, name="stewart-prototype-identified")
     res = q - identified.ik(poses)
-    J = identified.actuator_param_jacobian(poses).reshape(-1, 42)[:, free]
+    J = identified.actuator_param_jacobian(poses).reshape(-1, free.size)[:, free]
     sigma2 = np.sum(res**2) / (res.size - free.sum())
     cov_free = sigma2 * np.linalg.inv(J.T @ J)
-    std = np.full(42, np.nan)
+    std = np.full(free.size, np.nan)
     std[free] = np.sqrt(np.diag(cov_free))
     s = np.linalg.svd(J / np.linalg.norm(J, axis=0), compute_uv=False)
     rank = int(free.sum()) - (2 if rank_deficient else 0)

@@ -91,6 +91,7 @@ def test_pose_sensitivity_matches_a_direct_perturbation():
     poses = box_corners(real, np.array([10.0, 10.0, 5.0, 0.05, 0.05, 0.05]))[:6]
     G = pose_sensitivity(real, poses)
     d = np.random.default_rng(3).uniform(-1e-3, 1e-3, len(real.params))
+    d[42:] *= 1e-2  # the gains: 1e-5 of a reading up to 50 mm moves a leg as far as 1e-3 mm of a joint
     model = real.with_params(real.params + d)
     reached = real.fk(model.ik(poses), guess=poses).poses
     dp = reached[:, :3] - poses[:, :3]

@@ -232,7 +232,7 @@ def test_truth_is_the_real_machine_in_the_fits_gauge():
     assert np.max(np.abs(fit.estimate[free] - truth[free])) < 1e-3          # noise 1e-8 mm: far below
     assert np.max(np.abs(truth[free] - truth_full[free])) > 0.1              # a gauge move of ~1 mm
     other = nominal.home_pose + rng.uniform(-1, 1, (30, 6)) * half
-    twin = nominal.with_params(truth[:42])
+    twin = nominal.with_params(truth[:48])
     q = nominal.ik(other)
     y_real = setup.sensor.predict(real.frame(real.fk(q, guess=other).poses))
     y_twin = setup.sensor.predict(twin.frame(twin.fk(q, guess=other).poses))

@@ -85,7 +85,7 @@ def test_many_models_at_once_give_each_model_its_own_numbers():
     poses = _poses(12, seed=5)
     poses[3, 2] += 300.0                       # beyond the stroke: IK NaN or real limits
     poses[7, 3] += 0.6                         # a tilt the real machine's joints refuse
-    third = NOMINAL.with_params(NOMINAL.params + np.random.default_rng(1).uniform(-0.2, 0.2, 42), name="third")
+    third = NOMINAL.with_params(NOMINAL.params + np.r_[np.random.default_rng(1).uniform(-0.2, 0.2, 42), np.zeros(6)], name="third")
     models = (NOMINAL, REAL, third)
     together = pose_errors_many(models, REAL, poses, ("leg_collision",))
     assert len(together) == 3

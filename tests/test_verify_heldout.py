@@ -265,10 +265,11 @@ def test_verified_error_does_not_depend_on_the_gauge(tracker, tmp_path):
     aligned figures agree to the noise; the commanded comparison does not."""
     R = Rotation.from_rotvec(np.deg2rad([1.0, -0.5, 3.0])).as_matrix()
     moved = NOMINAL.with_params(NOMINAL.params.copy())
-    P = NOMINAL.params.reshape(6, 7).copy()
+    rho = NOMINAL.params.copy()
+    P = rho[:42].reshape(6, 7)                                   # per leg b, a, L0 (the gains follow)
     P[:, 0:3] = P[:, 0:3] @ R.T + np.array([4.0, -3.0, 2.0])     # base joints in another base frame
     P[:, 3:6] = P[:, 3:6] @ R + np.array([-2.0, 1.0, 3.0])       # platform joints in another platform frame
-    moved = NOMINAL.with_params(P.ravel())
+    moved = NOMINAL.with_params(rho)
     (tmp_path / "moved.yaml").write_text(machine_to_text(moved))
     ok(run("identify", tmp_path / "moved.yaml", tracker / "meas.csv", "--setup", tracker / "setup.yaml", "-o",
            tmp_path / "cal2.yaml"))

@@ -72,9 +72,10 @@ def calibration_json(machine: Mechanism, source: str | None = None) -> dict:
         std[used] = sd
         corr_block = {"parameters": [names[i] for i in used],
                       "matrix": [[_finite(v) for v in row] for row in np.clip(corr, -1.0, 1.0)]}
-    params = [{"name": n, "value": _finite(v), "unit": "deg" if a else "mm",
+    params = [{"name": n, "value": _finite(v), "unit": "deg" if a else u,
                "std": None if np.isnan(s) else _finite(s)}
-              for n, v, a, s in zip(names, values, angle, std)]
+              for n, v, a, u, s in zip(names, values, angle, machine.param_units, std)]
+    reading_units = tuple(machine.actuator_units)
     home = to_file_units(machine.home_pose, machine.pose_is_angle)
     meta = dict(getattr(machine, "metadata", {}) or {})
     out = {
@@ -88,7 +89,9 @@ def calibration_json(machine: Mechanism, source: str | None = None) -> dict:
                   # the unit of each numeric key (docs/conventions.md, "Units in JSON")
                   "format_version": "1", "n_identified": "1", "correlation": "1",
                   "home_pose": "mm for x, y, z; deg for the angles (a, b, c; phi)",
-                  "actuator_stroke": "mm (deg for rotary actuators): [min, max] reading",
+                  "actuator_stroke": ("mm (deg for rotary actuators): [min, max] reading"
+                                      if set(reading_units) <= {"mm", "deg"} else
+                                      "the reading unit of actuator_units: [min, max] reading"),
                   "n_poses": "1", "n_free": "1", "reduced_chi2": "1",
                   "rms_residual": "the unit of the fit's residual rows (mm; 1 when whitened or mixed)",
                   "sensor": "mm; deg for the sensor's angle parameters",
@@ -104,6 +107,7 @@ def calibration_json(machine: Mechanism, source: str | None = None) -> dict:
         "setup": meta.pop("setup", None),
         "metadata": meta or None,
     }
+    out["actuator_units"] = dict(zip(machine.actuator_names, reading_units))
     if hasattr(machine, "stroke"):
         out["actuator_stroke"] = {a: [_finite(v) for v in row]
                                   for a, row in zip(machine.actuator_names, np.asarray(machine.stroke, dtype=float))}

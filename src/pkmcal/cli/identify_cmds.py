@@ -424,8 +424,8 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
 
         d = finite_or_null(result.to_dict())
         d["free_rule"] = free_line
-        d["clipped"] = [c.to_dict("deg" if nominal.actuator_is_angle[nominal.actuator_names.index(c.actuator)] else "mm")
-                        for c in clipped_found]
+        units = dict(zip(nominal.actuator_names, nominal.actuator_units))
+        d["clipped"] = [c.to_dict(units[c.actuator]) for c in clipped_found]
         d["output"] = output
         if geometry is not None:
             d["geometry"] = finite_or_null(geometry.to_dict())

@@ -49,7 +49,9 @@ def _half_widths(mech: Mechanism) -> np.ndarray:
     (mm), 180° for angles (90° for the pitch b of a 6-DoF Euler pose)."""
     reach = 1000.0
     if hasattr(mech, "offset") and hasattr(mech, "stroke"):
-        reach = float(np.max(np.asarray(mech.offset) + np.asarray(mech.stroke)[:, 1]))
+        top = np.asarray(mech.stroke)[:, 1]
+        legs = mech.lengths_from_readings(top) if "leg-lengths" in mech.abilities else np.asarray(mech.offset) + top
+        reach = float(np.max(legs))
         if hasattr(mech, "base"):
             reach += float(np.max(np.linalg.norm(np.asarray(mech.base), axis=1)))
     out = np.where(np.array(mech.pose_is_angle), np.pi, reach)

@@ -108,7 +108,8 @@ class _DeferredTuple:
 
 @dataclass(frozen=True)
 class ParameterEstimate:
-    """One parameter of a fit, in file units (``unit``: "mm", or "deg" for angles):
+    """One parameter of a fit, in file units (``unit``: "mm", "deg" for angles, or the
+    machine's declared unit, e.g. "1" or "mm/rev" for a hexapod's leg gains):
     ``initial`` and ``value`` (the estimate), ``std`` its 1σ (the covariance the fit summary
     names; None unless ``status`` is "estimated"), ``status`` "estimated", "held" (fixed by
     the user, the setup or the machine's defaults) or "gauge" (fixed by the engine: the data
@@ -226,10 +227,13 @@ class IdentificationResult:
 
     def rms_by_unit(self) -> dict[str, float]:
         """{unit: rms} of the raw residuals over the rows of each unit, angles in degrees:
-        keys "mm", "deg" and "1" (whitened or mixed rows), only those present."""
+        keys "mm", "deg" and "1" (whitened or mixed rows), then any other reading unit (a
+        hexapod's ``actuator_unit``: "rev", ...), only those present."""
         units = self.residual_units or ("1",) * self.residuals.shape[1]
         out = {}
-        for unit, shown, scale in (("mm", "mm", 1.0), ("rad", "deg", float(np.rad2deg(1.0))), ("1", "1", 1.0)):
+        known = (("mm", "mm", 1.0), ("rad", "deg", float(np.rad2deg(1.0))), ("1", "1", 1.0))
+        others = tuple((u, u, 1.0) for u in dict.fromkeys(units) if u not in ("mm", "rad", "1"))
+        for unit, shown, scale in known + others:
             cols = [k for k, un in enumerate(units) if un == unit]
             if cols and self.residuals.size:
                 out[shown] = float(np.sqrt(np.mean(self.residuals[:, cols] ** 2))) * scale
@@ -255,12 +259,14 @@ class IdentificationResult:
         angles = set(self.angle_names())
         deg = float(np.rad2deg(1.0))
         gauge, free = set(self.gauge), {n: k for k, n in enumerate(self.free)}
+        p = len(self.mechanism.param_names)
+        units = tuple(self.mechanism.param_units) + tuple("deg" if n in angles else "mm" for n in self.names[p:])
         out = []
         for i, n in enumerate(self.names):
             s = deg if n in angles else 1.0
             k = free.get(n)
             out.append(ParameterEstimate(
-                name=n, unit="deg" if n in angles else "mm", initial=float(self.initial[i]) * s,
+                name=n, unit=units[i], initial=float(self.initial[i]) * s,
                 value=float(self.estimate[i]) * s, std=None if k is None else float(self.std[k]) * s,
                 status="estimated" if k is not None else "gauge" if n in gauge else "held"))
         return tuple(out)

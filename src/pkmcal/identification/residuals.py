@@ -21,8 +21,9 @@ the ρ columns. Parameters are passed explicitly: ``mech.ik_and_jacobians(x, par
     ``Mechanism.poses_from_frame``);
     r_j = q_j − IK(x̂_j, ρ);  ∂r/∂ρ = −B;  ∂r/∂s = A H⁻¹ G  (x̂ moves with s);
     Σ_j = Σ_q + A H⁻¹ Σ_y H⁻ᵀ Aᵀ.
-    ``form="squared"`` is the paper's own residual (L_q² − ‖l(x̂, ρ)‖²) with L_q = q + L0
-    the measured leg length; it needs a mechanism with leg lengths (the hexapod).
+    ``form="squared"`` is the paper's own residual (L_q² − ‖l(x̂, ρ)‖²) with L_q = L0 + g q
+    the measured leg length (g the leg gains, 1 for readings in mm); it needs a mechanism
+    with leg lengths (the hexapod).
 
 ``fk-residual`` (paper 2 §3, eq. 3; x from the forward kinematics)
     x_j = FK(q_j, ρ);  r_j = y_j − h(x_j, s);  implicit differentiation of IK(x, ρ) = q:
@@ -293,6 +294,14 @@ def default_fixed_parameters(mechanism) -> tuple[str, ...]:
     return tuple(n for n in mechanism.param_names if any(fnmatchcase(n, pat) for pat in mechanism.default_fixed))
 
 
+def default_estimated_index(mechanism) -> np.ndarray:
+    """Indices of the machine parameters a fit estimates unless told otherwise: all but
+    :func:`default_fixed_parameters` (a hexapod's 42 geometry parameters of papers 1 and 2,
+    without its leg gains)."""
+    held = set(default_fixed_parameters(mechanism))
+    return np.array([i for i, n in enumerate(mechanism.param_names) if n not in held], dtype=int)
+
+
 def candidate_parameters(model: Model, free=None, fix=None) -> tuple[list[int], bool]:
     """Indices of the parameters to estimate before any automatic gauge, and whether the
     choice was explicit (``free`` or a ``fix`` list given). Without ``free``: every machine
@@ -456,7 +465,8 @@ class IKResidual(Method):
     def row_units(self) -> tuple[str, ...]:
         if self.form == "squared":   # L_q² − L²: mm² rows, no unit of the readings
             return ("1",) * self.rows_per_pose()
-        return tuple("rad" if a else "mm" for a in self.model.mechanism.actuator_is_angle)
+        mech = self.model.mechanism
+        return tuple("rad" if a else u for a, u in zip(mech.actuator_is_angle, mech.actuator_units))
 
     def _measured_poses(self, rho, s) -> dict:
         """x̂ (the poses of the frames the readings determine) and converged, and on demand
@@ -523,20 +533,23 @@ class IKResidual(Method):
             AH = self._AHinv(A, poses)
             C = _diag_cov(m.sigma_q, m.n_poses) + _sandwich(AH, m.sigma_y)
         if self.form == "squared":
-            # r² = L_q² − L(x)², L_q = q + L0, L0 = L(x) − IK(x) (offset, independent of x).
+            # r² = L_q² − L(x)², L_q = L0 + g q = g q + (L(x) − g IK(x)) (L0 independent of x;
+            # for unit gains these are the operations of L_q = q + L0, bit for bit).
+            g = mech.reading_gains(rho)
             L = mech.leg_lengths(x, rho)
-            Lq = q_meas + (L - q_model)
+            Lq = g * q_meas + (L - g * q_model)
             r = Lq**2 - L**2
             if jac:
                 dL = mech.length_param_jacobian(x, rho)                # ∂L/∂ρ
-                dL0 = dL - B                                            # ∂L0/∂ρ
-                Jr = 2.0 * Lq[..., None] * dL0 - 2.0 * L[..., None] * dL
-                J = _full_jacobian(Jr, None if Js is None else 2.0 * L[..., None] * Js, m.n_sensor,
-                                   m.offset_jacobian(2.0 * Lq[:, :, None] * np.eye(m.q.shape[1])))
+                dLq = mech.lengths_from_readings_param_jacobian(q_meas)   # ∂L_q/∂ρ: 1 on L0_i, q_i on gain_i
+                Jr = 2.0 * Lq[..., None] * dLq - 2.0 * L[..., None] * dL
+                # ∂L/∂x = g A: the sensor columns 2 L g · ∂λ/∂s; ∂L_q/∂δq = g
+                J = _full_jacobian(Jr, None if Js is None else 2.0 * (L * g)[..., None] * Js, m.n_sensor,
+                                   m.offset_jacobian(2.0 * (Lq * g)[:, :, None] * np.eye(m.q.shape[1])))
             if cov:
                 AH = self._AHinv(A, poses)
-                C = _diag_cov(m.sigma_q, m.n_poses) * (2 * Lq)[:, :, None] * (2 * Lq)[:, None, :] \
-                    + _sandwich(2 * L[..., None] * AH, m.sigma_y)
+                C = _diag_cov(m.sigma_q, m.n_poses) * (2 * Lq * g)[:, :, None] * (2 * Lq * g)[:, None, :] \
+                    + _sandwich(2 * (L * g)[..., None] * AH, m.sigma_y)
         return Evaluation(r=r, J=J, cov=C, converged=conv, poses=x)
 
 

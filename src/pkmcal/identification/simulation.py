@@ -292,12 +292,16 @@ def perturb_machine(
     Lengths (and linear encoder offsets) get errors in mm; angle parameters
     (:attr:`~pkmcal.mechanisms.base.Mechanism.param_is_angle`: tower angles, leans, way
     directions, rotary encoder offsets) ``magnitude_mm / radius_mm`` rad, the same
-    displacement at ``radius_mm`` = 1 m. One rule for every machine: a hexapod, whose
-    parameters are all lengths, draws exactly as before. The home pose is kept, so the real
-    machine is commanded as the nominal one is.
+    displacement at ``radius_mm`` = 1 m. Parameters in other units (a hexapod's leg gains,
+    mm per reading unit) have no error in mm and are kept; perturb them explicitly
+    (``machine.with_params``). One rule for every machine: a hexapod, whose other parameters
+    are all lengths, draws exactly as before. The home pose is kept, so the real machine is
+    commanded as the nominal one is.
     """
     p = machine.params
-    delta = parameter_errors(p.shape, magnitude_mm, rng, distribution)
+    drawn = np.flatnonzero(np.isin(machine.param_units, ("mm", "deg")))
+    delta = np.zeros(p.shape)
+    delta[drawn] = parameter_errors(drawn.size, magnitude_mm, rng, distribution)
     delta = np.where(np.array(machine.param_is_angle, dtype=bool), delta / radius_mm, delta)
     return machine.with_params(p + delta, name=name or f"{machine.name}-perturbed")
 

@@ -10,8 +10,9 @@ platform joints in platform coordinates (``genhexkins.platform.N.x|y|z``). That 
 pkmcal's leg length L_i = ‖p + R a_i − b_i‖ (paper 1 eq. 1, paper 2 eq. 1) with N = i − 1 and
 the same pose convention (:mod:`pkmcal.conventions`), so the joints are copied unchanged.
 
-genhexkins' joints are strut *lengths*; pkmcal's actuator readings are λ_i = L_i − L0_i
-(L_i = L0_i + g_i λ_i with a leg gain g_i, 1 unless the machine carries gains). The leg
+genhexkins' joints are strut *lengths* (mm); pkmcal's actuator readings are
+λ_i = (L_i − L0_i) / g_i in the machine's ``actuator_unit`` (L_i = L0_i + g_i λ_i with the
+leg gains g_i, mm per reading unit: 1 for readings in mm, the default). The leg
 offsets L0_i have no genhexkins pin: they enter LinuxCNC through homing, as the joint
 position assigned at the home switch (``[JOINT_N] HOME_OFFSET`` in the INI file). The INI
 settings that match the machine (:func:`joint_settings`):
@@ -23,10 +24,11 @@ settings that match the machine (:func:`joint_settings`):
 
 :func:`linuxcnc_hal` writes the ``setp`` lines (and these values as comments),
 :func:`linuxcnc_ini` the INI sections ``[TRAJ]``, ``[KINS]`` and ``[JOINT_0..5]`` to merge
-into the machine's INI file; :mod:`pkmcal.io.import_linuxcnc` reads both back. A leg gain
-g_i ≠ 1 means the controller's strut scale is off by g_i: divide the joint's
-encoder/stepgen scale (counts per mm, e.g. ``[JOINT_N] SCALE``) by g_i (the INI lists the
-gains). See ``docs/conventions.md``.
+into the machine's INI file; :mod:`pkmcal.io.import_linuxcnc` reads both back (as a machine
+with readings in mm, gains 1: the same strut lengths). The gains set the joints' scale:
+LinuxCNC counts strut millimetres, so ``[JOINT_N] SCALE`` (counts per mm) = (encoder or
+step counts per reading unit) / g_i; for readings in mm, divide the scale that made those
+readings by g_i (the INI comments list the gains). See ``docs/conventions.md``.
 
 The text is safe by construction for ``halcmd -f``, which reads a file with ``fgets`` into
 a 1024-byte buffer (``MAX_CMD_LEN``) and treats ``#`` to the end of the line as a comment:
@@ -83,10 +85,9 @@ def _check_hexapod(machine) -> None:
 
 
 def leg_gains(machine: Hexapod) -> np.ndarray:
-    """g_i (6,): mm of strut length per reading unit. The hexapod model reads strut-length
-    changes in mm (L_i = L0_i + λ_i): every gain is 1. The one place the export reads
-    gains, so that per-leg gains of the machine file enter here."""
-    return np.ones(machine.n_actuators)
+    """g_i (6,): mm of strut length per reading unit, the machine's calibrated gains
+    (``legs[i].gain``, 1 unless given or identified). The one place the export reads gains."""
+    return np.array(machine.gains, dtype=float)
 
 
 def home_switch_reading(machine: Hexapod) -> np.ndarray:
@@ -139,9 +140,12 @@ def linuxcnc_ini(machine: Hexapod) -> str:
         "# home switch), MIN_LIMIT/MAX_LIMIT = L0 + gain * stroke, HOME = strut length at the home",
         "# pose [TRAJ] HOME (X Y Z mm, A B C degrees).",
     ]
-    if np.any(s["gain"] != 1.0):
-        lines.append("# Leg gains differ from 1: divide each joint's encoder/stepgen scale (counts per mm) by its gain:")
-        lines += [f"#   joint {n}: gain {_num(g)}" for n, g in enumerate(s["gain"])]
+    if np.any(s["gain"] != 1.0) or machine.actuator_unit != "mm":
+        unit = one_line(machine.actuator_unit)
+        lines.append(f"# Leg gains (mm of strut per {unit} of reading): set each joint's SCALE (counts per mm) to")
+        lines.append(f"# (encoder/step counts per {unit}) / gain" + (", i.e. divide the scale that made the readings "
+                                                                    "by the gain:" if unit == "mm" else ":"))
+        lines += [f"#   joint {n}: gain {_num(g)} mm/{unit}" for n, g in enumerate(s["gain"])]
     lines += ["", "[TRAJ]", "LINEAR_UNITS = mm", "ANGULAR_UNITS = degree", f"HOME = {_home_pose_text(machine)}",
               "", "[KINS]", "KINEMATICS = genhexkins", "JOINTS = 6"]
     for n in range(6):
@@ -189,10 +193,16 @@ def linuxcnc_hal(machine: Hexapod) -> str:
         f"# x y z a b c = {' '.join(_num(v) for v in home_file)} (mm, deg).",
         "# 'pkmcal export --format linuxcnc --ini FILE' writes these as INI sections [JOINT_N].",
     ]
+    if np.any(s["gain"] != 1.0) or machine.actuator_unit != "mm":
+        unit = one_line(machine.actuator_unit)
+        lines += [f"# Readings in {unit} with leg gains (mm of strut per {unit}): strut length L_i = L0_i + gain_i *",
+                  "# lambda_i, so HOME_OFFSET = L0 + gain * (reading at the switch) and MIN_LIMIT/MAX_LIMIT =",
+                  "# L0 + gain * stroke (the gains: 'gain=' below and in the INI comments)."]
     for n in range(6):
         home_offset = "" if s["HOME_OFFSET"][n] == machine.offset[n] else f" HOME_OFFSET={_num(s['HOME_OFFSET'][n])}"
         lines.append(
             f"# pkmcal.joint.{n} leg={n + 1} L0={_num(machine.offset[n])} MIN_LIMIT={_num(s['MIN_LIMIT'][n])} "
             f"MAX_LIMIT={_num(s['MAX_LIMIT'][n])} HOME={_num(s['HOME'][n])}{home_offset}"
+            + ("" if s["gain"][n] == 1.0 else f" gain={_num(s['gain'][n])}")
         )
     return "\n".join(lines) + "\n"

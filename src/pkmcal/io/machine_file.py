@@ -2,7 +2,8 @@
 
 A machine file describes one mechanism; ``kind`` (default ``hexapod``) selects the schema.
 The hexapod schema is paper 2's Table 3 layout per leg (base joint b_i, platform joint a_i,
-offset L0_i, stroke) plus limits (paper 2 §5), an optional home pose and workspace box, and
+offset L0_i, stroke, and a gain g_i when the readings are not in mm: L_i = L0_i + g_i λ_i,
+with the readings' unit in the top-level ``actuator_unit``) plus limits (paper 2 §5), an optional home pose and workspace box, and
 for identified machines the parameter covariance written as standard deviations and a
 correlation matrix, Σ_ij = σ_i ρ_ij σ_j over the named parameters, zeros elsewhere.
 
@@ -50,7 +51,7 @@ from pkmcal.io._yaml import (
 from pkmcal.io.atomic import atomic_write_text
 from pkmcal.io.limits import MAX_DESCRIPTION_CHARS, MAX_NAME_CHARS, magnitude_problem
 from pkmcal.mechanisms.base import Mechanism
-from pkmcal.mechanisms.hexapod import HEXAPOD_PARAM_NAMES, N_LEGS, Hexapod, HexapodLimits
+from pkmcal.mechanisms.hexapod import DEFAULT_ACTUATOR_UNIT, HEXAPOD_PARAM_NAMES, N_LEGS, Hexapod, HexapodLimits
 from pkmcal.mechanisms.library import builtin_machine, is_builtin_name
 
 MACHINE_FILE_SUFFIXES = (".yaml", ".yml")
@@ -93,6 +94,22 @@ Vec3 = tuple[Length, Length, Length]
 #: A machine's name and description: one line of text (:func:`pkmcal.errors.line_problem`).
 Name = Annotated[StrictStr, AfterValidator(_one_line(MAX_NAME_CHARS))]
 Description = Annotated[StrictStr, AfterValidator(_one_line(MAX_DESCRIPTION_CHARS))]
+#: Longest ``actuator_unit`` text (a unit name: mm, rev, deg, count, "motor rev").
+MAX_UNIT_CHARS = 40
+
+
+def _unit_text(v: str) -> str:
+    problem = line_problem(v, MAX_UNIT_CHARS)
+    if problem is not None:
+        raise ValueError(problem)
+    if not v.strip() or v != v.strip():
+        raise ValueError(f"{v!r} is not a unit name: give the readings' unit as text without surrounding blanks, "
+                         "e.g. mm, rev, deg or count")
+    return v
+
+
+#: The unit of a hexapod's readings and stroke (text; a label, never converted).
+ActuatorUnit = Annotated[StrictStr, AfterValidator(_unit_text)]
 
 
 class _Model(BaseModel):
@@ -100,14 +117,24 @@ class _Model(BaseModel):
 
 
 class LegSpec(_Model):
-    """One leg: base joint b_i in {F}, platform joint a_i in {P}, offset L0_i, stroke (mm)."""
+    """One leg: base joint b_i in {F}, platform joint a_i in {P}, offset L0_i (mm), stroke
+    (reading units), gain g_i (mm of leg length per reading unit, default 1)."""
 
     base: Vec3
     platform: Vec3
     offset: Length
     stroke: tuple[Length, Length]
+    gain: Annotated[StrictFloat, AfterValidator(_plausible("mm per reading unit"))] = 1.0
     base_axis: Vec3 | None = None
     platform_axis: Vec3 | None = None
+
+    @field_validator("gain")
+    @classmethod
+    def _positive_gain(cls, v: float) -> float:
+        if not v > 0:
+            raise ValueError(f"{v!r} is not a leg gain: give the mm of leg length per reading unit, a number > 0 "
+                             "(1, or no 'gain:', when the readings are in mm)")
+        return v
 
     @field_validator("offset")
     @classmethod
@@ -211,6 +238,7 @@ class HexapodFile(_Model):
     kind: Literal["hexapod", "6-UPS"] = "hexapod"
     name: Name | None = None
     description: Description = ""
+    actuator_unit: ActuatorUnit = DEFAULT_ACTUATOR_UNIT
     legs: list[LegSpec]
     limits: LimitsSpec = LimitsSpec()
     home: PoseSpec | None = None
@@ -240,7 +268,7 @@ _ALLOWED_KEYS: dict[str, tuple[str, ...]] = {
 _EXPECTED_SHAPE = {
     "base": "3 numbers [x, y, z] (mm)", "platform": "3 numbers [x, y, z] (mm)",
     "base_axis": "3 numbers [x, y, z]", "platform_axis": "3 numbers [x, y, z]",
-    "stroke": "2 numbers [min, max] (mm)",
+    "stroke": "2 numbers [min, max] (reading units: mm unless 'actuator_unit' says otherwise)",
     "x": "2 numbers [min, max]", "y": "2 numbers [min, max]", "z": "2 numbers [min, max]",
     "a": "2 numbers [min, max]", "b": "2 numbers [min, max]", "c": "2 numbers [min, max]",
 }
@@ -338,7 +366,8 @@ def _covariance_from_spec(path: object, spec: UncertaintySpec, lines: dict[tuple
         if name not in param_names:
             close = difflib.get_close_matches(name, param_names, n=1)
             hint = f" (did you mean '{close[0]}'?)" if close else ""
-            known = ("b1.x, b1.y, b1.z, a1.x, a1.y, a1.z, L0_1, ..., L0_6" if param_names is HEXAPOD_PARAM_NAMES
+            known = ("b1.x, b1.y, b1.z, a1.x, a1.y, a1.z, L0_1, ..., L0_6, gain_1, ..., gain_6"
+                     if param_names is HEXAPOD_PARAM_NAMES
                      else ", ".join(param_names))
             raise fail(("parameters", i) if spec.parameters is not None else ("std", name),
                        f"unknown parameter {name!r}{hint}; the machine's parameters are {known}")
@@ -437,6 +466,8 @@ def _hexapod_from_file(path: object, data: dict, lines: dict[tuple, int]) -> Hex
             platform=[l.platform for l in legs],  # noqa: E741
             offset=[l.offset for l in legs],  # noqa: E741
             stroke=[l.stroke for l in legs],  # noqa: E741
+            gains=[l.gain for l in legs],  # noqa: E741
+            actuator_unit=spec.actuator_unit,
             base_axis=axes("base_axis"),
             platform_axis=axes("platform_axis"),
             limits=limits,
@@ -486,10 +517,14 @@ def _hexapod_to_file(m: Hexapod) -> dict:
     out: dict[str, Any] = {"kind": "hexapod", "name": m.name}
     if m.description:
         out["description"] = m.description
+    if m.actuator_unit != DEFAULT_ACTUATOR_UNIT:
+        out["actuator_unit"] = m.actuator_unit
     legs = []
     for i in range(N_LEGS):
         leg: dict[str, Any] = {"base": _floats(m.base[i]), "platform": _floats(m.platform[i]),
                                "offset": float(m.offset[i]), "stroke": _floats(m.stroke[i])}
+        if m.gains[i] != 1.0:
+            leg["gain"] = float(m.gains[i])
         for key in ("base_axis", "platform_axis"):
             axis = getattr(m, key)[i]
             if not np.array_equal(axis, z):
@@ -506,7 +541,8 @@ def _hexapod_to_file(m: Hexapod) -> dict:
         limits["leg_diameter"] = float(lim.leg_diameter)
     limits["singularity_margin"] = float(lim.singularity_margin)
     out["limits"] = limits
-    default_home = Hexapod(name=m.name, base=m.base, platform=m.platform, offset=m.offset, stroke=m.stroke).home
+    default_home = Hexapod(name=m.name, base=m.base, platform=m.platform, offset=m.offset, stroke=m.stroke,
+                           gains=m.gains).home
     if not np.array_equal(m.home, default_home):
         out["home"] = {k: float(v) for k, v in zip("xyz", m.home[:3])}
         out["home"].update({k: RawFloat(rad_to_deg_text(v)) for k, v in zip("abc", m.home[3:])})

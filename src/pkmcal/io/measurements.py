@@ -3,9 +3,10 @@
 Columns (names case-insensitive, aliases and ``# units:`` line as in :mod:`pkmcal.io.tables`;
 extra columns are ignored):
 
-* actuators: ``lambda1..lambda6`` (actuator readings λ_i, mm), or ``l1..l6`` (leg lengths
-  L_i, mm), converted to readings with the machine's leg offsets, λ_i = L_i − L0_i
-  (paper 2 eq. 2); planar machines: ``q1..ql`` (encoder readings, mm, or degrees for
+* actuators: ``lambda1..lambda6`` (actuator readings λ_i, in the machine's
+  ``actuator_unit``: mm unless stated), or ``l1..l6`` (leg lengths L_i, mm), converted to
+  readings with the machine's leg offsets and gains, λ_i = (L_i − L0_i) / g_i (paper 2
+  eq. 2 with a gain; g_i = 1 for readings in mm); planar machines: ``q1..ql`` (encoder readings, mm, or degrees for
   rotary actuators, :attr:`Mechanism.actuator_is_angle`);
 * the sensor's readings: ``x,y,z,a,b,c`` (full-pose; mm, degrees), ``px,py,pz``
   (position; mm) or ``d1..dK`` (indicators; mm);
@@ -114,12 +115,12 @@ class Measurements:
         return f"pose {k + 1}"
 
 
-def _leg_offsets(machine: Mechanism, path) -> np.ndarray:
-    offset = getattr(machine, "offset", None)
-    if offset is None:
+def _readings_from_lengths(machine: Mechanism, lengths: np.ndarray, path) -> np.ndarray:
+    """λ = (L − L0) / g of measured leg lengths L (N, l), mm (:meth:`Hexapod.readings_from_lengths`)."""
+    if "leg-lengths" not in machine.abilities:
         raise InputFileError(path, f"has leg lengths l1.. but machine '{machine.name}' has no leg offsets; "
                                    f"give the actuator readings {machine.actuator_names[0]}.. instead")
-    return np.asarray(offset, dtype=float)
+    return machine.readings_from_lengths(lengths)
 
 
 def load_measurements(path: str | os.PathLike, machine: Mechanism, setup: MeasurementSetup,
@@ -137,7 +138,10 @@ def load_measurements(path: str | os.PathLike, machine: Mechanism, setup: Measur
     legs = tuple(f"l{i + 1}" for i in range(machine.n_actuators))
     reading_cols = tuple(sensor.reading_names)
     cmd_cols = command_columns(machine)
-    kinds = {**column_kinds(act, machine.actuator_is_angle), **column_kinds(legs, (False,) * len(legs)),
+    # readings in a unit of their own (actuator_unit: rev, count) are not lengths a units line converts
+    act_kinds = {n: k for (n, k), u in zip(column_kinds(act, machine.actuator_is_angle).items(), machine.actuator_units)
+                 if u in ("mm", "deg")}
+    kinds = {**act_kinds, **column_kinds(legs, (False,) * len(legs)),
              **column_kinds(reading_cols, sensor.reading_is_angle),
              **column_kinds(cmd_cols, machine.pose_is_angle)}
     try:
@@ -177,9 +181,12 @@ def load_measurements(path: str | os.PathLike, machine: Mechanism, setup: Measur
     if all(c in table.columns for c in act):
         actuators = from_file_units(table[list(act)], machine.actuator_is_angle)   # rotary encoders: deg in files
     else:
-        actuators = table[list(legs)] - _leg_offsets(machine, src)
+        actuators = _readings_from_lengths(machine, table[list(legs)], src)
+        unit_gains = np.all(machine.reading_gains() == 1.0)
+        rule = ("lambda_i = l_i - L0_i with the leg offsets" if unit_gains else
+                f"lambda_i = (l_i - L0_i) / gain_i ({machine.actuator_units[0]}) with the leg offsets and gains")
         notes = (f"{src}: columns {legs[0]}..{legs[-1]} are leg lengths; converted to actuator readings "
-                 f"lambda_i = l_i - L0_i with the leg offsets of machine '{machine.name}'",)
+                 f"{rule} of machine '{machine.name}'",)
     commanded = None
     if with_cmd:
         commanded = from_file_units(table[list(cmd_cols)], machine.pose_is_angle)
@@ -301,9 +308,18 @@ class ClippedReading:
                 f"[{self.stroke[0]!r}, {self.stroke[1]!r}] {unit}")
 
     def to_dict(self, unit: str = "mm") -> dict:
-        """JSON-ready, every number with its unit (docs/conventions.md, "Units in JSON")."""
-        return {"pose": self.pose, "line": self.line, "actuator": self.actuator, f"reading_{unit}": self.reading,
-                f"stroke_{unit}": list(self.stroke), "kind": self.kind, "units": {"pose": "1", "line": "1"}}
+        """JSON-ready, every number with its unit (docs/conventions.md, "Units in JSON"):
+        ``reading_mm``/``stroke_mm`` (``_deg`` for rotary actuators), or for readings in a
+        unit of their own (a hexapod's ``actuator_unit``) ``reading``/``stroke`` with that
+        unit in ``units``."""
+        units = {"pose": "1", "line": "1"}
+        if unit in ("mm", "deg"):
+            reading, stroke = f"reading_{unit}", f"stroke_{unit}"
+        else:
+            reading, stroke = "reading", "stroke"
+            units.update(reading=unit, stroke=unit)
+        return {"pose": self.pose, "line": self.line, "actuator": self.actuator, reading: self.reading,
+                stroke: list(self.stroke), "kind": self.kind, "units": units}
 
 
 def clipped_readings(measurements: Measurements, machine: Mechanism,
@@ -356,7 +372,7 @@ def apply_clipped_policy(measurements: Measurements, machine: Mechanism, policy:
     if not found:
         return measurements, [], []
     src = measurements.source or "the measurements"
-    unit = {name: ("deg" if a else "mm") for name, a in zip(machine.actuator_names, machine.actuator_is_angle)}
+    unit = dict(zip(machine.actuator_names, machine.actuator_units))
     lines = [f"{src}: {c.describe(unit[c.actuator])}" for c in found]
     poses = sorted({c.pose for c in found})
     if policy == "error":

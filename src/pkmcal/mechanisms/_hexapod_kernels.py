@@ -180,17 +180,19 @@ def ik_lengths(poses, base, platform):
 
 
 @nb.njit(**_OPTS)
-def _jacobians_range(poses, base, platform, A, B, L, start, stop):
+def _jacobians_range(poses, base, platform, offset, gains, A, B, lam, start, stop):
     """For rows k in [start, stop): A[k] = ∂λ/∂(x, y, z, a, b, c) (6×6), the non-zero
-    entries of B[k] = ∂λ/∂ρ (6×42; B must be zero on entry) and the leg lengths L[k] (6,)
-    (bit-identical to :func:`_ik_range`).
+    entries of B[k] = ∂λ/∂ρ (6×48; B must be zero on entry) and the readings
+    lam[k] = (L − L0) / g (6,) (L bit-identical to :func:`_ik_range`).
 
-    Leg i: u_i = l_i/‖l_i‖, w_i = (R a_i) × u_i; A row i = [u_iᵀ, w_iᵀ E(a, b, c)] with E
-    the Euler rate matrix (:func:`pkmcal.conventions.euler_rate_matrix`), B row i on leg
-    i's 7 columns = [−u_iᵀ, u_iᵀ R, −1] (paper 1 eq. 1–2: l_i = p + R a_i − b_i,
-    λ_i = ‖l_i‖ − L0_i).
+    Leg i: u_i = l_i/‖l_i‖, w_i = (R a_i) × u_i; A row i = [u_iᵀ, w_iᵀ E(a, b, c)] / g_i
+    with E the Euler rate matrix (:func:`pkmcal.conventions.euler_rate_matrix`), B row i on
+    leg i's 7 columns = [−u_iᵀ, u_iᵀ R, −1] / g_i and on its gain column 42 + i −λ_i / g_i
+    (paper 1 eq. 1–2: l_i = p + R a_i − b_i, λ_i = (‖l_i‖ − L0_i) / g_i). Every factor
+    1 / g_i is 1.0 for a unit gain, so those entries are the papers' bits exactly.
     """
     R = np.empty((3, 3))
+    ng = 7 * 6  # the gain columns follow the 42 geometry columns
     for k in range(start, stop):
         _euler_matrix(poses[k, 3], poses[k, 4], poses[k, 5], R)
         cb, sb = math.cos(poses[k, 4]), math.sin(poses[k, 4])
@@ -203,43 +205,43 @@ def _jacobians_range(poses, base, platform, A, B, L, start, stop):
             l1 = poses[k, 1] + ra1 - base[i, 1]
             l2 = poses[k, 2] + ra2 - base[i, 2]
             length = math.sqrt(l0 * l0 + l1 * l1 + l2 * l2)
-            L[k, i] = length
+            g = gains[i]
+            reading = (length - offset[i]) / g
+            lam[k, i] = reading
             inv = 1.0 / length
             u0, u1, u2 = l0 * inv, l1 * inv, l2 * inv
             wx = ra1 * u2 - ra2 * u1
             wy = ra2 * u0 - ra0 * u2
             wz = ra0 * u1 - ra1 * u0
-            A[k, i, 0] = u0
-            A[k, i, 1] = u1
-            A[k, i, 2] = u2
-            A[k, i, 3] = cb * (cc * wx + sc * wy) - sb * wz
-            A[k, i, 4] = cc * wy - sc * wx
-            A[k, i, 5] = wz
+            ig = 1.0 / g
+            A[k, i, 0] = u0 * ig
+            A[k, i, 1] = u1 * ig
+            A[k, i, 2] = u2 * ig
+            A[k, i, 3] = (cb * (cc * wx + sc * wy) - sb * wz) * ig
+            A[k, i, 4] = (cc * wy - sc * wx) * ig
+            A[k, i, 5] = wz * ig
             c0 = 7 * i
-            B[k, i, c0] = -u0
-            B[k, i, c0 + 1] = -u1
-            B[k, i, c0 + 2] = -u2
+            B[k, i, c0] = -u0 * ig
+            B[k, i, c0 + 1] = -u1 * ig
+            B[k, i, c0 + 2] = -u2 * ig
             for c in range(3):
-                B[k, i, c0 + 3 + c] = u0 * R[0, c] + u1 * R[1, c] + u2 * R[2, c]
-            B[k, i, c0 + 6] = -1.0
+                B[k, i, c0 + 3 + c] = (u0 * R[0, c] + u1 * R[1, c] + u2 * R[2, c]) * ig
+            B[k, i, c0 + 6] = -ig
+            B[k, i, ng + i] = -reading * ig
 
 
-def lengths_and_jacobians(poses, base, platform):
-    """``(L, A, B)``: leg lengths (N, 6), ∂λ/∂pose (N, 6, 6) and ∂λ/∂ρ (N, 6, 42) of poses
-    (N, 6) [mm, rad] in one pass (see :func:`_jacobians_range`); threaded like
-    :func:`ik_lengths`."""
-    poses, base, platform = _f64(poses), _f64(base), _f64(platform)
+def readings_and_jacobians(poses, base, platform, offset, gains):
+    """``(λ, A, B)``: readings (N, 6) = (L − L0) / g, ∂λ/∂pose (N, 6, 6) and ∂λ/∂ρ
+    (N, 6, 48) of poses (N, 6) [mm, rad] in one pass (see :func:`_jacobians_range`);
+    offset, gains (6,); threaded like :func:`ik_lengths`."""
+    poses, base, platform, offset, gains = _f64(poses), _f64(base), _f64(platform), _f64(offset), _f64(gains)
     n = poses.shape[0]
     A = np.empty((n, 6, 6))
-    B = np.zeros((n, 6, 42))
-    L = np.empty((n, 6))
-    _run_rows(_jacobians_range, n, _IK_GRAIN, (poses, base, platform, A, B, L))
-    return L, A, B
+    B = np.zeros((n, 6, 48))
+    lam = np.empty((n, 6))
+    _run_rows(_jacobians_range, n, _IK_GRAIN, (poses, base, platform, offset, gains, A, B, lam))
+    return lam, A, B
 
-
-def actuator_jacobians(poses, base, platform):
-    """``(A, B)`` of :func:`lengths_and_jacobians`."""
-    return lengths_and_jacobians(poses, base, platform)[1:]
 
 
 @nb.njit(**_OPTS)
@@ -706,7 +708,7 @@ def singularity_certificate(J, m, C, L):
 
 
 @nb.njit(**_OPTS)
-def _limits_range(poses, base, platform, offset, stroke, base_axis, platform_axis, pairs, enabled, limit,
+def _limits_range(poses, base, platform, offset, gains, stroke, base_axis, platform_axis, pairs, enabled, limit,
                   out, start, stop):
     """out[k] (columns stroke, U tilt, S tilt, leg collision, singularity:
     ``hexapod.LIMIT_NAMES``) for rows k in [start, stop): the stroke, tilt
@@ -741,8 +743,8 @@ def _limits_range(poses, base, platform, offset, stroke, base_axis, platform_axi
             length = math.sqrt(s)
             for q in range(3):
                 u[i, q] = legs[i, q] / length
-            lam = length - offset[i]
-            m = min(lam - stroke[i, 0], stroke[i, 1] - lam)
+            lam = (length - offset[i]) / gains[i]  # the reading, in the stroke's unit
+            m = min(lam - stroke[i, 0], stroke[i, 1] - lam) * gains[i]  # mm of leg length
             if not m >= worst:  # NaN propagates
                 worst = m
         out[k, 0] = worst - limit[5]
@@ -787,7 +789,7 @@ def _limits_range(poses, base, platform, offset, stroke, base_axis, platform_axi
             out[k, 4] = singularity_certificate(Jt, limit[3], C, L)
 
 
-def limit_margins(poses, base, platform, offset, stroke, base_axis, platform_axis, pairs, enabled, limit):
+def limit_margins(poses, base, platform, offset, gains, stroke, base_axis, platform_axis, pairs, enabled, limit):
     """(N, 5) array, columns ``hexapod.LIMIT_NAMES``, for poses (N, 6) [mm, rad]: margins of
     the stroke, tilt and collision limits and the singularity certificate (+1 / −1 / NaN
     undecided), see :func:`_limits_range`; ``pairs`` (P, 2) the leg pairs checked for
@@ -797,7 +799,7 @@ def limit_margins(poses, base, platform, offset, stroke, base_axis, platform_axi
     out = np.empty((poses.shape[0], 5))
     pairs = np.ascontiguousarray(pairs, dtype=np.int64).reshape(-1, 2)
     enabled = np.ascontiguousarray(enabled, dtype=np.bool_).copy()
-    args = (poses, _f64(base), _f64(platform), _f64(offset), _f64(stroke), _f64(base_axis), _f64(platform_axis),
-            pairs, enabled, _f64(limit), out)
+    args = (poses, _f64(base), _f64(platform), _f64(offset), _f64(gains), _f64(stroke), _f64(base_axis),
+            _f64(platform_axis), pairs, enabled, _f64(limit), out)
     _run_rows(_limits_range, poses.shape[0], _LIMIT_GRAIN, args)
     return out

@@ -154,7 +154,9 @@ class Mechanism(ABC):
     #: Names of the actuator readings, e.g. ("lambda1", ..., "lambda6").
     actuator_names: tuple[str, ...]
     #: Optional features, asked as ``"x" in mech.abilities``: ``"leg-lengths"`` (has
-    #: ``leg_lengths``, ``fk_lengths``, ``length_param_jacobian``), ``"drawing"`` (has
+    #: ``leg_lengths``, ``fk_lengths``, ``length_param_jacobian``, the reading map
+    #: L = L0 + g λ: ``lengths_from_readings``, ``readings_from_lengths``, ``reading_gains``,
+    #: ``lengths_from_readings_param_jacobian``), ``"drawing"`` (has
     #: ``draw_segments``), ``"linuxcnc"`` (exportable to a LinuxCNC kinematics module),
     #: ``"pose-convention"`` (the pose coordinates are the platform frame's x, y, z, a, b, c
     #: of :mod:`pkmcal.conventions`: ``frame`` is ``Frame.from_poses``), ``"planar"``.
@@ -162,8 +164,8 @@ class Mechanism(ABC):
     #: True when the platform frame depends on ρ (a tool offset): then
     #: :meth:`frame_jacobians` gives T_ρ and the engine adds (∂y/∂twist) · T_ρ to ∂y/∂ρ.
     frame_depends_on_params: bool = False
-    #: Parameter names or shell patterns held at their values unless freed by name
-    #: (none today; e.g. actuator gains, which only special campaigns can identify).
+    #: Parameter names or shell patterns held at their values unless freed by name (a
+    #: hexapod's leg gains, a delta's tool offset).
     default_fixed: tuple[str, ...] = ()
     #: Named sets of points among the parameters: set name → point labels, each label P
     #: with parameters ``P.x, P.y, P.z`` (mm). Shown gauge-free after an identification

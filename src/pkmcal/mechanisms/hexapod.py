@@ -1,21 +1,28 @@
-"""The Gough–Stewart hexapod (6-UPS) and its 42 kinematic parameters.
+"""The Gough–Stewart hexapod (6-UPS) and its 48 kinematic parameters.
 
 Model (paper 2 §2.1 eq. 1–2, paper 1 §II eq. 1): leg i joins the base (universal) joint
 b_i, given in the base frame {F}, to the platform (spherical) joint a_i, given in the
 platform frame {P}; with the pose (p, R) of {P} in {F},
 
-    l_i = p + R a_i − b_i,        L_i = ‖l_i‖,        λ_i = L_i − L0_i            (1)–(2)
+    l_i = p + R a_i − b_i,    L_i = ‖l_i‖,    L_i = L0_i + g_i λ_i,  λ_i = (L_i − L0_i) / g_i   (1)–(2)
 
-where λ_i is the actuator reading and L0_i the leg offset. The parameter vector ρ (42,) is
-ordered per leg i = 1..6 as ``b_i.x, b_i.y, b_i.z, a_i.x, a_i.y, a_i.z, L0_i``.
+where λ_i is the actuator reading in the instrument's unit (:attr:`Hexapod.actuator_unit`:
+mm, motor revolutions, encoder counts, ...), L0_i the leg offset (mm) and g_i > 0 the leg's
+gain (mm of leg length per reading unit; 1 for readings in mm, the papers' model). The
+parameter vector ρ (48,) is ordered per leg i = 1..6 as ``b_i.x, b_i.y, b_i.z, a_i.x,
+a_i.y, a_i.z, L0_i`` (the 42 parameters of papers 1 and 2), then the gains ``gain_1 ..
+gain_6``, which the machine holds unless freed by name (:attr:`Hexapod.default_fixed`: only
+a campaign that measures lengths, not just the readings' changes, can tell a gain from the
+geometry's scale, and the papers hold them at 1).
 
 Analytic derivatives, with the unit leg vector u_i = l_i / L_i:
 
-    ∂λ_i/∂p = u_iᵀ,    ∂λ_i/∂δω = ((R a_i) × u_i)ᵀ,    ∂λ_i/∂(a,b,c) = ((R a_i) × u_i)ᵀ E
-    ∂λ_i/∂b_i = −u_iᵀ,  ∂λ_i/∂a_i = u_iᵀ R,            ∂λ_i/∂L0_i = −1
+    ∂λ_i/∂p = u_iᵀ / g_i,    ∂λ_i/∂δω = ((R a_i) × u_i)ᵀ / g_i,    ∂λ_i/∂(a,b,c) = ((R a_i) × u_i)ᵀ E / g_i
+    ∂λ_i/∂b_i = −u_iᵀ / g_i,  ∂λ_i/∂a_i = u_iᵀ R / g_i,   ∂λ_i/∂L0_i = −1 / g_i,   ∂λ_i/∂g_i = −λ_i / g_i
 
-(E from :func:`pkmcal.conventions.euler_rate_matrix`). Limits (paper 2 §5): actuator
-stroke, U-joint tilt (angle between u_i and the base joint axis), S-joint tilt (angle
+(E from :func:`pkmcal.conventions.euler_rate_matrix`). With every g_i = 1 these are the
+papers' formulas, bit for bit (a division by 1.0 is exact). Limits (paper 2 §5): actuator
+stroke (in reading units, as the readings), U-joint tilt (angle between u_i and the base joint axis), S-joint tilt (angle
 between u_i and the platform joint axis R n_i), leg–leg collision (minimum distance
 between leg segments b_i → p + R a_i below the leg diameter) and a singularity margin
 (inverse condition number of the length-scaled pose Jacobian). They are computed by a
@@ -45,9 +52,15 @@ def _kernels():
 
 
 N_LEGS = 6
+#: Geometry parameters per leg (b_i, a_i, L0_i): the first 6 × 7 = 42 entries of ρ.
 PARAMS_PER_LEG = 7
+N_GEOMETRY_PARAMS = N_LEGS * PARAMS_PER_LEG
 _LEG_PARAM_SUFFIXES = ("b{i}.x", "b{i}.y", "b{i}.z", "a{i}.x", "a{i}.y", "a{i}.z", "L0_{i}")
-HEXAPOD_PARAM_NAMES = tuple(s.format(i=i + 1) for i in range(N_LEGS) for s in _LEG_PARAM_SUFFIXES)
+#: The gains g_i, appended after the 42 geometry parameters.
+GAIN_NAMES = tuple(f"gain_{i + 1}" for i in range(N_LEGS))
+HEXAPOD_PARAM_NAMES = tuple(s.format(i=i + 1) for i in range(N_LEGS) for s in _LEG_PARAM_SUFFIXES) + GAIN_NAMES
+#: The unit of readings in mm of leg length (gains 1): the default ``actuator_unit``.
+DEFAULT_ACTUATOR_UNIT = "mm"
 
 #: Batches of at least this many poses run the compiled IK kernel (0.08 µs/pose against NumPy's
 #: 1.3 µs/pose at 100,000 poses); below it NumPy's ~40 µs per call is cheaper than importing numba.
@@ -98,16 +111,19 @@ class Hexapod(Mechanism):
     name : machine name.
     base : (6, 3) base joint centres b_i in {F}, mm.
     platform : (6, 3) platform joint centres a_i in {P}, mm.
-    offset : (6,) leg offsets L0_i, mm (leg length = L0_i + λ_i).
-    stroke : (6, 2) actuator reading range [λ_min, λ_max], mm.
+    offset : (6,) leg offsets L0_i, mm (leg length = L0_i + g_i λ_i).
+    stroke : (6, 2) actuator reading range [λ_min, λ_max], in reading units (``actuator_unit``).
     base_axis, platform_axis : (6, 3) joint axis directions (unit), default z of {F}/{P}.
     limits : :class:`HexapodLimits`.
     home : (6,) home pose (mm, rad); default: level, centred, mid-stroke.
     workspace : optional (6, 2) box [min, max] of each pose coordinate (mm, rad).
-    covariance : optional (42, 42) covariance of the parameters (identified machines).
+    covariance : optional (48, 48) covariance of the parameters (identified machines).
     description : free text.
     metadata : free-form information carried along (e.g. ``{"calibration": {...}}`` from a
         machine file); not part of the kinematic identity, so ``==`` ignores it.
+    gains : (6,) leg gains g_i > 0, mm of leg length per reading unit; default all 1.
+    actuator_unit : the unit of the readings and the stroke (text: ``mm``, ``rev``, ``deg``,
+        ``count``, ...); a label, never converted (a gain turns readings into mm). Default mm.
     """
 
     name: str
@@ -123,6 +139,8 @@ class Hexapod(Mechanism):
     covariance: np.ndarray | None = None
     description: str = ""
     metadata: dict = field(default_factory=dict, compare=False)
+    gains: np.ndarray | None = None
+    actuator_unit: str = DEFAULT_ACTUATOR_UNIT
 
     kind = "6-UPS"
     pose_names = POSE_COLUMNS
@@ -131,6 +149,8 @@ class Hexapod(Mechanism):
     abilities = frozenset({"leg-lengths", "drawing", "linuxcnc", "pose-convention"})
     point_sets = MappingProxyType({"base joints": tuple(f"b{i + 1}" for i in range(N_LEGS)),
                                    "platform joints": tuple(f"a{i + 1}" for i in range(N_LEGS))})
+    #: The gains are held unless freed by name (``--free 'gain_*'``; module docstring).
+    default_fixed = ("gain_*",)
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -138,6 +158,13 @@ class Hexapod(Mechanism):
         set_(self, "platform", _frozen(self.platform, (N_LEGS, 3)))
         set_(self, "offset", _frozen(self.offset, (N_LEGS,)))
         set_(self, "stroke", _frozen(self.stroke, (N_LEGS, 2)))
+        set_(self, "gains", _frozen(np.ones(N_LEGS) if self.gains is None else self.gains, (N_LEGS,)))
+        if not np.all(np.isfinite(self.gains) & (self.gains > 0)):
+            leg = int(np.argmax(~(np.isfinite(self.gains) & (self.gains > 0)))) + 1
+            raise PkmcalError(f"machine '{self.name}': leg {leg} gain {float(self.gains[leg - 1])!r} is not a positive "
+                              "finite number (mm of leg length per reading unit)")
+        if not isinstance(self.actuator_unit, str) or not self.actuator_unit.strip():
+            raise PkmcalError(f"machine '{self.name}': the actuator unit must be a non-empty text (mm, rev, ...)")
         z = np.tile([0.0, 0.0, 1.0], (N_LEGS, 1))
         for attr in ("base_axis", "platform_axis"):
             axes = np.array(z if getattr(self, attr) is None else getattr(self, attr), dtype=float)
@@ -166,10 +193,23 @@ class Hexapod(Mechanism):
 
     @property
     def params(self) -> np.ndarray:
-        return np.concatenate([self.base, self.platform, self.offset[:, None]], axis=1).ravel()
+        geometry = np.concatenate([self.base, self.platform, self.offset[:, None]], axis=1).ravel()
+        return np.concatenate([geometry, self.gains])
+
+    @property
+    def param_units(self) -> tuple[str, ...]:
+        """mm for the 42 geometry parameters; for the gains mm per reading unit (``mm/rev``),
+        "1" for readings in mm (a pure number)."""
+        gain = "1" if self.actuator_unit == "mm" else f"mm/{self.actuator_unit}"
+        return ("mm",) * N_GEOMETRY_PARAMS + (gain,) * N_LEGS
+
+    @property
+    def actuator_units(self) -> tuple[str, ...]:
+        """:attr:`actuator_unit` for every leg."""
+        return (self.actuator_unit,) * N_LEGS
 
     def with_params(self, params: np.ndarray, name: str | None = None, covariance=None) -> "Hexapod":
-        """This machine with parameters ρ (42,) (and ``name``, ``covariance``, default none).
+        """This machine with parameters ρ (48,) (and ``name``, ``covariance``, default none).
 
         Cheap (studies and simulations build many machines; the identification passes ρ
         explicitly instead), so it does not go through ``dataclasses.replace``: only the
@@ -179,17 +219,19 @@ class Hexapod(Mechanism):
         recomputed from the new parameters (as with ``replace``, since home is never None
         after construction).
         """
-        rho = np.asarray(params, dtype=float).reshape(N_LEGS, PARAMS_PER_LEG)
+        flat = self.as_param_vector(params)
+        rho = flat[:N_GEOMETRY_PARAMS].reshape(N_LEGS, PARAMS_PER_LEG)
         changes = dict(
             name=self.name if name is None else name,
             base=rho[:, 0:3],
             platform=rho[:, 3:6],
             offset=rho[:, 6],
+            gains=flat[N_GEOMETRY_PARAMS:],
             covariance=covariance,
         )
-        if type(self) is not Hexapod:  # a subclass may validate more in __post_init__
-            return replace(self, **changes)
-        for key in ("base", "platform", "offset"):
+        if type(self) is not Hexapod or not np.all(np.isfinite(changes["gains"]) & (changes["gains"] > 0)):
+            return replace(self, **changes)  # a subclass may validate more; a bad gain is refused there
+        for key in ("base", "platform", "offset", "gains"):
             arr = changes[key].copy()  # C-contiguous float64 (6, 3) / (6,), as _frozen makes
             arr.flags.writeable = False
             changes[key] = arr
@@ -203,13 +245,13 @@ class Hexapod(Mechanism):
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, Hexapod):
             return NotImplemented
-        arrays = ("base", "platform", "offset", "stroke", "base_axis", "platform_axis", "home")
+        arrays = ("base", "platform", "offset", "stroke", "base_axis", "platform_axis", "home", "gains")
         same = all(np.array_equal(getattr(self, a), getattr(other, a)) for a in arrays)
         for opt in ("workspace", "covariance"):
             x, y = getattr(self, opt), getattr(other, opt)
             same &= (x is None and y is None) or (x is not None and y is not None and np.array_equal(x, y))
         return bool(same and self.name == other.name and self.limits == other.limits
-                    and self.description == other.description)
+                    and self.description == other.description and self.actuator_unit == other.actuator_unit)
 
     __hash__ = None  # type: ignore[assignment]
 
@@ -217,22 +259,23 @@ class Hexapod(Mechanism):
     def home_pose(self) -> np.ndarray:
         return self.home
 
-    def _geometry(self, params) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(b (6, 3), a (6, 3), L0 (6,))`` of parameters ρ (42,), C-contiguous as the
-        compiled kernels take them; this machine's own arrays for ``params=None``."""
+    def _geometry(self, params) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(b (6, 3), a (6, 3), L0 (6,), g (6,))`` of parameters ρ (48,), C-contiguous as
+        the compiled kernels take them; this machine's own arrays for ``params=None``."""
         if params is None:
-            return self.base, self.platform, self.offset
-        rho = self.as_param_vector(params).reshape(N_LEGS, PARAMS_PER_LEG)
+            return self.base, self.platform, self.offset, self.gains
+        flat = self.as_param_vector(params)
+        rho = flat[:N_GEOMETRY_PARAMS].reshape(N_LEGS, PARAMS_PER_LEG)
         return (np.ascontiguousarray(rho[:, 0:3]), np.ascontiguousarray(rho[:, 3:6]),
-                np.ascontiguousarray(rho[:, 6]))
+                np.ascontiguousarray(rho[:, 6]), np.ascontiguousarray(flat[N_GEOMETRY_PARAMS:]))
 
     def workspace_box(self) -> np.ndarray:
         """:attr:`workspace` when given, else home ± (s, s, s/2, s/r, s/r, s/r) with s the
-        mean actuator stroke and r the platform-joint radius (docs/planning.md's default
+        mean actuator stroke in mm of leg length (g_i times the stroke) and r the platform-joint radius (docs/planning.md's default
         box shape); an error when the machine cannot move (no stroke) or orient (r = 0)."""
         if self.workspace is not None:
             return self.workspace.copy()
-        s = float(np.mean(self.stroke[:, 1] - self.stroke[:, 0]))
+        s = float(np.mean(self.gains * (self.stroke[:, 1] - self.stroke[:, 0])))
         r = self.platform_radius
         if not s > 0:
             raise PkmcalError(f"machine '{self.name}': the actuators have no stroke (mean {s:g} mm), so the "
@@ -251,7 +294,7 @@ class Hexapod(Mechanism):
 
     def _default_home(self) -> np.ndarray:
         """Level, centred pose at which the mean reading is mid-stroke."""
-        target = self.offset + self.stroke.mean(axis=1)
+        target = self.offset + self.gains * self.stroke.mean(axis=1)
         horiz = np.linalg.norm((self.platform - self.base)[:, :2], axis=1)
         dz = self.base[:, 2] - self.platform[:, 2]
         z = np.sqrt(np.maximum(target**2 - horiz**2, 0.0)) + dz
@@ -264,7 +307,7 @@ class Hexapod(Mechanism):
         """``(R, Ra, l)``: rotations (N, 3, 3), platform joints in {F} relative to p
         (N, 6, 3) = R a_i, and leg vectors l_i = p + R a_i − b_i (N, 6, 3)."""
         poses = self.as_pose_array(poses)
-        base, platform, _ = self._geometry(params)
+        base, platform, _, _ = self._geometry(params)
         R = euler_to_matrix(poses[:, 3:6])
         Ra = np.einsum("nrc,ic->nir", R, platform)
         legs = poses[:, None, 0:3] + Ra - base[None]
@@ -283,12 +326,39 @@ class Hexapod(Mechanism):
         if poses.shape[0] < COMPILED_FROM:
             legs = self.leg_vectors(poses, params)[2]
             return np.sqrt(np.einsum("nik,nik->ni", legs, legs))
-        base, platform, _ = self._geometry(params)
+        base, platform, _, _ = self._geometry(params)
         return _kernels().ik_lengths(poses, base, platform)
 
     def ik(self, poses: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
-        """Actuator readings λ = L − L0 (N, 6), mm."""
-        return self.leg_lengths(poses, params) - self._geometry(params)[2]
+        """Actuator readings λ = (L − L0) / g (N, 6), in reading units."""
+        _, _, offset, gains = self._geometry(params)
+        return (self.leg_lengths(poses, params) - offset) / gains
+
+    def reading_gains(self, params: np.ndarray | None = None) -> np.ndarray:
+        """The gains g (6,) of parameters ρ (this machine's for ``params=None``)."""
+        return self._geometry(params)[3]
+
+    def lengths_from_readings(self, readings: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
+        """Leg lengths L = L0 + g λ (N, 6), mm, of readings λ (N, 6) (the inverse of the
+        reading map of :meth:`ik`; no kinematics)."""
+        _, _, offset, gains = self._geometry(params)
+        return offset + gains * np.asarray(readings, dtype=float)
+
+    def readings_from_lengths(self, lengths: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
+        """Readings λ = (L − L0) / g (N, 6) of leg lengths L (N, 6), mm (measured leg lengths,
+        the ``l1..l6`` columns of a measurement file)."""
+        _, _, offset, gains = self._geometry(params)
+        return (np.asarray(lengths, dtype=float) - offset) / gains
+
+    def lengths_from_readings_param_jacobian(self, readings: np.ndarray) -> np.ndarray:
+        """∂(L0 + g λ)/∂ρ (N, 6, 48) at fixed readings λ (N, 6): 1 in leg i's L0 column, λ_i in
+        its gain column, 0 elsewhere (the squared ik-residual's L_q)."""
+        lam = np.atleast_2d(np.asarray(readings, dtype=float))
+        J = np.zeros((lam.shape[0], N_LEGS, len(HEXAPOD_PARAM_NAMES)))
+        legs = np.arange(N_LEGS)
+        J[:, legs, legs * PARAMS_PER_LEG + PARAMS_PER_LEG - 1] = 1.0
+        J[:, legs, N_GEOMETRY_PARAMS + legs] = lam
+        return J
 
     def twist_jacobian(self, poses: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
         """∂L/∂(δp, δω) (N, 6, 6): row i = [u_iᵀ, ((R a_i) × u_i)ᵀ] (NumPy; the compiled
@@ -299,34 +369,34 @@ class Hexapod(Mechanism):
 
     def actuator_jacobians(self, poses: np.ndarray, params: np.ndarray | None = None
                            ) -> tuple[np.ndarray, np.ndarray]:
-        """``(A, B)`` = (∂λ/∂(x, y, z, a, b, c) (N, 6, 6), ∂λ/∂ρ (N, 6, 42)) in one compiled
-        pass: A = twist Jacobian · diag(I, E(a, b, c)), row i of the twist Jacobian
-        [u_iᵀ, ((R a_i) × u_i)ᵀ]; B row i non-zero only on leg i's 7 columns,
-        [−u_iᵀ, u_iᵀ R, −1]."""
-        base, platform, _ = self._geometry(params)
-        return _kernels().actuator_jacobians(self.as_pose_array(poses), base, platform)
+        """``(A, B)`` = (∂λ/∂(x, y, z, a, b, c) (N, 6, 6), ∂λ/∂ρ (N, 6, 48)) in one compiled
+        pass: A = twist Jacobian · diag(I, E(a, b, c)) / g (row i of the twist Jacobian
+        [u_iᵀ, ((R a_i) × u_i)ᵀ], divided by g_i); B row i non-zero only on leg i's 7
+        columns, [−u_iᵀ, u_iᵀ R, −1] / g_i, and its gain column, −λ_i / g_i."""
+        return self.ik_and_jacobians(poses, params)[1:]
 
     def ik_and_jacobians(self, poses: np.ndarray, params: np.ndarray | None = None
                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(λ, A, B)`` of :meth:`ik` and :meth:`actuator_jacobians` in one compiled pass,
         whatever the batch size (the identification's hot path)."""
-        base, platform, offset = self._geometry(params)
-        L, A, B = _kernels().lengths_and_jacobians(self.as_pose_array(poses), base, platform)
-        return L - offset, A, B
+        return _kernels().readings_and_jacobians(self.as_pose_array(poses), *self._geometry(params))
 
     def actuator_pose_jacobian(self, poses: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
         """∂λ/∂(x, y, z, a, b, c) (N, 6, 6), see :meth:`actuator_jacobians`."""
         return self.actuator_jacobians(poses, params)[0]
 
     def actuator_param_jacobian(self, poses: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
-        """∂λ/∂ρ (N, 6, 42), see :meth:`actuator_jacobians`."""
+        """∂λ/∂ρ (N, 6, 48), see :meth:`actuator_jacobians`."""
         return self.actuator_jacobians(poses, params)[1]
 
     def length_param_jacobian(self, poses: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
-        """∂L/∂ρ (N, 6, 42): as :meth:`actuator_param_jacobian` with the L0 columns zero
-        (a leg's length at a given pose does not depend on its offset)."""
-        J = self.actuator_param_jacobian(poses, params)
-        J[:, :, PARAMS_PER_LEG - 1 :: PARAMS_PER_LEG] = 0.0
+        """∂L/∂ρ (N, 6, 48): the parameter Jacobian of unit-gain readings with the L0 and gain
+        columns zero (a leg's length at a given pose depends on neither)."""
+        base, platform, _, _ = self._geometry(params)
+        J = _kernels().readings_and_jacobians(self.as_pose_array(poses), base, platform, np.zeros(N_LEGS),
+                                              np.ones(N_LEGS))[2]
+        J[:, :, PARAMS_PER_LEG - 1 : N_GEOMETRY_PARAMS : PARAMS_PER_LEG] = 0.0
+        J[:, :, N_GEOMETRY_PARAMS:] = 0.0
         return J
 
     # -- the platform frame ----------------------------------------------------------------
@@ -365,13 +435,13 @@ class Hexapod(Mechanism):
         max_iter: int = FK_MAX_ITER,
         polish: int = 0,
     ) -> FKResult:
-        """Poses from actuator readings λ (N, 6) by Newton–Raphson on SO(3).
+        """Poses from actuator readings λ (N, 6) by Newton–Raphson on SO(3), on the leg
+        lengths L = L0 + g λ (:meth:`fk_lengths`; ``tol`` is on L, mm).
 
         ``guess`` is one pose (6,) or one per reading (N, 6); default the home pose.
         """
-        readings = np.asarray(readings, dtype=float)
-        return self.fk_lengths(readings + self._geometry(params)[2], guess, params, tol=tol, max_iter=max_iter,
-                               polish=polish)
+        return self.fk_lengths(self.lengths_from_readings(readings, params), guess, params, tol=tol,
+                               max_iter=max_iter, polish=polish)
 
     def fk_precise(self, readings: np.ndarray, guess: np.ndarray | None = None,
                    params: np.ndarray | None = None) -> FKResult:
@@ -403,7 +473,7 @@ class Hexapod(Mechanism):
         if g.ndim == 1 or g.shape[0] == 1:
             guesses = guesses[:1]  # one guess for all: the kernel broadcasts it
         K = _kernels()
-        base, platform, _ = self._geometry(params)
+        base, platform, _, _ = self._geometry(params)
         poses, conv, iters, res, sign = K.fk_newton_signed(lengths, guesses, base, platform, tol, max_iter, polish)
         ref_sign = K.twist_det_signs(guesses, base, platform)
         ref_sign = np.broadcast_to(ref_sign, conv.shape) if ref_sign.shape[0] == 1 else ref_sign
@@ -427,7 +497,7 @@ class Hexapod(Mechanism):
         lengths L(guess) + t (L − L(guess)), t = 1/K, 2/K, …, 1, each solved by Newton from
         the previous step's pose (see :meth:`fk_lengths`)."""
         K = _kernels()
-        base, platform, _ = self._geometry(params)
+        base, platform, _, _ = self._geometry(params)
         start = self.leg_lengths(guesses, params)
         x = np.array(guesses, dtype=float)
         ok = np.ones(len(x), dtype=bool)
@@ -442,20 +512,21 @@ class Hexapod(Mechanism):
         it changes sign only through a singularity, so two poses with different signs are on
         different assembly modes. 0 where singular to working precision."""
         poses = self.as_pose_array(poses)
-        base, platform, _ = self._geometry(params)
+        base, platform, _, _ = self._geometry(params)
         return _kernels().twist_det_signs(poses, base, platform)[:, None]
 
     # -- limits -------------------------------------------------------------------------
 
     def reading_range(self) -> np.ndarray:
-        """The stroke (6, 2), mm."""
+        """The stroke (6, 2), in reading units (:attr:`actuator_unit`)."""
         return self.stroke
 
     def check_limits(self, poses: np.ndarray, margin: float = 0.0, *, margins: bool = True) -> LimitReport:
         """Reachability of N poses against every limit of the machine.
 
         ``margin`` shrinks every limit by that safety margin (mm for stroke and collision,
-        the same number in degrees for the joint tilts). A pose with a NaN or infinite
+        the same number in degrees for the joint tilts). The stroke margin is in mm of leg
+        length: g_i times the distance of the reading λ_i to the nearer end of its stroke. A pose with a NaN or infinite
         coordinate cannot be evaluated: it violates every limit and all its margins are NaN
         (likewise any single margin that cannot be evaluated, e.g. a zero-length leg).
 
@@ -498,7 +569,8 @@ class Hexapod(Mechanism):
         names = [n for n, enabled in zip(LIMIT_NAMES, on) if enabled]
         table = np.array([np.nan if v is None else v for v in (lim.u_joint_tilt, lim.s_joint_tilt, lim.leg_diameter)]
                          + [lim.singularity_margin, self.platform_radius, margin, np.deg2rad(margin)])
-        out = kernels.limit_margins(safe, self.base, self.platform, self.offset, self.stroke, self.base_axis,
+        out = kernels.limit_margins(safe, self.base, self.platform, self.offset, self.gains, self.stroke,
+                                    self.base_axis,
                                     self.platform_axis, self._leg_pairs(), on[:4] + (not margins,), table)
         result = {n: out[:, LIMIT_NAMES.index(n)] for n in names}
         unsure = ~np.all([np.abs(result[n]) > EXACT_VERDICT_TOL for n in names if n != "singularity"], axis=0)
@@ -540,8 +612,9 @@ class Hexapod(Mechanism):
             R, Ra, legs = self.leg_vectors(poses)
             L = np.linalg.norm(legs, axis=2)
             u = legs / L[..., None]
-            lam = L - self.offset
-            margins["stroke"] = np.min(np.minimum(lam - self.stroke[:, 0], self.stroke[:, 1] - lam), axis=1) - margin
+            lam = (L - self.offset) / self.gains
+            to_end = np.minimum(lam - self.stroke[:, 0], self.stroke[:, 1] - lam) * self.gains  # mm of leg length
+            margins["stroke"] = np.min(to_end, axis=1) - margin
             if lim.u_joint_tilt is not None:
                 tilt = np.arccos(np.clip(np.einsum("nir,ir->ni", u, self.base_axis), -1, 1))
                 margins["u_joint_tilt"] = lim.u_joint_tilt - np.deg2rad(margin) - tilt.max(axis=1)
@@ -582,11 +655,14 @@ class Hexapod(Mechanism):
         lim = self.limits
         deg = lambda v: "off" if v is None else f"{np.rad2deg(v):.1f}°"  # noqa: E731
         lines = [
-            f"{self.name}: 6-UPS hexapod, 42 kinematic parameters" + (f" — {self.description}" if self.description else ""),
+            f"{self.name}: 6-UPS hexapod, 48 kinematic parameters (the gains held unless freed)"
+            + (f" — {self.description}" if self.description else ""),
             f"  base joint radius {np.mean(np.linalg.norm(self.base[:, :2], axis=1)):.3f} mm, "
             f"platform joint radius {self.platform_radius:.3f} mm",
             f"  leg offsets L0 {np.array2string(self.offset, precision=3)} mm, "
-            f"stroke {self.stroke[0, 0]:g}..{self.stroke[0, 1]:g} mm",
+            f"stroke {self.stroke[0, 0]:g}..{self.stroke[0, 1]:g} {self.actuator_unit}"
+            + ("" if np.all(self.gains == 1.0) and self.actuator_unit == DEFAULT_ACTUATOR_UNIT else
+               f", gains {np.array2string(self.gains, precision=6)} mm/{self.actuator_unit}"),
             f"  limits: U-joint tilt {deg(lim.u_joint_tilt)}, S-joint tilt {deg(lim.s_joint_tilt)}, "
             f"leg diameter {'off' if lim.leg_diameter is None else f'{lim.leg_diameter:g} mm'}, "
             f"singularity margin {lim.singularity_margin:g}",

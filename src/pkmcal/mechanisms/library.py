@@ -98,6 +98,7 @@ def stewart_prototype_real() -> Hexapod:
          (nominal.offset + TABLE4_DELTA_OFFSET)[:, None]],
         axis=1,
     ).ravel()
+    rho = np.concatenate([rho, nominal.gains])  # Table 4 has no gain errors: the gains stay 1
     real = nominal.with_params(rho, name="stewart-prototype-real")
     from dataclasses import replace
 

@@ -81,7 +81,7 @@ def default_margin(mechanism: Mechanism, joint_error_mm: float = ASSUMED_JOINT_E
     if not has_margins(mechanism):
         return None
     r_p = float(np.min(np.linalg.norm(np.asarray(mechanism.platform), axis=1)))
-    l_min = float(np.min(np.asarray(mechanism.offset) + np.asarray(mechanism.stroke)[:, 0]))
+    l_min = float(np.min(mechanism.lengths_from_readings(mechanism.stroke[:, 0])))
     if r_p <= 0 or l_min <= 0:
         raise PkmcalError(f"machine '{mechanism.name}': cannot derive safety margins (smallest platform joint "
                           f"radius {r_p:g} mm, shortest leg {l_min:g} mm); give --stroke-margin and --tilt-margin")

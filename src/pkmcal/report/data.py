@@ -29,7 +29,8 @@ from pkmcal.mechanisms.base import Mechanism
 
 #: Unit in which the report shows angle parameters (as in files and on the command line).
 DISPLAY_ANGLE_UNIT = FILE_ANGLE_UNIT
-#: Units of residual rows (:class:`Residuals`): lengths, angles, none (whitened or mixed).
+#: Units of residual rows (:class:`Residuals`): lengths, angles, none (whitened or mixed);
+#: actuator readings in a unit of their own (a hexapod's ``actuator_unit``) carry that unit.
 RESIDUAL_UNITS = ("mm", "rad", "1")
 
 
@@ -91,7 +92,10 @@ class ParameterTable:
     ``std`` is the 1σ standard uncertainty (NaN for parameters held fixed); ``free`` marks
     the estimated parameters; ``true`` (optional) the simulation's ground truth (NaN where
     unknown); ``is_angle`` which parameters are angles (rad here, shown in degrees), as the
-    machine's and the sensor's ``param_is_angle`` declare them (None: all lengths, mm).
+    machine's and the sensor's ``param_is_angle`` declare them (None: all lengths, mm);
+    ``param_units`` (optional) the file unit of each parameter as the machine declares it
+    (``param_units``: mm, deg, or a hexapod gain's "1" / "mm/rev"; None: mm and deg by
+    ``is_angle``).
     """
 
     names: tuple[str, ...]
@@ -101,10 +105,15 @@ class ParameterTable:
     free: np.ndarray
     true: np.ndarray | None = None
     is_angle: np.ndarray | None = None
+    param_units: tuple[str, ...] | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "names", tuple(self.names))
         n = len(self.names)
+        if self.param_units is not None:
+            object.__setattr__(self, "param_units", tuple(self.param_units))
+            if len(self.param_units) != n:
+                raise PkmcalError(f"report: parameter table has {len(self.param_units)} units for {n} names")
         for attr in ("nominal", "identified", "std", "true"):
             if attr == "true" and self.true is None:
                 continue
@@ -127,8 +136,10 @@ class ParameterTable:
 
     @property
     def units(self) -> tuple[str, ...]:
-        """Display unit of each parameter: "deg" for angles, "mm" for lengths."""
-        return tuple(DISPLAY_ANGLE_UNIT if a else LENGTH_UNIT for a in self.is_angle)
+        """Display unit of each parameter: "deg" for angles, "mm" for lengths, else its own
+        (:attr:`param_units`: a gain's "1" or "mm/rev")."""
+        own = self.param_units or (LENGTH_UNIT,) * len(self.names)
+        return tuple(DISPLAY_ANGLE_UNIT if a else u for a, u in zip(self.is_angle, own))
 
     def display(self, values: np.ndarray) -> np.ndarray:
         """``values`` (n,) of this table (nominal, identified, deviation, std, true) in the
@@ -144,7 +155,9 @@ class Residuals:
     ``values`` (N, m) in display-ready internal units (mm, or rad for ``unit == "rad"``);
     ``names`` (m,) the reading names (e.g. "d1", or "lambda3" for actuator residuals);
     ``units`` (m,) "mm", "rad", or "1" for rows without one physical unit (the projection's
-    combinations of readings r = U⊥ᵀ W e: whitened, or mixing mm and rad), shown as computed.
+    combinations of readings r = U⊥ᵀ W e: whitened, or mixing mm and rad), shown as computed,
+    or the unit of actuator readings in a unit of their own (a hexapod's ``actuator_unit``:
+    "rev", "count"), shown as they are.
     ``pose_numbers`` (N,) the number of each residual row's pose: its data row in the
     measurement file, 1-based (default 1..N); poses the fit dropped have no row here.
     """
@@ -169,9 +182,10 @@ class Residuals:
             raise PkmcalError(
                 f"report: residuals have {values.shape[1]} columns but {len(self.names)} names, {len(self.units)} units"
             )
-        bad = set(self.units) - set(RESIDUAL_UNITS)
+        bad = [u for u in self.units if not (isinstance(u, str) and u.strip()) or u == "deg"]
         if bad:
-            raise PkmcalError(f"report: residual units must be 'mm', 'rad' or '1'; got {sorted(bad)}")
+            raise PkmcalError(f"report: residual units must be 'mm', 'rad' (angles are radians here), '1' or a "
+                              f"reading unit; got {bad}")
 
 
 @dataclass(frozen=True)

@@ -56,6 +56,12 @@ ARCSEC_PER_RAD = 180.0 / np.pi * 3600.0
 RESIDUAL_DISPLAY = {"mm": ("µm", 1000.0), "rad": ("arcsec", ARCSEC_PER_RAD), "1": ("1", 1.0)}
 
 
+def residual_display(unit: str) -> tuple[str, float]:
+    """(shown unit, scale) of a residual unit: :data:`RESIDUAL_DISPLAY`, else the unit itself
+    (readings in a unit of their own: a hexapod's ``actuator_unit``, e.g. rev)."""
+    return RESIDUAL_DISPLAY.get(unit, (unit, 1.0))
+
+
 @contextmanager
 def style():
     """Context in which all report figures are created and saved."""
@@ -203,7 +209,8 @@ def parameter_figure(table: ParameterTable) -> Figure:
     dev, std = table.display(table.deviation), table.display(table.std)
     true_dev = None if table.true is None else table.display(table.true - table.nominal)
     units = np.array(table.units)
-    groups = [(u, np.flatnonzero(units == u)) for u in ("mm", "deg") if np.any(units == u)] or [("mm", np.arange(0))]
+    shown = ("mm", "deg") + tuple(u for u in dict.fromkeys(table.units) if u not in ("mm", "deg"))
+    groups = [(u, np.flatnonzero(units == u)) for u in shown if np.any(units == u)] or [("mm", np.arange(0))]
     with style():
         width = max(6.4, 0.16 * max(len(cols) for _, cols in groups) + 1.5)
         fig = _new((width, 3.6 * len(groups)))
@@ -256,7 +263,8 @@ def _unit_groups(res: Residuals):
     """Residual columns grouped by unit: (label, scale, column indices)."""
     groups = []
     units = np.array(res.units)
-    for unit, (shown, scale) in RESIDUAL_DISPLAY.items():
+    for unit in tuple(RESIDUAL_DISPLAY) + tuple(u for u in dict.fromkeys(res.units) if u not in RESIDUAL_DISPLAY):
+        shown, scale = residual_display(unit)
         cols = np.flatnonzero(units == unit)
         if cols.size:
             label = "residual (whitened or mixed units)" if unit == "1" else f"residual ({shown})"

@@ -42,18 +42,21 @@ def identifiability_from_report(report, fixed: tuple[str, ...]) -> Identifiabili
 def residual_units(names: tuple[str, ...], setup: MeasurementSetup, mechanism: Mechanism | None = None,
                    weighted: bool = False) -> tuple[str, ...]:
     """Unit of each residual row. A row named after a reading has that reading's unit, from
-    the declared flags: the sensor's ``reading_is_angle``, the mechanism's
-    ``actuator_is_angle`` ("rad" for angles, "mm" otherwise). Other rows combine readings
-    (the projection's r = U⊥ᵀ W [e_y; e_q], paper 3 eq. 8): "1" when whitened (``weighted``)
-    or when the readings mix lengths and angles, else the readings' common unit."""
+    the declared flags and units: the sensor's ``reading_is_angle`` ("rad" for angles, "mm"
+    otherwise), the mechanism's ``actuator_is_angle`` ("rad") and ``actuator_units`` (mm, or
+    a hexapod's ``actuator_unit``: rev, count, ...). Other rows combine readings (the
+    projection's r = U⊥ᵀ W [e_y; e_q], paper 3 eq. 8): "1" when whitened (``weighted``) or
+    when the readings mix units, else the readings' common unit."""
     sensor = setup.sensor
-    flags = tuple(sensor.reading_is_angle)
-    angle = dict(zip(sensor.reading_names, sensor.reading_is_angle))
+    unit = {n: "rad" if a else "mm" for n, a in zip(sensor.reading_names, sensor.reading_is_angle)}
     if mechanism is not None:
-        flags += tuple(mechanism.actuator_is_angle)
-        angle.update(zip(mechanism.actuator_names, mechanism.actuator_is_angle))
-    combined = "1" if weighted or (any(flags) and not all(flags)) else ("rad" if flags and all(flags) else "mm")
-    return tuple(("rad" if angle[n] else "mm") if n in angle else combined for n in names)
+        # a reading unit that is only a label (a hexapod's actuator_unit: rev, count; "deg" of a
+        # motor, never converted) is marked as one where it reads like a unit the report converts
+        unit.update((n, "rad" if a else (f"{u} (reading)" if u in ("deg", "rad") else u)) for n, a, u in
+                    zip(mechanism.actuator_names, mechanism.actuator_is_angle, mechanism.actuator_units))
+    kinds = set(unit.values())
+    combined = "1" if weighted or len(kinds) > 1 else (kinds.pop() if kinds else "mm")
+    return tuple(unit.get(n, combined) for n in names)
 
 
 def held_out_from_verification(verification) -> HeldOutErrors | None:
@@ -90,7 +93,9 @@ def parameter_table(nominal: Mechanism, result, true_machine: Mechanism | None =
     p = len(nominal.param_names)
     sensor_angle = dict(zip(result.sensor.param_names, result.sensor.param_is_angle))
     sensor_angle.update(zip(result.names, result.param_is_angle))   # + the sessions' offsets dq_i@LABEL
+    sensor_unit = {n: "deg" if a else "mm" for n, a in sensor_angle.items()}
     flags = tuple(nominal.param_is_angle) + tuple(sensor_angle[n] for n in result.names[p:])
+    units = tuple(nominal.param_units) + tuple(sensor_unit[n] for n in result.names[p:])
     free_set = {n: k for k, n in enumerate(result.free)}
     shown = list(range(p)) + [i for i in range(p, len(result.names))
                               if result.names[i] in free_set or result.names[i] in result.gauge]
@@ -103,7 +108,7 @@ def parameter_table(nominal: Mechanism, result, true_machine: Mechanism | None =
         true = np.r_[t_mech, [t_sens.get(n, np.nan) for n in result.names[p:]]][shown]
     return ParameterTable(names, np.asarray(result.initial)[shown], np.asarray(result.estimate)[shown], std,
                           np.array([n in free_set for n in names]), true=true,
-                          is_angle=np.array(flags, dtype=bool)[shown])
+                          is_angle=np.array(flags, dtype=bool)[shown], param_units=tuple(units[i] for i in shown))
 
 
 def _compliance_facts(nominal, result, setup, commanded) -> tuple[tuple[str, str], ...]:

@@ -201,6 +201,8 @@ def _held_out_count(data: ReportData) -> str:
 #: Per display unit of a parameter: digits of its values, and the scale of its error
 #: against the truth (to µm for mm, to arc-seconds for degrees).
 _PARAM_FORMAT = {"mm": (4, 1000.0), "deg": (6, 3600.0)}
+#: Other units (a hexapod's leg gains, "1" or "mm/rev"): 6 digits, error in parts per million.
+_OTHER_PARAM_FORMAT = (6, 1e6)
 
 
 def _parameter_rows(t) -> tuple[list[str], list[list[str]]]:
@@ -210,10 +212,11 @@ def _parameter_rows(t) -> tuple[list[str], list[list[str]]]:
     header = ["parameter", "unit", "nominal", "identified", "deviation", "± 1σ"]
     if t.true is not None:
         true = t.display(t.true)
-        header += ["true", "error (µm; arcsec for deg)"]
+        other = any(u not in _PARAM_FORMAT for u in t.units)
+        header += ["true", "error (µm; arcsec for deg" + ("; ppm for the other units)" if other else ")")]
     rows = []
     for i, (name, unit) in enumerate(zip(t.names, t.units)):
-        digits, err_scale = _PARAM_FORMAT[unit]
+        digits, err_scale = _PARAM_FORMAT.get(unit, _OTHER_PARAM_FORMAT)
         row = [_esc(name), unit, _fmt(nominal[i], f".{digits}f"), _fmt(identified[i], f".{digits}f"),
                _fmt(dev[i], f"+.{digits}f"), _fmt(std[i], f".{digits}f") if t.free[i] else "fixed"]
         if t.true is not None:
@@ -351,7 +354,7 @@ def render_html(data: ReportData, figs: list[F.RenderedFigure]) -> str:
     if r.values.size:
         rrows = []
         for k, name in enumerate(r.names):
-            unit, scale = F.RESIDUAL_DISPLAY[r.units[k]]
+            unit, scale = F.residual_display(r.units[k])
             s = summarise(np.abs(r.values[:, k]))
             rrows.append([_esc(name), unit, _fmt(s["rms"] * scale, ".3f"), _fmt(s["p95"] * scale, ".3f"),
                           _fmt(s["max"] * scale, ".3f")])
@@ -359,7 +362,7 @@ def render_html(data: ReportData, figs: list[F.RenderedFigure]) -> str:
         if "1" in r.units:
             add("<p>Rows of unit 1 combine readings (the projection method, paper 3 eq. 8): divided by the "
                 "noise σ in a weighted fit, else mixing mm and rad; shown as computed.</p>")
-        scales = np.array([F.RESIDUAL_DISPLAY[u][1] for u in r.units])
+        scales = np.array([F.residual_display(u)[1] for u in r.units])
         worst = np.argsort(-np.sqrt(np.mean((r.values * scales) ** 2, axis=1)), kind="stable")[:3]
         add(f"<p>Poses with the largest residuals: {', '.join(str(int(r.pose_numbers[w])) for w in worst)} "
             "(pose numbers: data rows of the measurement file, counted from 1).</p>")

@@ -41,6 +41,7 @@ import time
 import numpy as np
 
 from pkmcal.identification.engine import identify
+from pkmcal.identification.residuals import default_estimated_index
 from pkmcal.identification.simulation import perturb_machine, simulate_campaign
 from pkmcal.identification.verification import pose_errors
 from pkmcal.io.setup_file import builtin_setup
@@ -107,13 +108,14 @@ def _fits(nominal, real, setup, sim, out: dict, kind: str, verify_poses, before,
     eq. 3 unweighted): mean parameter errors, pose errors at ``verify_poses`` and the
     Gauss–Markov bound, stored in ``out`` under ``kind``. Returns the weighted plain fit."""
     fits = {}
+    idx = default_estimated_index(real)  # the paper's 42 parameters (the leg gains are held at 1)
     for w, form in ((False, "plain"), (True, "plain"), (False, "squared")):
         if form not in forms:
             continue
         r = identify(nominal, setup, q=sim.actuator_readings, y=sim.sensor_readings, method="ik-residual",
                      weighted=w, form=form, solver="lm")
         key = f"{kind}_{'weighted' if w else 'unweighted'}" + ("_squared" if form == "squared" else "")
-        out[key] = float(np.mean(np.abs(r.estimate[:len(real.params)] - real.params)))
+        out[key] = float(np.mean(np.abs(r.estimate[idx] - real.params[idx])))
         fits[key] = r
         if verify_poses is not None and form == "plain":
             after = pose_errors(r.mechanism, real, verify_poses, ignore)
@@ -128,11 +130,11 @@ def _fits(nominal, real, setup, sim, out: dict, kind: str, verify_poses, before,
     C = exact.uncertainty.covariance_prior
     out[f"{kind}_bound_param"] = float(np.sqrt(2 / np.pi) * np.mean(np.sqrt(np.diag(C))))
     if verify_poses is not None:
-        G = pose_sensitivity(real, verify_poses)
+        G = pose_sensitivity(real, verify_poses)[..., exact.free_index]
         S = np.einsum("nik,kl,njl->nij", G, C, G)
         out[f"{kind}_bound_pos_rms"] = float(np.sqrt(np.mean(np.trace(S[:, :3, :3], axis1=1, axis2=2))))
         out[f"{kind}_bound_ori_rms"] = float(np.sqrt(np.mean(np.trace(S[:, 3:, 3:], axis1=1, axis2=2))))
-    out["_params_" + kind] = {k: f.estimate[:len(real.params)] - real.params for k, f in fits.items()}
+    out["_params_" + kind] = {k: f.estimate[idx] - real.params[idx] for k, f in fits.items()}
     return fits
 
 
@@ -150,7 +152,8 @@ def _trial(nominal, real, center, half, ignore, setup, rng):
     inner = center + rng.uniform(-1.0, 1.0, (4 * N_CALIB, 6)) * half
     s_in = simulate_campaign(nominal, real, setup, inner, rng, ignore_limits=ignore)
     sims = {"boundary": probe.subset(order[:N_CALIB]), "interior": s_in.subset(slice(N_CALIB))}
-    out = {"before": float(np.mean(np.abs(nominal.params - real.params))), "corners_reached": len(probe.kept),
+    idx = default_estimated_index(real)  # the paper's 42 parameters
+    out = {"before": float(np.mean(np.abs(nominal.params[idx] - real.params[idx]))), "corners_reached": len(probe.kept),
            "_verify": verify_poses}
     before = pose_errors(nominal, real, verify_poses, ignore)
     out["_pose_before"] = (before.position, before.orientation)
@@ -338,7 +341,7 @@ def paper1_table1(seed: int = 0, quick: bool = False, machines: int | None = Non
             for b, (blabel, center, half) in enumerate(boxes):
                 t = _trial(nominal, real, center, half, ignore, setup, rng)
                 if t is not None:
-                    t["_params_before"] = nominal.params - real.params
+                    t["_params_before"] = (nominal.params - real.params)[default_estimated_index(real)]
                     verify = t["_verify"] if verify is None else verify
                 trials[b].append(t)
             dopt.append(_doptimal_trial(nominal, real, setup, cand, G, ignore, verify, rng))
@@ -356,8 +359,10 @@ def paper1_table1(seed: int = 0, quick: bool = False, machines: int | None = Non
             _table_rows(rows, g, col, b == 0, mname, headline, short + tag)
             first = next(k for k, t in enumerate(trials[b]) if t is not None)
             if b == len(boxes) - 1:
-                tabs, fd = _representative(mname, blabel, trials[b][first], dopt[first], nominal.param_names,
-                                           np.array(nominal.param_is_angle, dtype=bool))
+                idx = default_estimated_index(nominal)
+                tabs, fd = _representative(mname, blabel, trials[b][first], dopt[first],
+                                           tuple(nominal.param_names[i] for i in idx),
+                                           np.array(nominal.param_is_angle, dtype=bool)[idx])
                 extra += tabs
                 figdata.append(fd)
     setup_d = {

@@ -33,6 +33,7 @@ import numpy as np
 
 from pkmcal.conventions import euler_to_matrix, matrix_to_euler
 from pkmcal.identification.engine import identify
+from pkmcal.identification.residuals import default_estimated_index
 from pkmcal.identification.simulation import simulate_campaign
 from pkmcal.identification.verification import pose_errors
 from pkmcal.io.setup_file import builtin_setup
@@ -82,7 +83,7 @@ def _measures(fit, real, sensor, heldout):
     target = level.predict(real.frame(heldout[ok]))
     out = {
         "rms": fit.rms_residual,
-        "param": float(np.mean(np.abs(fit.estimate[:len(real.params)] - real.params))),
+        "param": float(np.mean(np.abs((fit.estimate[:len(real.params)] - real.params)[default_estimated_index(real)]))),
         "base": float(np.mean(np.abs(level.predict(real.frame(pe.reached[ok])) - target))),
         "plate": float(np.mean(np.abs(sensor.predict(real.frame(pe.reached[ok])) - target))),
         "plate_xyz": float("nan"), "plate_abc": float("nan"), "sd_xyz": float("nan"), "sd_abc": float("nan"),

@@ -34,7 +34,9 @@ every pkmcal file)::
 
 ``errors`` groups match parameter names with shell patterns; every parameter matches at
 most one group; unmatched parameters are exact. ``size`` is the half-width of a uniform
-error and the standard deviation of a normal one (mm; degrees for angle parameters).
+error and the standard deviation of a normal one (mm; degrees for angle parameters; the
+parameter's own unit for the others, a hexapod's leg gains in mm per reading unit, which
+only a group naming them perturbs: ``"*"`` leaves them at their values).
 Plans: ``algorithm`` one of :data:`pkmcal.planning.selection.ALGORITHMS`; ``candidates``
 the size of the candidate pool (drawn once per machine × setup × plan); ``resample``
 ``trial`` (a new selection from the pool in every trial; the default for ``random`` and
@@ -183,9 +185,18 @@ class MachineSpec:
     ignore_limits: tuple[str, ...] = ()
 
     def error_index(self) -> list[np.ndarray]:
-        """Per error group, the indices of the parameters it perturbs."""
-        return [np.array([i for i, n in enumerate(self.nominal.param_names) if fnmatch.fnmatchcase(n, g.pattern)],
-                         dtype=int) for g in self.errors]
+        """Per error group, the indices of the parameters it perturbs. A group that matches
+        parameters in mm or degrees leaves those in other units (a hexapod's leg gains, mm
+        per reading unit) exact: ``"*"`` means the geometry; name them (``gain_*``) to
+        perturb them."""
+        unitless = ~np.isin(self.nominal.param_units, ("mm", "deg"))
+        out = []
+        for g in self.errors:
+            hit = np.array([fnmatch.fnmatchcase(n, g.pattern) for n in self.nominal.param_names], dtype=bool)
+            if np.any(hit & ~unitless):
+                hit &= ~unitless
+            out.append(np.flatnonzero(hit).astype(int))
+        return out
 
     def describe(self) -> str:
         if self.real is not None:
