@@ -43,6 +43,8 @@ PAGE = DOCS / "tutorial-indicators.md"
 FILES = DOCS / "tutorial-files"
 DELTA_PAGE = DOCS / "tutorial-delta-printer.md"
 DELTA_FILES = FILES / "delta"
+HEXAPOD_PAGE = DOCS / "tutorial-real-hexapod.md"
+HEXAPOD_FILES = FILES / "real-hexapod"
 #: Every tutorial page; each is run by a test below.
 PAGES = sorted(DOCS.glob("tutorial-*.md"))
 NUMBER = re.compile(r"[-+]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][-+]?\d+)?")
@@ -137,7 +139,7 @@ def run_page(page: Path, tmp_path, monkeypatch):
 
 
 def test_every_tutorial_page_is_checked():
-    assert set(PAGES) == {PAGE, DELTA_PAGE}, "a new tutorial page needs its test here"
+    assert set(PAGES) == {PAGE, DELTA_PAGE, HEXAPOD_PAGE}, "a new tutorial page needs its test here"
 
 
 def test_tutorial_runs_as_written(tmp_path, monkeypatch):
@@ -183,6 +185,31 @@ def test_delta_probe_logs_are_what_the_script_writes(tmp_path, capsys):
     quoted = {normalise(line) for line in DELTA_PAGE.read_text(encoding="utf-8").splitlines()}
     printed = capsys.readouterr().out.splitlines()
     assert len(printed) == 2 and all(normalise(line) in quoted for line in printed), printed
+
+
+def test_real_hexapod_tutorial_runs_as_written(tmp_path, monkeypatch):
+    n_run, excerpts, _ = run_page(HEXAPOD_PAGE, tmp_path, monkeypatch)
+    assert files_of(HEXAPOD_PAGE) == HEXAPOD_FILES
+    assert n_run >= 5
+    assert {name for name, _ in excerpts} >= {"campaign.csv", "joints.ini"}
+
+
+def test_real_hexapod_campaign_is_what_the_script_writes(tmp_path):
+    """make_campaign.py (fixed seed) writes the shipped campaign and held-out files byte for
+    byte, and the complications the page describes are in them (a reading at its stroke's
+    end on row 17, a 5 mm mocap error on row 41)."""
+    spec = importlib.util.spec_from_file_location("make_campaign", HEXAPOD_FILES / "make_campaign.py")
+    mk = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mk)
+    for name in ("hexapod.yaml", "mocap.yaml"):
+        shutil.copy(HEXAPOD_FILES / name, tmp_path)
+    mk.HERE = str(tmp_path)
+    mk.main()
+    for name in ("campaign.csv", "heldout.csv"):
+        assert (tmp_path / name).read_bytes() == (HEXAPOD_FILES / name).read_bytes(), name
+    rows = list(csv.DictReader((HEXAPOD_FILES / "campaign.csv").open()))
+    assert len(rows) == 60 and {r["session"] for r in rows} == {"1", "2"}
+    assert rows[mk.CLIPPED[0] - 1][f"lambda{mk.CLIPPED[1] + 1}"] == "10.000000"
 
 
 def test_dials_inch_is_the_tutorials_measurements_in_inches(tmp_path, monkeypatch):

@@ -324,7 +324,7 @@ def verify_cmd(calibrated, meas_path, real_spec, poses, nominal, setup_spec, cal
                                   f"identified in {calibrated} a '{cal_setup.sensor.kind}' sensor; give the same kind")
             before_sensor = None
             if nom is not None:
-                before_sensor, _ = _before_sensor(cal, cal_setup, nom, None, None, mapping)
+                before_sensor = _before_sensor(cal, cal_setup, nom, None, None, mapping)[0]
             sensors = (cal_setup.sensor, before_sensor)
         elif setup_spec is not None:
             raise PkmcalError(f"--setup is the true instrument, whose readings --compare sensor compares; with "
@@ -368,27 +368,31 @@ def _nominal_from_record(cal):
 def _before_sensor(cal, cal_setup, nominal, setup, calib_meas, mapping):
     """``(sensor, note)`` of the nominal machine for 'before': the sensor registered on the
     calibration data (calibration.before_registration, else a registration on
-    --calibration-measurements), or (None, why)."""
+    --calibration-measurements), or (None, why); third, with sessions, each session's
+    ((label, sensor), ...) from calibration.before_registration_sessions."""
     from pkmcal.identification.heldout import register_sensor, sensor_from_values
 
     record = dict(getattr(cal, "metadata", {}).get("calibration") or {})
     stored = record.get("before_registration")
     if not cal_setup.sensor.default_free:
-        return cal_setup.sensor, "no free sensor parameter: the sensor as the setup gives it"
+        return cal_setup.sensor, "no free sensor parameter: the sensor as the setup gives it", ()
     if calib_meas is not None:
         from pkmcal.io.measurements import load_measurements
 
         base = setup if setup is not None else cal_setup
         reg = register_sensor(nominal, base, load_measurements(calib_meas, nominal, base, mapping),
                               what=f"the calibration data ({calib_meas})")
-        return reg.sensor, reg.note
+        return reg.sensor, reg.note, ()
     if isinstance(stored, dict):
+        per = record.get("before_registration_sessions") or {}
+        sessions = tuple((str(lab), sensor_from_values(cal_setup.sensor, v, "calibration.before_registration_sessions"))
+                         for lab, v in per.items()) if isinstance(per, dict) else ()
         return (sensor_from_values(cal_setup.sensor, stored, "calibration.before_registration"),
                 f"{', '.join(stored)} registered on the calibration data with the nominal machine held "
-                "(calibration.before_registration)")
+                "(calibration.before_registration" + (", per session" if sessions else "") + ")", sessions)
     return None, ("the calibrated file has no calibration.before_registration (written by 'pkmcal identify' since "
                   "2026-12): give --nominal and --calibration-measurements MEAS.csv to register the nominal machine's "
-                  "sensor frames on the calibration data")
+                  "sensor frames on the calibration data"), ()
 
 
 def _verify_measured(calibrated, meas_path, nominal, setup_spec, calib_meas, clipped, as_json, mapping) -> str:
@@ -422,13 +426,13 @@ def _verify_measured(calibrated, meas_path, nominal, setup_spec, calib_meas, cli
                           f"({type(nom).__name__} vs {type(cal).__name__})")
     if calib_meas is not None and nom is None:
         raise PkmcalError(f"--calibration-measurements registers the nominal machine's sensor frames: {why}")
-    before_sensor, note = (None, why) if nom is None else _before_sensor(cal, cal_setup, nom, given, calib_meas,
-                                                                          mapping)
+    before_sensor, note, before_sessions = (None, why, ()) if nom is None else \
+        _before_sensor(cal, cal_setup, nom, given, calib_meas, mapping)
     held, found, lines = apply_clipped_policy(load_measurements(meas_path, cal, cal_setup, mapping), cal, clipped)
     unit = {n: ("deg" if a else "mm") for n, a in zip(cal.actuator_names, cal.actuator_is_angle)}
     notes.extend(f"warning: {w}" for w in lines)
     report = heldout_validation(cal, cal_setup, nom, before_sensor, held, source=str(meas_path), before_note=note,
-                                notes=notes, clipped=tuple(c.to_dict(unit[c.actuator]) for c in found))
+                                notes=notes, before_sessions=before_sessions, clipped=tuple(c.to_dict(unit[c.actuator]) for c in found))
     if as_json:
         from pkmcal.io.json_out import finite_or_null
 

@@ -540,23 +540,27 @@ def setup_json(result, cal_setup) -> dict:
     return doc
 
 
-def _before_registration(nominal, setup, meas, result) -> tuple[dict, str] | None:
-    """``(values, note)``: the setup's free sensor parameters fitted on the calibration data
-    with the machine held at nominal (file units), or None where no such fit applies (no
-    free sensor parameter, a redundantly actuated machine)."""
+def _before_registration(nominal, setup, meas, result) -> tuple[dict, str, dict] | None:
+    """``(values, note, per_session)``: the setup's free sensor parameters fitted on the
+    calibration data with the machine held at nominal (file units), or None where no such fit
+    applies (no free sensor parameter, a redundantly actuated machine). With several
+    sessions each session is registered on its own poses: ``values`` are the first
+    session's, ``per_session`` {label: values} all of them (else empty)."""
     from pkmcal.identification.heldout import register_sensor, sensor_values
 
     if not setup.sensor.default_free or nominal.n_actuators != nominal.n_dof:
         return None
     used = meas.subset(np.asarray(result.used_poses, dtype=int)) if len(result.used_poses) < len(meas) else meas
-    what = "the calibration data"
-    if used.sessions is not None and used.sessions.several:     # the first session's frames: the setup's
-        first = used.sessions.labels[0]
-        used = used.subset(np.flatnonzero(used.sessions.index == 0))
-        used = dataclasses.replace(used, sessions=None)
-        what = f"the calibration data of session {first}"
-    reg = register_sensor(nominal, setup, used, what=what)
-    return sensor_values(reg.sensor, setup.sensor.default_free), reg.note
+    if used.sessions is None or not used.sessions.several:
+        reg = register_sensor(nominal, setup, used, what="the calibration data")
+        return sensor_values(reg.sensor, setup.sensor.default_free), reg.note, {}
+    per, notes = {}, []
+    for k, label in enumerate(used.sessions.labels):       # each session's frames on its own poses
+        part = dataclasses.replace(used.subset(np.flatnonzero(used.sessions.index == k)), sessions=None)
+        reg = register_sensor(nominal, setup, part, what=f"the calibration data of session {label}")
+        per[label] = sensor_values(reg.sensor, setup.sensor.default_free)
+        notes.append(reg.note)
+    return per[used.sessions.labels[0]], "; ".join(notes), per
 
 
 def _heldout_validation(calibrated, cal_setup, nominal, before, path: str, mapping, clipped: str):
@@ -567,11 +571,14 @@ def _heldout_validation(calibrated, cal_setup, nominal, before, path: str, mappi
                                               clipped)
     if before is not None:
         before_sensor, note = sensor_from_values(cal_setup.sensor, before[0], "before_registration"), before[1]
+        before_sessions = tuple((lab, sensor_from_values(cal_setup.sensor, v, "before_registration"))
+                                for lab, v in before[2].items())
     else:   # no free sensor parameter: nothing to register, the sensor as the setup gives it
         before_sensor, note = cal_setup.sensor, "no free sensor parameter: the sensor as the setup gives it"
+        before_sessions = ()
     unit = {n: ("deg" if a else "mm") for n, a in zip(calibrated.actuator_names, calibrated.actuator_is_angle)}
     return heldout_validation(calibrated, cal_setup, nominal, before_sensor, held, source=str(path),
-                              before_note=note, notes=[f"warning: {w}" for w in lines],
+                              before_note=note, before_sessions=before_sessions, notes=[f"warning: {w}" for w in lines],
                               clipped=tuple(c.to_dict(unit[c.actuator]) for c in found))
 
 
@@ -623,6 +630,8 @@ def _with_calibration_record(result, machine: str, measurements: str, setup_spec
         record["sensor"] = sensor_calibration_block(next(iter(session_sensors(result.sensor).values())))
     if before is not None:
         record["before_registration"] = dict(before[0])
+        if before[2]:
+            record["before_registration_sessions"] = {lab: dict(v) for lab, v in before[2].items()}
     metadata = {k: v for k, v in dict(mech.metadata).items() if k != "setup"}   # a recalibration's old setup
     metadata["calibration"] = record
     block = setup_block(result, setup)

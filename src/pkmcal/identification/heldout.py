@@ -360,10 +360,12 @@ def _free_names(sensor: Sensor) -> tuple[str, ...]:
 
 def heldout_validation(calibrated: Mechanism, cal_setup: MeasurementSetup, nominal: Mechanism | None,
                        before_sensor: Sensor | None, heldout, *, source: str = "held-out measurements",
-                       before_note: str = "", notes=(), clipped=()) -> HeldoutReport:
+                       before_note: str = "", notes=(), clipped=(), before_sessions=()) -> HeldoutReport:
     """:class:`HeldoutReport` of ``calibrated`` with the identified sensor of ``cal_setup``
     on the measurements ``heldout`` (module docstring); ``before`` with ``nominal`` and
-    ``before_sensor`` (the sensor registered on the calibration data) when both are given,
+    ``before_sensor`` (the sensor registered on the calibration data; with sessions,
+    ``before_sessions`` ((label, sensor), ...) each session's, chosen per held-out pose as
+    for ``after``) when both are given,
     and ``after_reregistered`` with the setup's free sensor parameters refitted on
     ``heldout``."""
     if calibrated.n_actuators != calibrated.n_dof:
@@ -372,7 +374,10 @@ def heldout_validation(calibrated: Mechanism, cal_setup: MeasurementSetup, nomin
     models: dict[str, Predicted] = {}
     notes = list(notes)
     if nominal is not None and before_sensor is not None:
-        models["before"] = predict(nominal, before_sensor, heldout, "before", before_note)
+        bsetup = dataclasses.replace(cal_setup, sensor=before_sensor, session_sensors=tuple(before_sessions))
+        b_sensor, how = _sensor_for(bsetup, heldout)
+        models["before"] = predict(nominal, b_sensor, heldout, "before",
+                                   before_note + (f"; {how}" if before_sessions else ""))
     else:
         notes.append("no 'before' column: " + (before_note or "no nominal machine"))
     after_sensor, after_note = _sensor_for(cal_setup, heldout)
