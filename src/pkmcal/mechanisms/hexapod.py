@@ -37,10 +37,10 @@ from types import MappingProxyType
 
 import numpy as np
 
-from pkmcal.conventions import POSE_COLUMNS, euler_pose_jacobian, euler_rate_matrix, euler_to_matrix, matrix_to_euler
+from pkmcal.conventions import euler_to_matrix
 from pkmcal.errors import PkmcalError
-from pkmcal.mechanisms.base import FKResult, LimitReport, Mechanism
-from pkmcal.mechanisms.frame import Frame
+from pkmcal.mechanisms.base import FKResult, LimitReport
+from pkmcal.mechanisms.spatial import SpatialPlatform
 
 def _kernels():
     """The compiled kernels (:mod:`._hexapod_kernels`), imported on first use: numba takes
@@ -103,7 +103,7 @@ def _frozen(a, shape) -> np.ndarray:
 
 
 @dataclass(frozen=True, eq=False)
-class Hexapod(Mechanism):
+class Hexapod(SpatialPlatform):
     """A 6-UPS Gough–Stewart platform. Immutable; compare with ``==``.
 
     Parameters
@@ -143,8 +143,6 @@ class Hexapod(Mechanism):
     actuator_unit: str = DEFAULT_ACTUATOR_UNIT
 
     kind = "6-UPS"
-    pose_names = POSE_COLUMNS
-    pose_is_angle = (False, False, False, True, True, True)
     actuator_names = tuple(f"lambda{i + 1}" for i in range(N_LEGS))
     abilities = frozenset({"leg-lengths", "drawing", "linuxcnc", "pose-convention"})
     point_sets = MappingProxyType({"base joints": tuple(f"b{i + 1}" for i in range(N_LEGS)),
@@ -399,31 +397,7 @@ class Hexapod(Mechanism):
         J[:, :, N_GEOMETRY_PARAMS:] = 0.0
         return J
 
-    # -- the platform frame ----------------------------------------------------------------
-
-    def frame(self, poses: np.ndarray, params: np.ndarray | None = None) -> Frame:
-        """The platform frame of each pose: p = (x, y, z), R = Rz(c) Ry(b) Rx(a) (the pose
-        convention; independent of ρ)."""
-        return Frame.from_poses(self.as_pose_array(poses))
-
-    def frame_jacobians(self, poses: np.ndarray, params: np.ndarray | None = None) -> tuple[np.ndarray, None]:
-        """``(T, None)``: T = ∂(δp, δω)/∂(x, y, z, a, b, c) = diag(I, E(a, b, c)) (N, 6, 6),
-        E = :func:`~pkmcal.conventions.euler_rate_matrix`; the frame does not depend on ρ."""
-        poses = self.as_pose_array(poses)
-        T = np.zeros((poses.shape[0], 6, 6))
-        T[:, 0:3, 0:3] = np.eye(3)
-        T[:, 3:6, 3:6] = euler_rate_matrix(poses[:, 3:6])
-        return T, None
-
-    def pose_jacobian_from_twist(self, J_twist: np.ndarray, poses: np.ndarray,
-                                 params: np.ndarray | None = None) -> np.ndarray:
-        """J_twist · diag(I, E) written out (:func:`~pkmcal.conventions.euler_pose_jacobian`)."""
-        return euler_pose_jacobian(J_twist, self.as_pose_array(poses))
-
-    def poses_from_frame(self, frame: Frame) -> np.ndarray:
-        """(x, y, z, a, b, c) of frames: p and the Euler angles of R
-        (:func:`~pkmcal.conventions.matrix_to_euler`, |b| ≤ 90°)."""
-        return np.concatenate([frame.p, matrix_to_euler(frame.R)], axis=1)
+    # -- the platform frame: SpatialPlatform's (the pose convention) ---------------------
 
     def fk(
         self,
