@@ -33,6 +33,16 @@ PROTOTYPE_LEGS_YAML = """\
 POSE_HALF_WIDTHS = np.array([20.0, 20.0, 10.0, *np.deg2rad([8.0, 8.0, 8.0])])
 
 
+def reachable_poses(machine, n: int, seed: int) -> np.ndarray:
+    """``n`` poses uniform in the machine's workspace box that pass all its limits (seeded)."""
+    rng = np.random.default_rng(seed)
+    box = machine.workspace_box()
+    poses = box[:, 0] + rng.uniform(size=(4 * n, box.shape[0])) * (box[:, 1] - box[:, 0])
+    ok = ~np.any(np.column_stack(list(machine.check_limits(poses).violations.values())), axis=1)
+    assert ok.sum() >= n, f"only {ok.sum()} of {4 * n} poses in the box of '{machine.name}' pass its limits"
+    return poses[ok][:n]
+
+
 def random_poses(machine, n: int, seed: int = 0) -> np.ndarray:
     """``n`` poses uniform in home ± :data:`POSE_HALF_WIDTHS` (internal units)."""
     rng = np.random.default_rng(seed)

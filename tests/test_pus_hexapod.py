@@ -10,7 +10,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from helpers import assert_jacobian_matches_fd
+from helpers import assert_jacobian_matches_fd, reachable_poses as _reachable
 from scipy.spatial.transform import Rotation
 
 from pkmcal.errors import InputFileError, PkmcalError
@@ -21,15 +21,6 @@ from pkmcal.mechanisms.pus_hexapod import PARAM_NAMES, PUSHexapod, _legs, rail_f
 @pytest.fixture(scope="module")
 def machine() -> PUSHexapod:
     return builtin_machine("hexaslide")
-
-
-def _reachable(m, n, seed):
-    rng = np.random.default_rng(seed)
-    box = m.workspace_box()
-    poses = box[:, 0] + rng.uniform(size=(4 * n, 6)) * (box[:, 1] - box[:, 0])
-    ok = ~np.any(np.column_stack(list(m.check_limits(poses).violations.values())), axis=1)
-    assert ok.sum() >= n
-    return poses[ok][:n]
 
 
 def _tilted(machine):
