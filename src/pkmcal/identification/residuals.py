@@ -575,11 +575,12 @@ class FKResidual(Method):
         fk = m.mechanism.fk_precise(q, self._guess, rho)
         x = fk.poses
         ok = fk.ok & np.all(np.isfinite(x), axis=1)
-        if not ok.all():
-            # the warm start may be a pose of an earlier trial point far from θ (outside its
-            # reach, or on a path Newton cannot follow): solve those poses again from the
-            # fit's start poses, so that no trial point leaves a pose failing for good
-            bad = np.flatnonzero(~ok)
+        # the warm start may be a pose of an earlier trial point far from θ (outside its
+        # reach, or on a path Newton cannot follow): solve those poses again from the fit's
+        # start poses (where they were not already), so that no trial point leaves a pose
+        # failing for good
+        bad = np.flatnonzero(~ok & np.any(self._guess != self._start, axis=1)) if not ok.all() else ()
+        if len(bad):
             again = m.mechanism.fk_precise(q[bad], self._start[bad], rho)
             fixed = again.ok & np.all(np.isfinite(again.poses), axis=1)
             x = x.copy()

@@ -20,6 +20,13 @@ every sign of :meth:`Mechanism.assembly_signs` (the mechanism's declared branch 
 by default sign det A when l = n) agrees at both (:meth:`Mechanism.same_branch`); the
 result's ``same_branch`` flags the poses where it does not (``FKResult.ok`` False).
 
+A mechanism whose IK is NaN outside a chain's reach may pass its loop-closure equations
+(``equations``: a residual e(x) with the same roots, finite at every pose) for the
+iteration to run on instead of q − IK(x): from a start pose outside one chain's reach
+q − IK gives no direction (f = ∞ and A undefined there), the closure does (the 6-RSS:
+:meth:`RSSHexapod.fk <pkmcal.mechanisms.rss_hexapod.RSSHexapod.fk>`). Convergence is still
+|q − IK(x)| ≤ ``res_tol``. Without ``equations`` the iteration is the one above, bit for bit.
+
 A mechanism may override ``fk`` where a closed form or a compiled solver is faster (the
 hexapod's Newton on SO(3), ``_hexapod_kernels.fk_newton``, tested against this solver).
 """
