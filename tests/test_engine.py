@@ -564,3 +564,76 @@ def test_identify_with_no_poses_is_a_clear_error():
     m = builtin_machine("stewart-prototype")
     with pytest.raises(PkmcalError, match="no measured poses"):
         identify(m, builtin_setup("full-pose-paper1", m), (np.zeros((0, 6)), np.zeros((0, 6))))
+
+
+# -- trial points where poses fail ----------------------------------------------------------
+
+
+@pytest.fixture()
+def reading_space_rss(monkeypatch):
+    """The 6-RSS with the shared solver on λ − IK(x) (the deltas' and planar machines' FK,
+    NaN outside a chain's reach) instead of its loop-closure FK, so that a start pose
+    outside a rod's reach fails, as it did on that machine, and a 150-pose hobby-servo
+    campaign on it (real machine 0.3 mm / 0.3 mrad off, laser tracker 0.01 mm,
+    actuator noise ``sigma_q`` rad)."""
+    from pathlib import Path
+
+    from pkmcal.identification.simulation import perturb_machine, simulate_campaign
+    from pkmcal.io.setup_file import load_setup
+    from pkmcal.mechanisms.base import Mechanism
+    from pkmcal.mechanisms.rss_hexapod import RSSHexapod
+
+    monkeypatch.setattr(RSSHexapod, "fk", Mechanism.fk)
+    monkeypatch.syspath_prepend(str(Path(__file__).parent))
+    from test_rss_hexapod import _reachable
+
+    m = builtin_machine("servo-stewart")
+
+    def campaign(n, sigma_q):
+        setup = load_setup("laser-tracker", m)
+        setup = replace(setup, noise=replace(setup.noise, actuator_std=np.array(sigma_q)))
+        sim = simulate_campaign(m, perturb_machine(m, 0.3, 7), setup, _reachable(m, n, 3), 7)
+        return setup, sim.measurements
+
+    return m, campaign
+
+
+def test_fk_residual_after_a_far_trial_point_equals_fresh(reading_space_rss):
+    """A trial point far from θ (every crank pivot 5 mm off) makes some poses' FK fail and
+    leaves the others' warm starts there; back at θ0 every pose solves again and the
+    residual is a fresh method's to the FK's tolerance (1e-11 relative steps: ~1e-9 mm),
+    not that of poses stuck at starts outside the reach (main: up to 4 poses failing at
+    θ0, residuals off by 4 mm)."""
+    from pkmcal.mechanisms.rss_hexapod import PARAM_NAMES
+
+    m, campaign = reading_space_rss
+    setup, meas = campaign(60, 0.005)
+    q, y, cmd = measurement_arrays(meas)
+    model = Model(m, setup.sensor, setup.noise, q, y, cmd)
+    th0 = model.theta0
+    fresh = make_method("fk-residual", model).evaluate(th0, jac=False, cov=False)
+    assert fresh.converged.all()
+    far = th0.copy()
+    for i in range(6):
+        far[PARAM_NAMES.index(f"s{i + 1}.x")] += 5.0 * (-1) ** i
+        far[PARAM_NAMES.index(f"s{i + 1}.y")] += 5.0 * (-1) ** (i // 2)
+    meth = make_method("fk-residual", model)
+    assert not meth.evaluate(far, jac=False, cov=False).converged.all()
+    back = meth.evaluate(th0, jac=False, cov=False)
+    assert back.converged.all()
+    np.testing.assert_allclose(back.r, fresh.r, rtol=0, atol=1e-8)
+
+
+def test_fit_never_accepts_a_machine_that_cannot_take_a_pose(reading_space_rss):
+    """With 0.005 rad actuator noise, Levenberg–Marquardt's trial machines put commanded
+    poses outside a rod's reach, where this FK fails. Those trial points are rejected
+    (NaN residual rows), so the fit converges with every pose solved and χ²/ν within 4σ
+    of 1 (σ = √(2/ν)); main ended at a machine that could not take 41 of the 150 poses, and
+    with the warm starts repaired alone at one that could not take 3."""
+    m, campaign = reading_space_rss
+    setup, meas = campaign(150, 0.005)
+    fit = identify(m, setup, meas)
+    assert fit.success
+    assert not any("could not be solved" in w for w in fit.warnings)
+    u = fit.uncertainty
+    assert abs(u.chi2 / u.dof - 1.0) < 4 * np.sqrt(2.0 / u.dof)

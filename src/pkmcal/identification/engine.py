@@ -427,6 +427,13 @@ class _Objective:
     the method's cached poses (:meth:`Method._at`), so a rejected trial step costs no
     Jacobian and an accepted one no second pose solve. The finite-difference comparison
     (``jac="2-point"``) calls the same ``fun``: only the Jacobian differs.
+
+    A trial point where a pose's FK or pose solve fails (every pose solved at the start) is
+    a machine that cannot have produced that measurement: ``fun`` returns NaN for its rows,
+    which the solvers treat as a failed step and shrink (MINPACK counts a non-finite norm
+    as no reduction; ``least_squares`` shrinks its trust region). A finite stand-in there
+    (the fk-residual's residual at the pose's last solved pose, whose Jacobian row is no
+    derivative of it) let Levenberg–Marquardt accept such a machine and stop on it.
     """
 
     def __init__(self, method: Method, theta0: np.ndarray, free: np.ndarray, W: np.ndarray | None):
@@ -443,9 +450,12 @@ class _Objective:
 
     def fun(self, x):
         self._th[self.free] = x
-        r = self.method.evaluate(self._th, jac=False, cov=False).r
+        ev = self.method.evaluate(self._th, jac=False, cov=False)
+        r = ev.r
         if self.W is not None:
             r = (self.W @ r[..., None])[..., 0]
+        if not ev.converged.all():
+            r = np.where(ev.converged[:, None], r, np.nan)      # a failed step (class docstring)
         return r.ravel()
 
     def jac(self, x):

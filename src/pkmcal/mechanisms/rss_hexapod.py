@@ -33,7 +33,18 @@ motion, the singularity), ∂φ/∂ξ = −(∂f/∂ξ)/(2G):
     ∂φ/∂β = −w·(e_z × (C − S))/G,   ∂φ/∂χ = −w·(e_χ × (C − S))/G,   ∂λ/∂ζ = −1
 
 (e_χ = Rz(β) e_x, the axis of the tilt; ∂Q/∂β = [e_z]× Q, ∂Q/∂χ = [e_χ]× Q).
-Forward kinematics: the shared batched solver (:mod:`pkmcal.mechanisms.solver`).
+Forward kinematics: the shared batched solver (:mod:`pkmcal.mechanisms.solver`) on the
+loop-closure equations, not on λ − IK(x): with the readings the crank ends C_i are known, and
+the platform solves the Gough–Stewart problem |P_i(x) − C_i| = r_i,
+
+    e_i(x) = (r_i² − |P_i − C_i|²) / (2 r_i)   (≈ r_i − |P_i − C_i|, mm),
+    −∂e_i/∂(δp, δω) = [w, (R a) × w] / r_i,   w = P_i − C_i,
+
+which is finite at every pose, whereas IK is NaN wherever one rod cannot reach its crank: a
+start pose just outside one leg's reach (the commanded pose at a trial machine of a fit)
+left the solver without a direction, though the solution was ~1 mm away. A pose is
+converged when IK(x) reproduces λ (``FK_RES_TOL``), which also rejects a closure solution
+on the crank's other root.
 """
 
 from __future__ import annotations
@@ -270,6 +281,36 @@ class RSSHexapod(ParameterVector, SpatialPlatform):
     def actuator_jacobians(self, poses: np.ndarray, params: np.ndarray | None = None):
         _, A, B = self.ik_and_jacobians(poses, params)
         return A, B
+
+    def _closure(self, rho: np.ndarray):
+        """The loop-closure equations of FK (module docstring) at ρ, for
+        :func:`~pkmcal.mechanisms.solver.solve_fk`: e(x, λ) (M, 6) and −∂e/∂x (M, 6, 6)."""
+        g = _legs(rho)
+        v1, v2, _ = _crank_planes(g["beta"], g["tilt"])
+        S, a, c, r = g["S"], g["a"], g["crank"][None, :, None], g["rod"][None, :]
+
+        def equations(poses: np.ndarray, readings: np.ndarray, jac: bool):
+            phi = (readings + g["zero"][None, :])[..., None]
+            C = S[None] + c * (np.cos(phi) * v1[None] + np.sin(phi) * v2[None])   # crank ends (M, 6, 3)
+            fr = Frame.from_poses(poses)
+            Ra = np.einsum("nij,kj->nki", fr.R, a)
+            w = poses[:, None, 0:3] + Ra - C                                      # P − C
+            e = (r**2 - np.einsum("nkj,nkj->nk", w, w)) / (2.0 * r)
+            if not jac:
+                return e, None
+            twist = np.concatenate([w, np.cross(Ra, w)], axis=2) / r[..., None]
+            return e, euler_pose_jacobian(twist, poses)
+
+        return equations
+
+    def fk(self, readings: np.ndarray, guess: np.ndarray | None = None, params: np.ndarray | None = None,
+           **options):
+        """Poses from crank readings λ (N, 6) by the shared solver on the loop-closure
+        equations (module docstring); ``options`` those of
+        :func:`~pkmcal.mechanisms.solver.solve_fk`."""
+        from pkmcal.mechanisms.solver import solve_fk
+
+        return solve_fk(self, readings, guess, params, equations=self._closure(self._rho(params)), **options)
 
     def assembly_signs(self, poses: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
         """Per leg, the sign of G (module docstring): the crank's branch, 0 at the

@@ -20,12 +20,20 @@ every sign of :meth:`Mechanism.assembly_signs` (the mechanism's declared branch 
 by default sign det A when l = n) agrees at both (:meth:`Mechanism.same_branch`); the
 result's ``same_branch`` flags the poses where it does not (``FKResult.ok`` False).
 
+A mechanism whose IK is NaN outside a chain's reach may pass its loop-closure equations
+(``equations``: a residual e(x) with the same roots, finite at every pose) for the
+iteration to run on instead of q − IK(x): from a start pose outside one chain's reach
+q − IK gives no direction (f = ∞ and A undefined there), the closure does (the 6-RSS:
+:meth:`RSSHexapod.fk <pkmcal.mechanisms.rss_hexapod.RSSHexapod.fk>`). Convergence is still
+|q − IK(x)| ≤ ``res_tol``. Without ``equations`` the iteration is the one above, bit for bit.
+
 A mechanism may override ``fk`` where a closed form or a compiled solver is faster (the
 hexapod's Newton on SO(3), ``_hexapod_kernels.fk_newton``, tested against this solver).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -46,11 +54,15 @@ _STEPS = 0.5 ** np.arange(12)
 
 def solve_fk(mechanism: Mechanism, readings: np.ndarray, guess: np.ndarray | None = None,
              params: np.ndarray | None = None, *, tol: float = FK_TOL, max_iter: int = FK_MAX_ITER,
-             res_tol: float = FK_RES_TOL) -> FKResult:
+             res_tol: float = FK_RES_TOL, equations: Callable | None = None) -> FKResult:
     """Poses (N, n) minimising ‖q − IK(x, ρ)‖ over all l actuators (module docstring).
 
     ``readings`` (N, l); ``guess`` one pose (n,) or one per reading (N, n), default the home
-    pose; ``params`` ρ (default the mechanism's)."""
+    pose; ``params`` ρ (default the mechanism's). ``equations(x, q, jac)`` (x (M, n), q
+    (M, l)), when given, replaces q − IK(x) in the iteration by a residual e (M, l) with the
+    same roots that is finite at every pose (a mechanism's loop-closure equations), returning
+    (e, A = −∂e/∂x (M, l, n) or None for ``jac=False``); convergence is still judged on
+    |q − IK(x)|."""
     from pkmcal.mechanisms.base import FKResult
 
     m = mechanism
@@ -64,17 +76,30 @@ def solve_fk(mechanism: Mechanism, readings: np.ndarray, guess: np.ndarray | Non
     it = np.zeros(q.shape[0], dtype=int)
     done = np.zeros(q.shape[0], dtype=bool)
     sel = np.arange(q.shape[0])
+    if equations is None:
+        def residual(xs):                     # q − IK(x) at trial poses xs (k, N, n)
+            return q[None] - m.ik(xs.reshape(-1, n), params).reshape(xs.shape[0], *q.shape)
+
+        def jacobian(xx):
+            return m.actuator_pose_jacobian(xx, params)
+    else:
+        def residual(xs):
+            return equations(xs.reshape(-1, n), np.tile(q, (xs.shape[0], 1)), False)[0].reshape(
+                xs.shape[0], *q.shape)
+
+        def jacobian(xx):
+            return equations(xx, q, True)[1]
     with np.errstate(invalid="ignore", divide="ignore"):
-        r = q - m.ik(x, params)
+        r = q - m.ik(x, params) if equations is None else residual(x[None])[0]
         f = np.where(np.all(np.isfinite(r), axis=1), np.sum(r**2, axis=1), np.inf)
         for _ in range(max_iter):
-            A = m.actuator_pose_jacobian(x, params)
+            A = jacobian(x)
             At = np.swapaxes(A, 1, 2)
             dx = np.linalg.solve(At @ A + 1e-12 * np.eye(n), At @ np.nan_to_num(r)[..., None])[..., 0]
             dx = np.where(np.isfinite(dx) & ~done[:, None], dx, 0.0)
             # backtracking line search on ‖q − IK(x)‖² (IK is NaN outside the reach)
             xc = x[None] + _STEPS[:, None, None] * dx[None]
-            rc = q[None] - m.ik(xc.reshape(-1, n), params).reshape(len(_STEPS), *q.shape)
+            rc = residual(xc)
             fc = np.where(np.all(np.isfinite(rc), axis=2), np.sum(rc**2, axis=2), np.inf)
             ok = fc <= f[None] * (1.0 + 1e-12) + 1e-300
             k = np.argmax(ok, axis=0)
