@@ -989,3 +989,15 @@ def test_post_load_errors_name_the_file(tmp_path, base):
 def test_yaml_line_map_is_unchanged_by_the_yaml12_resolver():
     data, lines = parse_yaml("a: 1\nb:\n  - 0o17\n  - 1e3\nc: yes\n")
     assert data == {"a": 1, "b": [15, 1000.0], "c": "yes"} and lines[("b", 1)] == 4
+
+
+def test_regression_unit_conversion_overflow_is_an_error_naming_the_line(tmp_path):
+    """Fuzz finding (PYTHONHASHSEED=41, --hypothesis-seed=13): a reading of 1e308 in metres
+    overflowed to inf when converted to mm and surfaced as a numerical warning; it is an
+    input error naming the line and column."""
+    legs = tmp_path / "legs.csv"
+    legs.write_text("# units: length=m\nlambda1,lambda2,lambda3,lambda4,lambda5,lambda6\n"
+                    "0.02,0.02,0.02,0.02,0.02,0.02\n1e308,0.02,0.02,0.02,0.02,0.02\n")
+    res = CliRunner().invoke(cli, ["fk", "stewart-prototype", str(legs), "-o", str(tmp_path / "out.csv")])
+    assert res.exit_code == 2 and "line 4" in res.output and "lambda1" in res.output, res.output
+    assert "encountered in" not in res.output and not (tmp_path / "out.csv").exists()

@@ -200,30 +200,14 @@ def readable_geometry(nominal: Mechanism, calibrated: Mechanism, covariance_kind
 
 
 def _leg_lengths_at_home(nominal: Mechanism, calibrated: Mechanism, cov) -> tuple[Distance, ...]:
-    """Leg lengths of both machines at the readings that put the nominal one at home, with
-    σ = √(gᵀ Σ g), g = ∂L/∂ρ at fixed readings (central differences of the calibrated
-    machine's length at those readings: L is linear in its offsets and gains, so the
-    step only needs to resolve that)."""
-    home = np.asarray(nominal.home_pose, dtype=float)[None, :]
-    q = nominal.ik(home)
-    L0 = nominal.leg_lengths(home)[0]
-    L = _length_at(calibrated, calibrated.params, q, home)
+    """Leg lengths of both machines at the readings λ that put the nominal one at home:
+    L = the machine's ``lengths_from_readings(λ)`` (the hexapod: L0 + g λ), linear in ρ, so
+    its σ is √(gᵀ Σ g) with g = ``lengths_from_readings_param_jacobian(λ)``, exactly."""
+    q = nominal.ik(np.asarray(nominal.home_pose, dtype=float)[None, :])
+    L0 = nominal.lengths_from_readings(q)[0]
+    L = calibrated.lengths_from_readings(q)[0]
     std = [None] * len(L)
     if cov is not None:
-        rho = calibrated.params
-        G = np.zeros((len(L), len(rho)))
-        for k in np.flatnonzero(np.diag(cov) > 0):
-            h = 1e-6 * max(1.0, abs(rho[k]))
-            up, dn = rho.copy(), rho.copy()
-            up[k] += h
-            dn[k] -= h
-            G[:, k] = (_length_at(calibrated, up, q, home) - _length_at(calibrated, dn, q, home)) / (2 * h)
+        G = calibrated.lengths_from_readings_param_jacobian(q)[0]
         std = np.sqrt(np.clip(np.einsum("ip,pq,iq->i", G, cov, G), 0.0, None)).tolist()
     return tuple(Distance(f"L{i + 1}", float(L0[i]), float(L[i]), std[i]) for i in range(len(L)))
-
-
-def _length_at(mech: Mechanism, rho: np.ndarray, q: np.ndarray, guess: np.ndarray) -> np.ndarray:
-    """Leg lengths (l,) of ``mech`` at parameters ``rho`` and readings ``q`` (1, l), through
-    the polished FK (exact to rounding, so that the differences above resolve 1e-6 steps)."""
-    pose = mech.fk_precise(q, guess, params=rho).poses
-    return mech.leg_lengths(pose, params=rho)[0]

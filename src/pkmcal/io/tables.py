@@ -243,7 +243,15 @@ def read_table(
         if quantity is not None and quantity in units:
             factor = UNITS[quantity][units[quantity]]
             if factor != 1.0:
-                values[:, k] = np.rad2deg(values[:, k]) if units[quantity] == "rad" else values[:, k] * factor
+                given = values[:, k].copy()
+                with np.errstate(over="ignore"):
+                    values[:, k] = np.rad2deg(given) if units[quantity] == "rad" else given * factor
+                over = np.isfinite(given) & ~np.isfinite(values[:, k])
+                if over.any():
+                    i = int(np.argmax(over))
+                    raise InputFileError(src, f"column '{name}': {float(given[i])!r} {units[quantity]} is beyond any "
+                                              f"{quantity} a number can hold in pkmcal's units; check the value and "
+                                              "the unit", line=int(lines[i]))
     if sources:
         chosen, values = _euler_from_sources(src, header, idx, chosen, values, lines, sources)
     return Table(path=src, columns=tuple(chosen), values=values, lines=lines, header=tuple(header), units=units)

@@ -184,7 +184,9 @@ class PUSHexapod(ParameterVector, SpatialPlatform):
         g = _legs(self.rho)
         top = float(np.max(g["O"][:, 2]) + np.max(g["leg"]) + np.max(np.abs(self.stroke)))
         zs = np.linspace(float(np.min(g["O"][:, 2])) - top, top, 801)
-        vals = np.array([np.mean(self.ik(np.array([0, 0, z, 0, 0, 0.0])) - mid) for z in zs])
+        grid = np.zeros((len(zs), 6))
+        grid[:, 2] = zs
+        vals = np.mean(self.ik(grid) - mid, axis=1)            # one call over the grid
         ok = np.isfinite(vals)
         change = np.flatnonzero(ok[:-1] & ok[1:] & (np.sign(vals[:-1]) != np.sign(vals[1:])))
         if not len(change):

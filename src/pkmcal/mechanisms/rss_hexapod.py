@@ -175,7 +175,9 @@ class RSSHexapod(ParameterVector, SpatialPlatform):
             return float(np.mean(phi)) if np.all(np.isfinite(phi)) else np.nan
 
         zs = np.linspace(z_lo, z_hi, 400)
-        vals = np.array([mean_phi(z) for z in zs])
+        grid = np.zeros((len(zs), 6))
+        grid[:, 2] = zs
+        vals = np.mean(self._phi(grid, self.rho), axis=1)      # NaN where a rod cannot reach, as mean_phi
         ok = np.isfinite(vals)
         if not ok.any():
             raise PkmcalError(f"machine '{self.name}': no level, centred pose is reachable; check the rods and cranks")

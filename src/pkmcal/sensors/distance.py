@@ -127,8 +127,7 @@ class DistanceSensor(Sensor):
         J = np.zeros((N, K, 3 + 4 * K))
         J[:, :, 0:3] = u @ frame.R                      # u_kᵀ R, per pose
         k = np.arange(K)
-        for a in range(3):
-            J[:, k, 3 + 3 * k + a] = -u[:, k, a]
+        J[:, k[:, None], 3 + 3 * k[:, None] + np.arange(3)] = -u     # pivot k's own three columns
         J[:, k, 3 + 3 * K + k] = -1.0
         return J
 
