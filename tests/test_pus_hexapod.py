@@ -141,3 +141,40 @@ def test_identification_minimal_gauge_and_noise_free_recovery(machine, setup_nam
     for name in fit.gauge:
         assert identifiability(machine, setup, sim.real_poses, free=list(fit.free) + [name]).rank == len(fit.free), name
     assert len(fit.gauge) >= 6
+
+
+def test_fk_closure_equations_match_finite_differences(machine):
+    """The loop-closure residual e(x) of FK is zero at IK's solution, and −∂e/∂x is its
+    derivative (central differences, steps scaled like the poses)."""
+    m = _tilted(machine)
+    poses = _reachable(machine, 8, 6)
+    lam = m.ik(poses)
+    equations = m._closure(m.params)
+    e, A = equations(poses, lam, True)
+    np.testing.assert_allclose(e, 0.0, rtol=0, atol=1e-9)
+    shifted = poses + np.array([3.0, -2.0, 1.0, 0.02, -0.01, 0.03])
+    _, A = equations(shifted, lam, True)
+    assert_jacobian_matches_fd(lambda x: -equations(x, lam, False)[0], shifted, A,
+                               scale=np.array([70.0] * 3 + [1.0] * 3))
+
+
+def test_fk_from_a_start_outside_a_legs_reach(machine):
+    """A start pose where a leg cannot reach its rail (IK NaN there) still leads to the
+    solution: FK solves the loop closure |P − B| = ℓ, finite at every pose. Each start lies
+    2 mm beyond the reach boundary on the line from the solution along +x (bisection to
+    1e-6 mm)."""
+    poses = _reachable(machine, 20, 5)
+    out = np.array([1.0, 0, 0, 0, 0, 0])
+    starts = []
+    for x in poses:
+        lo, hi = 0.0, 2000.0
+        assert not np.all(np.isfinite(machine.ik(x + hi * out)))
+        while hi - lo > 1e-6:
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if np.all(np.isfinite(machine.ik(x + mid * out))) else (lo, mid)
+        starts.append(x + (hi + 2.0) * out)
+    starts = np.array(starts)
+    assert not np.any(np.all(np.isfinite(machine.ik(starts)), axis=1))
+    fk = machine.fk(machine.ik(poses), starts)
+    assert fk.ok.all()
+    np.testing.assert_allclose(fk.poses, poses, rtol=0, atol=1e-9)

@@ -30,7 +30,16 @@ the singularity where the leg is perpendicular to its rail):
     ∂s/∂O = −w/g,   ∂s/∂θ = −s w·(∂u/∂θ)/g,   ∂s/∂ℓ = −ℓ/g,   ∂s/∂a = wᵀR/g,   ∂λ/∂o = −1
 
 with ∂u/∂θx = Q (e_x × Rx Ry e_z) and ∂u/∂θy = Q Rx (e_y × Ry e_z).
-Forward kinematics: the shared batched solver (:mod:`pkmcal.mechanisms.solver`).
+Forward kinematics: the shared batched solver (:mod:`pkmcal.mechanisms.solver`) on the
+loop-closure equations, not on λ − IK(x): with the readings the carriage joints
+B_i = O_i + (λ_i + o_i) u_i are known, and the platform solves |P_i(x) − B_i| = ℓ_i,
+
+    e_i(x) = (ℓ_i² − |P_i − B_i|²) / (2 ℓ_i)   (≈ ℓ_i − |P_i − B_i|, mm),
+    −∂e_i/∂(δp, δω) = [w, (R a) × w] / ℓ_i,   w = P_i − B_i,
+
+finite at every pose, whereas IK is NaN wherever a leg cannot reach its rail (a start pose
+there left the solver without a direction). A pose is converged when IK(x) reproduces λ
+(``FK_RES_TOL``), which also rejects a closure solution on a carriage's other branch.
 """
 
 from __future__ import annotations
@@ -266,6 +275,35 @@ class PUSHexapod(ParameterVector, SpatialPlatform):
     def actuator_jacobians(self, poses: np.ndarray, params: np.ndarray | None = None):
         _, A, B = self.ik_and_jacobians(poses, params)
         return A, B
+
+    def _closure(self, rho: np.ndarray):
+        """The loop-closure equations of FK (module docstring) at ρ, for
+        :func:`~pkmcal.mechanisms.solver.solve_fk`: e(x, λ) (M, 6) and −∂e/∂x (M, 6, 6)."""
+        g = _legs(rho)
+        u = _directions(self._Q, g["tx"], g["ty"])[0]
+        leg = g["leg"][None, :]
+
+        def equations(poses: np.ndarray, readings: np.ndarray, jac: bool):
+            s = readings + g["offset"][None, :]
+            fr = Frame.from_poses(poses)
+            Ra = np.einsum("nij,kj->nki", fr.R, g["a"])
+            w = poses[:, None, 0:3] + Ra - g["O"][None] - s[..., None] * u[None]       # P − B
+            e = (leg**2 - np.einsum("nkj,nkj->nk", w, w)) / (2.0 * leg)
+            if not jac:
+                return e, None
+            twist = np.concatenate([w, np.cross(Ra, w)], axis=2) / leg[..., None]
+            return e, euler_pose_jacobian(twist, poses)
+
+        return equations
+
+    def fk(self, readings: np.ndarray, guess: np.ndarray | None = None, params: np.ndarray | None = None,
+           **options):
+        """Poses from carriage readings λ (N, 6) by the shared solver on the loop-closure
+        equations (module docstring); ``options`` those of
+        :func:`~pkmcal.mechanisms.solver.solve_fk`."""
+        from pkmcal.mechanisms.solver import solve_fk
+
+        return solve_fk(self, readings, guess, params, equations=self._closure(self._rho(params)), **options)
 
     def assembly_signs(self, poses: np.ndarray, params: np.ndarray | None = None) -> np.ndarray:
         """Per leg the sign of w·u (the carriage's side of the foot of the perpendicular),
