@@ -146,21 +146,26 @@ def align_frames(p_r: np.ndarray, R_r: np.ndarray, p_c: np.ndarray, R_c: np.ndar
     return a
 
 
-def align_poses(reached: np.ndarray, commanded: np.ndarray) -> RigidAlignment:
-    """:func:`align_frames` of poses x y z a b c (N, 6; mm, rad)."""
-    return align_frames(reached[:, 0:3], euler_to_matrix(reached[:, 3:6]), commanded[:, 0:3],
-                        euler_to_matrix(commanded[:, 3:6]))
+def align_poses(reached: np.ndarray, commanded: np.ndarray, mechanism=None) -> RigidAlignment:
+    """:func:`align_frames` of the platform frames of poses (N, n) of ``mechanism`` (its
+    :meth:`~pkmcal.mechanisms.base.Mechanism.frame`; None: poses x y z a b c, mm and rad)."""
+    if mechanism is None:
+        return align_frames(reached[:, 0:3], euler_to_matrix(reached[:, 3:6]), commanded[:, 0:3],
+                            euler_to_matrix(commanded[:, 3:6]))
+    f_r, f_c = mechanism.frame(reached), mechanism.frame(commanded)
+    return align_frames(f_r.p, f_r.R, f_c.p, f_c.R)
 
 
 def transport_poses(model, reference, poses: np.ndarray) -> tuple[np.ndarray, RigidAlignment]:
-    """``(poses in model's frames, alignment)``: the poses (N, 6; mm, rad) given in the frames
-    of ``reference`` (the nominal machine) expressed in the frames of ``model`` (a
-    calibration, whose gauge placed its base and platform frames elsewhere). Both models'
-    FK at the reference's IK of the poses give the same machine seen in two frame pairs,
-    T_ref ≈ A · T_model · B (:func:`align_frames`); the transported pose is A⁻¹ T_ref B⁻¹,
-    the pose the user means, in the model's frames."""
-    from pkmcal.conventions import matrix_to_euler
+    """``(poses in model's frames, alignment)``: the poses (N, n) given in the frames of
+    ``reference`` (the nominal machine) expressed in the frames of ``model`` (a calibration,
+    whose gauge placed its base and platform frames elsewhere). Both models' FK at the
+    reference's IK of the poses give the same machine seen in two frame pairs,
+    T_ref ≈ A · T_model · B (:func:`align_frames` of the platform frames); the transported
+    pose is that of the frame A⁻¹ T_ref B⁻¹, the pose the user means, in the model's frames
+    (``model.poses_from_frame``; a machine that does not rotate, a delta, keeps R = I)."""
     from pkmcal.identification.heldout import held_out_fk
+    from pkmcal.mechanisms.frame import Frame
 
     poses = np.asarray(poses, dtype=float)
     with np.errstate(all="ignore"):
@@ -170,10 +175,11 @@ def transport_poses(model, reference, poses: np.ndarray) -> tuple[np.ndarray, Ri
     ok &= good
     if not ok.any():
         return poses, IDENTITY
-    a = align_poses(poses[ok], x_m[ok])
-    R = a.R_A.T @ euler_to_matrix(poses[:, 3:6]) @ a.R_B.T
-    p = (poses[:, 0:3] - a.t_A) @ a.R_A - R @ a.t_B
-    return np.column_stack([p, matrix_to_euler(R)]), a
+    a = align_poses(poses[ok], x_m[ok], model)
+    f = model.frame(poses)
+    R = a.R_A.T @ f.R @ a.R_B.T
+    p = (f.p - a.t_A) @ a.R_A - R @ a.t_B
+    return model.poses_from_frame(Frame(p, R)), a
 
 
 __all__ = ["IDENTITY", "RigidAlignment", "align_frames", "align_poses", "transport_poses"]

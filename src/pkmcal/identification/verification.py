@@ -42,7 +42,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from pkmcal.conventions import POSE_COLUMNS, euler_to_matrix, rotation_error
+from pkmcal.conventions import POSE_COLUMNS, rotation_error
 from pkmcal.errors import PkmcalError
 from pkmcal.identification.simulation import drop_limit_violations
 from pkmcal.mechanisms.base import Mechanism
@@ -116,7 +116,8 @@ def frame_errors(p_r: np.ndarray, R_r: np.ndarray, p_c: np.ndarray, R_c: np.ndar
 
 
 def pose_errors(model: Mechanism, real: Mechanism, poses: np.ndarray, ignore_limits: tuple[str, ...] = ()) -> PoseErrors:
-    """Errors of the real machine commanded through ``model`` at ``poses`` (N, 6; mm, rad).
+    """Errors of the real machine commanded through ``model`` at ``poses`` (N, n; mm, rad):
+    of the platform frames (position, orientation) of the reached and the commanded poses.
 
     ``ignore_limits`` names limits of the real machine not checked (e.g. ``leg_collision``).
     """
@@ -132,9 +133,9 @@ def pose_errors_many(models: tuple[Mechanism, ...] | list[Mechanism], real: Mech
     fraction of the per-call cost when N is small (a study's held-out poses, checked
     with the nominal model and every calibrated one)."""
     for model in models:
-        if model.pose_names != POSE_COLUMNS or real.pose_names != POSE_COLUMNS:
-            raise PkmcalError(f"pose errors are defined for 6-DOF poses (x, y, z, a, b, c); machine "
-                              f"'{model.name}' has poses ({', '.join(model.pose_names)})")
+        if model.pose_names != real.pose_names:
+            raise PkmcalError(f"machine '{model.name}' has poses ({', '.join(model.pose_names)}) and the real "
+                              f"machine '{real.name}' ({', '.join(real.pose_names)}): compare machines of one kind")
     cmd1 = models[0].as_pose_array(poses)
     if not np.all(np.isfinite(cmd1)):
         raise PkmcalError("a held-out pose is not a finite number")
@@ -154,16 +155,18 @@ def pose_errors_many(models: tuple[Mechanism, ...] | list[Mechanism], real: Mech
     reached = np.where(ok[:, None], fk.poses, cmd)
     ok = drop_limit_violations(real, reached, ok, ignore_limits, dropped)
 
-    Rc1 = euler_to_matrix(cmd1[:, 3:6])
-    Rc, Rr = (np.tile(Rc1, (k, 1, 1)) if k > 1 else Rc1), euler_to_matrix(reached[:, 3:6])
-    e_p, e_R, e_n, e_z = frame_errors(reached[:, 0:3], Rr, cmd[:, 0:3], Rc)
+    f_c, f_r = models[0].frame(cmd1), real.frame(reached)       # platform frames (p, R) of the poses
+    Rc = np.tile(f_c.R, (k, 1, 1)) if k > 1 else f_c.R
+    e_p, e_R, e_n, e_z = frame_errors(f_r.p, f_r.R, np.tile(f_c.p, (k, 1)) if k > 1 else f_c.p, Rc)
     nan = np.where(ok, 1.0, np.nan)
+    rotates = any(real.pose_is_angle)      # a machine without angle coordinates (a delta) keeps R = I
     out = []
     for j, model in enumerate(models):
         rows = slice(j * n, (j + 1) * n)
         mine = {i - j * n: why for i, why in sorted(dropped.items()) if j * n <= i < (j + 1) * n}
         out.append(PoseErrors(model=model.name, reached=reached[rows], position=(e_p * nan)[rows],
-                              orientation=(e_R * nan)[rows], tilt=(e_n * nan)[rows], height=(e_z * nan)[rows],
+                              orientation=(e_R * nan)[rows] if rotates else None,
+                              tilt=(e_n * nan)[rows] if rotates else None, height=(e_z * nan)[rows],
                               valid=ok[rows], dropped=mine))
     return tuple(out)
 
@@ -300,15 +303,19 @@ COMPARES = {
 }
 
 
-def _aligned(pe: PoseErrors, cmd: np.ndarray, mask: np.ndarray):
-    """``(pe with the errors after the alignment fitted on mask, alignment)``."""
+def _aligned(pe: PoseErrors, cmd: np.ndarray, mask: np.ndarray, model: Mechanism):
+    """``(pe with the errors after the alignment fitted on mask, alignment)``; frames of
+    ``model``'s poses."""
     from pkmcal.identification.alignment import align_poses
 
-    a = align_poses(pe.reached[mask], cmd[mask])
-    p_c, R_c = a.apply(cmd[:, 0:3], euler_to_matrix(cmd[:, 3:6]))
-    e_p, e_R, e_n, e_z = frame_errors(pe.reached[:, 0:3], euler_to_matrix(pe.reached[:, 3:6]), p_c, R_c)
+    a = align_poses(pe.reached[mask], cmd[mask], model)
+    f_c, f_r = model.frame(cmd), model.frame(pe.reached)
+    p_c, R_c = a.apply(f_c.p, f_c.R)
+    with np.errstate(invalid="ignore"):
+        e_p, e_R, e_n, e_z = frame_errors(f_r.p, f_r.R, p_c, R_c)
     nan = np.where(pe.valid, 1.0, np.nan)
-    return replace(pe, position=e_p * nan, orientation=e_R * nan, tilt=e_n * nan, height=e_z * nan), a
+    return replace(pe, position=e_p * nan, orientation=None if pe.orientation is None else e_R * nan,
+                   tilt=None if pe.tilt is None else e_n * nan, height=e_z * nan), a
 
 
 def _sensed(pe: PoseErrors, model: Mechanism, sensor, real: Mechanism, true_sensor, cmd: np.ndarray) -> PoseErrors:
@@ -374,10 +381,10 @@ def verify(
         report = VerificationReport(real=real.name, after=after, before=before, compare=compare)
         mask = report.common
         if mask.any() and compare == "aligned":
-            after, a_after = _aligned(after, cmd_cal, mask)
+            after, a_after = _aligned(after, cmd_cal, mask, calibrated)
             alignment = {"after": a_after}
             if before is not None:
-                before, alignment["before"] = _aligned(before, cmd, mask)
+                before, alignment["before"] = _aligned(before, cmd, mask, nominal)
             report = VerificationReport(real=real.name, after=after, before=before, compare=compare,
                                         alignment=alignment, transported=transported)
         elif mask.any():

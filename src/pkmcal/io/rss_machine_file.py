@@ -73,6 +73,7 @@ class _File(_Model):
     uncertainty: UncertaintySpec | None = None
     calibration: dict[StrictStr, Any] | None = None
     metadata: dict[StrictStr, Any] | None = None
+    setup: dict[StrictStr, Any] | None = None
 
     @field_validator("legs", mode="before")
     @classmethod
