@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import difflib
 import os
+from dataclasses import dataclass
+from importlib import import_module
 from pathlib import Path
 from typing import Annotated, Any, Callable, Literal
 
@@ -53,6 +55,7 @@ from pkmcal.io.limits import MAX_DESCRIPTION_CHARS, MAX_NAME_CHARS, magnitude_pr
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.mechanisms.hexapod import DEFAULT_ACTUATOR_UNIT, HEXAPOD_PARAM_NAMES, N_LEGS, Hexapod, HexapodLimits
 from pkmcal.mechanisms.library import builtin_machine, is_builtin_name
+from pkmcal.registry import MACHINE_FILE_MODULES
 
 MACHINE_FILE_SUFFIXES = (".yaml", ".yml")
 _MAX_FILE_BYTES = 50_000_000
@@ -627,24 +630,50 @@ def _metadata_to_file(metadata: dict) -> dict:
     return out
 
 
-#: Machine kinds: kind → (file data → machine, machine class, machine → file data).
-_KINDS: dict[str, tuple[Callable[[object, dict, dict], Mechanism], type, Callable[[Any], dict]]] = {
-    "hexapod": (_hexapod_from_file, Hexapod, _hexapod_to_file),
-    # the registry key of the Gough–Stewart hexapod (Hexapod.kind); files keep writing
-    # "hexapod" (first entry) until the machine-file registry (issue 12 item 2) switches them
-    "6-UPS": (_hexapod_from_file, Hexapod, _hexapod_to_file),
-}
+@dataclass(frozen=True)
+class MachineKind:
+    """One machine-file kind of the registry: the ``kind:`` spellings a file may give
+    (``file_kinds``, the first is the one written), the mechanism kind it builds and saves
+    (:attr:`~pkmcal.mechanisms.base.Mechanism.kind`), ``read(source, data, lines)`` (the
+    parsed YAML mapping → machine; ``lines`` maps key paths to line numbers, for errors;
+    raises :class:`InputFileError`) and ``write(machine)`` (→ the mapping to dump, floats
+    exact: :mod:`pkmcal.io._yaml`). Units are converted by the reader and writer from the
+    mechanism's declared angle flags (degrees in files, radians inside)."""
+
+    mechanism_kind: str
+    file_kinds: tuple[str, ...]
+    read: Callable[[object, dict, dict], Mechanism]
+    write: Callable[[Any], dict]
+
+
+#: The registry: ``kind:`` text of a file → its :class:`MachineKind`, in registration order
+#: (the order an unknown kind's error lists them).
+_KINDS: dict[str, MachineKind] = {}
+#: mechanism kind → the :class:`MachineKind` that saves it (the first registered).
+_WRITERS: dict[str, MachineKind] = {}
+#: The ``kind:`` of a file without one.
+DEFAULT_FILE_KIND = "hexapod"
 
 
 # -- public API ---------------------------------------------------------------------------
 
 def register_machine_kind(kind: str, reader: Callable[[object, dict, dict], Mechanism], cls: type,
-                          writer: Callable[[Any], dict]) -> None:
-    """Add a machine file ``kind``: ``reader(source, data, lines)`` builds the machine from the
-    parsed YAML mapping (``lines`` maps key paths to line numbers, for error messages) and
-    raises :class:`InputFileError`; ``writer(machine)`` returns the mapping to write for
-    machines of class ``cls`` (floats exact; see :mod:`pkmcal.io._yaml`)."""
-    _KINDS[kind] = (reader, cls, writer)
+                          writer: Callable[[Any], dict], aliases: tuple[str, ...] = ()) -> MachineKind:
+    """Add the machine file ``kind`` (and its other accepted spellings ``aliases``) to the
+    registry: files with ``kind: <kind>`` are read by ``reader(source, data, lines)``, and
+    machines whose :attr:`~pkmcal.mechanisms.base.Mechanism.kind` is ``cls.kind`` are
+    saved with ``writer(machine)`` under ``kind: <kind>`` (see :class:`MachineKind`). The
+    drivers :func:`machine_from_text` and :func:`machine_to_text` need nothing else."""
+    entry = MachineKind(mechanism_kind=cls.kind, file_kinds=(kind, *aliases), read=reader, write=writer)
+    for text in entry.file_kinds:
+        _KINDS[text] = entry
+    _WRITERS.setdefault(entry.mechanism_kind, entry)
+    return entry
+
+
+def machine_kinds() -> tuple[str, ...]:
+    """Every ``kind:`` a machine file may give, in registration order."""
+    return tuple(_KINDS)
 
 
 def machine_from_text(text: str, source: object = "<machine file>") -> Mechanism:
@@ -660,11 +689,11 @@ def machine_from_text(text: str, source: object = "<machine file>") -> Mechanism
     if not isinstance(data, dict):
         raise InputFileError(source, f"expected a mapping of 'key: value' lines (name:, legs:, ...), "
                                      f"got a {type(data).__name__}", line=lines.get(()))
-    kind = data.get("kind", "hexapod")
+    kind = data.get("kind", DEFAULT_FILE_KIND)
     if not isinstance(kind, str) or kind not in _KINDS:
         raise InputFileError(source, f"kind: {_show(kind)} is not a known machine kind; known kinds: "
                                      f"{', '.join(_KINDS)}", line=lines.get(("kind",)))
-    return _KINDS[kind][0](source, data, lines)
+    return _KINDS[kind].read(source, data, lines)
 
 
 def read_machine_file(path: str | os.PathLike) -> Mechanism:
@@ -704,18 +733,12 @@ def load_machine(spec: str | os.PathLike) -> Mechanism:
 
 def machine_to_text(machine: Mechanism) -> str:
     """The YAML text of ``machine`` (deterministic; exact floats; angles in degrees)."""
-    for kind, (_, cls, writer) in _KINDS.items():
-        if isinstance(machine, cls):
-            body = dump_yaml(writer(machine))
-            return f"# pkmcal machine file (kind: {kind}); lengths in mm, angles in degrees\n{body}"
-    raise PkmcalError(f"cannot save machine '{machine.name}': no file format for {type(machine).__name__}")
-
-
-def _register_planar_kinds() -> None:
-    from pkmcal.io import delta_machine_file  # noqa: F401  (registers the delta kinds)
-    from pkmcal.io import planar_machine_file  # noqa: F401  (registers the planar kinds)
-    from pkmcal.io import pus_machine_file  # noqa: F401  (registers the 6-PUS kind)
-    from pkmcal.io import rss_machine_file  # noqa: F401  (registers the 6-RSS kind)
+    entry = _WRITERS.get(machine.kind)
+    if entry is None:
+        raise PkmcalError(f"cannot save machine '{machine.name}': no machine file format for its kind "
+                          f"'{machine.kind}' (kinds with one: {', '.join(_WRITERS)})")
+    body = dump_yaml(entry.write(machine))
+    return f"# pkmcal machine file (kind: {entry.file_kinds[0]}); lengths in mm, angles in degrees\n{body}"
 
 
 def save_machine(machine: Mechanism, path: str | os.PathLike) -> None:
@@ -736,19 +759,26 @@ def save_machine(machine: Mechanism, path: str | os.PathLike) -> None:
         raise PkmcalError(f"cannot save machine '{machine.name}': {exc}") from None
     if back != machine:
         raise RuntimeError(f"machine file of '{machine.name}' does not load back to the same machine")
-    if getattr(back, "metadata", {}) != getattr(machine, "metadata", {}):
+    if back.metadata != machine.metadata:
         raise PkmcalError(f"cannot save machine '{machine.name}': its metadata does not survive YAML "
                           "unchanged; use text, numbers, lists and mappings with text keys")
     atomic_write_text(path, text)
 
 
-_register_planar_kinds()
+# the Gough–Stewart hexapod (Hexapod.kind "6-UPS"): files are written "kind: hexapod", the
+# spelling every pkmcal version reads; "6-UPS" is read too
+register_machine_kind("hexapod", _hexapod_from_file, Hexapod, _hexapod_to_file, aliases=("6-UPS",))
+for _module in MACHINE_FILE_MODULES:   # the other kinds: each module registers its own
+    import_module(_module)
 
 __all__ = [
+    "DEFAULT_FILE_KIND",
     "HexapodFile",
+    "MachineKind",
     "identified_uncertainty",
     "load_machine",
     "machine_from_text",
+    "machine_kinds",
     "machine_to_text",
     "read_machine_file",
     "register_machine_kind",

@@ -156,8 +156,8 @@ def _num(v: float, angle: bool):
 
 
 def _planar_to_file(m: PlanarMechanism) -> dict:
-    kind = next(k for k, (cls, _, _) in _PLANAR.items() if type(m) is cls)
-    cls, factory, limit_key = _PLANAR[kind]
+    kind = m.kind
+    _, factory, limit_key = _PLANAR[kind]
     ref = factory()
     out: dict[str, Any] = {"kind": kind, "name": m.name}
     if m.description:

@@ -1,0 +1,23 @@
+"""Where the machine and sensor kinds register themselves (issue 12 item 2; docs/architecture.md).
+
+Plain text, no imports: the one line a new machine family adds. Each module named here
+registers its machine-file kinds on import with
+:func:`pkmcal.io.machine_file.register_machine_kind` (its file schema, reader and writer);
+:mod:`pkmcal.io.machine_file` imports them all once, so that its generic loader and saver
+know every kind. The Gough–Stewart hexapod's file kind is registered by
+:mod:`pkmcal.io.machine_file` itself. Sensor kinds of setup files register in
+:mod:`pkmcal.io.setup_file` (:func:`~pkmcal.io.setup_file.register_sensor_kind`); built-in
+machines are listed in :mod:`pkmcal.mechanisms.catalogue`.
+"""
+
+from __future__ import annotations
+
+#: Modules that register machine-file kinds, in the order an unknown kind's error lists them.
+MACHINE_FILE_MODULES: tuple[str, ...] = (
+    "pkmcal.io.delta_machine_file",    # linear-delta, rotary-delta
+    "pkmcal.io.planar_machine_file",   # planar-2dof-3act, planar-3dof-4act
+    "pkmcal.io.pus_machine_file",      # 6-PUS
+    "pkmcal.io.rss_machine_file",      # 6-RSS
+)
+
+__all__ = ["MACHINE_FILE_MODULES"]
