@@ -22,7 +22,7 @@ import os
 from dataclasses import dataclass
 from importlib import import_module
 from pathlib import Path
-from typing import Annotated, Any, Callable, Literal
+from typing import Annotated, Any, Callable, Literal, get_args
 
 import numpy as np
 import yaml
@@ -260,14 +260,6 @@ class HexapodFile(_Model):
         return v
 
 
-_ALLOWED_KEYS: dict[str, tuple[str, ...]] = {
-    "": tuple(HexapodFile.model_fields),
-    "legs": tuple(LegSpec.model_fields),
-    "limits": tuple(LimitsSpec.model_fields),
-    "home": tuple(PoseSpec.model_fields),
-    "workspace": tuple(WorkspaceSpec.model_fields),
-    "uncertainty": tuple(UncertaintySpec.model_fields),
-}
 _EXPECTED_SHAPE = {
     "base": "3 numbers [x, y, z] (mm)", "platform": "3 numbers [x, y, z] (mm)",
     "base_axis": "3 numbers [x, y, z]", "platform_axis": "3 numbers [x, y, z]",
@@ -305,19 +297,43 @@ def _show(value: Any) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-def _describe(err: dict) -> tuple[tuple, str]:
-    """``(loc, message)`` of one pydantic error, in the file's words."""
+def _model_in(annotation: Any) -> type[BaseModel] | None:
+    """The pydantic model inside a field's type (``X``, ``X | None``, ``list[X]``, ``dict[str, X]``)."""
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return annotation
+    for arg in get_args(annotation):
+        model = _model_in(arg)
+        if model is not None:
+            return model
+    return None
+
+
+def _keys_at(schema: type[BaseModel], loc: tuple) -> tuple[str, ...]:
+    """The keys ``schema`` allows in the mapping at key path ``loc`` (list indices and the
+    keys of free mappings, e.g. a delta's tower names, are stepped over)."""
+    model = schema
+    for part in loc:
+        field = model.model_fields.get(part) if isinstance(part, str) else None
+        if field is None:
+            continue
+        model = _model_in(field.annotation)
+        if model is None:
+            return ()
+    return tuple(model.model_fields)
+
+
+def _describe(err: dict, schema: type[BaseModel]) -> tuple[tuple, str]:
+    """``(loc, message)`` of one pydantic error of a file of ``schema``, in the file's words."""
     loc = tuple(p for p in err["loc"] if not (isinstance(p, str) and p.startswith("function-")))
     kind, value = err["type"], err.get("input")
     field_name = next((p for p in reversed(loc) if isinstance(p, str)), "")
-    section = "legs" if len(loc) >= 2 and loc[0] == "legs" else (loc[0] if loc else "")
     if kind == "missing" and loc and isinstance(loc[-1], int):  # a tuple that is too short
         want = _EXPECTED_SHAPE.get(str(field_name), "more items")
         return loc[:-1], f"expected {want}, got {loc[-1]} item{'s' if loc[-1] != 1 else ''}"
     if kind == "missing":
         return loc[:-1], f"missing key '{loc[-1]}'; add it (see docs/file-formats.md)"
     if kind == "extra_forbidden":
-        allowed = _ALLOWED_KEYS.get(str(section) if len(loc) > 1 else "", ())
+        allowed = _keys_at(schema, loc[:-1])
         close = difflib.get_close_matches(str(loc[-1]), allowed, n=1)
         hint = f"did you mean '{close[0]}'? " if close else ""
         return loc, f"unknown key {loc[-1]!r}; {hint}allowed keys here: {', '.join(allowed)}"
@@ -337,18 +353,23 @@ def _describe(err: dict) -> tuple[tuple, str]:
         return loc, f"expected a mapping of 'key: value' lines, got {_show(value)}"
     if kind == "string_type":
         return loc, f"expected text, got {_show(value)}; quote it if it looks like a number"
-    if kind == "literal_error":
+    if kind == "literal_error" and loc == ("kind",):
         return loc, f"{_show(value)} is not a known machine kind; known kinds: {', '.join(_KINDS)}"
+    if kind == "literal_error":
+        return loc, f"expected {(err.get('ctx') or {}).get('expected', 'another value')}, got {_show(value)}"
     if kind == "value_error":
         return loc, err["msg"].removeprefix("Value error, ")
     return loc, f"{err['msg']} (got {_show(value)})"
 
 
-def _validation_error(path: object, exc: ValidationError, lines: dict[tuple, int]) -> InputFileError:
+def _validation_error(path: object, exc: ValidationError, lines: dict[tuple, int],
+                      schema: type[BaseModel] | None = None) -> InputFileError:
+    """The first problem pydantic found in a file of ``schema`` (default :class:`HexapodFile`),
+    in the file's words, with its key path and line."""
     errors = exc.errors(include_url=False)
     # Report the outermost problem first (e.g. the leg count before a leg's contents).
     errors.sort(key=lambda e: len(e["loc"]))
-    loc, message = _describe(errors[0])
+    loc, message = _describe(errors[0], schema or HexapodFile)
     more = f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''})" if len(errors) > 1 else ""
     return InputFileError(path, f"{_key_path(loc)}: {message}{more}", line=_line_of(loc, lines))
 

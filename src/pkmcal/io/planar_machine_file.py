@@ -100,7 +100,7 @@ def _planar_from_file(path: object, data: dict, lines: dict[tuple, int]) -> Plan
     try:
         spec = _PlanarFile.model_validate(data)
     except ValidationError as exc:
-        raise _validation_error(path, exc, lines) from None
+        raise _validation_error(path, exc, lines, _PlanarFile) from None
     cls, factory, limit_key = _PLANAR[spec.kind]
     ref = factory()
     names, p_ang = ref.param_names, ref.param_is_angle

@@ -1,7 +1,7 @@
 """What the machine files of the six-pose hexapod kinds (``6-RSS``, ``6-PUS``) share: the
 common keys once (:class:`SpatialFile`: ``kind``, ``name``, ``description``, exactly six
 ``legs``, ``limits``, ``home``, ``workspace``, ``uncertainty``, ``calibration``,
-``metadata``; a kind's schema subclasses it with its leg and limit models), the optional
+``metadata``, the identified ``setup``; a kind's schema subclasses it with its leg and limit models), the optional
 ``home`` pose, ``workspace`` box and ``uncertainty`` read into the mechanism's keyword
 arguments and written back exactly (mm, degrees), and the head and tail of the written
 mapping (:func:`file_head`, :func:`file_tail`)."""
@@ -56,6 +56,7 @@ class SpatialFile(_Model):
     uncertainty: UncertaintySpec | None = None
     calibration: dict[StrictStr, Any] | None = None
     metadata: dict[StrictStr, Any] | None = None
+    setup: dict[StrictStr, Any] | None = None
 
     @field_validator("legs", mode="before")
     @classmethod
@@ -68,7 +69,7 @@ def read_spec(schema: type[SpatialFile], path: object, data: dict, lines: dict[t
     try:
         return schema.model_validate(data)
     except ValidationError as exc:
-        raise _validation_error(path, exc, lines) from None
+        raise _validation_error(path, exc, lines, schema) from None
 
 
 def common_kwargs(path: object, spec: SpatialFile, lines: dict[tuple, int], names, is_angle) -> dict[str, Any]:
