@@ -4,13 +4,15 @@
   object, and the text written again byte for byte), identified machines included;
 * an unknown kind is an error naming the known kinds and the line;
 * a kind registered in a test (a toy machine and a toy sensor) is read and written by the
-  unchanged drivers (``machine_from_text``/``machine_to_text``, ``load_setup``/``save_setup``).
+  unchanged drivers (``machine_from_text``/``machine_to_text``, ``load_setup``/``save_setup``);
+* a family in the generic ``parameters:`` layout needs only its registration line.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import re
+from types import MappingProxyType
 
 import numpy as np
 import pytest
@@ -36,7 +38,9 @@ from pkmcal.io.setup_file import (
     sensor_kinds,
     setup_to_yaml,
 )
+from pkmcal.io.parameter_machine_file import register_parameter_kind
 from pkmcal.mechanisms import BUILTIN_MACHINES, Hexapod, builtin_machine
+from pkmcal.mechanisms.rss_hexapod import RSSHexapod
 from pkmcal.sensors import PositionSensor
 
 MACHINES = {name: builtin_machine(name) for name in BUILTIN_MACHINES}
@@ -288,3 +292,44 @@ def test_builtin_setups_cover_every_kind_they_name():
                 continue
             assert setup.sensor.kind in sensor_kinds()
             break
+
+
+# -- a family in the generic layout: one registration line, no file schema of its own ----------
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class ToyRSS(RSSHexapod):
+    """A made-up family (a 6-RSS under another kind) filed in the generic ``parameters:`` layout."""
+
+    kind = "toy-rss"
+    limit_keywords = MappingProxyType({"motor_range": True, "max_joint_angle": True})
+
+
+def test_a_family_in_the_generic_layout_needs_only_its_registration(own_registries, tmp_path):
+    register_parameter_kind("toy-rss", f"{__name__}:ToyRSS")   # what a line of PARAMETER_FILE_KINDS does
+    real = _identified(MACHINES["servo-stewart"], seed=3)
+    m = ToyRSS(name="toy", rho=real.rho, motor_range=(np.deg2rad(-55.5), np.deg2rad(61.25)),
+               max_joint_angle=np.deg2rad(58.0), workspace=real.workspace_box(), home=real.home,
+               covariance=real.covariance, description="a toy", metadata=real.metadata)
+    text = machine_to_text(m)
+    assert "\nkind: toy-rss\n" in text and "\nparameters:\n  s1.x: " in text
+    assert "\nlimits:\n  motor_range: [-55.5, 61.25]\n  max_joint_angle: 58.0\n" in text   # degrees
+    assert "  beta_1: " in text and "  a: [" in text
+    back = machine_from_text(text, "toy.yaml")
+    _same_machine(m, back, metadata=False)
+    assert back.motor_range == m.motor_range and back.max_joint_angle == m.max_joint_angle
+    assert np.array_equal(back.workspace, m.workspace) and np.array_equal(back.home, m.home)
+    assert machine_to_text(back) == text
+    path = tmp_path / "toy.yaml"
+    save_machine(back, path)
+    _same_machine(back, load_machine(path))
+    # the errors name the parameter, with the line
+    bad = text.replace("  beta_1: ", "  betta_1: ", 1)
+    with pytest.raises(InputFileError, match=r"line \d+: parameters.betta_1: unknown parameter \(did you mean "
+                                             r"'beta_1'\?\)"):
+        machine_from_text(bad)
+    bad = re.sub(r"\n  beta_1: [^\n]*", "", text, count=1)
+    with pytest.raises(InputFileError, match=r"parameters: missing beta_1; give every parameter"):
+        machine_from_text(bad)
+    with pytest.raises(InputFileError, match=r"limits.motor_rang: unknown limit \(did you mean 'motor_range'\?\)"):
+        machine_from_text(text.replace("  motor_range:", "  motor_rang:"))

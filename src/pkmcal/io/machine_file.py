@@ -55,7 +55,7 @@ from pkmcal.io.limits import MAX_DESCRIPTION_CHARS, MAX_NAME_CHARS, magnitude_pr
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.mechanisms.hexapod import DEFAULT_ACTUATOR_UNIT, HEXAPOD_PARAM_NAMES, N_LEGS, Hexapod, HexapodLimits
 from pkmcal.mechanisms.library import builtin_machine, is_builtin_name
-from pkmcal.registry import MACHINE_FILE_MODULES
+from pkmcal.registry import MACHINE_FILE_MODULES, PARAMETER_FILE_KINDS
 
 MACHINE_FILE_SUFFIXES = (".yaml", ".yml")
 _MAX_FILE_BYTES = 50_000_000
@@ -685,7 +685,12 @@ def register_machine_kind(kind: str, reader: Callable[[object, dict, dict], Mech
     machines whose :attr:`~pkmcal.mechanisms.base.Mechanism.kind` is ``cls.kind`` are
     saved with ``writer(machine)`` under ``kind: <kind>`` (see :class:`MachineKind`). The
     drivers :func:`machine_from_text` and :func:`machine_to_text` need nothing else."""
-    entry = MachineKind(mechanism_kind=cls.kind, file_kinds=(kind, *aliases), read=reader, write=writer)
+    return add_machine_kind(MachineKind(mechanism_kind=cls.kind, file_kinds=(kind, *aliases), read=reader,
+                                        write=writer))
+
+
+def add_machine_kind(entry: MachineKind) -> MachineKind:
+    """Add ``entry`` to the registry (:func:`register_machine_kind` builds it from a class)."""
     for text in entry.file_kinds:
         _KINDS[text] = entry
     _WRITERS.setdefault(entry.mechanism_kind, entry)
@@ -791,11 +796,17 @@ def save_machine(machine: Mechanism, path: str | os.PathLike) -> None:
 register_machine_kind("hexapod", _hexapod_from_file, Hexapod, _hexapod_to_file, aliases=("6-UPS",))
 for _module in MACHINE_FILE_MODULES:   # the other kinds: each module registers its own
     import_module(_module)
+if PARAMETER_FILE_KINDS:               # families in the generic layout (classes imported on first read)
+    from pkmcal.io.parameter_machine_file import register_parameter_kind
+
+    for _kind, _target in PARAMETER_FILE_KINDS.items():
+        register_parameter_kind(_kind, _target)
 
 __all__ = [
     "DEFAULT_FILE_KIND",
     "HexapodFile",
     "MachineKind",
+    "add_machine_kind",
     "identified_uncertainty",
     "load_machine",
     "machine_from_text",

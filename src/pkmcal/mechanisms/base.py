@@ -167,6 +167,9 @@ class Mechanism(ABC):
     #: Free-form information carried along (``calibration``, ``setup`` of an identified
     #: machine); every concrete machine holds it as a field, empty by default.
     metadata: Mapping = MappingProxyType({})
+    #: Limit keywords of the constructor → True for angles (a number or a pair), the
+    #: ``limits:`` of the generic machine file (:mod:`pkmcal.io.parameter_machine_file`).
+    limit_keywords: Mapping[str, bool] = MappingProxyType({})
     #: The workspace box (n, 2) the machine file declares (internal units), None when it
     #: declares none; :meth:`workspace_box` is the box searched in either case.
     workspace: np.ndarray | None = None
