@@ -1,6 +1,9 @@
 """Machine files (YAML): load, validate, save. Format: ``docs/file-formats.md``.
 
-A machine file describes one mechanism; ``kind`` (default ``hexapod``) selects the schema.
+A machine file describes one mechanism; ``kind`` (default ``hexapod``) selects the schema
+from the registry (:class:`MachineKind`, :func:`register_machine_kind`; the kinds of other
+modules are named in :mod:`pkmcal.registry`), by which :func:`machine_from_text` and
+:func:`machine_to_text` are generic drivers (docs/architecture.md, "Registries").
 The hexapod schema is paper 2's Table 3 layout per leg (base joint b_i, platform joint a_i,
 offset L0_i, stroke, and a gain g_i when the readings are not in mm: L_i = L0_i + g_i λ_i,
 with the readings' unit in the top-level ``actuator_unit``) plus limits (paper 2 §5), an optional home pose and workspace box, and
