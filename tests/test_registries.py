@@ -333,3 +333,41 @@ def test_a_family_in_the_generic_layout_needs_only_its_registration(own_registri
         machine_from_text(bad)
     with pytest.raises(InputFileError, match=r"limits.motor_rang: unknown limit \(did you mean 'motor_range'\?\)"):
         machine_from_text(text.replace("  motor_range:", "  motor_rang:"))
+
+
+# -- the declarations the CLI, report and export read instead of probing ----------------------
+
+
+@pytest.mark.parametrize("name", sorted(MACHINES))
+def test_declared_description_metadata_workspace(name):
+    m = MACHINES[name]
+    assert isinstance(m.description, str) and dict(m.metadata) == {}
+    assert m.workspace is None or np.array_equal(m.workspace, m.workspace_box())
+    if "stroke" in m.abilities:   # exported as actuator_stroke: the readings' [min, max]
+        rng = m.reading_range()
+        assert rng.shape == (m.n_actuators, 2) and np.all(rng[:, 0] <= rng[:, 1])
+        q = m.ik(m.home_pose[None])[0]
+        assert np.all((rng[:, 0] <= q) & (q <= rng[:, 1]))   # home is within the stroke
+
+
+@pytest.mark.parametrize("name", sorted(n for n, m in MACHINES.items() if m.reach() is not None))
+def test_reach_bounds_every_reachable_pose(name):
+    """``reach()`` bounds ‖p‖ of every pose the limits admit: poses sampled in three times the
+    planning box about home, and along each translation axis out to 1.2 × reach."""
+    m = MACHINES[name]
+    r = m.reach()
+    rng = np.random.default_rng(7)
+    home = m.home_pose
+    box = m.workspace_box()
+    lo, hi = home + 3.0 * (box[:, 0] - home), home + 3.0 * (box[:, 1] - home)
+    poses = [rng.uniform(lo, hi, size=(20_000, m.n_dof))]
+    for k in range(3):
+        line = np.repeat(home[None], 2001, axis=0)
+        line[:, k] = np.linspace(-1.2 * r, 1.2 * r, 2001)
+        poses.append(line)
+    poses = np.concatenate(poses)
+    with np.errstate(all="ignore"):
+        ok = m.check_limits(poses).ok
+    assert ok.sum() > 50
+    assert np.max(np.linalg.norm(poses[ok, :3], axis=1)) <= r
+    assert np.linalg.norm(home[:3]) <= r
