@@ -167,6 +167,17 @@ def test_an_unknown_sensor_kind_names_the_known_kinds_and_the_line(tmp_path):
     assert text.endswith("must be one of " + ", ".join(sensor_kinds()))
 
 
+def test_a_setup_without_a_sensor_names_every_kind(tmp_path):
+    path = tmp_path / "s.yaml"
+    path.write_text("noise: {reading: 0.01, actuator: 0.01}\n", encoding="utf-8")
+    with pytest.raises(InputFileError, match=re.escape("key 'sensor': is missing; say which sensor: one of "
+                                                       + ", ".join(sensor_kinds()))):
+        load_setup(path)
+    path.write_text("- sensor: indicators\n", encoding="utf-8")
+    with pytest.raises(InputFileError, match=re.escape("sensor: " + "|".join(sensor_kinds()))):
+        load_setup(path)
+
+
 def test_a_machine_without_a_file_kind_is_an_error_naming_its_kind():
     @dataclasses.dataclass(frozen=True, eq=False)
     class Unfiled(Hexapod):

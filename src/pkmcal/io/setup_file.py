@@ -360,7 +360,7 @@ def load_setup(path: str | os.PathLike, machine=None) -> MeasurementSetup:
     except YamlSyntaxError as exc:
         raise InputFileError(path, str(exc), line=exc.line) from None
     if not isinstance(data, dict):
-        raise InputFileError(path, "a setup file is a YAML mapping starting with 'sensor: full-pose|position|indicators'")
+        raise InputFileError(path, f"a setup file is a YAML mapping starting with 'sensor: {'|'.join(_SENSOR_KINDS)}'")
     data, lines = _setup_mapping(path, data, lines)
     try:
         spec = _Setup.model_validate(data)
@@ -370,7 +370,7 @@ def load_setup(path: str | os.PathLike, machine=None) -> MeasurementSetup:
         loc = tuple(err["loc"])
         if err["type"] == "missing":
             what = "is missing" + (
-                "; say which sensor: full-pose, position or indicators" if loc == ("sensor",)
+                f"; say which sensor: one of {', '.join(_SENSOR_KINDS)}" if loc == ("sensor",)
                 else "; give the actuator noise (mm), e.g. noise: {reading: 0.01, actuator: 0.005}"
                 if loc == ("noise", "actuator") else
                 "; give the actuator stiffness, e.g. simulation: {stiffness: 2.0e4, load: [0, -30]} "
