@@ -146,5 +146,5 @@ def test_rejects_non_finite_and_non_hexapods():
     rho[0] = np.nan
     with pytest.raises(PkmcalError, match="non-finite"):
         linuxcnc_hal(m.with_params(rho))
-    with pytest.raises(PkmcalError, match="hexapod"):
-        linuxcnc_hal(object())
+    with pytest.raises(PkmcalError, match="6-UPS hexapods .*'servo-stewart' is a 6-RSS machine"):
+        linuxcnc_hal(builtin_machine("servo-stewart"))   # the error names the machine's kind, not a Python type

@@ -185,7 +185,7 @@ def export(machine: Mechanism, fmt: str) -> str:
 
         return linuxcnc_ini(machine)
     if fmt == "json":
-        from pkmcal.cli.export_cmd import format_calibration_json
+        from pkmcal.io.calibration_json import format_calibration_json
 
         return format_calibration_json(machine)
     if fmt in ("klipper", "marlin"):

@@ -130,8 +130,9 @@ def _safe_planning_machine(machine, config: DemoConfig):
     from pkmcal.mechanisms.hexapod import Hexapod
     from pkmcal.planning.margins import planning_machine, resolve_margin
 
-    if not isinstance(machine, Hexapod):
-        raise PkmcalError(f"pkmcal demo runs on hexapods; machine '{machine.name}' is a {type(machine).__name__}")
+    if machine.kind != Hexapod.kind:   # the margins of planning_machine are the 6-UPS hexapod's
+        raise PkmcalError(f"pkmcal demo runs on {Hexapod.kind} hexapods; machine '{machine.name}' is a "
+                          f"{machine.kind} machine")
     margin = resolve_margin(machine, stroke_mm=config.stroke_margin, tilt_deg=config.tilt_margin_deg)
     return planning_machine(machine, margin), margin
 

@@ -120,9 +120,9 @@ def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_rea
                        name=f"{nominal.name}-random-{random_errors:g}mm-seed{seed}")
     else:
         real = load_machine(real_spec)
-    if type(real) is not type(nominal):
+    if real.kind != nominal.kind:
         raise PkmcalError(f"the real machine '{real.name}' is not of the kind of '{nominal.name}' "
-                          f"({type(real).__name__} vs {type(nominal).__name__})")
+                          f"({real.kind} vs {nominal.kind})")
     if session_offsets is not None and n_sessions is None:
         raise PkmcalError("--session-offsets re-homes the actuators between sessions; give --sessions S too")
     session_text: list[str] = []
@@ -297,9 +297,9 @@ def verify_cmd(calibrated, meas_path, real_spec, poses, nominal, setup_spec, cal
     real = load_machine(real_spec)
     nom = None if nominal is None else load_machine(nominal)
     for other in (real, nom):
-        if other is not None and type(other) is not type(cal):
+        if other is not None and other.kind != cal.kind:
             raise PkmcalError(f"machine '{other.name}' is not of the kind of '{cal.name}' "
-                              f"({type(other).__name__} vs {type(cal).__name__})")
+                              f"({other.kind} vs {cal.kind})")
     if is_redundant(cal):
         if setup_spec is None:
             raise PkmcalError(f"machine '{cal.name}' is redundantly actuated: give --setup SETUP with the "

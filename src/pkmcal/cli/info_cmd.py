@@ -45,15 +45,11 @@ BOX_SAMPLES = 10_000
 
 
 def _half_widths(mech: Mechanism) -> np.ndarray:
-    """Search half-width per pose coordinate: the largest reach of a leg for translations
-    (mm), 180° for angles (90° for the pitch b of a 6-DoF Euler pose)."""
-    reach = 1000.0
-    if hasattr(mech, "offset") and hasattr(mech, "stroke"):
-        top = np.asarray(mech.stroke)[:, 1]
-        legs = mech.lengths_from_readings(top) if "leg-lengths" in mech.abilities else np.asarray(mech.offset) + top
-        reach = float(np.max(legs))
-        if hasattr(mech, "base"):
-            reach += float(np.max(np.linalg.norm(np.asarray(mech.base), axis=1)))
+    """Search half-width per pose coordinate: the machine's :meth:`~Mechanism.reach` (1000 mm
+    when it states none) for translations, 180° for angles (90° for the pitch b of a 6-DoF
+    Euler pose)."""
+    reach = mech.reach()
+    reach = 1000.0 if reach is None else reach
     out = np.where(np.array(mech.pose_is_angle), np.pi, reach)
     if mech.pose_names == ("x", "y", "z", "a", "b", "c"):
         out[4] = np.pi / 2
@@ -156,8 +152,8 @@ def info_cmd(machine: str, n_poses: int | None, poses: str | None, seed: int) ->
     for k, name in enumerate(mech.pose_names):
         click.echo(f"  {name}  {_fmt(ranges[k, 0], angle[k])} .. {_fmt(ranges[k, 1], angle[k])} {unit(k):<3}"
                    f"  (stopped by {stops[k][0]} / {stops[k][1]})")
-    if getattr(mech, "workspace", None) is not None:
-        ws = np.asarray(mech.workspace)
+    if mech.workspace is not None:   # the box the machine file declares (workspace_box() is it then)
+        ws = mech.workspace_box()
         text = ", ".join(f"{n} [{_fmt(ws[k, 0], angle[k]).strip()}, {_fmt(ws[k, 1], angle[k]).strip()}]"
                          for k, n in enumerate(mech.pose_names))
         click.echo(f"  declared workspace box: {text}")

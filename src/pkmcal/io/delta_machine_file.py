@@ -167,7 +167,7 @@ def _linear_from_file(path: object, data: dict, lines: dict[tuple, int]) -> ld.L
     try:
         spec = _LinearFile.model_validate(data)
     except ValidationError as exc:
-        raise _validation_error(path, exc, lines) from None
+        raise _validation_error(path, exc, lines, _LinearFile) from None
     rho = _rho(path, lines, "towers", spec.towers, ld.LAYOUT, spec.tool)
     kw: dict[str, Any] = {}
     lim = spec.limits
@@ -209,7 +209,7 @@ def _rotary_from_file(path: object, data: dict, lines: dict[tuple, int]) -> rd.R
     try:
         spec = _RotaryFile.model_validate(data)
     except ValidationError as exc:
-        raise _validation_error(path, exc, lines) from None
+        raise _validation_error(path, exc, lines, _RotaryFile) from None
     rho = _rho(path, lines, "arms", spec.arms, rd.LAYOUT, spec.tool)
     kw: dict[str, Any] = {}
     lim = spec.limits

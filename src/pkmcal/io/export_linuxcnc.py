@@ -77,11 +77,9 @@ def _num(v: float) -> str:
 
 
 def _check_hexapod(machine) -> None:
-    if not isinstance(machine, Hexapod):
-        raise PkmcalError(
-            f"LinuxCNC export supports 6-UPS hexapods (genhexkins); machine '{getattr(machine, 'name', machine)}' "
-            f"is a {type(machine).__name__}"
-        )
+    if "linuxcnc" not in machine.abilities:
+        raise PkmcalError(f"LinuxCNC export supports 6-UPS hexapods (genhexkins); machine '{machine.name}' is a "
+                          f"{machine.kind} machine")
 
 
 def leg_gains(machine: Hexapod) -> np.ndarray:

@@ -1,6 +1,9 @@
 """Machine files (YAML): load, validate, save. Format: ``docs/file-formats.md``.
 
-A machine file describes one mechanism; ``kind`` (default ``hexapod``) selects the schema.
+A machine file describes one mechanism; ``kind`` (default ``hexapod``) selects the schema
+from the registry (:class:`MachineKind`, :func:`register_machine_kind`; the kinds of other
+modules are named in :mod:`pkmcal.registry`), by which :func:`machine_from_text` and
+:func:`machine_to_text` are generic drivers (docs/architecture.md, "Registries").
 The hexapod schema is paper 2's Table 3 layout per leg (base joint b_i, platform joint a_i,
 offset L0_i, stroke, and a gain g_i when the readings are not in mm: L_i = L0_i + g_i λ_i,
 with the readings' unit in the top-level ``actuator_unit``) plus limits (paper 2 §5), an optional home pose and workspace box, and
@@ -19,8 +22,10 @@ from __future__ import annotations
 
 import difflib
 import os
+from dataclasses import dataclass
+from importlib import import_module
 from pathlib import Path
-from typing import Annotated, Any, Callable, Literal
+from typing import Annotated, Any, Callable, Literal, get_args
 
 import numpy as np
 import yaml
@@ -53,6 +58,7 @@ from pkmcal.io.limits import MAX_DESCRIPTION_CHARS, MAX_NAME_CHARS, magnitude_pr
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.mechanisms.hexapod import DEFAULT_ACTUATOR_UNIT, HEXAPOD_PARAM_NAMES, N_LEGS, Hexapod, HexapodLimits
 from pkmcal.mechanisms.library import builtin_machine, is_builtin_name
+from pkmcal.registry import MACHINE_FILE_MODULES, PARAMETER_FILE_KINDS
 
 MACHINE_FILE_SUFFIXES = (".yaml", ".yml")
 _MAX_FILE_BYTES = 50_000_000
@@ -257,14 +263,6 @@ class HexapodFile(_Model):
         return v
 
 
-_ALLOWED_KEYS: dict[str, tuple[str, ...]] = {
-    "": tuple(HexapodFile.model_fields),
-    "legs": tuple(LegSpec.model_fields),
-    "limits": tuple(LimitsSpec.model_fields),
-    "home": tuple(PoseSpec.model_fields),
-    "workspace": tuple(WorkspaceSpec.model_fields),
-    "uncertainty": tuple(UncertaintySpec.model_fields),
-}
 _EXPECTED_SHAPE = {
     "base": "3 numbers [x, y, z] (mm)", "platform": "3 numbers [x, y, z] (mm)",
     "base_axis": "3 numbers [x, y, z]", "platform_axis": "3 numbers [x, y, z]",
@@ -302,19 +300,43 @@ def _show(value: Any) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-def _describe(err: dict) -> tuple[tuple, str]:
-    """``(loc, message)`` of one pydantic error, in the file's words."""
+def _model_in(annotation: Any) -> type[BaseModel] | None:
+    """The pydantic model inside a field's type (``X``, ``X | None``, ``list[X]``, ``dict[str, X]``)."""
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return annotation
+    for arg in get_args(annotation):
+        model = _model_in(arg)
+        if model is not None:
+            return model
+    return None
+
+
+def _keys_at(schema: type[BaseModel], loc: tuple) -> tuple[str, ...]:
+    """The keys ``schema`` allows in the mapping at key path ``loc`` (list indices and the
+    keys of free mappings, e.g. a delta's tower names, are stepped over)."""
+    model = schema
+    for part in loc:
+        field = model.model_fields.get(part) if isinstance(part, str) else None
+        if field is None:
+            continue
+        model = _model_in(field.annotation)
+        if model is None:
+            return ()
+    return tuple(model.model_fields)
+
+
+def _describe(err: dict, schema: type[BaseModel]) -> tuple[tuple, str]:
+    """``(loc, message)`` of one pydantic error of a file of ``schema``, in the file's words."""
     loc = tuple(p for p in err["loc"] if not (isinstance(p, str) and p.startswith("function-")))
     kind, value = err["type"], err.get("input")
     field_name = next((p for p in reversed(loc) if isinstance(p, str)), "")
-    section = "legs" if len(loc) >= 2 and loc[0] == "legs" else (loc[0] if loc else "")
     if kind == "missing" and loc and isinstance(loc[-1], int):  # a tuple that is too short
         want = _EXPECTED_SHAPE.get(str(field_name), "more items")
         return loc[:-1], f"expected {want}, got {loc[-1]} item{'s' if loc[-1] != 1 else ''}"
     if kind == "missing":
         return loc[:-1], f"missing key '{loc[-1]}'; add it (see docs/file-formats.md)"
     if kind == "extra_forbidden":
-        allowed = _ALLOWED_KEYS.get(str(section) if len(loc) > 1 else "", ())
+        allowed = _keys_at(schema, loc[:-1])
         close = difflib.get_close_matches(str(loc[-1]), allowed, n=1)
         hint = f"did you mean '{close[0]}'? " if close else ""
         return loc, f"unknown key {loc[-1]!r}; {hint}allowed keys here: {', '.join(allowed)}"
@@ -334,18 +356,23 @@ def _describe(err: dict) -> tuple[tuple, str]:
         return loc, f"expected a mapping of 'key: value' lines, got {_show(value)}"
     if kind == "string_type":
         return loc, f"expected text, got {_show(value)}; quote it if it looks like a number"
-    if kind == "literal_error":
+    if kind == "literal_error" and loc == ("kind",):
         return loc, f"{_show(value)} is not a known machine kind; known kinds: {', '.join(_KINDS)}"
+    if kind == "literal_error":
+        return loc, f"expected {(err.get('ctx') or {}).get('expected', 'another value')}, got {_show(value)}"
     if kind == "value_error":
         return loc, err["msg"].removeprefix("Value error, ")
     return loc, f"{err['msg']} (got {_show(value)})"
 
 
-def _validation_error(path: object, exc: ValidationError, lines: dict[tuple, int]) -> InputFileError:
+def _validation_error(path: object, exc: ValidationError, lines: dict[tuple, int],
+                      schema: type[BaseModel] | None = None) -> InputFileError:
+    """The first problem pydantic found in a file of ``schema`` (default :class:`HexapodFile`),
+    in the file's words, with its key path and line."""
     errors = exc.errors(include_url=False)
     # Report the outermost problem first (e.g. the leg count before a leg's contents).
     errors.sort(key=lambda e: len(e["loc"]))
-    loc, message = _describe(errors[0])
+    loc, message = _describe(errors[0], schema or HexapodFile)
     more = f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''})" if len(errors) > 1 else ""
     return InputFileError(path, f"{_key_path(loc)}: {message}{more}", line=_line_of(loc, lines))
 
@@ -627,24 +654,55 @@ def _metadata_to_file(metadata: dict) -> dict:
     return out
 
 
-#: Machine kinds: kind → (file data → machine, machine class, machine → file data).
-_KINDS: dict[str, tuple[Callable[[object, dict, dict], Mechanism], type, Callable[[Any], dict]]] = {
-    "hexapod": (_hexapod_from_file, Hexapod, _hexapod_to_file),
-    # the registry key of the Gough–Stewart hexapod (Hexapod.kind); files keep writing
-    # "hexapod" (first entry) until the machine-file registry (issue 12 item 2) switches them
-    "6-UPS": (_hexapod_from_file, Hexapod, _hexapod_to_file),
-}
+@dataclass(frozen=True)
+class MachineKind:
+    """One machine-file kind of the registry: the ``kind:`` spellings a file may give
+    (``file_kinds``, the first is the one written), the mechanism kind it builds and saves
+    (:attr:`~pkmcal.mechanisms.base.Mechanism.kind`), ``read(source, data, lines)`` (the
+    parsed YAML mapping → machine; ``lines`` maps key paths to line numbers, for errors;
+    raises :class:`InputFileError`) and ``write(machine)`` (→ the mapping to dump, floats
+    exact: :mod:`pkmcal.io._yaml`). Units are converted by the reader and writer from the
+    mechanism's declared angle flags (degrees in files, radians inside)."""
+
+    mechanism_kind: str
+    file_kinds: tuple[str, ...]
+    read: Callable[[object, dict, dict], Mechanism]
+    write: Callable[[Any], dict]
+
+
+#: The registry: ``kind:`` text of a file → its :class:`MachineKind`, in registration order
+#: (the order an unknown kind's error lists them).
+_KINDS: dict[str, MachineKind] = {}
+#: mechanism kind → the :class:`MachineKind` that saves it (the first registered).
+_WRITERS: dict[str, MachineKind] = {}
+#: The ``kind:`` of a file without one.
+DEFAULT_FILE_KIND = "hexapod"
 
 
 # -- public API ---------------------------------------------------------------------------
 
 def register_machine_kind(kind: str, reader: Callable[[object, dict, dict], Mechanism], cls: type,
-                          writer: Callable[[Any], dict]) -> None:
-    """Add a machine file ``kind``: ``reader(source, data, lines)`` builds the machine from the
-    parsed YAML mapping (``lines`` maps key paths to line numbers, for error messages) and
-    raises :class:`InputFileError`; ``writer(machine)`` returns the mapping to write for
-    machines of class ``cls`` (floats exact; see :mod:`pkmcal.io._yaml`)."""
-    _KINDS[kind] = (reader, cls, writer)
+                          writer: Callable[[Any], dict], aliases: tuple[str, ...] = ()) -> MachineKind:
+    """Add the machine file ``kind`` (and its other accepted spellings ``aliases``) to the
+    registry: files with ``kind: <kind>`` are read by ``reader(source, data, lines)``, and
+    machines whose :attr:`~pkmcal.mechanisms.base.Mechanism.kind` is ``cls.kind`` are
+    saved with ``writer(machine)`` under ``kind: <kind>`` (see :class:`MachineKind`). The
+    drivers :func:`machine_from_text` and :func:`machine_to_text` need nothing else."""
+    return add_machine_kind(MachineKind(mechanism_kind=cls.kind, file_kinds=(kind, *aliases), read=reader,
+                                        write=writer))
+
+
+def add_machine_kind(entry: MachineKind) -> MachineKind:
+    """Add ``entry`` to the registry (:func:`register_machine_kind` builds it from a class)."""
+    for text in entry.file_kinds:
+        _KINDS[text] = entry
+    _WRITERS.setdefault(entry.mechanism_kind, entry)
+    return entry
+
+
+def machine_kinds() -> tuple[str, ...]:
+    """Every ``kind:`` a machine file may give, in registration order."""
+    return tuple(_KINDS)
 
 
 def machine_from_text(text: str, source: object = "<machine file>") -> Mechanism:
@@ -660,11 +718,11 @@ def machine_from_text(text: str, source: object = "<machine file>") -> Mechanism
     if not isinstance(data, dict):
         raise InputFileError(source, f"expected a mapping of 'key: value' lines (name:, legs:, ...), "
                                      f"got a {type(data).__name__}", line=lines.get(()))
-    kind = data.get("kind", "hexapod")
+    kind = data.get("kind", DEFAULT_FILE_KIND)
     if not isinstance(kind, str) or kind not in _KINDS:
         raise InputFileError(source, f"kind: {_show(kind)} is not a known machine kind; known kinds: "
                                      f"{', '.join(_KINDS)}", line=lines.get(("kind",)))
-    return _KINDS[kind][0](source, data, lines)
+    return _KINDS[kind].read(source, data, lines)
 
 
 def read_machine_file(path: str | os.PathLike) -> Mechanism:
@@ -704,18 +762,12 @@ def load_machine(spec: str | os.PathLike) -> Mechanism:
 
 def machine_to_text(machine: Mechanism) -> str:
     """The YAML text of ``machine`` (deterministic; exact floats; angles in degrees)."""
-    for kind, (_, cls, writer) in _KINDS.items():
-        if isinstance(machine, cls):
-            body = dump_yaml(writer(machine))
-            return f"# pkmcal machine file (kind: {kind}); lengths in mm, angles in degrees\n{body}"
-    raise PkmcalError(f"cannot save machine '{machine.name}': no file format for {type(machine).__name__}")
-
-
-def _register_planar_kinds() -> None:
-    from pkmcal.io import delta_machine_file  # noqa: F401  (registers the delta kinds)
-    from pkmcal.io import planar_machine_file  # noqa: F401  (registers the planar kinds)
-    from pkmcal.io import pus_machine_file  # noqa: F401  (registers the 6-PUS kind)
-    from pkmcal.io import rss_machine_file  # noqa: F401  (registers the 6-RSS kind)
+    entry = _WRITERS.get(machine.kind)
+    if entry is None:
+        raise PkmcalError(f"cannot save machine '{machine.name}': no machine file format for its kind "
+                          f"'{machine.kind}' (kinds with one: {', '.join(_WRITERS)})")
+    body = dump_yaml(entry.write(machine))
+    return f"# pkmcal machine file (kind: {entry.file_kinds[0]}); lengths in mm, angles in degrees\n{body}"
 
 
 def save_machine(machine: Mechanism, path: str | os.PathLike) -> None:
@@ -736,19 +788,32 @@ def save_machine(machine: Mechanism, path: str | os.PathLike) -> None:
         raise PkmcalError(f"cannot save machine '{machine.name}': {exc}") from None
     if back != machine:
         raise RuntimeError(f"machine file of '{machine.name}' does not load back to the same machine")
-    if getattr(back, "metadata", {}) != getattr(machine, "metadata", {}):
+    if back.metadata != machine.metadata:
         raise PkmcalError(f"cannot save machine '{machine.name}': its metadata does not survive YAML "
                           "unchanged; use text, numbers, lists and mappings with text keys")
     atomic_write_text(path, text)
 
 
-_register_planar_kinds()
+# the Gough–Stewart hexapod (Hexapod.kind "6-UPS"): files are written "kind: hexapod", the
+# spelling every pkmcal version reads; "6-UPS" is read too
+register_machine_kind("hexapod", _hexapod_from_file, Hexapod, _hexapod_to_file, aliases=("6-UPS",))
+for _module in MACHINE_FILE_MODULES:   # the other kinds: each module registers its own
+    import_module(_module)
+if PARAMETER_FILE_KINDS:               # families in the generic layout (classes imported on first read)
+    from pkmcal.io.parameter_machine_file import register_parameter_kind
+
+    for _kind, _target in PARAMETER_FILE_KINDS.items():
+        register_parameter_kind(_kind, _target)
 
 __all__ = [
+    "DEFAULT_FILE_KIND",
     "HexapodFile",
+    "MachineKind",
+    "add_machine_kind",
     "identified_uncertainty",
     "load_machine",
     "machine_from_text",
+    "machine_kinds",
     "machine_to_text",
     "read_machine_file",
     "register_machine_kind",

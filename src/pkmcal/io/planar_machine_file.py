@@ -25,7 +25,6 @@ written exactly (:mod:`pkmcal.io._yaml`), so a save/load round trip is bit-exact
 
 from __future__ import annotations
 
-import difflib
 from pathlib import Path
 from typing import Any, Literal
 
@@ -50,6 +49,7 @@ from pkmcal.io.machine_file import (
     _validation_error,
     register_machine_kind,
 )
+from pkmcal.io.parameter_machine_file import named_keys
 from pkmcal.mechanisms.planar import Planar2Dof3Act, Planar3Dof4Act, PlanarMechanism, planar_2dof_3act, planar_3dof_4act
 
 
@@ -83,28 +83,15 @@ def _value(v: float, angle: bool) -> float:
     return deg_to_rad(v) if angle else float(v)
 
 
-def _named(path, lines, section: str, given: dict, names: tuple[str, ...], what: str, required: bool) -> None:
-    unknown = [k for k in given if k not in names]
-    if unknown:
-        close = difflib.get_close_matches(unknown[0], names, n=1)
-        hint = f" (did you mean '{close[0]}'?)" if close else ""
-        raise InputFileError(path, f"{section}.{unknown[0]}: unknown {what}{hint}; the machine's {what}s are "
-                                   f"{', '.join(names)}", line=_line_of((section, unknown[0]), lines))
-    missing = [n for n in names if n not in given]
-    if required and missing:
-        raise InputFileError(path, f"{section}: missing {', '.join(missing)}; give every {what} "
-                                   f"({', '.join(names)}; mm, angles in degrees)", line=_line_of((section,), lines))
-
-
 def _planar_from_file(path: object, data: dict, lines: dict[tuple, int]) -> PlanarMechanism:
     try:
         spec = _PlanarFile.model_validate(data)
     except ValidationError as exc:
-        raise _validation_error(path, exc, lines) from None
+        raise _validation_error(path, exc, lines, _PlanarFile) from None
     cls, factory, limit_key = _PLANAR[spec.kind]
     ref = factory()
     names, p_ang = ref.param_names, ref.param_is_angle
-    _named(path, lines, "parameters", spec.parameters, names, "parameter", required=True)
+    named_keys(path, lines, "parameters", spec.parameters, names, "parameter", required=True)
     for n, a in zip(names, p_ang):
         problem = None if a else magnitude_problem(float(spec.parameters[n]), "mm")
         if problem is not None:
@@ -112,11 +99,11 @@ def _planar_from_file(path: object, data: dict, lines: dict[tuple, int]) -> Plan
     rho = np.array([_value(spec.parameters[n], a) for n, a in zip(names, p_ang)])
     home = ref.home
     if spec.home is not None:
-        _named(path, lines, "home", spec.home, ref.pose_names, "pose coordinate", required=True)
+        named_keys(path, lines, "home", spec.home, ref.pose_names, "pose coordinate", required=True)
         home = np.array([_value(spec.home[n], a) for n, a in zip(ref.pose_names, ref.pose_is_angle)])
     workspace = ref.workspace
     if spec.workspace is not None:
-        _named(path, lines, "workspace", spec.workspace, ref.pose_names, "pose coordinate", required=True)
+        named_keys(path, lines, "workspace", spec.workspace, ref.pose_names, "pose coordinate", required=True)
         workspace = np.array([[_value(v, a) for v in spec.workspace[n]] for n, a in zip(ref.pose_names, ref.pose_is_angle)])
     kw: dict[str, Any] = {}
     if spec.limits is not None:
@@ -156,8 +143,8 @@ def _num(v: float, angle: bool):
 
 
 def _planar_to_file(m: PlanarMechanism) -> dict:
-    kind = next(k for k, (cls, _, _) in _PLANAR.items() if type(m) is cls)
-    cls, factory, limit_key = _PLANAR[kind]
+    kind = m.kind
+    _, factory, limit_key = _PLANAR[kind]
     ref = factory()
     out: dict[str, Any] = {"kind": kind, "name": m.name}
     if m.description:

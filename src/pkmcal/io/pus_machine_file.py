@@ -19,30 +19,14 @@ Floats are written exactly (:mod:`pkmcal.io._yaml`): a save/load round trip is b
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import StrictStr, ValidationError, field_validator
 
-from pkmcal.errors import InputFileError, PkmcalError, one_line
+from pkmcal.errors import InputFileError, PkmcalError
 from pkmcal.io._yaml import FlowList, deg_to_rad
-from pkmcal.io.machine_file import (
-    Deg,
-    Description,
-    Length,
-    Name,
-    PoseSpec,
-    UncertaintySpec,
-    Vec3,
-    WorkspaceSpec,
-    _metadata_from_spec,
-    _metadata_to_file,
-    _Model,
-    _validation_error,
-    register_machine_kind,
-)
-from pkmcal.io.spatial_machine_file import degrees, leg_line, pose_extras, pose_extras_to_file, six_legs
+from pkmcal.io.machine_file import Deg, Length, Vec3, _Model, register_machine_kind
+from pkmcal.io.spatial_machine_file import SpatialFile, common_kwargs, degrees, file_head, file_tail, leg_line, read_spec
 from pkmcal.mechanisms import pus_hexapod as pus
 
 
@@ -62,51 +46,32 @@ class _Limits(_Model):
     max_joint_angle: Deg | None = None
 
 
-class _File(_Model):
+class _File(SpatialFile):
+    family = "6-PUS"
     kind: Literal["6-PUS"]
-    name: Name | None = None
-    description: Description | None = None
     legs: list[_Leg]
     limits: _Limits | None = None
-    home: PoseSpec | None = None
-    workspace: WorkspaceSpec | None = None
-    uncertainty: UncertaintySpec | None = None
-    calibration: dict[StrictStr, Any] | None = None
-    metadata: dict[StrictStr, Any] | None = None
-    setup: dict[StrictStr, Any] | None = None
-
-    @field_validator("legs", mode="before")
-    @classmethod
-    def _six_legs(cls, v):
-        return six_legs(v, "6-PUS")
 
 
 def _from_file(path: object, data: dict, lines: dict[tuple, int]) -> pus.PUSHexapod:
-    try:
-        spec = _File.model_validate(data)
-    except ValidationError as exc:
-        raise _validation_error(path, exc, lines) from None
+    spec = read_spec(_File, path, data, lines)
     legs = spec.legs
     rho = np.array([v for leg in legs for v in (*leg.rail_origin, deg_to_rad(leg.tilt_x), deg_to_rad(leg.tilt_y),
                                                 float(leg.leg), *leg.platform, float(leg.offset))], dtype=float)
     kw: dict[str, Any] = {}
     if spec.limits is not None and spec.limits.max_joint_angle is not None:
         kw["max_joint_angle"] = deg_to_rad(spec.limits.max_joint_angle)
-    kw.update(pose_extras(path, spec, lines, pus.PARAM_NAMES, pus.PARAM_IS_ANGLE))
-    name = spec.name if spec.name is not None else one_line(Path(str(path)).stem)
+    kw.update(common_kwargs(path, spec, lines, pus.PARAM_NAMES, pus.PARAM_IS_ANGLE))
     try:
-        return pus.PUSHexapod(name=name, rho=rho, rails=[leg.rail for leg in legs],
-                              stroke=[leg.stroke for leg in legs], branches=[leg.branch for leg in legs],
-                              description=spec.description or "", metadata=_metadata_from_spec(spec), **kw)
+        return pus.PUSHexapod(rho=rho, rails=[leg.rail for leg in legs], stroke=[leg.stroke for leg in legs],
+                              branches=[leg.branch for leg in legs], **kw)
     except PkmcalError as exc:
         text = str(exc).split(": ", 1)[-1]
         raise InputFileError(path, f"legs: {text}", line=leg_line(text, lines)) from None
 
 
 def _to_file(m: pus.PUSHexapod) -> dict:
-    out: dict[str, Any] = {"kind": "6-PUS", "name": m.name}
-    if m.description:
-        out["description"] = m.description
+    out = file_head(m)
     g = pus._legs(m.rho)
     deg = degrees
     legs = []
@@ -124,8 +89,7 @@ def _to_file(m: pus.PUSHexapod) -> dict:
         legs.append(leg)
     out["legs"] = legs
     out["limits"] = {"max_joint_angle": deg(m.max_joint_angle)}
-    out.update(pose_extras_to_file(m, pus.PARAM_NAMES, pus.PARAM_IS_ANGLE))
-    out.update(_metadata_to_file(m.metadata))
+    out.update(file_tail(m, pus.PARAM_NAMES, pus.PARAM_IS_ANGLE))
     return out
 
 

@@ -19,31 +19,14 @@ save/load round trip is bit-exact.
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import StrictStr, ValidationError, field_validator
 
-from pkmcal.errors import InputFileError, PkmcalError, one_line
+from pkmcal.errors import InputFileError, PkmcalError
 from pkmcal.io._yaml import FlowList, deg_to_rad
-from pkmcal.io.machine_file import (
-    Deg,
-    DegRange,
-    Description,
-    Length,
-    Name,
-    PoseSpec,
-    UncertaintySpec,
-    Vec3,
-    WorkspaceSpec,
-    _metadata_from_spec,
-    _metadata_to_file,
-    _Model,
-    _validation_error,
-    register_machine_kind,
-)
-from pkmcal.io.spatial_machine_file import degrees, leg_line, pose_extras, pose_extras_to_file, six_legs
+from pkmcal.io.machine_file import Deg, DegRange, Length, Vec3, _Model, register_machine_kind
+from pkmcal.io.spatial_machine_file import SpatialFile, common_kwargs, degrees, file_head, file_tail, leg_line, read_spec
 from pkmcal.mechanisms import rss_hexapod as rss
 
 
@@ -62,30 +45,15 @@ class _Limits(_Model):
     max_joint_angle: Deg | None = None
 
 
-class _File(_Model):
+class _File(SpatialFile):
+    family = "6-RSS"
     kind: Literal["6-RSS"]
-    name: Name | None = None
-    description: Description | None = None
     legs: list[_Leg]
     limits: _Limits | None = None
-    home: PoseSpec | None = None
-    workspace: WorkspaceSpec | None = None
-    uncertainty: UncertaintySpec | None = None
-    calibration: dict[StrictStr, Any] | None = None
-    metadata: dict[StrictStr, Any] | None = None
-    setup: dict[StrictStr, Any] | None = None
-
-    @field_validator("legs", mode="before")
-    @classmethod
-    def _six_legs(cls, v):
-        return six_legs(v, "6-RSS")
 
 
 def _from_file(path: object, data: dict, lines: dict[tuple, int]) -> rss.RSSHexapod:
-    try:
-        spec = _File.model_validate(data)
-    except ValidationError as exc:
-        raise _validation_error(path, exc, lines) from None
+    spec = read_spec(_File, path, data, lines)
     rho = np.array([v for leg in spec.legs for v in (*leg.pivot, deg_to_rad(leg.beta), deg_to_rad(leg.tilt),
                                                     float(leg.crank), float(leg.rod), *leg.platform,
                                                     deg_to_rad(leg.zero))], dtype=float)
@@ -95,20 +63,16 @@ def _from_file(path: object, data: dict, lines: dict[tuple, int]) -> rss.RSSHexa
             kw["motor_range"] = tuple(deg_to_rad(v) for v in spec.limits.motor_range)
         if spec.limits.max_joint_angle is not None:
             kw["max_joint_angle"] = deg_to_rad(spec.limits.max_joint_angle)
-    kw.update(pose_extras(path, spec, lines, rss.PARAM_NAMES, rss.PARAM_IS_ANGLE))
-    name = spec.name if spec.name is not None else one_line(Path(str(path)).stem)
+    kw.update(common_kwargs(path, spec, lines, rss.PARAM_NAMES, rss.PARAM_IS_ANGLE))
     try:
-        return rss.RSSHexapod(name=name, rho=rho, description=spec.description or "",
-                              metadata=_metadata_from_spec(spec), **kw)
+        return rss.RSSHexapod(rho=rho, **kw)
     except PkmcalError as exc:
         text = str(exc).split(": ", 1)[-1]
         raise InputFileError(path, f"legs: {text}", line=leg_line(text, lines)) from None
 
 
 def _to_file(m: rss.RSSHexapod) -> dict:
-    out: dict[str, Any] = {"kind": "6-RSS", "name": m.name}
-    if m.description:
-        out["description"] = m.description
+    out = file_head(m)
     g = rss._legs(m.rho)
     deg = degrees
     legs = []
@@ -123,8 +87,7 @@ def _to_file(m: rss.RSSHexapod) -> dict:
         legs.append(leg)
     out["legs"] = legs
     out["limits"] = {"motor_range": FlowList(deg(v) for v in m.motor_range), "max_joint_angle": deg(m.max_joint_angle)}
-    out.update(pose_extras_to_file(m, rss.PARAM_NAMES, rss.PARAM_IS_ANGLE))
-    out.update(_metadata_to_file(m.metadata))
+    out.update(file_tail(m, rss.PARAM_NAMES, rss.PARAM_IS_ANGLE))
     return out
 
 

@@ -76,8 +76,9 @@ from __future__ import annotations
 
 import math
 import os
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Literal, Union
+from typing import Annotated, Any, Callable, Literal, Union
 
 import numpy as np
 from pydantic import AfterValidator, BaseModel, ConfigDict, StrictFloat, StrictStr, ValidationError, field_validator
@@ -217,7 +218,7 @@ class _Bed(_Strict):
 
 
 class _Setup(_Strict):
-    sensor: Literal["full-pose", "position", "indicators", "planar-tool", "distance", "z-probe"]
+    sensor: Any     # a registered sensor kind (:data:`_SENSOR_KINDS`), checked by _known_kind
     description: Annotated[StrictStr, AfterValidator(_one_line)] = ""
     indicators: list[tuple[Number, Number]] | None = None
     plane_offset: Number | None = None
@@ -237,6 +238,13 @@ class _Setup(_Strict):
     prior: dict[StrictStr, Union[tuple[Number, Number], StrictStr]] | None = None
     sessions: dict | None = None    # checked by _sessions (labels are free text)
 
+    @field_validator("sensor")
+    @classmethod
+    def _known_kind(cls, v):
+        if not isinstance(v, str) or v not in _SENSOR_KINDS:
+            raise ValueError(f"must be one of {', '.join(_SENSOR_KINDS)}")
+        return v
+
     @field_validator("free")
     @classmethod
     def _each_once(cls, v):
@@ -247,23 +255,43 @@ class _Setup(_Strict):
         return v
 
 
-#: Keys allowed for each sensor kind (besides sensor, description, free, noise).
-_SENSOR_KEYS = {
-    "full-pose": ("world", "tool"),
-    "position": ("target", "world"),
-    "indicators": ("indicators", "plane_offset", "zero", "plate"),
-    "planar-tool": ("target", "world"),
-    "distance": ("pivots", "ball", "lengths"),
-    "z-probe": ("probe_offset", "bed"),
-}
-_NOISE_KEYS = {
-    "full-pose": ("position", "orientation", "orientation_deg"),
-    "position": ("reading",),
-    "indicators": ("reading",),
-    "planar-tool": ("reading",),
-    "distance": ("reading",),
-    "z-probe": ("reading",),
-}
+@dataclass(frozen=True)
+class SensorFileKind:
+    """One ``sensor:`` kind of setup files, as the registry holds it: its own setup keys
+    (``keys``, fields of the setup schema besides ``sensor``, ``description``, ``free``,
+    ``noise``, ``prior``, ``sessions``) and noise keys (``noise_keys``, besides
+    ``actuator``); ``read(ctx)`` → (sensor in file units, reading std (m,)) from a
+    :class:`SetupReading`; ``write(sensor)`` → its keys (exact floats, file units);
+    ``write_noise(std, uniform)`` → its noise keys; ``simulation``: the setup may carry the
+    statics of ``pkmcal simulate``/``verify`` (``simulation:``)."""
+
+    kind: str
+    keys: tuple[str, ...]
+    read: Callable[["SetupReading"], tuple[Any, np.ndarray]]
+    write: Callable[[Any], dict]
+    noise_keys: tuple[str, ...] = ("reading",)
+    write_noise: Callable[[np.ndarray, bool], dict] | None = None
+    simulation: bool = False
+
+
+#: The registry: ``sensor:`` kind → :class:`SensorFileKind`, in the order errors list them.
+_SENSOR_KINDS: dict[str, SensorFileKind] = {}
+
+
+def register_sensor_kind(entry: SensorFileKind) -> SensorFileKind:
+    """Add a ``sensor:`` kind to setup files: :func:`load_setup` and :func:`setup_to_dict`
+    read and write it with ``entry`` and need nothing else. Its ``keys`` must be keys of
+    the setup schema (:class:`_Setup`): a new key is added there."""
+    unknown = [k for k in entry.keys if k not in _Setup.model_fields]
+    if unknown:
+        raise ValueError(f"sensor kind '{entry.kind}': {', '.join(unknown)} not setup keys; add them to _Setup")
+    _SENSOR_KINDS[entry.kind] = entry
+    return entry
+
+
+def sensor_kinds() -> tuple[str, ...]:
+    """Every ``sensor:`` kind a setup file may give."""
+    return tuple(_SENSOR_KINDS)
 
 
 # -- loading -----------------------------------------------------------------------------
@@ -332,7 +360,7 @@ def load_setup(path: str | os.PathLike, machine=None) -> MeasurementSetup:
     except YamlSyntaxError as exc:
         raise InputFileError(path, str(exc), line=exc.line) from None
     if not isinstance(data, dict):
-        raise InputFileError(path, "a setup file is a YAML mapping starting with 'sensor: full-pose|position|indicators'")
+        raise InputFileError(path, f"a setup file is a YAML mapping starting with 'sensor: {'|'.join(_SENSOR_KINDS)}'")
     data, lines = _setup_mapping(path, data, lines)
     try:
         spec = _Setup.model_validate(data)
@@ -342,7 +370,7 @@ def load_setup(path: str | os.PathLike, machine=None) -> MeasurementSetup:
         loc = tuple(err["loc"])
         if err["type"] == "missing":
             what = "is missing" + (
-                "; say which sensor: full-pose, position or indicators" if loc == ("sensor",)
+                f"; say which sensor: one of {', '.join(_SENSOR_KINDS)}" if loc == ("sensor",)
                 else "; give the actuator noise (mm), e.g. noise: {reading: 0.01, actuator: 0.005}"
                 if loc == ("noise", "actuator") else
                 "; give the actuator stiffness, e.g. simulation: {stiffness: 2.0e4, load: [0, -30]} "
@@ -476,96 +504,21 @@ def _build(path, lines, spec: _Setup, raw: dict | None = None) -> MeasurementSet
     a setup written by :func:`setup_to_yaml` reads back exactly)."""
     raw = raw if isinstance(raw, dict) else {}
     raw_noise = raw.get("noise") if isinstance(raw.get("noise"), dict) else {}
-    kind = spec.sensor
-    for key in ("indicators", "plane_offset", "zero", "plate", "world", "tool", "target", "pivots", "ball",
-                "lengths", "probe_offset", "bed"):
-        if getattr(spec, key) is not None and key not in _SENSOR_KEYS[kind]:
-            _fail(path, lines, (key,), f"does not apply to sensor '{kind}' (its keys: {', '.join(_SENSOR_KEYS[kind])})")
+    entry = _SENSOR_KINDS[spec.sensor]
+    kind = entry.kind
+    sensor_keys = {k for e in _SENSOR_KINDS.values() for k in e.keys}
+    for key in (k for k in _Setup.model_fields if k in sensor_keys):   # in the schema's order
+        if getattr(spec, key) is not None and key not in entry.keys:
+            _fail(path, lines, (key,), f"does not apply to sensor '{kind}' (its keys: {', '.join(entry.keys)})")
     noise = spec.noise
     for key in ("reading", "position", "orientation", "orientation_deg"):
-        if getattr(noise, key) is not None and key not in _NOISE_KEYS[kind]:
+        if getattr(noise, key) is not None and key not in entry.noise_keys:
             _fail(path, lines, ("noise", key),
-                  f"does not apply to sensor '{kind}' (its noise keys: {', '.join(_NOISE_KEYS[kind])}, actuator)")
-    free = None if spec.free is None else tuple(spec.free)
-
-    def tf(t: _Transform | None):
-        """x, y, z, a, b, c as written (mm, degrees); :func:`_from_file_units` converts."""
-        return None if t is None else np.array([t.x, t.y, t.z, t.a, t.b, t.c])
-
+                  f"does not apply to sensor '{kind}' (its noise keys: {', '.join(entry.noise_keys)}, actuator)")
+    ctx = SetupReading(path=path, lines=lines, spec=spec, noise=noise, raw_noise=raw_noise,
+                       free=None if spec.free is None else tuple(spec.free))
     try:
-        if kind == "indicators":
-            if spec.indicators is None:
-                _fail(path, lines, ("indicators",), "is missing; give the indicator positions [[x, y], ...] in mm "
-                      "(base frame), at least 3")
-            if spec.plane_offset is None:
-                _fail(path, lines, ("plane_offset",), "is missing; give the distance (mm) of the platform origin "
-                      "above the platform's lower plane touched by the indicators")
-            if len(spec.indicators) < 3:
-                _fail(path, lines, ("indicators",), f"needs at least 3 indicators; got {len(spec.indicators)}")
-            k = len(spec.indicators)
-            if spec.zero is not None and len(spec.zero) != k:
-                _fail(path, lines, ("zero",), f"give one zero offset per indicator ({k}); got {len(spec.zero)}")
-            sensor = IndicatorSensor(positions=np.array(spec.indicators, dtype=float),
-                                     plane_offset=spec.plane_offset, zero=spec.zero, plate=tf(spec.plate), free=free)
-            reading = noise.reading
-            if reading is None:
-                _fail(path, lines, ("noise", "reading"), "is missing; give the indicator noise (mm)")
-            reading_std = _expand(path, lines, reading, k, ("noise", "reading"), "mm")
-        elif kind == "planar-tool":
-            if spec.target is not None and spec.target.z != 0:
-                _fail(path, lines, ("target", "z"), "a planar tool point has no z; give target: {x, y} (mm)")
-            if spec.world is not None:
-                for key in ("z", "a", "b"):
-                    if getattr(spec.world, key) != 0:
-                        _fail(path, lines, ("world", key), "a planar tracker frame has only x, y (mm) and c (deg)")
-            target = None if spec.target is None else [spec.target.x, spec.target.y]
-            world = None if spec.world is None else [spec.world.x, spec.world.y, spec.world.c]
-            sensor = PlanarToolSensor(n_pose=2, target=target, world=world, free=free)
-            if noise.reading is None:
-                _fail(path, lines, ("noise", "reading"), "is missing; give the tracker noise (mm)")
-            reading_std = _expand(path, lines, noise.reading, 2, ("noise", "reading"), "mm")
-        elif kind == "distance":
-            if not spec.pivots:
-                _fail(path, lines, ("pivots",), "is missing; give the pivot points [[x, y, z], ...] in mm (base frame), "
-                      "at least one")
-            k = len(spec.pivots)
-            if spec.lengths is not None and len(spec.lengths) != k:
-                _fail(path, lines, ("lengths",), f"give one reference length per pivot ({k}); got {len(spec.lengths)}")
-            ball = None if spec.ball is None else [spec.ball.x, spec.ball.y, spec.ball.z]
-            sensor = DistanceSensor(pivots=np.array(spec.pivots, dtype=float), ball=ball,
-                                    lengths=spec.lengths, free=free)
-            if noise.reading is None:
-                _fail(path, lines, ("noise", "reading"), "is missing; give the distance noise (mm)")
-            reading_std = _expand(path, lines, noise.reading, k, ("noise", "reading"), "mm")
-        elif kind == "z-probe":
-            bed = None if spec.bed is None else [spec.bed.z, spec.bed.a, spec.bed.b]
-            sensor = ZProbeSensor(probe_offset=spec.probe_offset, bed=bed, free=free)
-            if noise.reading is None:
-                _fail(path, lines, ("noise", "reading"), "is missing; give the probe's trigger noise (mm), e.g. the "
-                      "standard deviation PROBE_ACCURACY reports")
-            reading_std = _expand(path, lines, noise.reading, 1, ("noise", "reading"), "mm")
-        elif kind == "position":
-            target = None if spec.target is None else [spec.target.x, spec.target.y, spec.target.z]
-            sensor = PositionSensor(target=target, world=tf(spec.world), free=free)
-            if noise.reading is None:
-                _fail(path, lines, ("noise", "reading"), "is missing; give the tracker noise (mm)")
-            reading_std = _expand(path, lines, noise.reading, 3, ("noise", "reading"), "mm")
-        else:
-            sensor = FullPoseSensor(world=tf(spec.world), tool=tf(spec.tool), free=free)
-            if noise.position is None:
-                _fail(path, lines, ("noise", "position"), "is missing; give the position noise (mm)")
-            if (noise.orientation is None) == (noise.orientation_deg is None):
-                _fail(path, lines, ("noise", "orientation"),
-                      "give exactly one of orientation (rad) or orientation_deg (degrees)")
-            pos = _expand(path, lines, noise.position, 3, ("noise", "position"), "mm")
-            if noise.orientation is not None:
-                ori = _expand(path, lines, noise.orientation, 3, ("noise", "orientation"), "rad")
-            else:
-                raw_ori = (raw_noise or {}).get("orientation_deg", noise.orientation_deg)   # numbers with their text
-                _expand(path, lines, raw_ori, 3, ("noise", "orientation_deg"), "deg")   # checks the count
-                ori = np.broadcast_to(np.array([deg_to_rad(v) for v in
-                                                (raw_ori if isinstance(raw_ori, list) else [raw_ori])]), (3,)).copy()
-            reading_std = np.concatenate([pos, ori])
+        sensor, reading_std = entry.read(ctx)
         sensor = _from_file_units(sensor, raw)
     except InputFileError:
         raise
@@ -576,7 +529,7 @@ def _build(path, lines, spec: _Setup, raw: dict | None = None) -> MeasurementSet
         reading_std, actuator = reading_std / SQRT3, actuator / SQRT3
     simulation = None
     if spec.simulation is not None:
-        if kind != "planar-tool":
+        if not entry.simulation:
             _fail(path, lines, ("simulation",), "applies to redundantly actuated planar machines (sensor: planar-tool) "
                   "only; remove it")
         try:
@@ -659,28 +612,6 @@ def _group_dict(sensor, field: str) -> dict:
             for name, v, ang in zip(group.names, getattr(sensor, field), group.is_angle)}
 
 
-def _z_probe_keys(s: ZProbeSensor) -> dict:
-    """The z-probe's keys: ``probe_offset`` (mm) and, unless 0, ``bed`` (mm, degrees)."""
-    doc: dict = {"probe_offset": FlowList(float(v) for v in s.probe_offset)}
-    if np.any(s.bed != 0):
-        doc["bed"] = _group_dict(s, "bed")
-    return doc
-
-
-def _distance_keys(s: DistanceSensor) -> dict:
-    """The distance sensor's keys: ``pivots``, ``ball`` and, unless 0, ``lengths`` (mm)."""
-    doc: dict = {"pivots": [FlowList(float(v) for v in row) for row in s.pivots.reshape(-1, 3)],
-                 "ball": _group_dict(s, "ball")}
-    if np.any(s.lengths != 0):
-        doc["lengths"] = FlowList(float(v) for v in s.lengths)
-    return doc
-
-
-#: The sensor-specific keys written for a sensor kind (the kinds without an entry are written
-#: by the branches of :func:`setup_to_yaml`).
-_KIND_KEYS = {ZProbeSensor.kind: _z_probe_keys, DistanceSensor.kind: _distance_keys}
-
-
 def setup_to_yaml(setup: MeasurementSetup) -> str:
     """YAML text of a setup (full precision; :func:`load_setup` reads it back)."""
     head = "# pkmcal measurement setup: mm, angles in degrees (transforms, orientation_deg noise)\n"
@@ -712,40 +643,16 @@ def setup_to_dict(setup: MeasurementSetup) -> dict:
     """The mapping of a setup file for ``setup`` (exact floats; :func:`setup_to_yaml` dumps it)."""
     s, noise = setup.sensor, setup.noise
     doc: dict = {"sensor": s.kind}
-    if s.kind in _KIND_KEYS:      # by the declared kind, as the loader reads it (no type probe)
-        doc.update(_KIND_KEYS[s.kind](s))
-    elif isinstance(s, IndicatorSensor):
-        doc["indicators"] = [FlowList(float(v) for v in row) for row in s.positions]
-        doc["plane_offset"] = float(s.plane_offset)
-        if np.any(s.zero != 0):
-            doc["zero"] = FlowList(float(v) for v in s.zero)
-        if not s.plate_is_identity:
-            doc["plate"] = _group_dict(s, "plate")
-    elif isinstance(s, PositionSensor):
-        doc["target"] = _group_dict(s, "target")
-        if np.any(s.world != 0):
-            doc["world"] = _group_dict(s, "world")
-    elif isinstance(s, PlanarToolSensor):
-        doc["target"] = _group_dict(s, "target")
-        if np.any(s.world != 0):
-            doc["world"] = _group_dict(s, "world")
-    elif isinstance(s, FullPoseSensor):
-        if np.any(s.world != 0):
-            doc["world"] = _group_dict(s, "world")
-        if np.any(s.tool != 0):
-            doc["tool"] = _group_dict(s, "tool")
-    else:
+    entry = _SENSOR_KINDS.get(s.kind)
+    if entry is None:
         raise PkmcalError(f"cannot save a setup with a '{s.kind}' sensor")
+    doc.update(entry.write(s))
     if s.free is not None:
         doc["free"] = FlowList(s.free)
     uniform = noise.distribution == "uniform"
     nd: dict = {"distribution": noise.distribution}
     std = np.asarray(noise.reading_std, dtype=float).reshape(-1)
-    if isinstance(s, FullPoseSensor):
-        nd["position"] = _values(std[:3], uniform)
-        nd["orientation_deg"] = _values_deg(std[3:], uniform)
-    else:
-        nd["reading"] = _values(std, uniform)
+    nd.update((entry.write_noise or _reading_noise)(std, uniform))
     nd["actuator"] = _values(noise.actuator_std, uniform)
     doc["noise"] = nd
     if setup.simulation is not None:
@@ -759,6 +666,186 @@ def setup_to_dict(setup: MeasurementSetup) -> dict:
         doc["prior"] = {p.pattern: (f"± {p.std!r}" if p.mean is None else FlowList([float(p.mean), float(p.std)]))
                         for p in setup.priors}
     return doc
+
+
+def _reading_noise(std: np.ndarray, uniform: bool) -> dict:
+    """The noise key of most sensors: ``reading`` (one value or one per reading)."""
+    return {"reading": _values(std, uniform)}
+
+
+# -- sensor kinds: each registers its reader and writer (the obvious place for a new kind) ----
+
+
+@dataclass(frozen=True)
+class SetupReading:
+    """What a kind's reader gets: the file (``path``, ``lines`` for errors), the validated
+    setup ``spec`` and its ``noise``, the noise mapping as parsed (``raw_noise``: numbers
+    with their text) and the ``free`` names."""
+
+    path: object
+    lines: dict
+    spec: _Setup
+    noise: _Noise
+    raw_noise: dict
+    free: tuple[str, ...] | None
+
+    def fail(self, loc: tuple, message: str):
+        """Raise the :class:`InputFileError` of key ``loc``."""
+        _fail(self.path, self.lines, loc, message)
+
+    def expand(self, value, n: int, loc: tuple, unit: str) -> np.ndarray:
+        """One value or n values → array (n,)."""
+        return _expand(self.path, self.lines, value, n, loc, unit)
+
+    def reading_std(self, n: int, what: str) -> np.ndarray:
+        """``noise.reading`` for ``n`` readings (mm); missing: an error naming ``what``."""
+        if self.noise.reading is None:
+            self.fail(("noise", "reading"), f"is missing; give {what}")
+        return self.expand(self.noise.reading, n, ("noise", "reading"), "mm")
+
+
+def _pose6(t: _Transform | None):
+    """x, y, z, a, b, c as written (mm, degrees); :func:`_from_file_units` converts."""
+    return None if t is None else np.array([t.x, t.y, t.z, t.a, t.b, t.c])
+
+
+def _read_full_pose(ctx: SetupReading):
+    spec, noise = ctx.spec, ctx.noise
+    sensor = FullPoseSensor(world=_pose6(spec.world), tool=_pose6(spec.tool), free=ctx.free)
+    if noise.position is None:
+        ctx.fail(("noise", "position"), "is missing; give the position noise (mm)")
+    if (noise.orientation is None) == (noise.orientation_deg is None):
+        ctx.fail(("noise", "orientation"), "give exactly one of orientation (rad) or orientation_deg (degrees)")
+    pos = ctx.expand(noise.position, 3, ("noise", "position"), "mm")
+    if noise.orientation is not None:
+        ori = ctx.expand(noise.orientation, 3, ("noise", "orientation"), "rad")
+    else:
+        raw_ori = (ctx.raw_noise or {}).get("orientation_deg", noise.orientation_deg)   # numbers with their text
+        ctx.expand(raw_ori, 3, ("noise", "orientation_deg"), "deg")   # checks the count
+        ori = np.broadcast_to(np.array([deg_to_rad(v) for v in
+                                        (raw_ori if isinstance(raw_ori, list) else [raw_ori])]), (3,)).copy()
+    return sensor, np.concatenate([pos, ori])
+
+
+def _write_full_pose(s: FullPoseSensor) -> dict:
+    doc: dict = {}
+    if np.any(s.world != 0):
+        doc["world"] = _group_dict(s, "world")
+    if np.any(s.tool != 0):
+        doc["tool"] = _group_dict(s, "tool")
+    return doc
+
+
+def _full_pose_noise(std: np.ndarray, uniform: bool) -> dict:
+    return {"position": _values(std[:3], uniform), "orientation_deg": _values_deg(std[3:], uniform)}
+
+
+def _read_position(ctx: SetupReading):
+    spec = ctx.spec
+    target = None if spec.target is None else [spec.target.x, spec.target.y, spec.target.z]
+    sensor = PositionSensor(target=target, world=_pose6(spec.world), free=ctx.free)
+    return sensor, ctx.reading_std(3, "the tracker noise (mm)")
+
+
+def _write_target_world(s) -> dict:
+    """``target`` and, unless 0, ``world`` (the position and planar-tool trackers)."""
+    doc: dict = {"target": _group_dict(s, "target")}
+    if np.any(s.world != 0):
+        doc["world"] = _group_dict(s, "world")
+    return doc
+
+
+def _read_indicators(ctx: SetupReading):
+    spec = ctx.spec
+    if spec.indicators is None:
+        ctx.fail(("indicators",), "is missing; give the indicator positions [[x, y], ...] in mm (base frame), at least 3")
+    if spec.plane_offset is None:
+        ctx.fail(("plane_offset",), "is missing; give the distance (mm) of the platform origin above the platform's "
+                 "lower plane touched by the indicators")
+    if len(spec.indicators) < 3:
+        ctx.fail(("indicators",), f"needs at least 3 indicators; got {len(spec.indicators)}")
+    k = len(spec.indicators)
+    if spec.zero is not None and len(spec.zero) != k:
+        ctx.fail(("zero",), f"give one zero offset per indicator ({k}); got {len(spec.zero)}")
+    sensor = IndicatorSensor(positions=np.array(spec.indicators, dtype=float), plane_offset=spec.plane_offset,
+                             zero=spec.zero, plate=_pose6(spec.plate), free=ctx.free)
+    return sensor, ctx.reading_std(k, "the indicator noise (mm)")
+
+
+def _write_indicators(s: IndicatorSensor) -> dict:
+    doc: dict = {"indicators": [FlowList(float(v) for v in row) for row in s.positions],
+                 "plane_offset": float(s.plane_offset)}
+    if np.any(s.zero != 0):
+        doc["zero"] = FlowList(float(v) for v in s.zero)
+    if not s.plate_is_identity:
+        doc["plate"] = _group_dict(s, "plate")
+    return doc
+
+
+def _read_planar_tool(ctx: SetupReading):
+    spec = ctx.spec
+    if spec.target is not None and spec.target.z != 0:
+        ctx.fail(("target", "z"), "a planar tool point has no z; give target: {x, y} (mm)")
+    if spec.world is not None:
+        for key in ("z", "a", "b"):
+            if getattr(spec.world, key) != 0:
+                ctx.fail(("world", key), "a planar tracker frame has only x, y (mm) and c (deg)")
+    target = None if spec.target is None else [spec.target.x, spec.target.y]
+    world = None if spec.world is None else [spec.world.x, spec.world.y, spec.world.c]
+    sensor = PlanarToolSensor(n_pose=2, target=target, world=world, free=ctx.free)
+    return sensor, ctx.reading_std(2, "the tracker noise (mm)")
+
+
+def _read_distance(ctx: SetupReading):
+    spec = ctx.spec
+    if not spec.pivots:
+        ctx.fail(("pivots",), "is missing; give the pivot points [[x, y, z], ...] in mm (base frame), at least one")
+    k = len(spec.pivots)
+    if spec.lengths is not None and len(spec.lengths) != k:
+        ctx.fail(("lengths",), f"give one reference length per pivot ({k}); got {len(spec.lengths)}")
+    ball = None if spec.ball is None else [spec.ball.x, spec.ball.y, spec.ball.z]
+    sensor = DistanceSensor(pivots=np.array(spec.pivots, dtype=float), ball=ball, lengths=spec.lengths, free=ctx.free)
+    return sensor, ctx.reading_std(k, "the distance noise (mm)")
+
+
+def _write_distance(s: DistanceSensor) -> dict:
+    """``pivots``, ``ball`` and, unless 0, ``lengths`` (mm)."""
+    doc: dict = {"pivots": [FlowList(float(v) for v in row) for row in s.pivots.reshape(-1, 3)],
+                 "ball": _group_dict(s, "ball")}
+    if np.any(s.lengths != 0):
+        doc["lengths"] = FlowList(float(v) for v in s.lengths)
+    return doc
+
+
+def _read_z_probe(ctx: SetupReading):
+    spec = ctx.spec
+    bed = None if spec.bed is None else [spec.bed.z, spec.bed.a, spec.bed.b]
+    sensor = ZProbeSensor(probe_offset=spec.probe_offset, bed=bed, free=ctx.free)
+    return sensor, ctx.reading_std(1, "the probe's trigger noise (mm), e.g. the standard deviation "
+                                      "PROBE_ACCURACY reports")
+
+
+def _write_z_probe(s: ZProbeSensor) -> dict:
+    """``probe_offset`` (mm) and, unless 0, ``bed`` (mm, degrees)."""
+    doc: dict = {"probe_offset": FlowList(float(v) for v in s.probe_offset)}
+    if np.any(s.bed != 0):
+        doc["bed"] = _group_dict(s, "bed")
+    return doc
+
+
+# The built-in kinds, in the order errors list them. A new kind: its reader and writer above,
+# its keys in _Setup when new, and one line here.
+register_sensor_kind(SensorFileKind(FullPoseSensor.kind, ("world", "tool"), _read_full_pose, _write_full_pose,
+                                    noise_keys=("position", "orientation", "orientation_deg"),
+                                    write_noise=_full_pose_noise))
+register_sensor_kind(SensorFileKind(PositionSensor.kind, ("target", "world"), _read_position, _write_target_world))
+register_sensor_kind(SensorFileKind(IndicatorSensor.kind, ("indicators", "plane_offset", "zero", "plate"),
+                                    _read_indicators, _write_indicators))
+register_sensor_kind(SensorFileKind(PlanarToolSensor.kind, ("target", "world"), _read_planar_tool,
+                                    _write_target_world, simulation=True))
+register_sensor_kind(SensorFileKind(DistanceSensor.kind, ("pivots", "ball", "lengths"), _read_distance,
+                                    _write_distance))
+register_sensor_kind(SensorFileKind(ZProbeSensor.kind, ("probe_offset", "bed"), _read_z_probe, _write_z_probe))
 
 
 def save_setup(setup: MeasurementSetup, path: str | os.PathLike) -> None:

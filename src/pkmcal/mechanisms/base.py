@@ -156,11 +156,23 @@ class Mechanism(ABC):
     #: Optional features, asked as ``"x" in mech.abilities``: ``"leg-lengths"`` (has
     #: ``leg_lengths``, ``fk_lengths``, ``length_param_jacobian``, the reading map
     #: L = L0 + g λ: ``lengths_from_readings``, ``readings_from_lengths``, ``reading_gains``,
-    #: ``lengths_from_readings_param_jacobian``), ``"drawing"`` (has
-    #: ``draw_segments``), ``"linuxcnc"`` (exportable to a LinuxCNC kinematics module),
-    #: ``"pose-convention"`` (the pose coordinates are the platform frame's x, y, z, a, b, c
-    #: of :mod:`pkmcal.conventions`: ``frame`` is ``Frame.from_poses``), ``"planar"``.
+    #: ``lengths_from_readings_param_jacobian``), ``"drawing"`` (has ``leg_vectors`` and
+    #: ``base``: the report draws it), ``"linuxcnc"`` (exportable to a LinuxCNC kinematics
+    #: module), ``"pose-convention"`` (the pose coordinates are the platform frame's x, y, z,
+    #: a, b, c of :mod:`pkmcal.conventions`: ``frame`` is ``Frame.from_poses``), ``"stroke"``
+    #: (:meth:`reading_range` is an actuator stroke, exported as such), ``"planar"``.
     abilities: frozenset[str] = frozenset()
+    #: One line of free text (machine files' ``description``); every concrete machine holds it.
+    description: str = ""
+    #: Free-form information carried along (``calibration``, ``setup`` of an identified
+    #: machine); every concrete machine holds it as a field, empty by default.
+    metadata: Mapping = MappingProxyType({})
+    #: Limit keywords of the constructor → True for angles (a number or a pair), the
+    #: ``limits:`` of the generic machine file (:mod:`pkmcal.io.parameter_machine_file`).
+    limit_keywords: Mapping[str, bool] = MappingProxyType({})
+    #: The workspace box (n, 2) the machine file declares (internal units), None when it
+    #: declares none; :meth:`workspace_box` is the box searched in either case.
+    workspace: np.ndarray | None = None
     #: True when the platform frame depends on ρ (a tool offset): then
     #: :meth:`frame_jacobians` gives T_ρ and the engine adds (∂y/∂twist) · T_ρ to ∂y/∂ρ.
     frame_depends_on_params: bool = False
@@ -339,6 +351,12 @@ class Mechanism(ABC):
         r = self.assembly_signs(ref, params)
         r = np.broadcast_to(r, s.shape) if r.shape[0] == 1 else r
         return np.all((s == r) | (s == 0) | (r == 0), axis=1)
+
+    def reach(self) -> float | None:
+        """An upper bound (mm) of how far the platform can be from the base origin, the
+        half-width ``pkmcal info`` searches each translation over; None when the machine
+        states none (1000 mm is searched)."""
+        return None
 
     def reading_range(self) -> np.ndarray | None:
         """(l, 2) [min, max] of each actuator reading (internal units) where the machine

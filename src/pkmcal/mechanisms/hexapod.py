@@ -144,7 +144,7 @@ class Hexapod(SpatialPlatform):
 
     kind = "6-UPS"
     actuator_names = tuple(f"lambda{i + 1}" for i in range(N_LEGS))
-    abilities = frozenset({"leg-lengths", "drawing", "linuxcnc", "pose-convention"})
+    abilities = frozenset({"leg-lengths", "drawing", "linuxcnc", "pose-convention", "stroke"})
     point_sets = MappingProxyType({"base joints": tuple(f"b{i + 1}" for i in range(N_LEGS)),
                                    "platform joints": tuple(f"a{i + 1}" for i in range(N_LEGS))})
     #: The gains are held unless freed by name (``--free 'gain_*'``; module docstring).
@@ -490,6 +490,12 @@ class Hexapod(SpatialPlatform):
         return _kernels().twist_det_signs(poses, base, platform)[:, None]
 
     # -- limits -------------------------------------------------------------------------
+
+    def reach(self) -> float:
+        """The longest leg at full stroke plus the farthest base joint from the origin (mm)."""
+        top = np.asarray(self.stroke)[:, 1]
+        return float(np.max(self.lengths_from_readings(top))) + float(np.max(np.linalg.norm(np.asarray(self.base),
+                                                                                              axis=1)))
 
     def reading_range(self) -> np.ndarray:
         """The stroke (6, 2), in reading units (:attr:`actuator_unit`)."""

@@ -121,6 +121,7 @@ class PUSHexapod(ParameterVector, SpatialPlatform):
     metadata: dict = field(default_factory=dict, compare=False)
 
     kind: ClassVar[str] = "6-PUS"
+    abilities: ClassVar[frozenset[str]] = frozenset({"pose-convention", "stroke"})
     PARAM_NAMES: ClassVar[tuple[str, ...]] = PARAM_NAMES
     PARAM_IS_ANGLE: ClassVar[tuple[bool, ...]] = PARAM_IS_ANGLE
     LABEL: ClassVar[str] = "6-PUS hexapod"

@@ -103,7 +103,7 @@ def build_figures(data: ReportData, png: bool = True) -> list[F.RenderedFigure]:
     """All figures of the report, rendered (deterministic bytes)."""
     out: list[F.RenderedFigure] = []
     nominal = data.nominal
-    if hasattr(nominal, "leg_vectors") and hasattr(nominal, "base"):
+    if "drawing" in nominal.abilities:
         shown = F.pick_display_poses(data.poses, np.asarray(nominal.home_pose))
         titles = ["home", "most tilted", "farthest from home"][: len(shown)]
         out.append(F.render(F.machine_poses_figure(nominal, shown, titles), "machine-poses",
