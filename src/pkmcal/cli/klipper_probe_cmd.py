@@ -5,6 +5,12 @@ lines of a Klipper console log or the ``#*#`` DELTA_CALIBRATE block of a printer
 (:mod:`pkmcal.io.klipper_probe`) and writes the measurement CSV that ``pkmcal identify
 DELTA.yaml MEAS.csv --setup PROBE.yaml`` fits: ``lambda1..3`` (carriage positions),
 ``probe_z`` and the firmware's pose ``cmd_x..cmd_z``. Registered in the ``import`` group.
+
+``pkmcal import klipper-analyze CFG_OR_LOG --machine DELTA.yaml -o PAIRS.csv`` reads
+Klipper's DELTA_ANALYZE printed-object distances and the probe heights
+(:mod:`pkmcal.io.klipper_analyze`) as measurements of pose pairs (``lambda1..3``,
+``lambda1_2..lambda3_2``, ``probe_z``, ``distance``, ``cmd_*``), for a ``printed-distance``
+setup.
 """
 
 from __future__ import annotations
@@ -62,4 +68,52 @@ def klipper_probe_cmd(source: str, machine_spec: str, setup_spec: str, output: s
         click.echo(f"wrote {output}: {len(result.measurements)} pose(s)", err=True)
 
 
-__all__ = ["klipper_probe_cmd"]
+@click.command("klipper-analyze", epilog=examples(
+    "pkmcal import klipper-analyze examples/klipper/delta-analyze.log --machine kossel-mini -o pairs.csv"))
+@click.argument("source", metavar="CFG_OR_LOG")
+@click.option("--machine", "machine_spec", required=True, metavar="DELTA.yaml",
+              help="The printer's machine file (its firmware configuration), or a built-in name.")
+@click.option("--setup", "setup_spec", default="printed-distance-klipper", show_default=True, metavar="SETUP.yaml",
+              help="The printed-distance setup: its probe_offset is Klipper's [probe] x_offset, y_offset, z_offset.")
+@output_option("PAIRS.csv", "Measurement file to write")
+def klipper_analyze_cmd(source: str, machine_spec: str, setup_spec: str, output: str | None) -> None:
+    """Read Klipper's DELTA_ANALYZE distances and probe heights as pose-pair measurements.
+
+    CFG_OR_LOG: a printer.cfg whose SAVE_CONFIG (#*#) block holds [delta_calibrate]
+    distanceN with distanceN_pos1/_pos2 and heightN with heightN_pos (steps below the
+    endstops); or a console log with the DELTA_ANALYZE CENTER_DISTS=... CENTER_PILLAR_WIDTHS=...
+    OUTER_DISTS=... OUTER_PILLAR_WIDTHS=... [SCALE=...] commands and the probe result lines.
+    Each row is two points: a distance row holds the carriage positions of both printed points
+    and 'distance'; a height row holds one probed point twice and 'probe_z'.
+    """
+    check_output(output, [source])
+    from pkmcal.errors import PkmcalError
+    from pkmcal.io.klipper_analyze import read_klipper_analyze
+    from pkmcal.io.machine_file import load_machine
+    from pkmcal.io.measurements import measurement_columns, save_measurements
+    from pkmcal.io.setup_file import load_setup
+    from pkmcal.io.tables import format_table
+    from pkmcal.mechanisms.pose_pairs import PosePairs
+
+    machine = load_machine(machine_spec)
+    if machine.kind != "linear-delta":
+        raise PkmcalError(f"--machine {machine_spec}: DELTA_ANALYZE is Klipper's linear delta calibration; machine "
+                          f"'{machine.name}' is a {machine.kind or 'machine of another kind'}")
+    pairs = PosePairs(machine)
+    setup = load_setup(setup_spec, pairs)
+    if setup.sensor.kind != "printed-distance":
+        raise PkmcalError(f"--setup {setup_spec}: a '{setup.sensor.kind}' setup; DELTA_ANALYZE results are read "
+                          "with a 'sensor: printed-distance' setup")
+    result = read_klipper_analyze(source, machine, setup.sensor.probe_offset)
+    comment = (f"from Klipper DELTA_ANALYZE results {source}; each row a pair of poses",)
+    if to_stdout(output):
+        click.echo(format_table(measurement_columns(result.measurements, pairs, setup)), nl=False)
+    else:
+        save_measurements(output, result.measurements, pairs, setup, comments=comment)
+    for note in result.notes:
+        click.echo(f"note: {note}", err=True)
+    if not to_stdout(output):
+        click.echo(f"wrote {output}: {len(result.measurements)} row(s)", err=True)
+
+
+__all__ = ["klipper_analyze_cmd", "klipper_probe_cmd"]

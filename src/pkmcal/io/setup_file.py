@@ -51,6 +51,14 @@ the base frame), :mod:`pkmcal.sensors.z_probe`::
     free: [bed.a, bed.b]              # optional (default none): also probe.x/y/z, bed.z
     noise: {reading: 0.005, actuator: 0.0036}   # probe trigger std, carriage std (mm)
 
+Printed-object distances with the probe heights (Klipper's ``DELTA_ANALYZE``; the machine
+read as pose pairs), :mod:`pkmcal.sensors.printed_distance`: the z-probe's keys, and two
+reading noises::
+
+    sensor: printed-distance
+    probe_offset: [0.0, 0.0, 1.25]
+    noise: {reading: [0.005, 0.02], actuator: 0.0036}   # probe std, calipers std, carriage std (mm)
+
 Any setup may give Gaussian priors on parameters (maximum a posteriori identification,
 :mod:`pkmcal.identification.priors`): names or shell patterns, each ``[mean, std]`` or
 ``"mean ± std"`` (``+-`` also), or ``"± std"`` centred on the machine file's value; mm,
@@ -115,6 +123,7 @@ from pkmcal.sensors.library import (  # noqa: F401  (re-exported: the built-ins 
     bind_setup,
     builtin_setup,
 )
+from pkmcal.sensors.printed_distance import PrintedDistanceSensor
 from pkmcal.sensors.z_probe import MAX_BED_TILT_DEG, ZProbeSensor
 
 def _plausible(v: float) -> float:
@@ -217,7 +226,7 @@ class _Bed(_Strict):
 
 
 class _Setup(_Strict):
-    sensor: Literal["full-pose", "position", "indicators", "planar-tool", "distance", "z-probe"]
+    sensor: Literal["full-pose", "position", "indicators", "planar-tool", "distance", "z-probe", "printed-distance"]
     description: Annotated[StrictStr, AfterValidator(_one_line)] = ""
     indicators: list[tuple[Number, Number]] | None = None
     plane_offset: Number | None = None
@@ -255,6 +264,7 @@ _SENSOR_KEYS = {
     "planar-tool": ("target", "world"),
     "distance": ("pivots", "ball", "lengths"),
     "z-probe": ("probe_offset", "bed"),
+    "printed-distance": ("probe_offset", "bed"),
 }
 _NOISE_KEYS = {
     "full-pose": ("position", "orientation", "orientation_deg"),
@@ -263,6 +273,7 @@ _NOISE_KEYS = {
     "planar-tool": ("reading",),
     "distance": ("reading",),
     "z-probe": ("reading",),
+    "printed-distance": ("reading",),
 }
 
 
@@ -354,7 +365,7 @@ def load_setup(path: str | os.PathLike, machine=None) -> MeasurementSetup:
         else:
             what = _describe(err)
             if err["type"] == "literal_error" and loc == ("sensor",):
-                what = "must be one of full-pose, position, indicators, planar-tool, distance, z-probe"
+                what = "must be one of full-pose, position, indicators, planar-tool, distance, z-probe, printed-distance"
         _fail(path, lines, loc, what)
     setup = _build(path, lines, spec, data)
     if spec.prior:
@@ -537,13 +548,15 @@ def _build(path, lines, spec: _Setup, raw: dict | None = None) -> MeasurementSet
             if noise.reading is None:
                 _fail(path, lines, ("noise", "reading"), "is missing; give the distance noise (mm)")
             reading_std = _expand(path, lines, noise.reading, k, ("noise", "reading"), "mm")
-        elif kind == "z-probe":
+        elif kind in ("z-probe", "printed-distance"):
             bed = None if spec.bed is None else [spec.bed.z, spec.bed.a, spec.bed.b]
-            sensor = ZProbeSensor(probe_offset=spec.probe_offset, bed=bed, free=free)
+            probe = kind == "z-probe"
+            sensor = (ZProbeSensor if probe else PrintedDistanceSensor)(probe_offset=spec.probe_offset, bed=bed,
+                                                                        free=free)
             if noise.reading is None:
                 _fail(path, lines, ("noise", "reading"), "is missing; give the probe's trigger noise (mm), e.g. the "
-                      "standard deviation PROBE_ACCURACY reports")
-            reading_std = _expand(path, lines, noise.reading, 1, ("noise", "reading"), "mm")
+                      "standard deviation PROBE_ACCURACY reports" + ("" if probe else ", and the calipers' (mm)"))
+            reading_std = _expand(path, lines, noise.reading, 1 if probe else 2, ("noise", "reading"), "mm")
         elif kind == "position":
             target = None if spec.target is None else [spec.target.x, spec.target.y, spec.target.z]
             sensor = PositionSensor(target=target, world=tf(spec.world), free=free)
@@ -678,7 +691,8 @@ def _distance_keys(s: DistanceSensor) -> dict:
 
 #: The sensor-specific keys written for a sensor kind (the kinds without an entry are written
 #: by the branches of :func:`setup_to_yaml`).
-_KIND_KEYS = {ZProbeSensor.kind: _z_probe_keys, DistanceSensor.kind: _distance_keys}
+_KIND_KEYS = {ZProbeSensor.kind: _z_probe_keys, DistanceSensor.kind: _distance_keys,
+              PrintedDistanceSensor.kind: _z_probe_keys}
 
 
 def setup_to_yaml(setup: MeasurementSetup) -> str:
