@@ -692,7 +692,8 @@ def _report_data(nominal, result, setup, meas, meas_path: str, output: str, vali
 
 @click.command("identifiability", epilog=examples(
     "pkmcal identifiability stewart-prototype --setup indicators-prototype --poses poses.csv",
-    "pkmcal identifiability stewart-prototype --setup full-pose-paper1 --poses poses.csv --json"))
+    "pkmcal identifiability stewart-prototype --setup full-pose-paper1 --poses poses.csv --json",
+    "pkmcal identifiability stewart-prototype --setup indicators-prototype --poses poses.csv --suggest"))
 @click.argument("machine")
 @click.argument("poses_arg", required=False, cls=DeprecatedArgument)
 @click.option("--setup", "setup_spec", required=True, metavar="SETUP.yaml",
@@ -703,8 +704,12 @@ def _report_data(nominal, result, setup, meas, meas_path: str, output: str, vali
 @click.option("--fix", "fix", multiple=True, metavar="NAMES", help="Parameters held (removed from the analysis).")
 @click.option("--free", "free", multiple=True, metavar="NAMES", help="Candidate parameters (default: all + sensor's free).")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+@click.option("--suggest", is_flag=True, help="Also rank what to measure next: the other built-in setups, printed "
+              "distances (deltas) and more planned poses, by the rank and smallest singular value each gives "
+              "(JSON key 'suggestions').")
 @import_options
-def identifiability_cmd(machine, poses_arg, setup_spec, poses, method, fix, free, as_json, mapping=None) -> None:
+def identifiability_cmd(machine, poses_arg, setup_spec, poses, method, fix, free, as_json, mapping=None,
+                        suggest=False) -> None:
     """Which parameters of MACHINE the SETUP can identify from POSES.csv.
 
     Prints the rank of the column-scaled, noise-weighted identification Jacobian, its
@@ -727,9 +732,17 @@ def identifiability_cmd(machine, poses_arg, setup_spec, poses, method, fix, free
     if rep.n_unsolved:
         notes.append(f"{rep.n_unsolved} of the {len(x)} poses were left out: their readings or pose cannot be "
                      "computed on this machine (outside the reach of a chain, or the pose does not solve)")
+    advice = None
+    if suggest:   # identification/advice.py: the candidate additions ranked
+        from pkmcal.identification.advice import advise
+
+        advice = advise(nominal, setup, x, method=method, free=merged_free(_names(free), setup),
+                        fix=None if fix_names == ["auto"] else fix_names)
     if as_json:
         d = rep.to_dict()
         d["warnings"] = notes
+        if advice is not None:
+            d["suggestions"] = advice.to_dict()
         click.echo(json.dumps(d, indent=2, allow_nan=False))
         return
     click.echo(f"{nominal.name} with {setup.sensor.kind} sensor, {len(x)} poses: rank {rep.rank} of "
@@ -751,3 +764,5 @@ def identifiability_cmd(machine, poses_arg, setup_spec, poses, method, fix, free
         click.echo(f"not seen at all: {', '.join(rep.unseen)}")
     for n in notes:
         click.echo(f"warning: {n}")
+    for line in advice.lines() if advice is not None else ():
+        click.echo(line)

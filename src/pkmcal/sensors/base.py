@@ -179,6 +179,13 @@ class Sensor(ABC):
                     "coordinates, a planar machine); use a 'planar-tool' setup")
         return None
 
+    def measured_frames(self, frame: Frame) -> Frame:
+        """The frames at which this sensor takes its readings when the machine is sent to
+        ``frame``: the frames themselves (default); a touch probe's are lowered until it
+        triggers (:class:`~pkmcal.sensors.z_probe.ZProbeSensor`). What a plan of more poses
+        for this sensor measures (:mod:`pkmcal.identification.advice`)."""
+        return frame
+
     def reads_pose(self, params: np.ndarray | None = None) -> bool:
         """True when, at θ = ``params``, the readings are exactly the frame's x, y, z, a, b, c
         in the pose convention of :mod:`pkmcal.conventions` (no transform): on a mechanism
