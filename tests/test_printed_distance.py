@@ -17,6 +17,8 @@ sees, compared as angle differences) to 1e-9.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -326,3 +328,72 @@ def test_setup_file_round_trips(tmp_path):
     again = tmp_path / "again.yaml"
     again.write_text(setup_to_yaml(s))
     assert load_setup(str(again), pairs).sensor == s.sensor
+
+
+#: The printer behind examples/klipper/delta-analyze.log: kossel-mini's config, but rods
+#: 215.12/214.93/215.06 mm, radius 104.8 mm, endstops 250.62/249.71/250.38 mm, towers a and b
+#: 0.35° and −0.25° off.
+EXAMPLE_TRUTH = dict(radius=104.8, arms=(215.12, 214.93, 215.06), endstops=(250.62, 249.71, 250.38),
+                     angles=(210.35, 329.75, 90.0))
+EXAMPLE_LOG = Path(__file__).resolve().parent.parent / "examples" / "klipper" / "delta-analyze.log"
+
+
+def delta_analyze_log() -> str:
+    """The console of DELTA_CALIBRATE (Klipper's 7 points, probe at the nozzle) and of the
+    DELTA_ANALYZE commands (calipers to 0.01 mm, pillar widths about 9 mm) on that printer."""
+    from pkmcal.io.machine_file import load_machine
+
+    fw = load_machine("kossel-mini")
+    t = EXAMPLE_TRUTH
+    real = fw.with_params(klipper_delta("r", t["radius"], t["arms"], t["endstops"], t["angles"]).params)
+    xy = klipper_points()
+    z = np.zeros(len(xy))
+    for _ in range(8):
+        z = z - real.fk(fw.ik(np.c_[xy, z])).poses[:, 2]
+    p1, p2 = object_point_pairs()
+    d = np.linalg.norm(real.fk(fw.ik(p1)).poses - real.fk(fw.ik(p2)).poses, axis=1)
+    rng = np.random.default_rng(13)
+    cw = np.round(9.0 + rng.uniform(-0.05, 0.05, 3), 2)
+    ow = np.round(9.0 + rng.uniform(-0.05, 0.05, 6), 2)
+    meas = np.round(d + np.r_[cw[[0, 2, 1, 0, 2, 1]], ow], 2)
+
+    def values(v):
+        return ",".join(f"{x:.2f}" for x in v)
+
+    lines = ["// Klipper console of a Kossel Mini (z_offset 0): DELTA_CALIBRATE, then Klipper's calibrate_size.stl",
+             "// printed and measured with calipers (0.01 mm); a simulated printer (see tests/test_printed_distance.py)",
+             "DELTA_CALIBRATE"]
+    lines += [f"// probe at {x:.3f},{y:.3f} is z={zz:.6f}" for (x, y), zz in zip(xy, z)]
+    lines += [f"DELTA_ANALYZE CENTER_DISTS={values(meas[:6])}", f"DELTA_ANALYZE CENTER_PILLAR_WIDTHS={values(cw)}",
+              f"DELTA_ANALYZE OUTER_DISTS={values(meas[6:])}", f"DELTA_ANALYZE OUTER_PILLAR_WIDTHS={values(ow)}",
+              "DELTA_ANALYZE CALIBRATE=extended"]
+    return "\n".join(lines) + "\n"
+
+
+def test_example_log_is_its_simulation():
+    assert EXAMPLE_LOG.read_text() == delta_analyze_log()
+
+
+def test_cli_fits_the_printed_distances_and_exports_klippers_numbers(tmp_path):
+    """import klipper-analyze → identify (the machine read as pose pairs) → export klipper:
+    the truth to the calipers' 0.01 mm (angles relative to tower a)."""
+    from pkmcal.io.delta_firmware import read_klipper
+
+    run = CliRunner()
+    pairs, cal, cfg = tmp_path / "pairs.csv", tmp_path / "cal.yaml", tmp_path / "saved.cfg"
+    res = run.invoke(cli, ["import", "klipper-analyze", str(EXAMPLE_LOG), "--machine", "kossel-mini", "-o", str(pairs)])
+    assert res.exit_code == 0, res.output
+    res = run.invoke(cli, ["identify", "kossel-mini", str(pairs), "--setup", "printed-distance-klipper", "--free",
+                           "angle_*,radius_*,arm_*,endstop_*", "--fix", "auto", "-o", str(cal)])
+    assert res.exit_code == 0, res.output
+    res = run.invoke(cli, ["export", str(cal), "--format", "klipper", "-o", str(cfg)])
+    assert res.exit_code == 0, res.output
+    assert "written about their circle's centre" in res.output
+    cfg.write_text("[printer]\nkinematics: delta\n" + cfg.read_text().replace("[printer]\n", "", 1))
+    got = read_klipper(str(cfg))
+    t = EXAMPLE_TRUTH
+    assert abs(got.radius - t["radius"]) < 0.02
+    np.testing.assert_allclose(got.arms, t["arms"], rtol=0, atol=0.03)
+    np.testing.assert_allclose(got.endstops, t["endstops"], rtol=0, atol=0.03)
+    np.testing.assert_allclose(np.subtract(got.angles_deg, got.angles_deg[0]),
+                               np.subtract(t["angles"], t["angles"][0]), rtol=0, atol=0.02)

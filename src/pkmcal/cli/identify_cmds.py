@@ -358,7 +358,9 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     from pkmcal.io.machine_file import load_machine, machine_to_text
     from pkmcal.io.setup_file import load_setup
 
-    nominal = load_machine(machine)
+    from pkmcal.mechanisms.pose_pairs import read_by, single_machine
+
+    nominal = read_by(load_machine(machine), load_setup(setup_spec).sensor)   # pose pairs: printed distances
     setup = load_setup(setup_spec, nominal)
     meas, clipped_found, clipped_lines = apply_clipped_policy(load_measurements(measurements, nominal, setup, mapping),
                                                               nominal, clipped)
@@ -388,6 +390,7 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
                           reject=reject, priors=priors, session_offsets=True if session_offsets else None)
         if baseline is not None:
             result = baseline_result(result, nominal, baseline)
+        result = dataclasses.replace(result, mechanism=single_machine(result.mechanism))
         if not result.success:
             raise PkmcalError(f"the fit did not converge ({result.message}); nothing written")
         u = result.uncertainty

@@ -266,4 +266,15 @@ class PosePairs(Mechanism):
                            margins={k: np.minimum(v[:N], v[N:]) for k, v in (rep.margins or {}).items()})
 
 
-__all__ = ["PairFrame", "PosePairs", "SECOND"]
+def read_by(machine: Mechanism, sensor) -> Mechanism:
+    """``machine`` as the sensor reads it: as :class:`PosePairs` for a sensor whose readings
+    couple two poses (its declared ``reads_pose_pairs``), else itself."""
+    return PosePairs(machine) if sensor.reads_pose_pairs and "pose-pairs" not in machine.abilities else machine
+
+
+def single_machine(machine: Mechanism) -> Mechanism:
+    """The machine of a :class:`PosePairs` (what a machine file holds), else ``machine``."""
+    return machine.single if "pose-pairs" in machine.abilities else machine
+
+
+__all__ = ["PairFrame", "PosePairs", "SECOND", "read_by", "single_machine"]

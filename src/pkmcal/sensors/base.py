@@ -69,6 +69,9 @@ class Sensor(ABC):
     invertible: bool = False
     #: Optional features, asked as ``"x" in sensor.abilities`` (module docstring).
     abilities: frozenset[str] = frozenset()
+    #: True when a reading couples two poses: the machine is then read as pose pairs
+    #: (:mod:`pkmcal.mechanisms.pose_pairs`; :func:`~pkmcal.mechanisms.pose_pairs.read_by`).
+    reads_pose_pairs: bool = False
 
     @property
     @abstractmethod

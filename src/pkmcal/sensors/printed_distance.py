@@ -62,6 +62,7 @@ class PrintedDistanceSensor(Sensor):
     free: tuple[str, ...] | None = None
 
     kind = "printed-distance"
+    reads_pose_pairs = True
 
     def __post_init__(self) -> None:
         self._init_params()
