@@ -45,27 +45,38 @@ def klipper_probe_cmd(source: str, machine_spec: str, setup_spec: str, output: s
     check_output(output, [source])
     from pkmcal.io.klipper_probe import read_klipper_probe
     from pkmcal.io.machine_file import load_machine
-    from pkmcal.io.measurements import measurement_columns, save_measurements
-    from pkmcal.io.setup_file import load_setup
-    from pkmcal.io.tables import format_table
 
     machine = load_machine(machine_spec)
-    setup = load_setup(setup_spec, machine)
-    if setup.sensor.kind != "z-probe":
-        from pkmcal.errors import PkmcalError
-
-        raise PkmcalError(f"--setup {setup_spec}: a '{setup.sensor.kind}' setup; Klipper's probe results are read "
-                          "with a 'sensor: z-probe' setup")
+    setup = _setup_of_kind(setup_spec, machine, "z-probe", "Klipper's probe results")
     result = read_klipper_probe(source, machine, setup.sensor.probe_offset)
-    comment = (f"from Klipper probe results {source}",)
+    _write(result, machine, setup, output, f"from Klipper probe results {source}", "pose(s)")
+
+
+def _setup_of_kind(setup_spec: str, machine, kind: str, what: str):
+    """The setup ``setup_spec`` for ``machine``; an error unless its sensor is ``kind``."""
+    from pkmcal.errors import PkmcalError
+    from pkmcal.io.setup_file import load_setup
+
+    setup = load_setup(setup_spec, machine)
+    if setup.sensor.kind != kind:
+        raise PkmcalError(f"--setup {setup_spec}: a '{setup.sensor.kind}' setup; {what} are read with a 'sensor: "
+                          f"{kind}' setup")
+    return setup
+
+
+def _write(result, machine, setup, output: str | None, comment: str, rows: str) -> None:
+    """The imported measurements to ``output`` (or standard output) and the notes on stderr."""
+    from pkmcal.io.measurements import measurement_columns, save_measurements
+    from pkmcal.io.tables import format_table
+
     if to_stdout(output):
         click.echo(format_table(measurement_columns(result.measurements, machine, setup)), nl=False)
     else:
-        save_measurements(output, result.measurements, machine, setup, comments=comment)
+        save_measurements(output, result.measurements, machine, setup, comments=(comment,))
     for note in result.notes:
         click.echo(f"note: {note}", err=True)
     if not to_stdout(output):
-        click.echo(f"wrote {output}: {len(result.measurements)} pose(s)", err=True)
+        click.echo(f"wrote {output}: {len(result.measurements)} {rows}", err=True)
 
 
 @click.command("klipper-analyze", epilog=examples(
@@ -90,9 +101,6 @@ def klipper_analyze_cmd(source: str, machine_spec: str, setup_spec: str, output:
     from pkmcal.errors import PkmcalError
     from pkmcal.io.klipper_analyze import read_klipper_analyze
     from pkmcal.io.machine_file import load_machine
-    from pkmcal.io.measurements import measurement_columns, save_measurements
-    from pkmcal.io.setup_file import load_setup
-    from pkmcal.io.tables import format_table
     from pkmcal.mechanisms.pose_pairs import PosePairs
 
     machine = load_machine(machine_spec)
@@ -100,20 +108,10 @@ def klipper_analyze_cmd(source: str, machine_spec: str, setup_spec: str, output:
         raise PkmcalError(f"--machine {machine_spec}: DELTA_ANALYZE is Klipper's linear delta calibration; machine "
                           f"'{machine.name}' is a {machine.kind or 'machine of another kind'}")
     pairs = PosePairs(machine)
-    setup = load_setup(setup_spec, pairs)
-    if setup.sensor.kind != "printed-distance":
-        raise PkmcalError(f"--setup {setup_spec}: a '{setup.sensor.kind}' setup; DELTA_ANALYZE results are read "
-                          "with a 'sensor: printed-distance' setup")
+    setup = _setup_of_kind(setup_spec, pairs, "printed-distance", "DELTA_ANALYZE results")
     result = read_klipper_analyze(source, machine, setup.sensor.probe_offset)
-    comment = (f"from Klipper DELTA_ANALYZE results {source}; each row a pair of poses",)
-    if to_stdout(output):
-        click.echo(format_table(measurement_columns(result.measurements, pairs, setup)), nl=False)
-    else:
-        save_measurements(output, result.measurements, pairs, setup, comments=comment)
-    for note in result.notes:
-        click.echo(f"note: {note}", err=True)
-    if not to_stdout(output):
-        click.echo(f"wrote {output}: {len(result.measurements)} row(s)", err=True)
+    _write(result, pairs, setup, output, f"from Klipper DELTA_ANALYZE results {source}; each row a pair of poses",
+           "row(s)")
 
 
 __all__ = ["klipper_analyze_cmd", "klipper_probe_cmd"]

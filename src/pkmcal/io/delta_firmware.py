@@ -352,5 +352,5 @@ def marlin_text(fw: DeltaFirmware) -> str:
     return "\n".join([m665, m666, "M500 ; store in EEPROM", ""])
 
 
-__all__ = ["DeltaFirmware", "Dropped", "exact_rewrite", "firmware_subset", "klipper_text", "marlin_text", "read_klipper",
-           "read_marlin"]
+__all__ = ["DeltaFirmware", "Dropped", "exact_rewrite", "firmware_subset", "klipper_text", "marlin_text",
+           "read_klipper", "read_marlin"]

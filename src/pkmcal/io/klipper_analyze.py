@@ -45,6 +45,7 @@ from pkmcal.io.klipper_probe import (
     NoProbeResults,
     ProbeImport,
     carriages_from_steps,
+    read_klipper_file,
     read_klipper_probe,
     saved_values,
     stable_position,
@@ -88,14 +89,9 @@ def read_klipper_analyze(path: str | os.PathLike, machine, probe_offset=(0.0, 0.
     """The printed distances and probe heights of a printer.cfg or log (module docstring) as
     measurements of ``machine`` read as pose pairs; ``machine`` is the firmware's
     configuration (a linear delta), ``probe_offset`` the z-probe's (mm)."""
-    src = os.fspath(path)
-    try:
-        with open(src, encoding="utf-8", errors="replace") as fh:
-            text = fh.read()
-    except OSError as exc:
-        raise InputFileError(src, f"cannot read the Klipper file ({exc.strerror})") from None
+    src, text, saved = read_klipper_file(path)
     offset = np.asarray(probe_offset, dtype=float)
-    if any(line.startswith("#*#") for line in text.splitlines()) and "[delta_calibrate]" in text:
+    if saved:
         dist = _saved_distances(src, machine)
     else:
         dist = _logged_distances(src, text, machine)

@@ -72,16 +72,22 @@ def read_klipper_probe(path: str | os.PathLike, machine, probe_offset=(0.0, 0.0,
     """The probe results of a Klipper log or printer.cfg (module docstring) as measurements
     of ``machine`` (a linear delta whose parameters are the firmware's); ``probe_offset``
     Klipper's x_offset, y_offset, z_offset (mm), as in the z-probe setup."""
+    src, text, saved = read_klipper_file(path)
+    offset = np.asarray(probe_offset, dtype=float)
+    if saved:
+        return _from_saved_block(src, machine, offset)
+    return _from_lines(src, text, machine, offset)
+
+
+def read_klipper_file(path: str | os.PathLike) -> tuple[str, str, bool]:
+    """(path, text, whether it is a printer.cfg with a DELTA_CALIBRATE ``#*#`` block)."""
     src = os.fspath(path)
     try:
         with open(src, encoding="utf-8", errors="replace") as fh:
             text = fh.read()
     except OSError as exc:
         raise InputFileError(src, f"cannot read the Klipper file ({exc.strerror})") from None
-    offset = np.asarray(probe_offset, dtype=float)
-    if any(line.startswith("#*#") for line in text.splitlines()) and "[delta_calibrate]" in text:
-        return _from_saved_block(src, machine, offset)
-    return _from_lines(src, text, machine, offset)
+    return src, text, any(line.startswith("#*#") for line in text.splitlines()) and "[delta_calibrate]" in text
 
 
 def _from_lines(src: str, text: str, machine, offset: np.ndarray) -> ProbeImport:
@@ -243,5 +249,5 @@ def _from_saved_block(src: str, machine, offset: np.ndarray) -> ProbeImport:
     return ProbeImport(meas, tuple(notes))
 
 
-__all__ = ["NEW_LINE", "NoProbeResults", "OLD_LINE", "ProbeImport", "carriages_from_steps", "read_klipper_probe", "saved_values",
-           "stable_position"]
+__all__ = ["NEW_LINE", "NoProbeResults", "OLD_LINE", "ProbeImport", "carriages_from_steps", "read_klipper_file",
+           "read_klipper_probe", "saved_values", "stable_position"]

@@ -365,7 +365,8 @@ def load_setup(path: str | os.PathLike, machine=None) -> MeasurementSetup:
         else:
             what = _describe(err)
             if err["type"] == "literal_error" and loc == ("sensor",):
-                what = "must be one of full-pose, position, indicators, planar-tool, distance, z-probe, printed-distance"
+                what = ("must be one of full-pose, position, indicators, planar-tool, distance, z-probe, "
+                        "printed-distance")
         _fail(path, lines, loc, what)
     setup = _build(path, lines, spec, data)
     if spec.prior:
