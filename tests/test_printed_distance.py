@@ -384,8 +384,9 @@ def test_cli_fits_the_printed_distances_and_exports_klippers_numbers(tmp_path):
     res = run.invoke(cli, ["import", "klipper-analyze", str(EXAMPLE_LOG), "--machine", "kossel-mini", "-o", str(pairs)])
     assert res.exit_code == 0, res.output
     res = run.invoke(cli, ["identify", "kossel-mini", str(pairs), "--setup", "printed-distance-klipper", "--free",
-                           "angle_*,radius_*,arm_*,endstop_*", "--fix", "auto", "-o", str(cal)])
+                           "angle_*,radius_*,arm_*,endstop_*", "--fix", "auto", "-o", str(cal), "--heldout", str(pairs)])
     assert res.exit_code == 0, res.output
+    assert "reading residual rms (mm)" in res.output          # the held-out table reads pairs too
     res = run.invoke(cli, ["export", str(cal), "--format", "klipper", "-o", str(cfg)])
     assert res.exit_code == 0, res.output
     assert "written about their circle's centre" in res.output

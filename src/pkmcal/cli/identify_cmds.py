@@ -418,7 +418,8 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
         if cal_setup is None:
             raise PkmcalError(f"--heldout: the {baseline} baseline identifies a reduced model; validate the full "
                               "calibration (leave out --method) on held-out data")
-        validation = _heldout_validation(result.mechanism, cal_setup, nominal, before, heldout, mapping, clipped)
+        validation = _heldout_validation(read_by(result.mechanism, setup.sensor), cal_setup, nominal, before, heldout,
+                                         mapping, clipped)
     report = None if report_dir is None else _report_data(nominal, result, setup, meas, measurements,
                                                            "(standard output)" if to_stdout(output) else output,
                                                            validation)
