@@ -354,14 +354,12 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
                           "write the machine file to a file, or leave out --json")
     if report_dir is not None:
         _check_report_dir(report_dir, inputs)
+    from pkmcal.cli.klipper_probe_cmd import machine_and_setup
     from pkmcal.identification.engine import identify
-    from pkmcal.io.machine_file import load_machine, machine_to_text
-    from pkmcal.io.setup_file import load_setup
-
+    from pkmcal.io.machine_file import machine_to_text
     from pkmcal.mechanisms.pose_pairs import read_by, single_machine
 
-    nominal = read_by(load_machine(machine), load_setup(setup_spec).sensor)   # pose pairs: printed distances
-    setup = load_setup(setup_spec, nominal)
+    nominal, setup = machine_and_setup(machine, setup_spec)   # pose pairs for printed distances
     meas, clipped_found, clipped_lines = apply_clipped_policy(load_measurements(measurements, nominal, setup, mapping),
                                                               nominal, clipped)
     if method is None:

@@ -52,6 +52,31 @@ def klipper_probe_cmd(source: str, machine_spec: str, setup_spec: str, output: s
     _write(result, machine, setup, output, f"from Klipper probe results {source}", "pose(s)")
 
 
+def machine_and_setup(machine_spec: str, setup_spec: str):
+    """The machine of ``machine_spec`` as the setup's sensor reads it and the setup bound to
+    it: the machine itself, or, for a sensor of two poses (printed distances), the machine
+    read as pose pairs (:func:`pkmcal.mechanisms.pose_pairs.read_by`). A setup that neither
+    can take is the error of the machine itself."""
+    from pkmcal.errors import PkmcalError
+    from pkmcal.io.machine_file import load_machine
+    from pkmcal.io.setup_file import load_setup
+    from pkmcal.mechanisms.pose_pairs import PosePairs
+
+    nominal = load_machine(machine_spec)
+    try:
+        return nominal, load_setup(setup_spec, nominal)
+    except PkmcalError as exc:
+        first = exc
+    pairs = PosePairs(nominal)
+    try:
+        setup = load_setup(setup_spec, pairs)
+    except PkmcalError:
+        raise first from None
+    if not setup.sensor.reads_pose_pairs:
+        raise first
+    return pairs, setup
+
+
 def _setup_of_kind(setup_spec: str, machine, kind: str, what: str):
     """The setup ``setup_spec`` for ``machine``; an error unless its sensor is ``kind``."""
     from pkmcal.errors import PkmcalError
@@ -114,4 +139,4 @@ def klipper_analyze_cmd(source: str, machine_spec: str, setup_spec: str, output:
            "row(s)")
 
 
-__all__ = ["klipper_analyze_cmd", "klipper_probe_cmd"]
+__all__ = ["klipper_analyze_cmd", "klipper_probe_cmd", "machine_and_setup"]
