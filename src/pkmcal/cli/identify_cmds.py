@@ -388,7 +388,8 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
                           reject=reject, priors=priors, session_offsets=True if session_offsets else None)
         if baseline is not None:
             result = baseline_result(result, nominal, baseline)
-        result = dataclasses.replace(result, mechanism=single_machine(result.mechanism))
+        if nominal is not single_machine(nominal):    # pose pairs: the machine file holds the machine
+            result = dataclasses.replace(result, mechanism=single_machine(result.mechanism))
         if not result.success:
             raise PkmcalError(f"the fit did not converge ({result.message}); nothing written")
         u = result.uncertainty

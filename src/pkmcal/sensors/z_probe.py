@@ -37,9 +37,10 @@ unless named (``free:``), and the identifiability report names the combinations 
 they are freed.
 
 Declared: ``measured_frames`` — a probe reads where it triggers, lowered straight down until
-y = 0 (a frame moved by (0, 0, −y)); ``readable`` — the probe must approach the bed along its own axis, so a frame
-whose z axis R e_z is more than :data:`MAX_PROBE_TILT_DEG` from the bed normal cannot be
-read; ``works_with`` — any machine whose platform moves in space (the default).
+y = 0 (a frame moved by (0, 0, −y)); ``readable`` — the probe must approach the bed along
+its own axis, so a frame whose z axis R e_z is more than :data:`MAX_PROBE_TILT_DEG` from the
+bed normal cannot be read; ``works_with`` — any machine whose platform moves in space (the
+default).
 """
 
 from __future__ import annotations
