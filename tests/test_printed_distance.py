@@ -398,3 +398,26 @@ def test_cli_fits_the_printed_distances_and_exports_klippers_numbers(tmp_path):
     np.testing.assert_allclose(got.endstops, t["endstops"], rtol=0, atol=0.03)
     np.testing.assert_allclose(np.subtract(got.angles_deg, got.angles_deg[0]),
                                np.subtract(t["angles"], t["angles"][0]), rtol=0, atol=0.02)
+
+
+def test_pairs_of_a_rotating_platform_compose_like_the_machine():
+    """On a hexapod (frames that rotate) the pair's J·T is the machine's per pose, and a
+    distance's pose Jacobian matches central differences of the readings over both poses."""
+    from pkmcal.io.machine_file import load_machine
+
+    hexa = load_machine("stewart-prototype")
+    pairs = PosePairs(hexa)
+    rng = np.random.default_rng(8)
+    home = hexa.home_pose
+    X = np.c_[home + rng.uniform(-5, 5, (5, 6)) * [1, 1, 1, 0.02, 0.02, 0.02],
+              home + rng.uniform(-5, 5, (5, 6)) * [1, 1, 1, 0.02, 0.02, 0.02]]
+    J = rng.standard_normal((5, 2, 12))
+    T, _ = pairs.frame_jacobians(X)
+    np.testing.assert_allclose(pairs.pose_jacobian_from_twist(J, X), J @ T, rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(pairs.pose_jacobian_from_twist(J, X)[..., 6:],
+                                  hexa.pose_jacobian_from_twist(J[..., 6:], X[:, 6:]))
+    s = PrintedDistanceSensor()
+    H = pairs.pose_jacobian_from_twist(s.frame_jacobian(pairs.frame(X)), X)
+    d = float(np.min(np.linalg.norm(X[:, :3] - X[:, 6:9], axis=1)))    # the distance's curvature scale
+    assert_jacobian_matches_fd(lambda x: s.predict(pairs.frame(x)), X, H,
+                               scale=[d] * 3 + [1.0] * 3 + [d] * 3 + [1.0] * 3, magnitude=1000.0)
