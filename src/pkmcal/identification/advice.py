@@ -34,7 +34,8 @@ E_k D U, U an orthonormal basis of G⊥ (g = dim G):
 
 Options are ranked by rank, then σ_min, then how many named directions they identify, then
 σ_r. The candidates: every built-in setup that can
-measure the machine (:data:`~pkmcal.sensors.library.BUILTIN_SETUPS`), at the current poses;
+measure the machine (:data:`~pkmcal.sensors.library.BUILTIN_SETUPS`), at the current poses
+(where each reads there: a Z probe lowered onto the bed);
 for a linear delta, Klipper's printed calibration object (12 distances between printed
 points, :mod:`pkmcal.sensors.printed_distance` on :mod:`pkmcal.mechanisms.pose_pairs`); and
 as many poses again from each of the planners ``default`` and ``random``
@@ -164,6 +165,12 @@ def _eliminated(J: np.ndarray, S: np.ndarray) -> np.ndarray:
     return J - U @ (U.T @ J)
 
 
+def _where_read(machine, sensor, poses: np.ndarray) -> np.ndarray:
+    """The poses at which ``sensor`` reads when the machine is sent to ``poses``
+    (``Sensor.measured_frames``: a Z probe's lowered onto the bed)."""
+    return machine.poses_from_frame(sensor.measured_frames(machine.frame(poses)))
+
+
 def _additions(machine, setup, poses, method, names, notes):
     """(label, kind, rows on ``names``) of every candidate addition (module docstring)."""
     from pkmcal.sensors.library import BUILTIN_SETUPS, builtin_setup
@@ -177,7 +184,7 @@ def _additions(machine, setup, poses, method, names, notes):
         if other.sensor == setup.sensor:
             continue
         try:
-            J, S, n = _rows(machine, other, poses, None, names)
+            J, S, n = _rows(machine, other, _where_read(machine, other.sensor, poses), None, names)
         except PkmcalError as exc:
             notes.append(f"{name}: not scored ({exc})")
             continue
@@ -194,8 +201,8 @@ def _additions(machine, setup, poses, method, names, notes):
         except PkmcalError as exc:
             notes.append(f"planner '{alg}': no poses ({exc})")
             continue
-        x = machine.poses_from_frame(setup.sensor.measured_frames(machine.frame(plan.poses)))   # a probe: on the bed
-        J, _, n = _rows(machine, setup, x, method, names, same_setup=True)
+        J, _, n = _rows(machine, setup, _where_read(machine, setup.sensor, plan.poses), method, names,
+                        same_setup=True)
         out.append((f"+ {n} more poses (planner '{alg}')", "poses", J))
     return out
 
