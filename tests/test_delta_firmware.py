@@ -245,3 +245,37 @@ def test_cli_klipper_and_marlin_both_ways(tmp_path):
     assert res.exit_code == 0 and "lean_tangential_c = 0.2 deg cannot be represented" in res.output
     res = run(cli, ["export", "stewart-prototype", "--format", "marlin"])
     assert res.exit_code == 2 and "exports linear delta printers" in res.output
+
+
+def test_unequal_radii_on_vertical_rails_are_rewritten_exactly():
+    """Issue 13: the circumcentre rewrite (io/delta_firmware.py) keeps the rails: the
+    firmware's towers, seen from its origin c, are the calibrated rails B_i + (t_x, t_y) to
+    1e-12 mm, the switches at the same carriage heights, and every reading the same at the
+    same physical nozzle position; nothing is dropped."""
+    from pkmcal.io.delta_firmware import exact_rewrite
+
+    rng = np.random.default_rng(11)
+    m = DeltaFirmware(radius=105.0, angles_deg=(210.3, 329.8, 90.1), arms=(215.4, 214.8, 215.2),
+                      endstops=(250.3, 249.7, 250.9)).machine("m")
+    rho = m.params
+    rho[PARAM_NAMES.index("radius_b")] = 103.3
+    rho[PARAM_NAMES.index("radius_c")] = 106.1
+    rho[-3:] = (0.7, -0.4, 12.0)                    # a tool offset: its x, y move the rails, its z cancels
+    m = m.with_params(rho)
+    fw, dropped = firmware_subset(m)
+    assert dropped == [] and fw.origin != (0.0, 0.0)
+    f = fw.machine("f")
+    c = np.r_[fw.origin, 0.0]
+
+    def rails(machine):
+        g = {p: machine.params[[PARAM_NAMES.index(f"{p}_{t}") for t in "abc"]] for p in ("angle", "radius")}
+        return g["radius"][:, None] * np.c_[np.cos(g["angle"]), np.sin(g["angle"])] + machine.params[-3:-1]
+
+    np.testing.assert_allclose(rails(f) + c[:2], rails(m), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(f.switch_positions(), m.switch_positions() + rho[-1], rtol=0, atol=1e-12)
+    p = np.c_[rng.uniform(-60, 60, (40, 2)), rng.uniform(0, 150, 40)]
+    np.testing.assert_allclose(f.ik(p - c) - f.reading_reference, m.ik(p) - m.reading_reference, rtol=0, atol=1e-11)
+    # leaning rails have no exact form: the mean radius, and the lean and radii listed as dropped
+    rho[PARAM_NAMES.index("lean_radial_a")] = 1e-3
+    assert exact_rewrite(m.with_params(rho)) is None
+    assert {d.name for d in firmware_subset(m.with_params(rho))[1]} >= {"radius_b", "lean_radial_a", "tool.z"}

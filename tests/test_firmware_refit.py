@@ -145,6 +145,22 @@ def test_a_printer_without_leans_loses_nothing_to_the_firmware():
     assert abs(hr - hf) < 0.25 * hf and hr < 2.5 * TRIGGER_STD
 
 
+def test_unequal_radii_on_vertical_rails_cost_nothing_without_a_refit():
+    """A calibration with the rails held vertical (its gauge puts the sideways slide into
+    unequal radii): the firmware's numbers are its exact rewrite (io/delta_firmware.py), so
+    they score as the full model on the probe heights, fitted and held out, and the refit
+    cannot do better."""
+    nominal, setup, _, meas, held, priors = _campaign(3, 0.0)
+    free = [f"{p}_{t}" for p in ("angle", "radius", "arm", "endstop") for t in "abc"]
+    full = identify(nominal, setup, meas, free=free, fix="auto", priors=priors)
+    radii = full.mechanism.params[[PARAM_NAMES.index(f"radius_{t}") for t in "abc"]]
+    assert np.ptp(radii) > 0.1                          # unequal: the mean would have cost
+    ref = firmware_refit(full.mechanism, setup, meas, held, priors=priors)
+    assert ref.dropped.fit_rms["mm"] == pytest.approx(ref.full.fit_rms["mm"], rel=1e-9)
+    assert ref.dropped.heldout_rms["mm"] == pytest.approx(ref.full.heldout_rms["mm"], rel=1e-9)
+    assert ref.refit.fit_rms["mm"] >= ref.full.fit_rms["mm"] * (1 - 1e-6)
+
+
 def test_a_leaning_rail_costs_a_measurable_amount_and_the_refit_beats_dropping_it():
     nominal, setup, real, meas, held, priors = _campaign(5, 0.5)
     full = identify(nominal, setup, meas, priors=priors)

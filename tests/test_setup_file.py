@@ -80,7 +80,8 @@ def test_builtin_setups():
     np.testing.assert_allclose(p1.noise.reading_std * math.sqrt(3), [0.025] * 3 + [0.001] * 3)
     assert isinstance(load_setup("laser-tracker").sensor, PositionSensor)
     assert set(BUILTIN_SETUPS) == {"indicators-prototype", "full-pose-paper1", "laser-tracker", "planar-tracker",
-                                   "planar-tracker-rotary", "planar-tracker-linear", "z-probe-klipper"}
+                                   "planar-tracker-rotary", "planar-tracker-linear", "z-probe-klipper",
+                                   "printed-distance-klipper"}
 
 
 @settings(max_examples=25, deadline=None)

@@ -167,6 +167,10 @@ def _delta_firmware_text(machine, fmt: str, refit=None) -> str:
     angles = dict(zip(machine.param_names, machine.param_is_angle))
     for d in dropped:
         click.echo(f"pkmcal: warning: {d.describe(angles[d.name])}", err=True)
+    if refit is None and fw.origin != (0.0, 0.0):   # the exact rewrite of unequal radii (io/delta_firmware.py)
+        click.echo(f"pkmcal: note: the towers are written about their circle's centre, x {fw.origin[0]:.6g}, y "
+                   f"{fw.origin[1]:.6g} mm of the calibrated frame: the firmware's x, y are the calibrated ones less "
+                   "that (z unchanged), and its machine is the calibrated one exactly", err=True)
     if refit is not None:
         for line in refit.lines():
             click.echo(f"pkmcal: {line}", err=True)

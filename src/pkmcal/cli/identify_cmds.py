@@ -354,12 +354,12 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
                           "write the machine file to a file, or leave out --json")
     if report_dir is not None:
         _check_report_dir(report_dir, inputs)
+    from pkmcal.cli.klipper_probe_cmd import machine_and_setup
     from pkmcal.identification.engine import identify
-    from pkmcal.io.machine_file import load_machine, machine_to_text
-    from pkmcal.io.setup_file import load_setup
+    from pkmcal.io.machine_file import machine_to_text
+    from pkmcal.mechanisms.pose_pairs import read_by, single_machine
 
-    nominal = load_machine(machine)
-    setup = load_setup(setup_spec, nominal)
+    nominal, setup = machine_and_setup(machine, setup_spec)   # pose pairs for printed distances
     meas, clipped_found, clipped_lines = apply_clipped_policy(load_measurements(measurements, nominal, setup, mapping),
                                                               nominal, clipped)
     if method is None:
@@ -388,6 +388,8 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
                           reject=reject, priors=priors, session_offsets=True if session_offsets else None)
         if baseline is not None:
             result = baseline_result(result, nominal, baseline)
+        if nominal is not single_machine(nominal):    # pose pairs: the machine file holds the machine
+            result = dataclasses.replace(result, mechanism=single_machine(result.mechanism))
         if not result.success:
             raise PkmcalError(f"the fit did not converge ({result.message}); nothing written")
         u = result.uncertainty
@@ -415,7 +417,8 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
         if cal_setup is None:
             raise PkmcalError(f"--heldout: the {baseline} baseline identifies a reduced model; validate the full "
                               "calibration (leave out --method) on held-out data")
-        validation = _heldout_validation(result.mechanism, cal_setup, nominal, before, heldout, mapping, clipped)
+        validation = _heldout_validation(read_by(result.mechanism, setup.sensor), cal_setup, nominal, before, heldout,
+                                         mapping, clipped)
     report = None if report_dir is None else _report_data(nominal, result, setup, meas, measurements,
                                                            "(standard output)" if to_stdout(output) else output,
                                                            validation)
@@ -692,7 +695,8 @@ def _report_data(nominal, result, setup, meas, meas_path: str, output: str, vali
 
 @click.command("identifiability", epilog=examples(
     "pkmcal identifiability stewart-prototype --setup indicators-prototype --poses poses.csv",
-    "pkmcal identifiability stewart-prototype --setup full-pose-paper1 --poses poses.csv --json"))
+    "pkmcal identifiability stewart-prototype --setup full-pose-paper1 --poses poses.csv --json",
+    "pkmcal identifiability stewart-prototype --setup indicators-prototype --poses poses.csv --suggest"))
 @click.argument("machine")
 @click.argument("poses_arg", required=False, cls=DeprecatedArgument)
 @click.option("--setup", "setup_spec", required=True, metavar="SETUP.yaml",
@@ -703,8 +707,12 @@ def _report_data(nominal, result, setup, meas, meas_path: str, output: str, vali
 @click.option("--fix", "fix", multiple=True, metavar="NAMES", help="Parameters held (removed from the analysis).")
 @click.option("--free", "free", multiple=True, metavar="NAMES", help="Candidate parameters (default: all + sensor's free).")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+@click.option("--suggest", is_flag=True, help="Also rank what to measure next: the other built-in setups, printed "
+              "distances (deltas) and more planned poses, by the rank and smallest singular value each gives "
+              "(JSON key 'suggestions').")
 @import_options
-def identifiability_cmd(machine, poses_arg, setup_spec, poses, method, fix, free, as_json, mapping=None) -> None:
+def identifiability_cmd(machine, poses_arg, setup_spec, poses, method, fix, free, as_json, mapping=None,
+                        suggest=False) -> None:
     """Which parameters of MACHINE the SETUP can identify from POSES.csv.
 
     Prints the rank of the column-scaled, noise-weighted identification Jacobian, its
@@ -727,9 +735,17 @@ def identifiability_cmd(machine, poses_arg, setup_spec, poses, method, fix, free
     if rep.n_unsolved:
         notes.append(f"{rep.n_unsolved} of the {len(x)} poses were left out: their readings or pose cannot be "
                      "computed on this machine (outside the reach of a chain, or the pose does not solve)")
+    advice = None
+    if suggest:   # identification/advice.py: the candidate additions ranked
+        from pkmcal.identification.advice import advise
+
+        advice = advise(nominal, setup, x, method=method, free=merged_free(_names(free), setup),
+                        fix=None if fix_names == ["auto"] else fix_names)
     if as_json:
         d = rep.to_dict()
         d["warnings"] = notes
+        if advice is not None:
+            d["suggestions"] = advice.to_dict()
         click.echo(json.dumps(d, indent=2, allow_nan=False))
         return
     click.echo(f"{nominal.name} with {setup.sensor.kind} sensor, {len(x)} poses: rank {rep.rank} of "
@@ -751,3 +767,5 @@ def identifiability_cmd(machine, poses_arg, setup_spec, poses, method, fix, free
         click.echo(f"not seen at all: {', '.join(rep.unseen)}")
     for n in notes:
         click.echo(f"warning: {n}")
+    for line in advice.lines() if advice is not None else ():
+        click.echo(line)

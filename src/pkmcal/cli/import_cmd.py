@@ -154,8 +154,9 @@ def marlin_cmd(settings: str, output: str | None, name: str | None) -> None:
     _write_delta(read_marlin(settings).machine(_delta_name(settings, name)), output, f"Marlin settings {settings}")
 
 
-from pkmcal.cli.klipper_probe_cmd import klipper_probe_cmd  # noqa: E402  (its own module: Klipper probe results)
+from pkmcal.cli.klipper_probe_cmd import klipper_analyze_cmd, klipper_probe_cmd  # noqa: E402  (Klipper results)
 
 import_group.add_command(klipper_probe_cmd)
+import_group.add_command(klipper_analyze_cmd)
 
 __all__ = ["import_group", "klipper_cmd", "linuxcnc_cmd", "marlin_cmd"]

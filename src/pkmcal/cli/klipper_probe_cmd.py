@@ -5,6 +5,12 @@ lines of a Klipper console log or the ``#*#`` DELTA_CALIBRATE block of a printer
 (:mod:`pkmcal.io.klipper_probe`) and writes the measurement CSV that ``pkmcal identify
 DELTA.yaml MEAS.csv --setup PROBE.yaml`` fits: ``lambda1..3`` (carriage positions),
 ``probe_z`` and the firmware's pose ``cmd_x..cmd_z``. Registered in the ``import`` group.
+
+``pkmcal import klipper-analyze CFG_OR_LOG --machine DELTA.yaml -o PAIRS.csv`` reads
+Klipper's DELTA_ANALYZE printed-object distances and the probe heights
+(:mod:`pkmcal.io.klipper_analyze`) as measurements of pose pairs (``lambda1..3``,
+``lambda1_2..lambda3_2``, ``probe_z``, ``distance``, ``cmd_*``), for a ``printed-distance``
+setup.
 """
 
 from __future__ import annotations
@@ -39,27 +45,98 @@ def klipper_probe_cmd(source: str, machine_spec: str, setup_spec: str, output: s
     check_output(output, [source])
     from pkmcal.io.klipper_probe import read_klipper_probe
     from pkmcal.io.machine_file import load_machine
-    from pkmcal.io.measurements import measurement_columns, save_measurements
-    from pkmcal.io.setup_file import load_setup
-    from pkmcal.io.tables import format_table
 
     machine = load_machine(machine_spec)
-    setup = load_setup(setup_spec, machine)
-    if setup.sensor.kind != "z-probe":
-        from pkmcal.errors import PkmcalError
-
-        raise PkmcalError(f"--setup {setup_spec}: a '{setup.sensor.kind}' setup; Klipper's probe results are read "
-                          "with a 'sensor: z-probe' setup")
+    setup = _setup_of_kind(setup_spec, machine, "z-probe", "Klipper's probe results")
     result = read_klipper_probe(source, machine, setup.sensor.probe_offset)
-    comment = (f"from Klipper probe results {source}",)
+    _write(result, machine, setup, output, f"from Klipper probe results {source}", "pose(s)")
+
+
+def machine_and_setup(machine_spec: str, setup_spec: str):
+    """The machine of ``machine_spec`` as the setup's sensor reads it and the setup bound to
+    it: the machine itself, or, for a sensor of two poses (printed distances), the machine
+    read as pose pairs (:func:`pkmcal.mechanisms.pose_pairs.read_by`). A setup that neither
+    can take is the error of the machine itself."""
+    from pkmcal.errors import PkmcalError
+    from pkmcal.io.machine_file import load_machine
+    from pkmcal.io.setup_file import load_setup
+    from pkmcal.mechanisms.pose_pairs import PosePairs
+
+    nominal = load_machine(machine_spec)
+    try:
+        return nominal, load_setup(setup_spec, nominal)
+    except PkmcalError as exc:
+        first = exc
+    pairs = PosePairs(nominal)
+    try:
+        setup = load_setup(setup_spec, pairs)
+    except PkmcalError:
+        raise first from None
+    if not setup.sensor.reads_pose_pairs:
+        raise first
+    return pairs, setup
+
+
+def _setup_of_kind(setup_spec: str, machine, kind: str, what: str):
+    """The setup ``setup_spec`` for ``machine``; an error unless its sensor is ``kind``."""
+    from pkmcal.errors import PkmcalError
+    from pkmcal.io.setup_file import load_setup
+
+    setup = load_setup(setup_spec, machine)
+    if setup.sensor.kind != kind:
+        raise PkmcalError(f"--setup {setup_spec}: a '{setup.sensor.kind}' setup; {what} are read with a 'sensor: "
+                          f"{kind}' setup")
+    return setup
+
+
+def _write(result, machine, setup, output: str | None, comment: str, rows: str) -> None:
+    """The imported measurements to ``output`` (or standard output) and the notes on stderr."""
+    from pkmcal.io.measurements import measurement_columns, save_measurements
+    from pkmcal.io.tables import format_table
+
     if to_stdout(output):
         click.echo(format_table(measurement_columns(result.measurements, machine, setup)), nl=False)
     else:
-        save_measurements(output, result.measurements, machine, setup, comments=comment)
+        save_measurements(output, result.measurements, machine, setup, comments=(comment,))
     for note in result.notes:
         click.echo(f"note: {note}", err=True)
     if not to_stdout(output):
-        click.echo(f"wrote {output}: {len(result.measurements)} pose(s)", err=True)
+        click.echo(f"wrote {output}: {len(result.measurements)} {rows}", err=True)
 
 
-__all__ = ["klipper_probe_cmd"]
+@click.command("klipper-analyze", epilog=examples(
+    "pkmcal import klipper-analyze examples/klipper/delta-analyze.log --machine kossel-mini -o pairs.csv"))
+@click.argument("source", metavar="CFG_OR_LOG")
+@click.option("--machine", "machine_spec", required=True, metavar="DELTA.yaml",
+              help="The printer's machine file (its firmware configuration), or a built-in name.")
+@click.option("--setup", "setup_spec", default="printed-distance-klipper", show_default=True, metavar="SETUP.yaml",
+              help="The printed-distance setup: its probe_offset is Klipper's [probe] x_offset, y_offset, z_offset.")
+@output_option("PAIRS.csv", "Measurement file to write")
+def klipper_analyze_cmd(source: str, machine_spec: str, setup_spec: str, output: str | None) -> None:
+    """Read Klipper's DELTA_ANALYZE distances and probe heights as pose-pair measurements.
+
+    CFG_OR_LOG: a printer.cfg whose SAVE_CONFIG (#*#) block holds [delta_calibrate]
+    distanceN with distanceN_pos1/_pos2 and heightN with heightN_pos (steps below the
+    endstops); or a console log with the DELTA_ANALYZE CENTER_DISTS=... CENTER_PILLAR_WIDTHS=...
+    OUTER_DISTS=... OUTER_PILLAR_WIDTHS=... [SCALE=...] commands and the probe result lines.
+    Each row is two points: a distance row holds the carriage positions of both printed points
+    and 'distance'; a height row holds one probed point twice and 'probe_z'.
+    """
+    check_output(output, [source])
+    from pkmcal.errors import PkmcalError
+    from pkmcal.io.klipper_analyze import read_klipper_analyze
+    from pkmcal.io.machine_file import load_machine
+    from pkmcal.mechanisms.pose_pairs import PosePairs
+
+    machine = load_machine(machine_spec)
+    if machine.kind != "linear-delta":
+        raise PkmcalError(f"--machine {machine_spec}: DELTA_ANALYZE is Klipper's linear delta calibration; machine "
+                          f"'{machine.name}' is a {machine.kind or 'machine of another kind'}")
+    pairs = PosePairs(machine)
+    setup = _setup_of_kind(setup_spec, pairs, "printed-distance", "DELTA_ANALYZE results")
+    result = read_klipper_analyze(source, machine, setup.sensor.probe_offset)
+    _write(result, pairs, setup, output, f"from Klipper DELTA_ANALYZE results {source}; each row a pair of poses",
+           "row(s)")
+
+
+__all__ = ["klipper_analyze_cmd", "klipper_probe_cmd", "machine_and_setup"]

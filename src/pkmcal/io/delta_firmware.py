@@ -19,7 +19,22 @@ vertical-rail, common-radius subset of pkmcal's model (:func:`firmware_subset`):
   probe the stored value is H − the ``M851 Z`` offset; set it after loading with M851 in
   mind).
 
-What neither firmware can hold — rail leans, per-tower radii, a tool offset — is listed by
+Unequal radii and a tool offset on vertical rails are rewritten exactly
+(:func:`exact_rewrite`): a vertical rail is a point B_i of the bed plane, and the tool offset
+t only moves the effector joints, so the readings see the rails at B̃_i = B_i + (t_x, t_y)
+from the nozzle (t_z cancels: λ_i − H^fw_i = z + sqrt(L_i² − ρ_i²) − E_i − sqrt(L_i² −
+|B̃_i|²), ρ_i the nozzle's horizontal distance from B̃_i). Any three points lie on one
+circle: with c its centre (the circumcentre of the B̃_i), R its radius and θ'_i the angles of
+B̃_i − c, the firmware's machine (R, θ'_i, L_i, E'_i) with
+
+    E'_i = E_i + sqrt(L_i² − |B̃_i|²) − sqrt(L_i² − R²)
+
+(the switch, a carriage height, is where it was) has the same rails, seen from its own
+origin c: in the firmware's x, y every position is the calibrated one less c (``origin``),
+z unchanged. Nothing is dropped; the export says where the firmware's origin is.
+
+What neither firmware can hold otherwise — rail leans (and, on leaning rails, the radius
+differences and tool offset, replaced by their mean and 0) — is listed by
 :func:`firmware_subset` with the value that was dropped, so that an export never loses a
 parameter silently. Numbers are written with Python's shortest round-trip repr, so that
 machine → Klipper config → machine is exact (Marlin: to the 6 decimals written, beyond its
@@ -61,6 +76,9 @@ class DeltaFirmware:
     endstops: tuple[float, float, float]
     print_radius: float | None = None
     min_z: float | None = None
+    #: Where the firmware's x, y origin is in the calibrated machine's frame (mm): not
+    #: (0, 0) after an :func:`exact_rewrite` of unequal radii or a tool offset.
+    origin: tuple[float, float] = (0.0, 0.0)
 
     def machine(self, name: str) -> LinearDelta:
         limits = {}
@@ -86,12 +104,44 @@ class Dropped:
                 f"{f(self.replaced_by):.6g} {unit}")
 
 
-def firmware_subset(machine: LinearDelta) -> tuple[DeltaFirmware, list[Dropped]]:
-    """The firmware numbers of ``machine``: its tower angles, arms and endstops, the mean of
-    its radii; and what that drops (leans, radius differences, tool offset)."""
+def exact_rewrite(machine: LinearDelta) -> tuple[float, np.ndarray, np.ndarray, np.ndarray] | None:
+    """(R, angles θ'_i (rad), endstops E'_i, origin c (2,)) of the exact firmware form of a
+    vertical-rail ``machine`` (module docstring); None when a rail leans (no exact form)."""
     rho = machine.params
     g = {p: rho[[PARAM_NAMES.index(f"{p}_{t}") for t in TOWERS]] for p in
          ("angle", "radius", "arm", "endstop", "lean_radial", "lean_tangential")}
+    if np.any(g["lean_radial"] != 0.0) or np.any(g["lean_tangential"] != 0.0):
+        return None
+    tool = rho[[PARAM_NAMES.index(n) for n in PARAM_NAMES[-3:]]]
+    B = g["radius"][:, None] * np.stack([np.cos(g["angle"]), np.sin(g["angle"])], axis=1) + tool[None, 0:2]
+    # circumcentre c: |B_i − c|² equal for all i ⇔ 2 (B_i − B_0)·c = |B_i|² − |B_0|², i = 1, 2
+    M = 2.0 * (B[1:] - B[0])
+    c = np.linalg.solve(M, np.sum(B[1:] ** 2, axis=1) - np.sum(B[0] ** 2))
+    V = B - c
+    R = float(np.mean(np.hypot(V[:, 0], V[:, 1])))
+    angles = np.arctan2(V[:, 1], V[:, 0])
+    angles = g["angle"] + np.angle(np.exp(1j * (angles - g["angle"])))      # the branch nearest the machine's
+    arm = g["arm"]
+    endstops = g["endstop"] + np.sqrt(arm**2 - np.sum(B**2, axis=1)) - np.sqrt(arm**2 - R**2)
+    return R, angles, endstops, c
+
+
+def firmware_subset(machine: LinearDelta) -> tuple[DeltaFirmware, list[Dropped]]:
+    """The firmware numbers of ``machine`` and what they drop. Vertical rails: the
+    :func:`exact_rewrite` (nothing dropped; ``origin`` says where the firmware's origin
+    is). Leaning rails: its tower angles, arms and endstops, the mean of its radii, and the
+    dropped leans, radius differences and tool offset."""
+    rho = machine.params
+    g = {p: rho[[PARAM_NAMES.index(f"{p}_{t}") for t in TOWERS]] for p in
+         ("angle", "radius", "arm", "endstop", "lean_radial", "lean_tangential")}
+    exact = exact_rewrite(machine)
+    tool_moved = np.any(rho[-3:] != 0.0)
+    if exact is not None and (tool_moved or np.any(g["radius"] != g["radius"][0])):
+        R, angles, endstops, c = exact
+        return DeltaFirmware(radius=R, angles_deg=tuple(float(rad_to_deg_text(a)) for a in angles),
+                             arms=tuple(float(a) for a in g["arm"]), endstops=tuple(float(e) for e in endstops),
+                             print_radius=float(machine.print_radius), min_z=float(machine.min_z),
+                             origin=(float(c[0]), float(c[1]))), []
     radius = float(g["radius"][0]) if np.all(g["radius"] == g["radius"][0]) else float(np.mean(g["radius"]))
     dropped = [Dropped(f"radius_{t}", float(r), radius) for t, r in zip(TOWERS, g["radius"]) if r != radius]
     for lean in ("lean_radial", "lean_tangential"):
@@ -302,5 +352,5 @@ def marlin_text(fw: DeltaFirmware) -> str:
     return "\n".join([m665, m666, "M500 ; store in EEPROM", ""])
 
 
-__all__ = ["DeltaFirmware", "Dropped", "firmware_subset", "klipper_text", "marlin_text", "read_klipper",
-           "read_marlin"]
+__all__ = ["DeltaFirmware", "Dropped", "exact_rewrite", "firmware_subset", "klipper_text", "marlin_text",
+           "read_klipper", "read_marlin"]

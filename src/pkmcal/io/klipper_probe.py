@@ -56,6 +56,10 @@ NEW_LINE = re.compile(rf"probe: at {_NUM}\s*,\s*{_NUM} bed will contact at z={_N
 _HEIGHT = re.compile(r"^(manual_)?height(\d+)$")
 
 
+class NoProbeResults(InputFileError):
+    """A Klipper file without probe results (a printed-distance import may still read it)."""
+
+
 @dataclass(frozen=True)
 class ProbeImport:
     """What :func:`read_klipper_probe` found: the measurements and notes for the user."""
@@ -68,16 +72,22 @@ def read_klipper_probe(path: str | os.PathLike, machine, probe_offset=(0.0, 0.0,
     """The probe results of a Klipper log or printer.cfg (module docstring) as measurements
     of ``machine`` (a linear delta whose parameters are the firmware's); ``probe_offset``
     Klipper's x_offset, y_offset, z_offset (mm), as in the z-probe setup."""
+    src, text, saved = read_klipper_file(path)
+    offset = np.asarray(probe_offset, dtype=float)
+    if saved:
+        return _from_saved_block(src, machine, offset)
+    return _from_lines(src, text, machine, offset)
+
+
+def read_klipper_file(path: str | os.PathLike) -> tuple[str, str, bool]:
+    """(path, text, whether it is a printer.cfg with a DELTA_CALIBRATE ``#*#`` block)."""
     src = os.fspath(path)
     try:
         with open(src, encoding="utf-8", errors="replace") as fh:
             text = fh.read()
     except OSError as exc:
         raise InputFileError(src, f"cannot read the Klipper file ({exc.strerror})") from None
-    offset = np.asarray(probe_offset, dtype=float)
-    if any(line.startswith("#*#") for line in text.splitlines()) and "[delta_calibrate]" in text:
-        return _from_saved_block(src, machine, offset)
-    return _from_lines(src, text, machine, offset)
+    return src, text, any(line.startswith("#*#") for line in text.splitlines()) and "[delta_calibrate]" in text
 
 
 def _from_lines(src: str, text: str, machine, offset: np.ndarray) -> ProbeImport:
@@ -98,7 +108,7 @@ def _from_lines(src: str, text: str, machine, offset: np.ndarray) -> ProbeImport
         nozzle.append((x, y, z))
         lines.append(k)
     if not nozzle:
-        raise InputFileError(src, "no probe results found: expected Klipper lines 'probe at X,Y is z=Z' or "
+        raise NoProbeResults(src, "no probe results found: expected Klipper lines 'probe at X,Y is z=Z' or "
                              "'probe: at X,Y bed will contact at z=Z' (PROBE, PROBE_ACCURACY, DELTA_CALIBRATE "
                              "output), or a printer.cfg with a DELTA_CALIBRATE #*# block")
     poses = np.array(nozzle)
@@ -165,7 +175,7 @@ def _step_distance(values, tower: str, src: str) -> float:
                          "the stable positions of the #*# block count steps, whose length is needed")
 
 
-def _stable(value: str, where: str, line: int | None, key: str) -> np.ndarray:
+def stable_position(value: str, where: str, line: int | None, key: str) -> np.ndarray:
     parts = value.split(",")
     try:
         spos = np.array([float(p) for p in parts])
@@ -177,7 +187,9 @@ def _stable(value: str, where: str, line: int | None, key: str) -> np.ndarray:
     return spos
 
 
-def _from_saved_block(src: str, machine, offset: np.ndarray) -> ProbeImport:
+def saved_values(src: str) -> dict[tuple[str, str], tuple[str, str, int | None]]:
+    """(section, key) → (value, file, line) of a Klipper config with its includes and
+    ``#*#`` block (later values win)."""
     from pkmcal.io.delta_firmware import _read_sections
 
     values: dict[tuple[str, str], tuple[str, str, int | None]] = {}
@@ -185,6 +197,18 @@ def _from_saved_block(src: str, machine, offset: np.ndarray) -> ProbeImport:
         for section in parser.sections():
             for key, value in parser.items(section):
                 values[(section.strip(), key)] = (value, where, lines.get((section.strip(), key)))
+    return values
+
+
+def carriages_from_steps(values, steps: np.ndarray, machine, src: str) -> tuple[np.ndarray, np.ndarray]:
+    """Carriage readings λ = H^fw − d·steps (N, 3) of Klipper's stable positions ``steps``
+    (N, 3), and the step distances d (3,) of ``[stepper_a|b|c]`` (module docstring)."""
+    dist = np.array([_step_distance(values, t, src) for t in ("a", "b", "c")])
+    return machine.reading_reference[None, :] - steps * dist[None, :], dist
+
+
+def _from_saved_block(src: str, machine, offset: np.ndarray) -> ProbeImport:
+    values = saved_values(src)
     heights, manual = [], 0
     for (section, key), (value, where, line) in values.items():
         m = _HEIGHT.match(key) if section == "delta_calibrate" else None
@@ -202,14 +226,12 @@ def _from_saved_block(src: str, machine, offset: np.ndarray) -> ProbeImport:
             raise InputFileError(where, f"[delta_calibrate] {key}: expected a number, got '{value}'", line=line) \
                 from None
         pv, pwhere, pline = values[(section, pos_key)]
-        heights.append((int(m.group(2)), h, _stable(pv, pwhere, pline, pos_key), line))
+        heights.append((int(m.group(2)), h, stable_position(pv, pwhere, pline, pos_key), line))
     if not heights:
-        raise InputFileError(src, "the #*# block has no [delta_calibrate] heightN / heightN_pos entries; run "
+        raise NoProbeResults(src, "the #*# block has no [delta_calibrate] heightN / heightN_pos entries; run "
                              "DELTA_CALIBRATE and SAVE_CONFIG first")
     heights.sort()
-    steps = np.array([s for _, _, s, _ in heights])
-    dist = np.array([_step_distance(values, t, src) for t in ("a", "b", "c")])
-    lam = machine.reading_reference[None, :] - steps * dist[None, :]
+    lam, dist = carriages_from_steps(values, np.array([s for _, _, s, _ in heights]), machine, src)
     lines = np.array([ln if ln is not None else 0 for *_, ln in heights])
     readings = np.array([[h - offset[2]] for _, h, _, _ in heights])
     fk = machine.fk(lam)
@@ -227,4 +249,5 @@ def _from_saved_block(src: str, machine, offset: np.ndarray) -> ProbeImport:
     return ProbeImport(meas, tuple(notes))
 
 
-__all__ = ["NEW_LINE", "OLD_LINE", "ProbeImport", "read_klipper_probe"]
+__all__ = ["NEW_LINE", "NoProbeResults", "OLD_LINE", "ProbeImport", "carriages_from_steps", "read_klipper_file",
+           "read_klipper_probe", "saved_values", "stable_position"]

@@ -51,6 +51,14 @@ the base frame), :mod:`pkmcal.sensors.z_probe`::
     free: [bed.a, bed.b]              # optional (default none): also probe.x/y/z, bed.z
     noise: {reading: 0.005, actuator: 0.0036}   # probe trigger std, carriage std (mm)
 
+Printed-object distances with the probe heights (Klipper's ``DELTA_ANALYZE``; the machine
+read as pose pairs), :mod:`pkmcal.sensors.printed_distance`: the z-probe's keys, and two
+reading noises::
+
+    sensor: printed-distance
+    probe_offset: [0.0, 0.0, 1.25]
+    noise: {reading: [0.005, 0.02], actuator: 0.0036}   # probe std, calipers std, carriage std (mm)
+
 Any setup may give Gaussian priors on parameters (maximum a posteriori identification,
 :mod:`pkmcal.identification.priors`): names or shell patterns, each ``[mean, std]`` or
 ``"mean ± std"`` (``+-`` also), or ``"± std"`` centred on the machine file's value; mm,
@@ -116,6 +124,7 @@ from pkmcal.sensors.library import (  # noqa: F401  (re-exported: the built-ins 
     bind_setup,
     builtin_setup,
 )
+from pkmcal.sensors.printed_distance import PrintedDistanceSensor
 from pkmcal.sensors.z_probe import MAX_BED_TILT_DEG, ZProbeSensor
 
 def _plausible(v: float) -> float:
@@ -381,8 +390,6 @@ def load_setup(path: str | os.PathLike, machine=None) -> MeasurementSetup:
             what = f"is not a setup key here; remove or correct it (allowed: {', '.join(model.model_fields)})"
         else:
             what = _describe(err)
-            if err["type"] == "literal_error" and loc == ("sensor",):
-                what = "must be one of full-pose, position, indicators, planar-tool, distance, z-probe"
         _fail(path, lines, loc, what)
     setup = _build(path, lines, spec, data)
     if spec.prior:
@@ -825,6 +832,13 @@ def _read_z_probe(ctx: SetupReading):
                                       "PROBE_ACCURACY reports")
 
 
+def _read_printed_distance(ctx: SetupReading):
+    spec = ctx.spec
+    bed = None if spec.bed is None else [spec.bed.z, spec.bed.a, spec.bed.b]
+    sensor = PrintedDistanceSensor(probe_offset=spec.probe_offset, bed=bed, free=ctx.free)
+    return sensor, ctx.reading_std(2, "the probe's trigger noise and the calipers' (mm), e.g. [0.005, 0.02]")
+
+
 def _write_z_probe(s: ZProbeSensor) -> dict:
     """``probe_offset`` (mm) and, unless 0, ``bed`` (mm, degrees)."""
     doc: dict = {"probe_offset": FlowList(float(v) for v in s.probe_offset)}
@@ -846,6 +860,8 @@ register_sensor_kind(SensorFileKind(PlanarToolSensor.kind, ("target", "world"), 
 register_sensor_kind(SensorFileKind(DistanceSensor.kind, ("pivots", "ball", "lengths"), _read_distance,
                                     _write_distance))
 register_sensor_kind(SensorFileKind(ZProbeSensor.kind, ("probe_offset", "bed"), _read_z_probe, _write_z_probe))
+register_sensor_kind(SensorFileKind(PrintedDistanceSensor.kind, ("probe_offset", "bed"), _read_printed_distance,
+                                    _write_z_probe))
 
 
 def save_setup(setup: MeasurementSetup, path: str | os.PathLike) -> None:

@@ -7,6 +7,8 @@
 * :class:`DistanceSensor` (``distance``): distances from base pivots to a ball on the platform
   (double ballbar, string potentiometer, interferometer to a fixed point)
 * :class:`ZProbeSensor` (``z-probe``): a delta printer's Z probe, the height of a probe point above the bed
+* :class:`PrintedDistanceSensor` (``printed-distance``): distances between printed points (two poses) and
+  Z-probe heights, on a machine read as pose pairs
 
 ``base`` holds the interface (θ declared as :class:`ParamGroup` fields, from which names,
 angle flags, ``with_params`` and value equality follow), ``_common`` the shared argument
@@ -21,11 +23,12 @@ from pkmcal.sensors.full_pose import FullPoseSensor
 from pkmcal.sensors.indicators import IndicatorSensor
 from pkmcal.sensors.planar_tool import PlanarToolSensor
 from pkmcal.sensors.position import PositionSensor
+from pkmcal.sensors.printed_distance import PrintedDistanceSensor
 from pkmcal.sensors.z_probe import ZProbeSensor
 
 #: Sensor classes by the ``kind`` written in setup files.
 SENSOR_KINDS = {cls.kind: cls for cls in (FullPoseSensor, PositionSensor, IndicatorSensor, PlanarToolSensor,
-                                          DistanceSensor, ZProbeSensor)}
+                                          DistanceSensor, ZProbeSensor, PrintedDistanceSensor)}
 
 __all__ = [
     "DistanceSensor",
@@ -36,6 +39,7 @@ __all__ = [
     "ParamGroup",
     "PlanarToolSensor",
     "PositionSensor",
+    "PrintedDistanceSensor",
     "SENSOR_KINDS",
     "Sensor",
     "ZProbeSensor",

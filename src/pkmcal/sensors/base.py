@@ -69,6 +69,9 @@ class Sensor(ABC):
     invertible: bool = False
     #: Optional features, asked as ``"x" in sensor.abilities`` (module docstring).
     abilities: frozenset[str] = frozenset()
+    #: True when a reading couples two poses: the machine is then read as pose pairs
+    #: (:mod:`pkmcal.mechanisms.pose_pairs`; :func:`~pkmcal.mechanisms.pose_pairs.read_by`).
+    reads_pose_pairs: bool = False
 
     @property
     @abstractmethod
@@ -178,6 +181,13 @@ class Sensor(ABC):
             return (f"a '{self.kind}' sensor cannot measure machine '{mechanism.name}' ({mechanism.n_dof} pose "
                     "coordinates, a planar machine); use a 'planar-tool' setup")
         return None
+
+    def measured_frames(self, frame: Frame) -> Frame:
+        """The frames at which this sensor takes its readings when the machine is sent to
+        ``frame``: the frames themselves (default); a touch probe's are lowered until it
+        triggers (:class:`~pkmcal.sensors.z_probe.ZProbeSensor`). What a plan of more poses
+        for this sensor measures (:mod:`pkmcal.identification.advice`)."""
+        return frame
 
     def reads_pose(self, params: np.ndarray | None = None) -> bool:
         """True when, at θ = ``params``, the readings are exactly the frame's x, y, z, a, b, c

@@ -20,6 +20,7 @@ from pkmcal.sensors.full_pose import FullPoseSensor
 from pkmcal.sensors.indicators import IndicatorSensor
 from pkmcal.sensors.planar_tool import PlanarToolSensor
 from pkmcal.sensors.position import PositionSensor
+from pkmcal.sensors.printed_distance import PrintedDistanceSensor
 from pkmcal.sensors.z_probe import ZProbeSensor
 
 SQRT3 = math.sqrt(3.0)
@@ -92,6 +93,20 @@ def _z_probe_klipper() -> MeasurementSetup:
     )
 
 
+#: ``printed-distance-klipper``: the Z probe above, and calipers on Klipper's printed
+#: calibration object (DELTA_ANALYZE): σ 0.02 mm, a nominal assumption for a hand-held
+#: caliper reading of a printed edge; replace it by your own repeatability.
+PRINTED_DISTANCE_STD = 0.02
+
+
+def _printed_distance_klipper() -> MeasurementSetup:
+    return MeasurementSetup(
+        PrintedDistanceSensor(),
+        NoiseModel(reading_std=np.array([Z_PROBE_KLIPPER_STD, PRINTED_DISTANCE_STD]),
+                   actuator_std=np.array(Z_PROBE_KLIPPER_CARRIAGE_STD)),
+    )
+
+
 #: Built-in setups by name → (factory, one-line description).
 BUILTIN_SETUPS = {
     "indicators-prototype": (
@@ -112,6 +127,11 @@ BUILTIN_SETUPS = {
         _z_probe_klipper,
         "delta printer Z probe as Klipper uses it (bed z = 0 and level, probe offset 0): std 0.005 mm "
         "(nominal, BLTouch spec), carriages 0.0036 mm (one 0.0125 mm step, uniform)",
+    ),
+    "printed-distance-klipper": (
+        _printed_distance_klipper,
+        "delta printer: Klipper's Z probe (as z-probe-klipper) and DELTA_ANALYZE printed-object distances "
+        "(calipers std 0.02 mm, nominal); the machine read as pose pairs",
     ),
     "planar-tracker": (
         lambda machine=None: _planar_tracker("auto", machine),

@@ -36,9 +36,11 @@ probe offsets are measured (``PROBE_CALIBRATE``); hence nothing of this sensor i
 unless named (``free:``), and the identifiability report names the combinations when
 they are freed.
 
-Declared: ``readable`` — the probe must approach the bed along its own axis, so a frame
-whose z axis R e_z is more than :data:`MAX_PROBE_TILT_DEG` from the bed normal cannot be
-read; ``works_with`` — any machine whose platform moves in space (the default).
+Declared: ``measured_frames`` — a probe reads where it triggers, lowered straight down until
+y = 0 (a frame moved by (0, 0, −y)); ``readable`` — the probe must approach the bed along
+its own axis, so a frame whose z axis R e_z is more than :data:`MAX_PROBE_TILT_DEG` from the
+bed normal cannot be read; ``works_with`` — any machine whose platform moves in space (the
+default).
 """
 
 from __future__ import annotations
@@ -141,6 +143,13 @@ class ZProbeSensor(Sensor):
         J[:, 0, 4] = -P[:, 1] / (np.cos(a) ** 2 * np.cos(b))
         J[:, 0, 5] = P[:, 0] / np.cos(b) ** 2 - P[:, 1] * np.tan(a) * np.sin(b) / np.cos(b) ** 2
         return J
+
+    def measured_frames(self, frame: Frame) -> Frame:
+        """Where the probe triggers when lowered straight down from ``frame``: y falls 1:1
+        with the frame's height (∂y/∂p_z = g_z = 1), so the frame moved by (0, 0, −y(frame))
+        reads 0: the probe point on the bed."""
+        y = self.predict(frame)[:, 0]
+        return Frame(p=frame.p - y[:, None] * np.array([0.0, 0.0, 1.0]), R=frame.R)
 
     def readable(self, frame: Frame) -> tuple[np.ndarray, str]:
         """Frames whose probe axis (R e_z) is within :data:`MAX_PROBE_TILT_DEG` of the bed
