@@ -52,6 +52,8 @@ from pkmcal.errors import PkmcalError
 MAX_ITERATIONS = 50
 #: Starting damping λ (relative to the diagonal of J̃ᵀJ̃): nearly Gauss–Newton.
 START_DAMPING = 1e-6
+#: Successful steps after which J̃ᵀJ̃ is formed again (then kept: :func:`_levenberg_marquardt`).
+FULL_STEPS = 2
 
 
 @dataclass(frozen=True)
@@ -105,7 +107,7 @@ def batch_applies(setup, method: str, weighted: bool, form: str = "plain") -> bo
 
 
 def identify_batch(machine, setup, measurements: list, *, free=None, fix=None, xtol: float | None = None,
-                   ftol: float | None = None) -> list[BatchedFit | None]:
+                   ftol: float | None = None, gtol: float | None = None) -> list[BatchedFit | None]:
     """The weighted ik-residual fits of ``measurements`` (one per fit; anything
     :func:`~pkmcal.identification.engine.measurement_arrays` takes, with commanded poses) of
     ``machine`` with ``setup``, free set ``free`` / ``fix`` as :func:`identify`'s, to the
@@ -117,6 +119,7 @@ def identify_batch(machine, setup, measurements: list, *, free=None, fix=None, x
 
     xtol = TOLERANCE if xtol is None else xtol
     ftol = TOLERANCE if ftol is None else ftol
+    gtol = TOLERANCE if gtol is None else gtol
     out: list[BatchedFit | None] = [None] * len(measurements)
     data = []
     for b, meas in enumerate(measurements):
@@ -162,68 +165,114 @@ def identify_batch(machine, setup, measurements: list, *, free=None, fix=None, x
             continue                        # a gauge to fix, or an interpolating fit: the engine's
         s = np.linalg.svd(scaled.R, compute_uv=False)
         report = BatchReport(free_idx.size, free_idx.size, float(s[0] / s[-1]))
-        jobs.setdefault(len(q), []).append((b, q, y, cmd, ev0.poses[sl], W[sl], report))
+        r0 = (W[sl] @ ev0.r[sl][..., None])[..., 0].ravel()
+        jobs.setdefault(len(q), []).append(_Job(b, q, y, cmd, ev0.poses[sl], W[sl], report, r0,
+                                                Jw0[sl][:, :, free_idx].reshape(r0.size, free_idx.size)))
     for group in jobs.values():
-        x, nfev, cost, ok = _levenberg_marquardt(machine, theta0, free_idx, group, xtol, ftol)
-        for g, (b, q, y, cmd, _, _, report) in enumerate(group):
+        x, nfev, cost, ok = _levenberg_marquardt(machine, theta0, free_idx, group, xtol, ftol, gtol)
+        for g, job in enumerate(group):
             if ok[g]:
-                out[b] = _finish(machine, setup, q, y, cmd, theta0, free_idx, free_names, names, x[g], nfev[g],
-                                 cost[g], report)
+                out[job.index] = _finish(machine, setup, job.q, job.y, job.commanded, theta0, free_idx, free_names,
+                                         names, x[g], nfev[g], cost[g], job.report)
     return out
 
 
-def _residuals(machine, theta0: np.ndarray, free_idx: np.ndarray, group: list, x: np.ndarray, rows: np.ndarray):
-    """Whitened residuals (G, k N) and Jacobians (G, k N, n) of the fits ``rows`` of
-    ``group`` at free parameters ``x`` (G, n): r = q − IK(x̂, ρ), ∂r/∂ρ = −∂IK/∂ρ (the
-    ik-residual's, :class:`~pkmcal.identification.residuals.IKResidual`, at fixed x̂),
-    times the start weights, pose by pose."""
+@dataclass
+class _Job:
+    """One fit of a group: its index in the call, data, measured poses x̂ (N, n), start
+    weights W (N, k, k), report, and whitened residual (k N,) and Jacobian (k N, n) at the start."""
+
+    index: int
+    q: np.ndarray
+    y: np.ndarray
+    commanded: np.ndarray
+    xhat: np.ndarray
+    W: np.ndarray
+    report: BatchReport
+    r0: np.ndarray
+    J0: np.ndarray
+
+
+def _residuals(machine, theta0: np.ndarray, free_idx: np.ndarray, jobs: list[_Job], x: np.ndarray,
+               rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(r̃, W, B)`` of the fits ``rows`` at free parameters ``x`` (G, n): the whitened
+    residuals (G, k N) of r = q − IK(x̂, ρ) (the ik-residual's,
+    :class:`~pkmcal.identification.residuals.IKResidual`, at fixed x̂), the start weights
+    (G, N, k, k) and B = ∂IK/∂ρ of the free parameters (G, N, k, n): J̃ = −W B pose by pose."""
     p = len(machine.param_names)
-    r_all, J_all = [], []
+    r_all, B_all = [], []
     for g, i in enumerate(rows):
-        _, q, _, _, xhat, W, _ = group[i]
+        job = jobs[i]
         th = theta0.copy()
         th[free_idx] = x[g]
-        q_model, _, B = machine.ik_and_jacobians(xhat, th[:p])
-        r_all.append(q - q_model)
-        J_all.append(-B[:, :, free_idx])
-    Wst = np.stack([group[i][5] for i in rows])
-    r = (Wst @ np.stack(r_all)[..., None])[..., 0]
-    J = Wst @ np.stack(J_all)
-    G, N, k = r.shape
-    return r.reshape(G, N * k), J.reshape(G, N * k, -1)
+        q_model, _, B = machine.ik_and_jacobians(job.xhat, th[:p])
+        r_all.append(job.q - q_model)
+        B_all.append(B[:, :, free_idx])
+    W = np.stack([jobs[i].W for i in rows])
+    r = (W @ np.stack(r_all)[..., None])[..., 0]
+    return r.reshape(len(rows), -1), W, np.stack(B_all)
 
 
-def _levenberg_marquardt(machine, theta0, free_idx, group, xtol, ftol):
-    """The batched solver (module docstring): ``(x (G, n), nfev (G,), cost (G,), converged (G,))``."""
-    G, n = len(group), free_idx.size
+def _whitened_jacobian(W: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """J̃ (G, k N, n) = −W B pose by pose."""
+    J = -(W @ B)
+    return J.reshape(J.shape[0], -1, J.shape[-1])
+
+
+def _gradient(r: np.ndarray, W: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """J̃ᵀ r̃ (G, n) = −Σ_j B_jᵀ W_jᵀ r̃_j, without forming J̃."""
+    G, N, k, n = B.shape
+    u = np.swapaxes(W, 2, 3) @ r.reshape(G, N, k, 1)
+    return -(np.swapaxes(B.reshape(G, N * k, n), 1, 2) @ u.reshape(G, N * k, 1))[..., 0]
+
+
+def _levenberg_marquardt(machine, theta0, free_idx, jobs: list[_Job], xtol, ftol, gtol):
+    """The batched solver (module docstring): ``(x (G, n), nfev (G,), cost (G,), converged (G,))``.
+
+    J̃ᵀJ̃ is formed at the start and after the first :data:`FULL_STEPS` successful steps;
+    after that the steps use the last one with the exact gradient J̃ᵀr̃ at the current point
+    (a Newton chord: the same fixed point J̃ᵀr̃ = 0, the same minimiser; J̃ changes by
+    O(δρ/L) between the start and the solution, so the steps stay Gauss–Newton's to that
+    order), and a failed step forms it again at the current point before damping more."""
+    G, n = len(jobs), free_idx.size
     x = np.tile(theta0[free_idx], (G, 1))
-    every = np.arange(G)
-    r, J = _residuals(machine, theta0, free_idx, group, x, every)
+    r = np.stack([j.r0 for j in jobs])
+    J = np.stack([j.J0 for j in jobs])
+    W = np.stack([j.W for j in jobs])
+    B = None                                 # B at the current points, once a step has been taken
     f = 0.5 * np.sum(r * r, axis=1)
+    H = np.swapaxes(J, 1, 2) @ J
+    grad = (np.swapaxes(J, 1, 2) @ r[..., None])[..., 0]
+    D2 = np.diagonal(H, axis1=1, axis2=2).copy()
+    fresh = np.ones(G, dtype=bool)
+    steps = np.zeros(G, dtype=int)
     nfev = np.ones(G, dtype=int)
     lam = np.full(G, START_DAMPING)
-    D2 = np.zeros((G, n))
     active = np.isfinite(f)
     done = np.zeros(G, dtype=bool)
+    eye = np.eye(n)
     for _ in range(MAX_ITERATIONS):
         a = np.flatnonzero(active)
         if a.size == 0:
             break
-        Ja, ra = J[a], r[a]
-        Jt = np.swapaxes(Ja, 1, 2)
-        JtJ = Jt @ Ja
-        grad = (Jt @ ra[..., None])[..., 0]
-        diag = np.diagonal(JtJ, axis1=1, axis2=2)
-        D2[a] = np.maximum(D2[a], diag)
-        A = JtJ + (lam[a, None] * D2[a])[:, :, None] * np.eye(n)
-        try:
-            step = -np.linalg.solve(A, grad[..., None])[..., 0]
-        except np.linalg.LinAlgError:
-            active[a] = False
+        # gtol: every column of J̃ at most gtol from orthogonal to r̃ (cosine)
+        diag = np.diagonal(H[a], axis1=1, axis2=2)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cosine = np.abs(grad[a]) / np.sqrt(diag * (2.0 * f[a])[:, None])
+        flat = np.all((cosine <= gtol) | (diag == 0), axis=1) & fresh[a]
+        done[a[flat]] = True
+        active[a[flat]] = False
+        a = a[~flat]
+        if a.size == 0:
             break
-        pred = -(np.sum(grad * step, axis=1) + 0.5 * np.sum(step * (JtJ @ step[..., None])[..., 0], axis=1))
+        Ha, ga = H[a], grad[a]
+        try:
+            step = -np.linalg.solve(Ha + (lam[a, None] * D2[a])[:, :, None] * eye, ga[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            break
+        pred = -(np.sum(ga * step, axis=1) + 0.5 * np.sum(step * (Ha @ step[..., None])[..., 0], axis=1))
         x_new = x[a] + step
-        r_new, J_new = _residuals(machine, theta0, free_idx, group, x_new, a)
+        r_new, W_new, B_new = _residuals(machine, theta0, free_idx, jobs, x_new, a)
         nfev[a] += 1
         f_new = 0.5 * np.sum(r_new * r_new, axis=1)
         fa = f[a]
@@ -232,15 +281,27 @@ def _levenberg_marquardt(machine, theta0, free_idx, group, xtol, ftol):
         small_step = np.sqrt(np.sum((D * step) ** 2, axis=1)) <= xtol * np.sqrt(np.sum((D * x_new) ** 2, axis=1))
         with np.errstate(divide="ignore", invalid="ignore"):
             small_gain = (np.abs(fa - f_new) <= ftol * fa) & (pred <= ftol * fa)
+            ratio = np.where(pred > 0, (fa - f_new) / np.where(pred > 0, pred, 1.0), 0.0)
+        if B is None:
+            B = np.empty((G,) + B_new.shape[1:])
         acc = a[good]
-        x[acc], r[acc], J[acc], f[acc] = x_new[good], r_new[good], J_new[good], f_new[good]
-        ratio = np.where(pred > 0, (fa - f_new) / np.where(pred > 0, pred, 1.0), 0.0)
+        x[acc], r[acc], f[acc], B[acc] = x_new[good], r_new[good], f_new[good], B_new[good]
+        steps[acc] += 1
+        grad[acc] = _gradient(r_new[good], W_new[good], B_new[good])
+        # J̃ᵀJ̃ again: after the first steps, and where a step failed on an old one
+        renew = np.union1d(acc[steps[acc] <= FULL_STEPS], a[~good & ~fresh[a] & (steps[a] > 0)])
+        fresh[acc] = False
+        if renew.size:
+            Jr = _whitened_jacobian(W[renew], B[renew])
+            H[renew] = np.swapaxes(Jr, 1, 2) @ Jr
+            grad[renew] = (np.swapaxes(Jr, 1, 2) @ r[renew][..., None])[..., 0]
+            D2[renew] = np.maximum(D2[renew], np.diagonal(H[renew], axis1=1, axis2=2))
+            fresh[renew] = True
         lam[a] = np.where(good, lam[a] * np.maximum(1.0 / 3.0, 1.0 - (2.0 * np.clip(ratio, 0, 1) - 1.0) ** 3),
-                          lam[a] * 10.0)
-        stop = (good & small_step) | (~good & small_gain & np.isfinite(f_new))
+                          np.where(fresh[a] | (steps[a] == 0), lam[a] * 10.0, lam[a]))
+        stop = (good & (small_step | small_gain)) | (~good & fresh[a] & small_gain & np.isfinite(f_new))
         done[a[stop]] = True
         active[a[stop]] = False
-        active[a[~np.isfinite(step).all(axis=1)]] = False
     return x, nfev, f, done
 
 
