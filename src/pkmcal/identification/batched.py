@@ -299,7 +299,7 @@ def _levenberg_marquardt(machine, theta0, free_idx, jobs: list[_Job], xtol, ftol
             fresh[renew] = True
         lam[a] = np.where(good, lam[a] * np.maximum(1.0 / 3.0, 1.0 - (2.0 * np.clip(ratio, 0, 1) - 1.0) ** 3),
                           np.where(fresh[a] | (steps[a] == 0), lam[a] * 10.0, lam[a]))
-        stop = (good & (small_step | small_gain)) | (~good & fresh[a] & small_gain & np.isfinite(f_new))
+        stop = (good & small_step) | (~good & fresh[a] & small_gain & np.isfinite(f_new))
         done[a[stop]] = True
         active[a[stop]] = False
     return x, nfev, f, done
