@@ -201,3 +201,11 @@ def test_study_rows_of_batched_and_engine_fits_agree(paper1_study, monkeypatch):
                 assert float(u) == pytest.approx(float(v), rel=3e-5, abs=1e-4), name
             else:
                 assert u == v, name
+
+
+def test_a_fit_that_does_not_converge_is_left_to_the_engine(paper1, monkeypatch):
+    import pkmcal.identification.batched as batched
+
+    nominal, setup, meas = paper1
+    monkeypatch.setattr(batched, "MAX_ITERATIONS", 2)       # far too few from ±0.5 mm errors
+    assert identify_batch(nominal, setup, meas[:3]) == [None, None, None]

@@ -10,7 +10,9 @@ For trial t of campaign c (machine m × setup s × plan p × pose count n):
    the campaign's candidate pool drawn from the generator of key (21, m, s, p, n, t), which
    then draws the noise (:func:`pkmcal.identification.simulation.simulate_campaign`);
 3. every method identifies the parameters (:func:`pkmcal.identification.engine.identify`)
-   from the same simulated campaign;
+   from the same simulated campaign; the noise-weighted ik-residual fits of the trials of a
+   batch together (:func:`pkmcal.identification.batched.identify_batch`: the same fit, its
+   numbers independent of the batch; the fits it does not do go to ``identify``);
 4. the truth θ* the estimate is compared with: θ_real = [ρ_real; s_setup] when every
    parameter that was not estimated (gauge or user-fixed) has its true value at the start;
    otherwise the noise-free fit of the same poses with the same free set (the value the
