@@ -14,7 +14,8 @@ same covariance: weights recomputed at the solution, C = (J̃ᵀJ̃)⁻¹ and χ
 (:func:`~pkmcal.identification.uncertainty.parameter_uncertainty`).
 
 What is batched: the start (x̂, Jacobian and noise covariance of every pose of every fit
-at the nominal machine, one pass of the method), the design Jacobians (one pass), and the
+at the nominal machine, one pass of the method), the design Jacobians (one pass over the
+distinct commanded poses), and the
 solver: Levenberg–Marquardt on the normal equations,
 
     (J̃ᵀJ̃ + λ D²) δ = −J̃ᵀr̃,   D² = diag(J̃ᵀJ̃) (running maximum, Marquardt's scaling)
@@ -78,7 +79,8 @@ class BatchedFit:
     """One fit of :func:`identify_batch`, with the attributes of
     :class:`~pkmcal.identification.engine.IdentificationResult` a study reads (same
     meaning, internal units): the calibrated ``mechanism`` (with its covariance), ``names``,
-    ``free``, ``initial`` and ``estimate`` (full vectors), ``uncertainty``, ``identifiability``
+    ``free`` (and ``free_index``, their indices in ``names``), ``initial`` and ``estimate``
+    (full vectors), ``uncertainty``, ``identifiability``
     (:class:`BatchReport`), ``gauge`` (empty: the batch never fixes one), ``nfev`` / ``njev``
     (evaluations of this fit's residual and Jacobian), ``cost`` = ½ Σ ‖W r‖² at the solution
     with the start weights."""
@@ -93,12 +95,13 @@ class BatchedFit:
     nfev: int
     njev: int
     cost: float
+    free_index: np.ndarray | None = None
     gauge: tuple[str, ...] = ()
     success: bool = True
 
-    @property
-    def free_index(self) -> np.ndarray:
-        return np.array([self.names.index(n) for n in self.free], dtype=int)
+    def __post_init__(self):
+        if self.free_index is None:
+            object.__setattr__(self, "free_index", np.array([self.names.index(n) for n in self.free], dtype=int))
 
     @property
     def covariance(self) -> np.ndarray:
@@ -155,8 +158,14 @@ def identify_batch(machine, setup, measurements: list, *, free=None, fix=None, x
         W = whitening(ev0.cov, "ik-residual residual")
     except PkmcalError:
         return out
-    Jd, okd, _ = design_jacobian(machine, setup.sensor, setup.noise, model.commanded, "ik-residual", True,
+    # the design Jacobian row by row, once per distinct commanded pose (a study's trials draw
+    # their poses from one pool: 64 trials of 15 box corners have 64 distinct poses)
+    cmd = np.ascontiguousarray(model.commanded)
+    _, first, inverse = np.unique(cmd.view(np.dtype((np.void, cmd.dtype.itemsize * cmd.shape[1]))).ravel(),
+                                  return_index=True, return_inverse=True)
+    Jd, okd, _ = design_jacobian(machine, setup.sensor, setup.noise, cmd[first], "ik-residual", True,
                                  form="plain", sensor_columns=False)
+    Jd, okd = Jd[inverse.ravel()], okd[inverse.ravel()]
     Jw0 = W @ ev0.J
     names = model.names
     free_names = tuple(names[i] for i in free_idx)
@@ -340,7 +349,8 @@ def _finish(machine, setup, q, y, cmd, theta0, free_idx, free_names, names, x, n
     p = model.n_mech
     mech = machine.with_params(theta[:p], covariance=embed(unc.covariance, free_idx, p))
     return BatchedFit(mechanism=mech, names=names, free=free_names, initial=model.theta0, estimate=theta,
-                      uncertainty=unc, identifiability=report, nfev=int(nfev), njev=int(nfev), cost=float(cost))
+                      uncertainty=unc, identifiability=report, nfev=int(nfev), njev=int(nfev), cost=float(cost),
+                      free_index=free_idx)
 
 
 __all__ = ["BatchReport", "BatchedFit", "batch_applies", "identify_batch"]
