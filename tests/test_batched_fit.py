@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from pkmcal.errors import PkmcalError
 from pkmcal.identification.batched import batch_applies, identify_batch
 from pkmcal.identification.engine import TOLERANCE, identify
 from pkmcal.identification.residuals import Model, make_method, whitening
@@ -128,6 +129,17 @@ def test_fits_left_to_the_engine(paper1):
     few = [type(meas[0])(actuators=m.actuators[:3], readings=m.readings[:3], commanded=m.commanded[:3],
                          source=None, sessions=None) for m in meas[:2]]
     assert identify_batch(nominal, setup, few) == [None, None]
+    # a shared start the engine refuses (a sensor the ik-residual cannot use, a noise-free
+    # residual): every fit to the engine, which reports it fit by fit
+    indicators = builtin_setup("indicators-prototype")
+    q, cmd = meas[0].actuators, meas[0].commanded
+    y3 = indicators.sensor.predict(nominal.frame(cmd))
+    assert identify_batch(nominal, indicators, [(q, y3, cmd)] * 2) == [None, None]
+    with pytest.raises(PkmcalError, match="ik-residual"):
+        identify(nominal, indicators, (q, y3, cmd), method="ik-residual")
+    silent = dataclasses.replace(setup, noise=dataclasses.replace(setup.noise, reading_std=0.0 * np.asarray(
+        setup.noise.reading_std), actuator_std=0.0 * np.asarray(setup.noise.actuator_std)))
+    assert identify_batch(nominal, silent, meas[:2]) == [None, None]
     # an explicit free set is the engine's
     f = identify_batch(nominal, setup, meas[:1], free=("b*",))[0]
     ref = identify(nominal, setup, meas[0], free=("b*",))

@@ -121,7 +121,16 @@ def identify_batch(machine, setup, measurements: list, *, free=None, fix=None, x
     :func:`~pkmcal.identification.engine.measurement_arrays` takes, with commanded poses) of
     ``machine`` with ``setup``, free set ``free`` / ``fix`` as :func:`identify`'s, to the
     engine's tolerances by default. ``None`` for a fit the batch leaves to the engine
-    (module docstring)."""
+    (module docstring), and for every fit when their shared start raises a
+    :class:`~pkmcal.errors.PkmcalError` (a sensor the ik-residual cannot use, a noise-free
+    residual, a free-set pattern that matches nothing): the engine reports it, fit by fit."""
+    try:
+        return _identify_batch(machine, setup, measurements, free=free, fix=fix, xtol=xtol, ftol=ftol, gtol=gtol)
+    except PkmcalError:
+        return [None] * len(measurements)
+
+
+def _identify_batch(machine, setup, measurements: list, *, free, fix, xtol, ftol, gtol) -> list[BatchedFit | None]:
     from pkmcal.identification.engine import TOLERANCE, measurement_arrays, measurement_sessions
     from pkmcal.identification.identifiability import RANK_RTOL, ScaledJacobian, design_jacobian
     from pkmcal.identification.residuals import Model, candidate_parameters, make_method, whitening
@@ -140,12 +149,9 @@ def identify_batch(machine, setup, measurements: list, *, free=None, fix=None, x
         return out
     sizes = np.array([len(d[1]) for d in data])
     starts = np.concatenate([[0], np.cumsum(sizes)])
-    try:
-        model = Model(machine, setup.sensor, setup.noise, np.concatenate([d[1] for d in data]),
-                      np.concatenate([d[2] for d in data]), np.concatenate([d[3] for d in data]))
-        cand, _ = candidate_parameters(model, free, fix)
-    except PkmcalError:
-        return out                          # the engine reports it, per fit
+    model = Model(machine, setup.sensor, setup.noise, np.concatenate([d[1] for d in data]),
+                  np.concatenate([d[2] for d in data]), np.concatenate([d[3] for d in data]))
+    cand, _ = candidate_parameters(model, free, fix)
     p = model.n_mech
     if not cand or any(i >= p for i in cand):
         return out                          # a free sensor parameter moves x̂: the engine's fit
@@ -154,16 +160,13 @@ def identify_batch(machine, setup, measurements: list, *, free=None, fix=None, x
     meth.sensor_columns = False
     theta0 = model.theta0
     ev0 = meth.evaluate(theta0, jac=True, cov=True)
-    try:
-        W = whitening(ev0.cov, "ik-residual residual")
-    except PkmcalError:
-        return out
+    W = whitening(ev0.cov, "ik-residual residual")
     # the design Jacobian row by row, once per distinct commanded pose (a study's trials draw
     # their poses from one pool: 64 trials of 15 box corners have 64 distinct poses)
-    cmd = np.ascontiguousarray(model.commanded)
-    _, first, inverse = np.unique(cmd.view(np.dtype((np.void, cmd.dtype.itemsize * cmd.shape[1]))).ravel(),
-                                  return_index=True, return_inverse=True)
-    Jd, okd, _ = design_jacobian(machine, setup.sensor, setup.noise, cmd[first], "ik-residual", True,
+    every = np.ascontiguousarray(model.commanded)
+    rows = every.view(np.dtype((np.void, every.dtype.itemsize * every.shape[1]))).ravel()   # bit patterns
+    _, first, inverse = np.unique(rows, return_index=True, return_inverse=True)
+    Jd, okd, _ = design_jacobian(machine, setup.sensor, setup.noise, every[first], "ik-residual", True,
                                  form="plain", sensor_columns=False)
     Jd, okd = Jd[inverse.ravel()], okd[inverse.ravel()]
     Jw0 = W @ ev0.J

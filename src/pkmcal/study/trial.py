@@ -255,7 +255,7 @@ FIT_BATCH = 64
 
 @dataclass
 class _Measured:
-    """A trial after steps 1–2: its rows (one per method), real machine and campaign."""
+    """A trial after steps 1–2: its rows (one per method), real machine and simulated campaign."""
 
     rows: list
     real: object
