@@ -311,8 +311,10 @@ def _levenberg_marquardt(machine, theta0, free_idx, jobs: list[_Job], xtol, ftol
         x[acc], r[acc], f[acc], B[acc] = x_new[good], r_new[good], f_new[good], B_new[good]
         steps[acc] += 1
         grad[acc] = _gradient(r_new[good], W_new[good], B_new[good])
-        # J̃ᵀJ̃ again: after the first steps, and where a step failed on an old one
-        renew = np.union1d(acc[steps[acc] <= FULL_STEPS], a[~good & ~fresh[a] & (steps[a] > 0)])
+        # J̃ᵀJ̃ again: after the first steps, and where a step failed on an old one (then
+        # not damped more: the next step is Gauss–Newton's at the current point)
+        was_fresh = fresh[a].copy()
+        renew = np.union1d(acc[steps[acc] <= FULL_STEPS], a[~good & ~was_fresh & (steps[a] > 0)])
         fresh[acc] = False
         if renew.size:
             Jr = _whitened_jacobian(W[renew], B[renew])
@@ -321,8 +323,8 @@ def _levenberg_marquardt(machine, theta0, free_idx, jobs: list[_Job], xtol, ftol
             D2[renew] = np.maximum(D2[renew], np.diagonal(H[renew], axis1=1, axis2=2))
             fresh[renew] = True
         lam[a] = np.where(good, lam[a] * np.maximum(1.0 / 3.0, 1.0 - (2.0 * np.clip(ratio, 0, 1) - 1.0) ** 3),
-                          np.where(fresh[a] | (steps[a] == 0), np.maximum(lam[a] * 10.0, FIRST_DAMPING), lam[a]))
-        stop = (good & small_step) | (~good & fresh[a] & small_gain & np.isfinite(f_new))
+                          np.where(was_fresh, np.maximum(lam[a] * 10.0, FIRST_DAMPING), lam[a]))
+        stop = (good & small_step) | (~good & was_fresh & small_gain & np.isfinite(f_new))
         done[a[stop]] = True
         active[a[stop]] = False
     return x, nfev, f, done
