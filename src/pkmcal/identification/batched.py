@@ -15,26 +15,29 @@ same covariance: weights recomputed at the solution, C = (J̃ᵀJ̃)⁻¹ and χ
 
 What is batched: the start (x̂, Jacobian and noise covariance of every pose of every fit
 at the nominal machine, one pass of the method), the design Jacobians (one pass over the
-distinct commanded poses), and the
-solver: Levenberg–Marquardt on the normal equations,
+distinct commanded poses), and the solver: Levenberg–Marquardt on the normal equations,
 
     (J̃ᵀJ̃ + λ D²) δ = −J̃ᵀr̃,   D² = diag(J̃ᵀJ̃) (running maximum, Marquardt's scaling)
 
 for all fits of one size together (stacked (B, k N, n) Jacobians, one stacked solve per
 iteration, in the scaled variables D x), each fit with its own damping λ (0 at the start:
-Gauss–Newton steps; 1e-6, then ×10 after a failed step; shrunk after a successful one as
+Gauss–Newton steps; 1e-6, then ×10 after a failed step; shrunk after a successful one by
 Nielsen's rule) and its own stop, MINPACK's tests on its own numbers: the step
 ‖D δ‖ ≤ xtol ‖D x‖, the gradient (every column of J̃ within gtol of orthogonal to r̃),
 or — where a step fails — both the actual and the predicted relative reduction of the cost
-≤ ftol (nothing left to gain at rounding). The problem is
-nearly linear in ρ (the errors are mm on legs of ~1 m), so Gauss–Newton steps converge
-quadratically and the fit stops at the minimiser the engine's MINPACK run stops at, to
-its tolerances (``tests/test_batched_fit.py`` compares parameters, χ², covariance and rank).
+≤ ftol (nothing left to gain at rounding). J̃ᵀJ̃ is formed at the start and after the
+first :data:`FULL_STEPS` steps, then kept, the gradient always exact (a Newton chord:
+same fixed point J̃ᵀr̃ = 0). The problem is nearly linear in ρ (errors of mm on legs of
+~1 m), so a fit takes 5–7 evaluations (MINPACK's: 5 residuals, 4 Jacobians) and stops at
+the minimiser the engine's MINPACK run stops at, to their tolerances
+(``tests/test_batched_fit.py`` compares parameters, χ², covariance, rank and condition).
 
 Every number of fit b is computed from fit b's data by stacked per-pose / per-fit
-operations only (matmul, solve and reductions over each fit's own axes), so a fit's bits
-do not depend on which other fits share its batch (tested): a study gives the same bits
-on any number of workers.
+operations only (the compiled kernels row by row, NumPy's stacked matmul and solve slice
+by slice, reductions over each fit's own axes), so a fit's bits do not depend on which
+other fits share its batch, nor in which order (tested, as are a study's rows for 1 and 2
+workers, batches of 1 and 3 trials, and Dask): a study gives the same bits on any number of
+workers.
 
 A fit the batch cannot do as the engine would comes back ``None``, and the caller runs the
 engine on it: a start pose that cannot be solved, a free set the cheap certificate cannot
