@@ -10,7 +10,9 @@ For trial t of campaign c (machine m × setup s × plan p × pose count n):
    the campaign's candidate pool drawn from the generator of key (21, m, s, p, n, t), which
    then draws the noise (:func:`pkmcal.identification.simulation.simulate_campaign`);
 3. every method identifies the parameters (:func:`pkmcal.identification.engine.identify`)
-   from the same simulated campaign;
+   from the same simulated campaign; the noise-weighted ik-residual fits of the trials of a
+   batch together (:func:`pkmcal.identification.batched.identify_batch`: the same fit, its
+   numbers independent of the batch; the fits it does not do go to ``identify``);
 4. the truth θ* the estimate is compared with: θ_real = [ρ_real; s_setup] when every
    parameter that was not estimated (gauge or user-fixed) has its true value at the start;
    otherwise the noise-free fit of the same poses with the same free set (the value the
@@ -246,12 +248,22 @@ def evaluate(fit: IdentificationResult, truth_full: np.ndarray, is_angle: np.nda
     return out
 
 
-def run_trial(ctx: Context, campaign: Campaign, trial: int) -> list[str]:
-    """The CSV lines (one per method, in method order) of trial ``trial`` of ``campaign``.
+#: Trials whose fits :func:`~pkmcal.identification.batched.identify_batch` solves together
+#: (bounded memory: (B, 6 N, n) Jacobians). A fit's numbers do not depend on its batch.
+FIT_BATCH = 64
 
-    Every method is fitted first; then the held-out poses are verified once for the
-    nominal model and every calibrated one together (:func:`pose_errors_many`: one FK and
-    one limit check of the real machine for all, the same numbers as separate calls)."""
+
+@dataclass
+class _Measured:
+    """A trial after steps 1–2: its rows (one per method), real machine and simulated campaign."""
+
+    rows: list
+    real: object
+    sim: object
+
+
+def _measure(ctx: Context, campaign: Campaign, trial: int) -> "_Measured | list[str]":
+    """Steps 1–2 (module docstring) of one trial, or its failed lines."""
     st = ctx.study
     mspec, sspec, pspec = st.machines[campaign.machine], st.setups[campaign.setup], st.plans[campaign.plan]
     nominal, setup = mspec.nominal, sspec.setup
@@ -261,12 +273,6 @@ def run_trial(ctx: Context, campaign: Campaign, trial: int) -> list[str]:
     rows = [dict(base, config=ctx.config_index(campaign.index, k), method=me.label,
                  identification=me.resolved(setup, nominal), weighted=me.weighted)
             for k, me in enumerate(st.methods)]
-
-    def all_failed(exc: PkmcalError) -> list[str]:
-        return [format_row(dict(r, failed=True, message=str(exc)), ctx.names) for r in rows]
-
-    ignore = mspec.ignore_limits
-    heldout = ctx.heldout[campaign.machine]
     try:
         real = real_machine(mspec, st.seed, campaign.machine, trial,
                             ctx.error_index[campaign.machine] if ctx.error_index else None)
@@ -281,25 +287,62 @@ def run_trial(ctx: Context, campaign: Campaign, trial: int) -> list[str]:
                 chosen = select(G, campaign.n_poses, algorithm=pspec.algorithm, index=pspec.index, rng=rng,
                                 positions=pool).chosen
             poses = pool[chosen]
-        sim = simulate_campaign(nominal, real, setup, poses, rng, ignore_limits=ignore)
+        sim = simulate_campaign(nominal, real, setup, poses, rng, ignore_limits=mspec.ignore_limits)
         if len(sim.kept) == 0:
             raise PkmcalError(f"the real machine reaches none of the {len(poses)} planned poses ({sim.summary()})")
     except PkmcalError as exc:
-        return all_failed(exc)
+        return _failed(ctx, rows, exc)
+    return _Measured(rows, real, sim)
+
+
+def _failed(ctx: Context, rows: list, exc: PkmcalError) -> list[str]:
+    return [format_row(dict(r, failed=True, message=str(exc)), ctx.names) for r in rows]
+
+
+def _fit_all(ctx: Context, campaign: Campaign, measured: list[_Measured], k: int) -> list:
+    """Step 3 for method ``k`` of every measured trial: the fit or the PkmcalError. The
+    weighted ik-residual fits go to :func:`~pkmcal.identification.batched.identify_batch`
+    together (when the study has no extra metrics, which are given the engine's result);
+    every fit it hands back, and every other fit, to the engine."""
+    from pkmcal.identification.batched import batch_applies, identify_batch
+
+    st = ctx.study
+    nominal, setup = st.machines[campaign.machine].nominal, st.setups[campaign.setup].setup
+    me = st.methods[k]
+    method = me.resolved(setup, nominal)
+    fits: list = [None] * len(measured)
+    if st.extra_metrics is None and batch_applies(setup, method, me.weighted):
+        fits = identify_batch(nominal, setup, [m.sim.measurements for m in measured], free=me.free, fix=me.fix)
+    for i, m in enumerate(measured):
+        if fits[i] is None:
+            try:
+                fits[i] = identify(nominal, setup, m.sim.measurements, method=method, weighted=me.weighted,
+                                   free=me.free, fix=me.fix)
+            except PkmcalError as exc:
+                fits[i] = exc
+    return fits
+
+
+def _verify(ctx: Context, campaign: Campaign, m: _Measured, fitted: list) -> list[str]:
+    """Steps 4–6 of one trial from its fits (one per method: a fit or a PkmcalError)."""
+    st = ctx.study
+    mspec, sspec = st.machines[campaign.machine], st.setups[campaign.setup]
+    nominal, setup, real, sim = mspec.nominal, sspec.setup, m.real, m.sim
     truth_full = np.concatenate([real.params, setup.sensor.params])
     is_angle = np.array(tuple(nominal.param_is_angle) + tuple(setup.sensor.param_is_angle), dtype=bool)
-    out = [dict(r) for r in rows]
-    fits: list[tuple[int, IdentificationResult]] = []
-    for k, (r, me) in enumerate(zip(out, st.methods)):
-        try:
-            fits.append((k, identify(nominal, setup, sim.measurements, method=r["identification"],
-                                     weighted=me.weighted, free=me.free, fix=me.fix)))
-        except PkmcalError as exc:
-            r.update(failed=True, message=str(exc), poses_measured=len(sim.kept))
+    out = [dict(r) for r in m.rows]
+    fits = []
+    for k, (r, fit) in enumerate(zip(out, fitted)):
+        if isinstance(fit, PkmcalError):
+            r.update(failed=True, message=str(fit), poses_measured=len(sim.kept))
+        else:
+            fits.append((k, fit))
+    heldout = ctx.heldout[campaign.machine]
     try:
-        before, *afters = pose_errors_many((nominal,) + tuple(f.mechanism for _, f in fits), real, heldout, ignore)
+        before, *afters = pose_errors_many((nominal,) + tuple(f.mechanism for _, f in fits), real, heldout,
+                                           mspec.ignore_limits)
     except PkmcalError as exc:
-        return all_failed(exc)
+        return _failed(ctx, m.rows, exc)
     for (k, fit), after in zip(fits, afters):
         r, me = out[k], st.methods[k]
         try:
@@ -315,18 +358,48 @@ def run_trial(ctx: Context, campaign: Campaign, trial: int) -> list[str]:
     return [format_row(r, ctx.names) for r in out]
 
 
+def run_trials(ctx: Context, campaign: Campaign, trials) -> list[str]:
+    """The CSV lines of trials ``trials`` of ``campaign``, in (trial, method) order.
+
+    Per trial the real machine and the simulated campaign (steps 1–2); then every method
+    fits all trials (step 3; the weighted ik-residual fits batched,
+    :func:`_fit_all`); then per trial the held-out poses are verified once for the
+    nominal model and every calibrated one together (:func:`pose_errors_many`: one FK and
+    one limit check of the real machine for all, the same numbers as separate calls) and
+    the columns computed (steps 4–6)."""
+    done: dict[int, list[str]] = {}
+    measured: list[tuple[int, _Measured]] = []
+    for t in trials:
+        res = _measure(ctx, campaign, t)
+        if isinstance(res, list):
+            done[t] = res
+        else:
+            measured.append((t, res))
+    if measured:
+        per_method = [_fit_all(ctx, campaign, [m for _, m in measured], k) for k in range(ctx.n_methods)]
+        for i, (t, m) in enumerate(measured):
+            done[t] = _verify(ctx, campaign, m, [fits[i] for fits in per_method])
+    return [line for t in trials for line in done[t]]
+
+
+def run_trial(ctx: Context, campaign: Campaign, trial: int) -> list[str]:
+    """The CSV lines (one per method, in method order) of trial ``trial`` of ``campaign``
+    (:func:`run_trials` of that one trial: the same lines as in any batch)."""
+    return run_trials(ctx, campaign, [trial])
+
+
 def run_batch(ctx: Context, campaign: int, first: int, last: int) -> tuple[int, int, int, list[str], float]:
     """Trials ``first``..``last`` (inclusive) of one campaign: ``(campaign, first, last,
-    lines, seconds)`` with the lines in (trial, method) order."""
+    lines, seconds)`` with the lines in (trial, method) order, :data:`FIT_BATCH` trials at a time."""
     from pkmcal.identification.residuals import single_threaded_blas
 
     t0 = time.perf_counter()
     c = ctx.campaigns[campaign]
     lines: list[str] = []
     with single_threaded_blas():
-        for t in range(first, last + 1):
-            lines.extend(run_trial(ctx, c, t))
+        for start in range(first, last + 1, FIT_BATCH):
+            lines.extend(run_trials(ctx, c, range(start, min(last, start + FIT_BATCH - 1) + 1)))
     return campaign, first, last, lines, time.perf_counter() - t0
 
 
-__all__ = ["Campaign", "Context", "prepare", "pseudo_truth", "real_machine", "rng_for", "run_batch", "run_trial", "seed_for"]
+__all__ = ["Campaign", "Context", "prepare", "pseudo_truth", "real_machine", "rng_for", "run_batch", "run_trial", "run_trials", "seed_for"]
