@@ -221,6 +221,21 @@ def _bisect_scale(ok, t_max: float = 1.0, n_iter: int = 24) -> float:
     return lo
 
 
+def _bisect_scales(ok, n: int, t_max: float = 1.0, n_iter: int = 24) -> np.ndarray:
+    """:func:`_bisect_scale` of ``n`` independent scales at once: ``ok(t)`` takes the (n,)
+    scales and returns which pass (n,); the same halvings, one call per halving."""
+    lo, hi = np.zeros(n), np.full(n, t_max)
+    done = ok(hi.copy())
+    for _ in range(n_iter):
+        if done.all():
+            break
+        mid = 0.5 * (lo + hi)
+        passed = ok(np.where(done, hi, mid))
+        lo = np.where(~done & passed, mid, lo)
+        hi = np.where(~done & ~passed, mid, hi)
+    return np.where(done, t_max, lo)
+
+
 @blas_single_threaded
 def corner_box(mechanism: Mechanism, box: np.ndarray, setup: MeasurementSetup | None = None, *,
                margin: float = DEFAULT_MARGIN, measurability: Measurability = Measurability()) -> np.ndarray:
@@ -252,16 +267,14 @@ def workspace_box(mechanism: Mechanism, setup: MeasurementSetup | None = None, *
         return np.asarray(mechanism.workspace_box(), dtype=float)   # declared by the machine (its print volume, ...)
     home = np.asarray(mechanism.home_pose, dtype=float)
     half = default_box_shape(mechanism)
-    reach = np.empty(6)
-    for i in range(6):
-        e = np.zeros(6)
-        e[i] = half[i]
 
-        def ok(t, e=e):
-            pts = np.stack([home + t * e, home - t * e])
-            return bool(check_candidates(mechanism, setup, pts, margin=margin, measurability=measurability).ok.all())
+    def ok(t):               # the poses home ± t_i h_i e_i of every axis i in one check
+        steps = np.diag(t * half)
+        passed = check_candidates(mechanism, setup, np.concatenate([home + steps, home - steps]), margin=margin,
+                                  measurability=measurability).ok
+        return passed[:6] & passed[6:]
 
-        reach[i] = _bisect_scale(ok) * half[i]
+    reach = _bisect_scales(ok, 6) * half
     if np.any(reach <= 1e-6 * half):
         raise PkmcalError(f"machine '{mechanism.name}': the home pose cannot move along "
                           f"{', '.join(POSE_COLUMNS[i] for i in np.flatnonzero(reach <= 1e-6 * half))} within the "

@@ -69,7 +69,7 @@ class Plan:
 
 
 #: Accepted candidates per call of :meth:`PlanningModel.blocks` (bounds its temporaries).
-BLOCK_BATCH = 50_000
+BLOCK_BATCH = 10_000
 
 
 def candidate_blocks(model: PlanningModel, poses: np.ndarray, *, batch: int = BLOCK_BATCH,
