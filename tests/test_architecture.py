@@ -54,14 +54,7 @@ ALLOWED = {
     ("io/setup_file.py", "isinstance(s, PositionSensor)", "registries: generic setup loader"),
     ("io/setup_file.py", "isinstance(s, PlanarToolSensor)", "registries: generic setup loader"),
     ("io/setup_file.py", "isinstance(s, FullPoseSensor)", "registries: generic setup loader"),
-    ("planning/candidates.py", "except TypeError:", "workspace: check_limits(margin=) everywhere"),
-    ("planning/candidates.py", 'getattr(mechanism, "stroke"', "workspace: workspace_box()"),
-    ("planning/candidates.py", 'getattr(mechanism, "platform_radius", 100.0)', "workspace: workspace_box()"),
-    ("planning/candidates.py", 'getattr(mechanism, "workspace", None)', "workspace: workspace_box()"),
-    ("planning/indices.py", 'getattr(mechanism, "platform_radius", 1.0)', "workspace: a declared length scale"),
-    ("planning/margins.py", "isinstance(mechanism, Hexapod)", "registries: abilities"),
     ("report/html.py", 'hasattr(nominal, "leg_vectors") and hasattr(nominal, "base")', "registries: 'drawing'"),
-    ("reproduce/paper1_error_maps.py", 'getattr(nominal, "platform_radius", 1.0)', "workspace: declared length"),
 }
 
 

@@ -114,7 +114,7 @@ def test_workspace_box_is_unchanged_by_the_batched_bisection(machine, indicators
 
     pm = planning_machine(machine, resolve_margin(machine))        # the limits bind: the bisection runs
     box = cand_mod.workspace_box(pm, indicators, margin=0.0)
-    half = cand_mod.default_box_shape(pm)
+    half = pm.reach_search_shape()
     home = np.asarray(pm.home_pose)
     for i in range(6):
         e = np.zeros(6)

@@ -159,7 +159,10 @@ class Mechanism(ABC):
     #: ``lengths_from_readings_param_jacobian``), ``"drawing"`` (has
     #: ``draw_segments``), ``"linuxcnc"`` (exportable to a LinuxCNC kinematics module),
     #: ``"pose-convention"`` (the pose coordinates are the platform frame's x, y, z, a, b, c
-    #: of :mod:`pkmcal.conventions`: ``frame`` is ``Frame.from_poses``), ``"planar"``.
+    #: of :mod:`pkmcal.conventions`: ``frame`` is ``Frame.from_poses``), ``"planar"``,
+    #: ``"safety-margins"`` (stroke, U/S-joint tilt and leg clearance limits that planning
+    #: keeps safety margins from: ``stroke``, ``platform``, ``limits.u_joint_tilt``,
+    #: ``limits.s_joint_tilt``, ``limits.leg_diameter``; :mod:`pkmcal.planning.margins`).
     abilities: frozenset[str] = frozenset()
     #: True when the platform frame depends on ρ (a tool offset): then
     #: :meth:`frame_jacobians` gives T_ρ and the engine adds (∂y/∂twist) · T_ρ to ∂y/∂ρ.
@@ -235,6 +238,20 @@ class Mechanism(ABC):
     def workspace_box(self) -> np.ndarray:
         """The box (n, 2) [min, max] of the pose coordinates (internal units) in which
         planning and ``pkmcal info`` search for poses."""
+
+    def reach_search_shape(self) -> np.ndarray | None:
+        """Half-widths h (n,) about :attr:`home_pose` along which planning searches each
+        coordinate's reach (:func:`pkmcal.planning.candidates.workspace_box`: the largest
+        home ± t_i h_i, t_i ∈ (0, 1], within the limits), when :meth:`workspace_box` is only
+        that shape; None (default): :meth:`workspace_box` is the planning box itself."""
+        return None
+
+    @property
+    def length_scale(self) -> float:
+        """A length (mm) that turns the platform's rotations into displacements (rad × mm),
+        e.g. to weigh orientation errors against position errors or to make a Jacobian's
+        rotation columns dimensionless; 1 by default (the hexapod: its platform joint radius)."""
+        return 1.0
 
     @abstractmethod
     def summary(self) -> str:
@@ -347,8 +364,10 @@ class Mechanism(ABC):
         return None
 
     @abstractmethod
-    def check_limits(self, poses: np.ndarray, *, margins: bool = True) -> LimitReport:
-        """Which of the machine's limits each pose violates. ``margins=False`` says that the
+    def check_limits(self, poses: np.ndarray, margin: float = 0.0, *, margins: bool = True) -> LimitReport:
+        """Which of the machine's limits each pose violates, each shrunk by the safety
+        ``margin`` in its own unit where the limit takes one (a machine whose limits take
+        none accepts and ignores it). ``margins=False`` says that the
         caller reads only the verdicts: a mechanism may then leave
         :attr:`LimitReport.margins` empty and take a faster path (the hexapod's compiled
         kernel for small batches)."""

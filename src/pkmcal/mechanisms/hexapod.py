@@ -144,7 +144,7 @@ class Hexapod(SpatialPlatform):
 
     kind = "6-UPS"
     actuator_names = tuple(f"lambda{i + 1}" for i in range(N_LEGS))
-    abilities = frozenset({"leg-lengths", "drawing", "linuxcnc", "pose-convention"})
+    abilities = frozenset({"leg-lengths", "drawing", "linuxcnc", "pose-convention", "safety-margins"})
     point_sets = MappingProxyType({"base joints": tuple(f"b{i + 1}" for i in range(N_LEGS)),
                                    "platform joints": tuple(f"a{i + 1}" for i in range(N_LEGS))})
     #: The gains are held unless freed by name (``--free 'gain_*'``; module docstring).
@@ -273,6 +273,20 @@ class Hexapod(SpatialPlatform):
         box shape); an error when the machine cannot move (no stroke) or orient (r = 0)."""
         if self.workspace is not None:
             return self.workspace.copy()
+        half = self._box_shape()
+        return np.stack([self.home - half, self.home + half], axis=1)
+
+    def reach_search_shape(self) -> np.ndarray | None:
+        """The default box shape (s, s, s/2, s/r, s/r, s/r) of :meth:`workspace_box` when no
+        :attr:`workspace` is given (planning searches the reach along it), else None."""
+        return None if self.workspace is not None else self._box_shape()
+
+    @property
+    def length_scale(self) -> float:
+        """The platform joint radius (mm): :attr:`platform_radius`."""
+        return self.platform_radius
+
+    def _box_shape(self) -> np.ndarray:
         s = float(np.mean(self.gains * (self.stroke[:, 1] - self.stroke[:, 0])))
         r = self.platform_radius
         if not s > 0:
@@ -282,8 +296,7 @@ class Hexapod(SpatialPlatform):
             raise PkmcalError(f"machine '{self.name}': every platform joint is at the platform origin (radius "
                               f"{r:g} mm), so the legs cannot set the platform's orientation; check the legs' "
                               "'platform:' joints")
-        half = np.array([s, s, s / 2, s / r, s / r, s / r])
-        return np.stack([self.home - half, self.home + half], axis=1)
+        return np.array([s, s, s / 2, s / r, s / r, s / r])
 
     @property
     def platform_radius(self) -> float:

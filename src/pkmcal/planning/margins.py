@@ -70,10 +70,9 @@ class SafetyMargin:
 
 
 def has_margins(mechanism: Mechanism) -> bool:
-    """Whether the machine's limits take safety margins (stroke and joint tilts)."""
-    from pkmcal.mechanisms.hexapod import Hexapod
-
-    return isinstance(mechanism, Hexapod)
+    """Whether the machine's limits take safety margins (stroke and joint tilts): its
+    declared ``"safety-margins"`` ability."""
+    return "safety-margins" in mechanism.abilities
 
 
 def default_margin(mechanism: Mechanism, joint_error_mm: float = ASSUMED_JOINT_ERROR_MM) -> SafetyMargin | None:
