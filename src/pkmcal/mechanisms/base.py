@@ -160,9 +160,9 @@ class Mechanism(ABC):
     #: ``draw_segments``), ``"linuxcnc"`` (exportable to a LinuxCNC kinematics module),
     #: ``"pose-convention"`` (the pose coordinates are the platform frame's x, y, z, a, b, c
     #: of :mod:`pkmcal.conventions`: ``frame`` is ``Frame.from_poses``), ``"planar"``,
-    #: ``"safety-margins"`` (stroke, U/S-joint tilt and leg clearance limits that planning
-    #: keeps safety margins from: ``stroke``, ``platform``, ``limits.u_joint_tilt``,
-    #: ``limits.s_joint_tilt``, ``limits.leg_diameter``; :mod:`pkmcal.planning.margins`).
+    #: ``"safety-margins"`` (planning keeps safety margins from the limits, by the rule of
+    #: :mod:`pkmcal.planning.margins` for the machine's kind: the 6-UPS hexapod's stroke,
+    #: U/S-joint tilts and leg clearance; the deltas' travel, arm angles and workspace).
     abilities: frozenset[str] = frozenset()
     #: True when the platform frame depends on ρ (a tool offset): then
     #: :meth:`frame_jacobians` gives T_ρ and the engine adds (∂y/∂twist) · T_ρ to ∂y/∂ρ.
