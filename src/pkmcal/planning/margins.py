@@ -158,22 +158,22 @@ def default_margin(mechanism: Mechanism,
 
 
 def resolve_margin(mechanism: Mechanism, *, stroke_mm: float | None = None, tilt_deg: float | None = None,
-                   clearance_mm: float | None = None) -> SafetyMargin | None:
+                   clearance_mm: float | None = None) -> SafetyMargin | DeltaSafetyMargin | None:
     """The default margins of ``mechanism`` with the given ones replacing them."""
-    base = default_margin(mechanism)
-    if base is None:
+    found = default_margin(mechanism)
+    if found is None:
         return None
     given = [n for n, v in (("stroke", stroke_mm), ("tilt", tilt_deg), ("clearance", clearance_mm)) if v is not None]
     if not given:
-        return base
-    if isinstance(base, DeltaSafetyMargin):
-        raise PkmcalError(f"machine '{mechanism.name}' is a {mechanism.kind}: its margins are {base.describe()}; "
+        return found
+    if isinstance(found, DeltaSafetyMargin):
+        raise PkmcalError(f"machine '{mechanism.name}' is a {mechanism.kind}: its margins are {found.describe()}; "
                           "the stroke, tilt and clearance margins are a hexapod's: give --margin X for X on every "
                           "limit instead")
     source = "given: " + ", ".join(given) + ("" if len(given) == 3 else "; others default")
-    return SafetyMargin(base.stroke_mm if stroke_mm is None else float(stroke_mm),
-                        base.tilt_deg if tilt_deg is None else float(tilt_deg),
-                        base.clearance_mm if clearance_mm is None else float(clearance_mm), source)
+    return SafetyMargin(found.stroke_mm if stroke_mm is None else float(stroke_mm),
+                        found.tilt_deg if tilt_deg is None else float(tilt_deg),
+                        found.clearance_mm if clearance_mm is None else float(clearance_mm), source)
 
 
 def planning_checks(mechanism: Mechanism, margin: SafetyMargin | DeltaSafetyMargin | float | None
