@@ -126,3 +126,36 @@ def test_workspace_box_is_unchanged_by_the_batched_bisection(machine, indicators
 
         assert box[i, 1] == home[i] + cand_mod._bisect_scale(ok) * half[i]
     assert np.any(box[:, 1] - home < half)
+
+
+def _plan_cli(tmp_path, name, *extra):
+    from click.testing import CliRunner
+
+    from pkmcal.cli.main import cli
+
+    out = tmp_path / f"{name}.csv"
+    res = CliRunner().invoke(cli, ["plan", "stewart-prototype", "--setup", "full-pose-paper1", "--n", "12",
+                                   "--n-candidates", "400", "--seed", "2", "-o", str(out), "-q", *extra])
+    return res, out
+
+
+def test_plan_command_workers_give_the_same_file(tmp_path):
+    ref, ref_out = _plan_cli(tmp_path, "ref")
+    two, two_out = _plan_cli(tmp_path, "two", "--workers", "2")
+    assert ref.exit_code == 0 and two.exit_code == 0, (ref.output, two.output)
+    assert two_out.read_bytes() == ref_out.read_bytes()
+
+
+def test_plan_command_workers_with_a_dask_scheduler_is_an_error(tmp_path):
+    res, out = _plan_cli(tmp_path, "bad", "--workers", "2", "--dask", "tcp://127.0.0.1:1")
+    assert res.exit_code == 2 and "--workers applies to local runs" in res.output and not out.exists()
+
+
+def test_plan_on_a_dask_local_cluster_is_the_in_process_plan(machine, indicators):
+    pytest.importorskip("distributed")
+    kw = dict(n_candidates=900, seed=5, chunk_size=400)
+    ref = plan_poses(machine, indicators, 15, **kw)
+    with chunk_map(2, "local") as run:
+        p = plan_poses(machine, indicators, 15, chunk_map=run, **kw)
+    np.testing.assert_array_equal(p.poses, ref.poses)
+    assert p.candidates.rejected == ref.candidates.rejected and p.selection.indices == ref.selection.indices
