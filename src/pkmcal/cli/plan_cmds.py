@@ -59,6 +59,7 @@ def _format_indices(ind: dict[str, float]) -> str:
     "pkmcal plan stewart-prototype --setup indicators-prototype --n 50 --algorithm random --seed 9 -o heldout.csv",
     "pkmcal plan stewart-prototype --setup indicators-prototype --n 30 --tilt-margin 5 -o cautious.csv",
     "pkmcal plan planar-3dof-4act --setup planar-tracker --n 12 -o planar-poses.csv",
+    "pkmcal plan stewart-prototype --setup full-pose-paper1 --n 30 --n-candidates 20000 --workers 2 -o large.csv",
     "pkmcal plan stewart-prototype --setup examples/setup-ballbar.yaml --algorithm circle --n 36 -o circle.csv"))
 @click.argument("machine")
 @click.option("--setup", "setup_spec", required=True, metavar="SETUP.yaml", help=_SETUP_HELP)
@@ -116,8 +117,8 @@ def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, 
     """
     from pkmcal.io.machine_file import load_machine
     from pkmcal.io.setup_file import load_setup
-    from pkmcal.planning.margins import has_margins, resolve_margin
     from pkmcal.planning.executors import chunk_map
+    from pkmcal.planning.margins import has_margins, resolve_margin
     from pkmcal.planning.plan import plan_poses
     from pkmcal.progress import ProgressBar
 
