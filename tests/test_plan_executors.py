@@ -91,6 +91,10 @@ def test_passes_in_slices_are_the_one_gemm_they_replace(N):
     np.testing.assert_array_equal(sel_mod._leverages(flat, N, M), lev)
     np.testing.assert_allclose(Minv, np.linalg.inv(M), rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(S2[0], G[0] @ np.linalg.solve(M, G[0].T), rtol=1e-9, atol=1e-12)
+    gains = np.empty(N)
+    sel_mod._kernels().gains_of(S, gains)              # the gains of the former S of all N
+    np.testing.assert_array_equal(sel_mod._all_gains(flat, N, 6, M), gains)
+    np.testing.assert_allclose(gains, np.linalg.slogdet(np.eye(6) + S)[1], rtol=1e-12, atol=1e-12)
 
 
 def test_bisection_of_all_axes_at_once_is_the_one_axis_bisection():

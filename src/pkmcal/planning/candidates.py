@@ -17,7 +17,7 @@ when it declares one (a given ``workspace``, a delta's print volume, the planar 
 home: coordinate i spans ``home_i ± t_i·h_i`` with t_i ∈ (0, 1] the largest scale
 (bisection, 24 halvings, all axes in one check per halving) at which both poses
 home ± t_i h_i e_i are reachable (with the safety margin) and measurable, for the default
-shape h = (s, s, s/2, s/r, s/r, s/r), s = the mean actuator stroke in mm of leg length and
+shape h = (s, s, s/2, s/r, s/r, s/r), s = the mean actuator stroke (reading units) and
 r = the platform joint radius (mm) (the angles rotate a platform joint by s). Random and
 grid candidates are drawn in this box and filtered. Corner selection (paper 1) needs all 64 corners
 reachable: :func:`corner_box` shrinks the box about its centre by the largest common scale

@@ -146,6 +146,16 @@ def _all_S(flatF: np.ndarray, N: int, m: int, M: np.ndarray) -> tuple[np.ndarray
     return Linv.T @ Linv, S
 
 
+def _all_gains(flatF: np.ndarray, N: int, m: int, M: np.ndarray) -> np.ndarray:
+    """log det(I + S_j) (N,) for all candidates (−∞ where not positive definite), slice by
+    slice: the values of :func:`_all_S` then ``gains_of``, without holding S of all N."""
+    Linv = _inverse_factor(M)
+    gain = np.empty(N)
+    for start, stop, W in _whitened_slices(flatF, N, m, Linv):
+        _kernels().gains_of(np.einsum("nip,njp->nij", W, W, optimize=True), gain[start:stop])
+    return gain
+
+
 def _leverages(flatF: np.ndarray, N: int, M: np.ndarray) -> np.ndarray:
     """tr(G_j M⁻¹ G_jᵀ) = ‖G_j L⁻ᵀ‖²_F (N,) for all candidates."""
     m = flatF.shape[0] // max(N, 1)
@@ -221,9 +231,7 @@ def _detmax_exchange(G: np.ndarray, flatF: np.ndarray, chosen: list[int], max_ex
         if N <= work_size:
             work = np.arange(N)
         else:
-            _, S_all = _all_S(flatF, N, m, M)
-            gain_all = np.empty(N)
-            _kernels().gains_of(np.ascontiguousarray(S_all), gain_all)
+            gain_all = _all_gains(flatF, N, m, M)
             gain_all = np.where(np.isnan(gain_all) | in_set, -np.inf, gain_all)
             evaluations += N
             best = int(np.argmax(gain_all))
