@@ -113,7 +113,8 @@ def _batch_logdet(S: np.ndarray, sign: float, identity: bool = True) -> np.ndarr
     return np.where(s > 0, ld, -np.inf)
 
 
-#: Candidates per GEMM of the passes over all of them (:func:`_all_S`, :func:`_leverages`):
+#: Candidates per GEMM of the passes over all of them (:func:`_all_S`, :func:`_all_gains`,
+#: :func:`_leverages`):
 #: bounds their temporaries (G L⁻ᵀ of a slice: 10 MB at 42 parameters) whatever N.
 _PASS_ROWS = 5_000
 
@@ -130,8 +131,9 @@ def _inverse_factor(M: np.ndarray) -> np.ndarray:
 
 def _whitened_slices(flatF: np.ndarray, N: int, m: int, Linv: np.ndarray):
     """(start, stop, G_j L⁻ᵀ (stop − start, m, p)) over the candidates in slices of
-    :data:`_PASS_ROWS` (one GEMM each; a row of a GEMM does not depend on the other rows, so
-    the slices give the bits of one GEMM over all)."""
+    :data:`_PASS_ROWS` (one GEMM each; BLAS computes a row of a product the same way
+    whatever the rows around it, so the slices give the bits of one GEMM over all: tested in
+    ``tests/test_plan_executors.py``)."""
     for start in range(0, N, _PASS_ROWS):
         stop = min(N, start + _PASS_ROWS)
         yield start, stop, (flatF[start * m:stop * m] @ Linv.T).reshape(stop - start, m, -1)
