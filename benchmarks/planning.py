@@ -2,6 +2,7 @@
 sets (issue 14 item 4), measured in the same run.
 
     python benchmarks/planning.py [--setup indicators-prototype] [--seed 0] [--skip-million]
+                                  [--workers N] [--baseline-src DIR] [--repeat 3]
 
 Machine: paper 2's prototype (``stewart-prototype``); candidates: random reachable and
 measurable poses of its workspace box (seeded).
@@ -13,8 +14,12 @@ measurable poses of its workspace box (seeded).
 * Large candidate sets: ``pkmcal plan stewart-prototype --setup SETUP --n 110
   --n-candidates N`` end to end in a fresh process (start-up, imports, numba cache loads,
   candidates, blocks, selection, output file) for N = 100,000 (target ≤ 2 s) and N = 10^6
-  (chunked, ``--skip-million`` to leave it out: its keys are then null), with the child's
-  CPU time and peak resident memory (``os.wait4``'s ru_maxrss); then, in this process, the
+  (chunked, on ``--workers N`` processes when given; ``--skip-million`` to leave it out: its
+  keys are then null), with the child's CPU time (its worker processes included) and peak
+  resident memory (``os.wait4``'s ru_maxrss: the largest process); the 100,000 plan
+  ``--repeat`` times (medians), alternated with the same command on the source tree
+  ``--baseline-src DIR`` when given (e.g. the main branch's ``src``: before/after in one
+  run, keys ``..._baseline_...``); then, in this process, the
   stages of the 100,000 plan: candidate generation and checks (including the ~8× more poses
   tested than accepted), the planning blocks of the accepted candidates, and the selection;
   and the limit check per pose, compiled kernel (:meth:`Hexapod.check_limits` without
@@ -63,25 +68,29 @@ def timed(fn, *args, **kwargs):
     return out, time.perf_counter() - t
 
 
-def run_child(n_candidates: int, setup: str, seed: int) -> dict:
-    """``pkmcal plan`` in a fresh process: wall and CPU seconds, peak RSS (MB), its summary."""
+def run_child(n_candidates: int, setup: str, seed: int, workers: int | None = None, src: str | None = None) -> dict:
+    """``pkmcal plan`` in a fresh process (with ``--workers``; the package from ``src`` when
+    given): wall and CPU seconds, peak RSS (MB), its summary and the poses file's text."""
+    env = dict(os.environ) if src is None else {**os.environ, "PYTHONPATH": os.path.abspath(src)}
     with tempfile.TemporaryDirectory() as tmp:
         cmd = [sys.executable, "-m", "pkmcal.cli.main", "plan", "stewart-prototype", "--setup", setup, "--n", "110",
                "--n-candidates", str(n_candidates), "--seed", str(seed), "-o", os.path.join(tmp, "poses.csv")]
+        cmd += [] if workers is None else ["--workers", str(workers)]
         with open(os.path.join(tmp, "out.txt"), "w+") as out, open(os.path.join(tmp, "err.txt"), "w+") as err:
             t = time.perf_counter()
-            proc = subprocess.Popen(cmd, stdout=out, stderr=err)
+            proc = subprocess.Popen(cmd, stdout=out, stderr=err, env=env)
             _, status, usage = os.wait4(proc.pid, 0)
             wall = time.perf_counter() - t
             proc.returncode = os.waitstatus_to_exitcode(status)
             out.seek(0)
             err.seek(0)
             text, errors = out.read(), err.read()
+            poses = open(os.path.join(tmp, "poses.csv")).read() if proc.returncode == 0 else ""
     if proc.returncode != 0:
         raise SystemExit(f"pkmcal plan --n-candidates {n_candidates} failed: {errors.strip()}")
     scale = 1.0 if sys.platform == "darwin" else 1024.0       # ru_maxrss: bytes on macOS, KiB on Linux
     return {"wall_s": wall, "cpu_s": usage.ru_utime + usage.ru_stime,
-            "peak_rss_mb": usage.ru_maxrss * scale / 2**20, "summary": text.splitlines()[0]}
+            "peak_rss_mb": usage.ru_maxrss * scale / 2**20, "summary": text.splitlines()[0], "poses": poses}
 
 
 def timed_cpu(fn, *args, **kwargs):
@@ -91,19 +100,43 @@ def timed_cpu(fn, *args, **kwargs):
     return out, time.perf_counter() - t, time.process_time() - c
 
 
-def large_candidate_sets(setup_name: str, seed: int, skip_million: bool) -> dict:
+def _median_runs(runs: list[dict]) -> dict:
+    return {k: float(np.median([r[k] for r in runs])) for k in ("wall_s", "cpu_s", "peak_rss_mb")}
+
+
+def large_candidate_sets(setup_name: str, seed: int, skip_million: bool, workers: int | None = None,
+                         baseline_src: str | None = None, repeat: int = 3) -> dict:
     """Issue 14 item 4: whole plans with 10^5 and 10^6 candidates, the stages of the first,
     and the per-pose limit check (module docstring)."""
     res = {}
-    for n, key in ((100_000, "plan_110_of_100000"), (1_000_000, "plan_110_of_1000000")):
-        if n == 1_000_000 and skip_million:
-            res.update({f"{key}_s": None, f"{key}_cpu_s": None, f"{key}_peak_rss_mb": None})
+    ours, base = [], []
+    for _ in range(repeat):                       # alternated: both see the same load
+        ours.append(run_child(100_000, setup_name, seed))
+        if baseline_src is not None:
+            base.append(run_child(100_000, setup_name, seed, src=baseline_src))
+    for tag, runs in (("", ours), ("_baseline", base)):
+        if not runs:
             continue
-        child = run_child(n, setup_name, seed)
+        med = _median_runs(runs)
+        key = f"plan_110_of_100000{tag}"
+        res.update({f"{key}_s": med["wall_s"], f"{key}_cpu_s": med["cpu_s"], f"{key}_peak_rss_mb": med["peak_rss_mb"]})
+        print(f"pkmcal plan --n 110 --n-candidates 100000{' (baseline ' + baseline_src + ')' if tag else ''}, median "
+              f"of {len(runs)}: {med['wall_s']:.2f} s wall, {med['cpu_s']:.2f} s CPU, peak RSS "
+              f"{med['peak_rss_mb']:.0f} MB; {runs[0]['summary']}")
+    if base:
+        res["plan_110_of_100000_same_as_baseline"] = base[0]["poses"] == ours[0]["poses"]
+        print(f"same poses file as the baseline: {res['plan_110_of_100000_same_as_baseline']}")
+    key = "plan_110_of_1000000"
+    res[f"{key}_workers"] = workers
+    if skip_million:
+        res.update({f"{key}_s": None, f"{key}_cpu_s": None, f"{key}_peak_rss_mb": None})
+    else:
+        child = run_child(1_000_000, setup_name, seed, workers=workers)
         res.update({f"{key}_s": child["wall_s"], f"{key}_cpu_s": child["cpu_s"],
                     f"{key}_peak_rss_mb": child["peak_rss_mb"]})
-        print(f"pkmcal plan --n 110 --n-candidates {n}: {child['wall_s']:.2f} s wall, {child['cpu_s']:.2f} s CPU, "
-              f"peak RSS {child['peak_rss_mb']:.0f} MB; {child['summary']}")
+        print(f"pkmcal plan --n 110 --n-candidates 1000000{f' --workers {workers}' if workers else ''}: "
+              f"{child['wall_s']:.2f} s wall, {child['cpu_s']:.2f} s CPU, peak RSS {child['peak_rss_mb']:.0f} MB; "
+              f"{child['summary']}")
     machine = stewart_prototype()
     setup = load_setup(setup_name)
     model = planning_model(machine, setup)
@@ -140,8 +173,12 @@ def main(argv: list[str]) -> dict:
     ap.add_argument("--setup", default="indicators-prototype")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--skip-million", action="store_true", help="leave out the 10^6-candidate plan (keys null)")
+    ap.add_argument("--workers", type=int, default=None, help="worker processes of the 10^6-candidate plan")
+    ap.add_argument("--baseline-src", default=None, help="also time the 100,000 plan with this source tree (alternated)")
+    ap.add_argument("--repeat", type=int, default=3, help="runs of the 100,000 plan (medians)")
     args = ap.parse_args(argv)
-    large = large_candidate_sets(args.setup, args.seed, args.skip_million)
+    large = large_candidate_sets(args.setup, args.seed, args.skip_million, args.workers, args.baseline_src,
+                                 args.repeat)
 
     machine = stewart_prototype()
     setup = load_setup(args.setup)

@@ -35,13 +35,6 @@ ALLOWED = {
     ("cli/identify_cmds.py", 'getattr(result.sensor, "kind", "")', "pipeline: one verify"),
     ("identification/redundant_campaign.py", 'getattr(machine, "metadata", {})', "pipeline: one verify"),
     ("identification/redundant_campaign.py", 'getattr(mech, "base", None)', "pipeline: baselines in reproduce/"),
-    ("planning/candidates.py", "except TypeError:", "workspace: check_limits(margin=) everywhere"),
-    ("planning/candidates.py", 'getattr(mechanism, "stroke"', "workspace: workspace_box()"),
-    ("planning/candidates.py", 'getattr(mechanism, "platform_radius", 100.0)', "workspace: workspace_box()"),
-    ("planning/candidates.py", 'getattr(mechanism, "workspace", None)', "workspace: workspace_box()"),
-    ("planning/indices.py", 'getattr(mechanism, "platform_radius", 1.0)', "workspace: a declared length scale"),
-    ("planning/margins.py", "isinstance(mechanism, Hexapod)", "registries: abilities"),
-    ("reproduce/paper1_error_maps.py", 'getattr(nominal, "platform_radius", 1.0)', "workspace: declared length"),
 }
 
 

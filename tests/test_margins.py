@@ -21,6 +21,7 @@ from pkmcal.mechanisms.planar import planar_3dof_4act
 from pkmcal.planning.margins import (
     SafetyMargin,
     default_margin,
+    planning_checks,
     planning_machine,
     resolve_margin,
 )
@@ -102,3 +103,61 @@ def test_plan_command_states_and_uses_its_margin(tmp_path):
     res = runner.invoke(cli, ["plan", "--help"], terminal_width=200)
     tilt = default_margin(stewart_prototype()).tilt_deg
     assert f"({tilt:.3g}° on stewart-prototype)" in res.output
+
+
+# -- deltas -----------------------------------------------------------------------------------
+
+_LEVER = {"angle": "radius", "zero": "upper", "axis_yaw": "upper", "axis_tilt": "upper", "lean_radial": "endstop",
+          "lean_tangential": "endstop"}
+
+
+def _perturbed_delta(m, rng, d=3.0):
+    """``m`` with every length off by up to d mm and every angle by up to d over its lever."""
+    p = m.params.copy()
+    val = dict(zip(m.param_names, m.params))
+    for i, name in enumerate(m.param_names):
+        base, tower = name.rsplit("_", 1) if "_" in name else (name, "")
+        if base in ("radius", "arm", "endstop", "height", "upper", "forearm"):
+            p[i] += rng.uniform(-d, d)
+        elif base in _LEVER:
+            p[i] += rng.uniform(-d, d) / val[f"{_LEVER[base]}_{tower}"]
+    return m.with_params(p, name=m.name + "-real")
+
+
+def test_delta_margins_closed_form_and_printed():
+    from pkmcal.io.machine_file import load_machine
+    from pkmcal.planning.margins import DeltaSafetyMargin
+
+    k = default_margin(load_machine("kossel-mini"))
+    assert isinstance(k, DeltaSafetyMargin)
+    assert (k.travel, k.space_mm) == (3.0, 6.0)
+    assert k.angle_deg == pytest.approx(math.degrees(math.atan(3 / 215)), rel=1e-12)
+    assert k.describe().startswith("rail travel 3 mm, arm angle 0.799 deg, print radius and bed 6 mm")
+    r = default_margin(load_machine("delta-picker"))
+    assert (r.travel, r.angle_deg, r.space_mm) == pytest.approx(
+        (math.degrees(math.atan(3 / 350)), math.degrees(math.atan(3 / 800)), 9.0), rel=1e-12)
+    with pytest.raises(PkmcalError, match="--margin"):
+        resolve_margin(load_machine("kossel-mini"), stroke_mm=1.0)
+    out = CliRunner().invoke(cli, ["plan", "kossel-mini", "--setup", "laser-tracker", "--n", "12"])
+    assert out.exit_code == 0, out.output
+    assert "safety margin: rail travel 3 mm, arm angle 0.799 deg" in out.output
+
+
+@pytest.mark.parametrize("name", ["kossel-mini", "delta-picker"])
+def test_default_delta_plan_is_reached_by_a_perturbed_delta(name):
+    """Plan on the nominal delta, command one with 3 mm joint errors: every pose is reached
+    within its limits; the same plan without margins is not (the test can fail)."""
+    from pkmcal.io.machine_file import load_machine
+
+    nominal, setup = load_machine(name), builtin_setup("laser-tracker")
+    plan = plan_poses(nominal, setup, 30, seed=1)
+    bare = plan_poses(nominal, setup, 30, seed=1, margin=0.0)
+    lost = 0
+    for k in range(4):
+        real = _perturbed_delta(nominal, np.random.default_rng(k))
+        assert simulate_campaign(nominal, real, setup, plan.poses, rng=2).dropped == {}
+        lost += len(simulate_campaign(nominal, real, setup, bare.poses, rng=2).dropped)
+    assert lost > 0
+    # the margins hold on the nominal machine: every planned pose is that far inside
+    safe, check = planning_checks(nominal, plan.margin)
+    assert safe.check_limits(plan.poses, margin=check).ok.all()

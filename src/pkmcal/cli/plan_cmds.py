@@ -18,6 +18,7 @@ import click
 import numpy as np
 
 from pkmcal.cli._limits import unreachable_notes
+from pkmcal.cli.backend_options import backend_options, check_backend
 from pkmcal.cli.import_options import import_options
 from pkmcal.cli.options import (
     DeprecatedArgument,
@@ -58,6 +59,7 @@ def _format_indices(ind: dict[str, float]) -> str:
     "pkmcal plan stewart-prototype --setup indicators-prototype --n 50 --algorithm random --seed 9 -o heldout.csv",
     "pkmcal plan stewart-prototype --setup indicators-prototype --n 30 --tilt-margin 5 -o cautious.csv",
     "pkmcal plan planar-3dof-4act --setup planar-tracker --n 12 -o planar-poses.csv",
+    "pkmcal plan stewart-prototype --setup full-pose-paper1 --n 30 --n-candidates 20000 --workers 2 -o large.csv",
     "pkmcal plan stewart-prototype --setup examples/setup-ballbar.yaml --algorithm circle --n 36 -o circle.csv"))
 @click.argument("machine")
 @click.option("--setup", "setup_spec", required=True, metavar="SETUP.yaml", help=_SETUP_HELP)
@@ -96,27 +98,31 @@ def _format_indices(ind: dict[str, float]) -> str:
               help="Indicators: the touch points must lie within this radius of the platform origin.")
 @click.option("--sight-cone", type=FiniteFloat(min=0.0, max=180.0), metavar="DEG",
               help="Full-pose/position: half-angle of the target's line-of-sight cone.")
+@backend_options("in this process")
 @output_option("POSES.csv", "CSV of the chosen poses")
 @units_comment_option
 @quiet_option
 @import_options
 def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, index, algorithm, circle_plane, seed,
              stroke_margin, tilt_margin, clearance_margin, margin, indicator_travel, plate_radius, sight_cone,
-             output, units_comment=False, quiet=False, mapping=None) -> None:
+             workers, dask_address, output, units_comment=False, quiet=False, mapping=None) -> None:
     """Choose N poses of MACHINE to measure with SETUP (paper 2 §4, paper 1 §IV).
 
     Every candidate is checked on the nominal machine (stroke, joint tilts, leg collision,
     singularity) with safety margins that leave room for the real machine's deviations
     (defaults for joint errors up to 3 mm; the plan prints the margins it used), and for
     measurability; rejections are counted by reason. Writes x,y,z,a,b,c and the nominal
-    commands lambda1..; prints O1..O5 of the chosen set.
+    commands lambda1..; prints O1..O5 of the chosen set. Large candidate sets are checked in
+    chunks, which --workers / --dask run in parallel (same plan whatever the backend).
     """
     from pkmcal.io.machine_file import load_machine
     from pkmcal.io.setup_file import load_setup
+    from pkmcal.planning.executors import chunk_map
     from pkmcal.planning.margins import has_margins, resolve_margin
     from pkmcal.planning.plan import plan_poses
     from pkmcal.progress import ProgressBar
 
+    check_backend(workers, dask_address)
     check_output(output, [candidates_path, setup_spec, machine])
     mech = load_machine(machine)
     setup = load_setup(setup_spec, mech)
@@ -130,11 +136,11 @@ def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, 
     safety = margin if margin is not None else resolve_margin(mech, stroke_mm=stroke_margin, tilt_deg=tilt_margin,
                                                                 clearance_mm=clearance_margin)
     candidates = read_candidates_csv(candidates_path, mech, mapping) if candidates_path else None
-    with ProgressBar("plan", quiet=quiet) as bar:
+    with chunk_map(workers, dask_address) as run_chunks, ProgressBar("plan", quiet=quiet) as bar:
         plan = plan_poses(mech, setup, n_poses, algorithm=algorithm, index=index.upper() if index else None,
                           candidates=candidates, n_candidates=n_candidates, grid=grid, seed=seed, margin=safety,
                           measurability=_measurability(indicator_travel, plate_radius, sight_cone),
-                          progress=bar.stage, circle_plane=circle_plane)
+                          progress=bar.stage, circle_plane=circle_plane, chunk_map=run_chunks)
     poses = to_file_units(plan.poses, mech.pose_is_angle)
     commands = to_file_units(plan.commands, mech.actuator_is_angle)
     cols = {name: poses[:, i] for i, name in enumerate(mech.pose_names)}

@@ -160,7 +160,10 @@ class Mechanism(ABC):
     #: ``base``: the report draws it), ``"linuxcnc"`` (exportable to a LinuxCNC kinematics
     #: module), ``"pose-convention"`` (the pose coordinates are the platform frame's x, y, z,
     #: a, b, c of :mod:`pkmcal.conventions`: ``frame`` is ``Frame.from_poses``), ``"stroke"``
-    #: (:meth:`reading_range` is an actuator stroke, exported as such), ``"planar"``.
+    #: (:meth:`reading_range` is an actuator stroke, exported as such), ``"planar"``,
+    #: ``"safety-margins"`` (planning keeps safety margins from the limits, by the rule of
+    #: :mod:`pkmcal.planning.margins` for the machine's kind: the 6-UPS hexapod's stroke,
+    #: U/S-joint tilts and leg clearance; the deltas' travel, arm angles and workspace).
     abilities: frozenset[str] = frozenset()
     #: One line of free text (machine files' ``description``); every concrete machine holds it.
     description: str = ""
@@ -247,6 +250,20 @@ class Mechanism(ABC):
     def workspace_box(self) -> np.ndarray:
         """The box (n, 2) [min, max] of the pose coordinates (internal units) in which
         planning and ``pkmcal info`` search for poses."""
+
+    def reach_search_shape(self) -> np.ndarray | None:
+        """Half-widths h (n,) about :attr:`home_pose` along which planning searches each
+        coordinate's reach (:func:`pkmcal.planning.candidates.workspace_box`: the largest
+        home ± t_i h_i, t_i ∈ (0, 1], within the limits), when :meth:`workspace_box` is only
+        that shape; None (default): :meth:`workspace_box` is the planning box itself."""
+        return None
+
+    @property
+    def length_scale(self) -> float:
+        """A length (mm) that turns the platform's rotations into displacements (rad × mm),
+        e.g. to weigh orientation errors against position errors or to make a Jacobian's
+        rotation columns dimensionless; 1 by default (the hexapod: its platform joint radius)."""
+        return 1.0
 
     @abstractmethod
     def summary(self) -> str:
@@ -365,8 +382,10 @@ class Mechanism(ABC):
         return None
 
     @abstractmethod
-    def check_limits(self, poses: np.ndarray, *, margins: bool = True) -> LimitReport:
-        """Which of the machine's limits each pose violates. ``margins=False`` says that the
+    def check_limits(self, poses: np.ndarray, margin: float = 0.0, *, margins: bool = True) -> LimitReport:
+        """Which of the machine's limits each pose violates, each shrunk by the safety
+        ``margin`` in its own unit where the limit takes one (a machine whose limits take
+        none accepts and ignores it). ``margins=False`` says that the
         caller reads only the verdicts: a mechanism may then leave
         :attr:`LimitReport.margins` empty and take a faster path (the hexapod's compiled
         kernel for small batches)."""

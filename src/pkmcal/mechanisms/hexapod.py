@@ -144,7 +144,7 @@ class Hexapod(SpatialPlatform):
 
     kind = "6-UPS"
     actuator_names = tuple(f"lambda{i + 1}" for i in range(N_LEGS))
-    abilities = frozenset({"leg-lengths", "drawing", "linuxcnc", "pose-convention", "stroke"})
+    abilities = frozenset({"leg-lengths", "drawing", "linuxcnc", "pose-convention", "stroke", "safety-margins"})
     point_sets = MappingProxyType({"base joints": tuple(f"b{i + 1}" for i in range(N_LEGS)),
                                    "platform joints": tuple(f"a{i + 1}" for i in range(N_LEGS))})
     #: The gains are held unless freed by name (``--free 'gain_*'``; module docstring).
@@ -273,7 +273,23 @@ class Hexapod(SpatialPlatform):
         box shape); an error when the machine cannot move (no stroke) or orient (r = 0)."""
         if self.workspace is not None:
             return self.workspace.copy()
-        s = float(np.mean(self.gains * (self.stroke[:, 1] - self.stroke[:, 0])))
+        half = self._box_shape(self.gains * (self.stroke[:, 1] - self.stroke[:, 0]))
+        return np.stack([self.home - half, self.home + half], axis=1)
+
+    def reach_search_shape(self) -> np.ndarray | None:
+        """Planning's box shape (s, s, s/2, s/r, s/r, s/r) when no :attr:`workspace` is given
+        (planning searches the reach along it), else None. Here s is the mean stroke in
+        reading units, as planning has always had it (so plans stay the same); it differs from
+        :meth:`workspace_box`'s (mm of leg length) on machines with leg gains g ≠ 1."""
+        return None if self.workspace is not None else self._box_shape(self.stroke[:, 1] - self.stroke[:, 0])
+
+    @property
+    def length_scale(self) -> float:
+        """The platform joint radius (mm): :attr:`platform_radius`."""
+        return self.platform_radius
+
+    def _box_shape(self, strokes: np.ndarray) -> np.ndarray:
+        s = float(np.mean(strokes))
         r = self.platform_radius
         if not s > 0:
             raise PkmcalError(f"machine '{self.name}': the actuators have no stroke (mean {s:g} mm), so the "
@@ -282,8 +298,7 @@ class Hexapod(SpatialPlatform):
             raise PkmcalError(f"machine '{self.name}': every platform joint is at the platform origin (radius "
                               f"{r:g} mm), so the legs cannot set the platform's orientation; check the legs' "
                               "'platform:' joints")
-        half = np.array([s, s, s / 2, s / r, s / r, s / r])
-        return np.stack([self.home - half, self.home + half], axis=1)
+        return np.array([s, s, s / 2, s / r, s / r, s / r])
 
     @property
     def platform_radius(self) -> float:

@@ -120,6 +120,8 @@ class LinearDelta(TranslatingMechanism):
     metadata: dict = field(default_factory=dict)
 
     kind: ClassVar[str] = "linear-delta"
+    #: Planning keeps safety margins from its limits (:mod:`pkmcal.planning.margins`).
+    abilities: ClassVar[frozenset[str]] = frozenset({"translating", "safety-margins"})
     PARAM_NAMES: ClassVar[tuple[str, ...]] = PARAM_NAMES
     PARAM_IS_ANGLE: ClassVar[tuple[bool, ...]] = PARAM_IS_ANGLE
     LABEL: ClassVar[str] = "linear delta"

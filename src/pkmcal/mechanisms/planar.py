@@ -314,9 +314,10 @@ class Planar2Dof3Act(PlanarMechanism):
         reproduce the third reading and is reported not converged."""
         return np.zeros((self.as_pose_array(poses).shape[0], 0), dtype=np.int8)
 
-    def check_limits(self, poses: np.ndarray, *, margins: bool = True) -> LimitReport:
+    def check_limits(self, poses: np.ndarray, margin: float = 0.0, *, margins: bool = True) -> LimitReport:
         """Workspace box, reach of every chain, and transmission angle (angle between the
-        proximal and distal link, |sin| ≥ sin(min_transmission), away from singularity)."""
+        proximal and distal link, |sin| ≥ sin(min_transmission), away from singularity).
+        These limits take no safety ``margin`` (accepted, not applied)."""
         x = self.as_pose_array(poses)
         _, _, g, s, cosg = self._chains(x)
         l1, l2, _, _, _ = self._unpack()
@@ -447,9 +448,10 @@ class Planar3Dof4Act(PlanarMechanism):
         with np.errstate(invalid="ignore"):
             return np.sign(np.nan_to_num(b[:, [0, 2]])).astype(np.int8)
 
-    def check_limits(self, poses: np.ndarray, *, margins: bool = True) -> LimitReport:
+    def check_limits(self, poses: np.ndarray, margin: float = 0.0, *, margins: bool = True) -> LimitReport:
         """Workspace box, leg reach (|b| < ρ) and leg angle to the way ≥ ``min_leg_angle``
-        (a leg parallel to its way is a singularity), slider order on each way."""
+        (a leg parallel to its way is a singularity), slider order on each way. These
+        limits take no safety ``margin`` (accepted, not applied)."""
         x, ephi, d, nrm, a, b, root, s = self._geometry(poses)
         rho = self._unpack()[3]
         limit_margins = {

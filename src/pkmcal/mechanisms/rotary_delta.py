@@ -99,6 +99,8 @@ class RotaryDelta(TranslatingMechanism):
     metadata: dict = field(default_factory=dict)
 
     kind: ClassVar[str] = "rotary-delta"
+    #: Planning keeps safety margins from its limits (:mod:`pkmcal.planning.margins`).
+    abilities: ClassVar[frozenset[str]] = frozenset({"translating", "safety-margins"})
     PARAM_NAMES: ClassVar[tuple[str, ...]] = PARAM_NAMES
     PARAM_IS_ANGLE: ClassVar[tuple[bool, ...]] = PARAM_IS_ANGLE
     LABEL: ClassVar[str] = "rotary delta"

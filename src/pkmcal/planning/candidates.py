@@ -7,16 +7,19 @@ Candidates (paper 1 §IV; paper 2 §4):
 * ``random`` — uniform in the box; ``grid`` — k points per coordinate (k^6 poses);
 * ``file`` — a user CSV with the machine's pose columns (x, y, z, a, b, c: mm, degrees).
 
-Machines other than the hexapod (e.g. the planar ones) use their ``workspace`` box; limits
-that take no safety margin are checked without one.
+Every machine's limits take the safety margin (:meth:`Mechanism.check_limits`); those
+whose limits take none ignore it.
 
-**Workspace box.** The machine's ``workspace`` (6, 2) when it has one; otherwise the
-per-axis reach around home: coordinate i spans ``home_i ± t_i·h_i`` with t_i ∈ (0, 1] the
-largest scale (bisection, 24 halvings) at which both poses home ± t_i h_i e_i are
-reachable (with the safety margin) and measurable, for the default shape
-h = (s, s, s/2, s/r, s/r, s/r), s = the mean actuator stroke (mm) and r = the platform
-joint radius (mm) (the angles rotate a platform joint by s). Random and grid candidates
-are drawn in this box and filtered. Corner selection (paper 1) needs all 64 corners
+**Workspace box.** The machine's :meth:`~pkmcal.mechanisms.base.Mechanism.workspace_box`
+when it declares one (a given ``workspace``, a delta's print volume, the planar boxes, the
+6-RSS/6-PUS boxes about home); otherwise (the 6-UPS hexapod without a ``workspace``:
+:meth:`~pkmcal.mechanisms.base.Mechanism.reach_search_shape`) the per-axis reach around
+home: coordinate i spans ``home_i ± t_i·h_i`` with t_i ∈ (0, 1] the largest scale
+(bisection, 24 halvings, all axes in one check per halving) at which both poses
+home ± t_i h_i e_i are reachable (with the safety margin) and measurable, for the default
+shape h = (s, s, s/2, s/r, s/r, s/r), s = the mean actuator stroke (reading units) and
+r = the platform joint radius (mm) (the angles rotate a platform joint by s). Random and
+grid candidates are drawn in this box and filtered. Corner selection (paper 1) needs all 64 corners
 reachable: :func:`corner_box` shrinks the box about its centre by the largest common scale
 t ∈ (0, 1] whose corners all pass (same bisection).
 
@@ -168,10 +171,7 @@ def check_candidates(mechanism: Mechanism, setup: MeasurementSetup | None, poses
     poses = mechanism.as_pose_array(poses)
     finite = np.all(np.isfinite(poses), axis=1)
     safe = np.where(finite[:, None], poses, mechanism.home_pose)
-    try:                                   # verdicts only: the hexapod's faster path
-        lim = mechanism.check_limits(safe, margin=margin, margins=False)
-    except TypeError:                      # a mechanism whose limits take no safety margin
-        lim = mechanism.check_limits(safe)
+    lim = mechanism.check_limits(safe, margin=margin, margins=False)   # verdicts only: the faster path
     viol = {k: v | ~finite for k, v in lim.violations.items()}
     if setup is not None:
         viol.update(measurability_violations(setup, safe, measurability))
@@ -179,21 +179,6 @@ def check_candidates(mechanism: Mechanism, setup: MeasurementSetup | None, poses
 
 
 # -- the workspace box ------------------------------------------------------------------
-
-
-def default_box_shape(mechanism: Mechanism) -> np.ndarray:
-    """Half-widths h (6,) of the default box shape (module docstring)."""
-    stroke = np.asarray(getattr(mechanism, "stroke", np.array([[0.0, 50.0]])), dtype=float)
-    s = float(np.mean(stroke[:, 1] - stroke[:, 0]))
-    r = float(getattr(mechanism, "platform_radius", 100.0))
-    if not s > 0:
-        raise PkmcalError(f"machine '{mechanism.name}': the actuators have no stroke (mean {s:g} mm), so the "
-                          "platform cannot move; check the legs' 'stroke: [min, max]'")
-    if not r > 1e-9 * s:  # (practically) zero: the angle half-widths s/r would overflow
-        raise PkmcalError(f"machine '{mechanism.name}': every platform joint is at the platform origin (radius "
-                          f"{r:g} mm), so the legs cannot set the platform's orientation; check the legs' 'platform:' "
-                          "joints")
-    return np.array([s, s, s / 2, s / r, s / r, s / r])
 
 
 def corner_poses(box: np.ndarray) -> np.ndarray:
@@ -221,6 +206,21 @@ def _bisect_scale(ok, t_max: float = 1.0, n_iter: int = 24) -> float:
     return lo
 
 
+def _bisect_scales(ok, n: int, t_max: float = 1.0, n_iter: int = 24) -> np.ndarray:
+    """:func:`_bisect_scale` of ``n`` independent scales at once: ``ok(t)`` takes the (n,)
+    scales and returns which pass (n,); the same halvings, one call per halving."""
+    lo, hi = np.zeros(n), np.full(n, t_max)
+    done = ok(hi.copy())
+    for _ in range(n_iter):
+        if done.all():
+            break
+        mid = 0.5 * (lo + hi)
+        passed = ok(np.where(done, hi, mid))
+        lo = np.where(~done & passed, mid, lo)
+        hi = np.where(~done & ~passed, mid, hi)
+    return np.where(done, t_max, lo)
+
+
 @blas_single_threaded
 def corner_box(mechanism: Mechanism, box: np.ndarray, setup: MeasurementSetup | None = None, *,
                margin: float = DEFAULT_MARGIN, measurability: Measurability = Measurability()) -> np.ndarray:
@@ -244,28 +244,27 @@ def corner_box(mechanism: Mechanism, box: np.ndarray, setup: MeasurementSetup | 
 @blas_single_threaded
 def workspace_box(mechanism: Mechanism, setup: MeasurementSetup | None = None, *,
                   margin: float = DEFAULT_MARGIN, measurability: Measurability = Measurability()) -> np.ndarray:
-    """The machine's ``workspace`` if set, else the largest reachable box around home (module doc)."""
-    ws = getattr(mechanism, "workspace", None)
-    if ws is not None:
-        return np.array(ws, dtype=float).reshape(mechanism.n_dof, 2)
-    if mechanism.n_dof != 6:
-        return np.asarray(mechanism.workspace_box(), dtype=float)   # declared by the machine (its print volume, ...)
+    """The machine's declared box, or the largest reachable box around home along its
+    :meth:`~pkmcal.mechanisms.base.Mechanism.reach_search_shape` (module docstring)."""
+    shape = mechanism.reach_search_shape()
+    if shape is None:
+        return np.array(mechanism.workspace_box(), dtype=float).reshape(mechanism.n_dof, 2)
     home = np.asarray(mechanism.home_pose, dtype=float)
-    half = default_box_shape(mechanism)
-    reach = np.empty(6)
-    for i in range(6):
-        e = np.zeros(6)
-        e[i] = half[i]
+    half = np.asarray(shape, dtype=float)
+    n = len(half)
 
-        def ok(t, e=e):
-            pts = np.stack([home + t * e, home - t * e])
-            return bool(check_candidates(mechanism, setup, pts, margin=margin, measurability=measurability).ok.all())
+    def ok(t):               # the poses home ± t_i h_i e_i of every axis i in one check
+        steps = np.diag(t * half)
+        passed = check_candidates(mechanism, setup, np.concatenate([home + steps, home - steps]), margin=margin,
+                                  measurability=measurability).ok
+        return passed[:n] & passed[n:]
 
-        reach[i] = _bisect_scale(ok) * half[i]
+    reach = _bisect_scales(ok, n) * half
     if np.any(reach <= 1e-6 * half):
         raise PkmcalError(f"machine '{mechanism.name}': the home pose cannot move along "
-                          f"{', '.join(POSE_COLUMNS[i] for i in np.flatnonzero(reach <= 1e-6 * half))} within the "
-                          "limits and the safety margin; check the home pose, the margin and the sensor set-up")
+                          f"{', '.join(mechanism.pose_names[i] for i in np.flatnonzero(reach <= 1e-6 * half))} "
+                          "within the limits and the safety margin; check the home pose, the margin and the sensor "
+                          "set-up")
     return np.stack([home - reach, home + reach], axis=1)
 
 

@@ -156,7 +156,8 @@ def singularity_measures(mechanism, poses: np.ndarray, length: float | None = No
 
     J⁻¹ is the inverse kinematic Jacobian, ∂λ/∂(δp, δω) (rows [u_iᵀ, ((R a_i) × u_i)ᵀ],
     :meth:`~pkmcal.mechanisms.hexapod.Hexapod.twist_jacobian`), with its rotation columns
-    divided by ``length`` L (default the platform joint radius) so that both blocks are
+    divided by ``length`` L (default the machine's ``length_scale``: the platform joint
+    radius) so that both blocks are
     dimensionless. Then
 
     * ``det`` = |det J⁻¹_L| = |det J⁻¹| / L³ = Π σ_i: Merlet's criterion (paper 2 §2.1, ref.
@@ -170,7 +171,7 @@ def singularity_measures(mechanism, poses: np.ndarray, length: float | None = No
     vanish together at a singularity and rank poses differently elsewhere.
     """
     poses = mechanism.as_pose_array(poses)
-    L = float(getattr(mechanism, "platform_radius", 1.0)) if length is None else float(length)
+    L = float(mechanism.length_scale) if length is None else float(length)
     if not (L > 0 and np.isfinite(L)):
         raise PkmcalError(f"the length that scales the rotation columns must be a positive number of mm; got {length}")
     J = mechanism.twist_jacobian(poses)

@@ -34,7 +34,7 @@ from pkmcal.planning.candidates import (
     workspace_box,
 )
 from pkmcal.planning.indices import observability_indices
-from pkmcal.planning.margins import SafetyMargin, planning_machine, resolve_margin
+from pkmcal.planning.margins import DeltaSafetyMargin, SafetyMargin, planning_checks, resolve_margin
 from pkmcal.planning.selection import ALGORITHMS, Selection, select
 from pkmcal.progress import Stages
 from pkmcal.sensors.base import MeasurementSetup
@@ -44,8 +44,9 @@ from pkmcal.sensors.base import MeasurementSetup
 class Plan:
     """Chosen ``poses`` (n, 6) (mm, rad) with their nominal actuator ``commands`` (n, l), the
     ``selection`` (indices into the candidates, O1..O5), the ``candidates``, the model and the
-    safety ``margin`` the candidates were checked with (a :class:`SafetyMargin`, a single
-    number on every limit, or None for a machine whose limits take none)."""
+    safety ``margin`` the candidates were checked with (a :class:`SafetyMargin` or
+    :class:`DeltaSafetyMargin`, a single number on every limit, or None for a machine whose
+    limits take none)."""
 
     poses: np.ndarray
     commands: np.ndarray
@@ -53,13 +54,13 @@ class Plan:
     candidates: CandidateSet
     model: PlanningModel
     box: np.ndarray | None = None
-    margin: SafetyMargin | float | None = None
+    margin: SafetyMargin | DeltaSafetyMargin | float | None = None
 
     def describe_margin(self) -> str:
         """The safety margin in words (what ``pkmcal plan`` prints)."""
         if self.margin is None:
             return "none (this machine's limits take no safety margin)"
-        if isinstance(self.margin, SafetyMargin):
+        if isinstance(self.margin, (SafetyMargin, DeltaSafetyMargin)):
             return self.margin.describe()
         return f"{self.margin:g} on every limit (mm for stroke and clearance, degrees for joint tilts)"
 
@@ -68,8 +69,10 @@ class Plan:
         return self.selection.indices
 
 
-#: Accepted candidates per call of :meth:`PlanningModel.blocks` (bounds its temporaries).
-BLOCK_BATCH = 50_000
+#: Accepted candidates per call of :meth:`PlanningModel.blocks` (bounds its temporaries; at
+#: 10,000 rather than 50,000 the allocator reuses them instead of faulting in fresh pages: the
+#: 100,000-candidate plan's peak RSS 853 → 511 MB, system time ~2.2 → ~0.9 s).
+BLOCK_BATCH = 10_000
 
 
 def candidate_blocks(model: PlanningModel, poses: np.ndarray, *, batch: int = BLOCK_BATCH,
@@ -96,7 +99,7 @@ def candidate_blocks(model: PlanningModel, poses: np.ndarray, *, batch: int = BL
 def plan_poses(mechanism: Mechanism, setup: MeasurementSetup, n: int, *, algorithm: str = "default",
                index: str | None = None, candidates: np.ndarray | str | os.PathLike | None = None,
                n_candidates: int = 2000, grid: int | None = None, seed: int | None = None,
-               margin: SafetyMargin | float | None = None,
+               margin: SafetyMargin | DeltaSafetyMargin | float | None = None,
                measurability: Measurability = Measurability(), method: str | None = None,
                model: PlanningModel | None = None, progress: Stages | None = None, circle_plane: str = "xy",
                chunk_size: int = CHUNK_SIZE, chunk_map: Callable = map) -> Plan:
@@ -109,7 +112,7 @@ def plan_poses(mechanism: Mechanism, setup: MeasurementSetup, n: int, *, algorit
     ignores them and draws among the 64 corners of the largest all-reachable box. Every
     candidate is checked (limits with the safety margin, measurability) before selection.
 
-    ``margin``: a :class:`~pkmcal.planning.margins.SafetyMargin`; None (default) the
+    ``margin``: a :class:`~pkmcal.planning.margins.SafetyMargin` (or ``DeltaSafetyMargin``); None (default) the
     machine's default margins (:func:`~pkmcal.planning.margins.default_margin`); a number,
     that margin on every limit (mm and degrees, as ``check_limits(margin=...)``).
     ``progress(stage)`` is called as each stage starts and returns that stage's
@@ -129,11 +132,8 @@ def plan_poses(mechanism: Mechanism, setup: MeasurementSetup, n: int, *, algorit
     if margin is None:
         margin = resolve_margin(mechanism)
     nominal = mechanism
-    if isinstance(margin, SafetyMargin) or margin is None:
-        mechanism = planning_machine(mechanism, margin)
-        kw = dict(margin=0.0, measurability=measurability)
-    else:
-        kw = dict(margin=float(margin), measurability=measurability)
+    mechanism, check_margin = planning_checks(mechanism, margin)
+    kw = dict(margin=check_margin, measurability=measurability)
     chunked = dict(chunk_size=chunk_size, chunk_map=chunk_map, **kw)
     box = None
     if algorithm == "corners":

@@ -113,28 +113,58 @@ def _batch_logdet(S: np.ndarray, sign: float, identity: bool = True) -> np.ndarr
     return np.where(s > 0, ld, -np.inf)
 
 
-def _whitened(flatF: np.ndarray, M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(L⁻¹, G L⁻ᵀ (N·m, p)) with M = L Lᵀ (one GEMM over all candidate rows)."""
+#: Candidates per GEMM of the passes over all of them (:func:`_all_S`, :func:`_all_gains`,
+#: :func:`_leverages`):
+#: bounds their temporaries (G L⁻ᵀ of a slice: 10 MB at 42 parameters) whatever N.
+_PASS_ROWS = 5_000
+
+
+def _inverse_factor(M: np.ndarray) -> np.ndarray:
+    """L⁻¹ with M = L Lᵀ (Cholesky); a clear error when M is singular."""
     try:
         L = np.linalg.cholesky(M)
     except np.linalg.LinAlgError:
         raise PkmcalError("the candidate poses do not identify every parameter (singular information matrix); "
                           "use more poses or more varied candidates") from None
-    Linv = np.linalg.inv(L)
-    return Linv, flatF @ Linv.T
+    return np.linalg.inv(L)
+
+
+def _whitened_slices(flatF: np.ndarray, N: int, m: int, Linv: np.ndarray):
+    """(start, stop, G_j L⁻ᵀ (stop − start, m, p)) over the candidates in slices of
+    :data:`_PASS_ROWS` (one GEMM each; BLAS computes a row of a product the same way
+    whatever the rows around it, so the slices give the bits of one GEMM over all: tested in
+    ``tests/test_plan_executors.py``)."""
+    for start in range(0, N, _PASS_ROWS):
+        stop = min(N, start + _PASS_ROWS)
+        yield start, stop, (flatF[start * m:stop * m] @ Linv.T).reshape(stop - start, m, -1)
 
 
 def _all_S(flatF: np.ndarray, N: int, m: int, M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """M⁻¹ and S_j = G_j M⁻¹ G_jᵀ (N, m, m) for all candidates."""
-    Linv, W = _whitened(flatF, M)
-    W = W.reshape(N, m, -1)
-    return Linv.T @ Linv, np.einsum("nip,njp->nij", W, W, optimize=True)
+    Linv = _inverse_factor(M)
+    S = np.empty((N, m, m))
+    for start, stop, W in _whitened_slices(flatF, N, m, Linv):
+        S[start:stop] = np.einsum("nip,njp->nij", W, W, optimize=True)
+    return Linv.T @ Linv, S
+
+
+def _all_gains(flatF: np.ndarray, N: int, m: int, M: np.ndarray) -> np.ndarray:
+    """log det(I + S_j) (N,) for all candidates (−∞ where not positive definite), slice by
+    slice: the values of :func:`_all_S` then ``gains_of``, without holding S of all N."""
+    Linv = _inverse_factor(M)
+    gain = np.empty(N)
+    for start, stop, W in _whitened_slices(flatF, N, m, Linv):
+        _kernels().gains_of(np.einsum("nip,njp->nij", W, W, optimize=True), gain[start:stop])
+    return gain
 
 
 def _leverages(flatF: np.ndarray, N: int, M: np.ndarray) -> np.ndarray:
     """tr(G_j M⁻¹ G_jᵀ) = ‖G_j L⁻ᵀ‖²_F (N,) for all candidates."""
-    W = _whitened(flatF, M)[1]
-    return np.einsum("ij,ij->i", W, W).reshape(N, -1).sum(axis=1)
+    m = flatF.shape[0] // max(N, 1)
+    out = np.empty(N)
+    for start, stop, W in _whitened_slices(flatF, N, m, _inverse_factor(M)):
+        out[start:stop] = np.einsum("nij,nij->ni", W, W).sum(axis=1)
+    return out
 
 
 class _DState:
@@ -203,9 +233,7 @@ def _detmax_exchange(G: np.ndarray, flatF: np.ndarray, chosen: list[int], max_ex
         if N <= work_size:
             work = np.arange(N)
         else:
-            _, S_all = _all_S(flatF, N, m, M)
-            gain_all = np.empty(N)
-            _kernels().gains_of(np.ascontiguousarray(S_all), gain_all)
+            gain_all = _all_gains(flatF, N, m, M)
             gain_all = np.where(np.isnan(gain_all) | in_set, -np.inf, gain_all)
             evaluations += N
             best = int(np.argmax(gain_all))

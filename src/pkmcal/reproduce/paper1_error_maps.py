@@ -57,7 +57,7 @@ def slice_nonlinearity(nominal, real, values: np.ndarray, bases: np.ndarray) -> 
     """max_s ‖e(s) − (a + b s)‖ / max_s ‖e(s)‖ per slice (6, C), e = [Δp; rotation vector of
     R_r R_cᵀ] (mm, and rad times the platform radius, so both in mm), a + b s the
     least-squares line (module docstring); NaN for slices with fewer than 3 reachable points."""
-    r = float(getattr(nominal, "platform_radius", 1.0))
+    r = float(nominal.length_scale)
     out = np.full(bases.shape[:2], np.nan)
     every = tuple(real.check_limits(nominal.home_pose[None]).violations)
     for k in range(6):
