@@ -18,7 +18,6 @@ from pkmcal.report.data import (
     ErrorMap,
     HeldOutErrors,
     Identifiability,
-    OutlierRow,
     ParameterTable,
     PriorRow,
     ReportData,
@@ -134,7 +133,7 @@ def screening_from_result(result) -> Screening | None:
     sc = getattr(result, "screening", None)
     if sc is None:
         return None
-    rows = tuple(OutlierRow(o.pose, o.sigma, o.reading, o.reading_sigma, o.dropped, o.round) for o in sc.outliers)
+    rows = tuple(sc.outliers)
     return Screening(threshold=sc.threshold, loss=sc.loss, f_scale=sc.f_scale, reject=sc.reject, rounds=sc.rounds,
                      outliers=rows, max_sigma=float(np.max(sc.sigma)) if sc.sigma.size else np.nan,
                      median_sigma=float(np.median(sc.sigma)) if sc.sigma.size else np.nan)
