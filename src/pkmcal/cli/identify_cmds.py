@@ -215,7 +215,7 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     before = before_registration(nominal, setup, meas, result) if baseline is None else None
     cal_setup = identified_setup_of(setup, result) if baseline is None else None
     text = machine_to_text(with_calibration_record(result, machine, measurements, setup_spec, name,
-                                                    setup=cal_setup, before=before))
+                                                   setup=cal_setup, before=before))
     check_loads_back(text, "(standard output)" if to_stdout(output) else output)
     validation = None
     if heldout is not None:

@@ -40,9 +40,9 @@ so that both models command the same physical poses whatever the gauge.
   tool on the tracker reading of each held-out pose and compared on what the tracker reads
   (:mod:`pkmcal.identification.tool_errors`); it needs the setup's stiffness and load.
 
-The errors are those of the platform frames (p, R) = ``real.frame(x)`` of the reached and
-the commanded pose coordinates, so that every mechanism is verified the same way (a
-hexapod's frame is its pose x, y, z, a, b, c; a delta's R = I).
+The errors are those of the platform frames (p, R) of the reached and the commanded pose
+coordinates (``Mechanism.frame``), so that every mechanism is verified the same way (a
+hexapod's frame is its pose x, y, z, a, b, c; a delta's R = I, no orientation rows).
 """
 
 from __future__ import annotations
@@ -126,7 +126,8 @@ def frame_errors(p_r: np.ndarray, R_r: np.ndarray, p_c: np.ndarray, R_c: np.ndar
 
 
 def pose_errors(model: Mechanism, real: Mechanism, poses: np.ndarray, ignore_limits: tuple[str, ...] = ()) -> PoseErrors:
-    """Errors of the real machine commanded through ``model`` at ``poses`` (N, n; mm, rad).
+    """Errors of the real machine commanded through ``model`` at ``poses`` (N, n; mm, rad):
+    of the platform frames (position, orientation) of the reached and the commanded poses.
 
     ``ignore_limits`` names limits of the real machine not checked (e.g. ``leg_collision``).
     """
@@ -143,8 +144,8 @@ def pose_errors_many(models: tuple[Mechanism, ...] | list[Mechanism], real: Mech
     with the nominal model and every calibrated one)."""
     for model in models:
         if model.pose_names != real.pose_names:
-            raise PkmcalError(f"machine '{model.name}' has poses ({', '.join(model.pose_names)}), the real machine "
-                              f"'{real.name}' ({', '.join(real.pose_names)}): not the same kind")
+            raise PkmcalError(f"machine '{model.name}' has poses ({', '.join(model.pose_names)}) and the real "
+                              f"machine '{real.name}' ({', '.join(real.pose_names)}): compare machines of one kind")
     cmd1 = models[0].as_pose_array(poses)
     if not np.all(np.isfinite(cmd1)):
         raise PkmcalError("a held-out pose is not a finite number")
@@ -164,15 +165,18 @@ def pose_errors_many(models: tuple[Mechanism, ...] | list[Mechanism], real: Mech
     reached = np.where(ok[:, None], fk.poses, cmd)
     ok = drop_limit_violations(real, reached, ok, ignore_limits, dropped)
 
-    F_c, F_r = real.frame(cmd), real.frame(reached)   # the hexapod's: p = (x, y, z), R of (a, b, c)
-    e_p, e_R, e_n, e_z = frame_errors(F_r.p, F_r.R, F_c.p, F_c.R)
+    f_c, f_r = models[0].frame(cmd1), real.frame(reached)       # platform frames (p, R) of the poses
+    Rc = np.tile(f_c.R, (k, 1, 1)) if k > 1 else f_c.R
+    e_p, e_R, e_n, e_z = frame_errors(f_r.p, f_r.R, np.tile(f_c.p, (k, 1)) if k > 1 else f_c.p, Rc)
     nan = np.where(ok, 1.0, np.nan)
+    rotates = any(real.pose_is_angle)      # a machine without angle coordinates (a delta) keeps R = I
     out = []
     for j, model in enumerate(models):
         rows = slice(j * n, (j + 1) * n)
         mine = {i - j * n: why for i, why in sorted(dropped.items()) if j * n <= i < (j + 1) * n}
         out.append(PoseErrors(model=model.name, reached=reached[rows], position=(e_p * nan)[rows],
-                              orientation=(e_R * nan)[rows], tilt=(e_n * nan)[rows], height=(e_z * nan)[rows],
+                              orientation=(e_R * nan)[rows] if rotates else None,
+                              tilt=(e_n * nan)[rows] if rotates else None, height=(e_z * nan)[rows],
                               valid=ok[rows], dropped=mine))
     return tuple(out)
 
@@ -414,10 +418,6 @@ def verify(
                           f"'{calibrated.name}' has as many actuators as pose coordinates")
     if compare not in COMPARES:
         raise PkmcalError(f"compare must be one of {', '.join(COMPARES)}; got '{compare}'")
-    if compare != "commanded" and "pose-convention" not in calibrated.abilities:
-        raise PkmcalError(f"compare='{compare}' aligns the models' frames through poses x, y, z, a, b, c; machine "
-                          f"'{calibrated.name}' has poses ({', '.join(calibrated.pose_names)}): compare its poses "
-                          "as commanded (compare='commanded', verify --compare commanded)")
     if compare == "sensor" and (true_sensor is None or sensors is None or sensors[0] is None):
         raise PkmcalError("comparing what the sensor reads needs the true instrument and the calibrated sensor")
     if compare == "sensor" and nominal is not None and sensors[1] is None:
