@@ -28,6 +28,11 @@ from pkmcal.progress import Progress
 from pkmcal.reproduce.catalogue import CATALOGUE, format_catalogue
 from pkmcal.reproduce.table import Reproduction, Row
 
+# The two reproductions named as their modules are bound here, after their modules are
+# imported (an import of the module would otherwise leave the package's name on the module).
+from pkmcal.reproduce.paper2_singularity import paper2_singularity  # noqa: E402
+from pkmcal.reproduce.paper3_compliance import paper3_compliance  # noqa: E402
+
 #: name → (module under pkmcal.reproduce, function, one-line description)
 _ENTRIES: dict[str, tuple[str, str, str]] = {
     "paper1-table1": ("paper1", "paper1_table1", "paper 1 Table I, Figs. 10-11 (parameter errors, boundary vs interior "
