@@ -13,8 +13,8 @@ For each machine (``planar-2dof-3act``, ``planar-3dof-4act``):
    offsets, 0.1 mm for the tool point; stiffness of each actuator ×U(0.5, 2)), each with
    fresh poses and noise.
 
-Methods (:data:`pkmcal.identification.projection.METHODS`, each a configuration of the
-engine's ``identify(method="projection")``, see :func:`~pkmcal.identification.projection.fit_redundant`):
+Methods (:data:`pkmcal.reproduce.paper3_experiment.METHODS`, each a configuration of the
+engine's ``identify(method="projection")``, see :func:`~pkmcal.reproduce.paper3_experiment.fit_redundant`):
 ``projection`` (re-linearised, weighted), ``projection-single`` (the paper's one
 linearisation, weighted), ``projection-unweighted`` (re-linearised, rows in raw mm and rad),
 baselines ``ignore-redundancy`` and ``actuator-subset`` (first n actuators). "rank r/n":
@@ -33,9 +33,9 @@ import time
 
 import numpy as np
 
-from pkmcal.identification.projection import METHODS, calibration_experiment
 from pkmcal.reproduce.paper3 import (CASES, LOAD_N, N_CALIB, TRACKER_STD, case_models, gauge_equivalent, real_setup,
                                      table_experiment)
+from pkmcal.reproduce.paper3_experiment import METHODS, calibration_experiment
 
 
 def _angle_flags(mech, sensor) -> dict[str, bool]:

@@ -32,9 +32,6 @@ PROBE = re.compile(
 #: the registry); pipeline = item 3 (one simulate/verify/perturb); workspace = item 1's
 #: ``workspace_box()`` and ``check_limits(margin=)`` adopted by planning.
 ALLOWED = {
-    ("cli/identify_cmds.py", 'getattr(result.sensor, "kind", "")', "pipeline: one verify"),
-    ("identification/redundant_campaign.py", 'getattr(machine, "metadata", {})', "pipeline: one verify"),
-    ("identification/redundant_campaign.py", 'getattr(mech, "base", None)', "pipeline: baselines in reproduce/"),
 }
 
 

@@ -17,12 +17,9 @@ import numpy as np
 import pytest
 
 from pkmcal.errors import PkmcalError
-from pkmcal.identification.redundant_campaign import (
-    commands_for_targets,
-    compliance_warning,
-    load_deflection_estimate,
-    simulate_redundant_campaign,
-)
+from pkmcal.identification.load_deflection import compliance_warning, load_deflection_estimate
+from pkmcal.identification.simulation import simulate_campaign
+from pkmcal.identification.tool_errors import commands_for_targets
 from pkmcal.io.setup_file import load_setup, setup_to_yaml
 from pkmcal.mechanisms.statics import (
     StaticsModel,
@@ -70,13 +67,13 @@ def test_backlash_in_the_simulation_is_direction_dependent():
     base = real_setup(real_sensor, noise, CASES["paper3-case2"]["stiffness"])
     zero = dataclasses.replace(base, simulation=StaticsModel(base.simulation.stiffness, base.simulation.load,
                                                              backlash=0.0))
-    a = simulate_redundant_campaign(nominal, real, base, points, 3, ("workspace",))
-    z = simulate_redundant_campaign(nominal, real, zero, points, 3, ("workspace",))
+    a = simulate_campaign(nominal, real, base, points, 3, ("workspace",))
+    z = simulate_campaign(nominal, real, zero, points, 3, ("workspace",))
     assert np.array_equal(a.actuator_readings, z.actuator_readings) and np.array_equal(a.real_poses, z.real_poses)
     b = 0.01
     withb = dataclasses.replace(base, simulation=StaticsModel(base.simulation.stiffness, base.simulation.load,
                                                               backlash=b))
-    s = simulate_redundant_campaign(nominal, real, withb, points, 3, ("workspace",))
+    s = simulate_campaign(nominal, real, withb, points, 3, ("workspace",))
     c = nominal.ik(points)
     shift = withb.simulation.backlash_shift(c)
     eq = equilibrium(real, c - shift, withb.simulation.stiffness_for(real), withb.simulation.load, real_sensor,
@@ -109,7 +106,7 @@ def campaign(request):
     nominal, sensor, noise, real, real_sensor = case_models(name)
     setup = real_setup(real_sensor, noise, CASES[name]["stiffness"])
     calib = nominal.sample_poses(30, np.random.default_rng(1))
-    sim = simulate_redundant_campaign(nominal, real, setup, calib, 2, ("workspace",))
+    sim = simulate_campaign(nominal, real, setup, calib, 2, ("workspace",))
     return name, (nominal, sensor, noise, real, real_sensor), setup, calib, sim
 
 
@@ -166,7 +163,7 @@ def test_deflection_from_following_errors_is_the_linear_deflection():
     poses = nominal.sample_poses(12, np.random.default_rng(4))
     for machine in (nominal, real):              # no conflict, and the paper's errors (a fight)
         setup = MeasurementSetup(sensor, noise, StaticsModel(K, np.array([0.0, -50.0])))
-        sim = simulate_redundant_campaign(nominal, machine, dataclasses.replace(setup, noise=dataclasses.replace(
+        sim = simulate_campaign(nominal, machine, dataclasses.replace(setup, noise=dataclasses.replace(
             noise, reading_std=np.zeros(2), actuator_std=np.zeros(3))), poses, 0, ("workspace",))
         e = sim.actuator_true - nominal.ik(poses)
         est = load_deflection_estimate(machine, sensor, sim.real_poses, e)
@@ -177,5 +174,5 @@ def test_deflection_from_following_errors_is_the_linear_deflection():
     assert compliance_warning(nominal, real, sensor, poses, sim.real_poses, 0.01) is not None
     stiff = MeasurementSetup(sensor, dataclasses.replace(noise, reading_std=np.zeros(2), actuator_std=np.zeros(3)),
                              StaticsModel(K * 1e4, np.array([0.0, -50.0])))
-    s2 = simulate_redundant_campaign(nominal, nominal, stiff, poses, 0, ("workspace",))
+    s2 = simulate_campaign(nominal, nominal, stiff, poses, 0, ("workspace",))
     assert compliance_warning(nominal, nominal, sensor, poses, s2.real_poses, 0.01) is None

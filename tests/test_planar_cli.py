@@ -13,7 +13,7 @@ from click.testing import CliRunner
 from helpers import assert_user_error
 
 from pkmcal.cli.main import cli
-from pkmcal.identification.redundant_campaign import calibrated_sensor
+from pkmcal.identification.tool_errors import calibrated_sensor
 from pkmcal.io import load_machine, read_table, save_machine
 from pkmcal.io.measurements import load_measurements
 from pkmcal.io.setup_file import load_setup
@@ -236,7 +236,7 @@ def test_sensor_calibration_block_round_trip_by_declared_angles(tmp_path, sensor
     written, saved with the machine, loaded and applied, it gives back the same radians."""
     import dataclasses
 
-    from pkmcal.identification.redundant_campaign import sensor_calibration_block
+    from pkmcal.identification.tool_errors import sensor_calibration_block
     from pkmcal.sensors import PlanarToolSensor, PositionSensor
 
     if sensor_kind == "planar-tool":

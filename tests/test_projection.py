@@ -20,16 +20,12 @@ from scipy.optimize import least_squares
 from pkmcal.errors import PkmcalError
 from pkmcal.identification.engine import identify
 from pkmcal.identification.identifiability import identifiability
-from pkmcal.identification.projection import (
-    ActuatorSubset,
-    calibration_experiment,
-    fit_redundant,
-    single_linearisation,
-)
-from pkmcal.identification.redundant_campaign import simulate_redundant_campaign
+from pkmcal.identification.projection import ActuatorSubset, single_linearisation
+from pkmcal.identification.simulation import simulate_campaign
 from pkmcal.identification.residuals import Model
 from pkmcal.mechanisms import planar as PL
 from pkmcal.mechanisms.statics import StaticsModel
+from pkmcal.reproduce.paper3_experiment import calibration_experiment, fit_redundant
 from pkmcal.sensors.base import MeasurementSetup, NoiseModel
 from pkmcal.sensors.planar_tool import PlanarToolSensor
 
@@ -64,7 +60,7 @@ def _free(m, fixed, sensor_free=TOOL):
 def _measure(m, real, real_sensor, x, K, F, noise, seed=0):
     """The one redundant simulation: the real machine at equilibrium, noisy readings."""
     setup = MeasurementSetup(real_sensor, noise, StaticsModel(K, F))
-    sim = simulate_redundant_campaign(m, real, setup, x, np.random.default_rng(seed), ignore_limits=("workspace",))
+    sim = simulate_campaign(m, real, setup, x, np.random.default_rng(seed), ignore_limits=("workspace",))
     assert len(sim.kept) == len(x)
     return sim
 

@@ -249,7 +249,7 @@ def _planar_identification(name: str):
     import dataclasses
 
     from pkmcal.identification.engine import identify
-    from pkmcal.identification.redundant_campaign import simulate_redundant_campaign
+    from pkmcal.identification.simulation import simulate_campaign
     from pkmcal.io.setup_file import builtin_setup
     from pkmcal.mechanisms.library import builtin_machine
 
@@ -262,8 +262,8 @@ def _planar_identification(name: str):
     setup = dataclasses.replace(setup, sensor=sensor)
     real_sensor = sensor.with_params(np.array([0.5, -0.2, 1.0, 2.0, np.deg2rad(0.3)]))
     poses = nominal.sample_poses(20, np.random.default_rng(1))
-    sim = simulate_redundant_campaign(nominal, real, dataclasses.replace(setup, sensor=real_sensor), poses,
-                                      np.random.default_rng(2))
+    sim = simulate_campaign(nominal, real, dataclasses.replace(setup, sensor=real_sensor), poses,
+                            np.random.default_rng(2))
     result = identify(nominal, setup, sim.measurements, method="projection")
     assert result.success
     return nominal, real, real_sensor, setup, sim, result

@@ -153,18 +153,18 @@ def test_cli_figures_option(tmp_path):
 def test_report_warns_of_load_deflection():
     """The calibration report of a projection fit on a soft machine under load carries the
     warning line (pkmcal identify --report builds it the same way)."""
-    from pkmcal.identification.projection import fit_redundant
-    from pkmcal.identification.redundant_campaign import simulate_redundant_campaign
+    from pkmcal.identification.simulation import simulate_campaign
     from pkmcal.mechanisms.statics import StaticsModel
     from pkmcal.report.from_results import report_data_from_results
     from pkmcal.reproduce.paper3 import CASES, case_models
+    from pkmcal.reproduce.paper3_experiment import fit_redundant
     from pkmcal.sensors.base import MeasurementSetup
 
     nominal, sensor, noise, real, real_sensor = case_models("paper3-case1")
     cmd = nominal.sample_poses(30, np.random.default_rng(0))
     soft = MeasurementSetup(real_sensor, noise, StaticsModel(CASES["paper3-case1"]["stiffness"] / 10,
                                                              np.array([0.0, -50.0])))
-    sim = simulate_redundant_campaign(nominal, real, soft, cmd, 1, ("workspace",))
+    sim = simulate_campaign(nominal, real, soft, cmd, 1, ("workspace",))
     setup = MeasurementSetup(sensor, noise)
     fit = fit_redundant("projection", nominal, setup, sim.measurements, CASES["paper3-case1"]["free"])
     facts = dict(report_data_from_results(nominal, fit, setup, cmd, commanded=cmd).facts)

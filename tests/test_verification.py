@@ -134,7 +134,7 @@ def test_cli_verify_table_and_json(tmp_path):
 
 def test_redundant_tool_error_summary_against_numpy():
     """Planar held-out summaries: tool in mm, |angle| in degrees, NaN angles (n = 2) omitted."""
-    from pkmcal.identification.redundant_campaign import ToolErrors
+    from pkmcal.identification.tool_errors import ToolErrors
 
     rng = np.random.default_rng(4)
     tool, angle = rng.uniform(0.0, 1.0, 6), rng.normal(0.0, 1e-3, 6)

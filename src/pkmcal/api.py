@@ -125,7 +125,9 @@ def simulate(nominal: Mechanism, real: Mechanism, setup: MeasurementSetup, poses
              seed: int | None = None, **options) -> SimulationResult:
     """Simulate measuring ``poses`` on ``real`` commanded through ``nominal`` with the noise
     of ``setup`` (``pkmcal simulate``); ``.measurements`` is what a measured CSV holds, and
-    ``.dropped`` says which poses the real machine could not take and why."""
+    ``.dropped`` says which poses the real machine could not take and why. Every machine: a
+    redundantly actuated one settles at static equilibrium under the setup's ``simulation:``
+    stiffness and load."""
     from pkmcal.identification.simulation import simulate_campaign
 
     return simulate_campaign(nominal, real, setup, poses, seed, **options)
@@ -163,7 +165,8 @@ def verify(calibrated: Mechanism, real: Mechanism, poses: np.ndarray, nominal: M
            **options) -> VerificationReport:
     """Pose errors of the ``real`` machine commanded through ``calibrated`` (and ``nominal``
     for "before") on held-out ``poses`` (``pkmcal verify --real``); ``.to_dict()`` the
-    figures of ``verify --json``."""
+    figures of ``verify --json``. A redundantly actuated machine needs ``setup=`` (its
+    ``simulation:`` stiffness and load) and is compared on what its tracker reads."""
     from pkmcal.identification.verification import verify as _verify
 
     return _verify(calibrated, real, poses, nominal, **options)

@@ -192,7 +192,7 @@ def run_demo(config: DemoConfig = DemoConfig(), progress: Progress | None = None
     nominal = load_machine(config.machine)
     real = load_machine(config.real)
     setup = load_setup(config.setup)
-    method = default_method(setup)
+    method = default_method(setup, nominal)
     seed_plan, seed_sim, seed_held = np.random.SeedSequence(config.seed).generate_state(3)
     rng_sim, rng_held = np.random.default_rng(int(seed_sim)), np.random.default_rng(int(seed_held))
     notes: list[str] = []

@@ -7,8 +7,9 @@
   nominal) model on held-out poses (:mod:`pkmcal.identification.verification`).
 
 Redundantly actuated machines (more actuators than pose coordinates, paper 3) are simulated
-at static equilibrium under the setup's actuator stiffness and tool load
-(:mod:`pkmcal.identification.redundant_campaign`), in ``simulate`` and in ``verify``.
+at static equilibrium under the setup's actuator stiffness and tool load, by the same
+functions (:func:`~pkmcal.identification.simulation.settles_at_equilibrium`), in
+``simulate`` and in ``verify`` (``compare="tool"``).
 
 Everything is read, validated and computed before any output is written (atomically); on
 a user error nothing is written and the exit code is 2.
@@ -23,12 +24,7 @@ import click
 import numpy as np
 
 from pkmcal.errors import PkmcalError
-from pkmcal.identification.redundant_campaign import (
-    is_redundant,
-    simulate_redundant_campaign,
-    verify_redundant,
-)
-from pkmcal.identification.simulation import perturb_machine, simulate_campaign
+from pkmcal.identification.simulation import perturb_machine, settles_at_equilibrium, simulate_campaign
 from pkmcal.identification.verification import verify
 from pkmcal.cli.import_options import import_options
 from pkmcal.cli.options import check_output, emit, examples, output_option, quiet_option, to_stdout, units_comment_option
@@ -129,8 +125,6 @@ def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_rea
     if n_sessions is not None:
         result, session_text = _simulate_sessions(nominal, real, setup, commanded, rng, n_sessions, session_errors,
                                                   session_offsets, tuple(ignore_limits))
-    elif is_redundant(nominal):
-        result = simulate_redundant_campaign(nominal, real, setup, commanded, rng, ignore_limits=tuple(ignore_limits))
     else:
         from pkmcal.progress import ProgressBar
 
@@ -171,15 +165,13 @@ def _simulate_sessions(nominal, real, setup, commanded, rng, n_sessions: int, er
     sensors = session_sensors_drawn(setup.sensor, n_sessions, errors, rng, dict(setup.session_sensors))
     offsets = None
     if offsets_mm is not None:
-        if is_redundant(nominal):
+        if settles_at_equilibrium(nominal):
             raise PkmcalError("--session-offsets: a redundantly actuated machine settles at equilibrium under its "
                               "encoders; re-homing is not simulated there")
         delta = rng.uniform(-offsets_mm, offsets_mm, size=(n_sessions, nominal.n_actuators))
         offsets = np.where(np.array(nominal.actuator_is_angle, dtype=bool), delta / 1000.0, delta)
         offsets[0] = 0.0
-    extra = {"simulate": simulate_redundant_campaign} if is_redundant(nominal) else {}
-    result = simulate_sessions(nominal, real, setup, commanded, sensors, rng, offsets,
-                               ignore_limits=ignore_limits, **extra)
+    result = simulate_sessions(nominal, real, setup, commanded, sensors, rng, offsets, ignore_limits=ignore_limits)
     labels = tuple(str(s + 1) for s in range(n_sessions))
     truth = SessionSensor(sensors, Sessions(labels, np.zeros(0, dtype=np.intp)))
     values = session_setup_values(truth, None if offsets is None else dict(zip(labels[1:], offsets[1:])),
@@ -300,19 +292,17 @@ def verify_cmd(calibrated, meas_path, real_spec, poses, nominal, setup_spec, cal
         if other is not None and other.kind != cal.kind:
             raise PkmcalError(f"machine '{other.name}' is not of the kind of '{cal.name}' "
                               f"({other.kind} vs {cal.kind})")
-    if is_redundant(cal):
+    setup = sensors = true_sensor = frames = None
+    if settles_at_equilibrium(cal):
         if setup_spec is None:
             raise PkmcalError(f"machine '{cal.name}' is redundantly actuated: give --setup SETUP with the "
                               "'simulation:' stiffness and load the real machine settles under")
         if compare not in ("auto", "sensor"):
             raise PkmcalError(f"--compare {compare}: a redundantly actuated machine is verified on what its tracker "
                               "reads (the tool point); leave out --compare")
-        setup = load_setup(setup_spec, cal)
-        report = verify_redundant(cal, real, setup, read_poses(poses, cal, mapping), nominal=nom,
-                                  ignore_limits=tuple(ignore_limits))
+        mode, setup = "tool", load_setup(setup_spec, cal)
     else:
         mode = ("sensor" if setup_spec is not None else "aligned") if compare == "auto" else compare
-        sensors = true_sensor = None
         if mode == "sensor":
             if setup_spec is None:
                 raise PkmcalError("--compare sensor compares what the true instrument reads: give it with --setup "
@@ -332,8 +322,8 @@ def verify_cmd(calibrated, meas_path, real_spec, poses, nominal, setup_spec, cal
         frames = nom if nom is not None or mode == "commanded" else _nominal_from_record(cal)[0]
         if frames is not None and type(frames) is not type(cal):
             frames = None
-        report = verify(cal, real, read_poses(poses, cal, mapping), nominal=nom, ignore_limits=tuple(ignore_limits),
-                        compare=mode, sensors=sensors, true_sensor=true_sensor, frames=frames)
+    report = verify(cal, real, read_poses(poses, cal, mapping), nominal=nom, ignore_limits=tuple(ignore_limits),
+                    compare=mode, sensors=sensors, true_sensor=true_sensor, frames=frames, setup=setup)
     text = json.dumps(report.to_dict(), indent=2, allow_nan=False) + "\n" if as_json else report.format_table() + "\n"
     emit(text, output)
 
@@ -413,7 +403,7 @@ def _verify_measured(calibrated, meas_path, nominal, setup_spec, calib_meas, cli
         cal_setup = given
     else:
         raise PkmcalError(f"{calibrated} has no identified setup (setup:): give the measurement setup with --setup")
-    if is_redundant(cal):
+    if settles_at_equilibrium(cal):
         raise PkmcalError(f"machine '{cal.name}' is redundantly actuated: held-out measurements need FK from the "
                           "actuator readings alone; verify it against a true machine with --real")
     notes: list[str] = []

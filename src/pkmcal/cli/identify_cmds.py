@@ -20,59 +20,31 @@ import numpy as np
 
 from pkmcal.errors import PkmcalError
 from pkmcal.identification.identifiability import describe_named, format_direction
-from pkmcal.identification.redundant_campaign import (
-    BASELINES,
-    baseline_inputs,
-    baseline_result,
-    sensor_calibration_block,
-)
-from pkmcal.identification.residuals import METHODS, default_method
+from pkmcal.identification.residuals import DEFAULT_METHOD_RULE, METHODS
 from pkmcal.identification.robust import DEFAULT_F_SCALE, LOSSES, OUTLIER_SIGMA
 from pkmcal.cli._limits import unreachable_notes
+from pkmcal.cli.calibrated_file import (
+    before_registration,
+    check_loads_back,
+    identified_setup_of,
+    identify_heldout_validation,
+    setup_json,
+    with_calibration_record,
+)
+from pkmcal.cli.fit_text import fit_summary, free_statement, radian_hints, result_table
 from pkmcal.cli.import_options import import_options
 from pkmcal.cli.option_types import FiniteFloat
 from pkmcal.cli.options import DeprecatedArgument, check_output, emit, examples, output_option, poses_file, to_stdout
 from pkmcal.io.atomic import check_output_path
 from pkmcal.io.measurements import CLIPPED_POLICIES, apply_clipped_policy, clipped_named_in_errors, load_measurements
 from pkmcal.io.tables import read_poses
+from pkmcal.reproduce.paper3_baselines import BASELINES, baseline_inputs, baseline_result
 from pkmcal.sensors.library import BUILTIN_SETUPS
 
 
 def _names(values: tuple[str, ...]) -> list[str] | None:
     out = [n for v in values for n in v.replace(",", " ").split() if n]
     return out or None
-
-
-def _fmt(v: float, angle: bool) -> str:
-    return f"{np.rad2deg(v):.6f}°" if angle else f"{v:.6f}"
-
-
-def _angle_names(result) -> set[str]:
-    """Names of the angle parameters (shown in degrees), from the sensor's ``param_is_angle``
-    and the machine's (a machine without the flags, the hexapod, has only lengths), and the
-    result's own flags where it has them (the sessions' offsets of rotary actuators)."""
-    sensor, mech = result.sensor, result.mechanism
-    angles = {n for n, a in zip(sensor.param_names, sensor.param_is_angle) if a}
-    angles.update(n for n, a in zip(mech.param_names, mech.param_is_angle) if a)
-    angles.update(n for n, a in zip(getattr(result, "names", ()), getattr(result, "param_is_angle", ())) if a)
-    return angles
-
-
-def result_table(result) -> str:
-    """Parameter, nominal, identified, ±σ (mm; degrees for angles), one line per parameter."""
-    angles = _angle_names(result)
-    free = set(result.free)
-    std = dict(zip(result.free, result.std))
-    rows = [("parameter", "nominal", "identified", "±std", "")]
-    for i, n in enumerate(result.names):
-        if n not in free and n not in result.gauge and i >= len(result.mechanism.param_names):
-            continue  # sensor parameters held at their values: not part of the fit
-        a = n in angles
-        note = "gauge (fixed)" if n in result.gauge else ("fixed" if n not in free else "")
-        rows.append((n, _fmt(result.initial[i], a), _fmt(result.estimate[i], a),
-                     _fmt(std[n], a) if n in std else "-", note))
-    w = [max(len(r[k]) for r in rows) for k in range(5)]
-    return "\n".join(f"{r[0]:<{w[0]}}  {r[1]:>{w[1]}}  {r[2]:>{w[2]}}  {r[3]:>{w[3]}}  {r[4]}".rstrip() for r in rows)
 
 
 def merged_free(free: list[str] | None, setup) -> list[str] | None:
@@ -83,168 +55,6 @@ def merged_free(free: list[str] | None, setup) -> list[str] | None:
     if free is None:
         return None
     return list(free) + [n for n in setup.sensor.default_free if n not in free]
-
-
-def free_statement(result, free_opt: list[str] | None, setup) -> str:
-    """Which parameters were estimated and where each list came from (one line)."""
-    p = len(result.mechanism.param_names)
-    names = result.names
-    mech_free = [n for n in result.free if names.index(n) < p]
-    sensor_free = [n for n in result.free if names.index(n) >= p]
-    setup_free = set(setup.sensor.default_free)
-    several = result.sessions is not None and result.sessions.several
-    if several:   # NAME@LABEL of the setup's free: names, and the sessions' actuator offsets
-        setup_free = set(result.sensor.default_free)
-        offsets = {n for n in names[p + len(result.sensor.param_names):]}
-    from pkmcal.identification.residuals import default_fixed_parameters
-
-    held_by_machine = [n for n in default_fixed_parameters(result.mechanism) if n not in result.free]
-    if free_opt is not None:
-        src = "--free"
-    elif held_by_machine:
-        src = f"all but {', '.join(held_by_machine)}, which the machine holds unless freed by name; no --free given"
-    else:
-        src = "all, no --free given"
-    text = f"free parameters: {len(mech_free)} of {p} machine parameters ({src})"
-    if sensor_free:
-        parts = [f"{n} ({'setup free:' if n in setup_free else 'session offsets' if several and n in offsets else '--free'})"
-                 for n in sensor_free]
-        text += "; sensor: " + ", ".join(parts)
-    else:
-        text += "; no sensor parameter"
-    held = [n for n in (result.sensor.default_free if several else setup.sensor.default_free)
-            if n not in result.free]
-    if held:
-        text += f"; setup-free sensor parameters held: {', '.join(held)} (--fix or gauge)"
-    return text + ". Rule: --free adds to the setup's free: list, it does not replace it"
-
-
-def _residual_line(result) -> str:
-    groups: dict[str, list[str]] = {}
-    for name, unit in zip(result.residual_names, result.residual_units or ("1",) * len(result.residual_names)):
-        groups.setdefault({"rad": "deg"}.get(unit, unit), []).append(name)
-    rms = result.rms_by_unit()
-    parts = [f"rms {rms[u]:.6g}{'' if u == '1' else ' ' + u} over {', '.join(ns)}" + (" (whitened or mixed units)"
-                                                                                   if u == "1" else "")
-             for u, ns in groups.items()]
-    return "residuals at the solution (measured - predicted, raw): " + "; ".join(parts)
-
-
-def fit_summary(result, free_line: str | None = None) -> str:
-    u = result.uncertainty
-    rep = result.identifiability
-    dropped = (f", {len(result.dropped)} dropped (rows {', '.join(str(int(k) + 1) for k in result.dropped[:20])}"
-               f"{' ...' if len(result.dropped) > 20 else ''} of the file, 1-based)") if len(result.dropped) else ""
-    whitened = ("whitened (noise model): chi2 = sum |W r|^2 = "
-                f"{u.chi2:.6g} with the weights at the solution, chi2/dof = {u.chi2:.6g}/{u.dof} = "
-                f"{u.reduced_chi2:.4g}, rms whitened residual sqrt(chi2/M) = {result.rms_whitened:.4g}")
-    extra = "".join([f", {result.loss} loss" if result.loss != "linear" else "",
-                     " + 1/2 sum of the squared prior rows" if len(result.priors) else ""])
-    cost = (f"solver cost 1/2 sum |W0 r|^2 = {result.cost:.6g} (weights from the start, held fixed while solving"
-            f"{extra})"
-            if result.weighted else
-            f"solver cost 1/2 sum r^2 = {result.cost:.6g} (plain least squares on the raw residuals)")
-    lines = [
-        f"method {result.method} ({'noise-weighted' if result.weighted else 'unweighted'}), "
-        f"{len(result.used_poses)} poses used{dropped}, {len(result.free)} free parameters",
-        *([free_line] if free_line else []),
-        f"solver: {'converged' if result.success else 'NOT converged'} after {result.nfev} evaluations: {result.message}",
-        _residual_line(result),
-        whitened if (result.weighted or np.isfinite(u.chi2)) else "no noise model to whiten with: chi2 undefined",
-        cost,
-        f"identifiability ({rep.basis or 'at the start'}): rank {rep.rank} of {rep.n_params}, "
-        f"condition number {rep.condition_number:.3g}",
-        f"std: {u.description} — this covariance is written to the machine file",
-    ]
-    for d in rep.null_space:
-        lines.append(f"  unobservable: {format_direction(d)}")
-    lines.extend(robust_lines(result))
-    lines.extend(session_lines(result))
-    for w in result.warnings:
-        lines.append(w if w.startswith("warning: ") else f"note: {w}")
-    return "\n".join(lines)
-
-
-def session_lines(result) -> list[str]:
-    """The fit summary's lines on the sessions: poses per session and each session's
-    identified sensor (setup-file keys, mm and degrees; ``dq`` the re-homing offsets)."""
-    values = result.session_values()
-    if not values:
-        return []
-    ses = result.sessions
-    counts = dict(zip(ses.labels, ses.counts()))
-    out = [f"sessions: {len(values)} ({', '.join(f'{lab}: {int(counts[lab])} poses' for lab in ses.labels)}), "
-           "each with its own sensor parameters NAME@LABEL"
-           + ("; actuator zero offsets dq_i@LABEL after the first" if ses.offsets else "")]
-    for lab, groups in values.items():
-        parts = []
-        for key, v in groups.items():
-            text = (", ".join(f"{k} {x:.6g}" for k, x in v.items()) if isinstance(v, dict)
-                    else ", ".join(f"{x:.6g}" for x in v))
-            parts.append(f"{key}: {text}")
-        out.append(f"  session {lab} (mm, deg): " + "; ".join(parts))
-    return out
-
-
-def robust_lines(result) -> list[str]:
-    """The fit summary's lines on the normalised residuals, the loss and the priors."""
-    out = []
-    sc = result.screening
-    if sc is not None and sc.sigma.size:
-        j = int(np.argmax(sc.sigma))
-        out.append(f"normalised residuals sqrt(|W r|^2/k) per pose (noise sigmas): median {np.median(sc.sigma):.3g}, "
-                   f"max {sc.sigma[j]:.3g} (pose {int(sc.pose_numbers[j])}); {len(sc.flagged)} beyond "
-                   f"{sc.threshold:g} sigma" + (f"; rejection at {sc.reject:g} sigma: {len(sc.rejected)} pose(s) "
-                                                f"dropped in {sc.rounds} fit(s)" if sc.reject is not None else ""))
-    if result.loss != "linear":
-        out.append(f"loss: {result.loss} on the whitened rows, f_scale {sc.f_scale:g} sigma (scipy least_squares); "
-                   "chi2 and the covariance over the poses within the threshold")
-    pr = result.priors
-    if len(pr):
-        std = dict(zip(result.free, result.std))
-        out.append(f"priors (maximum a posteriori; the covariance is the posterior one), {len(pr)} parameter(s):")
-        for e in pr.to_dict(result.estimate, std):
-            post = "-" if e["posterior_std"] is None else f"{e['posterior_std']:.4g}"
-            out.append(f"  {e['parameter']}: prior {e['mean']:.6g} ± {e['std']:.4g} {e['unit']} -> {e['estimate']:.6g} "
-                       f"± {post} (pull {e['pull']:+.2f}; {e['source']})")
-    return out
-
-
-def radian_hints(nominal, setup, meas) -> list[str]:
-    """Warnings when the sensor's angle columns and the poses the fit starts from differ in
-    spread by about 180/π (57.3): one of them was written in radians where degrees were
-    read. The reference poses are the commanded ones (cmd_a..), else the FK of the actuator
-    readings at the nominal machine; per angle column the ratio of standard deviations over
-    the poses (offsets of world/tool transforms cancel) is compared with [30, 110]."""
-    sensor = setup.sensor
-    angle_cols = [k for k, a in enumerate(sensor.reading_is_angle) if a]
-    if not angle_cols or tuple(sensor.reading_names) != tuple(nominal.pose_names):
-        return []
-    if meas.commanded is not None:
-        ref, what = np.asarray(meas.commanded, dtype=float), "the commanded poses (cmd_ columns)"
-    else:
-        with np.errstate(all="ignore"):
-            fk = nominal.fk(meas.actuators)
-        ref, what = np.asarray(fk.poses)[fk.ok], "the poses of the actuator readings (FK at the nominal machine)"
-        if len(ref) < 3:
-            return []
-    y = np.asarray(meas.readings, dtype=float)[: len(ref)] if meas.commanded is not None else \
-        np.asarray(meas.readings, dtype=float)[fk.ok]
-    out = []
-    for k in angle_cols:
-        s_ref, s_y = float(np.std(ref[:, k])), float(np.std(y[:, k]))
-        if not (s_ref > np.deg2rad(0.5) or s_y > np.deg2rad(0.5)) or s_ref == 0 or s_y == 0:
-            continue
-        r = s_ref / s_y
-        name = sensor.reading_names[k]
-        if 30.0 < r < 110.0:
-            out.append(f"warning: column '{name}' varies {r:.3g} times less than the angles of {what}: it looks like "
-                       "radians where degrees are read; convert it to degrees (or, when every angle column of the "
-                       "file is in radians, give --angle-unit rad)")
-        elif 1 / 110.0 < r < 1 / 30.0 and meas.commanded is not None:
-            out.append(f"warning: column 'cmd_{name}' varies {1 / r:.3g} times less than the measured '{name}': it "
-                       "looks like radians where degrees are read; convert it to degrees")
-    return out
 
 
 @click.command("identify", epilog=examples(
@@ -262,8 +72,7 @@ def radian_hints(nominal, setup, meas) -> list[str]:
               help="ik-residual (full-pose sensor, paper 1), fk-residual (paper 2), projection (paper 3) or "
                    "projection-single (paper 3 eq. 10: one step linearised at the commanded poses, which the "
                    "measurements must give). "
-                   "Default: ik-residual for a full-pose sensor, projection for redundantly actuated machines, "
-                   "else fk-residual. Baselines for redundant machines (paper 3 §1): ignore-redundancy "
+                   f"Default: {DEFAULT_METHOD_RULE}. Baselines for redundant machines (paper 3 §1): ignore-redundancy "
                    "(encoders assumed at their commands), actuator-subset (only the --keep actuators).")
 @click.option("--keep", metavar="I,J", help="With --method actuator-subset: the actuators used, 1-based "
                                             "(default: the first n, n = pose coordinates).")
@@ -362,8 +171,6 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     nominal, setup = machine_and_setup(machine, setup_spec)   # pose pairs for printed distances
     meas, clipped_found, clipped_lines = apply_clipped_policy(load_measurements(measurements, nominal, setup, mapping),
                                                               nominal, clipped)
-    if method is None:
-        method = default_method(setup, nominal)
     if keep is not None and method != "actuator-subset":
         raise PkmcalError("--keep selects the actuators of --method actuator-subset; use them together")
     baseline = method if method in BASELINES else None
@@ -407,18 +214,18 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
         from pkmcal.identification.geometry import readable_geometry
 
         geometry = readable_geometry(nominal, result.mechanism, "the covariance written to the machine file")
-    before = _before_registration(nominal, setup, meas, result) if baseline is None else None
+    before = before_registration(nominal, setup, meas, result) if baseline is None else None
     cal_setup = identified_setup_of(setup, result) if baseline is None else None
-    text = machine_to_text(_with_calibration_record(result, machine, measurements, setup_spec, name,
-                                                    setup=cal_setup, before=before))
-    _check_loads_back(text, "(standard output)" if to_stdout(output) else output)
+    text = machine_to_text(with_calibration_record(result, machine, measurements, setup_spec, name,
+                                                   setup=cal_setup, before=before))
+    check_loads_back(text, "(standard output)" if to_stdout(output) else output)
     validation = None
     if heldout is not None:
         if cal_setup is None:
             raise PkmcalError(f"--heldout: the {baseline} baseline identifies a reduced model; validate the full "
                               "calibration (leave out --method) on held-out data")
-        validation = _heldout_validation(read_by(result.mechanism, setup.sensor), cal_setup, nominal, before, heldout,
-                                         mapping, clipped)
+        validation = identify_heldout_validation(read_by(result.mechanism, setup.sensor), cal_setup, nominal,
+                                                 before, heldout, mapping, clipped)
     report = None if report_dir is None else _report_data(nominal, result, setup, meas, measurements,
                                                            "(standard output)" if to_stdout(output) else output,
                                                            validation)
@@ -462,200 +269,6 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
             click.echo(f"wrote {output}" + (f" and {written.html}" if report is not None else ""))
         elif report is not None:
             click.echo(f"wrote {written.html}", err=True)
-
-
-def identified_setup_of(setup, result):
-    """``setup`` with the identified sensor: with several sessions the first session's
-    (plain, for any poses) and every session's as ``session_sensors`` (label → sensor), as
-    ``--setup CALIBRATED.yaml`` reads them back."""
-    from pkmcal.sensors.sessions import session_sensors
-
-    per = session_sensors(result.sensor)
-    if len(per) == 1:
-        return dataclasses.replace(setup, sensor=result.sensor)
-    return dataclasses.replace(setup, sensor=next(iter(per.values())), session_sensors=tuple(per.items()))
-
-
-def sensor_std(result) -> dict[str, float]:
-    """{name: 1σ} (internal units) of the sensor parameters the fit estimated."""
-    sensor_names = set(result.sensor.param_names)
-    return {n: float(s) for n, s in zip(result.free, result.std) if n in sensor_names}
-
-
-def setup_block(result, cal_setup) -> dict | None:
-    """The ``setup:`` mapping of the calibrated file (:func:`pkmcal.io.setup_file.identified_setup`):
-    the identified sensor, the 1σ of its estimated parameters and which covariance they are;
-    None for a sensor without parameters or one no setup file can describe.
-
-    With several sessions the first session's sensor is the setup's, and ``sessions:`` gives
-    every session's (labels as in the measurement file; ``dq`` its re-homing offsets, with
-    ``actuator_offsets: true`` when they were fitted), the form the setup loader reads back
-    (``--setup CALIBRATED.yaml`` starts each known session there); ``std`` then names the
-    parameters with their sessions (``world.x@2``)."""
-    from pkmcal.io._yaml import RawFloat, rad_to_deg_text
-    from pkmcal.io.setup_file import identified_setup
-    from pkmcal.sensors.sessions import session_sensors, session_setup_values
-
-    if cal_setup is None or not cal_setup.sensor.param_names:
-        return None
-    per = session_sensors(result.sensor)
-    if len(per) == 1:
-        try:
-            return identified_setup(cal_setup, result.sensor, sensor_std(result), result.uncertainty.description)
-        except PkmcalError:   # a sensor kind without a setup-file form
-            return None
-    first = next(iter(per.values()))
-    try:
-        doc = identified_setup(dataclasses.replace(cal_setup, sensor=first), first, None,
-                               result.uncertainty.description)
-    except PkmcalError:
-        return None
-    angles = set(result.angle_names())
-    doc["std"] = {n: float(np.rad2deg(v)) if n in angles else float(v) for n, v in sensor_std(result).items()}
-    offsets = {}
-    for lab in list(per)[1:]:
-        keys = [f"dq_{i + 1}@{lab}" for i in range(result.mechanism.n_actuators)]
-        if keys[0] in result.names:
-            offsets[lab] = np.array([result.estimate[result.names.index(k)] for k in keys])
-    sessions: dict = {"actuator_offsets": True} if offsets else {}
-    sessions.update(session_setup_values(result.sensor, offsets, result.mechanism.actuator_is_angle,
-                                         angle=lambda v: RawFloat(rad_to_deg_text(v))))
-    doc["sessions"] = sessions
-    for n, v in zip(result.free, result.std):
-        if n.startswith("dq_"):
-            doc["std"][n] = float(np.rad2deg(v)) if n in angles else float(v)
-    return doc
-
-
-def setup_json(result, cal_setup) -> dict:
-    """The identified setup for ``--json``: the ``setup:`` mapping of the file as plain
-    JSON values, with its units."""
-    from pkmcal.io._yaml import parse_yaml, dump_yaml, plain
-
-    block = setup_block(result, cal_setup) or {}
-    doc = plain(parse_yaml(dump_yaml(block))[0]) if block else {}
-    doc["units"] = {k: "mm; deg for a, b, c and angle parameters" for k in
-                    ("world", "tool", "plate", "target", "indicators", "plane_offset", "zero", "std")}
-    doc["units"]["noise"] = "mm; orientation_deg in deg; actuator mm (deg for rotary actuators)"
-    doc["units"]["prior"] = "file units: mm, deg for angle parameters"
-    doc["units"]["simulation"] = ("stiffness N/mm (N*mm/rad for rotary actuators), load N, backlash mm (rad for "
-                                  "rotary actuators)")
-    return doc
-
-
-def _before_registration(nominal, setup, meas, result) -> tuple[dict, str, dict] | None:
-    """``(values, note, per_session)``: the setup's free sensor parameters fitted on the
-    calibration data with the machine held at nominal (file units), or None where no such fit
-    applies (no free sensor parameter, a redundantly actuated machine). With several
-    sessions each session is registered on its own poses: ``values`` are the first
-    session's, ``per_session`` {label: values} all of them (else empty)."""
-    from pkmcal.identification.heldout import register_sensor, sensor_values
-
-    if not setup.sensor.default_free or nominal.n_actuators != nominal.n_dof:
-        return None
-    used = meas.subset(np.asarray(result.used_poses, dtype=int)) if len(result.used_poses) < len(meas) else meas
-    if used.sessions is None or not used.sessions.several:
-        reg = register_sensor(nominal, setup, used, what="the calibration data")
-        return sensor_values(reg.sensor, setup.sensor.default_free), reg.note, {}
-    per, notes = {}, []
-    for k, label in enumerate(used.sessions.labels):       # each session's frames on its own poses
-        part = dataclasses.replace(used.subset(np.flatnonzero(used.sessions.index == k)), sessions=None)
-        reg = register_sensor(nominal, setup, part, what=f"the calibration data of session {label}")
-        per[label] = sensor_values(reg.sensor, setup.sensor.default_free)
-        notes.append(reg.note)
-    return per[used.sessions.labels[0]], "; ".join(notes), per
-
-
-def _heldout_validation(calibrated, cal_setup, nominal, before, path: str, mapping, clipped: str):
-    """The held-out validation of ``identify --heldout`` (:mod:`pkmcal.identification.heldout`)."""
-    from pkmcal.identification.heldout import heldout_validation, sensor_from_values
-
-    held, found, lines = apply_clipped_policy(load_measurements(path, calibrated, cal_setup, mapping), calibrated,
-                                              clipped)
-    if before is not None:
-        before_sensor, note = sensor_from_values(cal_setup.sensor, before[0], "before_registration"), before[1]
-        before_sessions = tuple((lab, sensor_from_values(cal_setup.sensor, v, "before_registration"))
-                                for lab, v in before[2].items())
-    else:   # no free sensor parameter: nothing to register, the sensor as the setup gives it
-        before_sensor, note = cal_setup.sensor, "no free sensor parameter: the sensor as the setup gives it"
-        before_sessions = ()
-    unit = {n: ("deg" if a else "mm") for n, a in zip(calibrated.actuator_names, calibrated.actuator_is_angle)}
-    return heldout_validation(calibrated, cal_setup, nominal, before_sensor, held, source=str(path),
-                              before_note=note, before_sessions=before_sessions, notes=[f"warning: {w}" for w in lines],
-                              clipped=tuple(c.to_dict(unit[c.actuator]) for c in found))
-
-
-def _with_calibration_record(result, machine: str, measurements: str, setup_spec: str, name: str | None,
-                             setup=None, before=None):
-    """The identified machine under its own name with a ``calibration`` record in its
-    metadata (kept in the machine file; ``pkmcal export --format json`` shows it): name,
-    calibrated-from, UTC date, pkmcal version, command line, the inputs with their SHA-256
-    (:mod:`pkmcal.cli.provenance`), and the fit; ``before`` (values, note) is stored as
-    ``calibration.before_registration``. With ``setup`` (the setup with the identified
-    sensor) the identified setup goes under ``setup:`` (:func:`setup_block`).
-    ``SOURCE_DATE_EPOCH`` fixes the date, so that the same inputs give the same bytes."""
-    import dataclasses
-
-    from pkmcal import __version__
-    from pkmcal.cli.provenance import command_line, input_record, utc_timestamp
-
-    mech = result.mechanism
-    if not dataclasses.is_dataclass(mech) or "metadata" not in {f.name for f in dataclasses.fields(mech)}:
-        return mech
-    date = utc_timestamp()
-    new_name = name if name is not None else f"{mech.name}-calibrated-{date[:10]}"
-    if not new_name.strip():
-        raise PkmcalError("--name '': give the calibrated machine a name, e.g. --name hexapod-A-2026")
-    u = result.uncertainty
-    record = {
-        "name": new_name, "calibrated_from": mech.name, "date": date, "pkmcal_version": __version__,
-        "command": command_line(),
-        "inputs": {"machine": input_record(machine), "setup": input_record(setup_spec),
-                   "measurements": input_record(measurements)},
-        "method": result.method, "weighted": bool(result.weighted), "measurements": str(measurements),
-        "setup": str(setup_spec), "n_poses": int(len(result.used_poses)), "n_free": int(len(result.free)),
-        "gauge": list(result.gauge), "rms_residual": float(result.rms_residual),
-        # undefined (null) without degrees of freedom
-        "reduced_chi2": float(u.reduced_chi2) if np.isfinite(u.reduced_chi2) else None, "std": u.description,
-    }
-    if result.loss != "linear":
-        record["loss"] = result.loss
-    sc = result.screening
-    if sc is not None and sc.rejected:
-        record["rejected_poses"] = [o.pose for o in sc.rejected]
-    if len(result.priors):
-        record["priors"] = {e["parameter"]: f"{e['mean']!r} ± {e['std']!r} {e['unit']}"
-                            for e in result.priors.to_dict(result.estimate, {})}
-    if getattr(result.sensor, "kind", "") == "planar-tool":  # read back by 'pkmcal verify'
-        from pkmcal.sensors.sessions import session_sensors
-
-        # several sessions: the first session's tracker (the reference; every one is in the summary)
-        record["sensor"] = sensor_calibration_block(next(iter(session_sensors(result.sensor).values())))
-    if before is not None:
-        record["before_registration"] = dict(before[0])
-        if before[2]:
-            record["before_registration_sessions"] = {lab: dict(v) for lab, v in before[2].items()}
-    metadata = {k: v for k, v in dict(mech.metadata).items() if k != "setup"}   # a recalibration's old setup
-    metadata["calibration"] = record
-    block = setup_block(result, setup)
-    if block is not None:
-        metadata["setup"] = block
-    return dataclasses.replace(mech, name=new_name, metadata=metadata)
-
-
-def _check_loads_back(text: str, output: str) -> None:
-    """Refuse to write a calibrated machine file that pkmcal itself would not load (e.g. a
-    fit that wandered to a leg offset of 10 km: beyond :mod:`pkmcal.io.limits`)."""
-    from pkmcal.errors import InputFileError
-    from pkmcal.io.machine_file import machine_from_text
-
-    try:
-        machine_from_text(text, output)
-    except InputFileError as exc:
-        detail = str(exc).split(": ", 1)[1] if ": " in str(exc) else str(exc)
-        raise PkmcalError(f"nothing written to {output}: the identified machine would not load as a machine file "
-                          f"({detail}); the fit is not meaningful: check the measurements, the setup and the free "
-                          "parameters") from None
 
 
 def _check_report_dir(report_dir: str, inputs) -> None:
@@ -703,7 +316,7 @@ def _report_data(nominal, result, setup, meas, meas_path: str, output: str, vali
               help=f"Measurement setup file or built-in ({', '.join(BUILTIN_SETUPS)}).")
 @click.option("--poses", metavar="POSES.csv", help="Poses: columns x,y,z (mm), a,b,c (deg).")
 @click.option("--method", type=click.Choice(METHODS), default=None,
-              help="Method whose Jacobian is analysed (default: fk-residual; projection for redundant machines).")
+              help=f"Method whose Jacobian is analysed (default: {DEFAULT_METHOD_RULE}).")
 @click.option("--fix", "fix", multiple=True, metavar="NAMES", help="Parameters held (removed from the analysis).")
 @click.option("--free", "free", multiple=True, metavar="NAMES", help="Candidate parameters (default: all + sensor's free).")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON.")

@@ -1,4 +1,5 @@
-"""Paper 3 (Jeon et al., CIRP 2010) as named configurations of the identification engine.
+"""Paper 3 (Jeon et al., CIRP 2010) through the identification engine: the projection
+residual at the commanded poses, and the non-redundant view of a machine.
 
 Per pose j the stacked, noise-whitened residual of tool reading and encoder readings,
 
@@ -9,25 +10,12 @@ Eliminating it with R = I − Q(QᵀQ)⁻¹Qᵀ = U⊥U⊥ᵀ (eq. 7) leaves m +
 pose (eq. 8–9),  U⊥ᵀ e_j = −U⊥ᵀ W [J_ρ; H] Δθ : the engine's ``projection`` method
 (:class:`pkmcal.identification.residuals.Projection`). The encoder offsets dq are ordinary
 mechanism parameters (reading = true position + dq), so the paper's −R₂ Δq_r block is the
-dq columns of H.
+dq columns of H. :func:`single_linearisation` is eq. 10 at the commanded poses.
 
-:func:`fit_redundant` runs one of :data:`METHODS` by name, every one through
-:func:`pkmcal.identification.engine.identify` with ``method="projection"`` and the
-engine's automatic gauge (``fix="auto"``: an unidentifiable combination is fixed at its
-start by pivoted QR and named in ``identifiability``):
-
-* ``projection`` — weighted; the engine re-solves x_j* = argmin ‖e_j‖ at every iterate
-  (Gauss–Newton on the errors-in-variables problem with the poses eliminated);
-* ``projection-single`` — the paper's eq. 10: one linear least-squares step, linearised at
-  the commanded poses and the nominal parameters (the engine's ``projection-single``);
-* ``projection-unweighted`` — rows in raw mm and rad (W = I);
-* ``ignore-redundancy``, ``actuator-subset`` — the baselines of paper 3 §1
-  (:func:`pkmcal.identification.redundant_campaign.baseline_inputs`).
-
-:func:`calibration_experiment` is paper 3 §3 in simulation: the real machine settles at
-static equilibrium (:func:`~pkmcal.identification.redundant_campaign.simulate_redundant_campaign`),
-each method identifies, and the held-out tool errors of the real machine commanded through
-each model are measured (:func:`~pkmcal.identification.redundant_campaign.tool_errors`).
+:class:`ActuatorSubset` is a machine seen through n of its l actuators (the
+``actuator-subset`` baseline of paper 3 §1, :mod:`pkmcal.reproduce.paper3_baselines`). The
+paper-3 experiment (each method's fit, held-out tool errors) is
+:mod:`pkmcal.reproduce.paper3_experiment`.
 """
 
 from __future__ import annotations
@@ -36,23 +24,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pkmcal.errors import PkmcalError
-from pkmcal.identification.engine import IdentificationResult, identify
-from pkmcal.identification.redundant_campaign import (
-    BASELINES,
-    baseline_inputs,
-    baseline_result,
-    simulate_redundant_campaign,
-    tool_errors,
-)
 from pkmcal.identification.residuals import Model, make_method
-from pkmcal.identification.simulation import SimulationResult
 from pkmcal.mechanisms.base import LimitReport, Mechanism
-from pkmcal.sensors.base import MeasurementSetup, NoiseModel, Sensor
-
-#: The paper-3 fits :func:`fit_redundant` knows (the reproduction's and benchmark's rows).
-METHODS = ("projection", "projection-single", "projection-unweighted") + BASELINES
-
+from pkmcal.sensors.base import NoiseModel
 
 def single_linearisation(model: Model, weighted: bool = True):
     """Paper 3 eq. 10 at the commanded poses: (r (N, k), J (N, k, P)) with k = m + l − n,
@@ -60,21 +34,6 @@ def single_linearisation(model: Model, weighted: bool = True):
     ``projection-single`` residual at the start."""
     ev = make_method("projection-single", model, weighted).evaluate(model.theta0, jac=True, cov=False)
     return ev.r, ev.J
-
-
-def fit_redundant(method: str, machine: Mechanism, setup: MeasurementSetup, measurements, free=None,
-                  keep=None) -> IdentificationResult:
-    """Identify ``machine`` (+ the setup's sensor) from ``measurements`` by the paper-3
-    ``method`` (module docstring), through :func:`~pkmcal.identification.engine.identify`
-    with the automatic gauge. ``keep``: the actuators (0-based) of ``actuator-subset``."""
-    if method not in METHODS:
-        raise PkmcalError(f"unknown paper-3 method '{method}'; use one of {', '.join(METHODS)}")
-    fit_machine, fit_setup, data = machine, setup, measurements
-    if method in BASELINES:
-        fit_machine, fit_setup, data = baseline_inputs(method, machine, setup, measurements, keep)
-    result = identify(fit_machine, fit_setup, data, method="projection-single" if method == "projection-single"
-                      else "projection", free=free, fix="auto", weighted=method != "projection-unweighted")
-    return baseline_result(result, machine, method) if method in BASELINES else result
 
 
 # -- the non-redundant view of a machine (actuator-subset baseline) -----------------------
@@ -168,66 +127,3 @@ class ActuatorSubset(Mechanism):
 
     def check_limits(self, poses) -> LimitReport:
         return self.base.check_limits(poses)
-
-
-# -- paper 3 §3 in simulation --------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class HeldOutResult:
-    """Held-out tool errors (mm) before and after calibration by each method, the fits and
-    the simulated calibration campaign."""
-
-    before: np.ndarray
-    after: dict[str, np.ndarray]
-    fits: dict
-    simulation: SimulationResult
-
-    def improvement_pct(self, method: str) -> float:
-        """100 (1 − mean(after) / mean(before)) (paper 3 §3.1, §3.2)."""
-        return 100.0 * (1.0 - float(np.mean(self.after[method])) / float(np.mean(self.before)))
-
-
-def calibration_experiment(
-    nominal: Mechanism,
-    nominal_sensor: Sensor,
-    real: Mechanism,
-    setup: MeasurementSetup,
-    calib_poses: np.ndarray,
-    check_poses: np.ndarray,
-    rng: np.random.Generator,
-    free=None,
-    keep=None,
-    methods=METHODS,
-    weights: NoiseModel | None = None,
-    ignore_limits: tuple[str, ...] = ("workspace",),
-) -> HeldOutResult:
-    """Paper 3 §3 in simulation: measure ``calib_poses`` on ``real`` (``setup``: its true
-    sensor, the noise drawn and the actuator stiffness and load of its ``simulation``
-    block), identify by each of ``methods`` (:func:`fit_redundant`, starting from
-    ``nominal`` and ``nominal_sensor``), command the held-out ``check_poses``' tool points
-    y* = h(x_c, θ_nominal) through each model and measure the real tool errors ("before":
-    the nominal model). ``weights`` (default the setup's noise) are the standard deviations
-    the identification weights its rows with. ``ignore_limits``: the sampled poses lie in
-    the nominal workspace box, which the real machine may leave by its errors; reach and
-    transmission limits stay checked (a pose that fails them is an error here)."""
-    sim = simulate_redundant_campaign(nominal, real, setup, calib_poses, rng, ignore_limits)
-    if sim.dropped:
-        k, why = next(iter(sim.dropped.items()))
-        raise PkmcalError(f"calibration pose {k + 1} was not reached by the real machine: {why}")
-    fit_setup = MeasurementSetup(nominal_sensor, setup.noise if weights is None else weights)
-    fits = {m: fit_redundant(m, nominal, fit_setup, sim.measurements, free, keep) for m in methods}
-    for m, f in fits.items():
-        if not f.success:
-            raise PkmcalError(f"the {m} fit did not converge ({f.message})")
-
-    def held_out(model, model_sensor, name):
-        err = tool_errors(model, model_sensor, real, setup, check_poses, name, ignore_limits, nominal_sensor)
-        if not err.valid.all():
-            k, why = next(iter(err.dropped.items()))
-            raise PkmcalError(f"held-out pose {k + 1} was not reached by the real machine ({name}): {why}")
-        return err.tool
-
-    return HeldOutResult(before=held_out(nominal, nominal_sensor, "before"),
-                         after={m: held_out(f.mechanism, f.sensor, m) for m, f in fits.items()},
-                         fits=fits, simulation=sim)

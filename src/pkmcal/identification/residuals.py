@@ -781,12 +781,19 @@ class Projection(Method):
         return Evaluation(r=r, J=J, cov=C, converged=ok, poses=x)
 
 
+#: :func:`default_method` in words, for the commands' ``--method`` help.
+DEFAULT_METHOD_RULE = ("projection for redundantly actuated machines, else ik-residual for a full-pose sensor "
+                       "(one whose readings give the platform frame), else fk-residual")
+
+
 def default_method(setup, mechanism: Mechanism | None = None) -> str:
     """The method used when none is named, the one rule for every command and function
-    (``identify``, ``identifiability``, ``plan``, ``observability``, the demo): ``projection``
+    (``identify``, ``identifiability``, ``plan``, ``observability``, studies' ``auto``, the
+    demo, :func:`pkmcal.identify`; :data:`DEFAULT_METHOD_RULE`): ``projection``
     for a redundantly actuated machine (paper 3), else ``ik-residual`` for a full-pose sensor
     (paper 1: the sensor's readings determine the platform frame, ``Sensor.invertible``) and
-    ``fk-residual`` otherwise (paper 2)."""
+    ``fk-residual`` otherwise (paper 2). Without ``mechanism`` the machine is taken as not
+    redundant."""
     if mechanism is not None and mechanism.n_actuators != mechanism.n_dof:
         return "projection"
     return "ik-residual" if setup.sensor.invertible else "fk-residual"

@@ -20,6 +20,21 @@ mirror solution, not where the machine goes), real pose outside the real machine
 or not readable by the sensor (indicator plane near vertical) — are dropped and reported
 with their reasons. Noise is drawn for all N commanded poses before dropping, so a
 pose's noise does not depend on which other poses were dropped.
+
+Redundantly actuated machines (l actuators > n pose coordinates, paper 3 §2–3; the
+mechanism's declaration, :func:`settles_at_equilibrium`) are over-constrained: commanded
+with c = IK(x_c, ρ_nom) the real machine does not go to FK(c) but settles where its
+actuator springs and the tool load balance (:func:`pkmcal.mechanisms.statics.equilibrium`,
+paper 3 eq. 1–3 solved nonlinearly),
+
+    Γᵀ K (q(x) − c) − J_fᵀ F = 0,
+
+with K and F from the setup's ``simulation:`` block
+(:class:`~pkmcal.mechanisms.statics.StaticsModel`), never seen by the identifier (nor the
+block's backlash, which shifts each actuator by half its dead band against the direction
+of its last commanded motion, poses taken in the order given). The encoders then read
+q(x) + e_q (following error q(x) − c ≠ 0) and the sensor y = h(x, θ) + e_y. The same
+:func:`simulate_campaign` does both (:func:`reach` is where the real machine goes).
 """
 
 from __future__ import annotations
@@ -31,6 +46,7 @@ import numpy as np
 from pkmcal.errors import PkmcalError
 from pkmcal.io.measurements import Measurements
 from pkmcal.mechanisms.base import Mechanism
+from pkmcal.mechanisms.statics import StaticsModel, equilibrium
 from pkmcal.progress import Progress
 from pkmcal.sensors.base import MeasurementSetup, Sensor
 from pkmcal.sensors.sessions import Sessions
@@ -142,27 +158,32 @@ def simulate_campaign(
     progress: Progress | None = None,
     actuator_offset: np.ndarray | None = None,
 ) -> SimulationResult:
-    """Simulate measuring ``commanded_poses`` (N, 6; mm, rad) on ``real`` commanded by ``nominal``.
+    """Simulate measuring ``commanded_poses`` (N, n; mm, rad) on ``real`` commanded by ``nominal``.
 
-    See the module docstring for the model. ``rng`` is a seed or a generator; the same seed
+    See the module docstring for the model: FK of the commands, or, for a machine that
+    :func:`settles_at_equilibrium`, the static equilibrium under the setup's ``simulation:``
+    stiffness and load (``actuator_true`` then the noise-free encoder readings there,
+    commands + following errors). ``rng`` is a seed or a generator; the same seed
     gives bit-identical readings. ``ignore_limits`` names limits of the real machine not
     checked (e.g. ``("leg_collision",)``: a parameter perturbation of a few mm can bring
     the modelled legs of a tight design such as ``stewart-prototype`` into contact).
-    The poses are simulated in chunks of :data:`CHUNK_POSES`, ``progress(done, N)`` called
-    after each. ``actuator_offset`` (l,): the actuators' zeros moved by δq (re-homing): the
-    real machine goes to FK(q + δq), the readings are q (module docstring).
+    The poses are simulated in chunks of :data:`CHUNK_POSES` (at equilibrium in one: the
+    backlash follows the path), ``progress(done, N)`` called after each. ``actuator_offset``
+    (l,): the actuators' zeros moved by δq (re-homing): the real machine goes to FK(q + δq),
+    the readings are q (module docstring); not simulated at equilibrium.
     """
     commanded, e_y, e_q = campaign_inputs(nominal, real, setup, commanded_poses, rng)
     sensor = setup.sensor
     n = len(commanded)
+    chunk = max(n, 1) if settles_at_equilibrium(nominal) else CHUNK_POSES
     parts, dropped = [], {}
-    for start in range(0, max(n, 1), CHUNK_POSES):
-        q_c, poses_c, ok_c, dropped_c = _reach(nominal, real, sensor, commanded[start:start + CHUNK_POSES],
-                                               ignore_limits, actuator_offset)
+    for start in range(0, max(n, 1), chunk):
+        q_c, poses_c, ok_c, dropped_c = reach(nominal, real, setup, commanded[start:start + chunk], ignore_limits,
+                                              actuator_offset)
         parts.append((q_c, poses_c, ok_c))
         dropped.update({start + k: why for k, why in dropped_c.items()})
         if progress is not None:
-            progress(min(start + CHUNK_POSES, n), n)
+            progress(min(start + chunk, n), n)
     q, poses, ok = (np.concatenate(a) for a in zip(*parts))
 
     kept = np.flatnonzero(ok)
@@ -182,9 +203,35 @@ def simulate_campaign(
     )
 
 
-def _reach(nominal: Mechanism, real: Mechanism, sensor: Sensor, commanded: np.ndarray,
-           ignore_limits: tuple[str, ...], actuator_offset: np.ndarray | None = None,
-           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[int, str]]:
+def settles_at_equilibrium(machine: Mechanism) -> bool:
+    """True where the machine, commanded, settles at a static equilibrium rather than at the
+    FK of its commands: it declares more actuators than pose coordinates (redundantly
+    actuated, paper 3)."""
+    return machine.n_actuators > machine.n_dof
+
+
+def reach(nominal: Mechanism, real: Mechanism, setup: MeasurementSetup, commanded: np.ndarray,
+          ignore_limits: tuple[str, ...], actuator_offset: np.ndarray | None = None,
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[int, str]]:
+    """Where ``real`` goes for each of the ``commanded`` poses (N, n) commanded through
+    ``nominal``'s IK, c = IK(x_c, ρ_nom) (module docstring): ``(q, poses, ok, reasons)``,
+    q (N, l) the noise-free readings (the commands; the encoders at equilibrium), the real
+    poses (N, n; placeholders where not ok), whether each was reached and read, the
+    reasons of the others by position."""
+    if settles_at_equilibrium(nominal):
+        if actuator_offset is not None:
+            raise PkmcalError(f"machine '{nominal.name}' is redundantly actuated: it settles at equilibrium under "
+                              "its encoders; re-homing (actuator offsets) is not simulated there")
+        with np.errstate(invalid="ignore"):
+            commands = nominal.ik(commanded)
+        poses, readings, ok, dropped = settle(real, setup, commands, commanded, ignore_limits)
+        return readings, poses, ok, dropped
+    return _reach_fk(nominal, real, setup.sensor, commanded, ignore_limits, actuator_offset)
+
+
+def _reach_fk(nominal: Mechanism, real: Mechanism, sensor: Sensor, commanded: np.ndarray,
+              ignore_limits: tuple[str, ...], actuator_offset: np.ndarray | None = None,
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[int, str]]:
     """Where ``real`` goes for each of the ``commanded`` poses (one chunk): the commands
     q = IK(x_c, ρ_nom) (N, l), the real poses (N, n; the commanded pose where not reached;
     FK of q + ``actuator_offset`` when given), whether each was reached and read, and the
@@ -210,6 +257,42 @@ def _reach(nominal: Mechanism, real: Mechanism, sensor: Sensor, commanded: np.nd
     return q, poses, ok & ~unread, dropped
 
 
+def _statics(setup: MeasurementSetup, machine: Mechanism) -> tuple[np.ndarray, np.ndarray | None]:
+    sim: StaticsModel | None = setup.simulation
+    if sim is None:
+        raise PkmcalError(f"machine '{machine.name}' is redundantly actuated: simulating it needs the actuator "
+                          "stiffness (and the tool load) in the setup's 'simulation:' block, e.g. "
+                          "simulation: {stiffness: 2.0e4, load: [0, -30]} (N/mm or N*mm/rad; N)")
+    return sim.stiffness_for(machine), sim.load
+
+
+def settle(real: Mechanism, setup: MeasurementSetup, commands: np.ndarray, guess: np.ndarray,
+           ignore_limits: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[int, str]]:
+    """Equilibrium of ``real`` under ``commands`` (N, l), in path order: (poses, readings, ok,
+    reasons). With backlash (``simulation.backlash``) the springs act on the commands less
+    the backlash shift s b/2 and the encoders read the joints plus it
+    (:meth:`~pkmcal.mechanisms.statics.StaticsModel.backlash_shift`)."""
+    K, F = _statics(setup, real)
+    shift = setup.simulation.backlash_shift(commands)
+    n = len(commands)
+    finite = np.all(np.isfinite(commands), axis=1) & np.all(np.isfinite(guess), axis=1)
+    reasons: dict[int, str] = {int(k): "nominal-ik-failed" for k in np.flatnonzero(~finite)}
+    poses = np.array(guess, dtype=float)
+    readings = np.full((n, real.n_actuators), np.nan)
+    ok = finite.copy()
+    if finite.any():
+        eq = equilibrium(real, commands[finite] - shift[finite], K, F, setup.sensor, guess=guess[finite])
+        idx = np.flatnonzero(finite)
+        poses[idx] = eq.poses
+        readings[idx] = eq.readings + shift[finite]
+        for j in np.flatnonzero(~eq.converged):
+            reasons[int(idx[j])] = f"equilibrium-not-converged (force residual {eq.force_residual[j]:.3g})"
+        ok[idx[~eq.converged]] = False
+    with np.errstate(invalid="ignore"):
+        ok = drop_limit_violations(real, np.where(ok[:, None], poses, real.home_pose), ok, ignore_limits, reasons)
+    return poses, readings, ok, dict(sorted(reasons.items()))
+
+
 def simulate_sessions(
     nominal: Mechanism,
     real: Mechanism,
@@ -226,8 +309,8 @@ def simulate_sessions(
     ``1 … S``, part s read by ``sensors[s]`` and, with ``offsets`` (S, l), measured with the
     actuator zeros moved by ``offsets[s]`` (re-homing; row 0 is normally zero). One seeded
     generator draws the parts' noise in turn (same seed, same bytes). ``simulate`` replaces
-    :func:`simulate_campaign` (same arguments; e.g. the redundant machines' equilibrium
-    campaign, which takes no offsets); ``kw`` goes to it."""
+    :func:`simulate_campaign` (same arguments), which simulates every machine (at
+    equilibrium too, which takes no offsets); ``kw`` goes to it."""
     commanded = nominal.as_pose_array(commanded_poses)
     gen = as_rng(rng)
     n_ses = len(sensors)

@@ -34,6 +34,15 @@ gauge made arbitrary (a correct calibration then looks like a large degradation)
 With ``aligned`` and ``sensor`` the poses, given in the nominal machine's frames, are first
 carried into the calibrated model's frames (:func:`~pkmcal.identification.alignment.transport_poses`),
 so that both models command the same physical poses whatever the gauge.
+
+* ``tool``: a machine that settles at static equilibrium (redundantly actuated, paper 3 §3:
+  :func:`~pkmcal.identification.simulation.settles_at_equilibrium`) is commanded to put its
+  tool on the tracker reading of each held-out pose and compared on what the tracker reads
+  (:mod:`pkmcal.identification.tool_errors`); it needs the setup's stiffness and load.
+
+The errors are those of the platform frames (p, R) of the reached and the commanded pose
+coordinates (``Mechanism.frame``), so that every mechanism is verified the same way (a
+hexapod's frame is its pose x, y, z, a, b, c; a delta's R = I, no orientation rows).
 """
 
 from __future__ import annotations
@@ -42,10 +51,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from pkmcal.conventions import POSE_COLUMNS, rotation_error
+from pkmcal.conventions import rotation_error
 from pkmcal.errors import PkmcalError
-from pkmcal.identification.simulation import drop_limit_violations
+from pkmcal.identification.simulation import drop_limit_violations, settles_at_equilibrium
 from pkmcal.mechanisms.base import Mechanism
+from pkmcal.sensors.base import MeasurementSetup
 
 #: Error measures: key → (unit, description).
 MEASURES = {
@@ -173,13 +183,15 @@ def pose_errors_many(models: tuple[Mechanism, ...] | list[Mechanism], real: Mech
 
 @dataclass(frozen=True)
 class VerificationReport:
-    """Before/after pose errors on held-out poses. ``before`` is None without a nominal model.
-    Summaries use the poses both models reach (``common``)."""
+    """Before/after errors on held-out poses: :class:`PoseErrors` of each model, or with
+    ``compare="tool"`` (a machine at equilibrium) its
+    :class:`~pkmcal.identification.tool_errors.ToolErrors`. ``before`` is None without a
+    nominal model. Summaries use the poses both models reach (``common``)."""
 
     real: str
     after: PoseErrors
     before: PoseErrors | None = None
-    #: what is compared (:data:`COMPARES`): "commanded", "aligned" or "sensor"
+    #: what is compared (:data:`COMPARES`): "commanded", "aligned", "sensor" or "tool"
     compare: str = "commanded"
     #: compare="aligned": the alignment of each model ("before", "after")
     alignment: dict = field(default_factory=dict)
@@ -218,6 +230,10 @@ class VerificationReport:
     def compared_set(self) -> str:
         """Which poses the figures are taken over, and why that set (one sentence)."""
         n = len(self.after.valid)
+        if self.compare == "tool":
+            return (f"the {int(self.common.sum())} of {n} held-out poses at which the real machine settles within its "
+                    "limits when commanded through " + ("both models (the same poses before and after)"
+                                                        if self.before is not None else "the calibrated model"))
         if self.before is None:
             return (f"the {int(self.after.valid.sum())} of {n} held-out poses the real machine reaches when commanded "
                     "through the calibrated model (with a nominal model, only the poses both models bring it to "
@@ -231,7 +247,11 @@ class VerificationReport:
         """JSON-ready: ``{"poses": N, "used": K, "real": …, "after": {...}, "before": {...},
         "dropped": [{"pose": 1-based, "reason": …}], "reduction_percent": {...}}``; units
         in the key names (``_mm``, ``_deg``; ``_rad`` keys are deprecated aliases) and in
-        ``units``."""
+        ``units``. With ``compare="tool"``: ``{"after": {poses, tool_*_mm[, angle_*_deg]},
+        "dropped": {pose number: reason}, "compared_set", "before", "improvement_pct",
+        "units"}`` (the keys of ``verify --json`` for redundant machines since they exist)."""
+        if self.compare == "tool":
+            return self._tool_dict()
         mask = self.common
         out: dict = {"poses": int(len(mask)), "used": int(np.count_nonzero(mask)), "real": self.real,
                      "calibrated": self.after.model, "compared_set": self.compared_set(),
@@ -261,8 +281,38 @@ class VerificationReport:
         out["deprecated"] = "the *_rad keys repeat the *_deg values in radians; read the *_deg keys"
         return out
 
+    def _tool_dict(self) -> dict:
+        out = {"after": self.after.summary(self.common),
+               "dropped": {str(k + 1): v for k, v in self.dropped.items()},
+               "compared_set": self.compared_set()}
+        if self.before is not None:
+            out["before"] = self.before.summary(self.common)
+            b, a = out["before"]["tool_mean_mm"], out["after"]["tool_mean_mm"]
+            out["improvement_pct"] = float(100.0 * (1.0 - a / b)) if b > 0 else float("nan")
+        out["units"] = {"poses": "1", "dropped": "keys: held-out pose numbers = data rows of the pose file, 1-based"}
+        return out
+
+    def _tool_table(self) -> str:
+        d = self.to_dict()
+        cols = [k for k in ("before", "after") if k in d]
+        keys = [k for k in d["after"] if k != "poses"]
+        rows = [("measure",) + tuple(cols)] + [(k,) + tuple(f"{d[c][k]:.6g}" for c in cols) for k in keys]
+        w = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+        lines = [f"{d['after']['poses']} held-out poses (tool error = |tracker reading - target|; real machine at "
+                 "equilibrium under the setup's stiffness and load)", f"compared: {d['compared_set']}"]
+        lines += ["  ".join(f"{c:<{w[i]}}" if i == 0 else f"{c:>{w[i]}}" for i, c in enumerate(r)) for r in rows]
+        if "improvement_pct" in d:
+            lines.append(f"improvement of the mean tool error: {d['improvement_pct']:.1f} %")
+        for k, v in d["dropped"].items():
+            lines.append(f"pose {k} not reached: {v}")
+        if d["dropped"]:
+            lines.append("(pose numbers: data rows of the held-out pose file, 1-based)")
+        return "\n".join(lines)
+
     def format_table(self) -> str:
         """A before/after table for the terminal (angles in degrees)."""
+        if self.compare == "tool":
+            return self._tool_table()
         d = self.to_dict()
         cols = (["before"] if self.before is not None else []) + ["after"]
         lines = [f"verification on {d['used']} of {d['poses']} held-out poses; real machine '{self.real}'",
@@ -300,6 +350,8 @@ COMPARES = {
     "sensor": "what the true instrument reads at the real machine's pose against what the model predicts it reads "
               "at the commanded pose (tool point/frame in the world frame; each model with its own registration "
               "of the instrument; independent of the gauge)",
+    "tool": "what the tracker reads at the real machine's rest pose (static equilibrium under the setup's stiffness "
+            "and load) against the target reading of each held-out pose, which each model commands",
 }
 
 
@@ -337,14 +389,19 @@ def verify(
     poses: np.ndarray,
     nominal: Mechanism | None = None,
     ignore_limits: tuple[str, ...] = (),
-    compare: str = "commanded",
+    compare: str | None = None,
     sensors: tuple | None = None,
     true_sensor=None,
     frames: Mechanism | None = None,
+    setup: MeasurementSetup | None = None,
 ) -> VerificationReport:
-    """Pose errors of ``real`` commanded through ``calibrated`` (and ``nominal``, "before").
+    """Errors of ``real`` commanded through ``calibrated`` (and ``nominal``, "before") at the
+    held-out ``poses`` (N, n; mm, rad), for every machine.
 
-    ``compare`` (:data:`COMPARES`): ``"commanded"`` the platform poses as commanded;
+    ``compare`` (:data:`COMPARES`; None: ``"tool"`` for a machine that
+    :func:`~pkmcal.identification.simulation.settles_at_equilibrium`, which needs the
+    ``setup`` with its ``simulation:`` stiffness and load and the calibrated machine's
+    identified tracker from its file, else ``"commanded"``): ``"commanded"`` the platform poses as commanded;
     ``"aligned"`` after the best rigid alignment of each model's frames
     (:mod:`pkmcal.identification.alignment`); ``"sensor"`` the readings of ``true_sensor``
     (the real instrument) against those each model predicts with its own sensor,
@@ -354,6 +411,15 @@ def verify(
     that both models command the same physical poses whatever the calibration's gauge;
     ``frames`` names the machine whose frames the poses are given in when there is no
     nominal model (the calibration record's nominal machine), None: the calibrated one's."""
+    if settles_at_equilibrium(calibrated):
+        if compare not in (None, "tool"):
+            raise PkmcalError(f"compare='{compare}': machine '{calibrated.name}' settles at static equilibrium; it is "
+                              "verified on what its tracker reads (compare='tool')")
+        return _verify_tool(calibrated, real, poses, nominal, ignore_limits, setup)
+    compare = "commanded" if compare is None else compare
+    if compare == "tool":
+        raise PkmcalError(f"compare='tool' verifies a machine that settles at static equilibrium; machine "
+                          f"'{calibrated.name}' has as many actuators as pose coordinates")
     if compare not in COMPARES:
         raise PkmcalError(f"compare must be one of {', '.join(COMPARES)}; got '{compare}'")
     if compare == "sensor" and (true_sensor is None or sensors is None or sensors[0] is None):
@@ -396,4 +462,30 @@ def verify(
     if not report.common.any():
         raise PkmcalError(f"the real machine '{real.name}' reaches none of the {len(after.valid)} held-out poses "
                           f"({'; '.join(sorted(set(report.dropped.values())))}); choose poses inside its workspace")
+    return report
+
+
+def _verify_tool(calibrated: Mechanism, real: Mechanism, poses: np.ndarray, nominal: Mechanism | None,
+                 ignore_limits: tuple[str, ...], setup: MeasurementSetup | None) -> VerificationReport:
+    """``verify(compare="tool")``: the held-out tool errors of a machine at equilibrium
+    (:mod:`pkmcal.identification.tool_errors`), "after" with the tracker identified with
+    ``calibrated``, "before" with the setup's."""
+    from pkmcal.identification.tool_errors import calibrated_sensor, tool_errors
+
+    if setup is None:
+        raise PkmcalError(f"machine '{calibrated.name}' is redundantly actuated: verifying it needs the setup with "
+                          "the 'simulation:' stiffness and load the real machine settles under")
+    for m in (calibrated, nominal):
+        if m is not None and (m.n_dof != real.n_dof or m.n_actuators != real.n_actuators):
+            raise PkmcalError(f"machine '{m.name}' and the real machine '{real.name}' are not the same kind")
+    after = tool_errors(calibrated, calibrated_sensor(calibrated, setup.sensor), real, setup, poses, "after",
+                        ignore_limits)
+    before = None
+    if nominal is not None:
+        before = tool_errors(nominal, setup.sensor, real, setup, poses, "before", ignore_limits)
+    report = VerificationReport(real=real.name, after=after, before=before, compare="tool")
+    if not report.common.any():
+        raise PkmcalError(f"the real machine '{real.name}' settles within its limits at none of the {len(after.valid)} "
+                          f"held-out poses ({'; '.join(sorted(set(report.dropped.values())))}); choose poses inside "
+                          "its workspace")
     return report

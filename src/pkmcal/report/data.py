@@ -23,6 +23,7 @@ import numpy as np
 from pkmcal.conventions import FILE_ANGLE_UNIT, LENGTH_UNIT
 from pkmcal.errors import PkmcalError
 # ρ_ij = C_ij / √(C_ii C_jj), zero-variance rows 0: the report's name for the one implementation.
+from pkmcal.identification.robust import Outlier
 from pkmcal.identification.uncertainty import correlation as correlation_from_covariance  # noqa: F401
 from pkmcal.io.tables import to_file_units
 from pkmcal.mechanisms.base import Mechanism
@@ -188,19 +189,12 @@ class Residuals:
                               f"reading unit; got {bad}")
 
 
-@dataclass(frozen=True)
-class OutlierRow:
-    """A pose beyond the outlier threshold (:mod:`pkmcal.identification.robust`): ``pose``
-    its data row of the measurement file (1-based), ``sigma`` its normalised residual
-    √(‖W r‖²/k) in noise σ, ``reading`` its worst residual row and ``reading_sigma`` that
-    row in σ, ``dropped`` whether the fit left it out, ``round`` the fit round (1-based)."""
-
-    pose: int
-    sigma: float
-    reading: str
-    reading_sigma: float
-    dropped: bool
-    round: int
+#: A pose beyond the outlier threshold: the fit's own record
+#: (:class:`pkmcal.identification.robust.Outlier`: ``pose`` its data row of the measurement
+#: file, 1-based, ``sigma`` its normalised residual √(‖W r‖²/k) in noise σ, ``reading`` its
+#: worst residual row and ``reading_sigma`` that row in σ, ``dropped`` whether the fit left
+#: it out, ``round`` the fit round, 1-based), shared rather than copied.
+OutlierRow = Outlier
 
 
 @dataclass(frozen=True)

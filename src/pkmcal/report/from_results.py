@@ -18,7 +18,6 @@ from pkmcal.report.data import (
     ErrorMap,
     HeldOutErrors,
     Identifiability,
-    OutlierRow,
     ParameterTable,
     PriorRow,
     ReportData,
@@ -113,14 +112,15 @@ def parameter_table(nominal: Mechanism, result, true_machine: Mechanism | None =
 
 def _compliance_facts(nominal, result, setup, commanded) -> tuple[tuple[str, str], ...]:
     """A warning line when a redundant machine calibrated by projection deflected under its
-    load (:func:`~pkmcal.identification.redundant_campaign.compliance_warning`); needs the
+    load (:func:`~pkmcal.identification.load_deflection.compliance_warning`); needs the
     commanded poses of the measurements (``commanded``, one per input pose)."""
     if commanded is None:
         return ()
-    from pkmcal.identification.redundant_campaign import compliance_warning, is_redundant
+    from pkmcal.identification.load_deflection import compliance_warning
+    from pkmcal.identification.simulation import settles_at_equilibrium
 
     poses = np.asarray(commanded, dtype=float)
-    if result.method != "projection" or not is_redundant(nominal) or poses.ndim != 2 \
+    if result.method != "projection" or not settles_at_equilibrium(nominal) or poses.ndim != 2 \
             or len(poses) <= int(np.max(result.used_poses, initial=-1)) or "tool-point" not in result.sensor.abilities:
         return ()
     std = float(np.max(np.asarray(setup.noise.reading_std, dtype=float)))
@@ -133,7 +133,7 @@ def screening_from_result(result) -> Screening | None:
     sc = getattr(result, "screening", None)
     if sc is None:
         return None
-    rows = tuple(OutlierRow(o.pose, o.sigma, o.reading, o.reading_sigma, o.dropped, o.round) for o in sc.outliers)
+    rows = tuple(sc.outliers)
     return Screening(threshold=sc.threshold, loss=sc.loss, f_scale=sc.f_scale, reject=sc.reject, rounds=sc.rounds,
                      outliers=rows, max_sigma=float(np.max(sc.sigma)) if sc.sigma.size else np.nan,
                      median_sigma=float(np.median(sc.sigma)) if sc.sigma.size else np.nan)

@@ -1,7 +1,7 @@
 """Paper 3 (Jeon et al., CIRP 2010) §3, cases 1 and 2, in simulation.
 
 What ``benchmarks/redundant.py`` reproduces, through the same function
-(:func:`pkmcal.identification.projection.calibration_experiment`): the real machine is the
+(:func:`pkmcal.reproduce.paper3_experiment.calibration_experiment`): the real machine is the
 nominal one plus the paper's own identified errors (Table 1 / Table 2), 30 calibration
 poses and 8 (case 1) / 6 (case 2) held-out poses uniform in the workspace, tracker noise
 σ = 0.010 mm per axis, encoder noise σ = 1e-5 rad (case 1) / 1 µm (case 2), actuator
@@ -17,19 +17,12 @@ import time
 import numpy as np
 
 from pkmcal.errors import PkmcalError
-from pkmcal.identification.projection import (
-    METHODS,
-    HeldOutResult,
-    calibration_experiment,
-    fit_redundant,
-)
-from pkmcal.identification.redundant_campaign import (
-    simulate_redundant_campaign,
-    tool_errors,
-)
+from pkmcal.identification.simulation import simulate_campaign
+from pkmcal.identification.tool_errors import tool_errors
 from pkmcal.mechanisms import planar as PL
 from pkmcal.mechanisms.statics import StaticsModel
 from pkmcal.reproduce.known_stiffness import fit_known_stiffness
+from pkmcal.reproduce.paper3_experiment import METHODS, HeldOutResult, calibration_experiment, fit_redundant
 from pkmcal.reproduce.table import FigureSpec, Reproduction, Row, mean_sd
 from pkmcal.sensors.base import MeasurementSetup, NoiseModel
 from pkmcal.sensors.planar_tool import PlanarToolSensor
@@ -175,7 +168,7 @@ def path_experiment(name: str, rng: np.random.Generator, backlash: float, models
     nominal, sensor, noise, real, real_sensor = case_models(name) if models is None else models
     points, forward, cal = measurement_path(nominal, c["n_check"])
     setup = MeasurementSetup(real_sensor, noise, StaticsModel(c["stiffness"], np.array(LOAD_N), backlash=backlash))
-    sim = simulate_redundant_campaign(nominal, real, setup, points, rng, ("workspace",))
+    sim = simulate_campaign(nominal, real, setup, points, rng, ("workspace",))
     if sim.dropped:
         raise PkmcalError(f"{name}: path point {next(iter(sim.dropped)) + 1} not reached")
     calib = sim.subset(slice(30))

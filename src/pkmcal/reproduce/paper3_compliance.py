@@ -16,7 +16,7 @@ deflection at any load it knows.
 The study: case 1's machine (``planar-2dof-3act``, real = the paper's errors), actuator
 stiffness K₀/s for s = 1, 3, 10, 30 (K₀ = 5·10⁷ N·mm/rad) and a downward tool load of 30
 or 50 N during calibration; held-out tool errors at the calibration load and with the load
-removed. The warning: :func:`~pkmcal.identification.redundant_campaign.compliance_warning`
+removed. The warning: :func:`~pkmcal.identification.load_deflection.compliance_warning`
 estimates the deflection from the measured following errors (no stiffness needed) — the
 line the calibration report (``pkmcal identify --report``) shows.
 """
@@ -27,15 +27,12 @@ import time
 
 import numpy as np
 
-from pkmcal.identification.projection import calibration_experiment
-from pkmcal.identification.redundant_campaign import (
-    compliance_warning,
-    load_deflection_estimate,
-    tool_errors,
-)
+from pkmcal.identification.load_deflection import compliance_warning, load_deflection_estimate
+from pkmcal.identification.tool_errors import tool_errors
 from pkmcal.mechanisms.statics import StaticsModel
 from pkmcal.reproduce.known_stiffness import fit_known_stiffness
 from pkmcal.reproduce.paper3 import CASES, N_CALIB, TRACKER_STD, case_models
+from pkmcal.reproduce.paper3_experiment import calibration_experiment
 from pkmcal.reproduce.table import Reproduction, Row, mean_sd
 from pkmcal.sensors.base import MeasurementSetup
 
