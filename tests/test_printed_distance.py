@@ -17,6 +17,7 @@ sees, compared as angle differences) to 1e-9.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -387,6 +388,12 @@ def test_cli_fits_the_printed_distances_and_exports_klippers_numbers(tmp_path):
                            "angle_*,radius_*,arm_*,endstop_*", "--fix", "auto", "-o", str(cal), "--heldout", str(pairs)])
     assert res.exit_code == 0, res.output
     assert "reading residual rms (mm)" in res.output          # the held-out table reads pairs too
+    for setup in (str(cal), "printed-distance-klipper"):   # verify reads pair files as identify does
+        res = run.invoke(cli, ["verify", str(cal), "--measurements", str(pairs), "--setup", setup, "--json"])
+        assert res.exit_code == 0, res.output
+        rep = json.loads(res.output)
+        assert rep["n_poses"] == 19 and rep["sensor"] == "printed-distance"
+        assert rep["after"]["reading_rms_mm"] < 0.01 < rep["before"]["reading_rms_mm"]
     res = run.invoke(cli, ["export", str(cal), "--format", "klipper", "-o", str(cfg)])
     assert res.exit_code == 0, res.output
     assert "written about their circle's centre" in res.output

@@ -332,7 +332,7 @@ def _identified_setup(path: str, cal, what: str):
     """The setup identified with the calibrated machine (its file's ``setup:``)."""
     from pkmcal.io.setup_file import load_setup
 
-    if "setup" not in getattr(cal, "metadata", {}) or not os.path.exists(path):
+    if "setup" not in cal.metadata or not os.path.exists(path):
         raise PkmcalError(f"{what}: {path} has no identified setup (setup:, written by 'pkmcal identify' since "
                           "2026-12); recalibrate, or compare without the sensor")
     return load_setup(path, cal)
@@ -344,7 +344,7 @@ def _nominal_from_record(cal):
     from pkmcal.io.machine_file import load_machine
     from pkmcal.mechanisms.library import is_builtin_name
 
-    record = dict(getattr(cal, "metadata", {}).get("calibration") or {})
+    record = dict(cal.metadata.get("calibration") or {})
     src = (record.get("inputs") or {}).get("machine") or {}
     spec = src.get("builtin") or src.get("file")
     if not isinstance(spec, str):
@@ -362,7 +362,7 @@ def _before_sensor(cal, cal_setup, nominal, setup, calib_meas, mapping):
     ((label, sensor), ...) from calibration.before_registration_sessions."""
     from pkmcal.identification.heldout import register_sensor, sensor_from_values
 
-    record = dict(getattr(cal, "metadata", {}).get("calibration") or {})
+    record = dict(cal.metadata.get("calibration") or {})
     stored = record.get("before_registration")
     if not cal_setup.sensor.default_free:
         return cal_setup.sensor, "no free sensor parameter: the sensor as the setup gives it", ()
@@ -392,15 +392,19 @@ def _verify_measured(calibrated, meas_path, nominal, setup_spec, calib_meas, cli
     from pkmcal.io.measurements import apply_clipped_policy, load_measurements
     from pkmcal.io.setup_file import load_setup
 
+    from pkmcal.cli.klipper_probe_cmd import machine_and_setup
+    from pkmcal.mechanisms.pose_pairs import read_by
+
     cal = load_machine(calibrated)
+    if "setup" in cal.metadata:     # read as the identified sensor reads it (pose pairs: printed distances)
+        cal, cal_setup = machine_and_setup(calibrated, calibrated)
     given = None if setup_spec is None else load_setup(setup_spec, cal)
-    if "setup" in getattr(cal, "metadata", {}):
-        cal_setup = load_setup(calibrated, cal)
+    if "setup" in cal.metadata:
         if given is not None and given.sensor.kind != cal_setup.sensor.kind:
             raise PkmcalError(f"--setup {setup_spec} has a '{given.sensor.kind}' sensor, {calibrated} was identified "
                               f"with a '{cal_setup.sensor.kind}' sensor; give the setup of the calibration")
     elif given is not None:
-        cal_setup = given
+        cal, cal_setup = machine_and_setup(calibrated, setup_spec)
     else:
         raise PkmcalError(f"{calibrated} has no identified setup (setup:): give the measurement setup with --setup")
     if settles_at_equilibrium(cal):
@@ -411,9 +415,10 @@ def _verify_measured(calibrated, meas_path, nominal, setup_spec, calib_meas, cli
         nom, why = load_machine(nominal), ""
     else:
         nom, why = _nominal_from_record(cal)
-    if nom is not None and type(nom) is not type(cal):
-        raise PkmcalError(f"machine '{nom.name}' is not of the kind of '{cal.name}' "
-                          f"({type(nom).__name__} vs {type(cal).__name__})")
+    if nom is not None:
+        nom = read_by(nom, cal_setup.sensor)
+        if nom.kind != cal.kind:
+            raise PkmcalError(f"machine '{nom.name}' is not of the kind of '{cal.name}' ({nom.kind} vs {cal.kind})")
     if calib_meas is not None and nom is None:
         raise PkmcalError(f"--calibration-measurements registers the nominal machine's sensor frames: {why}")
     before_sensor, note, before_sessions = (None, why, ()) if nom is None else \

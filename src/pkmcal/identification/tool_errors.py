@@ -58,8 +58,8 @@ def calibrated_sensor(machine: Mechanism, sensor):
     ``calibration.sensor`` block: names → values in file units, mm and degrees for the
     parameters the sensor declares angles, ``sensor.param_is_angle``), or ``sensor`` itself
     when the machine has none."""
-    cal = (machine.metadata or {}).get("calibration") or {}
-    values = cal.get("sensor") if isinstance(cal, dict) else None
+    record = (machine.metadata or {}).get("calibration") or {}
+    values = record.get("sensor") if isinstance(record, dict) else None
     if not values:
         return sensor
     from pkmcal.identification.heldout import sensor_from_values
