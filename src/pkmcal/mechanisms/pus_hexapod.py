@@ -55,7 +55,7 @@ from pkmcal.errors import PkmcalError
 from pkmcal.mechanisms.base import LimitReport
 from pkmcal.mechanisms.frame import Frame
 from pkmcal.mechanisms.param_vector import ParameterVector
-from pkmcal.mechanisms.spatial import SpatialPlatform, twist_signs
+from pkmcal.mechanisms.spatial import SpatialPlatform, leg_closure, twist_signs
 
 N_LEGS = 6
 LEG_PARAMS = ("r{i}.x", "r{i}.y", "r{i}.z", "tilt_x_{i}", "tilt_y_{i}", "leg_{i}",
@@ -282,20 +282,11 @@ class PUSHexapod(ParameterVector, SpatialPlatform):
         :func:`~pkmcal.mechanisms.solver.solve_fk`: e(x, λ) (M, 6) and −∂e/∂x (M, 6, 6)."""
         g = _legs(rho)
         u = _directions(self._Q, g["tx"], g["ty"])[0]
-        leg = g["leg"][None, :]
 
-        def equations(poses: np.ndarray, readings: np.ndarray, jac: bool):
-            s = readings + g["offset"][None, :]
-            fr = Frame.from_poses(poses)
-            Ra = np.einsum("nij,kj->nki", fr.R, g["a"])
-            w = poses[:, None, 0:3] + Ra - g["O"][None] - s[..., None] * u[None]       # P − B
-            e = (leg**2 - np.einsum("nkj,nkj->nk", w, w)) / (2.0 * leg)
-            if not jac:
-                return e, None
-            twist = np.concatenate([w, np.cross(Ra, w)], axis=2) / leg[..., None]
-            return e, euler_pose_jacobian(twist, poses)
+        def carriages(readings: np.ndarray) -> np.ndarray:                        # B (M, 6, 3)
+            return g["O"][None] + (readings + g["offset"][None, :])[..., None] * u[None]
 
-        return equations
+        return leg_closure(carriages, g["a"], g["leg"])
 
     def fk(self, readings: np.ndarray, guess: np.ndarray | None = None, params: np.ndarray | None = None,
            **options):

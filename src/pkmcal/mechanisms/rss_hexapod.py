@@ -60,7 +60,7 @@ from pkmcal.errors import PkmcalError
 from pkmcal.mechanisms.base import LimitReport
 from pkmcal.mechanisms.frame import Frame
 from pkmcal.mechanisms.param_vector import ParameterVector
-from pkmcal.mechanisms.spatial import SpatialPlatform, twist_signs
+from pkmcal.mechanisms.spatial import SpatialPlatform, leg_closure, twist_signs
 
 N_LEGS = 6
 LEG_PARAMS = ("s{i}.x", "s{i}.y", "s{i}.z", "beta_{i}", "tilt_{i}", "crank_{i}", "rod_{i}",
@@ -289,21 +289,13 @@ class RSSHexapod(ParameterVector, SpatialPlatform):
         :func:`~pkmcal.mechanisms.solver.solve_fk`: e(x, λ) (M, 6) and −∂e/∂x (M, 6, 6)."""
         g = _legs(rho)
         v1, v2, _ = _crank_planes(g["beta"], g["tilt"])
-        S, a, c, r = g["S"], g["a"], g["crank"][None, :, None], g["rod"][None, :]
+        S, c = g["S"], g["crank"][None, :, None]
 
-        def equations(poses: np.ndarray, readings: np.ndarray, jac: bool):
+        def crank_ends(readings: np.ndarray) -> np.ndarray:                      # C (M, 6, 3)
             phi = (readings + g["zero"][None, :])[..., None]
-            C = S[None] + c * (np.cos(phi) * v1[None] + np.sin(phi) * v2[None])   # crank ends (M, 6, 3)
-            fr = Frame.from_poses(poses)
-            Ra = np.einsum("nij,kj->nki", fr.R, a)
-            w = poses[:, None, 0:3] + Ra - C                                      # P − C
-            e = (r**2 - np.einsum("nkj,nkj->nk", w, w)) / (2.0 * r)
-            if not jac:
-                return e, None
-            twist = np.concatenate([w, np.cross(Ra, w)], axis=2) / r[..., None]
-            return e, euler_pose_jacobian(twist, poses)
+            return S[None] + c * (np.cos(phi) * v1[None] + np.sin(phi) * v2[None])
 
-        return equations
+        return leg_closure(crank_ends, g["a"], g["rod"])
 
     def fk(self, readings: np.ndarray, guess: np.ndarray | None = None, params: np.ndarray | None = None,
            **options):

@@ -42,6 +42,31 @@ class SpatialPlatform(Mechanism):
         return np.concatenate([frame.p, matrix_to_euler(frame.R)], axis=1)
 
 
+def leg_closure(joints, a: np.ndarray, lengths: np.ndarray):
+    """The loop-closure equations of a six-legged platform whose legs of ``lengths`` (6,)
+    join the platform joints ``a`` (6, 3, platform frame) to base-side joints that the
+    readings place, ``joints(λ)`` → (M, 6, 3) (a crank's end, a carriage), for
+    :func:`~pkmcal.mechanisms.solver.solve_fk`:
+
+        e_i(x) = (ℓ_i² − |w_i|²) / (2 ℓ_i),   w_i = p + R a_i − joint_i   (≈ ℓ_i − |w_i|, mm),
+        −∂e_i/∂(δp, δω) = [w_i, (R a_i) × w_i] / ℓ_i   (× T for the pose),
+
+    finite at every pose, where IK is NaN outside a leg's reach."""
+    r = lengths[None, :]
+
+    def equations(poses: np.ndarray, readings: np.ndarray, jac: bool):
+        fr = Frame.from_poses(poses)
+        Ra = np.einsum("nij,kj->nki", fr.R, a)
+        w = poses[:, None, 0:3] + Ra - joints(readings)
+        e = (r**2 - np.einsum("nkj,nkj->nk", w, w)) / (2.0 * r)
+        if not jac:
+            return e, None
+        twist = np.concatenate([w, np.cross(Ra, w)], axis=2) / r[..., None]
+        return e, euler_pose_jacobian(twist, poses)
+
+    return equations
+
+
 def twist_signs(w: np.ndarray, Ra: np.ndarray) -> np.ndarray:
     """sign det (N,) of the twist Jacobian with rows [w_i, (R a_i) × w_i] (N, 6, 6), 0 where
     it is not finite or singular: the platform's assembly mode for legs whose constraint
