@@ -18,7 +18,7 @@ import pkmcal
 
 SRC = Path(pkmcal.__file__).parent
 
-_SUBJECT = (r"(?:self\.)?(?:mech|mechanism|machine|nominal|nom|cal|calibrated|model|real|sensor|s|m|other|back|base|load_point|"
+_SUBJECT = (r"(?:self\.)?(?:mech|mechanism|machine|nominal|nom|cal|calibrated|model|frames|reference|real|sensor|s|m|other|back|base|load_point|"
             r"setup\.sensor|result\.sensor|result\.mechanism|model\.mechanism|model\.sensor)")
 PROBE = re.compile(
     rf"\b(?:isinstance|hasattr)\(\s*{_SUBJECT}\s*,"               # isinstance(mech, …), hasattr(sensor, …)

@@ -320,7 +320,7 @@ def verify_cmd(calibrated, meas_path, real_spec, poses, nominal, setup_spec, cal
             raise PkmcalError(f"--setup is the true instrument, whose readings --compare sensor compares; with "
                               f"--compare {mode} remove it")
         frames = nom if nom is not None or mode == "commanded" else _nominal_from_record(cal)[0]
-        if frames is not None and type(frames) is not type(cal):
+        if frames is not None and frames.kind != cal.kind:
             frames = None
     report = verify(cal, real, read_poses(poses, cal, mapping), nominal=nom, ignore_limits=tuple(ignore_limits),
                     compare=mode, sensors=sensors, true_sensor=true_sensor, frames=frames, setup=setup)
@@ -387,12 +387,11 @@ def _before_sensor(cal, cal_setup, nominal, setup, calib_meas, mapping):
 
 def _verify_measured(calibrated, meas_path, nominal, setup_spec, calib_meas, clipped, as_json, mapping) -> str:
     """``verify --measurements``: the text or JSON of the held-out validation."""
+    from pkmcal.cli.klipper_probe_cmd import machine_and_setup
     from pkmcal.identification.heldout import heldout_validation
     from pkmcal.io.machine_file import load_machine
     from pkmcal.io.measurements import apply_clipped_policy, load_measurements
     from pkmcal.io.setup_file import load_setup
-
-    from pkmcal.cli.klipper_probe_cmd import machine_and_setup
     from pkmcal.mechanisms.pose_pairs import read_by
 
     cal = load_machine(calibrated)

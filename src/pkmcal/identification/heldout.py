@@ -172,7 +172,7 @@ def held_out_fk(machine: Mechanism, q: np.ndarray, start: np.ndarray, reference:
         x = np.asarray(fk.poses, dtype=float).copy()
         ok = fk.ok & np.all(np.isfinite(x), axis=1)
         branch = np.asarray(fk.branch_changed, dtype=bool).copy()
-        if ok.all() or reference is None or type(reference) is not type(machine) or \
+        if ok.all() or reference is None or reference.kind != machine.kind or \
                 len(reference.params) != len(machine.params):
             return x, ok, branch
         bad = np.flatnonzero(~ok)
