@@ -90,6 +90,9 @@ def test_hexapod_with_indicators_is_told_to_add_a_full_pose_sensor():
     assert adv.current.rank < adv.current.n_seen == 42
     assert adv.options[0].label.startswith("+ full-pose-paper1") and adv.options[0].rank == 42
     assert adv.options[0].sigma_min > 0 and adv.current.sigma_min == 0.0
+    # a Z probe reads a bed at z = 0 the hexapod's platform cannot be lowered to: not offered
+    assert not any("z-probe" in o.label for o in adv.options)
+    assert any(n.startswith("z-probe-klipper: not scored (the machine cannot reach") for n in adv.notes)
 
 
 def test_cli_prints_the_ranking_only_when_asked(tmp_path):

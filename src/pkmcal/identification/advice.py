@@ -183,8 +183,14 @@ def _additions(machine, setup, poses, method, names, notes):
             continue          # a setup that cannot measure this machine
         if other.sensor == setup.sensor:
             continue
+        where = _where_read(machine, other.sensor, poses)
+        with np.errstate(invalid="ignore"):
+            reached = machine.check_limits(where, margins=False).ok   # the machine goes where it reads
+        if not reached.any():
+            notes.append(f"{name}: not scored (the machine cannot reach where this sensor reads at these poses)")
+            continue
         try:
-            J, S, n = _rows(machine, other, _where_read(machine, other.sensor, poses), None, names)
+            J, S, n = _rows(machine, other, where[reached], None, names)
         except PkmcalError as exc:
             notes.append(f"{name}: not scored ({exc})")
             continue

@@ -336,13 +336,17 @@ def _diag_cov(sigma: np.ndarray, n: int) -> np.ndarray:
 
 
 def _full_jacobian(J_mech: np.ndarray, J_sensor: np.ndarray | None, n_sensor: int,
-                   J_offsets: np.ndarray | None = None) -> np.ndarray:
-    """[J_mech, J_sensor, J_offsets] (N, k, p + s + o); the sensor columns NaN when not
-    computed; no offset columns for ``J_offsets=None``."""
+                   J_offsets: np.ndarray | None = None, negate_mech: bool = False) -> np.ndarray:
+    """[±J_mech, J_sensor, J_offsets] (N, k, p + s + o) (−J_mech for ``negate_mech``, negated
+    in place: no copy); the sensor columns NaN when not computed; no offset columns for
+    ``J_offsets=None``."""
     N, k, p = J_mech.shape
     n_off = 0 if J_offsets is None else J_offsets.shape[-1]
     J = np.empty((N, k, p + n_sensor + n_off))
-    J[..., :p] = J_mech
+    if negate_mech:
+        np.negative(J_mech, out=J[..., :p])
+    else:
+        J[..., :p] = J_mech
     J[..., p:p + n_sensor] = np.nan if J_sensor is None else J_sensor
     if n_off:
         J[..., p + n_sensor:] = J_offsets
@@ -531,7 +535,7 @@ class IKResidual(Method):
         J = C = None
         if jac:
             Js = A @ self._HinvG(poses) if need_Js else None
-            J = _full_jacobian(-B, Js, m.n_sensor, m.offset_jacobian(np.eye(m.q.shape[1])))
+            J = _full_jacobian(B, Js, m.n_sensor, m.offset_jacobian(np.eye(m.q.shape[1])), negate_mech=True)
         if cov:
             AH = self._AHinv(A, poses)
             C = _diag_cov(m.sigma_q, m.n_poses) + _sandwich(AH, m.sigma_y)
