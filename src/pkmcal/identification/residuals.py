@@ -64,6 +64,7 @@ Machines and sensors hold no state.
 
 from __future__ import annotations
 
+import functools
 from abc import ABC, abstractmethod
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -218,7 +219,9 @@ class Model:
         """The machine and sensor objects at θ = [ρ; s; δq] (for results; the methods pass ρ
         and s explicitly instead)."""
         rho, s = self.parts(theta)
-        return self.mechanism.with_params(rho.copy()), self.sensor.with_params(s.copy())
+        # sensors are immutable values: one whose parameters did not move is returned as is
+        sensor = self.sensor if np.array_equal(s, self.sensor.params) else self.sensor.with_params(s.copy())
+        return self.mechanism.with_params(rho.copy()), sensor
 
     def subset(self, keep: np.ndarray) -> "Model":
         """The same model on the poses ``keep`` (boolean or index array), with their sessions."""
@@ -292,9 +295,14 @@ def default_fixed_parameters(mechanism) -> tuple[str, ...]:
     """The parameters the mechanism holds unless they are freed by name (its
     ``default_fixed`` names and patterns: a delta's tool offset, which a sensor of the tool
     point cannot tell from the towers' positions)."""
-    from fnmatch import fnmatchcase
+    return _matching(tuple(mechanism.param_names), tuple(mechanism.default_fixed))
 
-    return tuple(n for n in mechanism.param_names if any(fnmatchcase(n, pat) for pat in mechanism.default_fixed))
+
+@functools.lru_cache(maxsize=64)
+def _matching(names: tuple[str, ...], patterns: tuple[str, ...]) -> tuple[str, ...]:
+    """The ``names`` that match one of the shell ``patterns`` (a pure function of two
+    tuples of strings, so cached: every fit asks it of its machine)."""
+    return tuple(n for n in names if any(fnmatchcase(n, pat) for pat in patterns))
 
 
 def default_estimated_index(mechanism) -> np.ndarray:
