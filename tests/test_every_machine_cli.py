@@ -75,13 +75,19 @@ def test_measurement_day_on_every_machine(machine, setup, formats, tmp_path):
     held = json.loads(run("verify", d / "cal.yaml", "--measurements", d / "heldmeas.csv", "--setup", d / "cal.yaml",
                           "--json"))
     assert held["after"]["n_poses"] == held["before"]["n_poses"] > 0
-    key = "position_rms_mm" if held["after"]["position_rms_mm"] is not None else "reading_rms_mm"
-    assert held["after"][key] < held["before"][key], held
+    reads = "position_rms_mm" if held["after"]["position_rms_mm"] is not None else "reading_rms_mm"
+    assert held["after"][reads] < held["before"][reads], held
     for compare in ("sensor", "aligned", "commanded"):
         extra = ("--setup", setup) if compare == "sensor" else ()
         out = json.loads(run("verify", d / "cal.yaml", "--real", d / "real.yaml", "--poses", d / "held.csv",
-                             "--compare", compare, *extra, "--json"))
-        assert out["compare"] == compare
+                             "--nominal", machine, "--compare", compare, *extra, "--json"))
+        assert out["compare"] == compare and out["used"] > 0
+        # gauge-free comparisons: the calibration is closer to the real machine in what the sensor
+        # reads, and in the whole pose when the sensor reads positions (indicators and a Z probe see
+        # only some directions: the pose errors in the others need not shrink)
+        if compare == "sensor" or (compare == "aligned" and reads == "position_rms_mm"):
+            key = "position_rms_mm" if out["after"].get("position_rms_mm") is not None else "reading_rms_mm"
+            assert out["after"][key] < out["before"][key], (compare, out["after"], out["before"])
     run("export", d / "cal.yaml", "--format", "json", "-o", d / "cal.json")
     for fmt in formats:
         run("export", d / "cal.yaml", "--format", fmt, "-o", d / f"out.{fmt}")

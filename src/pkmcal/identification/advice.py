@@ -45,7 +45,7 @@ there (``Sensor.measured_frames``: a Z probe lowered onto the bed).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -273,8 +273,7 @@ def advise(machine, setup, poses: np.ndarray, *, method: str | None = None, free
     def gain(o: Option) -> Option:
         """σ_min / σ_min of now on full rank, else σ_r / σ_r of now (the weakest seen)."""
         mine, base = (o.sigma_min, current.sigma_min) if o.rank == o.n_seen else (o.sigma_rank, current.sigma_rank)
-        g = mine / base if base > 0 else (float("inf") if mine > 0 else 1.0)
-        return Option(o.label, o.kind, o.rank, o.n_seen, o.sigma_min, o.sigma_rank, g, o.n_rows, o.named)
+        return replace(o, gain=mine / base if base > 0 else (float("inf") if mine > 0 else 1.0))
 
     scored = sorted((gain(o) for o in scored), key=Option.key)
     gauge = []

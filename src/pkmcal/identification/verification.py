@@ -476,8 +476,9 @@ def _verify_tool(calibrated: Mechanism, real: Mechanism, poses: np.ndarray, nomi
         raise PkmcalError(f"machine '{calibrated.name}' is redundantly actuated: verifying it needs the setup with "
                           "the 'simulation:' stiffness and load the real machine settles under")
     for m in (calibrated, nominal):
-        if m is not None and (m.n_dof != real.n_dof or m.n_actuators != real.n_actuators):
-            raise PkmcalError(f"machine '{m.name}' and the real machine '{real.name}' are not the same kind")
+        if m is not None and m.kind != real.kind:
+            raise PkmcalError(f"machine '{m.name}' and the real machine '{real.name}' are not of one kind "
+                              f"({m.kind} vs {real.kind})")
     after = tool_errors(calibrated, calibrated_sensor(calibrated, setup.sensor), real, setup, poses, "after",
                         ignore_limits)
     before = None

@@ -24,7 +24,6 @@ order, so the plan is the same whatever the backend and the number of workers.
 from __future__ import annotations
 
 import contextlib
-import sys
 from collections import deque
 from typing import Callable, Iterable, Iterator
 
@@ -76,12 +75,12 @@ def chunk_map(workers: int | None = None, dask: str | None = None):
     if workers is None or workers <= 1:
         yield map
         return
-    import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
     from concurrent.futures.process import BrokenProcessPool
 
-    mp = multiprocessing.get_context("fork" if sys.platform.startswith("linux") else "spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=mp) as pool:
+    from pkmcal.study.backends import process_context
+
+    with ProcessPoolExecutor(max_workers=workers, mp_context=process_context()) as pool:
         try:
             yield ordered_map(pool.submit, lambda fut: fut.result(), LOOKAHEAD * workers)
         except BrokenProcessPool:

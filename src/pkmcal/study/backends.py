@@ -93,17 +93,25 @@ def _pool_batch(campaign: int, first: int, last: int):
     return run_batch(_WORKER_CONTEXT, campaign, first, last)
 
 
-def run_pool(ctx: Context, work: list[tuple[int, int, int]], on_batch: OnBatch, workers: int) -> None:
+def process_context():
+    """The multiprocessing context of the process pools (module docstring): fork on Linux
+    (workers inherit the parent's imports and data), spawn elsewhere."""
     import multiprocessing
+
+    return multiprocessing.get_context("fork" if sys.platform.startswith("linux") else "spawn")
+
+
+def run_pool(ctx: Context, work: list[tuple[int, int, int]], on_batch: OnBatch, workers: int) -> None:
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
 
     global _WORKER_CONTEXT
-    if sys.platform.startswith("linux"):
-        mp, init, args = multiprocessing.get_context("fork"), None, ()
+    mp = process_context()
+    if mp.get_start_method() == "fork":
+        init, args = None, ()
         _WORKER_CONTEXT = ctx
     else:
-        mp, init, args = multiprocessing.get_context("spawn"), _init_worker, (pickle.dumps(ctx),)
+        init, args = _init_worker, (pickle.dumps(ctx),)
     with ProcessPoolExecutor(max_workers=workers, mp_context=mp, initializer=init, initargs=args) as pool:
         pending = {pool.submit(_pool_batch, *w) for w in work}
         try:
