@@ -20,7 +20,6 @@ import math
 
 import numba as nb
 import numpy as np
-from scipy.linalg.lapack import dgeqrf
 
 _OPTS = dict(cache=True, nogil=True, error_model="numpy")
 
@@ -135,6 +134,8 @@ def cholesky_inverse(C: np.ndarray) -> tuple[np.ndarray, int]:
 
 def qr_triangle(A: np.ndarray) -> np.ndarray:
     """The upper triangle R (n, n) of A = QR for A (m, n), m ≥ n (signs as LAPACK leaves them)."""
+    from scipy.linalg.lapack import dgeqrf  # on first use: scipy.linalg takes ~0.4 s to import
+
     qr, _, _, info = dgeqrf(np.asarray(A, dtype=np.float64))
     if info != 0:
         raise ValueError(f"dgeqrf failed (info={info})")

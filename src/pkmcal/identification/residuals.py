@@ -65,6 +65,7 @@ Machines and sensors hold no state.
 from __future__ import annotations
 
 import functools
+import sys
 from abc import ABC, abstractmethod
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -239,30 +240,43 @@ class Model:
 # -- small dense linear algebra --------------------------------------------------------
 
 
-_BLAS_CONTROLLER = None
+#: The BLAS libraries' threadpoolctl controllers, by whether scipy's own BLAS was loaded
+#: when the inventory was taken (scipy ships a BLAS of its own beside NumPy's).
+_BLAS_CONTROLLERS: dict[bool, list] = {}
+
+
+def _blas_controllers() -> list:
+    with_scipy = "scipy.linalg" in sys.modules
+    found = _BLAS_CONTROLLERS.get(with_scipy)
+    if found is None:
+        try:
+            from threadpoolctl import ThreadpoolController
+
+            found = [c for c in ThreadpoolController().lib_controllers if c.user_api == "blas"]
+        except ImportError:
+            found = []
+        _BLAS_CONTROLLERS[with_scipy] = found
+    return found
 
 
 @contextmanager
-def single_threaded_blas():
+def single_threaded_blas(scipy: bool = True):
     """Run the block with one BLAS thread (threadpoolctl, when installed).
 
     The engine's matrices are small (≤ a few thousand rows × ≤ ~60 columns); a threaded
     BLAS only adds synchronisation: the SVD of a 90×42 Jacobian took 0.76 ms (median)
     with two OpenBLAS threads and 0.47 ms with one (2-core Xeon, 2026-11-22).
-    """
-    global _BLAS_CONTROLLER
-    if _BLAS_CONTROLLER is None:
-        try:
-            import scipy.linalg  # noqa: F401  (load scipy's own BLAS before taking the inventory)
-            from threadpoolctl import ThreadpoolController
 
-            _BLAS_CONTROLLER = [c for c in ThreadpoolController().lib_controllers if c.user_api == "blas"]
-        except ImportError:
-            _BLAS_CONTROLLER = []
+    ``scipy``: load scipy's own BLAS first so that it is limited too (the engine's blocks
+    call scipy); planning, which runs on NumPy alone, passes False and limits the BLAS
+    libraries loaded so far (scipy.linalg takes ~0.4 s to import).
+    """
+    if scipy:
+        import scipy.linalg  # noqa: F401
     # set and restore the thread counts directly: ThreadpoolController.limit re-reads the
     # library inventory on every call (0.017 ms against 0.008 ms for this block, measured
     # 2026-11-22 on a 2-core Xeon)
-    libs = [(c, c.get_num_threads()) for c in _BLAS_CONTROLLER]
+    libs = [(c, c.get_num_threads()) for c in _blas_controllers()]
     libs = [(c, n) for c, n in libs if isinstance(n, int) and n != 1]
     for c, _ in libs:
         c.set_num_threads(1)

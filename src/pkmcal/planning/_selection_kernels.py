@@ -43,15 +43,17 @@ def _logdet_i_plus(S, j, L):  # pragma: no cover - compiled
 
 
 @nb.njit(**_OPTS)
-def update_and_gain(G, UT, Cinv, S, sign, gain):  # pragma: no cover - compiled
-    """In place: S (N, m, m) rank-m update and gain (N,) = log det(I + S_j); see module doc.
+def update_and_gain(G, UT, Cinv, S, sign, gain, start, stop):  # pragma: no cover - compiled
+    """In place, for the candidates j in [start, stop): S_j (of S (N, m, m)) rank-m update
+    and gain_j = log det(I + S_j); see module doc. Each candidate is computed alone, so
+    ranges can run on separate threads (the kernel releases the GIL).
 
     G (N, m, n) candidate blocks, UT (m, n) = Uᵀ, Cinv (m, m)."""
-    N, m, p = G.shape
+    _, m, p = G.shape
     A = np.empty((m, m))
     B = np.empty((m, m))
     L = np.empty((m, m))
-    for j in range(N):
+    for j in range(start, stop):
         for i in range(m):
             for k in range(m):
                 s = 0.0

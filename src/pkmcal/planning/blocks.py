@@ -58,8 +58,9 @@ def raw_blocks(mechanism: Mechanism, setup: MeasurementSetup, poses: np.ndarray,
 @dataclass(frozen=True)
 class PlanningModel:
     """What :meth:`blocks` needs: machine, setup, method, the identifiable parameters
-    ``names`` (their indices ``free_index`` in θ = [ρ; s]), column scales ``scale`` and the
-    identifiability ``report`` of the reference set (module docstring)."""
+    ``names`` (their indices ``free_index`` in θ = [ρ; s]), column scales ``scale``, the
+    identifiability ``report`` of the reference set (module docstring) and the residual
+    rows per pose k of a block."""
 
     mechanism: Mechanism
     setup: MeasurementSetup
@@ -68,17 +69,18 @@ class PlanningModel:
     free_index: np.ndarray
     scale: np.ndarray
     report: IdentifiabilityReport
+    rows_per_pose: int
 
     @property
     def n_params(self) -> int:
         return len(self.names)
 
     @blas_single_threaded
-    def blocks(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def blocks(self, poses: np.ndarray, out: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """G (N, k, n) of ``poses`` (module docstring) and a flag (N,) of poses whose
-        nuisance pose was solved (FK converged)."""
+        nuisance pose was solved (FK converged); G written into ``out`` when given."""
         J, ok, _ = raw_blocks(self.mechanism, self.setup, poses, self.method)
-        return J[:, :, self.free_index] * self.scale, ok
+        return np.multiply(J[:, :, self.free_index], self.scale, out=out), ok
 
 
 @blas_single_threaded
@@ -107,4 +109,5 @@ def planning_model(mechanism: Mechanism, setup: MeasurementSetup, *, method: str
         raise PkmcalError("no identifiable parameter: the sensor sees none of the machine's parameters")
     col = np.sqrt(np.sum(J[:, :, keep] ** 2, axis=(0, 1)) / len(J))
     scale = 1.0 / np.where(col > 0, col, 1.0)
-    return PlanningModel(mechanism, setup, method, tuple(names[i] for i in keep), np.array(keep), scale, report)
+    return PlanningModel(mechanism, setup, method, tuple(names[i] for i in keep), np.array(keep), scale, report,
+                         J.shape[1])

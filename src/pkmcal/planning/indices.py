@@ -45,10 +45,11 @@ RANK_RTOL = 1e-10
 def blas_single_threaded(func):
     """Decorator: run ``func`` with one BLAS thread
     (:func:`pkmcal.identification.residuals.single_threaded_blas`). Planning multiplies many
-    small matrices, where a threaded BLAS only adds synchronisation."""
+    small matrices, where a threaded BLAS only adds synchronisation. Planning runs on
+    NumPy alone: scipy is not imported for it."""
     @functools.wraps(func)
     def wrapper(*args, **kwargs):
-        with single_threaded_blas():
+        with single_threaded_blas(scipy=False):
             return func(*args, **kwargs)
     return wrapper
 
@@ -176,7 +177,7 @@ def singularity_measures(mechanism, poses: np.ndarray, length: float | None = No
         raise PkmcalError(f"the length that scales the rotation columns must be a positive number of mm; got {length}")
     J = mechanism.twist_jacobian(poses)
     J[:, :, 3:] /= L
-    with single_threaded_blas():
+    with single_threaded_blas(scipy=False):
         s = np.linalg.svd(J, compute_uv=False)
         det = np.abs(np.linalg.det(J))
     return {"det": det, "inverse_condition": s[:, -1] / s[:, 0]}

@@ -76,23 +76,37 @@ BLOCK_BATCH = 10_000
 
 
 def candidate_blocks(model: PlanningModel, poses: np.ndarray, *, batch: int = BLOCK_BATCH,
-                     chunk_map: Callable = map) -> tuple[np.ndarray, np.ndarray]:
+                     chunk_map: Callable | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``model.blocks`` of the accepted candidate ``poses``, in ⌈N / batch⌉ near-equal
-    batches mapped by ``chunk_map`` (results in order): G (N, k, n) and the solved flags.
+    batches: G (N, k, n) and the solved flags. ``chunk_map`` None (default): the batches
+    run in this process on local threads (:func:`~pkmcal.planning.executors.thread_map`),
+    each written straight into G; else ``chunk_map(model.blocks, batches)`` yields them in
+    order (a process pool, Dask) and they are copied in.
 
     The batches depend only on N and ``batch`` — not on how the candidates were chunked —
     and are never shorter than batch/2 (or N), so that code paths chosen by batch size
     (e.g. NumPy below a few dozen poses, compiled above) take the same path as one call
     on all N: the blocks are bit-identical to ``model.blocks(poses)``.
     """
+    from pkmcal.planning.executors import thread_map
+
     parts = np.array_split(poses, max(1, -(-len(poses) // batch)))
+    bounds = np.cumsum([0] + [len(p) for p in parts])
+    if chunk_map is None:
+        G = np.empty((len(poses), model.rows_per_pose, model.n_params))
+        ok = np.empty(len(poses), dtype=bool)
+
+        def fill(i: int) -> None:
+            ok[bounds[i]:bounds[i + 1]] = model.blocks(parts[i], out=G[bounds[i]:bounds[i + 1]])[1]
+
+        for _ in thread_map(fill, range(len(parts))):
+            pass
+        return G, ok
     G = ok = None
-    start = 0
-    for g, solved in chunk_map(model.blocks, parts):      # written in place: no second copy of G
+    for i, (g, solved) in enumerate(chunk_map(model.blocks, parts)):
         if G is None:
             G, ok = np.empty((len(poses),) + g.shape[1:]), np.empty(len(poses), dtype=bool)
-        G[start:start + len(g)], ok[start:start + len(g)] = g, solved
-        start += len(g)
+        G[bounds[i]:bounds[i + 1]], ok[bounds[i]:bounds[i + 1]] = g, solved
     return G, ok
 
 
@@ -176,7 +190,8 @@ def plan_poses(mechanism: Mechanism, setup: MeasurementSetup, n: int, *, algorit
                           f"measurable ({cand.describe()}); ask for fewer poses or give more candidates")
     announce("planning model")
     model = model or planning_model(nominal, setup, method=method)   # the nominal's scaling (= observability)
-    G, ok = candidate_blocks(model, cand.poses, chunk_map=chunk_map)
+    # the in-process map runs the block batches on local threads, in place (candidate_blocks)
+    G, ok = candidate_blocks(model, cand.poses, chunk_map=None if chunk_map is map else chunk_map)
     if not ok.all():
         rejected = dict(cand.rejected)
         rejected["pose_not_solved"] = rejected.get("pose_not_solved", 0) + int((~ok).sum())

@@ -129,22 +129,32 @@ def _inverse_factor(M: np.ndarray) -> np.ndarray:
     return np.linalg.inv(L)
 
 
-def _whitened_slices(flatF: np.ndarray, N: int, m: int, Linv: np.ndarray):
-    """(start, stop, G_j L⁻ᵀ (stop − start, m, p)) over the candidates in slices of
-    :data:`_PASS_ROWS` (one GEMM each; BLAS computes a row of a product the same way
-    whatever the rows around it, so the slices give the bits of one GEMM over all: tested in
-    ``tests/test_plan_executors.py``)."""
-    for start in range(0, N, _PASS_ROWS):
-        stop = min(N, start + _PASS_ROWS)
-        yield start, stop, (flatF[start * m:stop * m] @ Linv.T).reshape(stop - start, m, -1)
+def _whitened(flatF: np.ndarray, m: int, Linv: np.ndarray, start: int, stop: int) -> np.ndarray:
+    """G_j L⁻ᵀ (stop − start, m, p) of the candidates [start, stop): one GEMM."""
+    return (flatF[start * m:stop * m] @ Linv.T).reshape(stop - start, m, -1)
+
+
+def _over_slices(fn: Callable[[int, int], None], N: int) -> None:
+    """``fn(start, stop)`` over the candidates in slices of :data:`_PASS_ROWS`, on local
+    threads (:func:`~pkmcal.planning.executors.thread_map`); each slice writes its own rows.
+    The slices depend only on N, and each is computed alone, so the bits do not depend on
+    the threads (tested in ``tests/test_plan_executors.py``)."""
+    from pkmcal.planning.executors import thread_map
+
+    for _ in thread_map(lambda start: fn(start, min(N, start + _PASS_ROWS)), range(0, N, _PASS_ROWS)):
+        pass
 
 
 def _all_S(flatF: np.ndarray, N: int, m: int, M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """M⁻¹ and S_j = G_j M⁻¹ G_jᵀ (N, m, m) for all candidates."""
     Linv = _inverse_factor(M)
     S = np.empty((N, m, m))
-    for start, stop, W in _whitened_slices(flatF, N, m, Linv):
+
+    def fill(start, stop):
+        W = _whitened(flatF, m, Linv, start, stop)
         S[start:stop] = np.einsum("nip,njp->nij", W, W, optimize=True)
+
+    _over_slices(fill, N)
     return Linv.T @ Linv, S
 
 
@@ -153,18 +163,32 @@ def _all_gains(flatF: np.ndarray, N: int, m: int, M: np.ndarray) -> np.ndarray:
     slice: the values of :func:`_all_S` then ``gains_of``, without holding S of all N."""
     Linv = _inverse_factor(M)
     gain = np.empty(N)
-    for start, stop, W in _whitened_slices(flatF, N, m, Linv):
+
+    def fill(start, stop):
+        W = _whitened(flatF, m, Linv, start, stop)
         _kernels().gains_of(np.einsum("nip,njp->nij", W, W, optimize=True), gain[start:stop])
+
+    _over_slices(fill, N)
     return gain
 
 
 def _leverages(flatF: np.ndarray, N: int, M: np.ndarray) -> np.ndarray:
     """tr(G_j M⁻¹ G_jᵀ) = ‖G_j L⁻ᵀ‖²_F (N,) for all candidates."""
     m = flatF.shape[0] // max(N, 1)
+    Linv = _inverse_factor(M)
     out = np.empty(N)
-    for start, stop, W in _whitened_slices(flatF, N, m, _inverse_factor(M)):
+
+    def fill(start, stop):
+        W = _whitened(flatF, m, Linv, start, stop)
         out[start:stop] = np.einsum("nij,nij->ni", W, W).sum(axis=1)
+
+    _over_slices(fill, N)
     return out
+
+
+#: Candidates per thread below which a rank-m update runs on the calling thread only (the
+#: update is ~1 µs per candidate; handing a range to a thread costs ~50 µs).
+_UPDATE_GRAIN = 2_000
 
 
 class _DState:
@@ -192,7 +216,11 @@ class _DState:
         U = self.Minv @ Gk.T
         Cinv = np.linalg.inv(np.eye(self.m) + sign * self.S[k])
         self.Minv -= sign * (U @ Cinv @ U.T)
-        _kernels().update_and_gain(self.G, np.ascontiguousarray(U.T), Cinv, self.S, sign, self.gain)
+        from pkmcal.planning.executors import run_ranges
+
+        UT, update = np.ascontiguousarray(U.T), _kernels().update_and_gain
+        run_ranges(lambda start, stop: update(self.G, UT, Cinv, self.S, sign, self.gain, start, stop),
+                   self.N, _UPDATE_GRAIN)
         self.M += sign * (Gk.T @ Gk)
         self.updates += 1
         if self.updates % 50 == 0:
