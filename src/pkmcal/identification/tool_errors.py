@@ -109,11 +109,13 @@ def tool_errors(model: Mechanism, model_sensor, real: Mechanism, setup: Measurem
     commands (:func:`commands_for_targets`)."""
     x_c = model.as_pose_array(poses)
     targets = (setup.sensor if target_sensor is None else target_sensor).predict(model.frame(x_c))
-    angles = x_c[:, 2] if model.n_dof == 3 else None
+    angle_columns = np.flatnonzero(np.asarray(model.pose_is_angle, dtype=bool))
+    plate = int(angle_columns[0]) if len(angle_columns) == 1 else None   # a planar machine's plate angle
+    angles = None if plate is None else x_c[:, plate]
     with np.errstate(invalid="ignore"):
         x_m, commands = commands_for_targets(model, model_sensor, targets, angles, model_statics)
     x_eq, _, ok, dropped = settle(real, setup, commands, x_m, ignore_limits)
     y = setup.sensor.predict(real.frame(x_eq))
     tool = np.where(ok, np.linalg.norm(y - targets, axis=1), np.nan)
-    angle = np.where(ok, x_eq[:, 2] - x_c[:, 2], np.nan) if model.n_dof == 3 else np.full(len(x_c), np.nan)
+    angle = np.full(len(x_c), np.nan) if plate is None else np.where(ok, x_eq[:, plate] - x_c[:, plate], np.nan)
     return ToolErrors(model=name, tool=tool, angle=angle, valid=ok, dropped=dropped)
