@@ -20,8 +20,8 @@ reported not converged.
 Structure, chosen for compile time: ONE serial ``@njit(nogil=True, cache=True)`` kernel per
 function (:func:`_ik_range`, :func:`_fk_range`) working on a row range [start, stop).
 Batches of 2 grains or more (``_IK_GRAIN``, ``_FK_GRAIN``) are cut into row chunks that the
-calling thread and a small :mod:`concurrent.futures` pool (``numba.get_num_threads()``
-workers in all, so ``numba.set_num_threads(1)`` still means one thread) take in turn; the
+calling thread and the process's shared thread pool (:func:`pkmcal.parallel.run_rows`:
+``numba.get_num_threads()`` workers in all, so ``numba.set_num_threads(1)`` still means one thread) take in turn; the
 kernels release the GIL, so the chunks run in parallel without ``parallel=True``, whose
 parfor lowering had to be compiled on top of a serial variant. Helpers are plain ``@njit``
 functions (LLVM inlines them; numba-level ``inline="always"`` only re-types them at every
@@ -66,14 +66,12 @@ measured 2.7 µs/pose alone); undecided poses go to the SVD.
 
 from __future__ import annotations
 
-import itertools
 import math
-import os
-import threading
-from concurrent.futures import ThreadPoolExecutor
 
 import numba as nb
 import numpy as np
+
+from pkmcal.parallel import run_rows
 
 #: No ``inline="always"``: LLVM inlines the small helpers anyway (see the module docstring).
 _OPTS = dict(cache=True, nogil=True, error_model="numpy")
@@ -82,52 +80,14 @@ _OPTS = dict(cache=True, nogil=True, error_model="numpy")
 #: thread, so IK is threaded from 10,000 poses and FK from 1,000.
 _IK_GRAIN = 5_000
 _FK_GRAIN = 500
-#: Chunks per worker thread, for load balance when a core is busy with something else.
-_CHUNKS_PER_THREAD = 4
 #: The shared-guess first step (see :func:`fk_newton`) is hoisted from this many rows on.
 _HOIST_FROM = 8
 
-_POOL: ThreadPoolExecutor | None = None
-_POOL_SIZE = 0
-_POOL_PID = 0
-_POOL_LOCK = threading.Lock()
-
-
-def _pool(workers: int) -> ThreadPoolExecutor:
-    """The shared worker pool, (re)created when too small or after a fork (a forked child
-    inherits the pool object but not its threads)."""
-    global _POOL, _POOL_SIZE, _POOL_PID
-    with _POOL_LOCK:
-        if _POOL is None or _POOL_SIZE < workers or _POOL_PID != os.getpid():
-            if _POOL is not None and _POOL_PID == os.getpid():
-                _POOL.shutdown(wait=False)
-            _POOL = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="pkmcal-kinematics")
-            _POOL_SIZE, _POOL_PID = workers, os.getpid()
-        return _POOL
-
 
 def _run_rows(kernel, n: int, grain: int, args: tuple) -> None:
-    """Run ``kernel(*args, start, stop)`` over rows [0, n): in the calling thread for small
-    n, else in chunks shared by the calling thread and ``numba.get_num_threads() − 1`` pool
-    threads (the kernels release the GIL)."""
-    workers = min(nb.get_num_threads(), n // grain) if n >= 2 * grain else 1
-    if workers <= 1:
-        kernel(*args, 0, n)
-        return
-    n_chunks = workers * _CHUNKS_PER_THREAD
-    bounds = [n * i // n_chunks for i in range(n_chunks + 1)]
-    nxt = itertools.count().__next__  # atomic under the GIL
-
-    def work():
-        while (i := nxt()) < n_chunks:
-            kernel(*args, bounds[i], bounds[i + 1])
-
-    pool = _pool(workers - 1)
-    futures = [pool.submit(work) for _ in range(workers - 1)]
-    work()
-    for f in futures:  # every chunk is taken; wait only for those a worker started
-        if not f.cancel():
-            f.result()
+    """Run ``kernel(*args, start, stop)`` over rows [0, n) on this process's threads
+    (:func:`pkmcal.parallel.run_rows`: the calling thread alone for small n)."""
+    run_rows(lambda start, stop: kernel(*args, start, stop), n, grain)
 
 
 def _f64(a) -> np.ndarray:

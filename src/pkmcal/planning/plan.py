@@ -79,7 +79,7 @@ def candidate_blocks(model: PlanningModel, poses: np.ndarray, *, batch: int = BL
                      chunk_map: Callable | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``model.blocks`` of the accepted candidate ``poses``, in ⌈N / batch⌉ near-equal
     batches: G (N, k, n) and the solved flags. ``chunk_map`` None (default): the batches
-    run in this process on local threads (:func:`~pkmcal.planning.executors.thread_map`),
+    run in this process on local threads (:func:`~pkmcal.parallel.thread_map`),
     each written straight into G; else ``chunk_map(model.blocks, batches)`` yields them in
     order (a process pool, Dask) and they are copied in.
 
@@ -88,7 +88,7 @@ def candidate_blocks(model: PlanningModel, poses: np.ndarray, *, batch: int = BL
     (e.g. NumPy below a few dozen poses, compiled above) take the same path as one call
     on all N: the blocks are bit-identical to ``model.blocks(poses)``.
     """
-    from pkmcal.planning.executors import thread_map
+    from pkmcal.parallel import thread_map
 
     parts = np.array_split(poses, max(1, -(-len(poses) // batch)))
     bounds = np.cumsum([0] + [len(p) for p in parts])
