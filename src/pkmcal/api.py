@@ -51,7 +51,7 @@ def load_machine(spec: str | os.PathLike) -> Mechanism:
     >>> pkmcal.load_machine("kossel-mini").kind
     'linear-delta'
     """
-    from pkmcal.io.machine_file import load_machine as _load
+    from pkmcal.io.lookup import load_machine as _load
 
     return _load(spec)
 
@@ -67,7 +67,7 @@ def save_machine(machine: Mechanism, path: str | os.PathLike) -> None:
 def load_setup(spec: str | os.PathLike, machine: Mechanism | None = None) -> MeasurementSetup:
     """A measurement setup (sensor, noise, priors) from a setup file or a built-in name,
     bound to ``machine`` when given (checks that the sensor can measure it)."""
-    from pkmcal.io.setup_file import load_setup as _load
+    from pkmcal.io.lookup import load_setup as _load
 
     return _load(spec, machine)
 

@@ -105,7 +105,7 @@ def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_rea
     if output is not None and save_real is not None and output == save_real:
         raise PkmcalError("-o and --save-real name the same file; choose two paths")
     from pkmcal.io.machine_file import load_machine, machine_to_text
-    from pkmcal.io.setup_file import load_setup
+    from pkmcal.io.lookup import load_setup
 
     nominal = load_machine(machine)
     setup = load_setup(setup_spec, nominal)
@@ -282,8 +282,8 @@ def verify_cmd(calibrated, meas_path, real_spec, poses, nominal, setup_spec, cal
     for name, value in (("--calibration-measurements", calib_meas), ("--clipped", clipped)):
         if value is not None:
             raise PkmcalError(f"{name} applies to --measurements (measured held-out data), not to --real")
-    from pkmcal.io.machine_file import load_machine
-    from pkmcal.io.setup_file import load_setup
+    from pkmcal.io.lookup import load_machine
+    from pkmcal.io.lookup import load_setup
 
     cal = load_machine(calibrated)
     real = load_machine(real_spec)
@@ -330,7 +330,7 @@ def verify_cmd(calibrated, meas_path, real_spec, poses, nominal, setup_spec, cal
 
 def _identified_setup(path: str, cal, what: str):
     """The setup identified with the calibrated machine (its file's ``setup:``)."""
-    from pkmcal.io.setup_file import load_setup
+    from pkmcal.io.lookup import load_setup
 
     if "setup" not in cal.metadata or not os.path.exists(path):
         raise PkmcalError(f"{what}: {path} has no identified setup (setup:, written by 'pkmcal identify' since "
@@ -341,7 +341,7 @@ def _identified_setup(path: str, cal, what: str):
 def _nominal_from_record(cal):
     """The nominal machine the calibration record names, when it is a built-in or a file
     that still exists; ``(machine or None, why not)``."""
-    from pkmcal.io.machine_file import load_machine
+    from pkmcal.io.lookup import load_machine
     from pkmcal.mechanisms.library import is_builtin_name
 
     record = dict(cal.metadata.get("calibration") or {})
@@ -389,9 +389,9 @@ def _verify_measured(calibrated, meas_path, nominal, setup_spec, calib_meas, cli
     """``verify --measurements``: the text or JSON of the held-out validation."""
     from pkmcal.cli.klipper_probe_cmd import machine_and_setup
     from pkmcal.identification.heldout import heldout_validation
-    from pkmcal.io.machine_file import load_machine
+    from pkmcal.io.lookup import load_machine
     from pkmcal.io.measurements import apply_clipped_policy, load_measurements
-    from pkmcal.io.setup_file import load_setup
+    from pkmcal.io.lookup import load_setup
     from pkmcal.mechanisms.pose_pairs import read_by
 
     cal = load_machine(calibrated)

@@ -103,7 +103,7 @@ def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None, m
         check_output(ini, [calibrated])
         if output is not None and os.path.abspath(ini) == os.path.abspath(output):
             raise PkmcalError("-o and --ini name the same file; choose two paths")
-    from pkmcal.io.machine_file import load_machine
+    from pkmcal.io.lookup import load_machine
 
     machine = load_machine(calibrated)
     ini_text = None
@@ -141,7 +141,7 @@ def _refit(machine, measurements: str, setup_spec: str | None, heldout: str | No
                           f"{machine.kind or 'machine of another kind'}")
     from pkmcal.identification.firmware_refit import firmware_refit
     from pkmcal.io.measurements import load_measurements
-    from pkmcal.io.setup_file import load_setup
+    from pkmcal.io.lookup import load_setup
 
     if setup_spec is None:
         setup_spec = ((machine.metadata or {}).get("calibration") or {}).get("setup")

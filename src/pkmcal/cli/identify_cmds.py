@@ -334,8 +334,8 @@ def identifiability_cmd(machine, poses_arg, setup_spec, poses, method, fix, free
     rank, singular_values, null_space, fixed, weak, ...
     """
     from pkmcal.identification.identifiability import identifiability
-    from pkmcal.io.machine_file import load_machine
-    from pkmcal.io.setup_file import load_setup
+    from pkmcal.io.lookup import load_machine
+    from pkmcal.io.lookup import load_setup
 
     poses = poses_file(poses, poses_arg, "identifiability")
     nominal = load_machine(machine)

@@ -130,7 +130,7 @@ N_ROUND_TRIP = 300
 @click.option("--seed", default=0, show_default=True, type=SEED, help="Seed of the random poses.")
 def info_cmd(machine: str, n_poses: int | None, poses: str | None, seed: int) -> None:
     """Describe MACHINE (default: stewart-prototype): summary, workspace, IK→FK round trip."""
-    from pkmcal.io.machine_file import load_machine
+    from pkmcal.io.lookup import load_machine
 
     n_poses, poses_path = count_or_poses_file(poses, n_poses, N_ROUND_TRIP)
     if n_poses > 100_000:

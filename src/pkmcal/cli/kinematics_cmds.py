@@ -73,7 +73,7 @@ def ik_cmd(machine: str, poses: str, output: str | None, units_comment: bool = F
     columns, their actuator columns; rotary actuators in degrees.)
     """
     check_output(output, [poses, machine])
-    from pkmcal.io.machine_file import load_machine
+    from pkmcal.io.lookup import load_machine
 
     mech = load_machine(machine)
     table = read_table(poses, mech.pose_names, kinds=column_kinds(mech.pose_names, mech.pose_is_angle),
@@ -140,7 +140,7 @@ def fk_cmd(machine: str, legs: str, output: str | None, guess: str | None, units
     LEGS.csv; the exit code is still 0 (check the columns).
     """
     check_output(output, [legs, machine])
-    from pkmcal.io.machine_file import load_machine
+    from pkmcal.io.lookup import load_machine
 
     mech = load_machine(machine)
     start = None if guess is None else parse_pose_option(guess, mech, "--guess")

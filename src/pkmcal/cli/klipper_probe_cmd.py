@@ -44,7 +44,7 @@ def klipper_probe_cmd(source: str, machine_spec: str, setup_spec: str, output: s
     """
     check_output(output, [source])
     from pkmcal.io.klipper_probe import read_klipper_probe
-    from pkmcal.io.machine_file import load_machine
+    from pkmcal.io.lookup import load_machine
 
     machine = load_machine(machine_spec)
     setup = _setup_of_kind(setup_spec, machine, "z-probe", "Klipper's probe results")
@@ -58,8 +58,8 @@ def machine_and_setup(machine_spec: str, setup_spec: str):
     read as pose pairs (:func:`pkmcal.mechanisms.pose_pairs.read_by`). A setup that neither
     can take is the error of the machine itself."""
     from pkmcal.errors import PkmcalError
-    from pkmcal.io.machine_file import load_machine
-    from pkmcal.io.setup_file import load_setup
+    from pkmcal.io.lookup import load_machine
+    from pkmcal.io.lookup import load_setup
     from pkmcal.mechanisms.pose_pairs import PosePairs
 
     nominal = load_machine(machine_spec)
@@ -80,7 +80,7 @@ def machine_and_setup(machine_spec: str, setup_spec: str):
 def _setup_of_kind(setup_spec: str, machine, kind: str, what: str):
     """The setup ``setup_spec`` for ``machine``; an error unless its sensor is ``kind``."""
     from pkmcal.errors import PkmcalError
-    from pkmcal.io.setup_file import load_setup
+    from pkmcal.io.lookup import load_setup
 
     setup = load_setup(setup_spec, machine)
     if setup.sensor.kind != kind:
@@ -125,7 +125,7 @@ def klipper_analyze_cmd(source: str, machine_spec: str, setup_spec: str, output:
     check_output(output, [source])
     from pkmcal.errors import PkmcalError
     from pkmcal.io.klipper_analyze import read_klipper_analyze
-    from pkmcal.io.machine_file import load_machine
+    from pkmcal.io.lookup import load_machine
     from pkmcal.mechanisms.pose_pairs import PosePairs
 
     machine = load_machine(machine_spec)

@@ -115,8 +115,8 @@ def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, 
     commands lambda1..; prints O1..O5 of the chosen set. Large candidate sets are checked in
     chunks, which --workers / --dask run in parallel (same plan whatever the backend).
     """
-    from pkmcal.io.machine_file import load_machine
-    from pkmcal.io.setup_file import load_setup
+    from pkmcal.io.lookup import load_machine
+    from pkmcal.io.lookup import load_setup
     from pkmcal.planning.executors import chunk_map
     from pkmcal.planning.margins import has_margins, resolve_margin
     from pkmcal.planning.plan import plan_poses
@@ -178,8 +178,8 @@ def observability_cmd(machine, poses_arg, poses, setup_spec, as_json, mapping=No
     parameters (as 'pkmcal plan'). O1 is D-optimality, O4 the noise amplification index.
     (The former spelling 'observability MACHINE POSES.csv' still works.)
     """
-    from pkmcal.io.machine_file import load_machine
-    from pkmcal.io.setup_file import load_setup
+    from pkmcal.io.lookup import load_machine
+    from pkmcal.io.lookup import load_setup
     from pkmcal.planning.plan import pose_set_indices
 
     poses = poses_file(poses, poses_arg, "observability")

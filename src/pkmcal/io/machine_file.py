@@ -55,9 +55,9 @@ from pkmcal.io._yaml import (
 )
 from pkmcal.io.atomic import atomic_write_text
 from pkmcal.io.limits import MAX_DESCRIPTION_CHARS, MAX_NAME_CHARS, magnitude_problem
+from pkmcal.io.lookup import load_machine  # noqa: F401  (re-exported: the front door lives in io.lookup)
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.mechanisms.hexapod import DEFAULT_ACTUATOR_UNIT, HEXAPOD_PARAM_NAMES, N_LEGS, Hexapod, HexapodLimits
-from pkmcal.mechanisms.library import builtin_machine, is_builtin_name
 from pkmcal.registry import MACHINE_FILE_MODULES, PARAMETER_FILE_KINDS
 
 MACHINE_FILE_SUFFIXES = (".yaml", ".yml")
@@ -741,23 +741,6 @@ def read_machine_file(path: str | os.PathLike) -> Mechanism:
     machine = machine_from_text(text, path)
     record_source("machine", machine.name, os.fspath(path))
     return machine
-
-
-def load_machine(spec: str | os.PathLike) -> Mechanism:
-    """A machine by built-in name (``stewart-prototype``, ``symmetric:...``; see
-    ``pkmcal machines``) or by the path of a YAML machine file. An existing file wins over
-    a built-in of the same name."""
-    text = os.fspath(spec)
-    if os.path.exists(text):
-        return read_machine_file(text)
-    if is_builtin_name(text):
-        machine = builtin_machine(text)
-        record_source("machine", machine.name, "built-in")
-        return machine
-    if text.lower().endswith(MACHINE_FILE_SUFFIXES) or os.sep in text or "/" in text:
-        raise InputFileError(text, "no such machine file; check the path (or run 'pkmcal machines' for "
-                                   "the built-in machines)")
-    return builtin_machine(text)  # raises: unknown machine, listing the built-in names
 
 
 def machine_to_text(machine: Mechanism) -> str:

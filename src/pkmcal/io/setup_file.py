@@ -124,6 +124,7 @@ from pkmcal.sensors.library import (  # noqa: F401  (re-exported: the built-ins 
     bind_setup,
     builtin_setup,
 )
+from pkmcal.io.lookup import load_setup  # noqa: F401  (re-exported: the front door lives in io.lookup)
 from pkmcal.sensors.printed_distance import PrintedDistanceSensor
 from pkmcal.sensors.z_probe import MAX_BED_TILT_DEG, ZProbeSensor
 
@@ -343,23 +344,14 @@ def _expand(path, lines, value, n: int, loc: tuple, unit: str) -> np.ndarray:
     return np.full(n, float(value))
 
 
-def load_setup(path: str | os.PathLike, machine=None) -> MeasurementSetup:
-    """The measurement setup of a YAML file, or of a built-in setup name; bound to
-    ``machine`` (:func:`bind_setup`) when one is given.
+def read_setup_file(path: str | os.PathLike, machine=None) -> MeasurementSetup:
+    """The measurement setup of the YAML file ``path`` (it exists; a built-in name is
+    resolved by :func:`pkmcal.io.lookup.load_setup`, re-exported here as ``load_setup``);
+    bound to ``machine`` (:func:`bind_setup`) when one is given.
 
     Raises :class:`~pkmcal.errors.InputFileError` naming the file, line and key.
     """
     p = Path(path)
-    try:
-        exists = p.exists()
-    except (OSError, ValueError):  # a name too long for the file system, a NUL byte
-        exists = False
-    if not exists:
-        if str(path) in BUILTIN_SETUPS:
-            return builtin_setup(str(path), machine)
-        raise PkmcalError(
-            f"setup file '{path}' does not exist and is not a built-in setup ({', '.join(BUILTIN_SETUPS)})"
-        )
     try:
         text = p.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:

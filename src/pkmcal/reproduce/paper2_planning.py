@@ -28,7 +28,7 @@ import time
 
 import numpy as np
 
-from pkmcal.io.setup_file import load_setup
+from pkmcal.io.lookup import load_setup
 from pkmcal.mechanisms.library import stewart_prototype
 from pkmcal.planning.blocks import planning_model, raw_blocks
 from pkmcal.planning.candidates import generate_candidates
