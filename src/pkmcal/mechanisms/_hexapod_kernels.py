@@ -668,6 +668,12 @@ def singularity_certificate(J, m, C, L):
 
 
 @nb.njit(**_OPTS)
+def _tilt(cosine):
+    """The joint tilt (rad) of a cosine, clipped to [−1, 1]; NaN stays NaN."""
+    return math.acos(max(-1.0, min(1.0, cosine))) if cosine == cosine else cosine
+
+
+@nb.njit(**_OPTS)
 def _limits_range(poses, base, platform, offset, gains, stroke, base_axis, platform_axis, pairs, enabled, limit,
                   out, start, stop):
     """out[k] (columns stroke, U tilt, S tilt, leg collision, singularity:
@@ -710,25 +716,24 @@ def _limits_range(poses, base, platform, offset, gains, stroke, base_axis, platf
         out[k, 0] = worst - limit[5]
         for c in range(1, 5):
             out[k, c] = np.nan
+        # the largest tilt is acos of the smallest cosine (acos decreases): one acos per joint kind
         if enabled[1]:
-            worst = -np.inf
+            worst = np.inf
             for i in range(6):
                 d = u[i, 0] * base_axis[i, 0] + u[i, 1] * base_axis[i, 1] + u[i, 2] * base_axis[i, 2]
-                t = math.acos(max(-1.0, min(1.0, d))) if d == d else d
-                if not t <= worst:
-                    worst = t
-            out[k, 1] = limit[0] - limit[6] - worst
+                if not d >= worst:  # NaN propagates
+                    worst = d
+            out[k, 1] = limit[0] - limit[6] - _tilt(worst)
         if enabled[2]:
-            worst = -np.inf
+            worst = np.inf
             for i in range(6):
                 d = 0.0
                 for q in range(3):
                     d += u[i, q] * (R[q, 0] * platform_axis[i, 0] + R[q, 1] * platform_axis[i, 1]
                                     + R[q, 2] * platform_axis[i, 2])
-                t = math.acos(max(-1.0, min(1.0, d))) if d == d else d
-                if not t <= worst:
-                    worst = t
-            out[k, 2] = limit[1] - limit[6] - worst
+                if not d >= worst:
+                    worst = d
+            out[k, 2] = limit[1] - limit[6] - _tilt(worst)
         if enabled[3]:
             worst = np.inf
             for q in range(n_pairs):
