@@ -104,6 +104,7 @@ from pkmcal.io._yaml import (
 )
 from pkmcal.io.atomic import atomic_write_text
 from pkmcal.io.limits import MAX_DESCRIPTION_CHARS, magnitude_problem
+from pkmcal.io.lookup import load_setup  # noqa: F401  (re-exported: the front door lives in io.lookup)
 from pkmcal.mechanisms.statics import StaticsModel
 from pkmcal.sensors import (
     DistanceSensor,
@@ -124,7 +125,6 @@ from pkmcal.sensors.library import (  # noqa: F401  (re-exported: the built-ins 
     bind_setup,
     builtin_setup,
 )
-from pkmcal.io.lookup import load_setup  # noqa: F401  (re-exported: the front door lives in io.lookup)
 from pkmcal.sensors.printed_distance import PrintedDistanceSensor
 from pkmcal.sensors.z_probe import MAX_BED_TILT_DEG, ZProbeSensor
 
