@@ -4,11 +4,15 @@ Why numba: the update S_j ← S_j ∓ (G_j U) C⁻¹ (G_j U)ᵀ for all N candid
 product (N·m × n) · (n × m) followed by N small m×m products and N log-determinants.
 Through NumPy that is a GEMM plus batched LAPACK calls, and a multi-threaded BLAS slows the
 skinny GEMM whenever the other core is busy. Here each
-candidate is done in registers, serially, with no allocation per candidate.
+candidate is done in registers, serially, with no allocation per candidate. The caller
+factors the m × m middle, ±C⁻¹ = Σ_c coef_c q'_c q'_cᵀ (coef_c = ±1), into V = [v_1 … v_m]
+(:meth:`pkmcal.planning.selection._DState.update`), so that per candidate
 
-    A_j = G_j U  (m × m),   S_j ← S_j − sign · A_j C⁻¹ A_jᵀ,   gain_j = log det(I + S_j)
+    E_j = G_j V  (m × m),   S_j ← S_j − Σ_c coef_c e_c e_cᵀ  (e_c column c of E_j),
+    gain_j = log det(I + S_j)
 
-(gain −∞ when I + S_j is not positive definite), U = M⁻¹ G_kᵀ, C = I + sign·S_k.
+(gain −∞ when I + S_j is not positive definite): one m × n by n × m product and m rank-one
+terms, without the m × m product by C⁻¹ (26 % less time per candidate at m = 6, n = 42).
 """
 
 from __future__ import annotations
@@ -43,35 +47,29 @@ def _logdet_i_plus(S, j, L):  # pragma: no cover - compiled
 
 
 @nb.njit(**_OPTS)
-def update_and_gain(G, UT, Cinv, S, sign, gain, start, stop):  # pragma: no cover - compiled
+def update_and_gain(G, VT, coef, S, gain, start, stop):  # pragma: no cover - compiled
     """In place, for the candidates j in [start, stop): S_j (of S (N, m, m)) rank-m update
-    and gain_j = log det(I + S_j); see module doc. Each candidate is computed alone, so
-    ranges can run on separate threads (the kernel releases the GIL).
+    S_j ← S_j − Σ_c coef_c (G_j v_c)(G_j v_c)ᵀ and gain_j = log det(I + S_j); see module doc.
+    Each candidate is computed alone, so ranges can run on separate threads (the kernel
+    releases the GIL).
 
-    G (N, m, n) candidate blocks, UT (m, n) = Uᵀ, Cinv (m, m)."""
+    G (N, m, n) candidate blocks, VT (m, n) rows v_cᵀ, coef (m,)."""
     _, m, p = G.shape
-    A = np.empty((m, m))
-    B = np.empty((m, m))
+    E = np.empty((m, m))
     L = np.empty((m, m))
     for j in range(start, stop):
         for i in range(m):
-            for k in range(m):
+            for c in range(m):
                 s = 0.0
                 for q in range(p):
-                    s += G[j, i, q] * UT[k, q]
-                A[i, k] = s
-        for i in range(m):
-            for k in range(m):
-                s = 0.0
-                for q in range(m):
-                    s += A[i, q] * Cinv[q, k]
-                B[i, k] = s
+                    s += G[j, i, q] * VT[c, q]
+                E[i, c] = s
         for i in range(m):
             for k in range(i, m):
                 s = 0.0
-                for q in range(m):
-                    s += B[i, q] * A[k, q]
-                v = S[j, i, k] - sign * s
+                for c in range(m):
+                    s += coef[c] * E[i, c] * E[k, c]
+                v = S[j, i, k] - s
                 S[j, i, k] = v
                 S[j, k, i] = v
         gain[j] = _logdet_i_plus(S, j, L)

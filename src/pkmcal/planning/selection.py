@@ -211,17 +211,22 @@ class _DState:
         _kernels().gains_of(self.S, self.gain)
 
     def update(self, k: int, sign: float) -> None:
-        """M ← M ± G_kᵀG_k: M⁻¹ ∓= U C⁻¹ Uᵀ, S_j ∓= A_j C⁻¹ A_jᵀ, U = M⁻¹G_kᵀ, C = I ± S_k,
-        A_j = G_j U, and the gains, for all j (compiled loop, :mod:`._selection_kernels`)."""
+        """M ← M ± G_kᵀG_k: M⁻¹ ∓= U C⁻¹ Uᵀ and S_j ∓= (G_j U) C⁻¹ (G_j U)ᵀ for all j, with
+        U = M⁻¹G_kᵀ and C = I ± S_k, and the gains (compiled loop, :mod:`._selection_kernels`).
+
+        With C = Q diag(μ) Qᵀ (symmetric eigendecomposition) and v_c = U q_c / √|μ_c|, both
+        updates are sums of m rank-one terms: ∓ Σ_c sgn(μ_c) v_c v_cᵀ and
+        ∓ Σ_c sgn(μ_c) (G_j v_c)(G_j v_c)ᵀ, so a candidate costs G_j V and its outer products."""
         Gk = self.G[k]
         U = self.Minv @ Gk.T
-        Cinv = np.linalg.inv(np.eye(self.m) + sign * self.S[k])
-        self.Minv -= sign * (U @ Cinv @ U.T)
+        mu, Q = np.linalg.eigh(np.eye(self.m) + sign * self.S[k])
+        V = (U @ Q) / np.sqrt(np.abs(mu))
+        coef = sign * np.sign(mu)
+        self.Minv -= (V * coef) @ V.T
         from pkmcal.parallel import run_rows
 
-        UT, update = np.ascontiguousarray(U.T), _kernels().update_and_gain
-        run_rows(lambda start, stop: update(self.G, UT, Cinv, self.S, sign, self.gain, start, stop),
-                 self.N, _UPDATE_GRAIN)
+        VT, update = np.ascontiguousarray(V.T), _kernels().update_and_gain
+        run_rows(lambda start, stop: update(self.G, VT, coef, self.S, self.gain, start, stop), self.N, _UPDATE_GRAIN)
         self.M += sign * (Gk.T @ Gk)
         self.updates += 1
         if self.updates % 50 == 0:
