@@ -58,14 +58,15 @@ def study(study_file, output, seed, trials, workers, dask_address, resume, quiet
     click.echo(f"study '{spec.name}': {n_cfg} configuration(s) x {spec.trials} trials; ran {result.trials_run} "
                f"trial(s) in {result.seconds:.1f} s ({result.backend}, {result.workers} worker(s))")
     shown = {"heldout_position_rms_mm": ("position", "mm"), "heldout_tilt_rms_deg": ("tilt", "deg"),
-             "heldout_height_rms_mm": ("height", "mm")}
+             "heldout_height_rms_mm": ("height", "mm"),
+             "heldout_orientation_rms_deg": ("orientation", "deg")}   # shown without a tilt (a planar plate angle)
     by_config: dict[int, dict] = {}
     for row in result.summary:
         by_config.setdefault(int(row["config"]), {})[row["metric"]] = row
     for rows in by_config.values():
         r0 = next(iter(rows.values()))
         parts = [f"{name} {rows[m]['median']:.4g} {unit}" for m, (name, unit) in shown.items()
-                 if m in rows and rows[m]["n"]]
+                 if m in rows and rows[m]["n"] and not (name == "orientation" and "heldout_tilt_rms_deg" in rows)]
         click.echo(f"  {r0['machine']} | {r0['setup']} | {r0['plan']} {int(r0['n_poses'])} | {r0['method']}: "
                    f"held-out rms after, median: {', '.join(parts) or 'no trial completed'}")
     failed = [r for r in result.summary if r["metric"] == "failed" and r["mean"] > 0]

@@ -1,7 +1,8 @@
 """Study figures (matplotlib, rendered deterministically by :func:`pkmcal.report.figures.render`).
 
 * ``error-vs-poses``: per machine and method, the median held-out position error and tilt
-  error after calibration (the tilt is what dial indicators calibrate) and the median rms
+  error after calibration (the tilt is what dial indicators calibrate; for a machine
+  without tilt its height error, or its orientation error: :data:`MIDDLE_ROW`) and the median rms
   parameter error (θ̂ − θ* over the free length parameters) against the number of planned poses, one line per setup × plan, with
   the 95 % intervals of the medians (binomial order statistics) as bars; log-log axes.
   Paper 2 Fig. 6 is this plot for random poses.
@@ -32,8 +33,31 @@ def _configs(cols: dict) -> list[tuple[int, str]]:
     return out
 
 
+def _bar(m: float, lo: float, hi: float) -> list[list[float]]:
+    """Error-bar lengths of the interval [lo, hi] about ``m``: 0 where the interval is
+    undefined (NaN) or, by rounding, on the wrong side of ``m`` (a Wilson interval of 0/n)."""
+    return [[m - lo if m - lo > 0 else 0.0], [hi - m if hi - m > 0 else 0.0]]
+
+
 def _finite(v: np.ndarray) -> np.ndarray:
     return v[np.isfinite(v)]
+
+
+#: The middle row of ``error-vs-poses``: the first of these the machine has (a hexapod the
+#: tilt, which dial indicators calibrate; a delta the height, which a Z probe does; a planar
+#: machine with a plate angle its orientation).
+MIDDLE_ROW = (("heldout_tilt_rms_deg", "held-out tilt error, rms (deg)"),
+              ("heldout_height_rms_mm", "held-out height error, rms (mm)"),
+              ("heldout_orientation_rms_deg", "held-out orientation error, rms (deg)"))
+
+
+def _middle_row(look: dict, configs: list[int]) -> tuple:
+    """(metric, axis label) of the middle row for a panel of ``configs``: the first of
+    :data:`MIDDLE_ROW` summarised for them, (None, None) when none is."""
+    for metric, label in MIDDLE_ROW:
+        if any((c, metric) in look for c in configs):
+            return metric, label
+    return None, None
 
 
 def error_vs_poses(cols: dict, summary: list) -> RenderedFigure | None:
@@ -54,10 +78,16 @@ def error_vs_poses(cols: dict, summary: list) -> RenderedFigure | None:
     with style():
         fig, axes = plt.subplots(3, len(groups), figsize=(4.6 * len(groups), 8.4), squeeze=False, sharex="col")
         for k, ((machine, method), lines) in enumerate(sorted(groups.items())):
+            configs = [c for pts in lines.values() for _, c in pts]
             for row, metric, label in ((0, "heldout_position_rms_mm", "held-out position error, rms (mm)"),
-                                       (1, "heldout_tilt_rms_deg", "held-out tilt error, rms (deg)"),
+                                       (1,) + _middle_row(look, configs),
                                        (2, "param_error_rms_mm", "parameter error θ̂ − θ*, rms (mm)")):
                 ax = axes[row, k]
+                if metric is None:
+                    ax.text(0.5, 0.5, "no orientation, tilt or height error\nfor this machine", ha="center",
+                            va="center", fontsize=8, transform=ax.transAxes)
+                    ax.set_yticks([])
+                    continue
                 for (setup, plan), pts in sorted(lines.items()):
                     pts.sort()
                     x, y, lo, hi = [], [], [], []
@@ -131,14 +161,13 @@ def coverage(cols: dict) -> RenderedFigure:
             if frac.size:
                 lo, hi = t_interval(frac)
                 m = frac.mean()
-                ax.errorbar([m], [k - 0.15], xerr=[[m - lo if np.isfinite(lo) else 0], [hi - m if np.isfinite(hi) else 0]],
-                            fmt="o", ms=3, color="#1f77b4", label="per-parameter 95 % intervals" if k == 0 else None)
+                ax.errorbar([m], [k - 0.15], xerr=_bar(m, lo, hi), fmt="o", ms=3, color="#1f77b4", label="per-parameter 95 % intervals" if k == 0 else None)
             ell = _finite(cols["ellipsoid_within_95"][cfg == c])
             if ell.size:
                 kk = int(ell.sum())
                 lo, hi = wilson_interval(kk, ell.size)
                 m = kk / ell.size
-                ax.errorbar([m], [k + 0.15], xerr=[[m - lo], [hi - m]], fmt="s", ms=3, color="#2ca02c",
+                ax.errorbar([m], [k + 0.15], xerr=_bar(m, lo, hi), fmt="s", ms=3, color="#2ca02c",
                             label="joint 95 % ellipsoid" if k == 0 else None)
         ax.axvline(0.95, color="k", lw=0.8, ls="--")
         ax.set_yticks(range(len(configs)))

@@ -93,6 +93,9 @@ COLUMNS: dict[str, tuple[str, str]] = {
     "heldout_tilt_rms_before_deg": ("float", "rms tilt error with the nominal model"),
     "heldout_height_rms_before_mm": ("float", "rms height error with the nominal model"),
 }
+#: The held-out error columns (empty for a measure the machine's kind does not have:
+#: :func:`pkmcal.study.trial.absent_columns`).
+HELDOUT_COLUMNS = tuple(c for c in COLUMNS if c.startswith("heldout_") and c != "heldout_used")
 #: The columns that identify a configuration.
 CONFIG_COLUMNS = ("config", "machine", "setup", "plan", "algorithm", "n_poses", "method", "identification",
                   "weighted", "plan_resampled")
@@ -305,16 +308,20 @@ SUMMARY_HEADER = CONFIG_COLUMNS + ("metric", "n", "mean", "mean_ci_low", "mean_c
 _FLAGS = ("failed", "all_within_95", "ellipsoid_within_95")
 
 
-def summarise(cols: dict[str, np.ndarray], metrics: tuple[str, ...] = SUMMARY_METRICS) -> list[dict]:
-    """Summary rows (module docstring) of the trial columns ``cols``."""
+def summarise(cols: dict[str, np.ndarray], metrics: tuple[str, ...] = SUMMARY_METRICS,
+              absent: dict[int, tuple[str, ...]] | None = None) -> list[dict]:
+    """Summary rows (module docstring) of the trial columns ``cols``; ``absent``
+    {config: columns} the metrics a configuration's machine does not have (a delta's
+    orientation error), left out rather than summarised as an empty set."""
     out = []
     cfg = cols["config"].astype(int) if len(cols["config"]) else np.zeros(0, int)
     for c in np.unique(cfg):
         sel = cfg == c
         first = np.flatnonzero(sel)[0]
         ident = {k: cols[k][first] for k in CONFIG_COLUMNS}
+        skip = () if absent is None else absent.get(int(c), ())
         for metric in metrics:
-            if metric not in cols:
+            if metric not in cols or metric in skip:
                 continue
             v = cols[metric][sel]
             v = v[np.isfinite(v)]
@@ -355,5 +362,5 @@ def summary_lookup(rows: list[dict]) -> dict[tuple[int, str], dict]:
     return {(int(r["config"]), r["metric"]): r for r in rows}
 
 
-__all__ = ["COLUMNS", "CONFIG_COLUMNS", "ResultFolder", "SUMMARY_METRICS", "format_row", "format_summary",
+__all__ = ["COLUMNS", "CONFIG_COLUMNS", "HELDOUT_COLUMNS", "ResultFolder", "SUMMARY_METRICS", "format_row", "format_summary",
            "median_interval", "parse_table", "read_trials", "summarise", "t_interval", "wilson_interval"]

@@ -169,7 +169,7 @@ def run_study(study: Study, out: str | Path, *, workers: int | None = None, dask
     header = ctx.names
     atomic_write_text(out / "trials.csv", ",".join(header) + "\n" + "".join(x + "\n" for x in lines))
     cols = parse_table(header, lines)
-    summary = summarise(cols)
+    summary = summarise(cols, absent=ctx.absent_metrics())
     atomic_write_text(out / "summary.csv", format_summary(summary))
     if figures:
         from pkmcal.study.page import write_page

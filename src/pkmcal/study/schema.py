@@ -95,6 +95,7 @@ class _Machine(_Strict):
     errors: list[_ErrorGroup] | None = None
     real: str | None = None
     ignore_limits: list[str] = []
+    setups: list[str] | None = None
 
 
 class _Setup(_Strict):
@@ -208,8 +209,22 @@ class MachineSpec:
 
 @dataclass(frozen=True)
 class SetupSpec:
+    """A measurement setup. ``bound``: per study machine, the setup bound to that machine
+    (:func:`study_setup`; a planar tracker takes the machine's pose dimension and actuator
+    kind), None where the machine is not studied with it (its ``setups:`` list); empty: the
+    setup as given for every machine (bound when the study is prepared). ``setup`` is the
+    setup as given, or bound to the first machine that uses it."""
+
     label: str
     setup: MeasurementSetup
+    bound: tuple[MeasurementSetup | None, ...] = ()
+
+    def for_machine(self, machine: int, nominal: Mechanism) -> MeasurementSetup | None:
+        """The setup machine ``machine`` (index, its nominal ``nominal``) is studied with,
+        or None."""
+        if self.bound:
+            return self.bound[machine]
+        return study_setup(self.setup, nominal, f"study setup '{self.label}'")
 
 
 @dataclass(frozen=True)
@@ -268,10 +283,24 @@ class Study:
         _unique("setup", [s.label for s in self.setups])
         _unique("plan", [p.label for p in self.plans])
         _unique("method", [m.label for m in self.methods])
-        for m in self.machines:
-            if m.nominal.n_dof != 6:
-                raise PkmcalError(f"study machine '{m.label}': studies verify 6-DOF pose errors; machine "
-                                  f"'{m.nominal.name}' has {m.nominal.n_dof} pose coordinates")
+        for s in self.setups:
+            if s.bound and len(s.bound) != len(self.machines):
+                raise PkmcalError(f"study setup '{s.label}' is bound to {len(s.bound)} machines; the study has "
+                                  f"{len(self.machines)}")
+        for i, m in enumerate(self.machines):
+            if all(s.bound and s.bound[i] is None for s in self.setups):
+                raise PkmcalError(f"study machine '{m.label}' is studied with none of the setups")
+        if self.heldout_file is not None:
+            kinds = {m.nominal.pose_names for m in self.machines}
+            if len(kinds) > 1:
+                raise PkmcalError("a held-out pose file gives the poses of one kind of machine; these machines have "
+                                  f"poses {' and '.join('(' + ', '.join(k) + ')' for k in sorted(kinds))}: use "
+                                  "heldout: {poses: N} (random reachable poses of each machine)")
+
+    def setup_for(self, machine: int, setup: int) -> MeasurementSetup | None:
+        """Setup ``setup`` bound to machine ``machine`` (indices), or None where that machine
+        is not studied with it."""
+        return self.setups[setup].for_machine(machine, self.machines[machine].nominal)
 
     def with_seed(self, seed: int) -> "Study":
         return replace(self, seed=int(seed))
@@ -291,6 +320,7 @@ class Study:
                           [[g.pattern, g.distribution, repr(g.size)] for g in m.errors], list(m.ignore_limits)]
                          for m in self.machines],
             "setups": [[s.label, setup_to_yaml(s.setup)] for s in self.setups],
+            **self._bound_fingerprint(),
             "plans": [[p.label, p.algorithm, list(p.poses), p.candidates, p.resample, repr(p.margin), p.index]
                       for p in self.plans],
             "methods": [[m.label, m.method, m.weighted, m.free and list(m.free),
@@ -301,11 +331,37 @@ class Study:
         }
         return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()
 
+    def _bound_fingerprint(self) -> dict:
+        """``{"bound_setups": ...}`` when a setup is bound to a machine otherwise than as
+        given (another pose dimension, actuator kind, or not used by it), else ``{}`` (so
+        that the studies of one kind of machine keep their fingerprints)."""
+        texts = [[None if b is None else setup_to_yaml(b) for b in s.bound] for s in self.setups]
+        if all(t == setup_to_yaml(s.setup) for s, ts in zip(self.setups, texts) for t in ts):
+            return {}
+        return {"bound_setups": [[s.label, ts] for s, ts in zip(self.setups, texts)]}
+
 
 def _unique(what: str, labels: list[str]) -> None:
     seen = {x for x in labels if labels.count(x) > 1}
     if seen:
         raise PkmcalError(f"two {what}s have the label '{sorted(seen)[0]}'; give each a distinct 'label:'")
+
+
+def study_setup(setup: MeasurementSetup, machine: Mechanism, source: str) -> MeasurementSetup:
+    """``setup`` bound to ``machine`` (:func:`pkmcal.sensors.library.bind_setup`: a planar
+    tracker takes the machine's pose dimension); a :class:`PkmcalError` naming ``source``
+    when its sensor cannot measure the machine, or when the machine settles at static
+    equilibrium (redundantly actuated, paper 3) and the setup has no ``simulation:``
+    stiffness and load to simulate and verify it with."""
+    from pkmcal.identification.simulation import settles_at_equilibrium
+    from pkmcal.sensors.library import bind_setup
+
+    bound = bind_setup(setup, machine, source)
+    if settles_at_equilibrium(machine) and bound.simulation is None:
+        raise PkmcalError(f"{source}: machine '{machine.name}' is redundantly actuated and settles at static "
+                          "equilibrium; give the setup a 'simulation:' block with the actuator stiffness and the tool "
+                          "load (e.g. the built-in planar-tracker)")
+    return bound
 
 
 def scaled_noise(setup: MeasurementSetup, reading: float, actuator: float) -> MeasurementSetup:
@@ -381,6 +437,33 @@ def load_study(path: str | os.PathLike) -> Study:
     return _build(p, spec, lines, text)
 
 
+def _by_unit(machine: Mechanism, names: list[str]) -> str:
+    """``names`` (parameters of ``machine``) grouped by unit: "a, b (mm); c (deg)"."""
+    unit = dict(zip(machine.param_names, machine.param_units))
+    groups: dict[str, list[str]] = {}
+    for n in names:
+        groups.setdefault(unit[n], []).append(n)
+    return "; ".join(f"{', '.join(v)} ({u})" for u, v in groups.items())
+
+
+def _machine_setups(path, lines, spec: _Study, machines: list, labels: list[str]) -> list[list[bool]]:
+    """Per machine, per setup: whether the machine is studied with it (its ``setups:``
+    list of setup labels; every setup when it has none)."""
+    out = []
+    for k, m in enumerate(spec.machines):
+        if m.setups is None:
+            out.append([True] * len(labels))
+            continue
+        for j, name in enumerate(m.setups):
+            if name not in labels:
+                _fail(path, lines, ("machines", k, "setups", j), f"'{name}' is not the label of a study setup "
+                      f"({', '.join(labels)})")
+        if not m.setups:
+            _fail(path, lines, ("machines", k, "setups"), f"machine '{machines[k].label}' needs at least one setup")
+        out.append([lab in m.setups for lab in labels])
+    return out
+
+
 def _fail(path, lines, loc: tuple, message: str):
     raise InputFileError(path, f"key '{_key_text(loc)}': {message}", line=_line(lines, loc))
 
@@ -409,8 +492,8 @@ def _build(path: Path, spec: _Study, lines: dict, text: str) -> Study:
                 hit = [n for n in names if fnmatch.fnmatchcase(n, g.parameters)]
                 if not hit:
                     _fail(path, lines, loc + ("errors", k, "parameters"),
-                          f"'{g.parameters}' matches no parameter of '{nominal.name}' (its parameters: "
-                          f"{', '.join(names[:8])}, ...)")
+                          f"'{g.parameters}' matches no parameter of '{nominal.name}'; its parameters: "
+                          f"{_by_unit(nominal, names)}")
                 for n in hit:
                     if n in owner:
                         _fail(path, lines, loc + ("errors", k, "parameters"),
@@ -419,7 +502,9 @@ def _build(path: Path, spec: _Study, lines: dict, text: str) -> Study:
                 angle = [nominal.param_is_angle[names.index(n)] for n in hit]
                 if any(angle) and not all(angle):
                     _fail(path, lines, loc + ("errors", k, "parameters"),
-                          "mixes length and angle parameters; give them separate groups (mm and degrees)")
+                          f"'{g.parameters}' mixes length and angle parameters of '{nominal.name}' "
+                          f"({_by_unit(nominal, hit)}); a group's size has one unit: give them separate groups "
+                          "(size in mm for lengths, degrees for angles), e.g. one pattern per name family")
                 size = float(np.deg2rad(g.size)) if all(angle) else float(g.size)
                 groups.append(ErrorGroup(g.parameters, g.distribution, size))
         limits = tuple(m.ignore_limits)
@@ -431,10 +516,27 @@ def _build(path: Path, spec: _Study, lines: dict, text: str) -> Study:
         machines.append(MachineSpec(m.label or nominal.name, nominal, real, tuple(groups), limits))
 
     setups = []
+    labels = [s.label or Path(s.setup).stem for s in spec.setups]
+    uses = _machine_setups(path, lines, spec, machines, labels)
     for i, s in enumerate(spec.setups):
-        setup = load(("setups", i, "setup"), load_setup, s.setup)
-        setups.append(SetupSpec(s.label or Path(s.setup).stem,
-                                scaled_noise(setup, s.reading_noise_scale, s.actuator_noise_scale)))
+        bound: list[MeasurementSetup | None] = []
+        for k, m in enumerate(machines):
+            if not uses[k][i]:
+                bound.append(None)
+                continue
+            try:
+                setup = study_setup(load_setup(_resolve(base, s.setup), m.nominal), m.nominal, f"setup '{s.setup}'")
+            except PkmcalError as exc:
+                if len(machines) == 1 or isinstance(exc, InputFileError):
+                    _fail(path, lines, ("setups", i, "setup"), str(exc))
+                _fail(path, lines, ("setups", i, "setup"), f"machine '{m.label}': {exc}; list the setups each "
+                      "machine is studied with in its entry (machines[N].setups: [setup labels])")
+            bound.append(scaled_noise(setup, s.reading_noise_scale, s.actuator_noise_scale))
+        first = next(b for b in bound if b is not None) if any(b is not None for b in bound) else None
+        if first is None:
+            _fail(path, lines, ("setups", i), f"setup '{labels[i]}' is used by no machine (their 'setups:' lists); "
+                  "remove it or name it in a machine's 'setups:'")
+        setups.append(SetupSpec(labels[i], first, tuple(bound)))
 
     plans = []
     for i, pl in enumerate(spec.plans):

@@ -41,12 +41,14 @@ import numpy as np
 
 from pkmcal.errors import PkmcalError
 from pkmcal.identification.engine import IdentificationResult, identify
-from pkmcal.identification.simulation import parameter_errors, simulate_campaign
+from pkmcal.identification.simulation import parameter_errors, settles_at_equilibrium, simulate_campaign
+from pkmcal.identification.tool_errors import ToolErrors, tool_errors
 from pkmcal.identification.verification import PoseErrors, pose_errors_many
 from pkmcal.planning.candidates import generate_candidates
 from pkmcal.planning.plan import plan_poses
 from pkmcal.planning.selection import select, select_random
-from pkmcal.study.results import Z95, column_names, format_row
+from pkmcal.sensors.base import MeasurementSetup
+from pkmcal.study.results import HELDOUT_COLUMNS, Z95, column_names, format_row
 from pkmcal.study.schema import MachineSpec, Study
 
 #: Keys of the seed sequences (module docstring).
@@ -91,6 +93,8 @@ class Context:
     pool_blocks: tuple[np.ndarray | None, ...]
     heldout: tuple[np.ndarray, ...]
     error_index: tuple[tuple[np.ndarray, ...], ...] = ()
+    #: per machine, per setup: the setup bound to the machine (None: not studied with it)
+    setups: tuple[tuple[MeasurementSetup | None, ...], ...] = ()
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -103,6 +107,18 @@ class Context:
     def config_index(self, campaign: int, method: int) -> int:
         return campaign * self.n_methods + method
 
+    def absent_metrics(self) -> dict[int, tuple[str, ...]]:
+        """{config: held-out columns its machine does not have} (:func:`absent_columns`)."""
+        by_machine = [absent_columns(m.nominal) for m in self.study.machines]
+        return {self.config_index(c.index, k): by_machine[c.machine] for c in self.campaigns
+                for k in range(self.n_methods) if by_machine[c.machine]}
+
+    def setup(self, campaign: Campaign) -> MeasurementSetup:
+        """The setup of ``campaign``, bound to its machine."""
+        if self.setups:
+            return self.setups[campaign.machine][campaign.setup]
+        return self.study.setups[campaign.setup].setup
+
 
 def prepare(study: Study, progress=None) -> Context:
     """Plan everything that does not change between trials (module docstring of
@@ -111,6 +127,8 @@ def prepare(study: Study, progress=None) -> Context:
     ``once`` plan and pose count one selection, per machine the held-out poses."""
     pools, blocks, campaigns = [], [], []
     heldout = []
+    setups = tuple(tuple(study.setup_for(mi, si) for si in range(len(study.setups)))
+                   for mi in range(len(study.machines)))
     for mi, m in enumerate(study.machines):
         if study.heldout_file is not None:
             heldout.append(m.nominal.as_pose_array(study.heldout_file))
@@ -120,9 +138,12 @@ def prepare(study: Study, progress=None) -> Context:
             heldout.append(cand.poses)
     for mi, m in enumerate(study.machines):
         for si, s in enumerate(study.setups):
+            setup = setups[mi][si]
+            if setup is None:       # not in the machine's 'setups:' list
+                continue
             for pi, p in enumerate(study.plans):
                 pool_kind = "corners" if p.algorithm == "corners" else "random"
-                pool = plan_poses(m.nominal, s.setup, 1, algorithm=pool_kind, n_candidates=p.candidates,
+                pool = plan_poses(m.nominal, setup, 1, algorithm=pool_kind, n_candidates=p.candidates,
                                   margin=p.margin, seed=seed_for(study.seed, KEY_POOL, mi, si, pi))
                 poses = pool.candidates.poses
                 need_blocks = p.algorithm not in ("random", "corners")
@@ -147,7 +168,7 @@ def prepare(study: Study, progress=None) -> Context:
                     if progress is not None:
                         progress(len(campaigns))
     error_index = tuple(tuple(m.error_index()) for m in study.machines)
-    return Context(study, tuple(campaigns), tuple(pools), tuple(blocks), tuple(heldout), error_index)
+    return Context(study, tuple(campaigns), tuple(pools), tuple(blocks), tuple(heldout), error_index, setups)
 
 
 def real_machine(spec: MachineSpec, seed: int, machine_index: int, trial: int,
@@ -189,28 +210,74 @@ def pseudo_truth(fit: IdentificationResult, truth_full: np.ndarray, nominal, set
     return ref.estimate, True, ref.rms_residual
 
 
-def _abs_stats(values: np.ndarray, scale: float = 1.0) -> tuple[float, float]:
-    """(rms, max) of |values| times ``scale``: the numbers (and operations) of
-    :meth:`PoseErrors.summary`'s ``*_rms_*`` and ``*_max_*`` keys, without its other ten."""
-    v = np.abs(values)
+def _abs_stats(values: np.ndarray | None, scale: float = 1.0, mask: np.ndarray | None = None) -> tuple[float, float]:
+    """(rms, max) of |values[mask]| times ``scale``: the numbers (and operations) of
+    :meth:`PoseErrors.summary`'s ``*_rms_*`` and ``*_max_*`` keys, without its other ten;
+    NaN for a measure the machine does not have (None)."""
+    if values is None:
+        return float("nan"), float("nan")
+    v = np.abs(values if mask is None else values[mask])
     return float(np.sqrt(np.mean(v**2))) * scale, float(np.max(v)) * scale
 
 
-def heldout_columns(after: PoseErrors, before: PoseErrors) -> dict:
+def heldout_errors(nominal, setup, fits: list, real, heldout: np.ndarray, ignore_limits: tuple[str, ...]
+                   ) -> tuple:
+    """Held-out errors (module docstring, step 6) of the real machine commanded through the
+    nominal model (first) and each fit's calibrated one, as ``pkmcal verify --real`` compares
+    them (:func:`pkmcal.identification.verification.verify`): the platform frames as
+    commanded (:func:`pose_errors_many`, one FK for all), or for a machine that settles at
+    static equilibrium (redundantly actuated, paper 3) the tool errors of each model with
+    its sensor (:func:`~pkmcal.identification.tool_errors.tool_errors`: "before" with the
+    setup's, "after" with the one identified in the fit)."""
+    if not settles_at_equilibrium(nominal):
+        return pose_errors_many((nominal,) + tuple(f.mechanism for f in fits), real, heldout, ignore_limits)
+    before = tool_errors(nominal, setup.sensor, real, setup, heldout, "before", ignore_limits)
+    return (before,) + tuple(tool_errors(f.mechanism, f.sensor, real, setup, heldout, "after", ignore_limits)
+                             for f in fits)
+
+
+def _measures(errors: "PoseErrors | ToolErrors") -> dict:
+    """Per held-out pose (N,): position (mm), orientation, tilt (rad) and height (mm) errors;
+    None for a measure the machine does not have (:data:`ABSENT`): a delta has no
+    orientation (nor tilt), the tool of a planar machine no tilt or height, its plate angle
+    is the orientation (none for 2 pose coordinates)."""
+    if isinstance(errors, ToolErrors):
+        angle = None if np.all(np.isnan(errors.angle)) else errors.angle
+        return {"position": errors.tool, "orientation": angle, "tilt": None, "height": None}
+    return {"position": errors.position, "orientation": errors.orientation, "tilt": errors.tilt,
+            "height": errors.height}
+
+
+def absent_columns(machine) -> tuple[str, ...]:
+    """The held-out columns that stay empty for ``machine``: its kind has no such error
+    (:func:`_measures`); ``summary.csv`` leaves them out for its configurations."""
+    absent = []
+    if not any(machine.pose_is_angle):
+        absent.append("orientation")
+    if settles_at_equilibrium(machine):
+        absent += ["tilt", "height"]
+    elif not any(machine.pose_is_angle):
+        absent.append("tilt")
+    return tuple(c for c in HELDOUT_COLUMNS if any(f"_{m}_" in c for m in absent))
+
+
+def heldout_columns(after: "PoseErrors | ToolErrors", before: "PoseErrors | ToolErrors") -> dict:
     """The held-out columns of one fit (module docstring, step 6): errors after and before
-    calibration over the poses the real machine reaches through both models."""
+    calibration over the poses the real machine reaches through both models; empty (NaN)
+    those of a measure the machine does not have (:func:`_measures`)."""
     common = after.valid & before.valid
     out: dict = {"heldout_used": int(common.sum())}
     if not common.any():
         out["message"] = "the real machine reaches none of the held-out poses with both models"
         return out
     for model, suffix in ((after, ""), (before, "_before")):
-        p_rms, p_max = _abs_stats(model.position[common])
-        o_rms, o_max = _abs_stats(model.orientation[common], DEG)
+        e = _measures(model)
+        p_rms, p_max = _abs_stats(e["position"][common])
+        o_rms, o_max = _abs_stats(e["orientation"], DEG, common)
         out[f"heldout_position_rms{suffix}_mm"] = p_rms
         out[f"heldout_orientation_rms{suffix}_deg"] = o_rms
-        out[f"heldout_tilt_rms{suffix}_deg"] = _abs_stats(model.tilt[common], DEG)[0]
-        out[f"heldout_height_rms{suffix}_mm"] = _abs_stats(model.height[common])[0]
+        out[f"heldout_tilt_rms{suffix}_deg"] = _abs_stats(e["tilt"], DEG, common)[0]
+        out[f"heldout_height_rms{suffix}_mm"] = _abs_stats(e["height"], 1.0, common)[0]
         if not suffix:
             out.update(heldout_position_max_mm=p_max, heldout_orientation_max_deg=o_max)
     return out
@@ -266,7 +333,7 @@ def _measure(ctx: Context, campaign: Campaign, trial: int) -> "_Measured | list[
     """Steps 1–2 (module docstring) of one trial, or its failed lines."""
     st = ctx.study
     mspec, sspec, pspec = st.machines[campaign.machine], st.setups[campaign.setup], st.plans[campaign.plan]
-    nominal, setup = mspec.nominal, sspec.setup
+    nominal, setup = mspec.nominal, ctx.setup(campaign)
     base = {"machine": mspec.label, "setup": sspec.label, "plan": pspec.label, "algorithm": pspec.algorithm,
             "n_poses": campaign.n_poses, "plan_resampled": campaign.poses is None, "trial": trial, "failed": False,
             "message": ""}
@@ -307,7 +374,7 @@ def _fit_all(ctx: Context, campaign: Campaign, measured: list[_Measured], k: int
     from pkmcal.identification.batched import batch_applies, identify_batch
 
     st = ctx.study
-    nominal, setup = st.machines[campaign.machine].nominal, st.setups[campaign.setup].setup
+    nominal, setup = st.machines[campaign.machine].nominal, ctx.setup(campaign)
     me = st.methods[k]
     method = me.resolved(setup, nominal)
     fits: list = [None] * len(measured)
@@ -326,8 +393,8 @@ def _fit_all(ctx: Context, campaign: Campaign, measured: list[_Measured], k: int
 def _verify(ctx: Context, campaign: Campaign, m: _Measured, fitted: list) -> list[str]:
     """Steps 4–6 of one trial from its fits (one per method: a fit or a PkmcalError)."""
     st = ctx.study
-    mspec, sspec = st.machines[campaign.machine], st.setups[campaign.setup]
-    nominal, setup, real, sim = mspec.nominal, sspec.setup, m.real, m.sim
+    mspec = st.machines[campaign.machine]
+    nominal, setup, real, sim = mspec.nominal, ctx.setup(campaign), m.real, m.sim
     truth_full = np.concatenate([real.params, setup.sensor.params])
     is_angle = np.array(tuple(nominal.param_is_angle) + tuple(setup.sensor.param_is_angle), dtype=bool)
     out = [dict(r) for r in m.rows]
@@ -339,8 +406,7 @@ def _verify(ctx: Context, campaign: Campaign, m: _Measured, fitted: list) -> lis
             fits.append((k, fit))
     heldout = ctx.heldout[campaign.machine]
     try:
-        before, *afters = pose_errors_many((nominal,) + tuple(f.mechanism for _, f in fits), real, heldout,
-                                           mspec.ignore_limits)
+        before, *afters = heldout_errors(nominal, setup, [f for _, f in fits], real, heldout, mspec.ignore_limits)
     except PkmcalError as exc:
         return _failed(ctx, m.rows, exc)
     for (k, fit), after in zip(fits, afters):
