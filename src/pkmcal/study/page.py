@@ -53,6 +53,13 @@ def _stat(s: dict | None, kind: str) -> str:
     return f"{_g(s['mean'])} [{_g(s['mean_ci_low'])}, {_g(s['mean_ci_high'])}]"
 
 
+def _setup_text(setup) -> str:
+    n = setup.noise
+    return (f"sensor '{setup.sensor.kind}', {n.distribution} noise, reading std "
+            f"{np.array2string(np.asarray(n.reading_std), precision=4)}, actuator std "
+            f"{np.array2string(np.asarray(n.actuator_std), precision=4)} (mm, rad)")
+
+
 def _table(header, rows) -> str:
     head = "".join(f"<th>{_esc(h)}</th>" for h in header)
     body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in r) + "</tr>" for r in rows)
@@ -76,10 +83,12 @@ def render_page(study, ctx, cols: dict, summary: list, figs) -> str:
         facts.append((f"machine {m.label}", f"nominal '{m.nominal.name}'; {m.describe()}"
                       + (f"; real-machine limits not checked: {', '.join(m.ignore_limits)}" if m.ignore_limits else "")))
     for s in study.setups:
-        n = s.setup.noise
-        facts.append((f"setup {s.label}", f"sensor '{s.setup.sensor.kind}', {n.distribution} noise, reading std "
-                      f"{np.array2string(np.asarray(n.reading_std), precision=4)}, actuator std "
-                      f"{np.array2string(np.asarray(n.actuator_std), precision=4)} (mm, rad)"))
+        texts = {m.label: _setup_text(b) for m, b in zip(study.machines, s.bound) if b is not None}
+        if len(set(texts.values())) <= 1:
+            facts.append((f"setup {s.label}", _setup_text(s.setup)
+                          + (f"; machines {', '.join(texts)}" if s.bound and len(texts) < len(study.machines) else "")))
+        else:   # bound otherwise per machine (a planar tracker on rotary and on linear actuators)
+            facts += [(f"setup {s.label}, machine {label}", text) for label, text in texts.items()]
     for pl in study.plans:
         facts.append((f"plan {pl.label}", f"algorithm '{pl.algorithm}', poses {', '.join(map(str, pl.poses))}; "
                       f"pool of {pl.candidates if pl.algorithm != 'corners' else 'the box corners'} candidates; "

@@ -19,6 +19,7 @@ every pkmcal file)::
           - {parameters: "L0_*", distribution: normal, size: 0.2}   # N(0, 0.2²) mm
         # real: stewart-prototype-real    # ... or one real machine for every trial
         ignore_limits: [leg_collision]    # limits of the real machine not checked
+        # setups: [indicators]            # optional: the setup labels it is studied with (default: all)
     setups:
       - setup: indicators-prototype       # built-in name or setup file (relative to this file)
         label: indicators                 # optional
@@ -31,6 +32,12 @@ every pkmcal file)::
       - auto                              # the planner's default for the setup
       - {method: fk-residual, weighted: false, fix: ["b1.*", "b2.*"], label: paper-gauge}
     heldout: {poses: 50}                  # random reachable poses; or {file: poses.csv}
+
+Machines of every kind (hexapods, deltas, planar redundant machines; several kinds in one
+study): each setup is bound to each machine it measures (:func:`study_setup`: a planar
+tracker takes the machine's pose dimension and actuator kind); a machine's ``setups:``
+names the setups it is studied with, for setups that cannot measure every machine of the
+study (a Z probe and a hexapod). ``auto`` resolves per machine and setup.
 
 ``errors`` groups match parameter names with shell patterns; every parameter matches at
 most one group; unmatched parameters are exact. ``size`` is the half-width of a uniform
@@ -356,6 +363,10 @@ def study_setup(setup: MeasurementSetup, machine: Mechanism, source: str) -> Mea
     from pkmcal.identification.simulation import settles_at_equilibrium
     from pkmcal.sensors.library import bind_setup
 
+    if setup.sensor.reads_pose_pairs:
+        raise PkmcalError(f"{source}: a '{setup.sensor.kind}' sensor reads pairs of poses (the distance between two "
+                          "printed points); a study plans, measures and verifies single poses as 'pkmcal plan' does: "
+                          "study a Z probe (z-probe-klipper) or a position sensor (laser-tracker) instead")
     bound = bind_setup(setup, machine, source)
     if settles_at_equilibrium(machine) and bound.simulation is None:
         raise PkmcalError(f"{source}: machine '{machine.name}' is redundantly actuated and settles at static "
@@ -435,6 +446,17 @@ def load_study(path: str | os.PathLike) -> Study:
             msg = err["msg"][0].lower() + err["msg"][1:]
         raise InputFileError(path, f"key '{_key_text(loc)}': {msg}", line=_line(lines, loc)) from None
     return _build(p, spec, lines, text)
+
+
+def _bound_setup(name: str, machine: Mechanism, source: str) -> MeasurementSetup:
+    """The setup file or built-in ``name`` bound to ``machine`` (:func:`study_setup`): read as
+    written, or, for a built-in made for its machine (``planar-tracker`` takes the
+    machine's actuator kind), made for ``machine``."""
+    try:
+        setup = load_setup(name)
+    except PkmcalError:
+        setup = load_setup(name, machine)     # raises the file's own error again, if it has one
+    return study_setup(setup, machine, source)
 
 
 def _by_unit(machine: Mechanism, names: list[str]) -> str:
@@ -525,7 +547,7 @@ def _build(path: Path, spec: _Study, lines: dict, text: str) -> Study:
                 bound.append(None)
                 continue
             try:
-                setup = study_setup(load_setup(_resolve(base, s.setup), m.nominal), m.nominal, f"setup '{s.setup}'")
+                setup = _bound_setup(_resolve(base, s.setup), m.nominal, f"setup '{s.setup}'")
             except PkmcalError as exc:
                 if len(machines) == 1 or isinstance(exc, InputFileError):
                     _fail(path, lines, ("setups", i, "setup"), str(exc))

@@ -23,7 +23,13 @@ For trial t of campaign c (machine m × setup s × plan p × pose count n):
    parameters (the file covariance max(1, χ²_ν)·C_prior, :mod:`pkmcal.identification.uncertainty`):
    marginal |e_i| ≤ 1.96 σ_i, and the joint ellipsoid eᵀC⁻¹e ≤ χ²_{n_free, 0.95};
 6. held-out pose errors with the nominal and the calibrated model
-   (:func:`pkmcal.identification.verification.pose_errors`), over the poses both reach.
+   (:func:`pkmcal.identification.verification.pose_errors`), over the poses both reach;
+   for a machine that settles at static equilibrium (redundantly actuated, paper 3) the
+   tool errors as ``pkmcal verify`` gives them
+   (:func:`pkmcal.identification.tool_errors.tool_errors`: position = tool point,
+   orientation = plate angle). A measure the machine does not have is empty (NaN): the
+   orientation and tilt of a delta, the tilt and height of a planar machine
+   (:func:`absent_columns`).
 
 Every generator is ``numpy.random.default_rng(SeedSequence(seed, spawn_key=key))``: a
 trial's numbers depend on the seed and its key only, never on which worker runs it, in
