@@ -345,9 +345,14 @@ def test_examples_load():
         load_study(f)
 
 
-def test_planar_machines_are_refused():
+def test_a_setup_that_cannot_measure_the_machine_is_refused():
+    """A study built in Python binds each setup to each machine when it is prepared (other
+    machine kinds: tests/test_study_kinds.py)."""
+    from pkmcal.study.trial import prepare
+
     planar = builtin_machine("planar-2dof-3act")
-    with pytest.raises(PkmcalError, match="6-DOF"):
-        Study(name="x", trials=1, machines=(MachineSpec("p", planar, errors=()),),
-              setups=(SetupSpec("s", builtin_setup("laser-tracker")),), plans=(PlanSpec("r", "random", (5,)),),
-              methods=(MethodSpec("auto", "auto"),))
+    study = Study(name="x", trials=1, machines=(MachineSpec("p", planar, errors=()),),
+                  setups=(SetupSpec("s", builtin_setup("laser-tracker")),), plans=(PlanSpec("r", "random", (5,)),),
+                  methods=(MethodSpec("auto", "auto"),))
+    with pytest.raises(PkmcalError, match="study setup 's': a 'position' sensor cannot measure machine"):
+        prepare(study)

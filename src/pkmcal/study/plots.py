@@ -109,7 +109,8 @@ def error_vs_poses(cols: dict, summary: list) -> RenderedFigure | None:
                 ax.xaxis.set_minor_locator(matplotlib.ticker.NullLocator())
                 if row == 0:
                     ax.set_title(f"{machine}, {method}")
-                    ax.legend(fontsize=7)
+                    if ax.get_legend_handles_labels()[0]:   # no line: every trial of the panel failed
+                        ax.legend(fontsize=7)
                 elif row == 2:
                     ax.set_xlabel("planned poses")
         fig.tight_layout()
