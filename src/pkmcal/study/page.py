@@ -75,7 +75,7 @@ def render_page(study, ctx, cols: dict, summary: list, figs) -> str:
     add(f"<h1>Study {_esc(study.name)}</h1>")
     if study.description:
         add(f"<p>{_esc(study.description)}</p>")
-    n_cfg = len(ctx.campaigns) * len(study.methods)
+    n_cfg = ctx.n_configs
     facts = [("pkmcal version", __version__), ("seed", study.seed), ("trials per configuration", study.trials),
              ("configurations", n_cfg), ("held-out poses", f"{len(ctx.heldout[0])} per machine "
                                         + ("(file)" if study.heldout_file is not None else "(random, reachable)"))]
@@ -96,7 +96,9 @@ def render_page(study, ctx, cols: dict, summary: list, figs) -> str:
     for me in study.methods:
         facts.append((f"method {me.label}", f"{me.method}, {'weighted' if me.weighted else 'unweighted'}"
                       + (f", free {', '.join(me.free)}" if me.free else "")
-                      + (f", fix {me.fix if isinstance(me.fix, str) else ', '.join(me.fix)}" if me.fix else "")))
+                      + (f", fix {me.fix if isinstance(me.fix, str) else ', '.join(me.fix)}" if me.fix else "")
+                      + (f"; machines {', '.join(me.machines)}" if me.machines is not None else "")
+                      + (f"; setups {', '.join(me.setups)}" if me.setups is not None else "")))
     add(_table(["item", "value"], [[_esc(k), _esc(v)] for k, v in facts]))
     add("<p>Files: <a href=\"trials.csv\">trials.csv</a> (one row per trial × configuration), "
         "<a href=\"summary.csv\">summary.csv</a> (statistics with 95 % intervals per configuration and metric).</p>")

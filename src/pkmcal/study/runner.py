@@ -163,8 +163,8 @@ def run_study(study: Study, out: str | Path, *, workers: int | None = None, dask
             cluster.close()
     run_seconds = time.perf_counter() - t_run
     lines = folder.read_parts(study.trials)
-    if len(lines) != total * len(study.methods):
-        raise PkmcalError(f"'{out}': {len(lines)} result rows for {total * len(study.methods)} expected; the part "
+    if len(lines) != study.trials * ctx.n_configs:
+        raise PkmcalError(f"'{out}': {len(lines)} result rows for {study.trials * ctx.n_configs} expected; the part "
                           "files are inconsistent: run again with --resume or choose another -o")
     header = ctx.names
     atomic_write_text(out / "trials.csv", ",".join(header) + "\n" + "".join(x + "\n" for x in lines))
@@ -178,7 +178,7 @@ def run_study(study: Study, out: str | Path, *, workers: int | None = None, dask
     seconds = time.perf_counter() - t0
     atomic_write_text(out / "run.json", json.dumps({
         "backend": backend, "workers": n_workers, "trials_run": n_todo, "trials_total": total,
-        "configurations": total // study.trials * len(study.methods) if study.trials else 0,
+        "configurations": ctx.n_configs,
         "seconds": seconds, "run_seconds": run_seconds,
         "trials_per_second": n_todo / run_seconds if run_seconds > 0 else None}, indent=2) + "\n")
     folder.write_manifest(study.name, study.trials, complete=True,

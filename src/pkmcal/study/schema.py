@@ -142,6 +142,8 @@ class _Method(_Strict):
     free: list[str] | None = None
     fix: list[str] | Literal["auto"] | None = None
     label: str | None = None
+    machines: list[str] | None = None
+    setups: list[str] | None = None
 
     @field_validator("method")
     @classmethod
@@ -257,6 +259,14 @@ class MethodSpec:
     weighted: bool = True
     free: tuple[str, ...] | None = None
     fix: tuple[str, ...] | str | None = None
+    #: the labels of the machines / setups it fits (None: all), e.g. a ``fix:`` list of one
+    #: kind's parameter names in a study of several kinds
+    machines: tuple[str, ...] | None = None
+    setups: tuple[str, ...] | None = None
+
+    def fits(self, machine: str, setup: str) -> bool:
+        """Whether it fits the campaigns of machine and setup labels ``machine``, ``setup``."""
+        return (self.machines is None or machine in self.machines) and (self.setups is None or setup in self.setups)
 
     def resolved(self, setup: MeasurementSetup, machine: Mechanism) -> str:
         return default_method(setup, machine) if self.method == "auto" else self.method
@@ -297,12 +307,22 @@ class Study:
         for i, m in enumerate(self.machines):
             if all(s.bound and s.bound[i] is None for s in self.setups):
                 raise PkmcalError(f"study machine '{m.label}' is studied with none of the setups")
+            for j, s in enumerate(self.setups):
+                if (not s.bound or s.bound[i] is not None) and not self.methods_for(i, j):
+                    raise PkmcalError(f"no method fits machine '{m.label}' with setup '{s.label}' (the methods' "
+                                      "'machines:' and 'setups:' lists); add one, or leave the setup out of the "
+                                      "machine's 'setups:'")
         if self.heldout_file is not None:
             kinds = {m.nominal.pose_names for m in self.machines}
             if len(kinds) > 1:
                 raise PkmcalError("a held-out pose file gives the poses of one kind of machine; these machines have "
                                   f"poses {' and '.join('(' + ', '.join(k) + ')' for k in sorted(kinds))}: use "
                                   "heldout: {poses: N} (random reachable poses of each machine)")
+
+    def methods_for(self, machine: int, setup: int) -> tuple[int, ...]:
+        """Indices of the methods that fit machine ``machine`` with setup ``setup``."""
+        m, s = self.machines[machine].label, self.setups[setup].label
+        return tuple(k for k, me in enumerate(self.methods) if me.fits(m, s))
 
     def setup_for(self, machine: int, setup: int) -> MeasurementSetup | None:
         """Setup ``setup`` bound to machine ``machine`` (indices), or None where that machine
@@ -331,7 +351,9 @@ class Study:
             "plans": [[p.label, p.algorithm, list(p.poses), p.candidates, p.resample, repr(p.margin), p.index]
                       for p in self.plans],
             "methods": [[m.label, m.method, m.weighted, m.free and list(m.free),
-                         m.fix if isinstance(m.fix, (str, type(None))) else list(m.fix)] for m in self.methods],
+                         m.fix if isinstance(m.fix, (str, type(None))) else list(m.fix)]
+                        + ([] if m.machines is None and m.setups is None else
+                           [m.machines and list(m.machines), m.setups and list(m.setups)]) for m in self.methods],
             "heldout": [self.heldout_poses, None if self.heldout_file is None else self.heldout_file.tobytes().hex()],
             "extra": None if self.extra_metrics is None else
             f"{self.extra_metrics.__module__}.{self.extra_metrics.__qualname__}",
@@ -573,8 +595,18 @@ def _build(path: Path, spec: _Study, lines: dict, text: str) -> Study:
                 _fail(path, lines, ("methods", i), f"unknown method '{me}'; use auto or one of {', '.join(METHODS)}")
             me = _Method(method=me)
         fix = me.fix if isinstance(me.fix, (str, type(None))) else tuple(me.fix)
+        for key, given, known in (("machines", me.machines, [m.label for m in machines]),
+                                  ("setups", me.setups, [s.label for s in setups])):
+            for j, name in enumerate(given or ()):
+                if name not in known:
+                    _fail(path, lines, ("methods", i, key, j), f"'{name}' is not the label of a study "
+                          f"{key[:-1]} ({', '.join(known)})")
+            if given is not None and not given:
+                _fail(path, lines, ("methods", i, key), f"name at least one {key[:-1]}, or leave '{key}' out")
         methods.append(MethodSpec(me.label or me.method, me.method, me.weighted,
-                                  None if me.free is None else tuple(me.free), fix))
+                                  None if me.free is None else tuple(me.free), fix,
+                                  None if me.machines is None else tuple(me.machines),
+                                  None if me.setups is None else tuple(me.setups)))
 
     h = spec.heldout
     if (h.poses is None) == (h.file is None):

@@ -75,7 +75,9 @@ def seed_for(seed: int, *key: int) -> int:
 @dataclass(frozen=True)
 class Campaign:
     """Machine × setup × plan × pose count, with its poses: ``poses`` the one selection of a
-    ``resample: once`` plan, else None (drawn per trial from pool ``pool``)."""
+    ``resample: once`` plan, else None (drawn per trial from pool ``pool``); ``methods`` the
+    indices of the study's methods that fit it (all, unless a method names its machines or
+    setups), whose configurations are numbered from ``first_config`` on."""
 
     index: int
     machine: int
@@ -85,6 +87,12 @@ class Campaign:
     n_poses: int
     pool: int
     poses: np.ndarray | None
+    methods: tuple[int, ...] = ()
+    first_config: int = 0
+
+    def configs(self) -> list[tuple[int, int]]:
+        """(configuration number, method index) of each of its methods, in method order."""
+        return [(self.first_config + j, k) for j, k in enumerate(self.methods)]
 
 
 @dataclass(frozen=True)
@@ -107,17 +115,15 @@ class Context:
         return column_names(self.study.extra_columns)
 
     @property
-    def n_methods(self) -> int:
-        return len(self.study.methods)
-
-    def config_index(self, campaign: int, method: int) -> int:
-        return campaign * self.n_methods + method
+    def n_configs(self) -> int:
+        """Configurations: campaign × method, over the methods each campaign is fitted with."""
+        return sum(len(c.methods) for c in self.campaigns)
 
     def absent_metrics(self) -> dict[int, tuple[str, ...]]:
         """{config: held-out columns its machine does not have} (:func:`absent_columns`)."""
         by_machine = [absent_columns(m.nominal) for m in self.study.machines]
-        return {self.config_index(c.index, k): by_machine[c.machine] for c in self.campaigns
-                for k in range(self.n_methods) if by_machine[c.machine]}
+        return {config: by_machine[c.machine] for c in self.campaigns for config, _ in c.configs()
+                if by_machine[c.machine]}
 
     def setup(self, campaign: Campaign) -> MeasurementSetup:
         """The setup of ``campaign``, bound to its machine."""
@@ -170,7 +176,9 @@ def prepare(study: Study, progress=None) -> Context:
                             chosen = poses[sel.chosen]
                         else:
                             chosen = poses[select_random(len(poses), n, rng)]
-                    campaigns.append(Campaign(len(campaigns), mi, si, pi, ni, n, pool_index, chosen))
+                    methods = study.methods_for(mi, si)
+                    first = campaigns[-1].first_config + len(campaigns[-1].methods) if campaigns else 0
+                    campaigns.append(Campaign(len(campaigns), mi, si, pi, ni, n, pool_index, chosen, methods, first))
                     if progress is not None:
                         progress(len(campaigns))
     error_index = tuple(tuple(m.error_index()) for m in study.machines)
@@ -343,9 +351,9 @@ def _measure(ctx: Context, campaign: Campaign, trial: int) -> "_Measured | list[
     base = {"machine": mspec.label, "setup": sspec.label, "plan": pspec.label, "algorithm": pspec.algorithm,
             "n_poses": campaign.n_poses, "plan_resampled": campaign.poses is None, "trial": trial, "failed": False,
             "message": ""}
-    rows = [dict(base, config=ctx.config_index(campaign.index, k), method=me.label,
-                 identification=me.resolved(setup, nominal), weighted=me.weighted)
-            for k, me in enumerate(st.methods)]
+    rows = [dict(base, config=config, method=st.methods[k].label,
+                 identification=st.methods[k].resolved(setup, nominal), weighted=st.methods[k].weighted)
+            for config, k in campaign.configs()]
     try:
         real = real_machine(mspec, st.seed, campaign.machine, trial,
                             ctx.error_index[campaign.machine] if ctx.error_index else None)
@@ -416,7 +424,7 @@ def _verify(ctx: Context, campaign: Campaign, m: _Measured, fitted: list) -> lis
     except PkmcalError as exc:
         return _failed(ctx, m.rows, exc)
     for (k, fit), after in zip(fits, afters):
-        r, me = out[k], st.methods[k]
+        r, me = out[k], st.methods[campaign.methods[k]]
         try:
             r.update(evaluate(fit, truth_full, is_angle, nominal, setup, sim, r["identification"], me.weighted))
             r.update(heldout_columns(after, before))
@@ -448,7 +456,7 @@ def run_trials(ctx: Context, campaign: Campaign, trials) -> list[str]:
         else:
             measured.append((t, res))
     if measured:
-        per_method = [_fit_all(ctx, campaign, [m for _, m in measured], k) for k in range(ctx.n_methods)]
+        per_method = [_fit_all(ctx, campaign, [m for _, m in measured], k) for k in campaign.methods]
         for i, (t, m) in enumerate(measured):
             done[t] = _verify(ctx, campaign, m, [fits[i] for fits in per_method])
     return [line for t in trials for line in done[t]]
