@@ -31,13 +31,15 @@ every pkmcal file)::
     methods:
       - auto                              # the planner's default for the setup
       - {method: fk-residual, weighted: false, fix: ["b1.*", "b2.*"], label: paper-gauge}
+      # - {method: auto, fix: ["target.*"], setups: [tracker]}   # only on these setups (or machines:)
     heldout: {poses: 50}                  # random reachable poses; or {file: poses.csv}
 
 Machines of every kind (hexapods, deltas, planar redundant machines; several kinds in one
 study): each setup is bound to each machine it measures (:func:`study_setup`: a planar
 tracker takes the machine's pose dimension and actuator kind); a machine's ``setups:``
 names the setups it is studied with, for setups that cannot measure every machine of the
-study (a Z probe and a hexapod). ``auto`` resolves per machine and setup.
+study (a Z probe and a hexapod); a method's ``machines:`` and ``setups:`` the labels it fits
+(a ``fix:`` list of one kind's parameter names). ``auto`` resolves per machine and setup.
 
 ``errors`` groups match parameter names with shell patterns; every parameter matches at
 most one group; unmatched parameters are exact. ``size`` is the half-width of a uniform
