@@ -36,7 +36,8 @@ DELTA_ERRORS = """\
 """
 # A laser tracker whose target offset is known (fixed): the fit's frames are the tracker's,
 # so the held-out poses as commanded compare like with like (a free target offset makes a
-# gauge with the tower positions: docs/studies.md, "Other machines").
+# gauge with the tower positions: docs/studies.md, "Other machines"); that method only on
+# the tracker, the Z probe with every parameter free.
 DELTA = f"""\
 name: delta
 seed: 5
@@ -46,9 +47,12 @@ machines:
     errors:
 {DELTA_ERRORS}setups:
   - {{setup: laser-tracker, label: tracker}}
+  - {{setup: z-probe-klipper, label: probe}}
 plans:
   - {{algorithm: random, poses: [20, 30]}}
-methods: [{{method: auto, fix: ["target.*"], label: target-known}}]
+methods:
+  - {{method: auto, fix: ["target.*"], label: target-known, setups: [tracker]}}
+  - {{method: auto, label: all-free, setups: [probe]}}
 heldout: {{poses: 8}}
 """
 PLANAR = """\
@@ -161,9 +165,15 @@ def test_delta_calibrated_by_a_tracker_lands_closer(delta):
     run, out = delta
     cols = read_trials(out / "trials.csv")
     assert np.all(cols["failed"] == 0), cols["message"]
+    # each method on its own setup: configurations numbered over the pairs that exist
+    assert list(cols["config"]) == [0] * 3 + [1] * 3 + [2] * 3 + [3] * 3
+    assert [(s, m) for s, m in zip(cols["setup"][::3], cols["method"][::3])] == \
+        [("tracker", "target-known")] * 2 + [("probe", "all-free")] * 2
+    assert json.loads((out / "run.json").read_text())["configurations"] == 4
+    tracker = cols["setup"] == "tracker"
     # tracker noise 0.01 mm on 20-30 poses against build errors of tenths of a mm: the
     # calibrated model brings the nozzle several times closer than the nominal one
-    after, before = cols["heldout_position_rms_mm"], cols["heldout_position_rms_before_mm"]
+    after, before = cols["heldout_position_rms_mm"][tracker], cols["heldout_position_rms_before_mm"][tracker]
     assert np.all(before > 0.1) and np.all(after < 0.2 * before), (after, before)
     assert np.all(cols["heldout_height_rms_mm"] < cols["heldout_height_rms_before_mm"])
     _coverage_in_unit_interval(cols)
@@ -338,6 +348,10 @@ def test_delta_study_file_errors(tmp_path, change, fragments):
 
 
 @pytest.mark.parametrize("change, fragments", [
+    (("methods: [auto]", "methods: [{method: auto, machines: [kossel-mini]}]"),
+     ("no method fits machine 'stewart-prototype' with setup 'full-pose'",)),
+    (("methods: [auto]", "methods: [{method: auto, setups: [tracker]}]"),
+     ("methods[0].setups[0]", "'tracker' is not the label of a study setup")),
     (("    setups: [probe]\n", ""), ("setups[2].setup", "machine 'kossel-mini'", "machines[N].setups")),
     (("setups: [probe]", "setups: [probes]"), ("machines[1].setups[0]", "'probes' is not the label")),
     (("heldout: {poses: 6}", "heldout: {file: held.csv}"), ("one kind of machine", "heldout: {poses: N}")),
