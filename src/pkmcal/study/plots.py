@@ -162,7 +162,8 @@ def coverage(cols: dict) -> RenderedFigure:
             if frac.size:
                 lo, hi = t_interval(frac)
                 m = frac.mean()
-                ax.errorbar([m], [k - 0.15], xerr=_bar(m, lo, hi), fmt="o", ms=3, color="#1f77b4", label="per-parameter 95 % intervals" if k == 0 else None)
+                ax.errorbar([m], [k - 0.15], xerr=_bar(m, lo, hi), fmt="o", ms=3, color="#1f77b4",
+                            label="per-parameter 95 % intervals" if k == 0 else None)
             ell = _finite(cols["ellipsoid_within_95"][cfg == c])
             if ell.size:
                 kk = int(ell.sum())

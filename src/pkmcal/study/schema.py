@@ -578,7 +578,7 @@ def _build(path: Path, spec: _Study, lines: dict, text: str) -> Study:
                 _fail(path, lines, ("setups", i, "setup"), f"machine '{m.label}': {exc}; list the setups each "
                       "machine is studied with in its entry (machines[N].setups: [setup labels])")
             bound.append(scaled_noise(setup, s.reading_noise_scale, s.actuator_noise_scale))
-        first = next(b for b in bound if b is not None) if any(b is not None for b in bound) else None
+        first = next((b for b in bound if b is not None), None)
         if first is None:
             _fail(path, lines, ("setups", i), f"setup '{labels[i]}' is used by no machine (their 'setups:' lists); "
                   "remove it or name it in a machine's 'setups:'")

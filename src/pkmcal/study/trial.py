@@ -252,7 +252,7 @@ def heldout_errors(nominal, setup, fits: list, real, heldout: np.ndarray, ignore
 
 def _measures(errors: "PoseErrors | ToolErrors") -> dict:
     """Per held-out pose (N,): position (mm), orientation, tilt (rad) and height (mm) errors;
-    None for a measure the machine does not have (:data:`ABSENT`): a delta has no
+    None for a measure the machine does not have (:func:`absent_columns`): a delta has no
     orientation (nor tilt), the tool of a planar machine no tilt or height, its plate angle
     is the orientation (none for 2 pose coordinates)."""
     if isinstance(errors, ToolErrors):
