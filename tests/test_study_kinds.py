@@ -1,7 +1,7 @@
 """pkmcal study on every built-in machine kind: a linear delta (pose x, y, z: no orientation),
 paper 3's redundantly actuated planar machines (they settle at static equilibrium and are
-verified on their tool point, as ``pkmcal verify --real`` does), a 6-PUS hexapod, and several
-kinds in one study. The checks are physical: calibration with a precise sensor brings the
+verified on their tool point, as ``pkmcal verify --real`` does), 6-PUS and 6-RSS hexapods, a
+rotary delta, and several kinds in one study. The checks are physical: calibration with a precise sensor brings the
 held-out errors well below the nominal model's, a Z probe calibrates the heights it sees, a
 measure the machine does not have stays empty and is not summarised, a planar trial is what
 ``pkmcal identify`` and ``pkmcal verify`` make of the same data, and a process pool gives the
@@ -91,6 +91,37 @@ setups:
 plans:
   - {algorithm: random, poses: [30]}
 methods: [auto]
+heldout: {poses: 8}
+"""
+# Rotary actuators (6-RSS servos, a rotary delta's motors): the built-in setups' actuator
+# noise is in the actuator's unit, rad for a motor (0.005 rad = 0.29 deg, meant for a
+# hexapod's legs in mm), scaled here to 5e-5 rad (0.003 deg, a fine encoder).
+ROTARY = """\
+name: rotary
+seed: 4
+trials: 3
+machines:
+  - nominal: servo-stewart
+    errors:
+      - {parameters: "[sa]?.?", distribution: uniform, size: 0.2}
+      - {parameters: "crank_*", distribution: uniform, size: 0.2}
+      - {parameters: "rod_*", distribution: uniform, size: 0.2}
+      - {parameters: "zero_*", distribution: uniform, size: 0.1}
+    setups: [full-pose]
+  - nominal: delta-picker
+    errors:
+      - {parameters: "upper_*", distribution: uniform, size: 0.2}
+      - {parameters: "forearm_*", distribution: uniform, size: 0.2}
+      - {parameters: "zero_*", distribution: uniform, size: 0.1}
+    setups: [tracker]
+setups:
+  - {setup: full-pose-paper1, label: full-pose, actuator_noise_scale: 0.01}
+  - {setup: laser-tracker, label: tracker, actuator_noise_scale: 0.01}
+plans:
+  - {algorithm: random, poses: [30]}
+methods:
+  - {method: auto, machines: [servo-stewart]}
+  - {method: auto, fix: ["target.*"], label: target-known, machines: [delta-picker]}
 heldout: {poses: 8}
 """
 MIXED = f"""\
@@ -287,6 +318,20 @@ def test_hexaslide_calibrated_by_full_pose(tmp_path_factory):
     for measure, unit in (("position", "mm"), ("orientation", "deg"), ("tilt", "deg")):
         after, before = cols[f"heldout_{measure}_rms_{unit}"], cols[f"heldout_{measure}_rms_before_{unit}"]
         assert np.all(np.isfinite(after)) and np.all(after < 0.5 * before), measure
+    _coverage_in_unit_interval(cols)
+
+
+def test_rotary_actuators_calibrated_with_fine_encoders(tmp_path_factory):
+    run, out = _run(tmp_path_factory, ROTARY)
+    cols = read_trials(out / "trials.csv")
+    assert np.all(cols["failed"] == 0), cols["message"]
+    assert list(zip(cols["machine"][::3], cols["method"][::3])) == [("servo-stewart", "auto"),
+                                                                    ("delta-picker", "target-known")]
+    after, before = cols["heldout_position_rms_mm"], cols["heldout_position_rms_before_mm"]
+    assert np.all(after < 0.2 * before), (after, before)
+    rss = cols["machine"] == "servo-stewart"
+    assert np.all(cols["heldout_orientation_rms_deg"][rss] < 0.5 * cols["heldout_orientation_rms_before_deg"][rss])
+    assert np.all(np.isnan(cols["heldout_orientation_rms_deg"][~rss]))
     _coverage_in_unit_interval(cols)
 
 
