@@ -34,10 +34,9 @@ DELTA_ERRORS = """\
       - {parameters: "arm_*", distribution: normal, size: 0.2}
       - {parameters: "endstop_*", distribution: normal, size: 0.3}
 """
-# A laser tracker whose target offset is known (fixed): the fit's frames are the tracker's,
-# so the held-out poses as commanded compare like with like (a free target offset makes a
-# gauge with the tower positions: docs/studies.md, "Other machines"); that method only on
-# the tracker, the Z probe with every parameter free.
+# A laser tracker whose target offset is known (fixed), that method only on the tracker,
+# the Z probe with every parameter free; the held-out errors are what each instrument reads
+# (compare: sensor, the default for instruments that do not read the full pose).
 DELTA = f"""\
 name: delta
 seed: 5
@@ -201,24 +200,39 @@ def test_delta_calibrated_by_a_tracker_lands_closer(delta):
     assert [(s, m) for s, m in zip(cols["setup"][::3], cols["method"][::3])] == \
         [("tracker", "target-known")] * 2 + [("probe", "all-free")] * 2
     assert json.loads((out / "run.json").read_text())["configurations"] == 4
+    # neither instrument reads the full pose: the held-out errors are what it reads
+    assert set(cols["heldout_compare"]) == {"sensor"}
     tracker = cols["setup"] == "tracker"
     # tracker noise 0.01 mm on 20-30 poses against build errors of tenths of a mm: the
-    # calibrated model brings the nozzle several times closer than the nominal one
+    # calibrated model brings the target several times closer than the nominal one
     after, before = cols["heldout_position_rms_mm"][tracker], cols["heldout_position_rms_before_mm"][tracker]
     assert np.all(before > 0.1) and np.all(after < 0.2 * before), (after, before)
-    assert np.all(cols["heldout_height_rms_mm"] < cols["heldout_height_rms_before_mm"])
+    # the probe's readings are bed heights (0.005 mm noise): after calibration they fall
+    after, before = cols["heldout_reading_rms_mm"][~tracker], cols["heldout_reading_rms_before_mm"][~tracker]
+    assert np.all(after < 0.2 * before), (after, before)
     _coverage_in_unit_interval(cols)
 
 
-def test_delta_has_no_orientation_cells_or_summary_rows(delta):
+def test_delta_cells_are_what_each_instrument_reads(delta):
+    """A tracker reads a position, a Z probe only its readings: every other held-out cell is
+    empty, and summary.csv has no row for it (no mean of an empty set)."""
     run, out = delta
     cols = read_trials(out / "trials.csv")
+    tracker = cols["setup"] == "tracker"
     for name in HELDOUT_COLUMNS:
-        assert _empty(cols, name) == ("orientation" in name or "tilt" in name), name
-    metrics = {r["metric"] for r in _summary(out)}
-    assert "heldout_position_rms_mm" in metrics and "heldout_height_rms_mm" in metrics
-    assert not any("orientation" in m or "tilt" in m for m in metrics)   # no mean of an empty set
-    # the summary's means are the trial table's, for what the delta has
+        sub = {k: v[tracker] for k, v in cols.items()}
+        assert _empty(sub, name) == ("position" not in name), name
+        sub = {k: v[~tracker] for k, v in cols.items()}
+        assert _empty(sub, name) == ("reading" not in name), name
+    by_config: dict[int, set] = {}
+    for r in _summary(out):
+        assert r["heldout_compare"] == "sensor"
+        by_config.setdefault(int(r["config"]), set()).add(r["metric"])
+    for config, metrics in by_config.items():
+        held = {m for m in metrics if m.startswith("heldout_")}
+        kind = "position" if config < 2 else "reading"
+        assert held and all(kind in m for m in held), (config, held)
+    # the summary's means are the trial table's
     for r in _summary(out):
         if r["metric"] == "heldout_position_rms_mm":
             v = cols["heldout_position_rms_mm"][cols["config"] == int(r["config"])]
@@ -229,9 +243,65 @@ def test_delta_page_and_figures(delta):
     run, out = delta
     page = (out / "index.html").read_text(encoding="utf-8")
     assert "nan" not in page.lower().replace("nano", "")
-    assert "<svg" in page and "held-out height error" in page      # the middle row: the height
+    assert "<svg" in page and "rms reading error" in page      # the probe's lines: its readings
+    assert "held-out errors compare" in page
     for name in ("error-vs-poses", "distributions", "coverage"):
         assert (out / "figures" / f"{name}.svg").stat().st_size > 0
+
+
+@pytest.mark.parametrize("compare", ["auto", "aligned"])
+def test_delta_trial_is_what_identify_and_verify_make_of_it(tmp_path, compare):
+    """Trial 1 of the tracker configuration, fitted and verified by the commands through
+    files: the row's held-out errors are `pkmcal verify --real`'s (auto, with `--setup`:
+    sensor, what the tracker reads; aligned: the platform frames after the best rigid
+    alignment). With sensor, the study's "before" is the nominal machine with the setup's
+    tracker as given, while `verify` registers the tracker to the nominal machine first (a
+    smaller "before"), so only "after" is compared there."""
+    text = DELTA if compare == "auto" else DELTA.replace("heldout: {poses: 8}", "heldout: {poses: 8, compare: aligned}")
+    study = load_study(_write(tmp_path, text))
+    ctx = prepare(study)
+    campaign = ctx.campaigns[0]
+    nominal, setup = study.machines[0].nominal, ctx.setup(campaign)
+    expected = "sensor" if compare == "auto" else "aligned"
+    assert campaign.compares == (expected,)
+    measured = _measure(ctx, campaign, 1)
+    row = dict(zip(ctx.names, next(csv.reader(run_trial(ctx, campaign, 1)))))
+    save_measurements(tmp_path / "meas.csv", measured.sim.measurements, nominal, setup)
+    (tmp_path / "real.yaml").write_text(machine_to_text(measured.real), encoding="utf-8")
+    held = ctx.heldout[0]
+    write_table(tmp_path / "held.csv", dict(zip(nominal.pose_names, to_file_units(held, nominal.pose_is_angle).T)))
+    runner = CliRunner()
+    r = runner.invoke(cli, ["identify", "kossel-mini", str(tmp_path / "meas.csv"), "--setup", "laser-tracker",
+                            "--fix", "target.*", "-o", str(tmp_path / "cal.yaml"), "--json"])
+    assert r.exit_code == 0, r.output
+    fit = json.loads(r.stdout)
+    how = ["--setup", "laser-tracker"] if compare == "auto" else ["--compare", "aligned"]
+    r = runner.invoke(cli, ["verify", str(tmp_path / "cal.yaml"), "--real", str(tmp_path / "real.yaml"), "--nominal",
+                            "kossel-mini", "--poses", str(tmp_path / "held.csv"), *how, "--json"])
+    assert r.exit_code == 0, r.output
+    ver = json.loads(r.stdout)
+    assert ver["compare"] == row["heldout_compare"] == expected
+    assert float(row["chi2"]) == pytest.approx(fit["chi2"], rel=1e-8)
+    assert int(row["heldout_used"]) == ver["after"]["poses"]
+    sides = ("after",) if compare == "auto" else ("after", "before")
+    for side in sides:
+        suffix = "" if side == "after" else "_before"
+        assert float(row[f"heldout_position_rms{suffix}_mm"]) == pytest.approx(ver[side]["position_rms_mm"], rel=1e-6)
+    if compare == "aligned":
+        assert float(row["heldout_height_rms_mm"]) == pytest.approx(ver["after"]["height_rms_mm"], rel=1e-6)
+        assert float(row["heldout_position_rms_mm"]) < 0.2 * float(row["heldout_position_rms_before_mm"])
+
+
+def test_poses_as_commanded_on_request(tmp_path_factory):
+    """``compare: commanded`` keeps the platform poses as commanded, the papers' figures: a
+    delta has its position and height errors there, no orientation or tilt, no readings."""
+    run, out = _run(tmp_path_factory, DELTA.replace("heldout: {poses: 8}", "heldout: {poses: 8, compare: commanded}"))
+    cols = read_trials(out / "trials.csv")
+    assert set(cols["heldout_compare"]) == {"commanded"}
+    for name in HELDOUT_COLUMNS:
+        assert _empty(cols, name) == any(m in name for m in ("orientation", "tilt", "reading")), name
+    tracker = cols["setup"] == "tracker"
+    assert np.all(cols["heldout_height_rms_mm"][tracker] < cols["heldout_height_rms_before_mm"][tracker])
 
 
 def test_a_z_probe_calibrates_the_heights_it_sees(mixed):
@@ -240,10 +310,13 @@ def test_a_z_probe_calibrates_the_heights_it_sees(mixed):
     probe = cols["setup"] == "probe"
     assert probe.sum() == 4 and np.all(cols["failed"][probe] == 0), cols["message"][probe]
     assert np.all(cols["identification"][probe] == "fk-residual")
-    # the probe reads heights (0.005 mm) of a flat bed: the height error falls to the noise
-    # level; the in-plane scale it barely sees (docs/tutorial-delta-printer.md), so the
-    # position error is not asserted
-    assert np.all(cols["heldout_height_rms_mm"][probe] < 0.1 * cols["heldout_height_rms_before_mm"][probe])
+    # the probe reads heights (0.005 mm) of a flat bed: what it reads falls to the noise
+    # level; the in-plane scale it barely sees (docs/tutorial-delta-printer.md) is no reading
+    assert np.all(cols["heldout_compare"][probe] == "sensor")
+    assert np.all(cols["heldout_reading_rms_mm"][probe] < 0.1 * cols["heldout_reading_rms_before_mm"][probe])
+    # the full-pose hexapod of the same study: poses as commanded; the planar machine: its tool
+    assert set(cols["heldout_compare"][cols["setup"] == "full-pose"]) == {"commanded"}
+    assert set(cols["heldout_compare"][cols["setup"] == "planar"]) == {"tool"}
 
 
 # -- planar machines at equilibrium --------------------------------------------------------------
@@ -380,6 +453,7 @@ def test_same_bytes_with_a_process_pool(mixed, tmp_path):
      ("matches no parameter of 'kossel-mini'", "endstop_c", "lean_radial_a", "(deg)")),
     (("setup: laser-tracker", "setup: printed-distance-klipper"), ("reads pairs of poses", "z-probe-klipper")),
     (("setup: laser-tracker", "setup: planar-tracker"), ("setups[0].setup", "cannot measure machine 'kossel-mini'")),
+    (("heldout: {poses: 8}", "heldout: {poses: 8, compare: as-commanded}"), ("heldout.compare", "aligned")),
 ])
 def test_delta_study_file_errors(tmp_path, change, fragments):
     p = _write(tmp_path, DELTA.replace(*change))
@@ -400,6 +474,8 @@ def test_delta_study_file_errors(tmp_path, change, fragments):
     (("    setups: [probe]\n", ""), ("setups[2].setup", "machine 'kossel-mini'", "machines[N].setups")),
     (("setups: [probe]", "setups: [probes]"), ("machines[1].setups[0]", "'probes' is not the label")),
     (("heldout: {poses: 6}", "heldout: {file: held.csv}"), ("one kind of machine", "heldout: {poses: N}")),
+    (("heldout: {poses: 6}", "heldout: {poses: 6, compare: sensor}"),
+     ("machine 'planar-3dof-4act' settles at static equilibrium", "leave 'compare' out")),
 ])
 def test_mixed_study_file_errors(tmp_path, change, fragments):
     (tmp_path / "held.csv").write_text("x,y,z,a,b,c\n0,0,450,0,0,0\n", encoding="utf-8")

@@ -59,7 +59,8 @@ def study(study_file, output, seed, trials, workers, dask_address, resume, quiet
                f"trial(s) in {result.seconds:.1f} s ({result.backend}, {result.workers} worker(s))")
     shown = {"heldout_position_rms_mm": ("position", "mm"), "heldout_tilt_rms_deg": ("tilt", "deg"),
              "heldout_height_rms_mm": ("height", "mm"),
-             "heldout_orientation_rms_deg": ("orientation", "deg")}   # shown without a tilt (a planar plate angle)
+             "heldout_orientation_rms_deg": ("orientation", "deg"),   # shown without a tilt (a planar plate angle)
+             "heldout_reading_rms_mm": ("reading", "mm")}             # indicators, a Z probe compared on readings
     by_config: dict[int, dict] = {}
     for row in result.summary:
         by_config.setdefault(int(row["config"]), {})[row["metric"]] = row
@@ -67,8 +68,10 @@ def study(study_file, output, seed, trials, workers, dask_address, resume, quiet
         r0 = next(iter(rows.values()))
         parts = [f"{name} {rows[m]['median']:.4g} {unit}" for m, (name, unit) in shown.items()
                  if m in rows and rows[m]["n"] and not (name == "orientation" and "heldout_tilt_rms_deg" in rows)]
+        compared = r0.get("heldout_compare") or "commanded"
         click.echo(f"  {r0['machine']} | {r0['setup']} | {r0['plan']} {int(r0['n_poses'])} | {r0['method']}: "
-                   f"held-out rms after, median: {', '.join(parts) or 'no trial completed'}")
+                   f"held-out rms after, median: {', '.join(parts) or 'no trial completed'}"
+                   + ("" if compared == "commanded" else f" (compared: {compared})"))
     failed = [r for r in result.summary if r["metric"] == "failed" and r["mean"] > 0]
     for r in failed:
         click.echo(f"  note: {r['mean']:.1%} of the trials of configuration {int(r['config'])} failed "

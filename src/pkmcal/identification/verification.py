@@ -355,9 +355,10 @@ COMPARES = {
 }
 
 
-def _aligned(pe: PoseErrors, cmd: np.ndarray, mask: np.ndarray, model: Mechanism):
-    """``(pe with the errors after the alignment fitted on mask, alignment)``; frames of
-    ``model``'s poses."""
+def aligned_errors(pe: PoseErrors, cmd: np.ndarray, mask: np.ndarray, model: Mechanism):
+    """``(pe with the errors after the alignment fitted on mask, alignment)``: the errors of
+    ``verify(compare="aligned")`` from those as commanded ``cmd`` (frames of ``model``'s
+    poses)."""
     from pkmcal.identification.alignment import align_poses
 
     a = align_poses(pe.reached[mask], cmd[mask], model)
@@ -381,6 +382,30 @@ def _sensed(pe: PoseErrors, model: Mechanism, sensor, real: Mechanism, true_sens
     r, e_p, e_R = reading_errors(sensor, y_true, y_model, pe.valid)
     return replace(pe, position=e_p, orientation=e_R, tilt=None, height=None,
                    reading=r if e_p is None else None)
+
+
+def transported(model: Mechanism, poses: np.ndarray, reference: Mechanism | None = None) -> np.ndarray:
+    """The held-out ``poses`` as ``model`` commands them: given in ``reference``'s frames
+    (the nominal machine), carried into the model's
+    (:func:`~pkmcal.identification.alignment.transport_poses`); as they are without one."""
+    cmd = model.as_pose_array(poses)
+    if reference is None:
+        return cmd
+    from pkmcal.identification.alignment import transport_poses
+
+    return transport_poses(model, reference, cmd)[0]
+
+
+def sensor_errors(model: Mechanism, sensor, real: Mechanism, true_sensor, poses: np.ndarray,
+                  ignore_limits: tuple[str, ...] = (), reference: Mechanism | None = None) -> PoseErrors:
+    """``verify(compare="sensor")`` for one model: the real machine commanded through
+    ``model`` to the held-out ``poses``, what ``true_sensor`` reads at the pose it reaches
+    against what ``model`` predicts its registered ``sensor`` reads at the commanded one.
+    ``reference`` (the nominal machine): the poses are given in its frames and carried into
+    the model's first (:func:`~pkmcal.identification.alignment.transport_poses`), so that
+    every model commands the same physical poses whatever its gauge."""
+    cmd = transported(model, poses, reference)
+    return _sensed(pose_errors(model, real, cmd, ignore_limits), model, sensor, real, true_sensor, cmd)
 
 
 def verify(
@@ -447,10 +472,10 @@ def verify(
         report = VerificationReport(real=real.name, after=after, before=before, compare=compare)
         mask = report.common
         if mask.any() and compare == "aligned":
-            after, a_after = _aligned(after, cmd_cal, mask, calibrated)
+            after, a_after = aligned_errors(after, cmd_cal, mask, calibrated)
             alignment = {"after": a_after}
             if before is not None:
-                before, alignment["before"] = _aligned(before, cmd, mask, nominal)
+                before, alignment["before"] = aligned_errors(before, cmd, mask, nominal)
             report = VerificationReport(real=real.name, after=after, before=before, compare=compare,
                                         alignment=alignment, transported=transported)
         elif mask.any():

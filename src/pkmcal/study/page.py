@@ -26,6 +26,7 @@ HEADLINE = (
     ("heldout_position_rms_mm", "held-out position rms after, mm (median, 95 % CI)", "median"),
     ("heldout_position_rms_before_mm", "before, mm (median)", "median_only"),
     ("heldout_orientation_rms_deg", "held-out orientation rms after, deg (median)", "median_only"),
+    ("heldout_reading_rms_mm", "held-out reading rms after, mm (median; compared on readings)", "median_only"),
     ("param_error_rms_mm", "parameter error rms, mm (median, 95 % CI)", "median"),
     ("coverage_fraction", "per-parameter coverage (mean, 95 % CI)", "mean"),
     ("ellipsoid_within_95", "joint-ellipsoid coverage (fraction, Wilson 95 % CI)", "mean"),
@@ -110,8 +111,16 @@ def render_page(study, ctx, cols: dict, summary: list, figs) -> str:
     for c in np.unique(cfg):
         i = np.flatnonzero(cfg == c)[0]
         name = f"{cols['machine'][i]} | {cols['setup'][i]} | {cols['plan'][i]} {int(cols['n_poses'][i])} | {cols['method'][i]}"
-        rows.append([_esc(name)] + [_esc(_stat(look.get((int(c), m)), kind)) for m, _, kind in HEADLINE])
-    add(_table(["configuration"] + [h for _, h, _ in HEADLINE], rows))
+        rows.append([_esc(name), _esc(cols["heldout_compare"][i])]
+                    + [_esc(_stat(look.get((int(c), m)), kind)) for m, _, kind in HEADLINE])
+    add(_table(["configuration", "held-out errors compare"] + [h for _, h, _ in HEADLINE], rows))
+    add("<p>Held-out errors compare (column <code>heldout_compare</code>): <b>commanded</b>, the platform poses "
+        "as commanded, where the calibration fixed no gauge (its frames are the instrument's); <b>sensor</b>, "
+        "what the instrument reads at the reached pose against what each model predicts its instrument reads, "
+        "where a gauge left the frames a choice (poses as commanded would compare frames the gauge made "
+        "arbitrary); <b>aligned</b> (on request), the platform poses after the best rigid alignment of each "
+        "model's base and platform frames; <b>tool</b>, the tool on the tracker, for a machine at static "
+        "equilibrium.</p>")
     add("<p>Intervals: Student-t for means, binomial order statistics for medians, Wilson score for fractions. "
         "θ* is the real machine's parameters in the fit's gauge (the noise-free fit of the same poses when a "
         "parameter held fixed differs from its true value); coverage uses the reported covariance of the free "

@@ -1,6 +1,7 @@
 """Study figures (matplotlib, rendered deterministically by :func:`pkmcal.report.figures.render`).
 
-* ``error-vs-poses``: per machine and method, the median held-out position error and tilt
+* ``error-vs-poses``: per machine and method, the median held-out position error (for a
+  line compared on readings that are no position, its reading error: :data:`TOP_ROW`) and tilt
   error after calibration (the tilt is what dial indicators calibrate; for a machine
   without tilt its height error, or its orientation error: :data:`MIDDLE_ROW`) and the median rms
   parameter error (θ̂ − θ* over the free length parameters) against the number of planned poses, one line per setup × plan, with
@@ -43,6 +44,10 @@ def _finite(v: np.ndarray) -> np.ndarray:
     return v[np.isfinite(v)]
 
 
+#: The top row of ``error-vs-poses``: the held-out position error, or for a configuration
+#: compared on readings that are no position (dial indicators, a Z probe) the reading error.
+TOP_ROW = (("heldout_position_rms_mm", "held-out position error, rms (mm)"),
+           ("heldout_reading_rms_mm", "held-out reading error, rms (mm)"))
 #: The middle row of ``error-vs-poses``: the first of these the machine has (a hexapod the
 #: tilt, which dial indicators calibrate; a delta the height, which a Z probe does; a planar
 #: machine with a plate angle its orientation).
@@ -51,10 +56,10 @@ MIDDLE_ROW = (("heldout_tilt_rms_deg", "held-out tilt error, rms (deg)"),
               ("heldout_orientation_rms_deg", "held-out orientation error, rms (deg)"))
 
 
-def _middle_row(look: dict, configs: list[int]) -> tuple:
-    """(metric, axis label) of the middle row for a panel of ``configs``: the first of
-    :data:`MIDDLE_ROW` summarised for them, (None, None) when none is."""
-    for metric, label in MIDDLE_ROW:
+def _row(choices: tuple, look: dict, configs: list[int]) -> tuple:
+    """(metric, axis label) of a row for a panel of ``configs``: the first of ``choices``
+    summarised for them, (None, None) when none is."""
+    for metric, label in choices:
         if any((c, metric) in look for c in configs):
             return metric, label
     return None, None
@@ -79,20 +84,25 @@ def error_vs_poses(cols: dict, summary: list) -> RenderedFigure | None:
         fig, axes = plt.subplots(3, len(groups), figsize=(4.6 * len(groups), 8.4), squeeze=False, sharex="col")
         for k, ((machine, method), lines) in enumerate(sorted(groups.items())):
             configs = [c for pts in lines.values() for _, c in pts]
-            for row, metric, label in ((0, "heldout_position_rms_mm", "held-out position error, rms (mm)"),
-                                       (1,) + _middle_row(look, configs),
+            for row, metric, label in ((0,) + _row(TOP_ROW, look, configs),
+                                       (1,) + _row(MIDDLE_ROW, look, configs),
                                        (2, "param_error_rms_mm", "parameter error θ̂ − θ*, rms (mm)")):
                 ax = axes[row, k]
                 if metric is None:
-                    ax.text(0.5, 0.5, "no orientation, tilt or height error\nfor this machine", ha="center",
+                    ax.text(0.5, 0.5, "no such held-out error\nfor these configurations", ha="center",
                             va="center", fontsize=8, transform=ax.transAxes)
                     ax.set_yticks([])
                     continue
+                mixed = False
                 for (setup, plan), pts in sorted(lines.items()):
                     pts.sort()
+                    # the top row: a line compared on readings (indicators) shows its reading error
+                    line_metric = (_row(TOP_ROW, look, [c for _, c in pts])[0] or metric) if row == 0 else metric
+                    tag = " (reading)" if line_metric != metric else ""
+                    mixed |= bool(tag)
                     x, y, lo, hi = [], [], [], []
                     for n, c in pts:
-                        s = look.get((c, metric))
+                        s = look.get((c, line_metric))
                         if s is None or not s["n"]:
                             continue
                         x.append(n)
@@ -100,10 +110,10 @@ def error_vs_poses(cols: dict, summary: list) -> RenderedFigure | None:
                         lo.append(s["median"] - s["median_ci_low"] if np.isfinite(s["median_ci_low"]) else 0.0)
                         hi.append(s["median_ci_high"] - s["median"] if np.isfinite(s["median_ci_high"]) else 0.0)
                     if x:
-                        ax.errorbar(x, y, yerr=[lo, hi], marker="o", ms=3, capsize=2, label=f"{setup}, {plan}")
+                        ax.errorbar(x, y, yerr=[lo, hi], marker="o", ms=3, capsize=2, label=f"{setup}, {plan}{tag}")
                 ax.set_xscale("log")
                 ax.set_yscale("log")
-                ax.set_ylabel(label)
+                ax.set_ylabel(label + ("\n(reading): rms reading error (mm)" if mixed else ""))
                 counts = sorted({n for pts in lines.values() for n, _ in pts})
                 ax.set_xticks(counts, [str(n) for n in counts])
                 ax.xaxis.set_minor_locator(matplotlib.ticker.NullLocator())

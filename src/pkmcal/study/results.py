@@ -92,10 +92,16 @@ COLUMNS: dict[str, tuple[str, str]] = {
     "heldout_orientation_rms_before_deg": ("float", "rms orientation error with the nominal model"),
     "heldout_tilt_rms_before_deg": ("float", "rms tilt error with the nominal model"),
     "heldout_height_rms_before_mm": ("float", "rms height error with the nominal model"),
+    "heldout_reading_rms_mm": ("float", "rms error of the readings themselves after (compare = sensor, a sensor that "
+                                        "reads no position: dial indicators, a Z probe)"),
+    "heldout_reading_rms_before_mm": ("float", "rms reading error with the nominal model"),
+    "heldout_compare": ("str", "what the held-out errors compare: commanded (the platform poses as commanded), sensor "
+                               "(what the instrument reads), aligned (the platform poses after the best rigid alignment "
+                               "of each model's frames), tool (the tool on the tracker, a machine at equilibrium)"),
 }
 #: The held-out error columns (empty for a measure the machine's kind does not have:
 #: :func:`pkmcal.study.trial.absent_columns`).
-HELDOUT_COLUMNS = tuple(c for c in COLUMNS if c.startswith("heldout_") and c != "heldout_used")
+HELDOUT_COLUMNS = tuple(c for c in COLUMNS if c.startswith("heldout_") and c not in ("heldout_used", "heldout_compare"))
 #: The columns that identify a configuration.
 CONFIG_COLUMNS = ("config", "machine", "setup", "plan", "algorithm", "n_poses", "method", "identification",
                   "weighted", "plan_resampled")
@@ -106,6 +112,7 @@ SUMMARY_METRICS = (
     "param_error_vs_real_mean_abs_mm", "coverage_fraction", "all_within_95", "ellipsoid_within_95", "error_nsigma_rms",
     "heldout_position_rms_mm", "heldout_position_max_mm", "heldout_orientation_rms_deg", "heldout_tilt_rms_deg",
     "heldout_height_rms_mm", "heldout_position_rms_before_mm", "heldout_orientation_rms_before_deg",
+    "heldout_reading_rms_mm", "heldout_reading_rms_before_mm",
 )
 PART_NAME = re.compile(r"^c(\d+)-t(\d+)-(\d+)\.csv$")
 
@@ -304,7 +311,7 @@ def median_interval(values: np.ndarray) -> tuple[float, float]:
 
 
 SUMMARY_HEADER = CONFIG_COLUMNS + ("metric", "n", "mean", "mean_ci_low", "mean_ci_high", "sd", "median",
-                                  "median_ci_low", "median_ci_high", "q05", "q95", "interval")
+                                  "median_ci_low", "median_ci_high", "q05", "q95", "interval", "heldout_compare")
 _FLAGS = ("failed", "all_within_95", "ellipsoid_within_95")
 
 
@@ -318,7 +325,7 @@ def summarise(cols: dict[str, np.ndarray], metrics: tuple[str, ...] = SUMMARY_ME
     for c in np.unique(cfg):
         sel = cfg == c
         first = np.flatnonzero(sel)[0]
-        ident = {k: cols[k][first] for k in CONFIG_COLUMNS}
+        ident = {k: cols[k][first] for k in CONFIG_COLUMNS + ("heldout_compare",) if k in cols}
         skip = () if absent is None else absent.get(int(c), ())
         for metric in metrics:
             if metric not in cols or metric in skip:
@@ -346,7 +353,7 @@ def summarise(cols: dict[str, np.ndarray], metrics: tuple[str, ...] = SUMMARY_ME
 
 _SUMMARY_TYPES = {"config": "int", "n_poses": "int", "n": "int", "weighted": "flag", "plan_resampled": "flag",
                   "machine": "str", "setup": "str", "plan": "str", "algorithm": "str", "method": "str",
-                  "identification": "str", "metric": "str", "interval": "str"}
+                  "identification": "str", "metric": "str", "interval": "str", "heldout_compare": "str"}
 
 
 def format_summary(rows: list[dict]) -> str:

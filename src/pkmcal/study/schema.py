@@ -33,6 +33,7 @@ every pkmcal file)::
       - {method: fk-residual, weighted: false, fix: ["b1.*", "b2.*"], label: paper-gauge}
       # - {method: auto, fix: ["target.*"], setups: [tracker]}   # only on these setups (or machines:)
     heldout: {poses: 50}                  # random reachable poses; or {file: poses.csv}
+    # heldout: {poses: 50, compare: sensor}   # what is compared: auto (default), commanded, sensor, aligned
 
 Machines of every kind (hexapods, deltas, planar redundant machines; several kinds in one
 study): each setup is bound to each machine it measures (:func:`study_setup`: a planar
@@ -66,7 +67,7 @@ import json
 import os
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable, Literal, Union
+from typing import Callable, Literal, Union, get_args
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
@@ -155,9 +156,17 @@ class _Method(_Strict):
         return v
 
 
+#: What the held-out errors compare (``heldout: {compare: ...}``): ``auto`` chooses per
+#: configuration (:func:`pkmcal.study.trial.heldout_compare`), ``commanded`` the platform
+#: poses as commanded (the papers' figures), ``sensor`` what the instrument reads,
+#: ``aligned`` the platform poses after the best rigid alignment of each model's frames.
+HELDOUT_COMPARES = Literal["auto", "commanded", "sensor", "aligned"]
+
+
 class _HeldOut(_Strict):
     poses: int | None = Field(None, ge=1, le=MAX_POSES)
     file: str | None = None
+    compare: HELDOUT_COMPARES = "auto"
 
 
 class _Study(_Strict):
@@ -291,6 +300,8 @@ class Study:
     methods: tuple[MethodSpec, ...]
     heldout_poses: int | None = 50
     heldout_file: np.ndarray | None = None
+    #: what the held-out errors compare (:data:`HELDOUT_COMPARES`, :func:`pkmcal.study.trial.heldout_compare`)
+    heldout_compare: str = "auto"
     seed: int = 0
     description: str = ""
     source: str = ""
@@ -314,6 +325,15 @@ class Study:
                     raise PkmcalError(f"no method fits machine '{m.label}' with setup '{s.label}' (the methods' "
                                       "'machines:' and 'setups:' lists); add one, or leave the setup out of the "
                                       "machine's 'setups:'")
+        if self.heldout_compare not in get_args(HELDOUT_COMPARES):
+            raise PkmcalError(f"heldout compare '{self.heldout_compare}': use one of {', '.join(get_args(HELDOUT_COMPARES))}")
+        if self.heldout_compare != "auto":
+            from pkmcal.identification.simulation import settles_at_equilibrium
+
+            for m in self.machines:
+                if settles_at_equilibrium(m.nominal):
+                    raise PkmcalError(f"heldout compare '{self.heldout_compare}': machine '{m.label}' settles at static "
+                                      "equilibrium and is verified on what its tracker reads; leave 'compare' out")
         if self.heldout_file is not None:
             kinds = {m.nominal.pose_names for m in self.machines}
             if len(kinds) > 1:
@@ -356,7 +376,8 @@ class Study:
                          m.fix if isinstance(m.fix, (str, type(None))) else list(m.fix)]
                         + ([] if m.machines is None and m.setups is None else
                            [m.machines and list(m.machines), m.setups and list(m.setups)]) for m in self.methods],
-            "heldout": [self.heldout_poses, None if self.heldout_file is None else self.heldout_file.tobytes().hex()],
+            "heldout": [self.heldout_poses, None if self.heldout_file is None else self.heldout_file.tobytes().hex(),
+                        self.heldout_compare],
             "extra": None if self.extra_metrics is None else
             f"{self.extra_metrics.__module__}.{self.extra_metrics.__qualname__}",
         }
@@ -621,7 +642,7 @@ def _build(path: Path, spec: _Study, lines: dict, text: str) -> Study:
     try:
         return Study(name=spec.name, trials=spec.trials, machines=tuple(machines), setups=tuple(setups),
                      plans=tuple(plans), methods=tuple(methods), heldout_poses=h.poses, heldout_file=held,
-                     seed=spec.seed, description=spec.description, source=text)
+                     heldout_compare=h.compare, seed=spec.seed, description=spec.description, source=text)
     except PkmcalError as exc:
         raise InputFileError(path, str(exc)) from None
 

@@ -49,7 +49,14 @@ from pkmcal.errors import PkmcalError
 from pkmcal.identification.engine import IdentificationResult, identify
 from pkmcal.identification.simulation import parameter_errors, settles_at_equilibrium, simulate_campaign
 from pkmcal.identification.tool_errors import ToolErrors, tool_errors
-from pkmcal.identification.verification import PoseErrors, pose_errors_many
+from pkmcal.identification.verification import (
+    PoseErrors,
+    aligned_errors,
+    pose_errors,
+    pose_errors_many,
+    sensor_errors,
+    transported,
+)
 from pkmcal.planning.candidates import generate_candidates
 from pkmcal.planning.plan import plan_poses
 from pkmcal.planning.selection import select, select_random
@@ -89,6 +96,8 @@ class Campaign:
     poses: np.ndarray | None
     methods: tuple[int, ...] = ()
     first_config: int = 0
+    #: per method of ``methods``: what its held-out errors compare (:func:`heldout_compare`)
+    compares: tuple[str, ...] = ()
 
     def configs(self) -> list[tuple[int, int]]:
         """(configuration number, method index) of each of its methods, in method order."""
@@ -120,10 +129,14 @@ class Context:
         return sum(len(c.methods) for c in self.campaigns)
 
     def absent_metrics(self) -> dict[int, tuple[str, ...]]:
-        """{config: held-out columns its machine does not have} (:func:`absent_columns`)."""
-        by_machine = [absent_columns(m.nominal) for m in self.study.machines]
-        return {config: by_machine[c.machine] for c in self.campaigns for config, _ in c.configs()
-                if by_machine[c.machine]}
+        """{config: held-out columns it does not have} (:func:`absent_columns`)."""
+        out = {}
+        for c in self.campaigns:
+            for (config, _), compare in zip(c.configs(), c.compares):
+                absent = absent_columns(self.study.machines[c.machine].nominal, compare, self.setup(c).sensor)
+                if absent:
+                    out[config] = absent
+        return out
 
     def setup(self, campaign: Campaign) -> MeasurementSetup:
         """The setup of ``campaign``, bound to its machine."""
@@ -141,6 +154,14 @@ def prepare(study: Study, progress=None) -> Context:
     heldout = []
     setups = tuple(tuple(study.setup_for(mi, si) for si in range(len(study.setups)))
                    for mi in range(len(study.machines)))
+    compared: dict[tuple[int, int, int], str] = {}
+
+    def compare_of(mi: int, si: int, k: int) -> str:
+        if (mi, si, k) not in compared:
+            compared[mi, si, k] = heldout_compare(study.heldout_compare, study.machines[mi].nominal, setups[mi][si],
+                                                  study.methods[k])
+        return compared[mi, si, k]
+
     for mi, m in enumerate(study.machines):
         if study.heldout_file is not None:
             heldout.append(m.nominal.as_pose_array(study.heldout_file))
@@ -178,7 +199,9 @@ def prepare(study: Study, progress=None) -> Context:
                             chosen = poses[select_random(len(poses), n, rng)]
                     methods = study.methods_for(mi, si)
                     first = campaigns[-1].first_config + len(campaigns[-1].methods) if campaigns else 0
-                    campaigns.append(Campaign(len(campaigns), mi, si, pi, ni, n, pool_index, chosen, methods, first))
+                    compares = tuple(compare_of(mi, si, k) for k in methods)
+                    campaigns.append(Campaign(len(campaigns), mi, si, pi, ni, n, pool_index, chosen, methods, first,
+                                              compares))
                     if progress is not None:
                         progress(len(campaigns))
     error_index = tuple(tuple(m.error_index()) for m in study.machines)
@@ -234,44 +257,121 @@ def _abs_stats(values: np.ndarray | None, scale: float = 1.0, mask: np.ndarray |
     return float(np.sqrt(np.mean(v**2))) * scale, float(np.max(v)) * scale
 
 
-def heldout_errors(nominal, setup, fits: list, real, heldout: np.ndarray, ignore_limits: tuple[str, ...]
-                   ) -> tuple:
-    """Held-out errors (module docstring, step 6) of the real machine commanded through the
-    nominal model (first) and each fit's calibrated one, as ``pkmcal verify --real`` compares
-    them (:func:`pkmcal.identification.verification.verify`): the platform frames as
-    commanded (:func:`pose_errors_many`, one FK for all), or for a machine that settles at
-    static equilibrium (redundantly actuated, paper 3) the tool errors of each model with
-    its sensor (:func:`~pkmcal.identification.tool_errors.tool_errors`: "before" with the
-    setup's, "after" with the one identified in the fit)."""
-    if not settles_at_equilibrium(nominal):
-        return pose_errors_many((nominal,) + tuple(f.mechanism for f in fits), real, heldout, ignore_limits)
-    before = tool_errors(nominal, setup.sensor, real, setup, heldout, "before", ignore_limits)
-    return (before,) + tuple(tool_errors(f.mechanism, f.sensor, real, setup, heldout, "after", ignore_limits)
-                             for f in fits)
+def heldout_compare(asked: str, nominal, setup: MeasurementSetup, method) -> str:
+    """What the held-out errors of a configuration (machine ``nominal``, its bound ``setup``,
+    a :class:`~pkmcal.study.schema.MethodSpec`) compare, as ``pkmcal verify --real --compare``:
+
+    * ``tool`` for a machine that settles at static equilibrium (paper 3): the tool on the
+      tracker, the only comparison that machine has;
+    * otherwise the study's ``heldout: {compare:}`` (``asked``), where ``auto`` is
+      ``commanded`` when the instrument reads the platform pose in known frames (a full-pose
+      sensor none of whose parameters the method estimates, paper 1): a gauge then cannot
+      move the pose, and the poses as commanded are what the instrument sees; and ``sensor``
+      otherwise (dial indicators, a Z probe, a tracker, a full-pose sensor with a free
+      frame): the calibration's frames are then a gauge choice, poses as commanded would
+      compare frames the gauge made arbitrary (a good calibration would look like a poor
+      one), and what the instrument reads is the comparison no gauge can change. Which
+      sensor parameters the method estimates is its candidate set on the planning model
+      (:func:`~pkmcal.planning.blocks.planning_model`), so the choice depends on the
+      configuration only, never on a trial."""
+    if settles_at_equilibrium(nominal):
+        if asked != "auto":
+            raise PkmcalError(f"heldout compare '{asked}': machine '{nominal.name}' settles at static equilibrium; it is "
+                              "verified on what its tracker reads (leave 'compare' out)")
+        return "tool"
+    if asked != "auto":
+        return asked
+    if setup.sensor.kind != "full-pose":
+        return "sensor"
+    from pkmcal.planning.blocks import planning_model
+
+    model = planning_model(nominal, setup, method=method.resolved(setup, nominal), free=method.free)
+    candidates = set(model.names) | set(model.report.fixed)
+    return "sensor" if candidates & set(setup.sensor.param_names) else "commanded"
+
+
+def heldout_errors(nominal, setup, fits: list, real, heldout: np.ndarray, ignore_limits: tuple[str, ...],
+                   compare: str = "commanded") -> list[tuple]:
+    """Held-out errors (module docstring, step 6): per fit, (after, before) of the real
+    machine commanded through the fit's calibrated model and through the nominal one, as
+    ``pkmcal verify --real --compare`` gives them
+    (:func:`pkmcal.identification.verification.verify`), ``compare`` from
+    :func:`heldout_compare`:
+
+    * ``commanded`` the platform frames as commanded (:func:`pose_errors_many`, one FK for all);
+    * ``sensor`` what the setup's instrument reads at the reached pose against what each model
+      predicts its own instrument reads ("before" the setup's, "after" the one identified in
+      the fit; :func:`~pkmcal.identification.verification.sensor_errors`);
+    * ``aligned`` the platform frames after the best rigid alignment of each model's base and
+      platform frames, fitted on the poses both models reach
+      (:func:`~pkmcal.identification.verification.aligned_errors`);
+    * ``tool`` the tool errors of a machine that settles at static equilibrium (redundantly
+      actuated, paper 3) with the same instruments as ``sensor``
+      (:func:`~pkmcal.identification.tool_errors.tool_errors`).
+
+    With ``sensor`` and ``aligned`` the held-out poses (the nominal machine's frames) are
+    carried into each fit's frames first, so that every model commands the same physical
+    poses whatever its gauge."""
+    if compare == "commanded":
+        before, *afters = pose_errors_many((nominal,) + tuple(f.mechanism for f in fits), real, heldout, ignore_limits)
+        return [(after, before) for after in afters]
+    if compare == "tool":
+        before = tool_errors(nominal, setup.sensor, real, setup, heldout, "before", ignore_limits)
+        return [(tool_errors(f.mechanism, f.sensor, real, setup, heldout, "after", ignore_limits), before) for f in fits]
+    if compare == "sensor":
+        before = sensor_errors(nominal, setup.sensor, real, setup.sensor, heldout, ignore_limits)
+        return [(sensor_errors(f.mechanism, f.sensor, real, setup.sensor, heldout, ignore_limits, reference=nominal),
+                 before) for f in fits]
+    cmd = nominal.as_pose_array(heldout)
+    raw_before = pose_errors(nominal, real, cmd, ignore_limits)
+    out = []
+    for f in fits:
+        cmd_f = transported(f.mechanism, cmd, nominal)
+        after = pose_errors(f.mechanism, real, cmd_f, ignore_limits)
+        mask = after.valid & raw_before.valid
+        if mask.any():
+            after = aligned_errors(after, cmd_f, mask, f.mechanism)[0]
+            before = aligned_errors(raw_before, cmd, mask, nominal)[0]
+        else:
+            before = raw_before
+        out.append((after, before))
+    return out
 
 
 def _measures(errors: "PoseErrors | ToolErrors") -> dict:
-    """Per held-out pose (N,): position (mm), orientation, tilt (rad) and height (mm) errors;
-    None for a measure the machine does not have (:func:`absent_columns`): a delta has no
+    """Per held-out pose (N,): position (mm), orientation, tilt (rad), height (mm) errors and
+    the reading errors (N, m) of a sensor compared on readings that are no position (mm);
+    None for a measure the comparison does not have (:func:`absent_columns`): a delta has no
     orientation (nor tilt), the tool of a planar machine no tilt or height, its plate angle
-    is the orientation (none for 2 pose coordinates)."""
+    is the orientation (none for 2 pose coordinates); what a sensor reads has no tilt or
+    height, and is a position (a tracker), a pose (a full-pose sensor) or only readings
+    (dial indicators, a Z probe)."""
     if isinstance(errors, ToolErrors):
         angle = None if np.all(np.isnan(errors.angle)) else errors.angle
-        return {"position": errors.tool, "orientation": angle, "tilt": None, "height": None}
+        return {"position": errors.tool, "orientation": angle, "tilt": None, "height": None, "reading": None}
     return {"position": errors.position, "orientation": errors.orientation, "tilt": errors.tilt,
-            "height": errors.height}
+            "height": errors.height, "reading": errors.reading}
 
 
-def absent_columns(machine) -> tuple[str, ...]:
-    """The held-out columns that stay empty for ``machine``: its kind has no such error
+def absent_columns(machine, compare: str = "commanded", sensor=None) -> tuple[str, ...]:
+    """The held-out columns that stay empty for ``machine`` compared by ``compare`` (its
+    ``sensor`` for ``sensor``): its kind or the comparison has no such error
     (:func:`_measures`); ``summary.csv`` leaves them out for its configurations."""
+    from pkmcal.identification.heldout import READS
+
     absent = []
-    if not any(machine.pose_is_angle):
-        absent.append("orientation")
-    if settles_at_equilibrium(machine):
-        absent += ["tilt", "height"]
-    elif not any(machine.pose_is_angle):
-        absent.append("tilt")
+    if compare == "sensor":
+        pos, rot = READS.get(sensor.kind, (None, None))
+        absent += ["tilt", "height"] + (["position"] if pos is None else ["reading"]) + \
+            (["orientation"] if rot is None else [])
+    else:
+        absent.append("reading")
+        if not any(machine.pose_is_angle):
+            absent.append("orientation")
+        if compare == "tool":
+            absent += ["tilt", "height"]
+        elif not any(machine.pose_is_angle):
+            absent.append("tilt")
     return tuple(c for c in HELDOUT_COLUMNS if any(f"_{m}_" in c for m in absent))
 
 
@@ -286,12 +386,13 @@ def heldout_columns(after: "PoseErrors | ToolErrors", before: "PoseErrors | Tool
         return out
     for model, suffix in ((after, ""), (before, "_before")):
         e = _measures(model)
-        p_rms, p_max = _abs_stats(e["position"][common])
+        p_rms, p_max = _abs_stats(e["position"], 1.0, common)
         o_rms, o_max = _abs_stats(e["orientation"], DEG, common)
         out[f"heldout_position_rms{suffix}_mm"] = p_rms
         out[f"heldout_orientation_rms{suffix}_deg"] = o_rms
         out[f"heldout_tilt_rms{suffix}_deg"] = _abs_stats(e["tilt"], DEG, common)[0]
         out[f"heldout_height_rms{suffix}_mm"] = _abs_stats(e["height"], 1.0, common)[0]
+        out[f"heldout_reading_rms{suffix}_mm"] = _abs_stats(e["reading"], 1.0, common)[0]
         if not suffix:
             out.update(heldout_position_max_mm=p_max, heldout_orientation_max_deg=o_max)
     return out
@@ -352,8 +453,9 @@ def _measure(ctx: Context, campaign: Campaign, trial: int) -> "_Measured | list[
             "n_poses": campaign.n_poses, "plan_resampled": campaign.poses is None, "trial": trial, "failed": False,
             "message": ""}
     rows = [dict(base, config=config, method=st.methods[k].label,
-                 identification=st.methods[k].resolved(setup, nominal), weighted=st.methods[k].weighted)
-            for config, k in campaign.configs()]
+                 identification=st.methods[k].resolved(setup, nominal), weighted=st.methods[k].weighted,
+                 heldout_compare=compare)
+            for (config, k), compare in zip(campaign.configs(), campaign.compares)]
     try:
         real = real_machine(mspec, st.seed, campaign.machine, trial,
                             ctx.error_index[campaign.machine] if ctx.error_index else None)
@@ -419,15 +521,19 @@ def _verify(ctx: Context, campaign: Campaign, m: _Measured, fitted: list) -> lis
         else:
             fits.append((k, fit))
     heldout = ctx.heldout[campaign.machine]
+    compared = {}   # k → (after, before): the fits of one comparison share its "before"
     try:
-        before, *afters = heldout_errors(nominal, setup, [f for _, f in fits], real, heldout, mspec.ignore_limits)
+        for compare in dict.fromkeys(campaign.compares[k] for k, _ in fits):
+            ks = [k for k, _ in fits if campaign.compares[k] == compare]
+            compared.update(zip(ks, heldout_errors(nominal, setup, [fitted[k] for k in ks], real, heldout,
+                                                   mspec.ignore_limits, compare)))
     except PkmcalError as exc:
         return _failed(ctx, m.rows, exc)
-    for (k, fit), after in zip(fits, afters):
+    for k, fit in fits:
         r, me = out[k], st.methods[campaign.methods[k]]
         try:
             r.update(evaluate(fit, truth_full, is_angle, nominal, setup, sim, r["identification"], me.weighted))
-            r.update(heldout_columns(after, before))
+            r.update(heldout_columns(*compared[k]))
             if st.extra_metrics is not None:
                 r.update(st.extra_metrics(nominal, real, setup, sim, fit, heldout))
         except PkmcalError as exc:
