@@ -22,13 +22,14 @@ For trial t of campaign c (machine m × setup s × plan p × pose count n):
    mm; angle parameters, degrees); coverage with the *reported* covariance C of the free
    parameters (the file covariance max(1, χ²_ν)·C_prior, :mod:`pkmcal.identification.uncertainty`):
    marginal |e_i| ≤ 1.96 σ_i, and the joint ellipsoid eᵀC⁻¹e ≤ χ²_{n_free, 0.95};
-6. held-out pose errors with the nominal and the calibrated model
-   (:func:`pkmcal.identification.verification.pose_errors`), over the poses both reach;
-   for a machine that settles at static equilibrium (redundantly actuated, paper 3) the
-   tool errors as ``pkmcal verify`` gives them
-   (:func:`pkmcal.identification.tool_errors.tool_errors`: position = tool point,
-   orientation = plate angle). A measure the machine does not have is empty (NaN): the
-   orientation and tilt of a delta, the tilt and height of a planar machine
+6. held-out errors with the nominal and the calibrated model, over the poses both reach,
+   compared as ``pkmcal verify --real --compare`` compares them (:func:`heldout_compare`,
+   :func:`heldout_errors`): the poses as commanded where the instrument reads the full pose
+   in known frames, else what the instrument reads (no gauge can move it); the tool errors
+   for a machine that settles at static equilibrium (redundantly actuated, paper 3:
+   position = tool point, orientation = plate angle). A measure the comparison or the
+   machine does not have is empty (NaN): the orientation and tilt of a delta, the tilt and
+   height of a planar machine, the tilt and height of what an instrument reads
    (:func:`absent_columns`).
 
 Every generator is ``numpy.random.default_rng(SeedSequence(seed, spawn_key=key))``: a
