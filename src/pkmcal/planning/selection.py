@@ -166,7 +166,8 @@ def _all_gains(flatF: np.ndarray, N: int, m: int, M: np.ndarray) -> np.ndarray:
 
     def fill(start, stop):
         W = _whitened(flatF, m, Linv, start, stop)
-        _kernels().gains_of(np.einsum("nip,njp->nij", W, W, optimize=True), gain[start:stop])
+        # C order, as the exchange's own S: one compiled specialisation of gains_of, not two
+        _kernels().gains_of(np.ascontiguousarray(np.einsum("nip,njp->nij", W, W, optimize=True)), gain[start:stop])
 
     _over_slices(fill, N)
     return gain
