@@ -495,3 +495,21 @@ def test_examples_of_other_machines_load():
         assert not math.isnan(s.trials)
     assert kinds == {"study-delta-printer.yaml": {"linear-delta"},
                      "study-planar.yaml": {"planar-3dof-4act", "planar-2dof-3act"}}
+
+
+def test_progress_estimate_uses_the_reading_where_a_row_has_no_position():
+    """The bar's running median takes a row's position error, or its reading error when it
+    is compared on readings (dial indicators, a Z probe)."""
+    from pkmcal.study.results import column_names
+    from pkmcal.study.runner import _Progress
+
+    names = column_names()
+    bar = _Progress(total=2, done=0, enabled=True, names=names)
+    rows = [dict.fromkeys(names, "") for _ in range(2)]
+    rows[0]["heldout_position_rms_mm"] = "0.25"
+    rows[1]["heldout_reading_rms_mm"] = "0.015"
+    try:
+        bar.update(2, [",".join(r[n] for n in names) for r in rows])
+    finally:
+        bar.close()
+    assert bar.values == [0.25, 0.015]

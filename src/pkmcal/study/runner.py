@@ -63,7 +63,8 @@ class _Progress:
     def __init__(self, total: int, done: int, enabled: bool, names: tuple[str, ...]):
         self.bar = None
         self.values: list[float] = []
-        self.col = names.index("heldout_position_rms_mm")
+        # the position error, or the reading error of a row compared on readings (indicators)
+        self.cols = (names.index("heldout_position_rms_mm"), names.index("heldout_reading_rms_mm"))
         self.n_methods = 1
         if enabled:
             from tqdm import tqdm
@@ -78,10 +79,11 @@ class _Progress:
         import csv
 
         for row in csv.reader(lines):
-            if row[self.col]:
-                self.values.append(float(row[self.col]))
+            cell = next((row[c] for c in self.cols if row[c]), "")
+            if cell:
+                self.values.append(float(cell))
         if self.values:
-            self.bar.set_postfix_str(f"median held-out position error {np.median(self.values):.4g} mm", refresh=False)
+            self.bar.set_postfix_str(f"median held-out error {np.median(self.values):.4g} mm", refresh=False)
         self.bar.update(trials)
 
     def close(self) -> None:
