@@ -82,3 +82,23 @@ def gains_of(S, gain):  # pragma: no cover - compiled
     L = np.empty((m, m))
     for j in range(N):
         gain[j] = _logdet_i_plus(S, j, L)
+
+
+@nb.njit(**_OPTS)
+def gains_of_whitened(W, gain):  # pragma: no cover - compiled
+    """gain (N,) = log det(I + W_j W_jᵀ) (−∞ where not positive definite) for the whitened
+    blocks W (N, m, n) = G_j L⁻ᵀ: S_j = W_j W_jᵀ formed in registers (its lower triangle, m(m+1)/2
+    dot products), then :func:`_logdet_i_plus`; the exact gains of all candidates without an
+    (N, m, m) array of S."""
+    N, m, p = W.shape
+    S = np.empty((1, m, m))
+    L = np.empty((m, m))
+    for j in range(N):
+        for i in range(m):
+            for k in range(i + 1):
+                s = 0.0
+                for c in range(p):
+                    s += W[j, i, c] * W[j, k, c]
+                S[0, i, k] = s
+                S[0, k, i] = s
+        gain[j] = _logdet_i_plus(S, 0, L)

@@ -160,14 +160,15 @@ def _all_S(flatF: np.ndarray, N: int, m: int, M: np.ndarray) -> tuple[np.ndarray
 
 def _all_gains(flatF: np.ndarray, N: int, m: int, M: np.ndarray) -> np.ndarray:
     """log det(I + S_j) (N,) for all candidates (−∞ where not positive definite), slice by
-    slice: the values of :func:`_all_S` then ``gains_of``, without holding S of all N."""
+    slice: W = G L⁻ᵀ of a slice by one GEMM, then S_j = W_j W_jᵀ and its log-determinant in
+    one compiled pass (:func:`~pkmcal.planning._selection_kernels.gains_of_whitened`), without
+    holding S of all N. The values of :func:`_all_S` then ``gains_of``, to the rounding of
+    the dot products."""
     Linv = _inverse_factor(M)
     gain = np.empty(N)
 
     def fill(start, stop):
-        W = _whitened(flatF, m, Linv, start, stop)
-        # C order, as the exchange's own S: one compiled specialisation of gains_of, not two
-        _kernels().gains_of(np.ascontiguousarray(np.einsum("nip,njp->nij", W, W, optimize=True)), gain[start:stop])
+        _kernels().gains_of_whitened(_whitened(flatF, m, Linv, start, stop), gain[start:stop])
 
     _over_slices(fill, N)
     return gain
