@@ -129,6 +129,8 @@ def test_export_errors(calibrated, tmp_path):
     # a planar machine exports as JSON (its parameters, angles in degrees)
     j = json.loads(ok(run("export", "planar-2dof-3act", "--format", "json")).stdout)
     assert j["parameters"] and all(p["unit"] in ("mm", "deg") for p in j["parameters"])
+    # the machine's kind as `pkmcal machines` lists it, beside the model's class name of old
+    assert j["machine"]["mechanism_kind"] == "planar-2dof-3act" and j["machine"]["kind"] == "Planar2Dof3Act"
     (tmp_path / "bad.yaml").write_text("name: x\nlegs: []\n")
     res = run("export", tmp_path / "bad.yaml", "--format", "json")
     assert res.exit_code == 2 and "bad.yaml" in res.stderr and "Traceback" not in res.output

@@ -66,7 +66,9 @@ def calibration_json(machine: Mechanism, source: str | None = None) -> dict:
         "format_version": JSON_FORMAT_VERSION,
         "pkmcal": __version__,
         "source": source,
-        "machine": {"name": machine.name, "kind": type(machine).__name__,
+        # "kind": the model's class (kept for the scripts that read it); "mechanism_kind": the
+        # kind `pkmcal machines` and `pkmcal info` name (6-UPS, linear-delta, planar-3dof-4act, ...)
+        "machine": {"name": machine.name, "kind": type(machine).__name__, "mechanism_kind": machine.kind,
                     "description": machine.description or ""},
         "units": {"length": "mm", "angle": "deg", "covariance": "mm^2 (deg^2, mm*deg for angle parameters)",
                   # the unit of each numeric key (docs/conventions.md, "Units in JSON")
