@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import os
 import stat
+import warnings
 from dataclasses import replace
 
 import numpy as np
@@ -340,6 +341,7 @@ def test_file_level_errors(text, expected, line):
          "workspace.x: [1.0, -1.0] has max < min"),
         ("uncertainty: {std: {b9.x: 0.1}}", "uncertainty.std['b9.x']: unknown parameter 'b9.x'"),
         ("uncertainty: {std: {b1.x: -0.1}}", "uncertainty.std['b1.x']: a standard deviation cannot be negative"),
+        ("uncertainty: {std: {b1.x: 1.0e+200}}", "the covariance overflows"),
         ("uncertainty: {parameters: [b1.x, b1.y], std: {b1.x: 0.1}}", "no standard deviation for b1.y"),
         ("uncertainty: {parameters: [b1.x, b1.y], std: {b1.x: 0.1, b1.y: 0.1}, correlation: [[1, 0]]}",
          "uncertainty.correlation: 1 rows, need 2"),
@@ -357,7 +359,9 @@ def test_optional_block_errors(block, expected):
         text, line = MINIMAL.replace(MINIMAL.splitlines()[-1], block), 9
     else:
         text, line = MINIMAL + block + "\n", 10
-    err = _error(text)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)   # the message, not NumPy's warning first
+        err = _error(text)
     assert expected in str(err)
     assert err.line == line
 

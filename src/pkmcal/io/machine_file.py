@@ -450,7 +450,8 @@ def _covariance_from_spec(path: object, spec: UncertaintySpec, lines: dict[tuple
                                              "it from std and correlation")
     else:
         corr = np.eye(n) if corr is None else corr
-        cov = std[:, None] * corr * std[None, :]
+        with np.errstate(over="ignore"):      # an overflow is the clear error below, not a warning
+            cov = std[:, None] * corr * std[None, :]
     scale = float(np.max(np.diag(cov))) if n else 0.0
     if n and not np.all(np.isfinite(cov)):
         raise fail(("std",), "the covariance overflows; give standard deviations in mm")
