@@ -27,6 +27,7 @@ HEADLINE = (
     ("heldout_position_rms_before_mm", "before, mm (median)", "median_only"),
     ("heldout_orientation_rms_deg", "held-out orientation rms after, deg (median)", "median_only"),
     ("heldout_reading_rms_mm", "held-out reading rms after, mm (median; compared on readings)", "median_only"),
+    ("heldout_reading_rms_before_mm", "before, mm (median)", "median_only"),
     ("param_error_rms_mm", "parameter error rms, mm (median, 95 % CI)", "median"),
     ("coverage_fraction", "per-parameter coverage (mean, 95 % CI)", "mean"),
     ("ellipsoid_within_95", "joint-ellipsoid coverage (fraction, Wilson 95 % CI)", "mean"),
