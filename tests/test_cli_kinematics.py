@@ -176,6 +176,32 @@ def test_fk_errors(tmp_path):
 
 # -- info ---------------------------------------------------------------------------------------
 
+def test_info_lists_the_parameter_names_by_unit():
+    """What --free, --fix, --prior and a study's error groups name, grouped by unit: a delta's
+    tower angles and leans in degrees, its radii, arms and endstops in mm (every name once)."""
+    from pkmcal.mechanisms.library import builtin_machine
+
+    res = run("info", "kossel-mini", "--n-poses", "5")
+    assert res.exit_code == 0, res.output
+    lines = res.stdout.splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("parameters ("))
+    texts: dict[str, str] = {}
+    unit = None
+    for line in lines[start + 1:]:
+        if line.startswith("    ") and unit is not None:      # a wrapped continuation
+            texts[unit] += " " + line.strip()
+        elif line.startswith("  ") and ": " in line:
+            unit, _, names = line.strip().partition(": ")
+            texts[unit] = names
+        else:
+            break
+    groups = {u: [n.strip() for n in t.split(",")] for u, t in texts.items()}
+    machine = builtin_machine("kossel-mini")
+    assert lines[start].startswith(f"parameters ({len(machine.param_names)};")
+    assert sorted(n for names in groups.values() for n in names) == sorted(machine.param_names)
+    assert "angle_a" in groups["deg"] and "lean_radial_c" in groups["deg"] and "radius_b" in groups["mm"]
+
+
 def test_info_default_machine():
     res = run("info", "--poses", "60")
     assert res.exit_code == 0, res.output

@@ -117,6 +117,22 @@ def _fmt(value: float, is_angle: bool) -> str:
 N_ROUND_TRIP = 300
 
 
+def _parameter_lines(mech) -> str:
+    """The machine's parameter names by unit, wrapped: what ``--free``, ``--fix``, ``--prior``
+    and a study's error groups name."""
+    import textwrap
+
+    by_unit: dict[str, list[str]] = {}
+    for name, unit, angle in zip(mech.param_names, mech.param_units, mech.param_is_angle):
+        by_unit.setdefault("deg" if angle else unit, []).append(name)
+    lines = [f"parameters ({len(mech.param_names)}; the names --free, --fix, --prior and study error groups use):"]
+    for unit, names in by_unit.items():
+        label = "no unit" if unit == "1" else unit    # a hexapod's leg gains (mm per reading unit of mm)
+        lines += textwrap.wrap(", ".join(names), width=100, initial_indent=f"  {label}: ",
+                               subsequent_indent="    ", break_on_hyphens=False)
+    return "\n".join(lines)
+
+
 @click.command("info", epilog=examples(
     "pkmcal info",
     "pkmcal info stewart-prototype-real --n-poses 1000 --seed 2",
@@ -138,6 +154,7 @@ def info_cmd(machine: str, n_poses: int | None, poses: str | None, seed: int) ->
     mech = load_machine(machine)
     summary = mech.summary()
     click.echo(summary)
+    click.echo(_parameter_lines(mech))
     home = np.asarray(mech.home_pose, dtype=float)
     angle = np.array(mech.pose_is_angle)
     unit = lambda k: "deg" if angle[k] else "mm"  # noqa: E731
