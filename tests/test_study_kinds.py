@@ -513,3 +513,62 @@ def test_progress_estimate_uses_the_reading_where_a_row_has_no_position():
     finally:
         bar.close()
     assert bar.values == [0.25, 0.015]
+
+
+# -- paper 3's baselines -------------------------------------------------------------------------
+
+BASELINE_STUDY = PLANAR.replace("methods: [auto]", "methods: [auto, ignore-redundancy, actuator-subset]").replace(
+    "  - nominal: planar-2dof-3act\n    errors:\n      - {parameters: \"[lBD]*\", distribution: uniform, size: 0.5}\n"
+    "      - {parameters: \"dq*\", distribution: uniform, size: 0.1}\n", "")
+
+
+def test_paper3_baselines_in_a_study(tmp_path):
+    """Paper 3 §1's ways of calibrating a redundant machine as if it were not (the encoders
+    replaced by the commands; a non-redundant subset of the actuators) as study methods: the
+    projection method lands the tool closer than either, on the same simulated machines."""
+    study = load_study(_write(tmp_path, BASELINE_STUDY))
+    assert [m.nominal.name for m in study.machines] == ["planar-3dof-4act"]
+    run_study(study, tmp_path / "r", workers=1, figures=False)
+    cols = read_trials(tmp_path / "r" / "trials.csv")
+    assert np.all(cols["failed"] == 0), cols["message"]
+    assert list(cols["identification"][::3]) == ["projection", "ignore-redundancy", "actuator-subset"]
+    err = {m: cols["heldout_position_rms_mm"][cols["method"] == m] for m in ("auto", "ignore-redundancy",
+                                                                              "actuator-subset")}
+    assert np.all(err["auto"] < err["ignore-redundancy"]) and np.all(err["auto"] < err["actuator-subset"]), err
+
+
+def test_a_baseline_trial_is_what_identify_and_verify_make_of_it(tmp_path):
+    """Trial 1 of the ignore-redundancy configuration through the commands, as the planar
+    projection trial above: `pkmcal identify --method ignore-redundancy` and `pkmcal verify`."""
+    study = load_study(_write(tmp_path, BASELINE_STUDY))
+    ctx = prepare(study)
+    campaign = ctx.campaigns[0]
+    nominal, setup = study.machines[0].nominal, ctx.setup(campaign)
+    measured = _measure(ctx, campaign, 1)
+    row = dict(zip(ctx.names, list(csv.reader(run_trial(ctx, campaign, 1)))[1]))
+    assert row["identification"] == "ignore-redundancy"
+    save_measurements(tmp_path / "meas.csv", measured.sim.measurements, nominal, setup)
+    (tmp_path / "real.yaml").write_text(machine_to_text(measured.real), encoding="utf-8")
+    held = ctx.heldout[0]
+    write_table(tmp_path / "held.csv", dict(zip(nominal.pose_names, to_file_units(held, nominal.pose_is_angle).T)))
+    runner = CliRunner()
+    r = runner.invoke(cli, ["identify", "planar-3dof-4act", str(tmp_path / "meas.csv"), "--setup", "planar-tracker",
+                            "--method", "ignore-redundancy", "-o", str(tmp_path / "cal.yaml"), "--json"])
+    assert r.exit_code == 0, r.output
+    fit = json.loads(r.stdout)
+    r = runner.invoke(cli, ["verify", str(tmp_path / "cal.yaml"), "--real", str(tmp_path / "real.yaml"), "--nominal",
+                            "planar-3dof-4act", "--setup", "planar-tracker", "--poses", str(tmp_path / "held.csv"),
+                            "--json"])
+    assert r.exit_code == 0, r.output
+    ver = json.loads(r.stdout)
+    assert fit["method"] == "ignore-redundancy"
+    assert float(row["chi2"]) == pytest.approx(fit["chi2"], rel=1e-8)
+    assert float(row["heldout_position_rms_mm"]) == pytest.approx(ver["after"]["tool_rms_mm"], rel=1e-6)
+    assert float(row["heldout_position_rms_before_mm"]) == pytest.approx(ver["before"]["tool_rms_mm"], rel=1e-6)
+
+
+def test_a_baseline_on_a_machine_that_is_not_redundant_is_refused(tmp_path):
+    p = _write(tmp_path, MIXED.replace("methods: [auto]", "methods: [auto, ignore-redundancy]"))
+    r = CliRunner().invoke(cli, ["study", str(p), "-o", str(tmp_path / "out")])
+    assert_user_error(r, str(p), "'ignore-redundancy'", "paper 3 baseline", "machine 'stewart-prototype'",
+                      "machines: [...]")

@@ -73,7 +73,8 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from pkmcal.errors import InputFileError, PkmcalError
-from pkmcal.identification.residuals import METHODS
+from pkmcal.identification.residuals import METHODS as ENGINE_METHODS
+from pkmcal.reproduce.paper3_baselines import BASELINES
 from pkmcal.io._yaml import YamlSyntaxError, parse_yaml
 from pkmcal.io.machine_file import load_machine, machine_to_text
 from pkmcal.io.setup_file import load_setup, setup_to_yaml
@@ -155,6 +156,11 @@ class _Method(_Strict):
             raise ValueError(f"unknown method '{v}'; use auto or one of {', '.join(METHODS)}")
         return v
 
+
+#: Methods a study fits with: the engine's, and paper 3's baselines for redundantly actuated
+#: machines (``ignore-redundancy``, ``actuator-subset``: the engine's projection fit on the
+#: inputs they change, as ``pkmcal identify --method``).
+METHODS = ENGINE_METHODS + BASELINES
 
 #: What the held-out errors compare (``heldout: {compare: ...}``): ``auto`` chooses per
 #: configuration (:func:`pkmcal.study.trial.heldout_compare`), ``commanded`` the platform
@@ -325,11 +331,19 @@ class Study:
                     raise PkmcalError(f"no method fits machine '{m.label}' with setup '{s.label}' (the methods' "
                                       "'machines:' and 'setups:' lists); add one, or leave the setup out of the "
                                       "machine's 'setups:'")
+        from pkmcal.identification.simulation import settles_at_equilibrium
+
+        for me in self.methods:
+            if me.method not in BASELINES:
+                continue
+            for m in self.machines:
+                if any(me.fits(m.label, s.label) for s in self.setups) and not settles_at_equilibrium(m.nominal):
+                    raise PkmcalError(f"method '{me.label}' ({me.method}) is a paper 3 baseline for redundantly "
+                                      f"actuated machines; machine '{m.label}' is not one: restrict the method "
+                                      "with 'machines: [...]'")
         if self.heldout_compare not in get_args(HELDOUT_COMPARES):
             raise PkmcalError(f"heldout compare '{self.heldout_compare}': use one of {', '.join(get_args(HELDOUT_COMPARES))}")
         if self.heldout_compare != "auto":
-            from pkmcal.identification.simulation import settles_at_equilibrium
-
             for m in self.machines:
                 if settles_at_equilibrium(m.nominal):
                     raise PkmcalError(f"heldout compare '{self.heldout_compare}': machine '{m.label}' settles at static "

@@ -40,6 +40,7 @@ held-out pose reachable) makes a row with ``failed = 1`` and the message, not a 
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 from functools import lru_cache
@@ -61,6 +62,7 @@ from pkmcal.identification.verification import (
 from pkmcal.planning.candidates import generate_candidates
 from pkmcal.planning.plan import plan_poses
 from pkmcal.planning.selection import select, select_random
+from pkmcal.reproduce.paper3_baselines import BASELINES, baseline_inputs, baseline_result
 from pkmcal.sensors.base import MeasurementSetup
 from pkmcal.study.results import HELDOUT_COLUMNS, Z95, column_names, format_row
 from pkmcal.study.schema import MachineSpec, Study
@@ -243,9 +245,21 @@ def pseudo_truth(fit: IdentificationResult, truth_full: np.ndarray, nominal, set
     fixed[fit.free_index] = False
     if np.array_equal(truth_full[fixed], fit.initial[fixed]):
         return truth_full, False, 0.0
-    ref = identify(nominal, setup, q=sim.actuator_true, y=sim.sensor_true, commanded=sim.commanded[sim.kept],
-                   method=method, weighted=weighted, free=fit.free)
+    noise_free = dataclasses.replace(sim.measurements, actuators=sim.actuator_true, readings=sim.sensor_true)
+    ref = fit_campaign(nominal, setup, noise_free, method, weighted, free=fit.free)
     return ref.estimate, True, ref.rms_residual
+
+
+def fit_campaign(nominal, setup, measurements, method: str, weighted: bool, free=None, fix=None) -> IdentificationResult:
+    """Step 3 for one trial: :func:`~pkmcal.identification.engine.identify` by ``method``, or a
+    paper 3 baseline for a redundantly actuated machine (``ignore-redundancy``,
+    ``actuator-subset``: the engine's ``projection`` fit on the inputs the baseline changes,
+    :mod:`pkmcal.reproduce.paper3_baselines`), as ``pkmcal identify --method`` fits it."""
+    if method not in BASELINES:
+        return identify(nominal, setup, measurements, method=method, weighted=weighted, free=free, fix=fix)
+    machine, fit_setup, data = baseline_inputs(method, nominal, setup, measurements)
+    result = identify(machine, fit_setup, data, method="projection", weighted=weighted, free=free, fix=fix)
+    return baseline_result(result, nominal, method)
 
 
 def _abs_stats(values: np.ndarray | None, scale: float = 1.0, mask: np.ndarray | None = None) -> tuple[float, float]:
@@ -497,8 +511,8 @@ def _fit_all(ctx: Context, campaign: Campaign, measured: list[_Measured], k: int
     for i, m in enumerate(measured):
         if fits[i] is None:
             try:
-                fits[i] = identify(nominal, setup, m.sim.measurements, method=method, weighted=me.weighted,
-                                   free=me.free, fix=me.fix)
+                fits[i] = fit_campaign(nominal, setup, m.sim.measurements, method, me.weighted, free=me.free,
+                                       fix=me.fix)
             except PkmcalError as exc:
                 fits[i] = exc
     return fits
