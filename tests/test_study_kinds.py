@@ -249,6 +249,32 @@ def test_delta_page_and_figures(delta):
         assert (out / "figures" / f"{name}.svg").stat().st_size > 0
 
 
+def _through_commands(tmp_path, study, method_index: int, identify_args: list, verify_args: list):
+    """Trial 1 of campaign 0 (its ``method_index``-th method) as the study computes it, and as
+    the commands compute it from the same data through files: ``(row, identify --json,
+    verify --json)``. The measurements, the real machine and the held-out poses are written
+    as a user would have them; ``pkmcal identify MACHINE MEAS.csv *identify_args`` then
+    ``pkmcal verify CAL.yaml --real REAL.yaml --nominal MACHINE --poses HELD.csv *verify_args``."""
+    ctx = prepare(study)
+    campaign = ctx.campaigns[0]
+    nominal, setup = study.machines[0].nominal, ctx.setup(campaign)
+    measured = _measure(ctx, campaign, 1)
+    row = dict(zip(ctx.names, list(csv.reader(run_trial(ctx, campaign, 1)))[method_index]))
+    save_measurements(tmp_path / "meas.csv", measured.sim.measurements, nominal, setup)
+    (tmp_path / "real.yaml").write_text(machine_to_text(measured.real), encoding="utf-8")
+    held = ctx.heldout[0]
+    write_table(tmp_path / "held.csv", dict(zip(nominal.pose_names, to_file_units(held, nominal.pose_is_angle).T)))
+    runner = CliRunner()
+    r = runner.invoke(cli, ["identify", nominal.name, str(tmp_path / "meas.csv"), *identify_args,
+                            "-o", str(tmp_path / "cal.yaml"), "--json"])
+    assert r.exit_code == 0, r.output
+    fit = json.loads(r.stdout)
+    r = runner.invoke(cli, ["verify", str(tmp_path / "cal.yaml"), "--real", str(tmp_path / "real.yaml"), "--nominal",
+                            nominal.name, "--poses", str(tmp_path / "held.csv"), *verify_args, "--json"])
+    assert r.exit_code == 0, r.output
+    return row, fit, json.loads(r.stdout)
+
+
 @pytest.mark.parametrize("compare", ["auto", "aligned"])
 def test_delta_trial_is_what_identify_and_verify_make_of_it(tmp_path, compare):
     """Trial 1 of the tracker configuration, fitted and verified by the commands through
@@ -259,27 +285,10 @@ def test_delta_trial_is_what_identify_and_verify_make_of_it(tmp_path, compare):
     smaller "before"), so only "after" is compared there."""
     text = DELTA if compare == "auto" else DELTA.replace("heldout: {poses: 8}", "heldout: {poses: 8, compare: aligned}")
     study = load_study(_write(tmp_path, text))
-    ctx = prepare(study)
-    campaign = ctx.campaigns[0]
-    nominal, setup = study.machines[0].nominal, ctx.setup(campaign)
     expected = "sensor" if compare == "auto" else "aligned"
-    assert campaign.compares == (expected,)
-    measured = _measure(ctx, campaign, 1)
-    row = dict(zip(ctx.names, next(csv.reader(run_trial(ctx, campaign, 1)))))
-    save_measurements(tmp_path / "meas.csv", measured.sim.measurements, nominal, setup)
-    (tmp_path / "real.yaml").write_text(machine_to_text(measured.real), encoding="utf-8")
-    held = ctx.heldout[0]
-    write_table(tmp_path / "held.csv", dict(zip(nominal.pose_names, to_file_units(held, nominal.pose_is_angle).T)))
-    runner = CliRunner()
-    r = runner.invoke(cli, ["identify", "kossel-mini", str(tmp_path / "meas.csv"), "--setup", "laser-tracker",
-                            "--fix", "target.*", "-o", str(tmp_path / "cal.yaml"), "--json"])
-    assert r.exit_code == 0, r.output
-    fit = json.loads(r.stdout)
+    assert prepare(study).campaigns[0].compares == (expected,)
     how = ["--setup", "laser-tracker"] if compare == "auto" else ["--compare", "aligned"]
-    r = runner.invoke(cli, ["verify", str(tmp_path / "cal.yaml"), "--real", str(tmp_path / "real.yaml"), "--nominal",
-                            "kossel-mini", "--poses", str(tmp_path / "held.csv"), *how, "--json"])
-    assert r.exit_code == 0, r.output
-    ver = json.loads(r.stdout)
+    row, fit, ver = _through_commands(tmp_path, study, 0, ["--setup", "laser-tracker", "--fix", "target.*"], how)
     assert ver["compare"] == row["heldout_compare"] == expected
     assert float(row["chi2"]) == pytest.approx(fit["chi2"], rel=1e-8)
     assert int(row["heldout_used"]) == ver["after"]["poses"]
@@ -350,25 +359,7 @@ def test_planar_trial_is_what_identify_and_verify_make_of_it(planar, tmp_path):
     """Trial 1 of planar-3dof-4act: the study's simulated campaign, fitted and verified by the
     commands (through files, so to the files' round trip) gives the trial's row."""
     study, _ = planar
-    ctx = prepare(study)
-    campaign = ctx.campaigns[0]
-    nominal, setup = study.machines[0].nominal, ctx.setup(campaign)
-    measured = _measure(ctx, campaign, 1)
-    row = dict(zip(ctx.names, next(csv.reader(run_trial(ctx, campaign, 1)))))
-    save_measurements(tmp_path / "meas.csv", measured.sim.measurements, nominal, setup)
-    (tmp_path / "real.yaml").write_text(machine_to_text(measured.real), encoding="utf-8")
-    held = ctx.heldout[0]
-    write_table(tmp_path / "held.csv", dict(zip(nominal.pose_names, to_file_units(held, nominal.pose_is_angle).T)))
-    runner = CliRunner()
-    r = runner.invoke(cli, ["identify", "planar-3dof-4act", str(tmp_path / "meas.csv"), "--setup", "planar-tracker",
-                            "-o", str(tmp_path / "cal.yaml"), "--json"])
-    assert r.exit_code == 0, r.output
-    fit = json.loads(r.stdout)
-    r = runner.invoke(cli, ["verify", str(tmp_path / "cal.yaml"), "--real", str(tmp_path / "real.yaml"), "--nominal",
-                            "planar-3dof-4act", "--setup", "planar-tracker", "--poses", str(tmp_path / "held.csv"),
-                            "--json"])
-    assert r.exit_code == 0, r.output
-    ver = json.loads(r.stdout)
+    row, fit, ver = _through_commands(tmp_path, study, 0, ["--setup", "planar-tracker"], ["--setup", "planar-tracker"])
     assert fit["method"] == row["identification"] == "projection"
     assert float(row["chi2"]) == pytest.approx(fit["chi2"], rel=1e-8)
     assert int(row["heldout_used"]) == ver["after"]["poses"] == ver["before"]["poses"]
@@ -541,26 +532,10 @@ def test_a_baseline_trial_is_what_identify_and_verify_make_of_it(tmp_path):
     """Trial 1 of the ignore-redundancy configuration through the commands, as the planar
     projection trial above: `pkmcal identify --method ignore-redundancy` and `pkmcal verify`."""
     study = load_study(_write(tmp_path, BASELINE_STUDY))
-    ctx = prepare(study)
-    campaign = ctx.campaigns[0]
-    nominal, setup = study.machines[0].nominal, ctx.setup(campaign)
-    measured = _measure(ctx, campaign, 1)
-    row = dict(zip(ctx.names, list(csv.reader(run_trial(ctx, campaign, 1)))[1]))
+    row, fit, ver = _through_commands(tmp_path, study, 1,
+                                      ["--setup", "planar-tracker", "--method", "ignore-redundancy"],
+                                      ["--setup", "planar-tracker"])
     assert row["identification"] == "ignore-redundancy"
-    save_measurements(tmp_path / "meas.csv", measured.sim.measurements, nominal, setup)
-    (tmp_path / "real.yaml").write_text(machine_to_text(measured.real), encoding="utf-8")
-    held = ctx.heldout[0]
-    write_table(tmp_path / "held.csv", dict(zip(nominal.pose_names, to_file_units(held, nominal.pose_is_angle).T)))
-    runner = CliRunner()
-    r = runner.invoke(cli, ["identify", "planar-3dof-4act", str(tmp_path / "meas.csv"), "--setup", "planar-tracker",
-                            "--method", "ignore-redundancy", "-o", str(tmp_path / "cal.yaml"), "--json"])
-    assert r.exit_code == 0, r.output
-    fit = json.loads(r.stdout)
-    r = runner.invoke(cli, ["verify", str(tmp_path / "cal.yaml"), "--real", str(tmp_path / "real.yaml"), "--nominal",
-                            "planar-3dof-4act", "--setup", "planar-tracker", "--poses", str(tmp_path / "held.csv"),
-                            "--json"])
-    assert r.exit_code == 0, r.output
-    ver = json.loads(r.stdout)
     assert fit["method"] == "ignore-redundancy"
     assert float(row["chi2"]) == pytest.approx(fit["chi2"], rel=1e-8)
     assert float(row["heldout_position_rms_mm"]) == pytest.approx(ver["after"]["tool_rms_mm"], rel=1e-6)
