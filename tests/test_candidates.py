@@ -20,6 +20,7 @@ from pkmcal.planning.candidates import (
     workspace_box,
 )
 from pkmcal.planning.indices import observability_indices
+from pkmcal.planning.blocks import planning_model, raw_blocks
 from pkmcal.planning.plan import candidate_blocks, plan_poses
 from pkmcal.sensors import FullPoseSensor, MeasurementSetup, NoiseModel
 
@@ -252,6 +253,22 @@ def test_blocks_in_batches_are_those_computed_at_once(machine, indicators):
         G, ok = candidate_blocks(plan.model, plan.candidates.poses, batch=batch)
         np.testing.assert_array_equal(G, G_all)
         np.testing.assert_array_equal(ok, ok_all)
+
+
+@pytest.mark.parametrize("setup_name", ["full-pose-paper1", "laser-tracker", "indicators-prototype"])
+def test_blocks_of_the_identifiable_columns_are_those_columns_of_all(machine, setup_name):
+    """raw_blocks(columns=...) (sensor columns skipped when none is asked for) gives the same
+    numbers as those columns of all P columns: whitening mixes rows only."""
+    setup = load_setup(setup_name)
+    model = planning_model(machine, setup)
+    poses = generate_candidates(machine, setup, kind="random", n=300, rng=np.random.default_rng(4)).poses
+    J_all, ok_all, names = raw_blocks(machine, setup, poses, model.method)
+    J, ok, _ = raw_blocks(machine, setup, poses, model.method, columns=model.free_index)
+    np.testing.assert_array_equal(J, J_all[:, :, model.free_index])
+    np.testing.assert_array_equal(ok, ok_all)
+    assert np.isfinite(J).all()
+    sensor_free = [names[i] for i in model.free_index if i >= len(machine.param_names)]
+    assert bool(sensor_free) == (setup_name == "laser-tracker")   # the target offset: both paths taken
 
 
 @pytest.mark.parametrize("n", [1, 15, 63])

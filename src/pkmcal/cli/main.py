@@ -183,6 +183,9 @@ def cli() -> None:
 
 
 def main() -> None:
+    from pkmcal.allocator import keep_freed_memory
+
+    keep_freed_memory()
     cli(prog_name="pkmcal")
 
 

@@ -43,16 +43,25 @@ N_REFERENCE = 256
 
 
 def raw_blocks(mechanism: Mechanism, setup: MeasurementSetup, poses: np.ndarray, method: str,
-               weighted: bool = True) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+               weighted: bool = True, columns: np.ndarray | None = None
+               ) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
     """Whitened residual Jacobians W_j J_j (N, k, P) of all parameters at the nominal machine
-    (J_j itself when not ``weighted``), a converged flag (N,) and the parameter names."""
+    (J_j itself when not ``weighted``), a converged flag (N,) and the parameter names.
+
+    ``columns``: only these columns of θ = [ρ; s] (N, k, len(columns)), the same numbers as
+    those columns of all P (whitening mixes rows, not columns); the sensor parameters'
+    columns are not computed when none of them is asked for, as the engine skips them when
+    none is free."""
     poses = mechanism.as_pose_array(poses)
     model = Model(mechanism, setup.sensor, setup.noise, mechanism.ik(poses),
                   setup.sensor.predict(mechanism.frame(poses)), commanded=poses)
-    ev = make_method(method, model, weighted=weighted).evaluate(model.theta0, jac=True, cov=weighted)
+    evaluator = make_method(method, model, weighted=weighted)
+    if columns is not None:
+        evaluator.sensor_columns = bool(np.any(np.asarray(columns) >= model.n_mech))
+    ev = evaluator.evaluate(model.theta0, jac=True, cov=weighted)
     W = whitening(ev.cov, f"{method} residual") if weighted and method != "projection" else None
-    J = ev.J if W is None else W @ ev.J
-    return J, ev.converged, model.names
+    J = ev.J if W is None else W @ ev.J    # NaN sensor columns stay in their own columns
+    return (J if columns is None else J[:, :, columns]), ev.converged, model.names
 
 
 @dataclass(frozen=True)
@@ -79,8 +88,8 @@ class PlanningModel:
     def blocks(self, poses: np.ndarray, out: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """G (N, k, n) of ``poses`` (module docstring) and a flag (N,) of poses whose
         nuisance pose was solved (FK converged); G written into ``out`` when given."""
-        J, ok, _ = raw_blocks(self.mechanism, self.setup, poses, self.method)
-        return np.multiply(J[:, :, self.free_index], self.scale, out=out), ok
+        J, ok, _ = raw_blocks(self.mechanism, self.setup, poses, self.method, columns=self.free_index)
+        return np.multiply(J, self.scale, out=out), ok
 
 
 @blas_single_threaded

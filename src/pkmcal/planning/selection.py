@@ -279,7 +279,6 @@ def _detmax_exchange(G: np.ndarray, flatF: np.ndarray, chosen: list[int], max_ex
         last_work = np.zeros(N, dtype=bool)
         last_work[work] = True
         state = _DState(np.ascontiguousarray(G[work]), M)
-        pos = {int(j): i for i, j in enumerate(work)}
         w_in = in_set[work]
         stopped = False
         while exchanges < max_ex:
@@ -291,7 +290,7 @@ def _detmax_exchange(G: np.ndarray, flatF: np.ndarray, chosen: list[int], max_ex
                 stopped = True
                 break
             state.update(k, 1.0)
-            cand = np.array([pos[c] for c in chosen] + [k])
+            cand = np.append(np.searchsorted(work, chosen), k)     # work is sorted
             loss = _batch_logdet(state.S[cand], -1.0)
             r = int(np.argmax(loss))
             if cand[r] == k or gain[k] + loss[r] <= 1e-10:
@@ -306,7 +305,7 @@ def _detmax_exchange(G: np.ndarray, flatF: np.ndarray, chosen: list[int], max_ex
             exchanges += 1
             if progress is not None:
                 progress(exchanges)
-        M = state.M
+        M, state = state.M, None       # the working set's copy of G freed before the next one
         if N <= work_size or not stopped:
             break
     return chosen, exchanges, evaluations
