@@ -8,6 +8,7 @@ import pytest
 
 from pkmcal.io.setup_file import load_setup
 from pkmcal.mechanisms.library import stewart_prototype
+from pkmcal.parallel import IN_PROCESS
 from pkmcal.planning import candidates as cand_mod
 from pkmcal.planning import selection as sel_mod
 from pkmcal.planning.executors import chunk_map, ordered_map
@@ -72,7 +73,7 @@ def test_ordered_map_keeps_order_and_a_bounded_look_ahead():
 def test_in_process_chunk_map_is_the_builtin_map():
     for workers in (None, 1):
         with chunk_map(workers) as run:
-            assert run is map
+            assert run is IN_PROCESS is map
 
 
 def _pass_problem(N, p=13):

@@ -2,6 +2,7 @@
 
 * :func:`ordered_map` — a ``map`` over any executor's futures (a thread or process pool,
   Dask), results in order, at most a given number in flight.
+* :data:`IN_PROCESS` — the chunk map of "in this process, one chunk after the other".
 
 One shared thread pool serves the compiled kinematics and planning.
 
@@ -31,6 +32,11 @@ from typing import Callable, Iterable, Iterator
 CHUNKS_PER_THREAD = 4
 #: Items in flight per worker (thread, process or Dask worker), ahead of the one consumed.
 LOOKAHEAD = 2
+#: The ``chunk_map`` of "in this process": the built-in lazy ``map`` (chunks one after the
+#: other, in order, none computed after the consumer stops). Work that this process does
+#: better than chunk by chunk (the planning blocks: batches on local threads, written in
+#: place) checks ``chunk_map is IN_PROCESS``.
+IN_PROCESS = map
 
 _POOL: ThreadPoolExecutor | None = None
 _POOL_SIZE = 0

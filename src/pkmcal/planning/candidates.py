@@ -59,6 +59,7 @@ from pkmcal.conventions import POSE_COLUMNS, euler_to_matrix
 from pkmcal.errors import InputFileError, PkmcalError
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.mechanisms.frame import Frame
+from pkmcal.parallel import IN_PROCESS
 from pkmcal.planning.indices import blas_single_threaded
 from pkmcal.sensors.base import MeasurementSetup
 from pkmcal.sensors.indicators import MIN_NORMAL_Z
@@ -388,7 +389,7 @@ def generate_candidates(mechanism: Mechanism, setup: MeasurementSetup | None, *,
                         path: str | os.PathLike | None = None, poses: np.ndarray | None = None,
                         grid_per_axis: int = 4, margin: float = DEFAULT_MARGIN,
                         measurability: Measurability = Measurability(), max_rounds: int = 50,
-                        chunk_size: int = CHUNK_SIZE, chunk_map: Callable = map,
+                        chunk_size: int = CHUNK_SIZE, chunk_map: Callable = IN_PROCESS,
                         progress: Progress | None = None) -> CandidateSet:
     """Checked candidate poses of one ``kind`` of :data:`CANDIDATE_KINDS`, processed in
     chunks of ``chunk_size`` poses (bounded memory); error if none passes.
@@ -402,7 +403,8 @@ def generate_candidates(mechanism: Mechanism, setup: MeasurementSetup | None, *,
     :func:`workspace_box`. The result does not depend on ``chunk_size``.
 
     ``chunk_map(fn, chunks)`` runs :func:`check_chunk` on the chunks and must yield the
-    results in order; the default, the built-in lazy ``map``, runs them in this process
+    results in order; the default, :data:`~pkmcal.parallel.IN_PROCESS` (the built-in lazy
+    ``map``), runs them in this process
     one after the other and stops at the n-th accepted pose. An executor's ``map``
     (``concurrent.futures``; Dask's ``client.map`` then ``gather``) may run a round's chunks
     at once; results after the n-th accepted pose are then discarded. ``progress`` is

@@ -7,7 +7,8 @@ by a ``chunk_map(fn, chunks)`` that yields the results in order. :func:`chunk_ma
 one on the backends of ``pkmcal study`` (:mod:`pkmcal.study.backends`: the same core count
 and the same Dask client):
 
-* in this process (``workers`` None or 1, no ``dask``): the built-in lazy ``map``;
+* in this process (``workers`` None or 1, no ``dask``): :data:`pkmcal.parallel.IN_PROCESS`,
+  the built-in lazy ``map``;
 * ``workers`` N > 1: a :class:`concurrent.futures.ProcessPoolExecutor` of N processes,
   forked on Linux (the workers start with the modules and the compiled kernels loaded), spawned
   elsewhere;
@@ -32,7 +33,7 @@ from __future__ import annotations
 import contextlib
 
 from pkmcal.errors import PkmcalError
-from pkmcal.parallel import LOOKAHEAD, ordered_map
+from pkmcal.parallel import IN_PROCESS, LOOKAHEAD, ordered_map
 
 @contextlib.contextmanager
 def chunk_map(workers: int | None = None, dask: str | None = None):
@@ -51,7 +52,7 @@ def chunk_map(workers: int | None = None, dask: str | None = None):
                 cluster.close()
         return
     if workers is None or workers <= 1:
-        yield map
+        yield IN_PROCESS
         return
     from concurrent.futures import ProcessPoolExecutor
     from concurrent.futures.process import BrokenProcessPool

@@ -23,6 +23,7 @@ import numpy as np
 
 from pkmcal.errors import PkmcalError
 from pkmcal.mechanisms.base import Mechanism
+from pkmcal.parallel import IN_PROCESS
 from pkmcal.planning.blocks import PlanningModel, planning_model
 from pkmcal.planning.candidates import (
     CHUNK_SIZE,
@@ -118,7 +119,7 @@ def plan_poses(mechanism: Mechanism, setup: MeasurementSetup, n: int, *, algorit
                margin: SafetyMargin | DeltaSafetyMargin | float | None = None,
                measurability: Measurability = Measurability(), method: str | None = None,
                model: PlanningModel | None = None, progress: Stages | None = None, circle_plane: str = "xy",
-               chunk_size: int = CHUNK_SIZE, chunk_map: Callable = map) -> Plan:
+               chunk_size: int = CHUNK_SIZE, chunk_map: Callable = IN_PROCESS) -> Plan:
     """Choose ``n`` poses to measure (paper 2 §4, paper 1 §IV).
 
     ``candidates``: an array (N, 6) (mm, rad) or a CSV path (x, y, z, a, b, c in mm, deg);
@@ -138,7 +139,8 @@ def plan_poses(mechanism: Mechanism, setup: MeasurementSetup, n: int, *, algorit
     (:func:`~pkmcal.planning.candidates.generate_candidates`, the "candidates" stage's
     callback called with (done, total) after every chunk), then only the accepted ones get
     their planning blocks (:func:`candidate_blocks`); both steps are mapped by ``chunk_map``
-    (default: in this process, in order). The plan does not depend on ``chunk_size``.
+    (default :data:`~pkmcal.parallel.IN_PROCESS`: in this process, in order). The plan does not
+    depend on ``chunk_size``.
     """
     algorithm = str(algorithm).lower()
     if algorithm not in ALGORITHMS:
@@ -192,8 +194,8 @@ def plan_poses(mechanism: Mechanism, setup: MeasurementSetup, n: int, *, algorit
                           f"measurable ({cand.describe()}); ask for fewer poses or give more candidates")
     announce("planning model")
     model = model or planning_model(nominal, setup, method=method)   # the nominal's scaling (= observability)
-    # the in-process map runs the block batches on local threads, in place (candidate_blocks)
-    G, ok = candidate_blocks(model, cand.poses, chunk_map=None if chunk_map is map else chunk_map)
+    # in this process the block batches run on local threads, in place (candidate_blocks)
+    G, ok = candidate_blocks(model, cand.poses, chunk_map=None if chunk_map is IN_PROCESS else chunk_map)
     if not ok.all():
         rejected = dict(cand.rejected)
         rejected["pose_not_solved"] = rejected.get("pose_not_solved", 0) + int((~ok).sum())
