@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import re
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -335,3 +336,53 @@ def test_residual_units_follow_the_declared_reading_flags():
     full = builtin_setup("full-pose-paper1")
     hexapod = stewart_prototype()
     assert residual_units(("x", "c", hexapod.actuator_names[0]), full, hexapod) == ("mm", "rad", "mm")
+
+
+def test_pose_points_read_the_pose_coordinates_by_name():
+    """Positions, tilt arccos(cos a cos b) (R₃₃ of Rz Ry Rx) and yaw of a hexapod's poses;
+    a delta's positions without tilt; a pose pair's second point; none for a planar machine."""
+    from pkmcal.mechanisms.library import builtin_machine
+    from pkmcal.mechanisms.pose_pairs import PosePairs
+    from pkmcal.report.data import pose_points
+
+    hexapod = stewart_prototype()
+    poses = np.array([[1.0, 2.0, 3.0, 0.1, -0.2, 0.3], [0.0, 0.0, 0.0, 0.0, 0.0, -1.0]])
+    shown = pose_points(hexapod, poses)
+    np.testing.assert_array_equal(shown.points, poses[:, :3])
+    tilt = [np.arccos(euler_to_matrix(p[3:])[2, 2]) for p in poses]
+    np.testing.assert_allclose(shown.tilt, tilt, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(shown.yaw, poses[:, 5])
+    assert shown.second is None
+
+    delta = builtin_machine("kossel-mini")
+    single = pose_points(delta, poses[:, :3])
+    assert single.tilt is None and single.yaw is None and single.second is None
+    pairs = pose_points(PosePairs(delta), poses)        # (x, y, z, x_2, y_2, z_2)
+    np.testing.assert_array_equal(pairs.points, poses[:, :3])
+    np.testing.assert_array_equal(pairs.second, poses[:, 3:])
+    assert pairs.tilt is None                           # x_2, y_2 are not roll and pitch
+    assert pose_points(builtin_machine("planar-3dof-4act"), np.zeros((2, 3))) is None
+
+
+def test_report_of_printed_distances_draws_pairs_not_tilts(tmp_path):
+    """identify --report on Klipper's DELTA_ANALYZE pairs: the plan line gives the points'
+    extent with no tilt or yaw (a pair's second point is not an angle), the pose cloud
+    draws the 7 probe points and the 12 pairs."""
+    from click.testing import CliRunner
+
+    from pkmcal.cli.main import cli
+
+    log = Path(__file__).resolve().parents[1] / "examples" / "klipper" / "delta-analyze.log"
+    run = CliRunner()
+    pairs = tmp_path / "pairs.csv"
+    res = run.invoke(cli, ["import", "klipper-analyze", str(log), "--machine", "kossel-mini", "-o", str(pairs)])
+    assert res.exit_code == 0, res.output
+    res = run.invoke(cli, ["identify", "kossel-mini", str(pairs), "--setup", "printed-distance-klipper",
+                           "-o", str(tmp_path / "cal.yaml"), "--report", str(tmp_path / "rep")])
+    assert res.exit_code == 0, res.output
+    page = (tmp_path / "rep" / "report.html").read_text()
+    line = re.search(r"<p>19 poses; x [^<]*</p>", page).group(0)
+    assert "tilt" not in line and "yaw" not in line
+    assert "probe points, and the pairs of points whose distance was measured" in page
+    svg = (tmp_path / "rep" / "pose-cloud.svg").read_text()
+    assert "probe points (7)" in svg and "distance pairs (12)" in svg and "platform tilt" not in svg

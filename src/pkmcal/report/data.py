@@ -306,6 +306,45 @@ class ErrorMap:
             object.__setattr__(self, attr, arr)
 
 
+@dataclass(frozen=True)
+class PosePoints:
+    """Where a machine's poses put its tool, for the pose cloud and the plan summary:
+    ``points`` (N, 3) mm; ``second`` (N, 3) the second point of a pose pair (a reading of two
+    poses: printed-object distances; equal to ``points`` for a probe height), else None;
+    ``tilt`` (N,) rad, the platform's tilt from the base z axis where the pose has roll and
+    pitch (a, b), else None; ``yaw`` (N,) rad, the pose's c where it has one, else None."""
+
+    points: np.ndarray
+    second: np.ndarray | None = None
+    tilt: np.ndarray | None = None
+    yaw: np.ndarray | None = None
+
+
+def pose_points(mechanism: Mechanism, poses: np.ndarray) -> PosePoints | None:
+    """The :class:`PosePoints` of ``poses`` (N, n) of ``mechanism``, read by its pose
+    coordinate names (x, y, z; a, b, c; a pose pair's x_2, y_2, z_2); None for a machine
+    whose poses have no x, y, z (a planar machine's x, y, φ)."""
+    from pkmcal.mechanisms.pose_pairs import SECOND
+
+    names = list(mechanism.pose_names)
+    poses = np.atleast_2d(np.asarray(poses, dtype=float))
+
+    def columns(*wanted: str) -> np.ndarray | None:
+        if not all(w in names for w in wanted) or poses.shape[1] != len(names):
+            return None
+        return poses[:, [names.index(w) for w in wanted]]
+
+    points = columns("x", "y", "z")
+    if points is None:
+        return None
+    second = columns(*(c + SECOND for c in "xyz"))
+    roll_pitch = columns("a", "b")
+    tilt = None if roll_pitch is None else \
+        np.arccos(np.clip(np.cos(roll_pitch[:, 0]) * np.cos(roll_pitch[:, 1]), -1.0, 1.0))   # R₃₃ of Rz Ry Rx
+    yaw = columns("c")
+    return PosePoints(points, second, tilt, None if yaw is None else yaw[:, 0])
+
+
 @dataclass(frozen=True, eq=False)
 class ReportData:
     """Everything the calibration report shows (see :func:`pkmcal.report.write_report`).

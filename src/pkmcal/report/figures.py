@@ -31,7 +31,14 @@ import matplotlib.ticker  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
-from pkmcal.report.data import ErrorMap, HeldOutErrors, ParameterTable, Residuals  # noqa: E402
+from pkmcal.report.data import (  # noqa: E402
+    ErrorMap,
+    HeldOutErrors,
+    ParameterTable,
+    PosePoints,
+    Residuals,
+    pose_points,
+)
 
 #: Fixed style: the same bytes on every run and every machine with the same matplotlib.
 RC = {
@@ -99,19 +106,17 @@ def _new(figsize, **kw) -> Figure:
         return plt.figure(figsize=figsize, **kw)
 
 
-def _tilt(poses: np.ndarray) -> np.ndarray:
-    """Tilt of the platform (rad): angle between its z axis and the base z axis, arccos R₃₃
-    with R₃₃ = cos a cos b for R = Rz(c) Ry(b) Rx(a)."""
-    return np.arccos(np.clip(np.cos(poses[:, 3]) * np.cos(poses[:, 4]), -1.0, 1.0))
-
-
-def pick_display_poses(poses: np.ndarray, home: np.ndarray, k: int = 3) -> np.ndarray:
-    """Up to ``k`` representative poses: home, the most tilted, the farthest from home."""
-    poses = np.asarray(poses, dtype=float)
-    chosen = [np.asarray(home, dtype=float)]
-    if len(poses):
-        chosen.append(poses[int(np.argmax(_tilt(poses)))])
-        d = np.linalg.norm(poses[:, :3] - home[:3], axis=1)
+def pick_display_poses(mechanism, poses: np.ndarray, k: int = 3) -> np.ndarray:
+    """Up to ``k`` representative poses of ``mechanism``: home, the most tilted (where its
+    poses tilt), the farthest from home."""
+    poses = np.atleast_2d(np.asarray(poses, dtype=float))
+    home = np.asarray(mechanism.home_pose, dtype=float)
+    chosen = [home]
+    shown = pose_points(mechanism, poses) if len(poses) else None
+    if shown is not None:
+        if shown.tilt is not None:
+            chosen.append(poses[int(np.argmax(shown.tilt))])
+        d = np.linalg.norm(shown.points - pose_points(mechanism, home).points, axis=1)
         chosen.append(poses[int(np.argmax(d))])
     return np.array(chosen[:k])
 
@@ -154,18 +159,29 @@ def machine_poses_figure(machine, poses: np.ndarray, titles: list[str] | None = 
     return fig
 
 
-def pose_cloud_figure(poses: np.ndarray, held_out: np.ndarray | None = None) -> Figure:
-    """Measured pose positions in 3D, coloured by platform tilt (deg); held-out poses as
-    crosses."""
-    poses = np.atleast_2d(np.asarray(poses, dtype=float))
+def pose_cloud_figure(shown: PosePoints, held_out: PosePoints | None = None) -> Figure:
+    """Measured tool positions in 3D, coloured by platform tilt (deg) where the poses have
+    one; a pose pair's two points joined by a line (a printed-object distance; a pair of one
+    point, a probe height, is one dot); held-out positions as crosses."""
     with style():
         fig = _new((6.4, 4.6))
         ax = fig.add_subplot(1, 1, 1, projection="3d")
-        tilt = np.rad2deg(_tilt(poses))
-        sc = ax.scatter(poses[:, 0], poses[:, 1], poses[:, 2], c=tilt, cmap="viridis", s=16, depthshade=False,
-                        label=f"measured ({len(poses)})")
-        if held_out is not None and len(held_out):
-            h = np.atleast_2d(held_out)
+        p = shown.points
+        pairs = np.zeros(len(p), dtype=bool) if shown.second is None else np.any(shown.second != p, axis=1)
+        single = ~pairs
+        colour = {} if shown.tilt is None else dict(c=np.rad2deg(shown.tilt), cmap="viridis")
+        label = f"measured ({len(p)})" if shown.second is None else f"probe points ({int(single.sum())})"
+        sc = ax.scatter(p[single, 0], p[single, 1], p[single, 2], s=16, depthshade=False, label=label,
+                        **(dict(c=colour["c"][single], cmap="viridis") if colour else dict(color=AFTER_COLOUR)))
+        if pairs.any():
+            q = shown.second
+            for i in np.flatnonzero(pairs):
+                ax.plot(*np.stack([p[i], q[i]]).T, color="0.55", lw=0.8)
+            ends = np.concatenate([p[pairs], q[pairs]])
+            ax.scatter(ends[:, 0], ends[:, 1], ends[:, 2], s=10, color=BEFORE_COLOUR, depthshade=False,
+                       label=f"distance pairs ({int(pairs.sum())})")
+        if held_out is not None and len(held_out.points):
+            h = held_out.points
             ax.scatter(h[:, 0], h[:, 1], h[:, 2], marker="x", color="0.4", s=14, depthshade=False,
                        label=f"held out ({len(h)})")
         ax.set_xlabel("x (mm)")
@@ -175,8 +191,9 @@ def pose_cloud_figure(poses: np.ndarray, held_out: np.ndarray | None = None) -> 
         for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
             axis.set_major_locator(matplotlib.ticker.MaxNLocator(5))
         ax.view_init(elev=22, azim=-60)
-        cb = fig.colorbar(sc, ax=ax, shrink=0.7, pad=0.12)
-        cb.set_label("platform tilt (deg)")
+        if colour:
+            cb = fig.colorbar(sc, ax=ax, shrink=0.7, pad=0.12)
+            cb.set_label("platform tilt (deg)")
         ax.legend(loc="upper left", fontsize=7)
         ax.set_title("Measurement poses")
     return fig

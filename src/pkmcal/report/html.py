@@ -28,7 +28,7 @@ from pkmcal import __version__
 from pkmcal.errors import PkmcalError
 from pkmcal.io.atomic import atomic_write_bytes
 from pkmcal.report import figures as F
-from pkmcal.report.data import ReportData, summarise
+from pkmcal.report.data import PosePoints, ReportData, pose_points, summarise
 
 REPORT_NAME = "report.html"
 
@@ -99,21 +99,50 @@ def inline_svg(svg: bytes, prefix: str) -> str:
     return text.replace("<svg ", f'<svg role="img" aria-label="{prefix}" class="figure" ', 1)
 
 
+def _held_out_points(data: ReportData) -> PosePoints | None:
+    """The held-out poses' :class:`PosePoints`: poses of the nominal machine, or of the
+    single machine when the measurements were pose pairs."""
+    from pkmcal.mechanisms.pose_pairs import single_machine
+
+    if data.held_out_poses is None:
+        return None
+    for mechanism in (data.nominal, single_machine(data.nominal)):
+        if data.held_out_poses.shape[1] == len(mechanism.pose_names):
+            return pose_points(mechanism, data.held_out_poses)
+    return None
+
+
+def _plan_extent(shown: PosePoints, n: int) -> str:
+    """The plan section's line: how many poses and where (mm, degrees)."""
+    p = shown.points if shown.second is None else np.concatenate([shown.points, shown.second])
+    text = f"{n} poses; " + ", ".join(f"{c} {p[:, i].min():.1f}…{p[:, i].max():.1f} mm" for i, c in enumerate("xyz"))
+    if shown.tilt is not None:
+        text += f"; tilt up to {np.rad2deg(shown.tilt).max():.1f}°"
+    if shown.yaw is not None:
+        text += f", yaw {np.rad2deg(shown.yaw).min():.1f}…{np.rad2deg(shown.yaw).max():.1f}°"
+    return text
+
+
 def build_figures(data: ReportData, png: bool = True) -> list[F.RenderedFigure]:
     """All figures of the report, rendered (deterministic bytes)."""
     out: list[F.RenderedFigure] = []
     nominal = data.nominal
     if "drawing" in nominal.abilities:
-        shown = F.pick_display_poses(data.poses, np.asarray(nominal.home_pose))
+        shown = F.pick_display_poses(nominal, data.poses)
         titles = ["home", "most tilted", "farthest from home"][: len(shown)]
         out.append(F.render(F.machine_poses_figure(nominal, shown, titles), "machine-poses",
                             f"{nominal.name} drawn in {len(shown)} of its poses: base (grey), platform (blue), "
                             "legs (red).", png))
-    if data.poses.shape[1] == 6:
-        held = data.held_out_poses
-        out.append(F.render(F.pose_cloud_figure(data.poses, held), "pose-cloud",
-                            f"The {len(data.poses)} measurement poses, coloured by platform tilt"
-                            + ("" if held is None else f"; crosses: the {len(held)} held-out poses") + ".", png))
+    points = pose_points(nominal, data.poses)
+    if points is not None and len(data.poses):
+        held = _held_out_points(data)
+        what = (f"The {len(data.poses)} measurement poses" if points.second is None else
+                f"The {len(data.poses)} measurements: probe points, and the pairs of points whose distance was "
+                "measured (joined)")
+        out.append(F.render(F.pose_cloud_figure(points, held), "pose-cloud",
+                            what + ("" if points.tilt is None else ", coloured by platform tilt")
+                            + ("" if held is None else f"; crosses: the {len(held.points)} held-out poses") + ".",
+                            png))
     ident = data.identifiability
     if ident.singular_values.size:
         out.append(F.render(F.singular_values_figure(ident.singular_values, ident.rank), "singular-values",
@@ -302,12 +331,9 @@ def render_html(data: ReportData, figs: list[F.RenderedFigure]) -> str:
 
     # -- plan --------------------------------------------------------------------------
     add('<h2 id="plan">Pose plan</h2>')
-    p = data.poses
-    if p.shape[1] == 6 and len(p):
-        tilt = np.rad2deg(F._tilt(p))
-        add(f"<p>{len(p)} poses; x {p[:, 0].min():.1f}…{p[:, 0].max():.1f} mm, y {p[:, 1].min():.1f}…"
-            f"{p[:, 1].max():.1f} mm, z {p[:, 2].min():.1f}…{p[:, 2].max():.1f} mm; tilt up to "
-            f"{tilt.max():.1f}°, yaw {np.rad2deg(p[:, 5]).min():.1f}…{np.rad2deg(p[:, 5]).max():.1f}°.</p>")
+    shown = pose_points(data.nominal, data.poses) if len(data.poses) else None
+    if shown is not None:
+        add(f"<p>{_plan_extent(shown, len(data.poses))}.</p>")
     add(fig("machine-poses"))
     add(fig("pose-cloud"))
 
