@@ -32,8 +32,9 @@ def blocks(seed=0, N=60, m=2, p=6):
     return rng.standard_normal((N, m, p)) * rng.uniform(0.2, 1.0, (N, 1, 1))
 
 
-def test_rank_updates_of_all_candidates_match_recomputation():
-    G = np.ascontiguousarray(blocks(2))
+@pytest.mark.parametrize("m, p", [(2, 6), (6, 14)])      # m = 6: the full-pose kernel path
+def test_rank_updates_of_all_candidates_match_recomputation(m, p):
+    G = np.ascontiguousarray(blocks(2, m=m, p=p))
     state = _DState(G, information_matrix(G, np.arange(8)))
     for k, sign in ((30, 1.0), (41, 1.0), (2, -1.0), (30, -1.0), (55, 1.0)):
         state.update(k, sign)
@@ -44,6 +45,18 @@ def test_rank_updates_of_all_candidates_match_recomputation():
     assert np.allclose(state.S, S, rtol=1e-8, atol=1e-11)
     gains = np.array([np.linalg.slogdet(M + g.T @ g)[1] for g in G]) - np.linalg.slogdet(M)[1]
     assert np.allclose(state.gains(), gains, rtol=1e-8, atol=1e-10)
+
+
+def test_working_set_size():
+    """All N up to max(10,000, 5 × pool); above, 5 × pool capped by the 750,000-number
+    budget, never below the pool."""
+    from pkmcal.planning.selection import _work_size
+
+    assert _work_size(10_000, 2000, 6, 42) == 10_000 and _work_size(11_000, 2200, 6, 42) == 11_000
+    assert _work_size(100_000, 2200, 6, 42) == 750_000 // 252 == 2976     # full pose, 42 parameters
+    assert _work_size(100_000, 2000, 3, 39) == 750_000 // 117              # tracker or indicators
+    assert _work_size(100_000, 2000, 1, 15) == 10_000                      # Z probe: 5 × pool
+    assert _work_size(10**6, 12_000, 6, 42) == 12_000                      # never below the pool
 
 
 def test_kernel_gain_is_minus_inf_when_not_positive_definite():

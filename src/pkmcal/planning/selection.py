@@ -239,8 +239,28 @@ class _DState:
         return np.where(np.isnan(self.gain), -np.inf, self.gain)
 
 
-#: Working-set size of the DETMAX exchange (at least; :func:`_detmax_exchange`).
+#: The DETMAX exchange runs over all N candidates up to max(_WORK_MIN, 5 × pool) of them;
+#: above, on a working set (:func:`_detmax_exchange`) of 5 × pool candidates, or fewer when
+#: their blocks would hold more than _WORK_NUMBERS numbers (m·n per candidate), but never
+#: fewer than the pool. Every exchange step reads the working set twice; at 110 of 100,000
+#: full-pose candidates (m·n = 252) the 11,000 of 5 × pool took 0.30 s of the selection's
+#: 1.0-1.4 s, the 2,976 of the budget 0.08 s (see :func:`_work_size` for what it does to
+#: the designs).
 _WORK_MIN = 10_000
+_WORK_NUMBERS = 750_000
+
+
+def _work_size(N: int, pool: int, m: int, p: int) -> int:
+    """The exchange's working-set size (N: over all candidates; constants above).
+
+    The budget changes which DETMAX optimum is reached (a local search: another working set
+    is another path), not the stopping rule. Measured on 6 seeds of 100,000 full-pose
+    candidates (110 poses): log det M of the design −0.008 on average against the 11,000-
+    candidate working set (range −0.049 … +0.018; the seeds' own spread is ±0.05), the
+    selection 0.97 s against 1.41 s."""
+    if N <= max(_WORK_MIN, 5 * pool):
+        return N
+    return max(pool, min(5 * pool, _WORK_NUMBERS // (m * p)))
 
 
 def _detmax_exchange(G: np.ndarray, flatF: np.ndarray, chosen: list[int], max_ex: int, work_size: int,
@@ -330,7 +350,8 @@ def select_default(G: np.ndarray, n: int, *, index: str = "O1", pool: int | None
        candidate of largest gain, remove the pose of least loss log det(I − S_i); stop
        when that is the one just added (paper 2 §4 iv) or nothing improves. Above
        max(10,000, 5·pool) candidates the updates run on a working set of the largest
-       gains, re-checked against all N when it stops (:func:`_detmax_exchange`).
+       gains (:func:`_work_size`), re-checked against all N when it stops
+       (:func:`_detmax_exchange`).
     4. For ``index`` O2..O5: paper 2's add/remove exchange on that index started from the
        D-optimal set, the add step scoring exactly the (at most 256) candidates of largest
        eigenvalue bound (:meth:`_IndexScorer.best_add`).
@@ -382,7 +403,7 @@ def select_default(G: np.ndarray, n: int, *, index: str = "O1", pool: int | None
         if progress is not None:
             progress(step + 1, total)
     chosen = [int(i) for i in pool_idx[np.flatnonzero(in_pool)]]
-    chosen, exchanges, n_eval = _detmax_exchange(G, flatF, chosen, max_ex, max(_WORK_MIN, 5 * K),
+    chosen, exchanges, n_eval = _detmax_exchange(G, flatF, chosen, max_ex, _work_size(N, K, m, p),
                                                  None if progress is None else (lambda i: progress(n + i, total)))
     evaluations += n_eval
     out = np.array(sorted(chosen))
