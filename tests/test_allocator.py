@@ -53,3 +53,32 @@ def test_a_freed_block_is_reused_without_page_faults():
 def test_no_mallopt_is_not_an_error(monkeypatch):
     monkeypatch.setattr(sys, "platform", "darwin")
     assert keep_freed_memory() is False
+
+
+_ADVICE = """
+from pkmcal.allocator import configure_process_memory
+configure_process_memory()
+import numpy as np
+core = getattr(np, "_core", None) or np.core      # NumPy 2 / 1.x
+print(int(core.multiarray._get_madvise_hugepage()))
+"""
+
+
+@pytest.mark.parametrize("user_value, advised", [(None, 0), ("1", 1)])
+def test_numpy_huge_page_advice_is_off_unless_the_user_set_it(user_value, advised):
+    import os
+
+    env = {k: v for k, v in os.environ.items() if k != "NUMPY_MADVISE_HUGEPAGE"}
+    if user_value is not None:
+        env["NUMPY_MADVISE_HUGEPAGE"] = user_value
+    out = subprocess.run([sys.executable, "-c", _ADVICE], capture_output=True, text=True, check=True, env=env)
+    assert int(out.stdout) == advised
+
+
+def test_huge_page_advice_is_left_alone_once_numpy_is_imported(monkeypatch):
+    import numpy  # noqa: F401  (imported: too late to change)
+
+    from pkmcal.allocator import no_huge_page_advice
+
+    monkeypatch.delenv("NUMPY_MADVISE_HUGEPAGE", raising=False)
+    assert no_huge_page_advice() is False

@@ -183,9 +183,9 @@ def cli() -> None:
 
 
 def main() -> None:
-    from pkmcal.allocator import keep_freed_memory
+    from pkmcal.allocator import configure_process_memory
 
-    keep_freed_memory()
+    configure_process_memory()
     cli(prog_name="pkmcal")
 
 
