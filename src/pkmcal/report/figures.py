@@ -169,10 +169,10 @@ def pose_cloud_figure(shown: PosePoints, held_out: PosePoints | None = None) -> 
         p = shown.points
         pairs = np.zeros(len(p), dtype=bool) if shown.second is None else np.any(shown.second != p, axis=1)
         single = ~pairs
-        colour = {} if shown.tilt is None else dict(c=np.rad2deg(shown.tilt), cmap="viridis")
+        colour = dict(color=AFTER_COLOUR) if shown.tilt is None else dict(c=np.rad2deg(shown.tilt)[single],
+                                                                           cmap="viridis")
         label = f"measured ({len(p)})" if shown.second is None else f"probe points ({int(single.sum())})"
-        sc = ax.scatter(p[single, 0], p[single, 1], p[single, 2], s=16, depthshade=False, label=label,
-                        **(dict(c=colour["c"][single], cmap="viridis") if colour else dict(color=AFTER_COLOUR)))
+        sc = ax.scatter(p[single, 0], p[single, 1], p[single, 2], s=16, depthshade=False, label=label, **colour)
         if pairs.any():
             q = shown.second
             for i in np.flatnonzero(pairs):
@@ -191,7 +191,7 @@ def pose_cloud_figure(shown: PosePoints, held_out: PosePoints | None = None) -> 
         for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
             axis.set_major_locator(matplotlib.ticker.MaxNLocator(5))
         ax.view_init(elev=22, azim=-60)
-        if colour:
+        if shown.tilt is not None:
             cb = fig.colorbar(sc, ax=ax, shrink=0.7, pad=0.12)
             cb.set_label("platform tilt (deg)")
         ax.legend(loc="upper left", fontsize=7)
