@@ -70,9 +70,9 @@ def bed_limits(machine: Mechanism) -> tuple[str, ...]:
 
 
 def probes_the_bed(sensor: Sensor) -> bool:
-    """Whether ``sensor`` reads where it is lowered to (it declares its
-    :meth:`~pkmcal.sensors.base.Sensor.measured_frames`: a Z probe)."""
-    return type(sensor).measured_frames is not Sensor.measured_frames
+    """Whether ``sensor`` reads where it is lowered to (it declares ``"touch-probe"``: a Z
+    probe, :meth:`~pkmcal.sensors.base.Sensor.measured_frames`)."""
+    return "touch-probe" in sensor.abilities
 
 
 def lowered_to_bed(machine: Mechanism, setup: MeasurementSetup, poses: np.ndarray) -> np.ndarray:

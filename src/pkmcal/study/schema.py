@@ -125,7 +125,6 @@ class _Setup(_Strict):
     object_scale: float | None = Field(None, gt=0.0, allow_inf_nan=False)
     on_bed: bool = False
 
-
     @field_validator("reading_noise_scale")
     @classmethod
     def _factors(cls, v):

@@ -185,14 +185,14 @@ def prepare(study: Study, progress=None) -> Context:
             setup = setups[mi][si]
             if setup is None:       # not in the machine's 'setups:' list
                 continue
+            planned = single_pose_setup(setup)     # what a plan's poses are read with (printed: its probe)
             for pi, p in enumerate(study.plans):
                 pool_kind = "corners" if p.algorithm == "corners" else "random"
-                # the poses a plan chooses: a printed-distance setup's probe points (study.printed)
-                pool = plan_poses(m.nominal, single_pose_setup(setup), 1, algorithm=pool_kind, n_candidates=p.candidates,
+                pool = plan_poses(m.nominal, planned, 1, algorithm=pool_kind, n_candidates=p.candidates,
                                   margin=p.margin, seed=seed_for(study.seed, KEY_POOL, mi, si, pi))
                 poses = pool.candidates.poses
                 if s.on_bed:        # a printer's probe points: where its probe triggers on the bed
-                    poses = printed.lowered_to_bed(m.nominal, single_pose_setup(setup), poses)
+                    poses = printed.lowered_to_bed(m.nominal, planned, poses)
                 need_blocks = p.algorithm not in ("random", "corners")
                 G = pool.model.blocks(poses)[0] if need_blocks else None
                 pool_index = len(pools)
