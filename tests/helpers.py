@@ -287,6 +287,68 @@ def assert_ok_or_user_error(result, out=None) -> None:
         assert out is None or not out.exists()
 
 
+# -- study files ---------------------------------------------------------------------------------
+
+#: A kossel-mini's assembly errors as the ``errors:`` items of a study machine (mm, degrees).
+DELTA_ERRORS_YAML = """\
+      - {parameters: "radius_*", distribution: normal, size: 0.3}
+      - {parameters: "angle_*", distribution: normal, size: 0.2}
+      - {parameters: "arm_*", distribution: normal, size: 0.2}
+      - {parameters: "endstop_*", distribution: normal, size: 0.3}
+"""
+
+
+def write_study(tmp_path, text: str, name: str = "study.yaml") -> Path:
+    """The study file ``name`` in ``tmp_path`` holding ``text`` (dedented)."""
+    import textwrap
+
+    p = tmp_path / name
+    p.write_text(textwrap.dedent(text), encoding="utf-8")
+    return p
+
+
+# -- a study trial against the commands -----------------------------------------------------------
+
+def trial_through_commands(tmp_path, study, method_index: int, identify_args: list, verify_args: list):
+    """Trial 1 of campaign 0 (its ``method_index``-th method) as the study computes it, and as
+    the commands compute it from the same data through files: ``(row, identify --json,
+    verify --json)``. The measurements (pose pairs for a printed-distance setup, as ``pkmcal
+    import klipper-analyze`` writes them), the real machine and the held-out poses are
+    written as a user would have them; ``pkmcal identify MACHINE MEAS.csv *identify_args``
+    then ``pkmcal verify CAL.yaml --real REAL.yaml --nominal MACHINE --poses HELD.csv
+    *verify_args``."""
+    import csv
+    import json
+
+    from click.testing import CliRunner
+
+    from pkmcal.cli.main import cli
+    from pkmcal.io.machine_file import machine_to_text
+    from pkmcal.io.measurements import save_measurements
+    from pkmcal.io.tables import to_file_units, write_table
+    from pkmcal.mechanisms.pose_pairs import read_by
+    from pkmcal.study.trial import _measure, prepare, run_trial
+
+    ctx = prepare(study)
+    campaign = ctx.campaigns[0]
+    nominal, setup = study.machines[0].nominal, ctx.setup(campaign)
+    measured = _measure(ctx, campaign, 1)
+    row = dict(zip(ctx.names, list(csv.reader(run_trial(ctx, campaign, 1)))[method_index]))
+    save_measurements(tmp_path / "meas.csv", measured.sim.measurements, read_by(nominal, setup.sensor), setup)
+    (tmp_path / "real.yaml").write_text(machine_to_text(measured.real), encoding="utf-8")
+    held = ctx.heldout[0]
+    write_table(tmp_path / "held.csv", dict(zip(nominal.pose_names, to_file_units(held, nominal.pose_is_angle).T)))
+    runner = CliRunner()
+    r = runner.invoke(cli, ["identify", nominal.name, str(tmp_path / "meas.csv"), *identify_args,
+                            "-o", str(tmp_path / "cal.yaml"), "--json"])
+    assert r.exit_code == 0, r.output
+    fit = json.loads(r.stdout)
+    r = runner.invoke(cli, ["verify", str(tmp_path / "cal.yaml"), "--real", str(tmp_path / "real.yaml"), "--nominal",
+                            nominal.name, "--poses", str(tmp_path / "held.csv"), *verify_args, "--json"])
+    assert r.exit_code == 0, r.output
+    return row, fit, json.loads(r.stdout)
+
+
 # -- fuzzing the loaders -------------------------------------------------------------------------
 
 def fuzz_settings(max_examples: int) -> settings:

@@ -7,13 +7,13 @@ from __future__ import annotations
 import json
 import math
 import shutil
-import textwrap
 from pathlib import Path
 
 import numpy as np
 import pytest
 from click.testing import CliRunner
 from helpers import assert_user_error
+from helpers import write_study as _write
 from scipy import stats
 
 from pkmcal.cli.main import cli
@@ -45,12 +45,6 @@ plans:
 methods: [auto]
 heldout: {poses: 6}
 """
-
-
-def _write(tmp_path, text, name="study.yaml"):
-    p = tmp_path / name
-    p.write_text(textwrap.dedent(text), encoding="utf-8")
-    return p
 
 
 @pytest.fixture(scope="module")

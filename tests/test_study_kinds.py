@@ -12,28 +12,20 @@ from __future__ import annotations
 import csv
 import json
 import math
-import textwrap
 
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from helpers import assert_user_error
+from helpers import DELTA_ERRORS_YAML, assert_user_error, trial_through_commands
+from helpers import write_study as _write
 
 from pkmcal.cli.main import cli
 from pkmcal.errors import InputFileError
-from pkmcal.io.machine_file import machine_to_text
-from pkmcal.io.measurements import save_measurements
-from pkmcal.io.tables import to_file_units, write_table
 from pkmcal.study import load_study, read_trials, run_study
 from pkmcal.study.results import HELDOUT_COLUMNS
-from pkmcal.study.trial import _measure, prepare, run_trial
+from pkmcal.study.trial import prepare
 
-DELTA_ERRORS = """\
-      - {parameters: "radius_*", distribution: normal, size: 0.3}
-      - {parameters: "angle_*", distribution: normal, size: 0.2}
-      - {parameters: "arm_*", distribution: normal, size: 0.2}
-      - {parameters: "endstop_*", distribution: normal, size: 0.3}
-"""
+DELTA_ERRORS = DELTA_ERRORS_YAML
 # A laser tracker whose target offset is known (fixed), that method only on the tracker,
 # the Z probe with every parameter free; the held-out errors are what each instrument reads
 # (compare: sensor, the default for instruments that do not read the full pose).
@@ -151,12 +143,6 @@ heldout: {{poses: 6}}
 """
 
 
-def _write(tmp_path, text, name="study.yaml"):
-    p = tmp_path / name
-    p.write_text(textwrap.dedent(text), encoding="utf-8")
-    return p
-
-
 def _run(tmp_path_factory, text, figures=False, workers=1):
     d = tmp_path_factory.mktemp("study")
     run = run_study(load_study(_write(d, text)), d / "r", workers=workers, figures=figures)
@@ -249,32 +235,6 @@ def test_delta_page_and_figures(delta):
         assert (out / "figures" / f"{name}.svg").stat().st_size > 0
 
 
-def _through_commands(tmp_path, study, method_index: int, identify_args: list, verify_args: list):
-    """Trial 1 of campaign 0 (its ``method_index``-th method) as the study computes it, and as
-    the commands compute it from the same data through files: ``(row, identify --json,
-    verify --json)``. The measurements, the real machine and the held-out poses are written
-    as a user would have them; ``pkmcal identify MACHINE MEAS.csv *identify_args`` then
-    ``pkmcal verify CAL.yaml --real REAL.yaml --nominal MACHINE --poses HELD.csv *verify_args``."""
-    ctx = prepare(study)
-    campaign = ctx.campaigns[0]
-    nominal, setup = study.machines[0].nominal, ctx.setup(campaign)
-    measured = _measure(ctx, campaign, 1)
-    row = dict(zip(ctx.names, list(csv.reader(run_trial(ctx, campaign, 1)))[method_index]))
-    save_measurements(tmp_path / "meas.csv", measured.sim.measurements, nominal, setup)
-    (tmp_path / "real.yaml").write_text(machine_to_text(measured.real), encoding="utf-8")
-    held = ctx.heldout[0]
-    write_table(tmp_path / "held.csv", dict(zip(nominal.pose_names, to_file_units(held, nominal.pose_is_angle).T)))
-    runner = CliRunner()
-    r = runner.invoke(cli, ["identify", nominal.name, str(tmp_path / "meas.csv"), *identify_args,
-                            "-o", str(tmp_path / "cal.yaml"), "--json"])
-    assert r.exit_code == 0, r.output
-    fit = json.loads(r.stdout)
-    r = runner.invoke(cli, ["verify", str(tmp_path / "cal.yaml"), "--real", str(tmp_path / "real.yaml"), "--nominal",
-                            nominal.name, "--poses", str(tmp_path / "held.csv"), *verify_args, "--json"])
-    assert r.exit_code == 0, r.output
-    return row, fit, json.loads(r.stdout)
-
-
 @pytest.mark.parametrize("compare", ["auto", "aligned"])
 def test_delta_trial_is_what_identify_and_verify_make_of_it(tmp_path, compare):
     """Trial 1 of the tracker configuration, fitted and verified by the commands through
@@ -288,7 +248,7 @@ def test_delta_trial_is_what_identify_and_verify_make_of_it(tmp_path, compare):
     expected = "sensor" if compare == "auto" else "aligned"
     assert prepare(study).campaigns[0].compares == (expected,)
     how = ["--setup", "laser-tracker"] if compare == "auto" else ["--compare", "aligned"]
-    row, fit, ver = _through_commands(tmp_path, study, 0, ["--setup", "laser-tracker", "--fix", "target.*"], how)
+    row, fit, ver = trial_through_commands(tmp_path, study, 0, ["--setup", "laser-tracker", "--fix", "target.*"], how)
     assert ver["compare"] == row["heldout_compare"] == expected
     assert float(row["chi2"]) == pytest.approx(fit["chi2"], rel=1e-8)
     assert int(row["heldout_used"]) == ver["after"]["poses"]
@@ -359,7 +319,7 @@ def test_planar_trial_is_what_identify_and_verify_make_of_it(planar, tmp_path):
     """Trial 1 of planar-3dof-4act: the study's simulated campaign, fitted and verified by the
     commands (through files, so to the files' round trip) gives the trial's row."""
     study, _ = planar
-    row, fit, ver = _through_commands(tmp_path, study, 0, ["--setup", "planar-tracker"], ["--setup", "planar-tracker"])
+    row, fit, ver = trial_through_commands(tmp_path, study, 0, ["--setup", "planar-tracker"], ["--setup", "planar-tracker"])
     assert fit["method"] == row["identification"] == "projection"
     assert float(row["chi2"]) == pytest.approx(fit["chi2"], rel=1e-8)
     assert int(row["heldout_used"]) == ver["after"]["poses"] == ver["before"]["poses"]
@@ -442,7 +402,6 @@ def test_same_bytes_with_a_process_pool(mixed, tmp_path):
       "(mm)", "angle_a", "(deg)", "separate groups")),
     ((DELTA_ERRORS, '      - {parameters: "b*", distribution: uniform, size: 0.3}\n'),
      ("matches no parameter of 'kossel-mini'", "endstop_c", "lean_radial_a", "(deg)")),
-    (("setup: laser-tracker", "setup: printed-distance-klipper"), ("reads pairs of poses", "z-probe-klipper")),
     (("setup: laser-tracker", "setup: planar-tracker"), ("setups[0].setup", "cannot measure machine 'kossel-mini'")),
     (("heldout: {poses: 8}", "heldout: {poses: 8, compare: as-commanded}"), ("heldout.compare", "aligned")),
 ])
@@ -532,7 +491,7 @@ def test_a_baseline_trial_is_what_identify_and_verify_make_of_it(tmp_path):
     """Trial 1 of the ignore-redundancy configuration through the commands, as the planar
     projection trial above: `pkmcal identify --method ignore-redundancy` and `pkmcal verify`."""
     study = load_study(_write(tmp_path, BASELINE_STUDY))
-    row, fit, ver = _through_commands(tmp_path, study, 1,
+    row, fit, ver = trial_through_commands(tmp_path, study, 1,
                                       ["--setup", "planar-tracker", "--method", "ignore-redundancy"],
                                       ["--setup", "planar-tracker"])
     assert row["identification"] == "ignore-redundancy"

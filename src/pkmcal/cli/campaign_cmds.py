@@ -213,8 +213,9 @@ def _simulate_sessions(nominal, real, setup, commanded, rng, n_sessions: int, er
 @click.option("--setup", "setup_spec", metavar="SETUP.yaml",
               help="With --measurements: the measurement setup (CALIBRATED.yaml itself works; the sensor identified "
                    "in CALIBRATED.yaml's setup: is used when it has one). With --real: the true instrument, whose "
-                   "readings are compared (--compare sensor); redundant machines: the tracker setup with the "
-                   "'simulation:' stiffness and load (required there).")
+                   "readings are compared (--compare sensor; a printed-distance setup reads the held-out poses with "
+                   "its Z probe); redundant machines: the tracker setup with the 'simulation:' stiffness and load "
+                   "(required there).")
 @click.option("--calibration-measurements", "calib_meas", metavar="MEAS.csv",
               help="With --measurements, for a calibrated file without calibration.before_registration: the "
                    "calibration data on which the nominal machine's sensor frames are registered for 'before'.")
@@ -282,6 +283,7 @@ def verify_cmd(calibrated, meas_path, real_spec, poses, nominal, setup_spec, cal
     for name, value in (("--calibration-measurements", calib_meas), ("--clipped", clipped)):
         if value is not None:
             raise PkmcalError(f"{name} applies to --measurements (measured held-out data), not to --real")
+    from pkmcal.cli.klipper_probe_cmd import single_pose_setup_of
     from pkmcal.io.lookup import load_machine
     from pkmcal.io.lookup import load_setup
 
@@ -307,7 +309,7 @@ def verify_cmd(calibrated, meas_path, real_spec, poses, nominal, setup_spec, cal
             if setup_spec is None:
                 raise PkmcalError("--compare sensor compares what the true instrument reads: give it with --setup "
                                   "TRUE-SETUP.yaml (the setup the measurements were simulated with)")
-            true_sensor = load_setup(setup_spec, real).sensor
+            true_sensor = single_pose_setup_of(setup_spec, real).sensor     # printed distances: the probe
             cal_setup = _identified_setup(calibrated, cal, "--compare sensor")
             if cal_setup.sensor.kind != true_sensor.kind:
                 raise PkmcalError(f"the true instrument ({setup_spec}) is a '{true_sensor.kind}' sensor, the one "
@@ -329,13 +331,14 @@ def verify_cmd(calibrated, meas_path, real_spec, poses, nominal, setup_spec, cal
 
 
 def _identified_setup(path: str, cal, what: str):
-    """The setup identified with the calibrated machine (its file's ``setup:``)."""
-    from pkmcal.io.lookup import load_setup
+    """The setup identified with the calibrated machine (its file's ``setup:``) as it reads
+    single poses (a printed-distance calibration: its identified Z probe)."""
+    from pkmcal.cli.klipper_probe_cmd import single_pose_setup_of
 
     if "setup" not in cal.metadata or not os.path.exists(path):
         raise PkmcalError(f"{what}: {path} has no identified setup (setup:, written by 'pkmcal identify' since "
                           "2026-12); recalibrate, or compare without the sensor")
-    return load_setup(path, cal)
+    return single_pose_setup_of(path, cal)
 
 
 def _nominal_from_record(cal):

@@ -57,12 +57,26 @@ def machine_and_setup(machine_spec: str, setup_spec: str):
     it: the machine itself, or, for a sensor of two poses (printed distances), the machine
     read as pose pairs (:func:`pkmcal.mechanisms.pose_pairs.read_by`). A setup that neither
     can take is the error of the machine itself."""
-    from pkmcal.errors import PkmcalError
     from pkmcal.io.lookup import load_machine
+
+    return machine_read_by(load_machine(machine_spec), setup_spec)
+
+
+def single_pose_setup_of(setup_spec: str, machine):
+    """The setup ``setup_spec`` as it reads single poses of ``machine`` (held-out poses of
+    ``verify --real``): the setup, or the Z probe of a printed-distance setup
+    (:func:`pkmcal.sensors.printed_distance.single_pose_setup`)."""
+    from pkmcal.sensors.printed_distance import single_pose_setup
+
+    return single_pose_setup(machine_read_by(machine, setup_spec)[1])
+
+
+def machine_read_by(nominal, setup_spec: str):
+    """:func:`machine_and_setup` of a loaded machine ``nominal``."""
+    from pkmcal.errors import PkmcalError
     from pkmcal.io.lookup import load_setup
     from pkmcal.mechanisms.pose_pairs import PosePairs
 
-    nominal = load_machine(machine_spec)
     try:
         return nominal, load_setup(setup_spec, nominal)
     except PkmcalError as exc:
@@ -139,4 +153,4 @@ def klipper_analyze_cmd(source: str, machine_spec: str, setup_spec: str, output:
            "row(s)")
 
 
-__all__ = ["klipper_analyze_cmd", "klipper_probe_cmd", "machine_and_setup"]
+__all__ = ["klipper_analyze_cmd", "klipper_probe_cmd", "machine_and_setup", "machine_read_by", "single_pose_setup_of"]

@@ -51,6 +51,7 @@ from pkmcal.io.klipper_probe import (
     stable_position,
 )
 from pkmcal.io.measurements import Measurements
+from pkmcal.sensors.printed_distance import distance_rows, height_rows
 
 #: Klipper's calibration object (module docstring): pillar angles (deg), pillar distance
 #: from the centre and ridge radius (mm, at SCALE 1).
@@ -105,13 +106,14 @@ def read_klipper_analyze(path: str | os.PathLike, machine, probe_offset=(0.0, 0.
 def _pairs(src, dist, heights, machine) -> ProbeImport:
     """Height rows (each pose twice) then distance rows, as one pair measurement set."""
     lam1, lam2, d, cmd1, cmd2, lines, notes = dist
-    parts_q, parts_y, parts_c, parts_l = [np.c_[lam1, lam2]], [np.c_[np.zeros(len(d)), d]], [np.c_[cmd1, cmd2]], \
-        [lines]
+    q, y, c = distance_rows(lam1, lam2, d, cmd1, cmd2)
+    parts_q, parts_y, parts_c, parts_l = [q], [y], [c], [lines]
     if heights is not None:
         h = heights.measurements
-        parts_q.insert(0, np.c_[h.actuators, h.actuators])
-        parts_y.insert(0, np.c_[h.readings[:, 0], np.zeros(len(h))])
-        parts_c.insert(0, np.c_[h.commanded, h.commanded])
+        q, y, c = height_rows(h.actuators, h.readings[:, 0], h.commanded)
+        parts_q.insert(0, q)
+        parts_y.insert(0, y)
+        parts_c.insert(0, c)
         parts_l.insert(0, np.asarray(h.lines))
         notes = list(heights.notes) + notes
     else:

@@ -40,12 +40,12 @@ applied before the distances reach this sensor (:mod:`pkmcal.io.klipper_analyze`
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import numpy as np
 
-from pkmcal.sensors.base import Sensor
+from pkmcal.sensors.base import MeasurementSetup, NoiseModel, Sensor
 from pkmcal.sensors.z_probe import ZProbeSensor
 
 #: Two points of a pair closer than this (mm) are one point: the row is a height row.
@@ -68,12 +68,14 @@ class PrintedDistanceSensor(Sensor):
         self._init_params()
 
     @cached_property
-    def _probe(self) -> ZProbeSensor:
-        return ZProbeSensor(probe_offset=self.probe_offset, bed=self.bed)
+    def probe(self) -> ZProbeSensor:
+        """The Z probe of the height rows (same θ and free set): what this setup reads of a
+        single pose."""
+        return ZProbeSensor(probe_offset=self.probe_offset, bed=self.bed, free=self.free)
 
     @property
     def param_groups(self):
-        return self._probe.param_groups
+        return self.probe.param_groups
 
     @property
     def reading_names(self) -> tuple[str, ...]:
@@ -90,7 +92,7 @@ class PrintedDistanceSensor(Sensor):
         """Readings (N, 2): probe_z on height rows, distance on distance rows, else 0."""
         height, _, d = self._rows(frame)
         y = np.zeros((len(frame), 2))
-        y[:, 0] = np.where(height, self._probe.predict(frame.first, params)[:, 0], 0.0)
+        y[:, 0] = np.where(height, self.probe.predict(frame.first, params)[:, 0], 0.0)
         y[:, 1] = np.where(height, 0.0, d)
         return y
 
@@ -98,7 +100,7 @@ class PrintedDistanceSensor(Sensor):
         """∂y/∂(twist 1, twist 2) (N, 2, 12) (module docstring)."""
         height, v, d = self._rows(frame)
         J = np.zeros((len(frame), 2, 12))
-        J[:, 0, 0:6] = np.where(height[:, None], self._probe.frame_jacobian(frame.first, params)[:, 0], 0.0)
+        J[:, 0, 0:6] = np.where(height[:, None], self.probe.frame_jacobian(frame.first, params)[:, 0], 0.0)
         with np.errstate(invalid="ignore", divide="ignore"):
             u = np.where(height[:, None], 0.0, v / d[:, None])
         J[:, 1, 0:3] = u
@@ -109,13 +111,13 @@ class PrintedDistanceSensor(Sensor):
         """∂y/∂θ (N, 2, 6): the Z probe's on height rows."""
         height, _, _ = self._rows(frame)
         J = np.zeros((len(frame), 2, len(self.param_names)))
-        J[:, 0] = np.where(height[:, None], self._probe.param_jacobian(frame.first, params)[:, 0], 0.0)
+        J[:, 0] = np.where(height[:, None], self.probe.param_jacobian(frame.first, params)[:, 0], 0.0)
         return J
 
     def readable(self, frame) -> tuple[np.ndarray, str]:
         """Height rows where the Z probe can read pose 1; every distance row."""
         height, _, _ = self._rows(frame)
-        ok, why = self._probe.readable(frame.first)
+        ok, why = self.probe.readable(frame.first)
         return ok | ~height, why
 
     def works_with(self, mechanism) -> str | None:
@@ -124,7 +126,39 @@ class PrintedDistanceSensor(Sensor):
         if "pose-pairs" not in mechanism.abilities:
             return (f"a '{self.kind}' sensor reads pairs of poses; read machine '{mechanism.name}' as pose pairs "
                     "(pkmcal.mechanisms.pose_pairs.PosePairs)")
-        return self._probe.works_with(mechanism.single)
+        return self.probe.works_with(mechanism.single)
 
 
-__all__ = ["PrintedDistanceSensor", "SAME_POINT_MM"]
+def probe_setup(setup: MeasurementSetup) -> MeasurementSetup:
+    """The Z-probe setup of a printed-distance ``setup``: its probe (:attr:`PrintedDistanceSensor.probe`),
+    the probe's reading noise and the same actuator noise; what it reads of single poses
+    (a study plans its probe points and verifies its heights with it)."""
+    n = setup.noise
+    reading = np.broadcast_to(np.asarray(n.reading_std, dtype=float), (2,))[:1].copy()
+    return replace(setup, sensor=setup.sensor.probe, noise=NoiseModel(reading, n.actuator_std, n.distribution))
+
+
+def single_pose_setup(setup: MeasurementSetup) -> MeasurementSetup:
+    """What ``setup`` reads of single poses: the setup itself, or the Z probe of a
+    printed-distance setup (:func:`probe_setup`; the sensor that reads pose pairs)."""
+    return probe_setup(setup) if setup.sensor.reads_pose_pairs else setup
+
+
+def height_rows(actuators: np.ndarray, probe_z: np.ndarray, poses: np.ndarray):
+    """Height rows (module docstring) of single-pose probe measurements: ``(actuators (N, 2l),
+    readings (N, 2), poses (N, 2n))`` with each pose's carriage positions and pose twice,
+    ``probe_z`` the reading and ``distance`` 0."""
+    z = np.asarray(probe_z, dtype=float).reshape(-1)
+    return np.c_[actuators, actuators], np.c_[z, np.zeros(len(z))], np.c_[poses, poses]
+
+
+def distance_rows(actuators_1: np.ndarray, actuators_2: np.ndarray, distance: np.ndarray, poses_1: np.ndarray,
+                  poses_2: np.ndarray):
+    """Distance rows (module docstring): ``(actuators (N, 2l), readings (N, 2), poses (N, 2n))``
+    with both points' carriage positions and poses, ``probe_z`` 0 and ``distance``."""
+    d = np.asarray(distance, dtype=float).reshape(-1)
+    return np.c_[actuators_1, actuators_2], np.c_[np.zeros(len(d)), d], np.c_[poses_1, poses_2]
+
+
+__all__ = ["PrintedDistanceSensor", "SAME_POINT_MM", "distance_rows", "height_rows", "probe_setup",
+           "single_pose_setup"]

@@ -88,6 +88,9 @@ class ZProbeSensor(Sensor):
     free: tuple[str, ...] | None = None
 
     kind = "z-probe"
+    #: it reads where it triggers when lowered (:meth:`measured_frames`): a study can put its
+    #: probe points on the bed (a study setup's ``on_bed``, :mod:`pkmcal.study.printed`)
+    abilities = frozenset({"touch-probe"})
 
     def __post_init__(self) -> None:
         self._init_params()

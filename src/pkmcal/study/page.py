@@ -19,7 +19,7 @@ from pkmcal import __version__
 from pkmcal.io.atomic import atomic_write_bytes, atomic_write_text
 from pkmcal.report.html import CSS, inline_svg
 from pkmcal.study.plots import study_figures
-from pkmcal.study.results import COLUMNS, summary_lookup
+from pkmcal.study.results import COLUMNS, SCALE_COLUMNS, summary_lookup
 
 #: Headline columns of the page's table: (metric, heading, statistic).
 HEADLINE = (
@@ -55,11 +55,15 @@ def _stat(s: dict | None, kind: str) -> str:
     return f"{_g(s['mean'])} [{_g(s['mean_ci_low'])}, {_g(s['mean_ci_high'])}]"
 
 
-def _setup_text(setup) -> str:
+def _setup_text(setup, spec) -> str:
+    """The setup's line of facts; ``spec`` its :class:`~pkmcal.study.schema.SetupSpec`."""
     n = setup.noise
     return (f"sensor '{setup.sensor.kind}', {n.distribution} noise, reading std "
             f"{np.array2string(np.asarray(n.reading_std), precision=4)}, actuator std "
-            f"{np.array2string(np.asarray(n.actuator_std), precision=4)} (mm, rad)")
+            f"{np.array2string(np.asarray(n.actuator_std), precision=4)} (mm, rad)"
+            + (f"; the plan's poses are probe points, with the 12 distances of Klipper's calibration object at scale "
+               f"{spec.object_scale:g}" if setup.sensor.reads_pose_pairs else "")
+            + ("; probe points lowered onto the bed" if spec.on_bed else ""))
 
 
 def _table(header, rows) -> str:
@@ -85,9 +89,9 @@ def render_page(study, ctx, cols: dict, summary: list, figs) -> str:
         facts.append((f"machine {m.label}", f"nominal '{m.nominal.name}'; {m.describe()}"
                       + (f"; real-machine limits not checked: {', '.join(m.ignore_limits)}" if m.ignore_limits else "")))
     for s in study.setups:
-        texts = {m.label: _setup_text(b) for m, b in zip(study.machines, s.bound) if b is not None}
+        texts = {m.label: _setup_text(b, s) for m, b in zip(study.machines, s.bound) if b is not None}
         if len(set(texts.values())) <= 1:
-            facts.append((f"setup {s.label}", _setup_text(s.setup)
+            facts.append((f"setup {s.label}", _setup_text(s.setup, s)
                           + (f"; machines {', '.join(texts)}" if s.bound and len(texts) < len(study.machines) else "")))
         else:   # bound otherwise per machine (a planar tracker on rotary and on linear actuators)
             facts += [(f"setup {s.label}, machine {label}", text) for label, text in texts.items()]
@@ -119,7 +123,9 @@ def render_page(study, ctx, cols: dict, summary: list, figs) -> str:
         "as commanded, where the calibration fixed no gauge (its frames are the instrument's); <b>sensor</b>, "
         "what the instrument reads at the reached pose against what each model predicts its instrument reads, "
         "where a gauge left the frames a choice (poses as commanded would compare frames the gauge made "
-        "arbitrary); <b>aligned</b> (on request), the platform poses after the best rigid alignment of each "
+        "arbitrary); <b>aligned</b> (" + ("on request; the default with a printed object, whose geometry it is"
+                                          if study.reads_pose_pairs else "on request")
+        + "), the platform poses after the best rigid alignment of each "
         "model's base and platform frames; <b>tool</b>, the tool on the tracker, for a machine at static "
         "equilibrium.</p>")
     add("<p>Intervals: Student-t for means, binomial order statistics for medians, Wilson score for fractions. "
@@ -127,7 +133,8 @@ def render_page(study, ctx, cols: dict, summary: list, figs) -> str:
         "parameter held fixed differs from its true value); coverage uses the reported covariance of the free "
         "parameters only (gauge-fixed parameters are not estimated, so not counted).</p>")
     add("<h2>Columns of trials.csv</h2>")
-    add(_table(["column", "meaning"], [[_esc(k), _esc(d)] for k, (_, d) in COLUMNS.items()]
+    glossary = COLUMNS | (SCALE_COLUMNS if study.reads_pose_pairs else {})
+    add(_table(["column", "meaning"], [[_esc(k), _esc(d)] for k, (_, d) in glossary.items()]
                + [[_esc(k), "extra metric of this study"] for k in study.extra_columns]))
     add("</body>\n</html>\n")
     return "\n".join(p)

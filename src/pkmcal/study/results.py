@@ -99,6 +99,14 @@ COLUMNS: dict[str, tuple[str, str]] = {
                                "(what the instrument reads), aligned (the platform poses after the best rigid alignment "
                                "of each model's frames), tool (the tool on the tracker, a machine at equilibrium)"),
 }
+#: Columns of a study with a setup of pose pairs (a printed object, :mod:`pkmcal.study.printed`),
+#: after :data:`COLUMNS`: whether the measurements determine the in-plane scale.
+SCALE_COLUMNS: dict[str, tuple[str, str]] = {
+    "scale_status": ("str", "whether the measured poses determine the machine's named direction (a linear delta's "
+                            "common scale of arms and radius), as pkmcal identifiability judges it whatever the method "
+                            "holds: identified, weak, not determined or unidentifiable; empty for a machine without one"),
+    "scale_sigma": ("float", "the standard deviation of that scale the measurements leave (relative: 0.001 = 0.1 %)"),
+}
 #: The held-out error columns (empty for a measure the machine's kind does not have:
 #: :func:`pkmcal.study.trial.absent_columns`).
 HELDOUT_COLUMNS = tuple(c for c in COLUMNS if c.startswith("heldout_") and c not in ("heldout_used", "heldout_compare"))
@@ -112,17 +120,22 @@ SUMMARY_METRICS = (
     "param_error_vs_real_mean_abs_mm", "coverage_fraction", "all_within_95", "ellipsoid_within_95", "error_nsigma_rms",
     "heldout_position_rms_mm", "heldout_position_max_mm", "heldout_orientation_rms_deg", "heldout_tilt_rms_deg",
     "heldout_height_rms_mm", "heldout_position_rms_before_mm", "heldout_orientation_rms_before_deg",
-    "heldout_reading_rms_mm", "heldout_reading_rms_before_mm",
+    "heldout_reading_rms_mm", "heldout_reading_rms_before_mm", "scale_sigma",
 )
 PART_NAME = re.compile(r"^c(\d+)-t(\d+)-(\d+)\.csv$")
 
 
-def column_names(extra: tuple[str, ...] = ()) -> tuple[str, ...]:
-    return tuple(COLUMNS) + tuple(extra)
+def column_names(extra: tuple[str, ...] = (), scale: bool = False) -> tuple[str, ...]:
+    """The columns of ``trials.csv``: :data:`COLUMNS`, :data:`SCALE_COLUMNS` when ``scale`` (a
+    study with a printed object), then a reproduction's ``extra`` ones."""
+    return tuple(COLUMNS) + (tuple(SCALE_COLUMNS) if scale else ()) + tuple(extra)
+
+
+_TYPES = {name: kind for name, (kind, _) in (COLUMNS | SCALE_COLUMNS).items()}
 
 
 def column_type(name: str) -> str:
-    return COLUMNS[name][0] if name in COLUMNS else "float"
+    return _TYPES.get(name, "float")
 
 
 def cell(value, kind: str) -> str:
@@ -369,5 +382,5 @@ def summary_lookup(rows: list[dict]) -> dict[tuple[int, str], dict]:
     return {(int(r["config"]), r["metric"]): r for r in rows}
 
 
-__all__ = ["COLUMNS", "CONFIG_COLUMNS", "HELDOUT_COLUMNS", "ResultFolder", "SUMMARY_METRICS", "format_row",
+__all__ = ["COLUMNS", "CONFIG_COLUMNS", "HELDOUT_COLUMNS", "SCALE_COLUMNS", "ResultFolder", "SUMMARY_METRICS", "format_row",
            "format_summary", "median_interval", "parse_table", "read_trials", "summarise", "t_interval", "wilson_interval"]

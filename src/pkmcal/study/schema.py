@@ -23,8 +23,10 @@ every pkmcal file)::
     setups:
       - setup: indicators-prototype       # built-in name or setup file (relative to this file)
         label: indicators                 # optional
-        reading_noise_scale: 1.0          # optional multipliers of the setup's noise
-        actuator_noise_scale: 1.0
+        reading_noise_scale: 1.0          # optional multipliers of the setup's noise (reading: one, or one
+        actuator_noise_scale: 1.0         # per reading, e.g. [1, 0.5]: a printed-distance setup's calipers halved)
+      # - {setup: printed-distance-klipper, label: object, object_scale: 1.0, on_bed: true}   # a delta
+      #     # printer's probe heights and Klipper's printed object (DELTA_ANALYZE SCALE), probed on the bed
     plans:
       - {algorithm: random, poses: [15, 30, 60, 110]}
       - {algorithm: default, poses: [15, 30, 60, 110], candidates: 2000}
@@ -41,6 +43,12 @@ tracker takes the machine's pose dimension and actuator kind); a machine's ``set
 names the setups it is studied with, for setups that cannot measure every machine of the
 study (a Z probe and a hexapod); a method's ``machines:`` and ``setups:`` the labels it fits
 (a ``fix:`` list of one kind's parameter names). ``auto`` resolves per machine and setup.
+A setup whose sensor reads pairs of poses (``printed-distance``: Klipper's ``DELTA_ANALYZE``)
+studies a linear delta printer calibrated with probe heights and the 12 distances of
+Klipper's calibration object printed at ``object_scale`` (default 1): a plan's ``poses`` are
+its probe points (:mod:`pkmcal.study.printed`). ``on_bed: true`` (a Z probe, alone or with
+the object) lowers the probe points onto the bed, as a printer probes; without it a probe
+reads its height anywhere in the volume.
 
 ``errors`` groups match parameter names with shell patterns; every parameter matches at
 most one group; unmatched parameters are exact. ``size`` is the half-width of a uniform
@@ -112,8 +120,18 @@ class _Machine(_Strict):
 class _Setup(_Strict):
     setup: str
     label: str | None = None
-    reading_noise_scale: float = Field(1.0, ge=0.0, allow_inf_nan=False)
+    reading_noise_scale: Union[float, list[float]] = 1.0
     actuator_noise_scale: float = Field(1.0, ge=0.0, allow_inf_nan=False)
+    object_scale: float | None = Field(None, gt=0.0, allow_inf_nan=False)
+    on_bed: bool = False
+
+    @field_validator("reading_noise_scale")
+    @classmethod
+    def _factors(cls, v):
+        values = v if isinstance(v, list) else [v]
+        if not values or not all(np.isfinite(x) and x >= 0 for x in values):
+            raise ValueError("give one finite factor ≥ 0, or one per reading of the setup")
+        return v
 
 
 class _Plan(_Strict):
@@ -244,6 +262,11 @@ class SetupSpec:
     label: str
     setup: MeasurementSetup
     bound: tuple[MeasurementSetup | None, ...] = ()
+    #: the scale of Klipper's calibration object a setup of pose pairs measures (its
+    #: ``DELTA_ANALYZE SCALE``; :mod:`pkmcal.study.printed`)
+    object_scale: float = 1.0
+    #: a Z probe's probe points lowered onto the bed, as a printer probes (:mod:`pkmcal.study.printed`)
+    on_bed: bool = False
 
     def for_machine(self, machine: int, nominal: Mechanism) -> MeasurementSetup | None:
         """The setup machine ``machine`` (index, its nominal ``nominal``) is studied with,
@@ -355,6 +378,13 @@ class Study:
                                   f"poses {' and '.join('(' + ', '.join(k) + ')' for k in sorted(kinds))}: use "
                                   "heldout: {poses: N} (random reachable poses of each machine)")
 
+    @property
+    def reads_pose_pairs(self) -> bool:
+        """True when a setup reads pairs of poses (a printed object with probe heights,
+        :mod:`pkmcal.study.printed`): the trials then also say whether the scale is
+        determined (:data:`~pkmcal.study.results.SCALE_COLUMNS`)."""
+        return any(b is not None and b.sensor.reads_pose_pairs for s in self.setups for b in (s.bound or (s.setup,)))
+
     def methods_for(self, machine: int, setup: int) -> tuple[int, ...]:
         """Indices of the methods that fit machine ``machine`` with setup ``setup``."""
         m, s = self.machines[machine].label, self.setups[setup].label
@@ -395,6 +425,8 @@ class Study:
             "extra": None if self.extra_metrics is None else
             f"{self.extra_metrics.__module__}.{self.extra_metrics.__qualname__}",
         }
+        if self.reads_pose_pairs or any(s.on_bed for s in self.setups):   # only then: the others keep theirs
+            doc["printer"] = [[s.label, repr(s.object_scale), s.on_bed] for s in self.setups]
         return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()
 
     def _bound_fingerprint(self) -> dict:
@@ -423,9 +455,15 @@ def study_setup(setup: MeasurementSetup, machine: Mechanism, source: str) -> Mea
     from pkmcal.sensors.library import bind_setup
 
     if setup.sensor.reads_pose_pairs:
-        raise PkmcalError(f"{source}: a '{setup.sensor.kind}' sensor reads pairs of poses (the distance between two "
-                          "printed points); a study plans, measures and verifies single poses as 'pkmcal plan' does: "
-                          "study a Z probe (z-probe-klipper) or a position sensor (laser-tracker) instead")
+        from pkmcal.mechanisms.pose_pairs import PosePairs
+        from pkmcal.study.printed import PRINTER_KINDS
+
+        if machine.kind not in PRINTER_KINDS:
+            raise PkmcalError(f"{source}: a '{setup.sensor.kind}' sensor reads the distances of Klipper's calibration "
+                              "object (DELTA_ANALYZE) with the probe heights of a linear delta printer; machine "
+                              f"'{machine.name}' is a {machine.kind}: study it with a setup of single poses "
+                              "(z-probe-klipper, laser-tracker)")
+        return bind_setup(setup, PosePairs(machine), source)
     bound = bind_setup(setup, machine, source)
     if settles_at_equilibrium(machine) and bound.simulation is None:
         raise PkmcalError(f"{source}: machine '{machine.name}' is redundantly actuated and settles at static "
@@ -434,10 +472,17 @@ def study_setup(setup: MeasurementSetup, machine: Mechanism, source: str) -> Mea
     return bound
 
 
-def scaled_noise(setup: MeasurementSetup, reading: float, actuator: float) -> MeasurementSetup:
-    """``setup`` with its reading and actuator noise multiplied by the given factors."""
-    if reading == 1.0 and actuator == 1.0:
+def scaled_noise(setup: MeasurementSetup, reading, actuator: float) -> MeasurementSetup:
+    """``setup`` with its reading and actuator noise multiplied by the given factors
+    (``reading``: one factor, or one per reading, e.g. a printed-distance setup's probe and
+    calipers)."""
+    if np.all(np.asarray(reading) == 1.0) and actuator == 1.0:
         return setup
+    reading = np.asarray(reading, dtype=float)
+    if reading.ndim and reading.size != setup.sensor.n_readings:
+        raise PkmcalError(f"{reading.size} reading noise factors for the {setup.sensor.n_readings} readings "
+                          f"({', '.join(setup.sensor.reading_names)}) of a '{setup.sensor.kind}' sensor; give one "
+                          "factor, or one per reading")
     n = setup.noise
     noise = NoiseModel(np.asarray(n.reading_std, float) * reading, np.asarray(n.actuator_std, float) * actuator,
                        n.distribution)
@@ -545,11 +590,34 @@ def _machine_setups(path, lines, spec: _Study, machines: list, labels: list[str]
     return out
 
 
+def _object_scale(path, lines, i: int, given: _Setup, setup: MeasurementSetup, machines: list) -> float:
+    """The ``object_scale`` of study setup ``i`` (1 unless given): only for a setup that reads a
+    printed object, whose every machine must be able to print it."""
+    if not setup.sensor.reads_pose_pairs:
+        if given.object_scale is not None:
+            _fail(path, lines, ("setups", i, "object_scale"), f"is the scale of a printed calibration object; setup "
+                  f"'{given.setup}' has a '{setup.sensor.kind}' sensor (use a 'printed-distance' setup, e.g. "
+                  "printed-distance-klipper)")
+        return 1.0
+    from pkmcal.study.printed import object_poses
+
+    scale = 1.0 if given.object_scale is None else given.object_scale
+    for m in machines:
+        try:
+            object_poses(m.nominal, scale)
+        except PkmcalError as exc:
+            _fail(path, lines, ("setups", i, "object_scale" if given.object_scale is not None else "setup"), str(exc))
+    return scale
+
+
 def _fail(path, lines, loc: tuple, message: str):
     raise InputFileError(path, f"key '{_key_text(loc)}': {message}", line=_line(lines, loc))
 
 
 def _build(path: Path, spec: _Study, lines: dict, text: str) -> Study:
+    from pkmcal.sensors.printed_distance import single_pose_setup
+    from pkmcal.study.printed import probes_the_bed
+
     base = path.parent
 
     def load(loc, fn, name):
@@ -612,12 +680,19 @@ def _build(path: Path, spec: _Study, lines: dict, text: str) -> Study:
                     _fail(path, lines, ("setups", i, "setup"), str(exc))
                 _fail(path, lines, ("setups", i, "setup"), f"machine '{m.label}': {exc}; list the setups each "
                       "machine is studied with in its entry (machines[N].setups: [setup labels])")
-            bound.append(scaled_noise(setup, s.reading_noise_scale, s.actuator_noise_scale))
+            try:
+                bound.append(scaled_noise(setup, s.reading_noise_scale, s.actuator_noise_scale))
+            except PkmcalError as exc:
+                _fail(path, lines, ("setups", i, "reading_noise_scale"), str(exc))
         first = next((b for b in bound if b is not None), None)
         if first is None:
             _fail(path, lines, ("setups", i), f"setup '{labels[i]}' is used by no machine (their 'setups:' lists); "
                   "remove it or name it in a machine's 'setups:'")
-        setups.append(SetupSpec(labels[i], first, tuple(bound)))
+        scale = _object_scale(path, lines, i, s, first, [m for m, b in zip(machines, bound) if b is not None])
+        if s.on_bed and not probes_the_bed(single_pose_setup(first).sensor):
+            _fail(path, lines, ("setups", i, "on_bed"), f"lowers a Z probe's probe points onto the bed; setup "
+                  f"'{s.setup}' has a '{first.sensor.kind}' sensor, which reads where the machine is sent")
+        setups.append(SetupSpec(labels[i], first, tuple(bound), scale, s.on_bed))
 
     plans = []
     for i, pl in enumerate(spec.plans):

@@ -32,6 +32,10 @@ For trial t of campaign c (machine m × setup s × plan p × pose count n):
    height of a planar machine, the tilt and height of what an instrument reads
    (:func:`absent_columns`).
 
+A setup of pose pairs (a printed object's distances with probe heights) plans its probe
+points as its Z probe would, measures them and the object on the machine read as pose pairs
+(steps 2–5) and verifies on single poses (step 6): :mod:`pkmcal.study.printed`.
+
 Every generator is ``numpy.random.default_rng(SeedSequence(seed, spawn_key=key))``: a
 trial's numbers depend on the seed and its key only, never on which worker runs it, in
 which batch, or in which order. A :class:`~pkmcal.errors.PkmcalError` in a trial (e.g. no
@@ -59,12 +63,15 @@ from pkmcal.identification.verification import (
     sensor_errors,
     transported,
 )
+from pkmcal.mechanisms.pose_pairs import read_by
 from pkmcal.planning.candidates import generate_candidates
 from pkmcal.planning.plan import plan_poses
 from pkmcal.planning.selection import select, select_random
 from pkmcal.reproduce.paper3_baselines import BASELINES, baseline_inputs, baseline_result
 from pkmcal.sensors.base import MeasurementSetup
+from pkmcal.sensors.printed_distance import single_pose_setup
 from pkmcal.study.results import HELDOUT_COLUMNS, Z95, column_names, format_row
+from pkmcal.study import printed
 from pkmcal.study.schema import MachineSpec, Study
 
 #: Keys of the seed sequences (module docstring).
@@ -124,7 +131,7 @@ class Context:
 
     @property
     def names(self) -> tuple[str, ...]:
-        return column_names(self.study.extra_columns)
+        return column_names(self.study.extra_columns, scale=self.study.reads_pose_pairs)
 
     @property
     def n_configs(self) -> int:
@@ -136,7 +143,8 @@ class Context:
         out = {}
         for c in self.campaigns:
             for (config, _), compare in zip(c.configs(), c.compares):
-                absent = absent_columns(self.study.machines[c.machine].nominal, compare, self.setup(c).sensor)
+                absent = absent_columns(self.study.machines[c.machine].nominal, compare,
+                                        single_pose_setup(self.setup(c)).sensor)
                 if absent:
                     out[config] = absent
         return out
@@ -177,11 +185,14 @@ def prepare(study: Study, progress=None) -> Context:
             setup = setups[mi][si]
             if setup is None:       # not in the machine's 'setups:' list
                 continue
+            planned = single_pose_setup(setup)     # what a plan's poses are read with (printed: its probe)
             for pi, p in enumerate(study.plans):
                 pool_kind = "corners" if p.algorithm == "corners" else "random"
-                pool = plan_poses(m.nominal, setup, 1, algorithm=pool_kind, n_candidates=p.candidates,
+                pool = plan_poses(m.nominal, planned, 1, algorithm=pool_kind, n_candidates=p.candidates,
                                   margin=p.margin, seed=seed_for(study.seed, KEY_POOL, mi, si, pi))
                 poses = pool.candidates.poses
+                if s.on_bed:        # a printer's probe points: where its probe triggers on the bed
+                    poses = printed.lowered_to_bed(m.nominal, planned, poses)
                 need_blocks = p.algorithm not in ("random", "corners")
                 G = pool.model.blocks(poses)[0] if need_blocks else None
                 pool_index = len(pools)
@@ -196,7 +207,13 @@ def prepare(study: Study, progress=None) -> Context:
                     if p.resample == "once":
                         rng = rng_for(study.seed, KEY_ONCE, mi, si, pi, ni)
                         if need_blocks:
-                            sel = select(G, n, algorithm=p.algorithm, index=p.index, rng=rng, positions=poses)
+                            try:
+                                sel = select(G, n, algorithm=p.algorithm, index=p.index, rng=rng, positions=poses)
+                            except PkmcalError as exc:
+                                raise PkmcalError(f"plan '{p.label}' for machine '{m.label}' with setup '{s.label}'"
+                                                  + (" (its probe points, planned as for its Z probe alone: the "
+                                                     "printed object is Klipper's)" if setup.sensor.reads_pose_pairs
+                                                     else "") + f": {exc}") from None
                             chosen = poses[sel.chosen]
                         else:
                             chosen = poses[select_random(len(poses), n, rng)]
@@ -288,11 +305,19 @@ def heldout_compare(asked: str, nominal, setup: MeasurementSetup, method) -> str
       one), and what the instrument reads is the comparison no gauge can change. Which
       sensor parameters the method estimates is its candidate set on the planning model
       (:func:`~pkmcal.planning.blocks.planning_model`), so the choice depends on the
-      configuration only, never on a trial."""
+      configuration only, never on a trial;
+    * ``aligned`` for ``auto`` with a sensor of pose pairs (a printed object's distances
+      with probe heights, :mod:`pkmcal.study.printed`): no instrument reads the single
+      held-out poses but its Z probe, which reads heights only; the nozzle positions after
+      the best rigid alignment are the printed geometry whatever its place on the bed, the
+      in-plane scale the object is printed for included (``sensor`` on request: the
+      probe's heights)."""
     if settles_at_equilibrium(nominal):
         return "tool"          # a Study refuses any other 'compare' for such a machine
     if asked != "auto":
         return asked
+    if setup.sensor.reads_pose_pairs:
+        return "aligned"
     if setup.sensor.kind != "full-pose":
         return "sensor"
     from pkmcal.planning.blocks import planning_model
@@ -482,7 +507,11 @@ def _measure(ctx: Context, campaign: Campaign, trial: int) -> "_Measured | list[
                 chosen = select(G, campaign.n_poses, algorithm=pspec.algorithm, index=pspec.index, rng=rng,
                                 positions=pool).chosen
             poses = pool[chosen]
-        sim = simulate_campaign(nominal, real, setup, poses, rng, ignore_limits=mspec.ignore_limits)
+        ignore = mspec.ignore_limits + (printed.bed_limits(nominal) if sspec.on_bed else ())  # probe points on the bed
+        if setup.sensor.reads_pose_pairs:   # probe points, then the printed object (study.printed)
+            sim = printed.simulate(nominal, real, setup, poses, sspec.object_scale, rng, ignore)
+        else:
+            sim = simulate_campaign(nominal, real, setup, poses, rng, ignore_limits=ignore)
         if len(sim.kept) == 0:
             raise PkmcalError(f"the real machine reaches none of the {len(poses)} planned poses ({sim.summary()})")
     except PkmcalError as exc:
@@ -502,7 +531,8 @@ def _fit_all(ctx: Context, campaign: Campaign, measured: list[_Measured], k: int
     from pkmcal.identification.batched import batch_applies, identify_batch
 
     st = ctx.study
-    nominal, setup = st.machines[campaign.machine].nominal, ctx.setup(campaign)
+    setup = ctx.setup(campaign)
+    nominal = read_by(st.machines[campaign.machine].nominal, setup.sensor)   # pose pairs for printed distances
     me = st.methods[k]
     method = me.resolved(setup, nominal)
     fits: list = [None] * len(measured)
@@ -523,6 +553,7 @@ def _verify(ctx: Context, campaign: Campaign, m: _Measured, fitted: list) -> lis
     st = ctx.study
     mspec = st.machines[campaign.machine]
     nominal, setup, real, sim = mspec.nominal, ctx.setup(campaign), m.real, m.sim
+    fitted_machine = read_by(nominal, setup.sensor)      # what the fits fitted (pose pairs: printed distances)
     truth_full = np.concatenate([real.params, setup.sensor.params])
     is_angle = np.array(tuple(nominal.param_is_angle) + tuple(setup.sensor.param_is_angle), dtype=bool)
     out = [dict(r) for r in m.rows]
@@ -533,19 +564,23 @@ def _verify(ctx: Context, campaign: Campaign, m: _Measured, fitted: list) -> lis
         else:
             fits.append((k, fit))
     heldout = ctx.heldout[campaign.machine]
+    single_setup = single_pose_setup(setup)     # what the setup reads of the single held-out poses
     compared = {}   # k → (after, before): the fits of one comparison share its "before"
     try:
         for compare in dict.fromkeys(campaign.compares[k] for k, _ in fits):
             ks = [k for k, _ in fits if campaign.compares[k] == compare]
-            compared.update(zip(ks, heldout_errors(nominal, setup, [fitted[k] for k in ks], real, heldout,
-                                                   mspec.ignore_limits, compare)))
+            models = [printed.single_pose_fit(fitted[k], setup) for k in ks]
+            compared.update(zip(ks, heldout_errors(nominal, single_setup, models, real, heldout, mspec.ignore_limits,
+                                                   compare)))
     except PkmcalError as exc:
         return _failed(ctx, m.rows, exc)
     for k, fit in fits:
         r, me = out[k], st.methods[campaign.methods[k]]
         try:
-            r.update(evaluate(fit, truth_full, is_angle, nominal, setup, sim, r["identification"], me.weighted))
+            r.update(evaluate(fit, truth_full, is_angle, fitted_machine, setup, sim, r["identification"], me.weighted))
             r.update(heldout_columns(*compared[k]))
+            if st.reads_pose_pairs:     # whether the measurements determine the scale
+                r.update(printed.scale_columns(fitted_machine, setup, sim.measurements.commanded, me.free, me.fix))
             if st.extra_metrics is not None:
                 r.update(st.extra_metrics(nominal, real, setup, sim, fit, heldout))
         except PkmcalError as exc:
