@@ -382,5 +382,6 @@ def summary_lookup(rows: list[dict]) -> dict[tuple[int, str], dict]:
     return {(int(r["config"]), r["metric"]): r for r in rows}
 
 
-__all__ = ["COLUMNS", "CONFIG_COLUMNS", "HELDOUT_COLUMNS", "SCALE_COLUMNS", "ResultFolder", "SUMMARY_METRICS", "format_row",
-           "format_summary", "median_interval", "parse_table", "read_trials", "summarise", "t_interval", "wilson_interval"]
+__all__ = ["COLUMNS", "CONFIG_COLUMNS", "HELDOUT_COLUMNS", "SCALE_COLUMNS", "ResultFolder", "SUMMARY_METRICS",
+           "format_row", "format_summary", "median_interval", "parse_table", "read_trials", "summarise", "t_interval",
+           "wilson_interval"]

@@ -70,8 +70,8 @@ from pkmcal.planning.selection import select, select_random
 from pkmcal.reproduce.paper3_baselines import BASELINES, baseline_inputs, baseline_result
 from pkmcal.sensors.base import MeasurementSetup
 from pkmcal.sensors.printed_distance import single_pose_setup
-from pkmcal.study.results import HELDOUT_COLUMNS, Z95, column_names, format_row
 from pkmcal.study import printed
+from pkmcal.study.results import HELDOUT_COLUMNS, Z95, column_names, format_row
 from pkmcal.study.schema import MachineSpec, Study
 
 #: Keys of the seed sequences (module docstring).
