@@ -428,3 +428,38 @@ def test_pairs_of_a_rotating_platform_compose_like_the_machine():
     d = float(np.min(np.linalg.norm(X[:, :3] - X[:, 6:9], axis=1)))    # the distance's curvature scale
     assert_jacobian_matches_fd(lambda x: s.predict(pairs.frame(x)), X, H,
                                scale=[d] * 3 + [1.0] * 3 + [d] * 3 + [1.0] * 3, magnitude=1000.0)
+
+
+def test_chi2_of_pair_fits_counts_only_the_readings_each_row_takes():
+    """A printed-object campaign (probe heights and Klipper's 12 distances, as pair rows that
+    each measure one of their two readings) simulated with the setup's own noise: χ² of the
+    weighted fit follows χ²(dof) with dof = measured readings − free parameters, so its mean
+    over fits is dof (the old count, every row's two readings, made it about a third). With
+    n fits the mean's relative spread is √(2 / (dof n)); the tolerance is 4 of those. The
+    screening's per-pose sigma and the rms count the measured readings too."""
+    from pkmcal.mechanisms.library import builtin_machine
+    from pkmcal.mechanisms.pose_pairs import PosePairs
+    from pkmcal.study import printed
+
+    nominal = builtin_machine("kossel-mini")
+    setup = builtin_setup("printed-distance-klipper")
+    rng = np.random.default_rng(11)
+    angle = rng.uniform(0, 2 * np.pi, 15)
+    radius = 70 * np.sqrt(rng.uniform(0, 1, 15))
+    probe_points = np.c_[radius * np.cos(angle), radius * np.sin(angle), rng.uniform(0, 5, 15)]
+    free = ["angle_*", "radius_*", "arm_*", "endstop_*"]
+    chi2, dofs = [], set()
+    for seed in range(40):
+        sim = printed.simulate(nominal, nominal, setup, probe_points, 1.0, np.random.default_rng(seed))
+        res = identify(PosePairs(nominal), setup, sim.measurements, free=free, fix="auto")
+        u = res.uncertainty
+        chi2.append(u.chi2)
+        dofs.add(u.dof)
+        assert res.measured is not None and int(res.measured.sum()) == 15 + 12
+    (dof,) = dofs
+    assert dof == 15 + 12 - len(res.free)
+    mean = float(np.mean(chi2))
+    assert abs(mean / dof - 1) < 4 * np.sqrt(2 / (dof * len(chi2))), (mean, dof)
+    r = res.residuals_weighted
+    np.testing.assert_allclose(res.rms_whitened, np.sqrt(np.sum(r**2) / 27), rtol=1e-12)
+    np.testing.assert_allclose(res.screening.sigma, np.linalg.norm(r, axis=1), rtol=1e-12)   # one reading a row

@@ -190,6 +190,9 @@ class IdentificationResult:
     param_is_angle: tuple[bool, ...] = ()
     #: the sessions of the poses fitted (:mod:`pkmcal.sensors.sessions`); None: one session
     sessions: Sessions | None = None
+    #: (N, k) the residual entries that are measurements where some are not (a printed
+    #: object's pair rows measure one of their two readings); None: all
+    measured: np.ndarray | None = None
 
     @cached_property
     def identifiability(self) -> IdentifiabilityReport:
@@ -218,12 +221,19 @@ class IdentificationResult:
     def correlation(self) -> np.ndarray:
         return self.uncertainty.correlation
 
+    def _rms(self, r: np.ndarray, cols=slice(None)) -> float:
+        """√(mean r²) of the entries of columns ``cols`` of ``r`` (N, k) that are measurements
+        (:attr:`measured`)."""
+        kept = np.ones(r.shape, dtype=bool) if self.measured is None else self.measured
+        n = int(np.count_nonzero(kept[:, cols]))
+        return float(np.sqrt(np.sum(r[:, cols] ** 2) / n)) if n else float("nan")
+
     @property
     def rms_residual(self) -> float:
-        """√(mean r²) over every raw residual row and pose (measured − predicted), whatever
-        their units: a single number only when all rows share one unit (see
-        :meth:`rms_by_unit`)."""
-        return float(np.sqrt(np.mean(self.residuals**2)))
+        """√(mean r²) over every raw residual row and pose (measured − predicted; the entries
+        that are measurements), whatever their units: a single number only when all rows
+        share one unit (see :meth:`rms_by_unit`)."""
+        return self._rms(self.residuals)
 
     def rms_by_unit(self) -> dict[str, float]:
         """{unit: rms} of the raw residuals over the rows of each unit, angles in degrees:
@@ -236,15 +246,14 @@ class IdentificationResult:
         for unit, shown, scale in known + others:
             cols = [k for k, un in enumerate(units) if un == unit]
             if cols and self.residuals.size:
-                out[shown] = float(np.sqrt(np.mean(self.residuals[:, cols] ** 2))) * scale
+                out[shown] = self._rms(self.residuals, cols) * scale
         return out
 
     @property
     def rms_whitened(self) -> float:
         """√(χ²/M): rms of the whitened residuals at the solution (weights recomputed there),
         1 when the residuals are as large as the noise model says (unit 1)."""
-        r = self.residuals_weighted
-        return float(np.sqrt(np.mean(r**2))) if r.size else float("nan")
+        return self._rms(self.residuals_weighted) if self.residuals_weighted.size else float("nan")
 
     def angle_names(self) -> tuple[str, ...]:
         """The parameters that are angles (the machine's and the sensor's ``param_is_angle``)."""
@@ -949,19 +958,20 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
             W_end = whitening(ev.cov, f"{method} residual")
         except PkmcalError:  # noise-free noise model: no χ², the sandwich covariance is zero
             W_end = None
-        unc = parameter_uncertainty(free_names, J_free, ev.r, weighted=False, W=W_end, cov_rows=ev.cov)
+        unc = parameter_uncertainty(free_names, J_free, ev.r, weighted=False, W=W_end, cov_rows=ev.cov,
+                                    measured=ev.measured)
         r_w = ev.r
         z = None if W_end is None else (W_end @ ev.r[..., None])[..., 0]
     where = getattr(measurements, "where", None) if getattr(measurements, "source", None) is not None else None
     screening = None if z is None else screen(z, used, meth.row_names(), outlier_sigma, where=where, round_=round_,
-                                              numbers=numbers, loss=loss, f_scale=f_scale)
+                                              numbers=numbers, loss=loss, f_scale=f_scale, measured=ev.measured)
     if weighted:
         inliers = screening.inliers if loss != "linear" else np.ones(len(used), dtype=bool)
         if loss == "linear" and not len(prior):
-            unc = parameter_uncertainty(free_names, J_free, r_w, weighted=True)
+            unc = parameter_uncertainty(free_names, J_free, r_w, weighted=True, measured=ev.measured)
         else:
             unc = robust_uncertainty(free_names, J_free, r_w, inliers, loss, f_scale,
-                                     *prior.rows(free_idx, theta[free_idx]))
+                                     *prior.rows(free_idx, theta[free_idx]), measured=ev.measured)
     if screening is not None:
         notes.extend(screening.warnings())
 
@@ -999,6 +1009,7 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
         uncertainty=unc,
         residuals=ev.r,
         residuals_weighted=r_w,
+        measured=ev.measured,
         residual_names=meth.row_names(),
         poses=ev.poses,
         used_poses=used,

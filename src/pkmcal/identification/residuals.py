@@ -89,13 +89,16 @@ _POSE_MAX_ITER = 30
 
 @dataclass(frozen=True)
 class Evaluation:
-    """Residuals of all poses at one parameter vector (module docstring)."""
+    """Residuals of all poses at one parameter vector (module docstring); ``measured`` (N, k)
+    the residual entries that are measurements where some are not (None: all;
+    :meth:`~pkmcal.sensors.base.Sensor.measured_readings`)."""
 
     r: np.ndarray
     J: np.ndarray | None
     cov: np.ndarray | None
     converged: np.ndarray
     poses: np.ndarray
+    measured: np.ndarray | None = None
 
 
 @dataclass
@@ -660,7 +663,8 @@ class FKResidual(Method):
                                m.n_sensor, m.offset_jacobian(-HAi) if m.n_offsets else None)
         if cov:
             C = _diag_cov(m.sigma_y, m.n_poses) + _sandwich(HAi, m.sigma_q)
-        return Evaluation(r=r, J=J, cov=C, converged=ok, poses=x)
+        measured = sensor.measured_readings(frame)      # the rows are the readings
+        return Evaluation(r=r, J=J, cov=C, converged=ok, poses=x, measured=None if measured.all() else measured)
 
 
 class Projection(Method):

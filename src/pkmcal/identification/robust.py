@@ -226,14 +226,17 @@ class Screening:
 
 
 def screen(z: np.ndarray, used: np.ndarray, row_names, threshold: float, *, where=None, round_: int = 1, numbers=None,
-           loss: str = "linear", f_scale: float = 1.0) -> Screening:
+           loss: str = "linear", f_scale: float = 1.0, measured: np.ndarray | None = None) -> Screening:
     """The :class:`Screening` of whitened residuals ``z`` (N, k) of the poses ``used``
     (indices into the poses given); ``where(i)`` names pose i's file and line, ``numbers``
-    (default index + 1) are the poses' numbers in the file."""
+    (default index + 1) are the poses' numbers in the file. ``measured`` (N, k): the entries
+    that are measurements (None: all); a pose's k counts those only (a printed object's
+    pair row, one reading of two, is not halved in sigma)."""
     numbers = np.arange(1, int(np.max(used, initial=-1)) + 2) if numbers is None else np.asarray(numbers, dtype=int)
     z = np.asarray(z, dtype=float)
     N, k = z.shape
-    sigma = np.sqrt(np.sum(z**2, axis=1) / k) if k else np.zeros(N)
+    per_pose = np.full(N, k) if measured is None else np.count_nonzero(measured, axis=1)
+    sigma = np.sqrt(np.sum(z**2, axis=1) / np.maximum(per_pose, 1)) if k else np.zeros(N)
     out = []
     for j in np.flatnonzero(sigma > threshold):
         i = int(np.argmax(np.abs(z[j])))
@@ -250,12 +253,15 @@ def screen(z: np.ndarray, used: np.ndarray, row_names, threshold: float, *, wher
 
 
 def robust_uncertainty(names, J: np.ndarray, r: np.ndarray, inliers: np.ndarray, loss: str, f_scale: float,
-                       prior_J: np.ndarray | None = None, prior_r: np.ndarray | None = None):
+                       prior_J: np.ndarray | None = None, prior_r: np.ndarray | None = None,
+                       measured: np.ndarray | None = None):
     """The :class:`~pkmcal.identification.uncertainty.Uncertainty` of a robust and/or MAP fit
     from the whitened per-pose Jacobian ``J`` (N, k, p) and residuals ``r`` (N, k), the
     ``inliers`` mask (N,) and the prior rows (module docstrings of this module and of
     :mod:`.priors`): kind ``"map"`` for a quadratic loss with priors (posterior
-    (J̃ᵀJ̃ + P)⁻¹), ``"robust"`` for a robust loss (sandwich on the inliers)."""
+    (J̃ᵀJ̃ + P)⁻¹), ``"robust"`` for a robust loss (sandwich on the inliers). ``measured``
+    (N, k): the entries that are measurements, as in
+    :func:`~pkmcal.identification.uncertainty.parameter_uncertainty` (None: all)."""
     from pkmcal.identification.uncertainty import Uncertainty, _inverse_normal
 
     N, k, p = J.shape
@@ -271,7 +277,8 @@ def robust_uncertainty(names, J: np.ndarray, r: np.ndarray, inliers: np.ndarray,
         B = b * (Jin.T @ Jin) + Jp.T @ Jp
         C = Ainv @ B @ Ainv
     C = 0.5 * (C + C.T)
-    rows = Jin.shape[0] + Jp.shape[0]
+    n_in = Jin.shape[0] if measured is None else int(np.count_nonzero(np.asarray(measured)[inliers]))
+    rows = n_in + Jp.shape[0]
     dof = rows - p
     chi2 = float(rin @ rin + rp @ rp)
     post = C * (chi2 / dof if dof > 0 else np.nan)

@@ -171,6 +171,7 @@ def parameter_uncertainty(
     weighted: bool,
     W: np.ndarray | None = None,
     cov_rows: np.ndarray | None = None,
+    measured: np.ndarray | None = None,
 ) -> Uncertainty:
     """Covariances of the parameters from the per-pose Jacobian ``J`` (N, k, p) and
     residuals ``r`` (N, k) of the fit (module docstring).
@@ -179,11 +180,17 @@ def parameter_uncertainty(
     the raw ones and the per-pose noise covariance ``cov_rows`` (N, k, k) (for the sandwich
     and E[χ²]) and its whitening ``W`` (N, k, k) (for χ²), ``kind="sandwich"``; without
     them only C_post is meaningful (C_prior NaN).
+
+    ``measured`` (N, k): the residual entries that are measurements (None: all). An entry
+    that is not (a reading its row does not take: residual 0, Jacobian row 0, and after
+    whitening still alone in its row) adds nothing to χ² and no degree of freedom, so the
+    M of dof = M − p and of E[χ²] counts the measured entries only.
     """
     N, k, p = J.shape
-    M = N * k
+    rows = N * k
+    M = rows if measured is None else int(np.count_nonzero(measured))
     dof = M - p
-    Jf = J.reshape(M, p)
+    Jf = J.reshape(rows, p)
     inv = _inverse_normal(Jf)
     if weighted:
         chi2 = float(np.sum(r**2))
@@ -194,11 +201,11 @@ def parameter_uncertainty(
         post = inv * s2
         expected = float("nan")
         if cov_rows is not None:
-            meat = Jf.T @ (cov_rows @ J).reshape(M, p)            # Σ_j J_jᵀ Σ_j J_j
+            meat = Jf.T @ (cov_rows @ J).reshape(rows, p)         # Σ_j J_jᵀ Σ_j J_j
             prior = inv @ meat @ inv
             prior = 0.5 * (prior + prior.T)
             if W is not None:
-                Jw = (W @ J).reshape(M, p)
+                Jw = (W @ J).reshape(rows, p)
                 expected = float(M - 2 * p + np.sum((Jw.T @ Jw) * prior))   # M − 2p + tr(F C)
         else:
             prior = np.full((p, p), np.nan)

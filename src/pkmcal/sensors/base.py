@@ -183,6 +183,13 @@ class Sensor(ABC):
                     "coordinates, a planar machine); use a 'planar-tool' setup")
         return None
 
+    def measured_readings(self, frame: Frame) -> np.ndarray:
+        """Which readings of each frame are measurements (N, m) bool: all (default). A reading
+        that is not (a row of two poses that measures one of its two readings and records the
+        other as 0, predicted 0: :class:`~pkmcal.sensors.printed_distance.PrintedDistanceSensor`)
+        adds no degree of freedom to a fit's χ² (:mod:`pkmcal.identification.uncertainty`)."""
+        return np.ones((len(frame), self.n_readings), dtype=bool)
+
     def measured_frames(self, frame: Frame) -> Frame:
         """The frames at which this sensor takes its readings when the machine is sent to
         ``frame``: the frames themselves (default); a touch probe's are lowered until it

@@ -114,6 +114,12 @@ class PrintedDistanceSensor(Sensor):
         J[:, 0] = np.where(height[:, None], self.probe.param_jacobian(frame.first, params)[:, 0], 0.0)
         return J
 
+    def measured_readings(self, frame) -> np.ndarray:
+        """(N, 2): a height row measures probe_z, a distance row the distance; the other
+        reading is recorded as 0 and predicted 0 (no degree of freedom)."""
+        height, _, _ = self._rows(frame)
+        return np.c_[height, ~height]
+
     def readable(self, frame) -> tuple[np.ndarray, str]:
         """Height rows where the Z probe can read pose 1; every distance row."""
         height, _, _ = self._rows(frame)
