@@ -463,3 +463,23 @@ def test_chi2_of_pair_fits_counts_only_the_readings_each_row_takes():
     r = res.residuals_weighted
     np.testing.assert_allclose(res.rms_whitened, np.sqrt(np.sum(r**2) / 27), rtol=1e-12)
     np.testing.assert_allclose(res.screening.sigma, np.linalg.norm(r, axis=1), rtol=1e-12)   # one reading a row
+
+
+def test_held_out_reading_statistics_count_the_readings_each_row_takes():
+    """Held-out errors of Klipper's example log (7 heights, 12 distances) on the nominal
+    machine: the reading mean and rms are over the 19 readings measured, not over the 38
+    entries of which 19 are recorded 0 and predicted 0."""
+    from pkmcal.identification.heldout import predict
+    from pkmcal.mechanisms.library import builtin_machine
+
+    machine = builtin_machine("kossel-mini")
+    meas = read_klipper_analyze(EXAMPLE_LOG, machine).measurements
+    sensor = builtin_setup("printed-distance-klipper").sensor
+    pred = predict(PosePairs(machine), sensor, meas, "nominal")
+    assert pred.measured is not None and int(pred.measured.sum()) == 19
+    taken = pred.residuals[pred.measured]
+    out = pred.summary(np.ones(len(meas.readings), dtype=bool))
+    assert out["reading_rms_mm"] == pytest.approx(float(np.sqrt(np.mean(taken**2))), rel=1e-12)
+    assert out["reading_mean_mm"] == pytest.approx(float(np.mean(np.abs(taken))), rel=1e-12)
+    assert out["reading_max_mm"] == pytest.approx(float(np.max(np.abs(pred.residuals))), rel=1e-12)
+    assert np.all(pred.residuals[~pred.measured] == 0)

@@ -117,7 +117,9 @@ class Predicted:
     """Held-out errors of one model (module docstring), per pose (N,): ``residuals`` (N, m)
     measured − predicted (mm, rad), ``position`` (mm) and ``orientation`` (rad) or None
     where the sensor reads no such thing; ``ok`` False where the FK failed (NaN rows);
-    ``poses`` (N, n) the FK poses (internal units)."""
+    ``poses`` (N, n) the FK poses (internal units); ``measured`` (N, m) the readings that are
+    measurements where some are not (a printed object's pair rows: one of two; None: all),
+    the only ones the reading statistics count."""
 
     label: str
     machine: str
@@ -129,6 +131,7 @@ class Predicted:
     reason: tuple[str, ...]
     registration: str = ""
     poses: np.ndarray | None = None
+    measured: np.ndarray | None = None
 
     def summary(self, mask: np.ndarray) -> dict:
         """``{n_poses, position_mean_mm, position_rms_mm, position_max_mm, orientation_mean_deg,
@@ -141,8 +144,11 @@ class Predicted:
             for stat, v in _stats(None if values is None else values[mask] * scale).items():
                 out[f"{key}_{stat}_{unit}"] = v
         lengths = [k for k, a in enumerate(self.sensor.reading_is_angle) if not a]
-        r = self.residuals[mask][:, lengths] if lengths else None
-        for stat, v in _stats(None if r is None else r.reshape(-1)).items():
+        r = None
+        if lengths:
+            taken = np.ones(self.residuals.shape, dtype=bool) if self.measured is None else self.measured
+            r = self.residuals[mask][:, lengths][taken[mask][:, lengths]]
+        for stat, v in _stats(r).items():
             out[f"reading_{stat}_mm"] = v
         return out
 
@@ -202,11 +208,14 @@ def predict(machine: Mechanism, sensor: Sensor, measurements, label: str, regist
     x, ok, branch = held_out_fk(machine, q, np.broadcast_to(start, (len(q), machine.n_dof)).copy(), reference)
     with np.errstate(all="ignore"):
         x = np.where(ok[:, None], x, machine.home_pose)
-        pred = sensor.predict(machine.frame(x))
+        frame = machine.frame(x)
+        pred = sensor.predict(frame)
+        measured = sensor.measured_readings(frame)
     reason = tuple("" if k else ("FK converged on another assembly mode" if b else "FK did not converge")
                    for k, b in zip(ok, branch))
     r, position, orientation = reading_errors(sensor, y, pred, ok)
-    return Predicted(label, machine.name, sensor, r, position, orientation, ok, reason, registration, x)
+    return Predicted(label, machine.name, sensor, r, position, orientation, ok, reason, registration, x,
+                     None if measured.all() else measured)
 
 
 def reading_errors(sensor: Sensor, measured: np.ndarray, predicted: np.ndarray, ok: np.ndarray | None = None
