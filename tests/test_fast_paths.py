@@ -195,6 +195,17 @@ def test_small_linalg_flags_singular_and_indefinite():
     assert cholesky_inverse(np.stack([np.eye(2), np.diag([1.0, np.nan])]))[1] == 1
 
 
+@pytest.mark.parametrize("A_shape, H_shape", [((13, 6, 6), (13, 3, 3)), ((4, 3, 3), (5, 2, 3)), ((4, 3, 2), (4, 2, 2))])
+def test_small_linalg_refuses_mismatched_shapes(A_shape, H_shape):
+    """The compiled loops index without bounds checks: a shape mismatch (a single-pose sensor's
+    H against a pose pair's A once wrote past the arrays and corrupted the heap) is an error
+    before the loop runs."""
+    with pytest.raises(ValueError, match="solve_right needs"):
+        solve_right(np.ones(A_shape), np.ones(H_shape))
+    with pytest.raises(ValueError, match="cholesky_inverse needs"):
+        cholesky_inverse(np.ones((3, 2, 3)))
+
+
 def test_full_pose_inverse_is_exact_and_measures_the_poses(machine):
     """The full-pose sensor's closed-form inverse (R = R_wᵀ R_T R_tᵀ, p = R_wᵀ(y − p_w) − R p_t)
     gives back the frame it read to rounding, with and without world/tool transforms; the

@@ -483,3 +483,35 @@ def test_held_out_reading_statistics_count_the_readings_each_row_takes():
     assert out["reading_mean_mm"] == pytest.approx(float(np.mean(np.abs(taken))), rel=1e-12)
     assert out["reading_max_mm"] == pytest.approx(float(np.max(np.abs(pred.residuals))), rel=1e-12)
     assert np.all(pred.residuals[~pred.measured] == 0)
+
+
+def test_cli_identifiability_reads_pose_pairs_and_refuses_what_pairs_cannot_do(tmp_path):
+    """`pkmcal identifiability` judges a printed-object campaign from its pose pairs (x, y, z,
+    x_2, y_2, z_2) as the library does on the machine read as pose pairs; `--suggest`, `plan`
+    and `simulate` refuse it with what to do instead (exit 2, no traceback)."""
+    from pkmcal.identification.identifiability import identifiability
+    from pkmcal.mechanisms.library import builtin_machine
+
+    machine = builtin_machine("kossel-mini")
+    meas = read_klipper_analyze(EXAMPLE_LOG, machine).measurements
+    poses = tmp_path / "pairs.csv"
+    cols = ("x", "y", "z", "x_2", "y_2", "z_2")
+    poses.write_text(",".join(cols) + "\n" + "\n".join(",".join(repr(float(v)) for v in row) for row in meas.commanded)
+                     + "\n")
+    run = CliRunner()
+    res = run.invoke(cli, ["identifiability", "kossel-mini", "--setup", "printed-distance-klipper", "--poses", str(poses),
+                           "--json"])
+    assert res.exit_code == 0, res.output
+    got = json.loads(res.stdout)
+    setup = builtin_setup("printed-distance-klipper", PosePairs(machine))
+    want = identifiability(PosePairs(machine), setup, meas.commanded)
+    assert (got["rank"], got["n_params"]) == (want.rank, want.n_params) == (15, 18)
+    np.testing.assert_allclose(got["singular_values"], want.singular_values, rtol=1e-12)
+    for args, hint in ((["identifiability", "kossel-mini", "--setup", "printed-distance-klipper", "--poses", str(poses),
+                         "--suggest"], "probe heights alone"),
+                       (["plan", "kossel-mini", "--setup", "printed-distance-klipper", "--n", "15", "-o",
+                         str(tmp_path / "p.csv")], "z-probe-klipper"),
+                       (["simulate", "kossel-mini", "--real", "kossel-mini", "--setup", "printed-distance-klipper",
+                         "--poses", str(poses), "-o", str(tmp_path / "m.csv")], "z-probe-klipper")):
+        res = run.invoke(cli, args)
+        assert res.exit_code == 2 and hint in res.output and "Traceback" not in res.output, (args, res.output)

@@ -333,13 +333,11 @@ def identifiability_cmd(machine, poses_arg, setup_spec, poses, method, fix, free
     directions, and a minimal set of parameters to fix (the gauge). JSON keys: n_params,
     rank, singular_values, null_space, fixed, weak, ...
     """
+    from pkmcal.cli.klipper_probe_cmd import machine_and_setup
     from pkmcal.identification.identifiability import identifiability
-    from pkmcal.io.lookup import load_machine
-    from pkmcal.io.lookup import load_setup
 
     poses = poses_file(poses, poses_arg, "identifiability")
-    nominal = load_machine(machine)
-    setup = load_setup(setup_spec, nominal)
+    nominal, setup = machine_and_setup(machine, setup_spec)   # pose pairs for printed distances
     x = read_poses(poses, nominal, mapping)
     fix_names = _names(fix)
     rep = identifiability(nominal, setup, x, method=method, free=merged_free(_names(free), setup),

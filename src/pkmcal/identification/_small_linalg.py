@@ -88,6 +88,9 @@ def solve_right(A: np.ndarray, H: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     NaN) where A_j is singular to 1e-14 relative."""
     A = np.ascontiguousarray(A, dtype=np.float64)
     H = np.ascontiguousarray(H, dtype=np.float64)
+    if A.ndim != 3 or H.ndim != 3 or A.shape[1] != A.shape[2] or A.shape[::2] != H.shape[::2]:
+        # the kernel indexes without bounds checks: a mismatch would write past its arrays
+        raise ValueError(f"solve_right needs A (N, n, n) and H (N, m, n); got {A.shape} and {H.shape}")
     out = np.empty(H.shape)
     ok = np.empty(A.shape[0], dtype=np.bool_)
     _solve_right(A, H, out, ok)
@@ -127,6 +130,8 @@ def cholesky_inverse(C: np.ndarray) -> tuple[np.ndarray, int]:
     """``(W, bad)``: W_j = L_j⁻¹, L_j L_jᵀ = C_j for C (N, n, n) symmetric; ``bad`` the first
     j whose C_j is not positive definite (W then incomplete), else −1."""
     C = np.ascontiguousarray(C, dtype=np.float64)
+    if C.ndim != 3 or C.shape[1] != C.shape[2]:
+        raise ValueError(f"cholesky_inverse needs C (N, n, n); got {C.shape}")   # unchecked kernel indexing
     W = np.empty(C.shape)
     bad = int(_cholesky_inverse(C, W))
     return W, bad

@@ -244,6 +244,10 @@ def advise(machine, setup, poses: np.ndarray, *, method: str | None = None, free
     from pkmcal.identification.identifiability import _clean, named_directions_report
     from pkmcal.identification.residuals import Model, candidate_parameters, single_threaded_blas
 
+    if setup.sensor.reads_pose_pairs:
+        raise PkmcalError("--suggest ranks what to add to measurements of single poses; these are pairs of poses "
+                          "(a printed object with probe heights). Run it on the probe heights alone (--setup "
+                          "z-probe-klipper and their poses): it ranks the printed object among the additions")
     poses = machine.as_pose_array(poses)
     with np.errstate(invalid="ignore"):
         model = Model(machine, setup.sensor, setup.noise, machine.ik(poses[:1]),

@@ -130,8 +130,11 @@ class PrintedDistanceSensor(Sensor):
         """Machines read as pose pairs (:class:`~pkmcal.mechanisms.pose_pairs.PosePairs`) of
         a machine the Z probe can measure."""
         if "pose-pairs" not in mechanism.abilities:
-            return (f"a '{self.kind}' sensor reads pairs of poses; read machine '{mechanism.name}' as pose pairs "
-                    "(pkmcal.mechanisms.pose_pairs.PosePairs)")
+            return (f"a '{self.kind}' sensor reads pairs of poses (the distances of Klipper's printed object with "
+                    f"probe heights), which 'pkmcal identify', 'identifiability', 'verify' and 'study' read on machine "
+                    f"'{mechanism.name}' as pose pairs (files of x, y, z, x_2, y_2, z_2; 'pkmcal import klipper-analyze'); "
+                    "the object is Klipper's, not planned or simulated pose by pose: plan or simulate the probe points "
+                    "with the Z probe (--setup z-probe-klipper)")
         return self.probe.works_with(mechanism.single)
 
 
