@@ -165,7 +165,7 @@ def _eliminated(J: np.ndarray, S: np.ndarray) -> np.ndarray:
     return J - U @ (U.T @ J)
 
 
-def _where_read(machine, sensor, poses: np.ndarray) -> np.ndarray:
+def where_read(machine, sensor, poses: np.ndarray) -> np.ndarray:
     """The poses at which ``sensor`` reads when the machine is sent to ``poses``
     (``Sensor.measured_frames``: a Z probe's lowered onto the bed)."""
     return machine.poses_from_frame(sensor.measured_frames(machine.frame(poses)))
@@ -183,7 +183,7 @@ def _additions(machine, setup, poses, method, names, notes):
             continue          # a setup that cannot measure this machine
         if other.sensor == setup.sensor:
             continue
-        where = _where_read(machine, other.sensor, poses)
+        where = where_read(machine, other.sensor, poses)
         with np.errstate(invalid="ignore"):
             reached = machine.check_limits(where, margins=False).ok   # the machine goes where it reads
         if not reached.any():
@@ -207,7 +207,7 @@ def _additions(machine, setup, poses, method, names, notes):
         except PkmcalError as exc:
             notes.append(f"planner '{alg}': no poses ({exc})")
             continue
-        J, _, n = _rows(machine, setup, _where_read(machine, setup.sensor, plan.poses), method, names,
+        J, _, n = _rows(machine, setup, where_read(machine, setup.sensor, plan.poses), method, names,
                         same_setup=True)
         out.append((f"+ {n} more poses (planner '{alg}')", "poses", J))
     return out
@@ -289,4 +289,4 @@ def advise(machine, setup, poses: np.ndarray, *, method: str | None = None, free
     return Advice(gain(current), tuple(scored), names, gauge, tuple(notes))
 
 
-__all__ = ["Advice", "Option", "PLANNERS", "advise"]
+__all__ = ["Advice", "Option", "PLANNERS", "advise", "where_read"]

@@ -243,9 +243,9 @@ class _DState:
 #: above, on a working set (:func:`_detmax_exchange`) of 5 × pool candidates, or fewer when
 #: their blocks would hold more than _WORK_NUMBERS numbers (m·n per candidate), but never
 #: fewer than the pool. Every exchange step reads the working set twice; at 110 of 100,000
-#: full-pose candidates (m·n = 252) the 11,000 of 5 × pool took 0.30 s of the selection's
-#: 1.0-1.4 s, the 2,976 of the budget 0.08 s (see :func:`_work_size` for what it does to
-#: the designs).
+#: full-pose candidates (m·n = 252) the updates of the 11,000 of 5 × pool took 0.31 s of the
+#: selection's 1.0-1.4 s, those of the 2,976 of the budget 0.17 s (line profiles, 36 and 37
+#: exchanges; see :func:`_work_size` for what it does to the designs).
 _WORK_MIN = 10_000
 _WORK_NUMBERS = 750_000
 

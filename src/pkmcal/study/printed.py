@@ -79,7 +79,9 @@ def lowered_to_bed(machine: Mechanism, setup: MeasurementSetup, poses: np.ndarra
     """``poses`` (N, n) of ``machine`` lowered to where the probe of ``setup`` (a single-pose
     setup) triggers on the bed (:meth:`~pkmcal.sensors.base.Sensor.measured_frames`): the
     probe points of a printer, which probes its bed only (a study setup's ``on_bed``)."""
-    return machine.poses_from_frame(setup.sensor.measured_frames(machine.frame(poses)))
+    from pkmcal.identification.advice import where_read
+
+    return where_read(machine, setup.sensor, poses)
 
 
 def object_poses(machine: Mechanism, scale: float) -> np.ndarray:
@@ -161,18 +163,13 @@ def scale_columns(machine: Mechanism, setup: MeasurementSetup, poses: np.ndarray
     directions = machine.named_directions()
     if not directions:
         return {}
-    from fnmatch import fnmatchcase
-
     from pkmcal.identification.identifiability import identifiability
+    from pkmcal.identification.residuals import _matching     # the engine's shell-pattern match
 
     own = set(directions[0].direction)
     names = tuple(machine.param_names) + tuple(setup.sensor.param_names)
-
-    def named(patterns):
-        return [n for n in names if any(fnmatchcase(n, p) for p in patterns)]
-
-    held = None if fix is None or isinstance(fix, str) else [n for n in named(fix) if n not in own]
-    chosen = None if free is None else [n for n in names if n in own or n in named(free)]
+    held = None if fix is None or isinstance(fix, str) else [n for n in _matching(names, tuple(fix)) if n not in own]
+    chosen = None if free is None else [n for n in names if n in own or n in _matching(names, tuple(free))]
     rep = identifiability(machine, setup, poses, free=chosen, fix=held)
     if not rep.named:
         return {}
