@@ -19,7 +19,11 @@ measurable poses of its workspace box (seeded).
   resident memory (``os.wait4``'s ru_maxrss: the largest process); the 100,000 plan
   ``--repeat`` times (medians), alternated with the same command on the source tree
   ``--baseline-src DIR`` when given (e.g. the main branch's ``src``: before/after in one
-  run, keys ``..._baseline_...``); then, in this process, the
+  run, keys ``..._baseline_...``); beside them, the start-up floors of this machine
+  (:func:`start_up_floors`: ``python -c pass`` and one cached numba function) and the plan
+  of 8 of 100 candidates, whose difference from the 100,000 plan is that plan's own work
+  (``plan_110_of_100000_above_8_of_100_s``: comparable between machines whose start-up
+  differs); then, in this process, the
   stages of the 100,000 plan: candidate generation and checks (including the ~8× more poses
   tested than accepted), the planning blocks of the accepted candidates, and the selection;
   and the limit check per pose, compiled kernel (:meth:`Hexapod.check_limits` without
@@ -68,12 +72,13 @@ def timed(fn, *args, **kwargs):
     return out, time.perf_counter() - t
 
 
-def run_child(n_candidates: int, setup: str, seed: int, workers: int | None = None, src: str | None = None) -> dict:
-    """``pkmcal plan`` in a fresh process (with ``--workers``; the package from ``src`` when
-    given): wall and CPU seconds, peak RSS (MB), its summary and the poses file's text."""
+def run_child(n_candidates: int, setup: str, seed: int, workers: int | None = None, src: str | None = None,
+              n: int = 110) -> dict:
+    """``pkmcal plan --n n`` in a fresh process (with ``--workers``; the package from ``src``
+    when given): wall and CPU seconds, peak RSS (MB), its summary and the poses file's text."""
     env = dict(os.environ) if src is None else {**os.environ, "PYTHONPATH": os.path.abspath(src)}
     with tempfile.TemporaryDirectory() as tmp:
-        cmd = [sys.executable, "-m", "pkmcal.cli.main", "plan", "stewart-prototype", "--setup", setup, "--n", "110",
+        cmd = [sys.executable, "-m", "pkmcal.cli.main", "plan", "stewart-prototype", "--setup", setup, "--n", str(n),
                "--n-candidates", str(n_candidates), "--seed", str(seed), "-o", os.path.join(tmp, "poses.csv")]
         cmd += [] if workers is None else ["--workers", str(workers)]
         with open(os.path.join(tmp, "out.txt"), "w+") as out, open(os.path.join(tmp, "err.txt"), "w+") as err:
@@ -93,6 +98,37 @@ def run_child(n_candidates: int, setup: str, seed: int, workers: int | None = No
             "peak_rss_mb": usage.ru_maxrss * scale / 2**20, "summary": text.splitlines()[0], "poses": poses}
 
 
+#: The least a process that calls one compiled (cached) numba function costs: the
+#: interpreter, NumPy, numba and the lowering registries numba loads before its first call
+#: (they import SciPy's linear algebra). Every compiled pkmcal command pays it.
+NUMBA_FLOOR = """
+import numba
+
+@numba.njit(cache=True)
+def one_more(x):
+    return x + 1
+"""
+
+
+def start_up_floors(repeat: int) -> dict:
+    """Wall seconds (medians of ``repeat`` fresh processes) of ``python -c pass`` and of
+    :data:`NUMBA_FLOOR` calling its function, its numba cache filled first."""
+    with tempfile.TemporaryDirectory() as tmp:
+        with open(os.path.join(tmp, "floor.py"), "w") as f:
+            f.write(NUMBA_FLOOR)
+        env = {**os.environ, "NUMBA_CACHE_DIR": os.path.join(tmp, "cache")}
+        commands = {"python_start_s": [sys.executable, "-c", "pass"],
+                    "numba_floor_s": [sys.executable, "-c", "import floor; floor.one_more(1)"]}
+        subprocess.run(commands["numba_floor_s"], cwd=tmp, env=env, check=True)       # fills the cache
+        runs = {k: [] for k in commands}
+        for _ in range(repeat):
+            for key, cmd in commands.items():
+                t = time.perf_counter()
+                subprocess.run(cmd, cwd=tmp, env=env, check=True)
+                runs[key].append(time.perf_counter() - t)
+    return {k: float(np.median(v)) for k, v in runs.items()}
+
+
 def timed_cpu(fn, *args, **kwargs):
     """(result, wall seconds, process CPU seconds)."""
     t, c = time.perf_counter(), time.process_time()
@@ -108,9 +144,10 @@ def large_candidate_sets(setup_name: str, seed: int, skip_million: bool, workers
                          baseline_src: str | None = None, repeat: int = 3) -> dict:
     """Issue 14 item 4: whole plans with 10^5 and 10^6 candidates, the stages of the first,
     and the per-pose limit check (module docstring)."""
-    res = {}
-    ours, base = [], []
+    res = start_up_floors(repeat)
+    ours, base, tiny = [], [], []
     for _ in range(repeat):                       # alternated: both see the same load
+        tiny.append(run_child(100, setup_name, seed, n=8))
         ours.append(run_child(100_000, setup_name, seed))
         if baseline_src is not None:
             base.append(run_child(100_000, setup_name, seed, src=baseline_src))
@@ -123,6 +160,11 @@ def large_candidate_sets(setup_name: str, seed: int, skip_million: bool, workers
         print(f"pkmcal plan --n 110 --n-candidates 100000{' (baseline ' + baseline_src + ')' if tag else ''}, median "
               f"of {len(runs)}: {med['wall_s']:.2f} s wall, {med['cpu_s']:.2f} s CPU, peak RSS "
               f"{med['peak_rss_mb']:.0f} MB; {runs[0]['summary']}")
+    res["plan_8_of_100_s"] = _median_runs(tiny)["wall_s"]
+    res["plan_110_of_100000_above_8_of_100_s"] = res["plan_110_of_100000_s"] - res["plan_8_of_100_s"]
+    print(f"start-up floors, medians of {repeat}: python -c pass {res['python_start_s']:.2f} s; one cached numba "
+          f"function {res['numba_floor_s']:.2f} s; pkmcal plan --n 8 --n-candidates 100 {res['plan_8_of_100_s']:.2f} s, "
+          f"so the 100,000 plan's own work is {res['plan_110_of_100000_above_8_of_100_s']:.2f} s")
     if base:
         res["plan_110_of_100000_same_as_baseline"] = base[0]["poses"] == ours[0]["poses"]
         print(f"same poses file as the baseline: {res['plan_110_of_100000_same_as_baseline']}")
