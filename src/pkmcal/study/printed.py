@@ -24,7 +24,7 @@ is 0, as in the imported file (:func:`~pkmcal.sensors.printed_distance.height_ro
   (:data:`BED_LIMITS`), whose z the endstop errors move by tenths of a mm.
 * **On the bed** (a study setup's ``on_bed: true``, any Z probe): a printer probes its bed
   only, so the plan's probe points are lowered to where the probe triggers
-  (:func:`lowered_to_bed`) before they are chosen, and, like the object, not checked
+  (:func:`pkmcal.identification.advice.where_read`) before they are chosen, and, like the object, not checked
   against the bed limit on the real machine. Without it the probe reads its height
   anywhere in the volume (a probe on gauge blocks), as the studies of ``z-probe-klipper``
   always have.
@@ -73,15 +73,6 @@ def probes_the_bed(sensor: Sensor) -> bool:
     """Whether ``sensor`` reads where it is lowered to (it declares ``"touch-probe"``: a Z
     probe, :meth:`~pkmcal.sensors.base.Sensor.measured_frames`)."""
     return "touch-probe" in sensor.abilities
-
-
-def lowered_to_bed(machine: Mechanism, setup: MeasurementSetup, poses: np.ndarray) -> np.ndarray:
-    """``poses`` (N, n) of ``machine`` lowered to where the probe of ``setup`` (a single-pose
-    setup) triggers on the bed (:meth:`~pkmcal.sensors.base.Sensor.measured_frames`): the
-    probe points of a printer, which probes its bed only (a study setup's ``on_bed``)."""
-    from pkmcal.identification.advice import where_read
-
-    return where_read(machine, setup.sensor, poses)
 
 
 def object_poses(machine: Mechanism, scale: float) -> np.ndarray:
@@ -176,5 +167,5 @@ def scale_columns(machine: Mechanism, setup: MeasurementSetup, poses: np.ndarray
     return {"scale_status": rep.named[0]["status"], "scale_sigma": rep.named[0]["sigma"]}
 
 
-__all__ = ["BED_LIMITS", "PRINTER_KINDS", "SinglePoseModel", "bed_limits", "lowered_to_bed", "object_poses",
+__all__ = ["BED_LIMITS", "PRINTER_KINDS", "SinglePoseModel", "bed_limits", "object_poses",
            "probes_the_bed", "scale_columns", "simulate", "single_pose_fit"]

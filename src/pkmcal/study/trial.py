@@ -52,6 +52,7 @@ from functools import lru_cache
 import numpy as np
 
 from pkmcal.errors import PkmcalError
+from pkmcal.identification.advice import where_read
 from pkmcal.identification.engine import IdentificationResult, identify
 from pkmcal.identification.simulation import parameter_errors, settles_at_equilibrium, simulate_campaign
 from pkmcal.identification.tool_errors import ToolErrors, tool_errors
@@ -192,7 +193,7 @@ def prepare(study: Study, progress=None) -> Context:
                                   margin=p.margin, seed=seed_for(study.seed, KEY_POOL, mi, si, pi))
                 poses = pool.candidates.poses
                 if s.on_bed:        # a printer's probe points: where its probe triggers on the bed
-                    poses = printed.lowered_to_bed(m.nominal, planned, poses)
+                    poses = where_read(m.nominal, planned.sensor, poses)
                 need_blocks = p.algorithm not in ("random", "corners")
                 G = pool.model.blocks(poses)[0] if need_blocks else None
                 pool_index = len(pools)
