@@ -201,7 +201,10 @@ def test_cli_outliers_json_and_report(tmp_path, data):
                                          f"{float(np.rad2deg(1e-4))!r}, actuator: 0.005}}\n")
     run = CliRunner().invoke
     base = ["identify", "stewart-prototype", str(tmp_path / "meas.csv"), "--setup", str(tmp_path / "setup.yaml")]
+    # least squares with the outlier kept: refused (issue 24), the outlier named first with the remedy
     res = run(cli, base + ["-o", str(tmp_path / "a.yaml")])
+    assert res.exit_code == 2 and "pose(s) (42," in res.stderr and "--reject" in res.stderr, res.output
+    res = run(cli, base + ["-o", str(tmp_path / "a.yaml"), "--accept-bad-fit"])
     assert res.exit_code == 0, res.output
     # the outlier first (it also drags the fit, so that others follow it beyond 3 σ), with its line:
     # data row 42 under the header line

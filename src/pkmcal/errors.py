@@ -30,6 +30,12 @@ class PkmcalError(Exception):
     exit_code = 2
 
 
+class PkmcalWarning(UserWarning):
+    """Something in the user's input that looks wrong but may be meant (angles that look
+    like radians, a quaternion that looks scalar-first): the CLI prints it as one
+    ``pkmcal: warning:`` line; from Python it is an ordinary warning."""
+
+
 class InputFileError(PkmcalError):
     """A malformed input file; the message names the file, and where known line and column."""
 

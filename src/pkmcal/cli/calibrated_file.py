@@ -144,13 +144,15 @@ def identify_heldout_validation(calibrated, cal_setup, nominal, before, path: st
 
 
 def with_calibration_record(result, machine: str, measurements: str, setup_spec: str, name: str | None,
-                             setup=None, before=None):
+                             setup=None, before=None, accepted=None):
     """The identified machine under its own name with a ``calibration`` record in its
     metadata (kept in the machine file; ``pkmcal export --format json`` shows it): name,
     calibrated-from, UTC date, pkmcal version, command line, the inputs with their SHA-256
     (:mod:`pkmcal.cli.provenance`), and the fit; ``before`` (values, note) is stored as
     ``calibration.before_registration``. With ``setup`` (the setup with the identified
     sensor) the identified setup goes under ``setup:`` (:func:`setup_block`).
+    ``accepted``: the :class:`~pkmcal.identification.fit_verdict.FitVerdict` of a refused fit
+    written with ``--accept-bad-fit``, stored as ``calibration.accepted_bad_fit``.
     ``SOURCE_DATE_EPOCH`` fixes the date, so that the same inputs give the same bytes."""
     from pkmcal import __version__
     from pkmcal.cli.provenance import command_line, input_record, utc_timestamp
@@ -176,6 +178,8 @@ def with_calibration_record(result, machine: str, measurements: str, setup_spec:
     }
     if result.loss != "linear":
         record["loss"] = result.loss
+    if accepted is not None:
+        record["accepted_bad_fit"] = {"problems": list(accepted.problems), "diagnoses": list(accepted.diagnoses)}
     sc = result.screening
     if sc is not None and sc.rejected:
         record["rejected_poses"] = [o.pose for o in sc.rejected]

@@ -1,6 +1,5 @@
 """What ``pkmcal identify`` prints about a fit: the parameter table, the fit summary (method,
-poses, solver, residuals, chi², identifiability, covariance, outliers, priors, sessions) and
-the warnings on angle columns read in the wrong unit (:func:`radian_hints`).
+poses, solver, residuals, chi², identifiability, covariance, outliers, priors, sessions).
 
 The table shows parameter, nominal, identified and ±σ (mm; degrees for angle parameters);
 chi² = Σ |W r|² with the noise whitening W at the solution, chi²/dof its reduced value.
@@ -167,41 +166,4 @@ def robust_lines(result) -> list[str]:
             post = "-" if e["posterior_std"] is None else f"{e['posterior_std']:.4g}"
             out.append(f"  {e['parameter']}: prior {e['mean']:.6g} ± {e['std']:.4g} {e['unit']} -> {e['estimate']:.6g} "
                        f"± {post} (pull {e['pull']:+.2f}; {e['source']})")
-    return out
-
-
-def radian_hints(nominal, setup, meas) -> list[str]:
-    """Warnings when the sensor's angle columns and the poses the fit starts from differ in
-    spread by about 180/π (57.3): one of them was written in radians where degrees were
-    read. The reference poses are the commanded ones (cmd_a..), else the FK of the actuator
-    readings at the nominal machine; per angle column the ratio of standard deviations over
-    the poses (offsets of world/tool transforms cancel) is compared with [30, 110]."""
-    sensor = setup.sensor
-    angle_cols = [k for k, a in enumerate(sensor.reading_is_angle) if a]
-    if not angle_cols or tuple(sensor.reading_names) != tuple(nominal.pose_names):
-        return []
-    if meas.commanded is not None:
-        ref, what = np.asarray(meas.commanded, dtype=float), "the commanded poses (cmd_ columns)"
-    else:
-        with np.errstate(all="ignore"):
-            fk = nominal.fk(meas.actuators)
-        ref, what = np.asarray(fk.poses)[fk.ok], "the poses of the actuator readings (FK at the nominal machine)"
-        if len(ref) < 3:
-            return []
-    y = np.asarray(meas.readings, dtype=float)[: len(ref)] if meas.commanded is not None else \
-        np.asarray(meas.readings, dtype=float)[fk.ok]
-    out = []
-    for k in angle_cols:
-        s_ref, s_y = float(np.std(ref[:, k])), float(np.std(y[:, k]))
-        if not (s_ref > np.deg2rad(0.5) or s_y > np.deg2rad(0.5)) or s_ref == 0 or s_y == 0:
-            continue
-        r = s_ref / s_y
-        name = sensor.reading_names[k]
-        if 30.0 < r < 110.0:
-            out.append(f"warning: column '{name}' varies {r:.3g} times less than the angles of {what}: it looks like "
-                       "radians where degrees are read; convert it to degrees (or, when every angle column of the "
-                       "file is in radians, give --angle-unit rad)")
-        elif 1 / 110.0 < r < 1 / 30.0 and meas.commanded is not None:
-            out.append(f"warning: column 'cmd_{name}' varies {1 / r:.3g} times less than the measured '{name}': it "
-                       "looks like radians where degrees are read; convert it to degrees")
     return out

@@ -19,6 +19,7 @@ import click
 import numpy as np
 
 from pkmcal.errors import PkmcalError
+from pkmcal.identification.fit_verdict import diagnose, input_causes, judge
 from pkmcal.identification.identifiability import describe_named, format_direction
 from pkmcal.identification.residuals import DEFAULT_METHOD_RULE, METHODS
 from pkmcal.identification.robust import DEFAULT_F_SCALE, LOSSES, OUTLIER_SIGMA
@@ -31,7 +32,7 @@ from pkmcal.cli.calibrated_file import (
     setup_json,
     with_calibration_record,
 )
-from pkmcal.cli.fit_text import fit_summary, free_statement, radian_hints, result_table
+from pkmcal.cli.fit_text import fit_summary, free_statement, result_table
 from pkmcal.cli.import_options import import_options
 from pkmcal.cli.option_types import FiniteFloat
 from pkmcal.cli.options import DeprecatedArgument, check_output, emit, examples, output_option, poses_file, to_stdout
@@ -123,10 +124,15 @@ def merged_free(free: list[str] | None, setup) -> list[str] | None:
               help="Held-out measurements (same columns as MEAS.csv, not used in the fit): print the validation of "
                    "'pkmcal verify CALIBRATED.yaml --measurements HELDOUT.csv' (before / after / "
                    "after_reregistered) and show it in the --report.")
+@click.option("--accept-bad-fit", "accept_bad_fit", is_flag=True,
+              help="Write the calibrated file even when the fit is refused (it did not converge, or its chi2 is "
+                   "beyond what the setup's noise allows even with every noise sigma 3 times larger: the rule of "
+                   "pkmcal.identification.fit_verdict); the file's calibration record says it was accepted and why "
+                   "it was refused.")
 @import_options
 def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fix, free, output, name, as_json,
                  report_dir=None, mapping=None, keep=None, loss="linear", f_scale=None, reject=None,
-                 prior=(), clipped="drop", session_offsets=False, heldout=None) -> None:
+                 prior=(), clipped="drop", session_offsets=False, heldout=None, accept_bad_fit=False) -> None:
     """Identify MACHINE's kinematic parameters from MEAS.csv and write CALIBRATED.yaml.
 
     Units: mm, degrees in files and tables. Unidentifiable combinations are fixed
@@ -158,6 +164,10 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     """
     inputs = [machine, measurements, setup_spec] + ([heldout] if heldout is not None else [])
     check_output(output, inputs)
+    if f_scale is not None and loss == "linear":
+        raise PkmcalError("--f-scale sets where a robust --loss turns from quadratic, and the loss is linear (least "
+                          f"squares): give --loss ({', '.join(lo for lo in LOSSES if lo != 'linear')}) with it, or "
+                          "leave out --f-scale")
     if to_stdout(output) and as_json:
         raise PkmcalError("-o - puts the machine file on standard output; --json would go there too: "
                           "write the machine file to a file, or leave out --json")
@@ -169,8 +179,8 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     from pkmcal.mechanisms.pose_pairs import read_by, single_machine
 
     nominal, setup = machine_and_setup(machine, setup_spec)   # pose pairs for printed distances
-    meas, clipped_found, clipped_lines = apply_clipped_policy(load_measurements(measurements, nominal, setup, mapping),
-                                                              nominal, clipped)
+    read = load_measurements(measurements, nominal, setup, mapping)
+    meas, clipped_found, clipped_lines = apply_clipped_policy(read, nominal, clipped)
     if keep is not None and method != "actuator-subset":
         raise PkmcalError("--keep selects the actuators of --method actuator-subset; use them together")
     baseline = method if method in BASELINES else None
@@ -189,23 +199,37 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     from pkmcal.identification.priors import parse_prior
 
     priors = tuple(parse_prior(p) for p in prior)
+
+    def fit(with_priors=True):
+        return identify(fit_machine, fit_setup, fit_meas, method=method, free=merged_free(free_opt, fit_setup),
+                        fix=fix_names, weighted=not unweighted, form=form, loss=loss, f_scale=f_scale,
+                        reject=reject, priors=priors if with_priors else (),
+                        session_offsets=True if session_offsets else None)
+
     with clipped_named_in_errors(clipped_lines):
-        result = identify(fit_machine, fit_setup, fit_meas, method=method, free=merged_free(free_opt, fit_setup),
-                          fix=fix_names, weighted=not unweighted, form=form, loss=loss, f_scale=f_scale,
-                          reject=reject, priors=priors, session_offsets=True if session_offsets else None)
+        result = fit()
         if baseline is not None:
             result = baseline_result(result, nominal, baseline)
         if nominal is not single_machine(nominal):    # pose pairs: the machine file holds the machine
             result = dataclasses.replace(result, mechanism=single_machine(result.mechanism))
-        if not result.success:
-            raise PkmcalError(f"the fit did not converge ({result.message}); nothing written")
         u = result.uncertainty
         if u.dof <= 0:
             raise PkmcalError(
                 f"{len(result.used_poses)} poses give {u.dof + len(result.free)} residuals for {len(result.free)} free "
                 f"parameters{' (after fixing the gauge)' if result.gauge else ''}: no degree of freedom is left to "
                 "check the fit (chi2/dof undefined); measure more poses or fix parameters; nothing written")
-    hints = [f"warning: {w}" for w in clipped_lines] + radian_hints(nominal, setup, meas)
+        causes = input_causes(nominal, setup, meas)
+        verdict = judge(result, causes)
+        if not verdict.acceptable:
+            verdict = verdict.with_diagnoses(diagnose(
+                result, setup, meas, causes, n_read=len(read.actuators),
+                refit_without_priors=(lambda: fit(with_priors=False)) if baseline is None and priors else None))
+            if not accept_bad_fit:
+                raise PkmcalError(f"the fit is refused: {verdict.text()}; nothing written to {output}: mend the cause "
+                                  "and run again, or write it anyway with --accept-bad-fit (recorded in the file)")
+    hints = [f"warning: {w}" for w in clipped_lines] + [f"warning: {c}" for c in causes]
+    if not verdict.acceptable:
+        hints.append(f"warning: written with --accept-bad-fit although the fit is refused: {verdict.text()}")
     if hints:
         result = dataclasses.replace(result, warnings=tuple(result.warnings) + tuple(hints))
     free_line = free_statement(result, free_opt, fit_setup)
@@ -217,7 +241,8 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     before = before_registration(nominal, setup, meas, result) if baseline is None else None
     cal_setup = identified_setup_of(setup, result) if baseline is None else None
     text = machine_to_text(with_calibration_record(result, machine, measurements, setup_spec, name,
-                                                   setup=cal_setup, before=before))
+                                                   setup=cal_setup, before=before,
+                                                   accepted=None if verdict.acceptable else verdict))
     check_loads_back(text, "(standard output)" if to_stdout(output) else output)
     validation = None
     if heldout is not None:
@@ -234,6 +259,7 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
 
         d = finite_or_null(result.to_dict())
         d["free_rule"] = free_line
+        d["verdict"] = verdict.to_dict()
         units = dict(zip(nominal.actuator_names, nominal.actuator_units))
         d["clipped"] = [c.to_dict(units[c.actuator]) for c in clipped_found]
         d["output"] = output

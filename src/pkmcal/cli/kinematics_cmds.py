@@ -76,8 +76,10 @@ def ik_cmd(machine: str, poses: str, output: str | None, units_comment: bool = F
     from pkmcal.io.lookup import load_machine
 
     mech = load_machine(machine)
+    from pkmcal.io.orientation import small_angle_limit
+
     table = read_table(poses, mech.pose_names, kinds=column_kinds(mech.pose_names, mech.pose_is_angle),
-                       mapping=mapping)
+                       mapping=mapping, small_angle_deg=small_angle_limit(mech))
     # Every pose is read and checked first; then IK, limits and the CSV text are made
     # _IK_BLOCK poses at a time and written as they come (to a temporary file that becomes
     # the output at the end), so memory stays bounded however many poses there are.

@@ -30,7 +30,7 @@ import warnings
 import click
 
 from pkmcal import __version__
-from pkmcal.errors import PkmcalError, name_sources, one_line, recorded_sources
+from pkmcal.errors import PkmcalError, PkmcalWarning, name_sources, one_line, recorded_sources
 
 #: Command name → (module, click command object in it, the summary ``pkmcal --help`` shows).
 #: The summary is the first line of the command's own help; ``tests/test_cli_main.py``
@@ -101,9 +101,11 @@ class PkmcalGroup(click.Group):
     def invoke(self, ctx: click.Context):
         with recorded_sources() as sources, warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", RuntimeWarning)
+            warnings.simplefilter("always", PkmcalWarning)
             try:
                 result = super().invoke(ctx)
             except PkmcalError as exc:
+                _report_warnings([w for w in caught if str(w.message) not in str(exc)])
                 _error_line(name_sources(str(exc), sources))
                 sys.exit(exc.exit_code)
             except MemoryError:
@@ -143,11 +145,16 @@ def _error_line(message: str) -> None:
 
 
 def _report_warnings(caught: list[warnings.WarningMessage]) -> None:
-    """Each distinct RuntimeWarning as one ``pkmcal: warning:`` line; other warnings as
-    Python shows them."""
+    """Each distinct RuntimeWarning and :class:`PkmcalWarning` as one ``pkmcal: warning:``
+    line; other warnings as Python shows them."""
     seen: set[str] = set()
     for w in caught:
-        if issubclass(w.category, RuntimeWarning):
+        if issubclass(w.category, PkmcalWarning):
+            text = one_line(str(w.message))
+            if text not in seen:
+                seen.add(text)
+                click.echo(f"pkmcal: warning: {text}", err=True)
+        elif issubclass(w.category, RuntimeWarning):
             text = one_line(str(w.message))
             if text not in seen:
                 seen.add(text)

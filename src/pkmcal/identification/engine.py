@@ -57,7 +57,7 @@ from pkmcal.identification.residuals import (
     single_threaded_blas,
     whitening,
 )
-from pkmcal.identification.priors import NO_PRIORS, PriorObjective, ResolvedPriors, check_free, resolve
+from pkmcal.identification.priors import NO_PRIORS, PriorObjective, ResolvedPriors, check_free, check_plausible, resolve
 from pkmcal.identification.robust import (
     OUTLIER_SIGMA,
     ROBUST_UNITS,
@@ -220,6 +220,15 @@ class IdentificationResult:
     @property
     def correlation(self) -> np.ndarray:
         return self.uncertainty.correlation
+
+    @property
+    def verdict(self):
+        """Whether this fit may be written as a calibration (:func:`.fit_verdict.judge`:
+        converged, finite, χ² within what the noise model allows); ``pkmcal identify``
+        refuses to write it otherwise."""
+        from pkmcal.identification.fit_verdict import judge
+
+        return judge(self)
 
     def _rms(self, r: np.ndarray, cols=slice(None)) -> float:
         """√(mean r²) of the entries of columns ``cols`` of ``r`` (N, k) that are measurements
@@ -616,12 +625,6 @@ def _gauss_newton_step(obj: "_Objective", x0: np.ndarray) -> _Solution:
                      message="one Gauss-Newton step from the start (single linearisation)")
 
 
-#: χ²/ν above this is reported: the residuals are then ≥ 10× the noise the setup states,
-#: which no noise model explains (wrong units, e.g. radians in a degrees column, wrong noise,
-#: measurements of another machine). χ²/ν of a correct model is 1 ± √(2/ν).
-ABSURD_REDUCED_CHI2 = 100.0
-
-
 def _short_direction(direction: dict[str, float], terms: int = 6) -> str:
     """The ``terms`` largest coefficients of a direction, formatted, "+ …" when cut."""
     top = dict(sorted(direction.items(), key=lambda kv: -abs(kv[1]))[:terms])
@@ -632,8 +635,11 @@ def fit_warnings(report: IdentifiabilityReport | None, free: tuple[str, ...], un
                  angle_names: tuple[str, ...] = ()) -> list[str]:
     """Warnings on a fit's result: every weakly identifiable direction of ``report`` (σ/σ₁
     below :data:`~pkmcal.identification.identifiability.WEAK_RATIO`), with the largest
-    standard deviation among its free parameters (mm; degrees for ``angle_names``), and an
-    absurd χ²/ν (:data:`ABSURD_REDUCED_CHI2`)."""
+    standard deviation among its free parameters (mm; degrees for ``angle_names``), and a
+    χ² beyond what the noise model allows (:mod:`.fit_verdict`: refused by
+    ``pkmcal identify`` beyond :data:`~.fit_verdict.NOISE_SLACK`, warned below it)."""
+    from pkmcal.identification.fit_verdict import NOISE_SLACK, beyond_noise, chi2_warning
+
     out = []
     std = dict(zip(free, unc.std))
     for w in [] if report is None else report.weak:
@@ -647,12 +653,14 @@ def fit_warnings(report: IdentifiabilityReport | None, free: tuple[str, ...], un
             s = std[worst] * (np.rad2deg(1.0) if worst in angle_names else 1.0)
             text += f"; std up to {s:.3g} {'deg' if worst in angle_names else 'mm'} ({worst})"
         out.append("warning: " + text + ": add poses that move it, or fix one of its parameters")
-    chi = unc.reduced_chi2
-    if np.isfinite(chi) and chi > ABSURD_REDUCED_CHI2:
-        out.append(f"warning: chi2/dof = {chi:.4g}: the residuals are {np.sqrt(chi):.3g} times the noise the setup states, "
-                   "which no noise explains; check the units of the files (angles in degrees, lengths in mm), "
+    if beyond_noise(unc, NOISE_SLACK):
+        b = unc.birge_ratio
+        out.append(f"warning: chi2/E[chi2] = {b:.4g}: the residuals are {np.sqrt(b):.3g} times the noise the setup "
+                   "states, which no noise explains; check the units of the files (angles in degrees, lengths in mm), "
                    "the setup's noise, and that the measurements belong to this machine and setup "
-                   "(the file covariance is inflated by chi2/dof)")
+                   "(the file covariance is inflated by chi2/E[chi2])")
+    elif (w := chi2_warning(unc)) is not None:
+        out.append(w)
     return out
 
 
@@ -809,6 +817,7 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
                             max_dropped_fraction=max_dropped_fraction)
     names = model.names
     prior = resolve(priors, names, model.param_is_angle, model.theta0)
+    check_plausible(prior, model.theta0, model.param_is_angle, model.n_mech)
     check_free(prior, {names[i] for i in cand})
     if not weighted and (len(prior) or loss != "linear"):
         raise PkmcalError(("Gaussian priors weigh the prior against the noise model" if len(prior) else

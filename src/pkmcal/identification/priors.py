@@ -184,6 +184,57 @@ def resolve(priors, names: tuple[str, ...], is_angle: tuple[bool, ...], theta0: 
                           source=tuple(chosen[i][0].source for i in idx))
 
 
+#: Unit mistakes a prior's mean is checked for (mean / starting value ≈ factor), lengths
+#: then angles: what the mean would be if written in that unit instead of mm or degrees.
+_LENGTH_UNITS = {1e-3: "metres", 0.1: "centimetres", 1 / 25.4: "inches", 1e3: "micrometres"}
+_ANGLE_UNITS = {np.pi / 180: "radians"}
+#: A factor within this ratio of the mean/start ratio counts as a match.
+_UNIT_MATCH = 1.05
+
+
+def check_plausible(priors: ResolvedPriors, theta0: np.ndarray, is_angle, n_machine: int) -> None:
+    """A prior whose mean cannot be meant is a :class:`PkmcalError` naming it (issue 24):
+
+    * |mean| beyond :data:`pkmcal.io.limits.MAX_MAGNITUDE` (1e6 mm or degrees), larger than
+      any machine or instrument;
+    * the mean is the starting value written in another unit (metres, centimetres, inches,
+      micrometres for lengths of at least 1 mm; radians for angles of at least 1°): mean /
+      start within 5 % of the unit's factor;
+    * a machine parameter (the first ``n_machine`` of ``names``) whose mean moves it from its
+      starting value by more than the machine's size (the largest |start| of its length
+      parameters), or an angle by more than 90°: no drawing is that far off.
+
+    ``theta0`` and ``is_angle`` are the fit's starting vector and angle flags (internal
+    units)."""
+    from pkmcal.io.limits import MAX_MAGNITUDE
+
+    deg = float(np.rad2deg(1.0))
+    theta0 = np.asarray(theta0, dtype=float)
+    machine_lengths = [abs(float(theta0[i])) for i in range(n_machine) if not is_angle[i]]
+    size = max([v for v in machine_lengths if np.isfinite(v)] + [1.0])
+    for k, (n, i) in enumerate(zip(priors.names, priors.index)):
+        angle = bool(priors.is_angle[k])
+        f, unit = (deg, "deg") if angle else (1.0, "mm")
+        mean, start = float(priors.mean[k]), float(theta0[i])
+        where = f"prior on {n} ({priors.source[k]}): mean {mean * f:.6g} {unit}"
+        if abs(mean * f) > MAX_MAGNITUDE:
+            raise PkmcalError(f"{where} is beyond ±{MAX_MAGNITUDE:g} {unit}, larger than any machine; check the number "
+                              "and its unit")
+        if abs(start * f) >= 1.0 and mean != start:
+            ratio = mean / start
+            for factor, name in (_ANGLE_UNITS if angle else _LENGTH_UNITS).items():
+                if 1 / _UNIT_MATCH < ratio / factor < _UNIT_MATCH:
+                    raise PkmcalError(f"{where} is {ratio:.4g} times its starting value {start * f:.6g} {unit}: it "
+                                      f"looks written in {name}; give it in {unit} (e.g. {start * f:.6g}±...)")
+        if i < n_machine:
+            limit, what = (np.pi / 2, "90 deg") if angle else (size, f"the machine's size ({size:.6g} mm, its "
+                                                                       "largest length parameter)")
+            if abs(mean - start) > limit:
+                raise PkmcalError(f"{where} is {abs(mean - start) * f:.6g} {unit} from its starting value "
+                                  f"{start * f:.6g} {unit}, more than {what}: no machine is that far from its "
+                                  "drawing; check the value, its unit and the parameter's name")
+
+
 def check_free(priors: ResolvedPriors, free_names: set[str], gauge: tuple[str, ...] = ()) -> None:
     """A prior on a parameter that is not estimated is an error: it would be silently
     ignored. ``gauge``: parameters the automatic gauge fixed although they have a prior

@@ -84,6 +84,10 @@ def rho(loss: str, u: np.ndarray) -> np.ndarray:
     return out
 
 
+#: Largest f_scale accepted (σ): scipy squares it, and beyond a few σ a loss is least squares.
+MAX_F_SCALE = 1e3
+
+
 def check_loss(loss: str, f_scale: float | None) -> float:
     """The f_scale (σ units) of ``loss``: given, else :data:`DEFAULT_F_SCALE` (1 for linear)."""
     if loss not in LOSSES:
@@ -92,6 +96,10 @@ def check_loss(loss: str, f_scale: float | None) -> float:
         return DEFAULT_F_SCALE.get(loss, 1.0)
     if not (np.isfinite(f_scale) and f_scale > 0):
         raise PkmcalError(f"f_scale must be a positive number of sigmas; got {f_scale:g}")
+    if f_scale > MAX_F_SCALE:
+        raise PkmcalError(f"f_scale {f_scale:g} sigma: a loss that turns from quadratic beyond {MAX_F_SCALE:g} noise "
+                          "sigmas is least squares on every real residual; give a few sigmas (the default is "
+                          f"{DEFAULT_F_SCALE.get(loss, 1.0):g}), or use the linear loss")
     return float(f_scale)
 
 

@@ -32,7 +32,7 @@ import numpy as np
 from pkmcal.conventions import POSE_COLUMNS
 from pkmcal.errors import InputFileError, PkmcalError
 from pkmcal.io.import_mapping import ImportMapping
-from pkmcal.io.orientation import euler_triples, orientation_given
+from pkmcal.io.orientation import euler_triples, orientation_given, small_angle_limit
 from pkmcal.io.tables import DEFAULT_ALIASES, check_magnitudes, column_kinds, from_file_units, mapped_name, read_table, to_file_units, write_table
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.sensors.base import MeasurementSetup
@@ -164,7 +164,8 @@ def load_measurements(path: str | os.PathLike, machine: Mechanism, setup: Measur
                                   f"give all of {', '.join(cmd_cols)} (mm, deg) or none")
     columns = reading_cols + (cmd_cols if with_cmd else ())
     try:
-        table = read_table(src, columns, either=[act, legs], kinds=kinds, text=text, mapping=mapping)
+        table = read_table(src, columns, either=[act, legs], kinds=kinds, text=text, mapping=mapping,
+                           small_angle_deg=small_angle_limit(machine))
     except InputFileError as exc:
         if "missing column" in str(exc):
             where = f"{exc.path}" + (f", line {exc.line}" if exc.line is not None else "") + ": "
@@ -177,7 +178,7 @@ def load_measurements(path: str | os.PathLike, machine: Mechanism, setup: Measur
         raise
     check_magnitudes(table, kinds)
     readings = from_file_units(table[list(reading_cols)], sensor.reading_is_angle)
-    notes: tuple[str, ...] = ()
+    notes: tuple[str, ...] = table.notes
     if all(c in table.columns for c in act):
         actuators = from_file_units(table[list(act)], machine.actuator_is_angle)   # rotary encoders: deg in files
     else:
@@ -185,7 +186,7 @@ def load_measurements(path: str | os.PathLike, machine: Mechanism, setup: Measur
         unit_gains = np.all(machine.reading_gains() == 1.0)
         rule = ("lambda_i = l_i - L0_i with the leg offsets" if unit_gains else
                 f"lambda_i = (l_i - L0_i) / gain_i ({machine.actuator_units[0]}) with the leg offsets and gains")
-        notes = (f"{src}: columns {legs[0]}..{legs[-1]} are leg lengths; converted to actuator readings "
+        notes += (f"{src}: columns {legs[0]}..{legs[-1]} are leg lengths; converted to actuator readings "
                  f"{rule} of machine '{machine.name}'",)
     commanded = None
     if with_cmd:

@@ -24,6 +24,20 @@ counted from 1) and the norm: a unit quaternion is what the instruments write, a
 else is a wrong column, a scaled export or a truncated line. Within the tolerance it is
 normalised (by scipy). Code used by :func:`pkmcal.io.tables.read_table`; tests:
 ``tests/test_orientation_columns.py``.
+
+Conventions that look wrong (:func:`small_angle_note`, :func:`quaternion_order_note`; issue 24): every reader of
+orientation columns notes (the table's ``notes``, and a :class:`~pkmcal.errors.PkmcalWarning`)
+
+* Euler angles or rotation vectors read in degrees whose largest magnitude over the whole
+  file is above 0 and below the machine's orientation range in radians read as degrees
+  (:func:`small_angle_limit`; at least :data:`SMALL_ANGLE_DEG`, 0.1°, the limit of readers
+  that know no machine): radians written where degrees are read give exactly that; the
+  note names ``--angle-unit rad``;
+* quaternions whose first column in the file has magnitude above :data:`NEAR_ONE` on every
+  row while it is not read as the scalar: a scalar-first file read as scalar-last (a
+  machine's orientations near the identity have w ≈ 1; read wrongly, every pose turns by
+  about 180°); the note names ``--quaternion-order wxyz`` (or, for named columns, the
+  ``--columns`` renaming).
 """
 
 from __future__ import annotations
@@ -39,6 +53,10 @@ from pkmcal.errors import InputFileError
 QUATERNION_ORDERS = ("xyzw", "wxyz")
 #: Largest accepted | ‖q‖ − 1 | of a quaternion read from a file.
 NORM_TOLERANCE = 1e-6
+#: Below this largest |angle| (degrees) over a file, angle columns read in degrees look like radians.
+SMALL_ANGLE_DEG = 0.1
+#: Above this |component| on every row, a quaternion column not read as w looks like the scalar.
+NEAR_ONE = 0.9
 _EULER = ("a", "b", "c")
 
 
@@ -153,5 +171,48 @@ def euler_from_rotvecs(r_deg: np.ndarray) -> np.ndarray:
     return np.rad2deg(matrix_to_euler(Rotation.from_rotvec(np.deg2rad(r_deg)).as_matrix()))
 
 
-__all__ = ["NORM_TOLERANCE", "OrientationSource", "QUATERNION_ORDERS", "alternatives_hint", "euler_from_quaternions",
+def small_angle_limit(machine) -> float:
+    """The largest |angle| (degrees) below which a file's orientations look like radians on
+    ``machine``: its orientation range in radians read as degrees (a file in degrees that
+    uses less than 1/57.3 of the range the machine can tilt is likelier radians), at least
+    :data:`SMALL_ANGLE_DEG`."""
+    angles = np.asarray(machine.pose_is_angle, dtype=bool)
+    if not angles.any():
+        return SMALL_ANGLE_DEG
+    reach_rad = float(np.max(np.abs(np.asarray(machine.workspace_box(), dtype=float)[angles])))
+    return max(SMALL_ANGLE_DEG, reach_rad) if np.isfinite(reach_rad) else SMALL_ANGLE_DEG
+
+
+def small_angle_note(src: str, columns: Sequence[str], degrees: np.ndarray, what: str,
+                     limit: float | None = None) -> str | None:
+    """The note of the module docstring for angle ``columns`` (values in degrees, (N, k))
+    whose magnitudes are all below ``limit`` (default :data:`SMALL_ANGLE_DEG`) but not all
+    zero, else None."""
+    limit = SMALL_ANGLE_DEG if limit is None else float(limit)
+    with np.errstate(invalid="ignore"):
+        largest = float(np.nanmax(np.abs(degrees))) if degrees.size else 0.0
+    if not (0.0 < largest < limit):
+        return None
+    return (f"{src}: the {what} {','.join(columns)} are all below {limit:.3g} degree (largest {largest:.3g}), "
+            "less than 1/57.3 of the machine's orientation range: they look like radians read as degrees; if they "
+            "are radians, give --angle-unit rad (or the file's units line '# units: angle=rad')")
+
+
+def quaternion_order_note(src: str, q: np.ndarray, header_names: Sequence[str], file_positions: Sequence[int],
+                          positional: bool) -> str | None:
+    """The note of the module docstring for quaternions ``q`` (N, 4, in x, y, z, w order as
+    read) from the file columns ``header_names`` at header positions ``file_positions``
+    (same order), else None: the column that comes first in the file is near ±1 on every
+    row although it is not read as w."""
+    first = int(np.argmin(file_positions))
+    if first == 3 or not len(q) or not bool(np.all(np.abs(q[:, first]) > NEAR_ONE)):
+        return None
+    fix = ("give --quaternion-order wxyz" if positional else
+           "rename the columns with --columns so that the scalar is read as w (qw)")
+    return (f"{src}: the quaternion column '{header_names[first]}' (read as {'xyz'[first]}) is near 1 in magnitude "
+            f"on every pose while the one read as w ('{header_names[3]}') is not: every orientation would be a turn "
+            f"of about 180 degrees; the file looks scalar-first (w, x, y, z): {fix}")
+
+
+__all__ = ["NEAR_ONE", "NORM_TOLERANCE", "SMALL_ANGLE_DEG", "small_angle_limit", "small_angle_note", "quaternion_order_note", "OrientationSource", "QUATERNION_ORDERS", "alternatives_hint", "euler_from_quaternions",
            "euler_from_rotvecs", "euler_triples", "find_sources", "orientation_given"]

@@ -22,12 +22,13 @@ import csv
 import io
 import os
 import re
+import warnings
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Mapping, Sequence
 
 import numpy as np
 
-from pkmcal.errors import InputFileError, PkmcalError, one_line
+from pkmcal.errors import InputFileError, PkmcalError, PkmcalWarning, one_line
 from pkmcal.io.atomic import atomic_write_text
 from pkmcal.io.limits import MAX_MAGNITUDE, magnitude_problem
 
@@ -78,6 +79,9 @@ class Table:
     lines: np.ndarray
     header: tuple[str, ...] = ()
     units: dict[str, str] = field(default_factory=dict)
+    #: Conventions that look wrong (radians read as degrees, a scalar-first quaternion read
+    #: scalar-last: :mod:`pkmcal.io.orientation`), one line each, also issued as warnings.
+    notes: tuple[str, ...] = ()
 
     def __len__(self) -> int:
         return self.values.shape[0]
@@ -164,6 +168,7 @@ def read_table(
     aliases: Mapping[str, str] = DEFAULT_ALIASES,
     text: str | None = None,
     mapping: "ImportMapping | None" = None,
+    small_angle_deg: float | None = None,
 ) -> Table:
     """Read the numeric ``columns`` of the CSV file ``path``.
 
@@ -181,6 +186,10 @@ def read_table(
     mapping : an :class:`~pkmcal.io.import_mapping.ImportMapping` for files from other tools:
         header cells renamed before the aliases apply (every renamed column must exist), and
         units that replace the file's units line.
+    small_angle_deg : below this largest |angle| (degrees) an orientation read in degrees
+        looks like radians (:func:`pkmcal.io.orientation.small_angle_note`); default
+        :data:`~pkmcal.io.orientation.SMALL_ANGLE_DEG`, readers that know the machine give
+        :func:`~pkmcal.io.orientation.small_angle_limit`.
 
     The file is read line by line and its rows are parsed in blocks of :data:`_BLOCK_ROWS`,
     so the memory it takes is that of the numbers it holds, not of its text. Problems are
@@ -252,15 +261,44 @@ def read_table(
                     raise InputFileError(src, f"column '{name}': {float(given[i])!r} {units[quantity]} is beyond any "
                                               f"{quantity} a number can hold in pkmcal's units; check the value and "
                                               "the unit", line=int(lines[i]))
+    notes: list[str] = []
     if sources:
-        chosen, values = _euler_from_sources(src, header, idx, chosen, values, lines, sources)
-    return Table(path=src, columns=tuple(chosen), values=values, lines=lines, header=tuple(header), units=units)
+        chosen, values = _euler_from_sources(src, header, idx, chosen, values, lines, sources, notes)
+    notes += _small_angle_notes(src, chosen, values, units, kinds, sources, small_angle_deg)
+    for note in notes:
+        warnings.warn(note, PkmcalWarning, stacklevel=2)
+    return Table(path=src, columns=tuple(chosen), values=values, lines=lines, header=tuple(header), units=units,
+                 notes=tuple(notes))
 
 
-def _euler_from_sources(src, header, idx, chosen, values, lines, sources):
+def _small_angle_notes(src, chosen, values, units, kinds, sources, limit) -> list[str]:
+    """:func:`pkmcal.io.orientation.small_angle_note` of each orientation read in degrees:
+    Euler triples read as such, and rotation vectors (here already turned into Euler angles,
+    whose magnitudes are as small as the vector's)."""
+    from pkmcal.io.orientation import euler_triples, small_angle_note
+
+    if units.get("angle", "deg") != "deg":
+        return []
+    by_euler = {o.euler: o for o in sources}
+    out = []
+    for triple in euler_triples(chosen):
+        if any(kinds.get(n) != "angle" for n in triple):
+            continue
+        o = by_euler.get(triple)
+        if o is not None and o.kind != "rotvec":
+            continue
+        cols, what = (o.columns, "rotation vectors") if o is not None else (triple, "angles")
+        note = small_angle_note(src, cols, values[:, [chosen.index(n) for n in triple]], what, limit)
+        if note is not None:
+            out.append(note)
+    return out
+
+
+def _euler_from_sources(src, header, idx, chosen, values, lines, sources, notes):
     """``(names, values)`` with each orientation source's columns replaced, where the triple
-    was asked for, by its a, b, c in degrees (:mod:`pkmcal.io.orientation`)."""
-    from pkmcal.io.orientation import euler_from_quaternions, euler_from_rotvecs
+    was asked for, by its a, b, c in degrees (:mod:`pkmcal.io.orientation`); a quaternion
+    that looks scalar-first adds its note to ``notes``."""
+    from pkmcal.io.orientation import euler_from_quaternions, euler_from_rotvecs, quaternion_order_note
 
     names, parts = [], []
     by_first = {o.columns[0]: o for o in sources}
@@ -275,7 +313,12 @@ def _euler_from_sources(src, header, idx, chosen, values, lines, sources):
             continue
         cols = [chosen.index(c) for c in o.columns]
         if o.kind == "quaternion":
-            euler = euler_from_quaternions(values[:, cols], src, lines, o.columns, [header[idx[j]] for j in cols])
+            cells = [header[idx[j]] for j in cols]
+            euler = euler_from_quaternions(values[:, cols], src, lines, o.columns, cells)
+            note = quaternion_order_note(src, values[:, cols], cells, [idx[j] for j in cols],
+                                         positional=not o.columns[0].endswith("qx"))
+            if note is not None:
+                notes.append(note)
         else:
             euler = euler_from_rotvecs(values[:, cols])
         names.extend(o.euler)
@@ -513,8 +556,11 @@ def read_poses(path: str | os.PathLike, machine, mapping: "ImportMapping | None"
     """Poses (N, n_dof) of a CSV with the machine's pose columns (mm, deg) in internal units
     (mm, rad); ``mapping``: column renaming and units of a file from another tool. Every
     coordinate must be within ±1e6 mm or degrees (:func:`check_magnitudes`)."""
+    from pkmcal.io.orientation import small_angle_limit
+
     kinds = column_kinds(machine.pose_names, machine.pose_is_angle)
-    table = read_table(path, machine.pose_names, kinds=kinds, mapping=mapping)
+    table = read_table(path, machine.pose_names, kinds=kinds, mapping=mapping,
+                       small_angle_deg=small_angle_limit(machine))
     check_magnitudes(table, kinds)
     return from_file_units(table.values, machine.pose_is_angle)
 

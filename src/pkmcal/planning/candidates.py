@@ -297,7 +297,10 @@ def read_candidates_csv(path: str | os.PathLike, mechanism: Mechanism | None = N
         names, is_angle = tuple(mechanism.pose_names), tuple(mechanism.pose_is_angle)
     else:
         names, is_angle = POSE_COLUMNS, tuple(POSE_KINDS[c] == "angle" for c in POSE_COLUMNS)
-    table = read_table(path, names, kinds=column_kinds(names, is_angle), mapping=mapping)
+    from pkmcal.io.orientation import small_angle_limit
+
+    table = read_table(path, names, kinds=column_kinds(names, is_angle), mapping=mapping,
+                       small_angle_deg=None if mechanism is None else small_angle_limit(mechanism))
     check_magnitudes(table, column_kinds(names, is_angle))
     if len(table) == 0:
         raise InputFileError(path, "no candidate poses (the file has a header but no rows)")
