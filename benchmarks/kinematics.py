@@ -134,6 +134,7 @@ void fk_loop(int n, const double *L, const double *guess, const double *b, const
 
 def build_c_reference():
     """Compile :data:`C_REFERENCE` with the system C compiler (gcc -O2); None if unavailable."""
+    import atexit
     import ctypes
     import shutil
     import subprocess
@@ -143,6 +144,7 @@ def build_c_reference():
     if cc is None:
         return None, "no C compiler"
     tmp = tempfile.mkdtemp(prefix="pkmcal-bench-")
+    atexit.register(shutil.rmtree, tmp, True)       # the loaded library needs no file after dlopen
     src, lib = os.path.join(tmp, "fk.c"), os.path.join(tmp, "fk.so")
     with open(src, "w") as f:
         f.write(C_REFERENCE)
