@@ -20,17 +20,20 @@ from __future__ import annotations
 import argparse
 
 
-def parse_args(ap: argparse.ArgumentParser, argv: list[str] | None = None, **quick) -> argparse.Namespace:
+def parse_args(ap: argparse.ArgumentParser, argv: list[str] | None = None, also: str = "",
+               **quick) -> argparse.Namespace:
     """Add ``--quick`` to ``ap`` and parse ``argv``: under ``--quick`` the arguments named in
     ``quick`` (destinations) default to the values given there instead of their own
-    defaults; a value given on the command line wins either way."""
+    defaults; a value given on the command line wins either way. ``also``: what else the
+    benchmark shrinks under ``--quick`` (for its help)."""
     unknown = set(quick) - {a.dest for a in ap._actions}
     if unknown:
         raise ValueError(f"quick defaults for arguments the benchmark does not have: {sorted(unknown)}")
-    listed = ", ".join(f"--{k.replace('_', '-')} {v}" for k, v in quick.items())
+    parts = [", ".join(f"--{k.replace('_', '-')} {v}" for k, v in quick.items()) + " unless given"] if quick else []
+    parts += [also] if also else []
     ap.add_argument("--quick", action="store_true",
                     help="seconds, not minutes: the same code at small sizes and few repeats"
-                         + (f" ({listed} unless given)" if listed else "")
+                         + (f" ({'; '.join(parts)})" if parts else "")
                          + "; the JSON gets 'quick': true, its figures are not the benchmark's")
     pre = argparse.ArgumentParser(add_help=False)
     pre.add_argument("--quick", action="store_true")

@@ -42,8 +42,8 @@ working-set threshold, max(10,000, 5 × the 2,200-candidate pool of 110 poses)),
 the "10^6" plan (still in more than one chunk of ``CHUNK_SIZE``), 20,000 poses for the
 limit check (still threaded), 2,400 / 600 candidates for the selections (110 poses still
 chosen from a pre-selected pool of 2,200, 30 poses from all of them, as in the full run) and
-at most 5 add/remove iterations of the cuckoo search (10 × 30 in the full run; it stops
-after 11-33 there).
+at most 5 add/remove iterations of the cuckoo search (at most 10 × 30 in the full run,
+which stopped after 22 on O4 and 33 on O1 with the default setup on 2026-12-03).
 """
 
 from __future__ import annotations
@@ -203,14 +203,16 @@ def large_candidate_sets(setup_name: str, seed: int, skip_million: bool, workers
         med = _median_runs(runs)
         key = f"plan_110_of_100000{tag}"
         res.update({f"{key}_s": med["wall_s"], f"{key}_cpu_s": med["cpu_s"], f"{key}_peak_rss_mb": med["peak_rss_mb"]})
-        print(f"pkmcal plan --n 110 --n-candidates {sizes.large}{' (baseline ' + baseline_src + ')' if tag else ''}, median "
+        print(f"pkmcal plan --n 110 --n-candidates {sizes.large}"
+              f"{' (baseline ' + baseline_src + ')' if tag else ''}, median "
               f"of {len(runs)}: {med['wall_s']:.2f} s wall, {med['cpu_s']:.2f} s CPU, peak RSS "
               f"{med['peak_rss_mb']:.0f} MB; {runs[0]['summary']}")
     res["plan_8_of_100_s"] = _median_runs(tiny)["wall_s"]
     res["plan_8_of_100_poses"] = n_small
     res["plan_110_of_100000_above_8_of_100_s"] = res["plan_110_of_100000_s"] - res["plan_8_of_100_s"]
     print(f"start-up floors, medians of {repeat}: python -c pass {res['python_start_s']:.2f} s; one cached numba "
-          f"function {res['numba_floor_s']:.2f} s; pkmcal plan --n {n_small} --n-candidates 100 {res['plan_8_of_100_s']:.2f} s, "
+          f"function {res['numba_floor_s']:.2f} s; pkmcal plan --n {n_small} --n-candidates 100 "
+          f"{res['plan_8_of_100_s']:.2f} s, "
           f"so the {sizes.large} plan's own work is {res['plan_110_of_100000_above_8_of_100_s']:.2f} s")
     if base:
         res["plan_110_of_100000_same_as_baseline"] = base[0]["poses"] == ours[0]["poses"]
@@ -262,7 +264,7 @@ def main(argv: list[str]) -> dict:
     ap.add_argument("--workers", type=int, default=None, help="worker processes of the 10^6-candidate plan")
     ap.add_argument("--baseline-src", default=None, help="also time the 100,000 plan with this source tree (alternated)")
     ap.add_argument("--repeat", type=int, default=3, help="runs of the 100,000 plan (medians)")
-    args = parse_args(ap, argv, repeat=1)
+    args = parse_args(ap, argv, also="the sizes of QUICK (module docstring)", repeat=1)
     sizes = QUICK if args.quick else FULL
     large = large_candidate_sets(args.setup, args.seed, args.skip_million, args.workers, args.baseline_src,
                                  args.repeat, sizes)

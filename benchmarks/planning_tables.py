@@ -26,7 +26,7 @@ def main(argv: list[str]) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--random-sets", type=int, default=None)
-    args = parse_args(ap, argv)
+    args = parse_args(ap, argv, also="the reproduction's quick mode")
     r = paper2_tables1_2(seed=args.seed, quick=args.quick, random_sets=args.random_sets)
     print(r.format())
     out = {}

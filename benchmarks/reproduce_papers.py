@@ -20,7 +20,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--only", nargs="*", default=list(REPRODUCTIONS))
-    args = parse_args(ap)
+    args = parse_args(ap, also="each reproduction's quick mode")
     out: dict = {"seed": args.seed, "quick": args.quick, "cores": os.cpu_count()}
     for name in args.only:
         r = run_reproduction(name, seed=args.seed, quick=args.quick)
