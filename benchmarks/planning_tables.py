@@ -5,8 +5,8 @@ A thin wrapper of the reproduction ``paper2-tables1-2``
 (:func:`pkmcal.reproduce.paper2_planning.paper2_tables1_2`, also ``pkmcal reproduce
 paper2-tables1-2``): prints its table, then the markdown table of docs/planning.md
 (paper, paper-like Jacobian, planning Jacobian; random and optimal). Last line: one JSON
-object, per size n the four columns of O1..O4 (``--quick``: the reproduction's quick mode, fewer
-random sets and a smaller search; key ``quick``).
+object, per size n the four columns of O1..O4 (``--quick``: the reproduction's quick mode, 3
+random sets per size instead of 10 and 400 candidates instead of 2,000; key ``quick``).
 
     python benchmarks/planning_tables.py [--seed 0] [--random-sets 10] [--quick]
 """
