@@ -16,7 +16,7 @@ slowest top-level imports, so a regression names its cause.
 The last line of output is one JSON object (``help_s``, ``machines_s``, ``ik_10_s``: best
 wall times in seconds; ``*_median_s``; ``python_s``; ``imports``).
 
-Usage: ``python benchmarks/cli_startup.py [--repeats 9]``
+Usage: ``python benchmarks/cli_startup.py [--repeats 9] [--quick]`` (``--quick``: one repeat)
 """
 
 from __future__ import annotations
@@ -30,6 +30,8 @@ import subprocess
 import sys
 import tempfile
 import time
+
+from _quick import parse_args  # benchmarks/_quick.py
 
 HEAVY = ("numpy", "scipy", "numba", "pydantic", "matplotlib")
 TARGETS = {"help": 0.3, "machines": 0.3, "ik_10": 1.0}
@@ -97,7 +99,7 @@ def _imports(cmd: list[str]) -> dict:
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=9)
-    args = ap.parse_args(argv)
+    args = parse_args(ap, argv, repeats=1)
     py = sys.executable
     with tempfile.TemporaryDirectory() as tmp:
         poses = os.path.join(tmp, "poses10.csv")
@@ -112,7 +114,7 @@ def main(argv=None) -> dict:
               f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}; Python {platform.python_version()}")
         python_s = _time([py, "-c", "pass"], args.repeats)[0]
         print(f"bare interpreter start (python -c pass): {python_s:.3f} s")
-        out: dict = {"python_s": round(python_s, 4), "imports": {}}
+        out: dict = {"python_s": round(python_s, 4), "imports": {}, "quick": args.quick}
         for key, cmd in cmds.items():
             best, med = _time(cmd, args.repeats)
             out[f"{key}_s"], out[f"{key}_median_s"] = round(best, 4), round(med, 4)

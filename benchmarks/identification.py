@@ -73,7 +73,8 @@ speed-up could not exceed ``*_speedup_bound`` = (time of the finite-difference f
 split the speed-up into cost per Jacobian and number of iterations.
 The last line of output is one JSON object.
 
-Usage: ``python benchmarks/identification.py [--repeats 20] [--trials 1000] [--seed 0] [--problems 5]``
+Usage: ``python benchmarks/identification.py [--repeats 20] [--trials 1000] [--seed 0] [--problems 5]
+[--quick]`` (``--quick``: one repeat, 10 trials, one problem of each fit; key ``quick``)
 """
 
 from __future__ import annotations
@@ -96,6 +97,7 @@ from pkmcal.io.setup_file import builtin_setup
 from pkmcal.mechanisms import builtin_machine
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from _quick import parse_args  # noqa: E402  (benchmarks/_quick.py)
 from kinematics import cpu_model  # noqa: E402  (benchmarks/kinematics.py)
 
 
@@ -283,7 +285,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--problems", type=int, default=5,
                     help="problem instances per fit (real machines / pose draws); times are medians over them")
-    args = ap.parse_args()
+    args = parse_args(ap, None, repeats=1, trials=10, problems=1)
     numba.set_num_threads(1)
 
     machine_info = {
@@ -405,6 +407,7 @@ def main() -> None:
         "unweighted_rms_mm": actual[False],
         "trials": args.trials,
         "repeats": args.repeats,
+        "quick": args.quick,
         "machine": {**machine_info, "load_average_1min_after": os.getloadavg()[0]},
     })
     sys.stdout.flush()

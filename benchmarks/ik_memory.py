@@ -10,9 +10,10 @@ that loads the compiled kernels' cache first is far smaller), its wall time, the
 per pose, and the SHA-256 of the output (the bytes do not depend on how the work is split).
 
 The last line of output is one JSON object (``poses``, ``peak_rss_mb``, ``wall_s``,
-``bytes_per_pose``, ``output_sha256``).
+``bytes_per_pose``, ``output_sha256``, ``quick``).
 
-Usage: ``python benchmarks/ik_memory.py [--poses 1000000]``
+Usage: ``python benchmarks/ik_memory.py [--poses 1000000] [--quick]`` (``--quick``: 20,500
+poses, three of the blocks ``pkmcal ik`` computes and writes at a time, the last one partial)
 """
 
 from __future__ import annotations
@@ -30,6 +31,8 @@ import time
 
 import numpy as np
 
+from _quick import parse_args  # benchmarks/_quick.py
+from pkmcal.cli.kinematics_cmds import _IK_BLOCK
 from pkmcal.io.tables import format_table
 from pkmcal.mechanisms.library import stewart_prototype
 
@@ -37,7 +40,7 @@ from pkmcal.mechanisms.library import stewart_prototype
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--poses", type=int, default=1_000_000)
-    args = ap.parse_args()
+    args = parse_args(ap, None, poses=2 * _IK_BLOCK + 500)
     rng = np.random.default_rng(0)
     p = rng.uniform(-1, 1, (args.poses, 6)) * np.array([8.0, 8.0, 4.0, 2.0, 2.0, 4.0])
     p[:, :3] += stewart_prototype().home_pose[:3]
@@ -62,7 +65,8 @@ def main() -> None:
     print(f"pkmcal ik on {args.poses} poses: peak RSS {peak_kb / 1024:.0f} MB "
           f"({peak_kb * 1024 / args.poses:.0f} bytes per pose), {wall:.1f} s wall")
     print(json.dumps({"poses": args.poses, "peak_rss_mb": round(peak_kb / 1024, 1), "wall_s": round(wall, 2),
-                      "bytes_per_pose": round(peak_kb * 1024 / args.poses, 1), "output_sha256": digest}))
+                      "bytes_per_pose": round(peak_kb * 1024 / args.poses, 1), "output_sha256": digest,
+                      "quick": args.quick}))
 
 
 if __name__ == "__main__":

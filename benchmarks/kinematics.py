@@ -16,7 +16,10 @@ figures. Also a pose-by-pose loop through the public API (one
 
 The last line of output is one JSON object.
 
-Usage: ``python benchmarks/kinematics.py [--n 100000] [--repeats 5] [--seed 0]``
+Usage: ``python benchmarks/kinematics.py [--n 100000] [--repeats 15] [--seed 0] [--quick]``
+(``--quick``: 10,000 poses, so that IK and FK are still split over threads, one repeat, 200
+poses pose by pose; the compile in a fresh process stays: it is what ``compile_s`` measures;
+key ``quick``)
 """
 
 from __future__ import annotations
@@ -31,6 +34,8 @@ import time
 import tracemalloc
 
 import numpy as np
+
+from _quick import parse_args  # benchmarks/_quick.py
 
 T_IMPORT = time.perf_counter()
 import numba  # noqa: E402
@@ -129,6 +134,7 @@ void fk_loop(int n, const double *L, const double *guess, const double *b, const
 
 def build_c_reference():
     """Compile :data:`C_REFERENCE` with the system C compiler (gcc -O2); None if unavailable."""
+    import atexit
     import ctypes
     import shutil
     import subprocess
@@ -138,6 +144,7 @@ def build_c_reference():
     if cc is None:
         return None, "no C compiler"
     tmp = tempfile.mkdtemp(prefix="pkmcal-bench-")
+    atexit.register(shutil.rmtree, tmp, True)       # the loaded library needs no file after dlopen
     src, lib = os.path.join(tmp, "fk.c"), os.path.join(tmp, "fk.so")
     with open(src, "w") as f:
         f.write(C_REFERENCE)
@@ -209,7 +216,8 @@ def main(argv=None) -> dict:
     ap.add_argument("--repeats", type=int, default=15)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--loop-n", type=int, default=2000, help="poses for the pose-by-pose loop")
-    args = ap.parse_args(argv)
+    # quick: every batch still large enough to be split over threads (IK from 2 × its grain)
+    args = parse_args(ap, argv, n=2 * kernels._IK_GRAIN, repeats=1, loop_n=200)
 
     machine = builtin_machine("stewart-prototype")
     rng = np.random.default_rng(args.seed)
@@ -314,6 +322,7 @@ def main(argv=None) -> dict:
         "python": platform.python_version(),
         "numpy": np.__version__,
         "numba": numba.__version__,
+        "quick": args.quick,
     }
 
     print(f"machine under test: {machine.name}; {args.n} random poses, home ± (30, 30, 15 mm, 20°, 20°, 20°)")

@@ -2,7 +2,7 @@
 sets (issue 14 item 4), measured in the same run.
 
     python benchmarks/planning.py [--setup indicators-prototype] [--seed 0] [--skip-million]
-                                  [--workers N] [--baseline-src DIR] [--repeat 3]
+                                  [--workers N] [--baseline-src DIR] [--repeat 3] [--quick]
 
 Machine: paper 2's prototype (``stewart-prototype``); candidates: random reachable and
 measurable poses of its workspace box (seeded).
@@ -21,7 +21,9 @@ measurable poses of its workspace box (seeded).
   ``--baseline-src DIR`` when given (e.g. the main branch's ``src``: before/after in one
   run, keys ``..._baseline_...``); beside them, the start-up floors of this machine
   (:func:`start_up_floors`: ``python -c pass`` and one cached numba function) and the plan
-  of 8 of 100 candidates, whose difference from the 100,000 plan is that plan's own work
+  of 8 of 100 candidates (of :func:`smallest_plan` poses: more when 8 poses' readings are
+  fewer than the setup's identifiable parameters, 13 with the default three indicators;
+  ``plan_8_of_100_poses``), whose difference from the 100,000 plan is that plan's own work
   (``plan_110_of_100000_above_8_of_100_s``: comparable between machines whose start-up
   differs); then, in this process, the
   stages of the 100,000 plan: candidate generation and checks (including the ~8× more poses
@@ -33,6 +35,15 @@ Wall and process CPU times are both reported: on a machine shared with other job
 time is the better estimate of the unloaded wall time (the checks use up to
 ``numba.get_num_threads()`` threads, so their CPU time can exceed their wall time). Last
 line of output: one JSON object.
+
+``--quick`` (:data:`QUICK`, key ``quick``; the keys keep the full run's sizes in their
+names): one repeat, 12,000 candidates for the "100,000" plan (still above the exchange's
+working-set threshold, max(10,000, 5 × the 2,200-candidate pool of 110 poses)), 60,000 for
+the "10^6" plan (still in more than one chunk of ``CHUNK_SIZE``), 20,000 poses for the
+limit check (still threaded), 2,400 / 600 candidates for the selections (110 poses still
+chosen from a pre-selected pool of 2,200, 30 poses from all of them, as in the full run) and
+at most 5 add/remove iterations of the cuckoo search (at most 10 × 30 in the full run,
+which stopped after 22 on O4 and 33 on O1 with the default setup on 2026-12-03).
 """
 
 from __future__ import annotations
@@ -45,19 +56,38 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
 from pkmcal.io.setup_file import load_setup
 from pkmcal.mechanisms.library import stewart_prototype
 from pkmcal.planning.blocks import planning_model
-from pkmcal.planning.candidates import generate_candidates, random_poses, workspace_box
+from pkmcal.planning.candidates import CHUNK_SIZE, generate_candidates, random_poses, workspace_box
 from pkmcal.planning.indices import observability_indices
 from pkmcal.planning.plan import candidate_blocks
 from pkmcal.planning.selection import select, select_cuckoo, select_default, select_random
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from _quick import parse_args  # noqa: E402  (benchmarks/_quick.py)
 from kinematics import cpu_model  # noqa: E402  (benchmarks/kinematics.py)
+
+
+@dataclass(frozen=True)
+class Sizes:
+    """Candidates and poses of each workload (the keys name the full run's)."""
+
+    large: int = 100_000          # the "100,000" plan and its stages in this process
+    million: int = 1_000_000      # the "10^6" plan
+    limit_poses: int = 200_000    # poses of the per-pose limit check
+    pool: int = 10_000            # candidates of the "110 of 10000" selection
+    small_pool: int = 2_000       # candidates of the "30 of 2000" selections
+    cuckoo_iterations: int | None = None    # add/remove iterations at most (None: select_cuckoo's 10 × poses)
+
+
+FULL = Sizes()
+QUICK = Sizes(large=12_000, million=CHUNK_SIZE + 10_000, limit_poses=20_000, pool=2_400, small_pool=600,
+              cuckoo_iterations=5)
 
 
 CPU = {}
@@ -140,31 +170,50 @@ def _median_runs(runs: list[dict]) -> dict:
     return {k: float(np.median([r[k] for r in runs])) for k in ("wall_s", "cpu_s", "peak_rss_mb")}
 
 
+#: Poses of the small plan whose time is the start-up floor of a plan (8: enough readings for
+#: the 42 parameters of a full-pose setup, 6 readings a pose).
+SMALL_PLAN_POSES = 8
+
+
+def smallest_plan(model) -> int:
+    """:data:`SMALL_PLAN_POSES`, or the fewest poses whose readings cover the setup's
+    identifiable parameters when 8 do not (``pkmcal plan`` refuses fewer: 13 for the three
+    dial indicators, 3 readings a pose for 39 parameters)."""
+    return max(SMALL_PLAN_POSES, -(-model.n_params // model.rows_per_pose))
+
+
 def large_candidate_sets(setup_name: str, seed: int, skip_million: bool, workers: int | None = None,
-                         baseline_src: str | None = None, repeat: int = 3) -> dict:
+                         baseline_src: str | None = None, repeat: int = 3, sizes: Sizes = FULL) -> dict:
     """Issue 14 item 4: whole plans with 10^5 and 10^6 candidates, the stages of the first,
     and the per-pose limit check (module docstring)."""
+    machine = stewart_prototype()
+    setup = load_setup(setup_name)
+    model = planning_model(machine, setup)
+    n_small = smallest_plan(model)
     res = start_up_floors(repeat)
     ours, base, tiny = [], [], []
     for _ in range(repeat):                       # alternated: both see the same load
-        tiny.append(run_child(100, setup_name, seed, n=8))
-        ours.append(run_child(100_000, setup_name, seed))
+        tiny.append(run_child(100, setup_name, seed, n=n_small))
+        ours.append(run_child(sizes.large, setup_name, seed))
         if baseline_src is not None:
-            base.append(run_child(100_000, setup_name, seed, src=baseline_src))
+            base.append(run_child(sizes.large, setup_name, seed, src=baseline_src))
     for tag, runs in (("", ours), ("_baseline", base)):
         if not runs:
             continue
         med = _median_runs(runs)
         key = f"plan_110_of_100000{tag}"
         res.update({f"{key}_s": med["wall_s"], f"{key}_cpu_s": med["cpu_s"], f"{key}_peak_rss_mb": med["peak_rss_mb"]})
-        print(f"pkmcal plan --n 110 --n-candidates 100000{' (baseline ' + baseline_src + ')' if tag else ''}, median "
+        print(f"pkmcal plan --n 110 --n-candidates {sizes.large}"
+              f"{' (baseline ' + baseline_src + ')' if tag else ''}, median "
               f"of {len(runs)}: {med['wall_s']:.2f} s wall, {med['cpu_s']:.2f} s CPU, peak RSS "
               f"{med['peak_rss_mb']:.0f} MB; {runs[0]['summary']}")
     res["plan_8_of_100_s"] = _median_runs(tiny)["wall_s"]
+    res["plan_8_of_100_poses"] = n_small
     res["plan_110_of_100000_above_8_of_100_s"] = res["plan_110_of_100000_s"] - res["plan_8_of_100_s"]
     print(f"start-up floors, medians of {repeat}: python -c pass {res['python_start_s']:.2f} s; one cached numba "
-          f"function {res['numba_floor_s']:.2f} s; pkmcal plan --n 8 --n-candidates 100 {res['plan_8_of_100_s']:.2f} s, "
-          f"so the 100,000 plan's own work is {res['plan_110_of_100000_above_8_of_100_s']:.2f} s")
+          f"function {res['numba_floor_s']:.2f} s; pkmcal plan --n {n_small} --n-candidates 100 "
+          f"{res['plan_8_of_100_s']:.2f} s, "
+          f"so the {sizes.large} plan's own work is {res['plan_110_of_100000_above_8_of_100_s']:.2f} s")
     if base:
         res["plan_110_of_100000_same_as_baseline"] = base[0]["poses"] == ours[0]["poses"]
         print(f"same poses file as the baseline: {res['plan_110_of_100000_same_as_baseline']}")
@@ -173,22 +222,19 @@ def large_candidate_sets(setup_name: str, seed: int, skip_million: bool, workers
     if skip_million:
         res.update({f"{key}_s": None, f"{key}_cpu_s": None, f"{key}_peak_rss_mb": None})
     else:
-        child = run_child(1_000_000, setup_name, seed, workers=workers)
+        child = run_child(sizes.million, setup_name, seed, workers=workers)
         res.update({f"{key}_s": child["wall_s"], f"{key}_cpu_s": child["cpu_s"],
                     f"{key}_peak_rss_mb": child["peak_rss_mb"]})
-        print(f"pkmcal plan --n 110 --n-candidates 1000000{f' --workers {workers}' if workers else ''}: "
+        print(f"pkmcal plan --n 110 --n-candidates {sizes.million}{f' --workers {workers}' if workers else ''}: "
               f"{child['wall_s']:.2f} s wall, {child['cpu_s']:.2f} s CPU, peak RSS {child['peak_rss_mb']:.0f} MB; "
               f"{child['summary']}")
-    machine = stewart_prototype()
-    setup = load_setup(setup_name)
-    model = planning_model(machine, setup)
     box = workspace_box(machine, setup)
     generate_candidates(machine, setup, n=1000, rng=np.random.default_rng(seed), box=box)     # warm-up
-    cand, t_gen, c_gen = timed_cpu(generate_candidates, machine, setup, n=100_000, box=box,
+    cand, t_gen, c_gen = timed_cpu(generate_candidates, machine, setup, n=sizes.large, box=box,
                                    rng=np.random.default_rng(seed))
     (G, ok), t_blk, c_blk = timed_cpu(candidate_blocks, model, cand.poses)
     sel, t_sel, c_sel = timed_cpu(select, G[ok], 110, rng=np.random.default_rng(seed), positions=cand.poses[ok])
-    poses = random_poses(box, 200_000, np.random.default_rng(seed + 1))
+    poses = random_poses(box, sizes.limit_poses, np.random.default_rng(seed + 1))
     machine.check_limits(poses[:10], margin=0.1, margins=False)
     _, t_ker, c_ker = timed_cpu(machine.check_limits, poses, margin=0.1, margins=False)
     _, t_np, c_np = timed_cpu(machine._limit_margins_numpy, poses, 0.1)
@@ -201,7 +247,7 @@ def large_candidate_sets(setup_name: str, seed: int, skip_million: bool, workers
         "check_limits_numpy_us_per_pose": 1e6 * t_np / len(poses),
         "check_limits_numpy_cpu_us_per_pose": 1e6 * c_np / len(poses),
     })
-    print(f"stages of the 100000-candidate plan (in process): candidates {t_gen:.3f} s ({c_gen:.3f} s CPU; "
+    print(f"stages of the {sizes.large}-candidate plan (in process): candidates {t_gen:.3f} s ({c_gen:.3f} s CPU; "
           f"{cand.n_tested} poses tested), blocks {t_blk:.3f} s ({c_blk:.3f} s CPU), "
           f"selection {t_sel:.3f} s ({c_sel:.3f} s CPU)")
     print(f"limit check per pose: compiled {res['check_limits_us_per_pose']:.3f} µs "
@@ -218,34 +264,37 @@ def main(argv: list[str]) -> dict:
     ap.add_argument("--workers", type=int, default=None, help="worker processes of the 10^6-candidate plan")
     ap.add_argument("--baseline-src", default=None, help="also time the 100,000 plan with this source tree (alternated)")
     ap.add_argument("--repeat", type=int, default=3, help="runs of the 100,000 plan (medians)")
-    args = ap.parse_args(argv)
+    args = parse_args(ap, argv, also="the sizes of QUICK (module docstring)", repeat=1)
+    sizes = QUICK if args.quick else FULL
     large = large_candidate_sets(args.setup, args.seed, args.skip_million, args.workers, args.baseline_src,
-                                 args.repeat)
+                                 args.repeat, sizes)
 
     machine = stewart_prototype()
     setup = load_setup(args.setup)
     model = planning_model(machine, setup)
-    cand = generate_candidates(machine, setup, kind="random", n=10_000, rng=np.random.default_rng(args.seed))
+    cand = generate_candidates(machine, setup, kind="random", n=sizes.pool, rng=np.random.default_rng(args.seed))
     G, ok = model.blocks(cand.poses)
     if not ok.all():
         raise SystemExit("some candidate poses could not be solved at the nominal machine")
-    G2000, X2000 = G[:2000], cand.poses[:2000]
+    G2000, X2000 = G[:sizes.small_pool], cand.poses[:sizes.small_pool]
 
     _, t_warm = timed(select_default, G[:200], 20)                       # numba compile / cache load
     d30, t_d30 = timed(select_default, G2000, 30)
     d110, t_d110 = timed(select_default, G, 110)
-    c30, t_c30 = timed(select_cuckoo, G2000, 30, positions=X2000, index="O4", rng=np.random.default_rng(args.seed))
+    c30, t_c30 = timed(select_cuckoo, G2000, 30, positions=X2000, index="O4", rng=np.random.default_rng(args.seed),
+                       max_iter=sizes.cuckoo_iterations)
     c30_o1, t_c30_o1 = timed(select_cuckoo, G2000, 30, positions=X2000, index="O1",
-                             rng=np.random.default_rng(args.seed))
+                             rng=np.random.default_rng(args.seed), max_iter=sizes.cuckoo_iterations)
     d30_o4, t_d30_o4 = timed(select_default, G2000, 30, index="O4")
     rng = np.random.default_rng(args.seed + 1)
-    r30 = [observability_indices(G2000, select_random(2000, 30, rng)) for _ in range(20)]
+    r30 = [observability_indices(G2000, select_random(len(G2000), 30, rng)) for _ in range(20)]
 
-    runs = [("default_30_of_2000", "default (D-optimal)", "30 of 2000", t_d30, d30),
-            ("default_110_of_10000", "default (D-optimal)", "110 of 10000", t_d110, d110),
-            ("cuckoo_30_of_2000", "cuckoo on O4 (paper 2)", "30 of 2000", t_c30, c30),
-            ("cuckoo_O1_30_of_2000", "cuckoo on O1", "30 of 2000", t_c30_o1, c30_o1),
-            ("default_O4_30_of_2000", "default --index O4", "30 of 2000", t_d30_o4, d30_o4)]
+    small, large_ = f"30 of {sizes.small_pool}", f"110 of {sizes.pool}"
+    runs = [("default_30_of_2000", "default (D-optimal)", small, t_d30, d30),
+            ("default_110_of_10000", "default (D-optimal)", large_, t_d110, d110),
+            ("cuckoo_30_of_2000", "cuckoo on O4 (paper 2)", small, t_c30, c30),
+            ("cuckoo_O1_30_of_2000", "cuckoo on O1", small, t_c30_o1, c30_o1),
+            ("default_O4_30_of_2000", "default --index O4", small, t_d30_o4, d30_o4)]
     result = {"setup": args.setup, "identifiable_parameters": model.n_params, "rows_per_pose": int(G.shape[1])}
     for key, _, _, t, sel in runs:
         result.update({f"{key}_s": t, f"{key}_cpu_s": CPU[id(sel)], f"{key}_O1": sel.indices["O1"],
@@ -254,6 +303,8 @@ def main(argv: list[str]) -> dict:
         "random_30_of_2000_mean_O1": float(np.mean([r["O1"] for r in r30])),
         "random_30_of_2000_mean_O4": float(np.mean([r["O4"] for r in r30])),
         "warmup_s": t_warm,
+        "quick": args.quick,
+        "sizes": asdict(sizes),
         **large,
         "load_average_1min": os.getloadavg()[0],
         "cores": os.cpu_count(),
@@ -268,7 +319,7 @@ def main(argv: list[str]) -> dict:
     for _, name, case, t, sel in runs:
         print(f"{name:<24} {case:<13} {t:8.3f} s ({CPU[id(sel)]:.3f} s CPU)   O1 = {sel.indices['O1']:.5g}   O4 = {sel.indices['O4']:.5g}   "
               f"({sel.message})")
-    print(f"{'random (mean of 20)':<24} {'30 of 2000':<13} {'':>10}   O1 = {result['random_30_of_2000_mean_O1']:.5g}   "
+    print(f"{'random (mean of 20)':<24} {small:<13} {'':>10}   O1 = {result['random_30_of_2000_mean_O1']:.5g}   "
           f"O4 = {result['random_30_of_2000_mean_O4']:.5g}")
     print(json.dumps(result))
     return result

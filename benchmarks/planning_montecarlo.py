@@ -13,7 +13,9 @@ RMS of the parameter errors |ρ̂ − ρ_real| over the identifiable parameters,
 max position error on 300 held-out random poses (commanded through the calibrated model,
 reached by the real machine). Last line: one JSON object.
 
-    python benchmarks/planning_montecarlo.py [--trials 10] [--n 30] [--seed 0]
+    python benchmarks/planning_montecarlo.py [--trials 10] [--n 30] [--seed 0] [--quick]
+
+``--quick``: one trial per setup (the same setups, strategies and pose count; key ``quick``).
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from _quick import parse_args  # benchmarks/_quick.py
 from pkmcal.identification.engine import identify
 from pkmcal.identification.simulation import simulate_campaign
 from pkmcal.io.setup_file import load_setup
@@ -103,9 +106,10 @@ def main(argv: list[str]) -> dict:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--magnitude", type=float, default=1.0)
     ap.add_argument("--setups", default="full-pose-paper1,indicators-prototype")
-    args = ap.parse_args(argv)
+    args = parse_args(ap, argv, trials=1)
     t0 = time.perf_counter()
-    result = {"trials": args.trials, "n_poses": args.n, "magnitude_mm": args.magnitude, "setups": {}}
+    result = {"trials": args.trials, "n_poses": args.n, "magnitude_mm": args.magnitude, "setups": {},
+              "quick": args.quick}
     for name in args.setups.split(","):
         s = run_setup(name, args.trials, args.n, args.seed, args.magnitude)
         result["setups"][name] = s

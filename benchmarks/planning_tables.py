@@ -5,7 +5,8 @@ A thin wrapper of the reproduction ``paper2-tables1-2``
 (:func:`pkmcal.reproduce.paper2_planning.paper2_tables1_2`, also ``pkmcal reproduce
 paper2-tables1-2``): prints its table, then the markdown table of docs/planning.md
 (paper, paper-like Jacobian, planning Jacobian; random and optimal). Last line: one JSON
-object, per size n the four columns of O1..O4.
+object, per size n the four columns of O1..O4 (``--quick``: the reproduction's quick mode, 3
+random sets per size instead of 10 and 400 candidates instead of 2,000; key ``quick``).
 
     python benchmarks/planning_tables.py [--seed 0] [--random-sets 10] [--quick]
 """
@@ -16,6 +17,7 @@ import argparse
 import json
 import sys
 
+from _quick import parse_args  # benchmarks/_quick.py
 from pkmcal.planning.indices import INDEX_NAMES
 from pkmcal.reproduce.paper2_planning import PAPER_INDICES, SIZES, paper2_tables1_2
 
@@ -24,8 +26,7 @@ def main(argv: list[str]) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--random-sets", type=int, default=None)
-    ap.add_argument("--quick", action="store_true")
-    args = ap.parse_args(argv)
+    args = parse_args(ap, argv, also="the reproduction's quick mode")
     r = paper2_tables1_2(seed=args.seed, quick=args.quick, random_sets=args.random_sets)
     print(r.format())
     out = {}
@@ -49,6 +50,7 @@ def main(argv: list[str]) -> dict:
                   f"{o['paper_like_random'][k]:.3e} | {o['paper_like_optimal'][k]:.3e} | "
                   f"{o['ours_random'][k]:.3e} | {o['ours_optimal'][k]:.3e} |")
     out["seconds"] = round(r.seconds, 2)
+    out["quick"] = args.quick
     print(json.dumps(out))
     return out
 

@@ -22,7 +22,8 @@ rank of the requested free set / its size (the engine fixes the rest as the gaug
 the engine's reported standard deviation.
 Improvement = 100·(1 − mean held-out error after / before). Last line: one JSON object.
 
-Run: ``python benchmarks/redundant.py [--machines 100] [--seed 0]``
+Run: ``python benchmarks/redundant.py [--machines 100] [--seed 0] [--quick]`` (``--quick``: the
+same reproduction, a Monte Carlo of 2 machines; key ``quick``)
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ import time
 
 import numpy as np
 
+from _quick import parse_args  # benchmarks/_quick.py
 from pkmcal.reproduce.paper3 import (CASES, LOAD_N, N_CALIB, TRACKER_STD, case_models, gauge_equivalent, real_setup,
                                      table_experiment)
 from pkmcal.reproduce.paper3_experiment import METHODS, calibration_experiment
@@ -109,8 +111,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--machines", type=int, default=100)
     ap.add_argument("--seed", type=int, default=0)
-    args = ap.parse_args()
-    out = {}
+    args = parse_args(ap, None, machines=2)
+    out = {"quick": args.quick}
     for case, setup in CASES.items():
         name = setup["machine"]
         repro, mc, ident = run(case, args.machines, args.seed)

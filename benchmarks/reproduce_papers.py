@@ -12,15 +12,15 @@ import json
 import os
 import sys
 
+from _quick import parse_args  # benchmarks/_quick.py
 from pkmcal.reproduce import REPRODUCTIONS, run_reproduction
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--quick", action="store_true")
     ap.add_argument("--only", nargs="*", default=list(REPRODUCTIONS))
-    args = ap.parse_args()
+    args = parse_args(ap, also="each reproduction's quick mode")
     out: dict = {"seed": args.seed, "quick": args.quick, "cores": os.cpu_count()}
     for name in args.only:
         r = run_reproduction(name, seed=args.seed, quick=args.quick)

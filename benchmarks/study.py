@@ -28,8 +28,9 @@ machine, 10,000 trials) end to end on all local cores, figures included, as the 
 ``default_study_cpu_seconds`` the CPU of this process and its workers: divided by the cores,
 the wall time the machine would take with its cores to itself).
 
-Usage: ``python benchmarks/study.py [--trials 2000] [--default-trials 10000]``; the last
-line of output is one JSON object.
+Usage: ``python benchmarks/study.py [--trials 2000] [--default-trials 10000] [--quick]``
+(``--quick``: 4 trials of each study, still on one worker and on all local cores, figures
+included; key ``quick``); the last line of output is one JSON object.
 """
 
 from __future__ import annotations
@@ -48,6 +49,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent / "src"))
 
+from _quick import parse_args  # noqa: E402
 from kinematics import cpu_model  # noqa: E402
 
 from pkmcal import __version__  # noqa: E402
@@ -77,7 +79,7 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trials", type=int, default=2000)
     ap.add_argument("--default-trials", type=int, default=10000)
-    args = ap.parse_args(argv)
+    args = parse_args(ap, argv, trials=4, default_trials=4)
     cores = local_cores()
     load0 = os.getloadavg()[0]
     print(f"machine: {cpu_model()}, {cores} cores, {platform.python_implementation()} {platform.python_version()}, "
@@ -102,7 +104,7 @@ def main(argv=None) -> dict:
            "trials_per_s_1core_from_cpu": one.trials_run / cpu1,
            "cpu_ms_per_trial_all_local": 1e3 * cpu_all / alll.trials_run,
            "cpu_efficiency_all_local": cpu1 / cpu_all, "identical": identical,
-           "load_average_before": load0}
+           "load_average_before": load0, "quick": args.quick}
     if args.default_trials:
         d = load_study(HERE.parent / "examples" / "study-default.yaml").with_trials(args.default_trials)
         t0 = time.perf_counter()
