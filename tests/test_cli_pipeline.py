@@ -181,7 +181,7 @@ def test_report_folder_must_be_a_folder(tmp_path, bad):
 def test_report_without_commanded_poses(tmp_path):
     """A measurement file without cmd_x..cmd_c (as from a real data logger): the report's
     pose cloud is the nominal FK of the leg readings, one pose per row."""
-    write_poses(tmp_path / "poses.csv", 25, 4)
+    write_poses(tmp_path / "poses.csv", 45, 4)
     ok(run(*SIM, "--poses", tmp_path / "poses.csv", "-o", tmp_path / "meas.csv"))
     lines = (tmp_path / "meas.csv").read_text().splitlines()
     header = lines[[k for k, s in enumerate(lines) if not s.startswith("#")][0]].split(",")
@@ -193,6 +193,6 @@ def test_report_without_commanded_poses(tmp_path):
     import json
 
     j = json.loads(res.stdout)
-    assert j["report"] == str(tmp_path / "rep" / "report.html") and j["n_poses"] == 25
+    assert j["report"] == str(tmp_path / "rep" / "report.html") and j["n_poses"] == 45
     page = (tmp_path / "rep" / "report.html").read_text(encoding="utf-8")
-    assert "legs_dials.csv</td>" in page and 'poses used</td><td class="l">25 (dropped 0)' in page
+    assert "legs_dials.csv</td>" in page and 'poses used</td><td class="l">45 (dropped 0)' in page

@@ -102,7 +102,11 @@ def test_identify_reports_drops_keeps_or_refuses_clipped_poses(tmp_path):
     assert "pose 12 (line 13): lambda1 = 53.5 mm is outside its stroke [0.0, 50.0] mm" in text
     assert "2 pose(s) with clipped readings left out (--clipped drop, the default; --clipped keep uses them): 7, 12" \
         in text
-    res = runner.invoke(cli, [*base, "-o", str(tmp_path / "cal3.yaml"), "--json", "--clipped", "keep"])
+    # kept, the clipped readings are wrong by millimetres: the fit is refused (issue 24), they are named
+    res = runner.invoke(cli, [*base, "-o", str(tmp_path / "cal3.yaml"), "--clipped", "keep"])
+    assert res.exit_code == 2 and "refused" in res.stderr and "are used (--clipped keep): 7, 12" in res.stderr, res.output
+    res = runner.invoke(cli, [*base, "-o", str(tmp_path / "cal3.yaml"), "--json", "--clipped", "keep",
+                              "--accept-bad-fit"])
     assert res.exit_code == 0 and json.loads(res.stdout)["n_poses"] == 20
     res = runner.invoke(cli, [*base, "-o", str(tmp_path / "cal4.yaml"), "--clipped", "error"])
     assert res.exit_code == 2 and "2 clipped actuator reading(s) in 2 pose(s)" in res.stderr

@@ -444,8 +444,13 @@ def test_cli_identify_frees_the_gains_by_name(tmp_path):
     assert "actuator_unit: rev" in text and "gain_1:" in text.split("uncertainty:")[1]
     info = run("info", tmp_path / "cal.yaml")
     assert info.exit_code == 0 and "mm/rev" in info.output and "stroke 0..10 rev" in info.output
+    # the gains held, the real 1 % lead errors leave residuals 1e9 times the setup's 1e-12 noise: refused
+    # (issue 24), the noise named; written with --accept-bad-fit
     held = run("identify", tmp_path / "nominal.yaml", tmp_path / "m.csv", "--setup", tmp_path / "setup.yaml",
                "--method", "ik-residual", "-o", tmp_path / "cal42.yaml")
+    assert held.exit_code == 2 and "refused" in held.stderr and "noise far too small" in held.stderr, held.output
+    held = run("identify", tmp_path / "nominal.yaml", tmp_path / "m.csv", "--setup", tmp_path / "setup.yaml",
+               "--method", "ik-residual", "-o", tmp_path / "cal42.yaml", "--accept-bad-fit")
     assert held.exit_code == 0, held.output
     assert "gain_1, gain_2, gain_3, gain_4, gain_5, gain_6, which the machine holds unless freed by name" \
         in held.output

@@ -105,7 +105,9 @@ class PkmcalGroup(click.Group):
             try:
                 result = super().invoke(ctx)
             except PkmcalError as exc:
-                _report_warnings([w for w in caught if str(w.message) not in str(exc)])
+                # the input warnings that may explain the error (numerical ones would only be noise)
+                _report_warnings([w for w in caught if issubclass(w.category, PkmcalWarning)
+                                  and str(w.message) not in str(exc)])
                 _error_line(name_sources(str(exc), sources))
                 sys.exit(exc.exit_code)
             except MemoryError:

@@ -9,7 +9,7 @@ likely causes; ``pkmcal identify`` refuses to write a refused fit unless the use
 
 The rule. A fit is refused when
 
-* the solver did not converge, or its cost or χ² is not finite; or
+* the solver did not converge, or its cost is not finite; or
 * a machine parameter moved from its starting value by more than the machine's size (its
   largest length parameter) or an angle by more than 90° (radians read as degrees on a
   42-parameter hexapod are absorbed by joints moved 4 m, at χ²/ν = 12.7); or
@@ -21,7 +21,7 @@ The rule. A fit is refused when
       P( χ²_ν ≥ χ² / k² ) < α,     k = NOISE_SLACK, α = TAIL (1e-6), ν = E[χ²]
 
   (ν the degrees of freedom of a noise-weighted fit; :class:`~.uncertainty.Uncertainty`'s
-  E[χ²] for the others). A correct model with noise as stated gives χ²/ν = 1 ± √(2/ν);
+  E[χ²] for the others; no χ² rule where the setup states a noise of 0 and χ² is infinite). A correct model with noise as stated gives χ²/ν = 1 ± √(2/ν);
   real instruments' stated σ are often optimistic by a factor of 2 or so, and such fits are
   not wrong (their covariance is inflated by χ²/E[χ²]) — :func:`chi2_warning` says so, the
   fit is written. At ν = 138 the refusal starts at χ²/ν ≈ 14.3 (residuals 3.8 times the
@@ -110,7 +110,7 @@ class FitVerdict:
                 "rule": RULE}
 
 
-RULE = (f"refused when the fit did not converge, its chi2 is not finite, P(chi2_nu >= chi2/{NOISE_SLACK:g}^2) < "
+RULE = (f"refused when the fit did not converge, its cost is not finite, P(chi2_nu >= chi2/{NOISE_SLACK:g}^2) < "
         f"{TAIL:g} with nu = E[chi2] (chi2 beyond what the noise model allows even with every noise sigma "
         f"{NOISE_SLACK:g} times larger; without that slack when the input files look wrong), or a machine parameter "
         "moved by more than the machine's size (90 deg for an angle)")
@@ -126,8 +126,10 @@ def judge(result, input_causes: Sequence[str] = ()) -> FitVerdict:
     if not result.success:
         problems.append(f"the fit did not converge ({result.message})")
     u = result.uncertainty
-    if not (np.isfinite(result.cost) and np.isfinite(u.chi2)):
+    if not np.isfinite(result.cost):
         problems.append("the fit's cost is not finite (a parameter or a prior beyond any machine's scale)")
+    elif not np.isfinite(u.chi2):
+        pass   # a noise of 0 (an exact simulation, fitted unweighted): χ² has no scale to judge by
     elif beyond_noise(u, NOISE_SLACK):
         problems.append(f"chi2/E[chi2] = {u.birge_ratio:.4g} ({u.chi2:.6g} over E[chi2] {_nu(u):g}): the residuals "
                         f"are {np.sqrt(u.birge_ratio):.3g} times the noise the setup states, beyond what the noise "
@@ -180,6 +182,7 @@ def diagnose(result, setup, meas, causes: Sequence[str] = (), *, n_read: int | N
     when the fit has priors)."""
     out = list(causes)
     out += _prior_causes(result, refit_without_priors)
+    out += _weak_cause(result)
     if not out:   # the generic causes only when no specific one is known
         out += _outlier_cause(result) or _noise_cause(result, setup)
     if n_read is not None and n_read > 0:
@@ -221,6 +224,19 @@ def _prior_causes(result, refit) -> list[str]:
                        f"sigma from what the data say without priors ({est * f:.6g} ± {s_data * f:.3g} {unit}; that "
                        f"fit's chi2/E[chi2] is {free.uncertainty.birge_ratio:.3g}): check the prior's value and unit")
     return out
+
+
+def _weak_cause(result) -> list[str]:
+    """The weakly identifiable directions along which machine parameters moved absurdly."""
+    if not _implausible_moves(result):
+        return []
+    weak = result.identifiability.weak
+    if not weak:
+        return []
+    worst = min(w["ratio"] for w in weak)
+    return [f"the data leave {len(weak)} direction(s) weakly identifiable (sigma/sigma_1 down to {worst:.2g}), along "
+            "which the fit wandered: measure more or better spread poses (pkmcal plan), or give priors on the "
+            "parameters of those directions (--prior), or fix one of them"]
 
 
 def _outlier_cause(result) -> list[str]:

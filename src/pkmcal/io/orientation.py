@@ -194,7 +194,7 @@ def small_angle_note(src: str, columns: Sequence[str], degrees: np.ndarray, what
     if not (0.0 < largest < limit):
         return None
     return (f"{src}: the {what} {','.join(columns)} are all below {limit:.3g} degree (largest {largest:.3g}), "
-            "less than 1/57.3 of the machine's orientation range: they look like radians read as degrees; if they "
+            "they look like radians read as degrees; if they "
             "are radians, give --angle-unit rad (or the file's units line '# units: angle=rad')")
 
 
