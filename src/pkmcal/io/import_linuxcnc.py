@@ -32,8 +32,12 @@ length at the home switch, so that readings are zero there (what
 :func:`pkmcal.io.export_linuxcnc.linuxcnc_ini` writes); ``"zero"`` L0_i = 0, genhexkins' own
 convention: the reading is the joint value, the strut length (its home-switch value is kept
 in ``metadata.linuxcnc.home_switch_reading`` so that an export writes HOME_OFFSET =
-L0 + reading). The stroke is [MIN_LIMIT − L0, MAX_LIMIT − L0]. ``[JOINT_N] HOME`` is
-compared with the strut lengths at ``[TRAJ] HOME`` (a note when they differ).
+L0 + reading). The stroke is [MIN_LIMIT − L0, MAX_LIMIT − L0], written as the file says; a
+strut range beyond what struts of their home length reach (between half and twice it:
+:mod:`pkmcal.mechanisms.hexapod_reach`; LinuxCNC's own hexapod sample allows ±1000 inch on
+29.75-inch struts) is reported in a note naming MIN_LIMIT/MAX_LIMIT, and planning keeps
+within the reachable range. ``[JOINT_N] HOME`` is compared with the strut lengths at
+``[TRAJ] HOME`` (a note when they differ).
 
 Round trip: machine → :func:`~pkmcal.io.export_linuxcnc.linuxcnc_hal` +
 :func:`~pkmcal.io.export_linuxcnc.linuxcnc_ini` → :func:`machine_from_linuxcnc` gives the
@@ -56,6 +60,7 @@ import numpy as np
 from pkmcal.errors import InputFileError, PkmcalError
 from pkmcal.io.export_linuxcnc import HAL_PREFIX
 from pkmcal.io.limits import MAX_MAGNITUDE
+from pkmcal.mechanisms.hexapod_reach import loose_stroke_note
 
 #: ``[TRAJ] LINEAR_UNITS`` / ``[JOINT_N] UNITS`` values → mm per unit.
 LINEAR_UNITS = {"mm": 1.0, "metric": 1.0, "cm": 10.0, "in": 25.4, "inch": 25.4, "imperial": 25.4}
@@ -372,9 +377,6 @@ def machine_from_linuxcnc(hal: str | os.PathLike, ini_path: str | os.PathLike | 
         raise PkmcalError(f"[JOINT_{n}] HOME_OFFSET = {L0[n]!r} mm is not a strut length; use --offsets zero "
                           "(readings = joint values) or fix HOME_OFFSET")
     stroke = np.stack([lo - L0, hi - L0], axis=1)
-    if np.any(lo <= 0):
-        notes.append("joint limits allow strut lengths <= 0 (genhexkins refuses them): the stroke in the machine "
-                     "file is not the machine's; set [JOINT_N] MIN_LIMIT/MAX_LIMIT to the real strut range")
     home = None
     traj_home = ini.get("TRAJ", "HOME")
     if traj_home is not None:
@@ -402,6 +404,10 @@ def machine_from_linuxcnc(hal: str | os.PathLike, ini_path: str | os.PathLike | 
                           metadata=metadata)
     except PkmcalError as exc:
         raise PkmcalError(f"{hal_src}: {exc}") from None
+    limits_from = "--joint-limits" if joint_limits is not None else f"[JOINT_N] MIN_LIMIT/MAX_LIMIT of {ini.path}"
+    _, loose = loose_stroke_note(machine, where=limits_from)
+    if loose is not None:
+        notes.append(loose + ("; genhexkins refuses struts of length 0 or less" if np.any(lo <= 0) else ""))
     if np.any(~np.isnan(joint_home)) and traj_home is not None:
         L = machine.leg_lengths(machine.home_pose)[0]
         dev = np.nanmax(np.abs(L - joint_home))

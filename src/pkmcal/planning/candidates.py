@@ -18,8 +18,12 @@ home: coordinate i spans ``home_i ± t_i·h_i`` with t_i ∈ (0, 1] the largest 
 (bisection, 24 halvings, all axes in one check per halving) at which both poses
 home ± t_i h_i e_i are reachable (with the safety margin) and measurable, for the default
 shape h = (s, s, s/2, s/r, s/r, s/r), s = the mean actuator stroke (reading units) and
-r = the platform joint radius (mm) (the angles rotate a platform joint by s). Random and
-grid candidates are drawn in this box and filtered. Corner selection (paper 1) needs all 64 corners
+r = the platform joint radius (mm) (the angles rotate a platform joint by s). Either box
+stays within the range in which the Euler angles represent each orientation once
+(:func:`angle_bounds`: a, c within ±180°, b within ±90°, from
+:data:`~pkmcal.conventions.EULER_RANGES`): the search goes no further, a declared box
+beyond it is clipped with a note (the rotations beyond are those inside, by whole turns
+or by the convention's other branch). Random and grid candidates are drawn in this box and filtered. Corner selection (paper 1) needs all 64 corners
 reachable: :func:`corner_box` shrinks the box about its centre by the largest common scale
 t ∈ (0, 1] whose corners all pass (same bisection).
 
@@ -55,7 +59,7 @@ from typing import Callable
 
 import numpy as np
 
-from pkmcal.conventions import POSE_COLUMNS, euler_to_matrix
+from pkmcal.conventions import EULER_RANGES, POSE_COLUMNS, euler_to_matrix
 from pkmcal.errors import InputFileError, PkmcalError
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.mechanisms.frame import Frame
@@ -242,16 +246,48 @@ def corner_box(mechanism: Mechanism, box: np.ndarray, setup: MeasurementSetup | 
     return _scaled_box(center, half, t)
 
 
+def angle_bounds(mechanism: Mechanism) -> np.ndarray:
+    """Bounds (n, 2) of each pose coordinate in a planning box: the Euler angles' ranges
+    (:data:`~pkmcal.conventions.EULER_RANGES`: a and c ±π, b ±π/2) on a machine with the
+    pose convention, ±π on any other angle, unbounded lengths."""
+    n = mechanism.n_dof
+    bounds = np.tile([-np.inf, np.inf], (n, 1))
+    angle = np.flatnonzero(np.asarray(mechanism.pose_is_angle, dtype=bool))
+    bounds[angle] = [-np.pi, np.pi]
+    if "pose-convention" in mechanism.abilities and n == len(POSE_COLUMNS):
+        bounds[3:6] = EULER_RANGES
+    return bounds
+
+
+def _clip_box(mechanism: Mechanism, box: np.ndarray, notes: list[str] | None, what: str) -> np.ndarray:
+    """``box`` clipped to :func:`angle_bounds`, with a note naming the coordinates clipped."""
+    bounds = angle_bounds(mechanism)
+    clipped = np.stack([np.maximum(box[:, 0], bounds[:, 0]), np.minimum(box[:, 1], bounds[:, 1])], axis=1)
+    changed = np.flatnonzero(np.any(clipped != box, axis=1))
+    if notes is not None and len(changed):
+        notes.append(f"{what}: " + ", ".join(
+            f"{mechanism.pose_names[i]} [{np.rad2deg(box[i, 0]):.6g}, {np.rad2deg(box[i, 1]):.6g}] deg -> "
+            f"[{np.rad2deg(clipped[i, 0]):.6g}, {np.rad2deg(clipped[i, 1]):.6g}]" for i in changed)
+            + " (beyond the range in which the Euler angles represent each orientation once: a, c ±180, b ±90)")
+    return clipped
+
+
 @blas_single_threaded
 def workspace_box(mechanism: Mechanism, setup: MeasurementSetup | None = None, *,
-                  margin: float = DEFAULT_MARGIN, measurability: Measurability = Measurability()) -> np.ndarray:
+                  margin: float = DEFAULT_MARGIN, measurability: Measurability = Measurability(),
+                  notes: list[str] | None = None) -> np.ndarray:
     """The machine's declared box, or the largest reachable box around home along its
-    :meth:`~pkmcal.mechanisms.base.Mechanism.reach_search_shape` (module docstring)."""
+    :meth:`~pkmcal.mechanisms.base.Mechanism.reach_search_shape` (module docstring); either
+    within :func:`angle_bounds` (a declared box beyond them is clipped, with a note appended
+    to ``notes``; the search never goes beyond them)."""
     shape = mechanism.reach_search_shape()
     if shape is None:
-        return np.array(mechanism.workspace_box(), dtype=float).reshape(mechanism.n_dof, 2)
+        return _clip_box(mechanism, np.array(mechanism.workspace_box(), dtype=float).reshape(mechanism.n_dof, 2),
+                         notes, "the machine's workspace box is clipped")
     home = np.asarray(mechanism.home_pose, dtype=float)
-    half = np.asarray(shape, dtype=float)
+    bounds = angle_bounds(mechanism)
+    # the search is symmetric about home: no further than the farther bound on either side
+    half = np.minimum(np.asarray(shape, dtype=float), np.maximum(bounds[:, 1] - home, home - bounds[:, 0]))
     n = len(half)
 
     def ok(t):               # the poses home ± t_i h_i e_i of every axis i in one check
@@ -266,7 +302,7 @@ def workspace_box(mechanism: Mechanism, setup: MeasurementSetup | None = None, *
                           f"{', '.join(mechanism.pose_names[i] for i in np.flatnonzero(reach <= 1e-6 * half))} "
                           "within the limits and the safety margin; check the home pose, the margin and the sensor "
                           "set-up")
-    return np.stack([home - reach, home + reach], axis=1)
+    return _clip_box(mechanism, np.stack([home - reach, home + reach], axis=1), None, "")
 
 
 # -- generators -------------------------------------------------------------------------
