@@ -318,3 +318,26 @@ def test_cli_export_ini_and_import_round_trip(tmp_path):
     ]:
         res = runner.invoke(cli, args)
         assert res.exit_code == 2 and fragment in res.stderr and "Traceback" not in res.output, (args, res.output)
+
+
+def test_linuxcnc_sample_joint_limits_are_reported_as_too_loose(tmp_path):
+    """LinuxCNC's hexapod sample lets every strut run from -1000 to 1000 inch on struts of
+    29.75 inch at home: the import writes the stroke as the file says and its note names the
+    limit, the range the geometry allows (L_h / 2 .. 2 L_h) and that genhexkins refuses
+    struts <= 0. A configuration with a real strut range has no such note."""
+    from helpers import write_linuxcnc_hexapod_sample
+
+    hal, ini = write_linuxcnc_hexapod_sample(tmp_path / "sample")
+    got = machine_from_linuxcnc(hal, ini)
+    np.testing.assert_allclose(got.machine.offset[:, None] + got.machine.stroke, [[-25400.0, 25400.0]] * 6,
+                               rtol=1e-12)
+    loose = [n for n in got.notes if "strut range" in n]
+    assert len(loose) == 1
+    assert f"(-25400 to 25400 mm, [JOINT_N] MIN_LIMIT/MAX_LIMIT of {ini})" in loose[0]
+    assert "(377.8 to 1511 mm)" in loose[0] and "genhexkins refuses struts of length 0 or less" in loose[0]
+    res = CliRunner().invoke(cli, ["import", "linuxcnc", str(hal), "--joint-limits", "-100,2000", "-o",
+                                   str(tmp_path / "m.yaml")])
+    assert res.exit_code == 0, res.output
+    assert "(-100 to 2000 mm, --joint-limits)" in res.output and "refuses" in res.output
+    hal2, ini2 = export_files(tmp_path, builtin_machine("stewart-prototype"))
+    assert not [n for n in machine_from_linuxcnc(hal2, ini2).notes if "strut range" in n]
