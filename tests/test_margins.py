@@ -249,6 +249,7 @@ def test_linuxcnc_sample_plans_inside_its_geometry_with_every_margin_option(tmp_
     assert f"[JOINT_N] MIN_LIMIT/MAX_LIMIT of {ini}" in res.output and "-25400 to 25400 mm" in res.output
     assert "(377.8 to 1511 mm)" in res.output                 # L_h / 2 and 2 L_h, L_h = 755.6 mm
     assert "joint tilt limits beyond 90°" in res.output
+    assert f"workspace box ([AXIS_X..C] MIN_LIMIT/MAX_LIMIT of {ini}) is mostly beyond" in res.output
     assert "# note: the strut range of legs 1, 2, 3, 4, 5, 6" in out.read_text()   # the file records it
 
 
@@ -259,7 +260,8 @@ def test_linuxcnc_sample_planning_box_is_mostly_reachable(tmp_path):
     hal, ini = write_linuxcnc_hexapod_sample(tmp_path)
     machine = machine_from_linuxcnc(hal, ini).machine
     plan = plan_poses(machine, builtin_setup("full-pose-paper1"), 8, n_candidates=300, seed=1, margin=3.0)
-    assert len(plan.notes) == 2 and "[JOINT_N] MIN_LIMIT/MAX_LIMIT" in plan.notes[0]
+    assert len(plan.notes) == 3 and "[JOINT_N] MIN_LIMIT/MAX_LIMIT" in plan.notes[0]
+    assert f"workspace box ([AXIS_X..C] MIN_LIMIT/MAX_LIMIT of {ini}) is mostly beyond" in plan.notes[2]
     base, platform, home_struts = _sample_geometry()
     rng = np.random.default_rng(0)
 

@@ -89,10 +89,11 @@ def test_declared_workspace_beyond_the_euler_range_is_clipped_with_a_note(tmp_pa
     res = CliRunner().invoke(cli, ["plan", str(machine), "--setup", "full-pose-paper1", "--n", "8",
                                    "--n-candidates", "100", "-o", str(out)])
     assert res.exit_code == 0, res.output
-    assert "a [-400, 400] deg -> [-180, 180], b [-100, 30] deg -> [-90, 30]" in res.output
+    assert "workspace box ('workspace:' in the machine file) is clipped: a [-400, 400] deg -> [-180, 180], " \
+           "b [-100, 30] deg -> [-90, 30]" in res.output
     got = _written_poses(out)
     assert np.all(np.abs(got[:, 3]) <= 180.0) and np.all(got[:, 4] >= -90.0)
     # and the rotations of that box are mostly beyond the prototype's joints (0.35 % of it
     # passes): planning draws in the reach from home instead, and says so
-    assert "workspace box is mostly beyond what the machine reaches" in res.output
+    assert "workspace box ('workspace:' in the machine file) is mostly beyond what the machine reaches" in res.output
     assert np.all(np.abs(got[:, 3:5]) < 15.0)

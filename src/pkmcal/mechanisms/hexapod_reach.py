@@ -52,17 +52,10 @@ def strut_range(mechanism: Hexapod) -> np.ndarray:
     return np.stack([home_lengths / STRUT_RATIO, home_lengths * STRUT_RATIO], axis=1)
 
 
-def _stroke_source(mechanism: Hexapod) -> str:
-    """Where the machine's stroke was set, in the words of that file."""
-    linuxcnc = mechanism.metadata.get("linuxcnc") if mechanism.metadata else None
-    if isinstance(linuxcnc, dict) and linuxcnc.get("ini"):
-        return f"[JOINT_N] MIN_LIMIT/MAX_LIMIT of {linuxcnc['ini']}"
-    return "the legs' 'stroke:' in the machine file"
-
-
-def loose_stroke_note(mechanism: Hexapod, where: str | None = None) -> tuple[np.ndarray, str | None]:
+def loose_stroke_note(mechanism: Hexapod) -> tuple[np.ndarray, str | None]:
     """(the stroke (6, 2) clipped to :func:`strut_range`, in reading units; a note naming the
-    looser limit and ``where`` it was set, or None when the stroke is within the range).
+    looser limit and where it was set (:meth:`~pkmcal.mechanisms.base.Mechanism.limit_source`), or None when the stroke is
+    within the range).
     A leg whose stroke does not overlap the range is left as it is (its home pose is then
     outside its stroke, which planning reports)."""
     lengths = mechanism.offset[:, None] + mechanism.gains[:, None] * np.asarray(mechanism.stroke, dtype=float)
@@ -75,9 +68,10 @@ def loose_stroke_note(mechanism: Hexapod, where: str | None = None) -> tuple[np.
     stroke[clip, 0] = (lo[clip] - mechanism.offset[clip]) / mechanism.gains[clip]
     stroke[clip, 1] = (hi[clip] - mechanism.offset[clip]) / mechanism.gains[clip]
     legs = ", ".join(str(int(i) + 1) for i in np.flatnonzero(clip))
+    source = mechanism.limit_source("stroke", "the legs' 'stroke:' in the machine file")
     home = mechanism.leg_lengths(np.asarray(mechanism.home_pose, dtype=float)[None, :])[0][clip]
     note = (f"the strut range of legs {legs} ({lengths[clip, 0].min():.6g} to {lengths[clip, 1].max():.6g} mm, "
-            f"{where or _stroke_source(mechanism)}) is beyond what struts {home.min():.4g}"
+            f"{source}) is beyond what struts {home.min():.4g}"
             f"{'' if np.ptp(home) < 0.05 else f'-{home.max():.4g}'} mm long at home reach: a single-stage strut "
             f"runs between 1/{STRUT_RATIO:g} and {STRUT_RATIO:g} times its home length "
             f"({allowed[clip, 0].min():.4g} to {allowed[clip, 1].max():.4g} mm); planning keeps the struts within "

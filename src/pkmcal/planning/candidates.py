@@ -302,17 +302,21 @@ def _reached_part(mechanism: Mechanism, box: np.ndarray, setup, margin, measurab
         return check_candidates(mechanism, setup, poses, margin=margin, measurability=measurability).ok
 
     t = _bisect_scales(ok, 2 * n)
+    if not np.any(t > 0):
+        return box                                   # home fails the checks: the candidates' error says so
     shrunk = np.stack([home + t[n:] * edge[n:], home + t[:n] * edge[:n]], axis=1)
     if notes is not None:
         changed = np.flatnonzero(np.any(shrunk != box, axis=1))
         unit = ["deg" if a else "mm" for a in mechanism.pose_is_angle]
         shown = [np.where(np.asarray(mechanism.pose_is_angle)[:, None], np.rad2deg(b), b) for b in (box, shrunk)]
-        notes.append(f"the machine's workspace box is mostly beyond what the machine reaches ({100 * reached:.2g} % of "
+        source = mechanism.limit_source("workspace", "'workspace:' in the machine file")
+        notes.append(f"the machine's workspace box ({source}) is mostly beyond what the machine reaches "
+                     f"({100 * reached:.2g} % of "
                      f"{N_PROBE} uniform poses in it pass the limits): planning draws in the reach from home along "
                      "each coordinate: " + ", ".join(
                          f"{mechanism.pose_names[i]} [{shown[0][i, 0]:.6g}, {shown[0][i, 1]:.6g}] -> "
                          f"[{shown[1][i, 0]:.4g}, {shown[1][i, 1]:.4g}] {unit[i]}" for i in changed)
-                     + "; set 'workspace:' to the poses the machine reaches")
+                     + "; set it to the poses the machine reaches")
     return shrunk
 
 
@@ -328,8 +332,9 @@ def workspace_box(mechanism: Mechanism, setup: MeasurementSetup | None = None, *
     shape = mechanism.reach_search_shape()
     home = np.asarray(mechanism.home_pose, dtype=float)
     if shape is None:
+        source = mechanism.limit_source("workspace", "'workspace:' in the machine file")
         box = _clip_box(mechanism, np.array(mechanism.workspace_box(), dtype=float).reshape(mechanism.n_dof, 2),
-                        notes, "the machine's workspace box is clipped")
+                        notes, f"the machine's workspace box ({source}) is clipped")
         return _reached_part(mechanism, box, setup, margin, measurability, notes)
     bounds = angle_bounds(mechanism)
     # the search is symmetric about home: no further than the farther bound on either side

@@ -7,7 +7,9 @@ the planned one. With joint position errors of size δ (mm):
 
 * the platform turns by up to about δ / r_p (r_p: the smallest platform joint radius), which
   tilts every spherical joint by as much, and each leg's direction changes by about δ / L
-  (L: the shortest leg, L0 + lowest reading); hence the **joint tilt margin**
+  (L: the shortest leg, L0 + lowest reading, within what the geometry reaches:
+  :meth:`~pkmcal.mechanisms.base.Mechanism.within_geometry`, so that a configuration that
+  allows struts of length ≤ 0 still has one); hence the **joint tilt margin**
 
       Δθ = atan(δ / r_p) + atan(δ / L_min)                          (degrees on the command line)
 
@@ -23,7 +25,7 @@ paper 2's Table 4 (1–3 mm). On the prototype (r_p = 70 mm, L_min = 305 mm) it 
 3.02°, and every pose of the indicator tutorial's plan is then reached by
 ``stewart-prototype-real`` (18 of 45 exceeded its 29° S-joint tilt with the former default of
 0.1 mm / 0.1°). A machine expected to deviate more needs larger margins (``--stroke-margin``,
-``--tilt-margin``).
+``--tilt-margin``). A margin that is given is not derived (:func:`resolve_margin`).
 
 **Deltas** (:class:`DeltaSafetyMargin`; the platform only translates, so only the arm
 direction and the nozzle position move):
