@@ -487,8 +487,9 @@ def write_linuxcnc_hexapod_sample(folder: Path) -> tuple[Path, Path]:
                 for axis, v in zip("xyz", joint)]
     hal.append("net tool-offset genhexkins.tool-offset motion.tooloffset.z")
     lim = LINUXCNC_SAMPLE_JOINT_LIMIT_IN
+    home = " ".join(f"{v:g}" for v in LINUXCNC_SAMPLE_HOME_IN)
     ini = ["# limits of LinuxCNC's configs/sim/axis/vismach/hexapod-sim/hexapod.ini", "[EMC]",
-           "MACHINE = hexapod (switchkins)", "[TRAJ]", f"HOME = {' '.join(f'{v:g}' for v in LINUXCNC_SAMPLE_HOME_IN)} 0 0 0",
+           "MACHINE = hexapod (switchkins)", "[TRAJ]", f"HOME = {home} 0 0 0",
            "COORDINATES = X Y Z A B C", "LINEAR_UNITS = inch", "ANGULAR_UNITS = degree", "[KINS]",
            "KINEMATICS = genhexkins", "JOINTS = 6"]
     for n in range(6):

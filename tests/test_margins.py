@@ -305,3 +305,20 @@ def test_debian_linuxcnc_sample_plans_inside_its_geometry(tmp_path):
     names = ["x", "y", "z", "a", "b", "c"]
     _assert_within_the_geometry(read_table(out, names, kinds={})[names], 3.0, 3.0)
     assert "[JOINT_N] MIN_LIMIT/MAX_LIMIT" in res.output
+
+
+def test_info_reports_the_sample_workspace_within_its_geometry(tmp_path):
+    """``pkmcal info`` on the sample: the single-axis ranges from home are those of the
+    machine within its geometry (x within ±2 L_h, where the configured struts reached
+    4.4 m), with the notes naming the loose limits."""
+    runner = CliRunner()
+    hal, ini = write_linuxcnc_hexapod_sample(tmp_path / "cfg")
+    machine = tmp_path / "hexapod.yaml"
+    _import_sample(runner, hal, ini, machine)
+    res = runner.invoke(cli, ["info", str(machine), "--n-poses", "20"])
+    assert res.exit_code == 0, res.output
+    assert "note: the strut range of legs 1, 2, 3, 4, 5, 6 (-25400 to 25400 mm" in res.output
+    _, _, home_struts = _sample_geometry()
+    x_line = next(line for line in res.output.splitlines() if line.startswith("  x "))
+    lo, hi = (float(v) for v in x_line.split()[1:4:2])
+    assert -2 * home_struts.max() < lo < 0 < hi < 2 * home_struts.max(), x_line

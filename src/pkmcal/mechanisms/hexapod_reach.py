@@ -15,8 +15,9 @@ beyond the first bound:
 * **strut length** within [L_h / k, k·L_h], k = :data:`STRUT_RATIO` = 2, L_h the leg's
   length at the home pose. A single-stage strut (a screw or a rod in its housing) cannot
   extend by more than its retracted length, L_max < 2·L_min, and its home length lies
-  between the two, so L_min > L_max / 2 ≥ L_h / 2 and L_max < 2·L_min ≤ 2·L_h. (A machine
-  with multi-stage telescopic struts is planned within this range too; the note says so.)
+  between the two, so L_min > L_max / 2 ≥ L_h / 2 and L_max < 2·L_min ≤ 2·L_h, wherever
+  home lies in the stroke. (Multi-stage telescopic struts, the one kind beyond, are planned
+  within this range too.)
 * **joint tilt** below :data:`MAX_TILT` = 90° at the U and S joints (the angle between the
   leg and the joint's axis, as :class:`~pkmcal.mechanisms.hexapod.HexapodLimits` measures
   it): a leg tilted further passes through the base or the platform its joint is mounted
@@ -54,10 +55,9 @@ def strut_range(mechanism: Hexapod) -> np.ndarray:
 
 def loose_stroke_note(mechanism: Hexapod) -> tuple[np.ndarray, str | None]:
     """(the stroke (6, 2) clipped to :func:`strut_range`, in reading units; a note naming the
-    looser limit and where it was set (:meth:`~pkmcal.mechanisms.base.Mechanism.limit_source`), or None when the stroke is
-    within the range).
-    A leg whose stroke does not overlap the range is left as it is (its home pose is then
-    outside its stroke, which planning reports)."""
+    looser limit and where it was set (:meth:`~pkmcal.mechanisms.base.Mechanism.limit_source`),
+    or None when the stroke is within the range). A leg whose stroke does not overlap the
+    range is left as it is (its home pose is then outside its stroke, which planning reports)."""
     lengths = mechanism.offset[:, None] + mechanism.gains[:, None] * np.asarray(mechanism.stroke, dtype=float)
     allowed = strut_range(mechanism)
     lo, hi = np.maximum(lengths[:, 0], allowed[:, 0]), np.minimum(lengths[:, 1], allowed[:, 1])
@@ -74,8 +74,8 @@ def loose_stroke_note(mechanism: Hexapod) -> tuple[np.ndarray, str | None]:
             f"{source}) is beyond what struts {home.min():.4g}"
             f"{'' if np.ptp(home) < 0.05 else f'-{home.max():.4g}'} mm long at home reach: a single-stage strut "
             f"runs between 1/{STRUT_RATIO:g} and {STRUT_RATIO:g} times its home length "
-            f"({allowed[clip, 0].min():.4g} to {allowed[clip, 1].max():.4g} mm); planning keeps the struts within "
-            "that; set the real strut range")
+            f"({allowed[clip, 0].min():.4g} to {allowed[clip, 1].max():.4g} mm); pkmcal plan and info keep the "
+            "struts within that; set the real strut range")
     return stroke, note
 
 
@@ -94,8 +94,9 @@ def reachable_machine(mechanism: Hexapod) -> tuple[Hexapod, tuple[str, ...]]:
         said = [f"{'U (base)' if n[0] == 'u' else 'S (platform)'} joint "
                 + ("none" if getattr(lim, n) is None else f"{math.degrees(getattr(lim, n)):.4g}°") for n in tilts]
         notes.append(f"joint tilt limits beyond 90° ({', '.join(said)}; 'limits: {', '.join(tilts)}' in the machine "
-                     "file, LinuxCNC has no such setting): planning keeps every leg within 90° of its joints' axes "
-                     "(a leg beyond passes through the plate its joint is mounted on); add the joints' real limits")
+                     "file, LinuxCNC has no such setting): pkmcal plan and info keep every leg within 90° of its "
+                     "joints' axes (a leg beyond passes through the plate its joint is mounted on); add the joints' "
+                     "real limits")
     if note is None and not tilts:
         return mechanism, ()
     return replace(mechanism, stroke=stroke, limits=replace(lim, **tilts)), tuple(notes)

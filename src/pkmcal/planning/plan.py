@@ -8,10 +8,11 @@ Jacobian rows on the identifiable parameters, in batches: :func:`candidate_block
 parameters and scaling, so ``pkmcal plan`` and ``pkmcal observability`` agree.
 
 Candidates are checked inside the nominal machine's limits, clipped first to what its joint
-geometry reaches (:meth:`~pkmcal.mechanisms.base.Mechanism.within_geometry`: a controller's configuration may allow struts of metres on a
-machine of decimetres), by the safety margins of :mod:`.margins` (by default those a real machine with joint errors of 3 mm survives), and
-the stages report progress through an optional ``progress(stage)`` announcer
-(:data:`pkmcal.progress.Stages`).
+geometry reaches (:meth:`~pkmcal.mechanisms.base.Mechanism.within_geometry`: a controller's
+configuration may allow struts of metres on a machine of decimetres, with a note in
+:attr:`Plan.notes`), by the safety margins of :mod:`.margins` (by default those a real
+machine with joint errors of 3 mm survives), and the stages report progress through an
+optional ``progress(stage)`` announcer (:data:`pkmcal.progress.Stages`).
 """
 
 from __future__ import annotations
