@@ -463,3 +463,41 @@ def hexapod_pose_jacobian(sensor, poses, params=None):
 
     poses = np.atleast_2d(np.asarray(poses, dtype=float))
     return euler_pose_jacobian(sensor.frame_jacobian(frames_of(poses), params), poses)
+
+
+#: LinuxCNC's own hexapod sample, typed in from its files (LinuxCNC
+#: ``configs/sim/axis/vismach/hexapod-sim/kinematics.hal`` and ``hexapod.ini``; Debian's
+#: linuxcnc-uspace installs them under ``/usr/share/doc/linuxcnc/examples/sample-configs/``):
+#: base and platform joints (inch) and the INI values pkmcal reads. Its joint limits are
+#: ±1000 inch on struts 29.7466 inch long at home, and LinuxCNC has no joint tilt setting.
+LINUXCNC_SAMPLE_BASE_IN = [(-22.950, 13.250, 0.0), (22.950, 13.250, 0.0), (22.950, 13.250, 0.0),
+                           (0.000, -26.500, 0.0), (0.000, -26.500, 0.0), (-22.950, 13.250, 0.0)]
+LINUXCNC_SAMPLE_PLATFORM_IN = [(-1.000, 11.500, 0.0), (1.000, 11.500, 0.0), (10.459, -4.884, 0.0),
+                               (9.459, -6.616, 0.0), (-9.459, -6.616, 0.0), (-10.459, -4.884, 0.0)]
+LINUXCNC_SAMPLE_HOME_IN = (0.0, 0.0, 20.0)
+LINUXCNC_SAMPLE_JOINT_LIMIT_IN = 1000.0
+
+
+def write_linuxcnc_hexapod_sample(folder: Path) -> tuple[Path, Path]:
+    """Our own HAL and INI files with the geometry and limits of LinuxCNC's hexapod sample
+    (:data:`LINUXCNC_SAMPLE_BASE_IN`; the same values, not LinuxCNC's files)."""
+    hal = ["# geometry of LinuxCNC's configs/sim/axis/vismach/hexapod-sim/kinematics.hal"]
+    for part, joints in (("base", LINUXCNC_SAMPLE_BASE_IN), ("platform", LINUXCNC_SAMPLE_PLATFORM_IN)):
+        hal += [f"setp genhexkins.{part}.{n}.{axis} {v:.3f}" for n, joint in enumerate(joints)
+                for axis, v in zip("xyz", joint)]
+    hal.append("net tool-offset genhexkins.tool-offset motion.tooloffset.z")
+    lim = LINUXCNC_SAMPLE_JOINT_LIMIT_IN
+    home = " ".join(f"{v:g}" for v in LINUXCNC_SAMPLE_HOME_IN)
+    ini = ["# limits of LinuxCNC's configs/sim/axis/vismach/hexapod-sim/hexapod.ini", "[EMC]",
+           "MACHINE = hexapod (switchkins)", "[TRAJ]", f"HOME = {home} 0 0 0",
+           "COORDINATES = X Y Z A B C", "LINEAR_UNITS = inch", "ANGULAR_UNITS = degree", "[KINS]",
+           "KINEMATICS = genhexkins", "JOINTS = 6"]
+    for n in range(6):
+        ini += [f"[JOINT_{n}]", "TYPE = LINEAR", f"MIN_LIMIT = -{lim:.1f}", f"MAX_LIMIT = {lim:.1f}",
+                "HOME_OFFSET= 29.7466", "HOME = 29.7466"]
+    for axis in "XYZABC":
+        ini += [f"[AXIS_{axis}]", f"MIN_LIMIT = -{lim:.1f}", f"MAX_LIMIT = {lim:.1f}"]
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "kinematics.hal").write_text("\n".join(hal) + "\n")
+    (folder / "hexapod.ini").write_text("\n".join(ini) + "\n")
+    return folder / "kinematics.hal", folder / "hexapod.ini"

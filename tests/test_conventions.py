@@ -11,6 +11,7 @@ from hypothesis.extra.numpy import arrays
 from scipy.spatial.transform import Rotation
 
 from pkmcal.conventions import (
+    EULER_RANGES,
     euler_pose_jacobian,
     euler_rate_matrix,
     euler_to_matrix,
@@ -19,6 +20,7 @@ from pkmcal.conventions import (
     poses_to_file_units,
     rotation_error,
     rotation_vector_to_matrix,
+    wrap_angle,
 )
 
 angle = st.floats(-np.pi, np.pi, allow_nan=False)
@@ -185,3 +187,27 @@ def test_matrix_to_euler_exact_half_turns_with_signed_zeros():
 def test_matrix_to_euler_range_everywhere(abc):
     out = matrix_to_euler(euler_to_matrix(abc))
     assert np.all(out[[0, 2]] > -np.pi) and np.all(out[[0, 2]] <= np.pi) and abs(out[1]) <= np.pi / 2
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.floats(-1e4, 1e4, allow_nan=False), st.integers(-3, 3))
+def test_wrap_angle_is_the_same_rotation_within_minus_pi_to_pi(x, turns):
+    """Whole turns only: the result is in (-π, π], differs from x by a multiple of 2π (to the
+    rounding of |x|), and an angle already inside is returned bit for bit."""
+    w = float(wrap_angle(x))
+    assert -np.pi < w <= np.pi
+    k = (x - w) / (2 * np.pi)
+    assert abs(k - round(k)) <= 8 * np.finfo(float).eps * max(1.0, abs(x)) / (2 * np.pi)
+    inside = float(wrap_angle(np.pi))
+    assert inside == np.pi and float(wrap_angle(-np.pi)) == np.pi      # the half-open end
+    y = float(np.clip(x, -3.14, 3.14))
+    assert float(wrap_angle(y)) == y and float(wrap_angle(y + 2 * np.pi * turns)) == pytest.approx(y, abs=1e-12)
+
+
+def test_euler_ranges_are_those_matrix_to_euler_returns():
+    """The planning box's bounds are the range of matrix_to_euler (a, c: ±π; b: ±π/2)."""
+    rng = np.random.default_rng(0)
+    abc = matrix_to_euler(Rotation.random(2000, random_state=rng).as_matrix())
+    for k, (lo, hi) in enumerate(EULER_RANGES):
+        assert lo <= abc[:, k].min() and abc[:, k].max() <= hi
+        assert abc[:, k].min() < lo + 0.1 and abc[:, k].max() > hi - 0.1     # and they are reached

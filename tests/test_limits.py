@@ -5,6 +5,8 @@ formulas it replaces, and its singularity certificate against the SVD."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -508,3 +510,49 @@ def test_check_limits_without_margins_on_non_finite_poses_and_threads():
     rows = [M.check_limits(p, margin=0.1, margins=False).ok[0] for p in poses[:50]]   # one by one
     assert rows == fast.ok[:50].tolist()
     assert 0 < fast.ok.sum() < len(poses)
+
+
+# -- what the geometry reaches (pkmcal.mechanisms.hexapod_reach; issue 24 item 5) ----------------
+
+
+def test_machines_within_their_geometry_are_kept_as_they_are():
+    """Every built-in hexapod's stroke lies within 1/2..2 times its home strut length and its
+    tilt limits below 90°: the same machine, no note (plans on it do not change)."""
+    for name in ("stewart-prototype", "stewart-prototype-real"):
+        m = builtin_machine(name)
+        assert m.within_geometry() == (m, ())
+    planar = builtin_machine("planar-3dof-4act")
+    assert planar.within_geometry() == (planar, ())
+
+
+def test_linuxcnc_sample_is_clipped_to_half_and_twice_its_home_struts(tmp_path):
+    """LinuxCNC's hexapod sample (±1000 inch struts, no tilt limits): the stroke becomes
+    [L_h / 2, 2 L_h] with L_h the strut at home, computed here from the typed-in joints, and
+    the tilt limits 90°; the notes name the INI limits and the missing tilt limits."""
+    from helpers import (
+        LINUXCNC_SAMPLE_BASE_IN,
+        LINUXCNC_SAMPLE_HOME_IN,
+        LINUXCNC_SAMPLE_PLATFORM_IN,
+        write_linuxcnc_hexapod_sample,
+    )
+
+    from pkmcal.io.import_linuxcnc import machine_from_linuxcnc
+
+    hal, ini = write_linuxcnc_hexapod_sample(tmp_path)
+    m = machine_from_linuxcnc(hal, ini).machine
+    home = np.linalg.norm(25.4 * (np.array(LINUXCNC_SAMPLE_HOME_IN) + LINUXCNC_SAMPLE_PLATFORM_IN
+                                  - np.array(LINUXCNC_SAMPLE_BASE_IN)), axis=1)
+    clipped, notes = m.within_geometry()
+    lengths = clipped.offset[:, None] + clipped.stroke
+    np.testing.assert_allclose(lengths, np.stack([home / 2, 2 * home], axis=1), rtol=1e-12)
+    assert clipped.limits.u_joint_tilt == clipped.limits.s_joint_tilt == np.pi / 2
+    assert m.stroke[0, 0] < -25000 and m.limits.u_joint_tilt is None      # the machine itself unchanged
+    assert len(notes) == 2 and f"[JOINT_N] MIN_LIMIT/MAX_LIMIT of {ini}" in notes[0]
+    assert "U (base) joint none, S (platform) joint none" in notes[1]
+    # idempotent: the clipped machine is within its geometry
+    assert clipped.within_geometry() == (clipped, ())
+    # a tilt limit beyond 90° is brought to 90°, one below is kept
+    wide = replace(clipped, limits=replace(clipped.limits, u_joint_tilt=2.0, s_joint_tilt=0.5))
+    again, notes = wide.within_geometry()
+    assert again.limits.u_joint_tilt == np.pi / 2 and again.limits.s_joint_tilt == 0.5
+    assert notes == (notes[0],) and "U (base) joint 114.6°" in notes[0]

@@ -318,3 +318,83 @@ def test_cli_export_ini_and_import_round_trip(tmp_path):
     ]:
         res = runner.invoke(cli, args)
         assert res.exit_code == 2 and fragment in res.stderr and "Traceback" not in res.output, (args, res.output)
+
+
+def test_linuxcnc_sample_joint_limits_are_reported_as_too_loose(tmp_path):
+    """LinuxCNC's hexapod sample lets every strut run from -1000 to 1000 inch on struts of
+    29.75 inch at home: the import writes the stroke as the file says and its note names the
+    limit, the range the geometry allows (L_h / 2 .. 2 L_h) and that genhexkins refuses
+    struts <= 0. A configuration with a real strut range has no such note."""
+    from helpers import write_linuxcnc_hexapod_sample
+
+    hal, ini = write_linuxcnc_hexapod_sample(tmp_path / "sample")
+    got = machine_from_linuxcnc(hal, ini)
+    np.testing.assert_allclose(got.machine.offset[:, None] + got.machine.stroke, [[-25400.0, 25400.0]] * 6,
+                               rtol=1e-12)
+    loose = [n for n in got.notes if "strut range" in n]
+    assert len(loose) == 1
+    assert f"(-25400 to 25400 mm, [JOINT_N] MIN_LIMIT/MAX_LIMIT of {ini})" in loose[0]
+    assert "(377.8 to 1511 mm)" in loose[0] and "genhexkins refuses struts of length 0 or less" in loose[0]
+    res = CliRunner().invoke(cli, ["import", "linuxcnc", str(hal), "--joint-limits", "-100,2000", "-o",
+                                   str(tmp_path / "m.yaml")])
+    assert res.exit_code == 0, res.output
+    assert "(-100 to 2000 mm, --joint-limits)" in res.output and "refuses" in res.output
+    hal2, ini2 = export_files(tmp_path, builtin_machine("stewart-prototype"))
+    assert not [n for n in machine_from_linuxcnc(hal2, ini2).notes if "strut range" in n]
+
+
+def test_axis_soft_limits_are_the_workspace_within_the_euler_range(tmp_path):
+    """[AXIS_X..C] MIN_LIMIT/MAX_LIMIT (LinuxCNC's soft limits in world coordinates, [TRAJ]
+    units) become the machine's workspace; angles beyond A, C ±180° and B ±90° are clipped
+    with a note naming the section; an axis without limits (LinuxCNC: ±1e99) gives no
+    workspace, with a note; MAX < MIN is an error naming the file and line."""
+    from helpers import write_linuxcnc_hexapod_sample
+
+    hal, ini = write_linuxcnc_hexapod_sample(tmp_path / "sample")
+    got = machine_from_linuxcnc(hal, ini)
+    box = got.machine.workspace
+    np.testing.assert_allclose(box[:3], [[-25400.0, 25400.0]] * 3, rtol=1e-12)
+    np.testing.assert_array_equal(box[3:], [[-np.pi, np.pi], [-np.pi / 2, np.pi / 2], [-np.pi, np.pi]])
+    clipped = [n for n in got.notes if "[AXIS_A]" in n]
+    assert len(clipped) == 1 and "[AXIS_B] MIN_LIMIT/MAX_LIMIT = -1000/1000 deg" in clipped[0]
+    text = machine_to_text(got.machine)
+    assert "a: [-180.0, 180.0]" in text and "b: [-90.0, 90.0]" in text
+    assert machine_from_text(text).workspace is not None
+
+    small = ini.read_text().replace("[AXIS_A]\nMIN_LIMIT = -1000.0\nMAX_LIMIT = 1000.0",
+                                    "[AXIS_A]\nMIN_LIMIT = -10\nMAX_LIMIT = 20")
+    assert small != ini.read_text()
+    ini.write_text(small)
+    got = machine_from_linuxcnc(hal, ini)
+    np.testing.assert_allclose(np.rad2deg(got.machine.workspace[3]), [-10.0, 20.0], rtol=1e-12)
+    assert not [n for n in got.notes if "[AXIS_A]" in n]
+
+    ini.write_text(small.replace("[AXIS_Y]\nMIN_LIMIT = -1000.0\n", "[AXIS_Y]\n"))
+    got = machine_from_linuxcnc(hal, ini)
+    assert got.machine.workspace is None
+    assert any("no [AXIS_Y] MIN_LIMIT/MAX_LIMIT" in n and "no 'workspace:' imported" in n for n in got.notes)
+
+    ini.write_text(small.replace("[AXIS_Z]\nMIN_LIMIT = -1000.0\nMAX_LIMIT = 1000.0",
+                                 "[AXIS_Z]\nMIN_LIMIT = 10\nMAX_LIMIT = 5"))
+    with pytest.raises(InputFileError, match=r"\[AXIS_Z\] MAX_LIMIT < MIN_LIMIT") as exc:
+        machine_from_linuxcnc(hal, ini)
+    assert str(ini) in str(exc.value) and "line" in str(exc.value)
+
+
+def test_home_angles_beyond_180_are_wrapped_with_a_note(tmp_path):
+    """[TRAJ] HOME = 0 0 20 370 0 -190 (degrees): the same orientation as 10, 0, 170, which
+    the machine file's home gets, with a note; the home strut lengths are unchanged."""
+    from helpers import write_linuxcnc_hexapod_sample
+
+    hal, ini = write_linuxcnc_hexapod_sample(tmp_path)
+    text = ini.read_text()
+    assert "HOME = 0 0 20 0 0 0" in text
+    ini.write_text(text.replace("HOME = 0 0 20 0 0 0", "HOME = 0 0 20 10 0 170"))
+    plain = machine_from_linuxcnc(hal, ini)
+    ini.write_text(text.replace("HOME = 0 0 20 0 0 0", "HOME = 0 0 20 370 0 -190"))
+    turned = machine_from_linuxcnc(hal, ini)
+    np.testing.assert_allclose(np.rad2deg(turned.machine.home_pose[3:]), [10.0, 0.0, 170.0], rtol=0, atol=1e-12)
+    assert any("[TRAJ] HOME = 0 0 20 370 0 -190" in n for n in turned.notes)
+    assert not any("[TRAJ] HOME =" in n for n in plain.notes)
+    np.testing.assert_allclose(turned.machine.leg_lengths(turned.machine.home_pose),
+                               plain.machine.leg_lengths(plain.machine.home_pose), rtol=1e-12)

@@ -6,14 +6,22 @@ paper 2 (Table 4), which the former default (0.1 mm / 0.1°) drove past its S-jo
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from helpers import (
+    LINUXCNC_SAMPLE_BASE_IN,
+    LINUXCNC_SAMPLE_HOME_IN,
+    LINUXCNC_SAMPLE_PLATFORM_IN,
+    write_linuxcnc_hexapod_sample,
+)
 
 from pkmcal.cli.main import cli
 from pkmcal.errors import PkmcalError
 from pkmcal.identification.simulation import simulate_campaign
+from pkmcal.io.import_linuxcnc import machine_from_linuxcnc
 from pkmcal.io.setup_file import builtin_setup
 from pkmcal.io.tables import read_table
 from pkmcal.mechanisms.library import stewart_prototype, stewart_prototype_real
@@ -161,3 +169,156 @@ def test_default_delta_plan_is_reached_by_a_perturbed_delta(name):
     # the margins hold on the nominal machine: every planned pose is that far inside
     safe, check = planning_checks(nominal, plan.margin)
     assert safe.check_limits(plan.poses, margin=check).ok.all()
+
+
+# -- a controller's configuration with limits far beyond the machine (issue 24 item 5) ---------
+
+#: Where Debian's linuxcnc-uspace installs LinuxCNC's hexapod sample.
+DEBIAN_SAMPLE = Path("/usr/share/doc/linuxcnc/examples/sample-configs/sim/axis/vismach/hexapod-sim")
+INCH = 25.4
+
+
+def _sample_geometry():
+    """The sample's joints (mm) and strut lengths at home, from the typed-in values alone."""
+    base = np.array(LINUXCNC_SAMPLE_BASE_IN) * INCH
+    platform = np.array(LINUXCNC_SAMPLE_PLATFORM_IN) * INCH
+    home_struts = np.linalg.norm(np.array(LINUXCNC_SAMPLE_HOME_IN) * INCH + platform - base, axis=1)
+    return base, platform, home_struts
+
+
+def _rotation(a, b, c):
+    """Rz(c) Ry(b) Rx(a) written out here (genhexkins' pmRpyMatConvert), radians."""
+    ca, sa, cb, sb, cc, sc = np.cos(a), np.sin(a), np.cos(b), np.sin(b), np.cos(c), np.sin(c)
+    return np.array([[cc * cb, cc * sb * sa - sc * ca, cc * sb * ca + sc * sa],
+                     [sc * cb, sc * sb * sa + cc * ca, sc * sb * ca - cc * sa],
+                     [-sb, cb * sa, cb * ca]])
+
+
+def _assert_within_the_geometry(poses_deg, stroke_mm, tilt_deg):
+    """Each pose (x, y, z mm; a, b, c deg) has its angles within the Euler angles' range
+    and, by our own kinematics of the sample, every strut within [L_h / 2, 2 L_h] by
+    ``stroke_mm`` and every leg within 90° − ``tilt_deg`` of the base and platform normals
+    (the bounds of pkmcal.mechanisms.hexapod_reach)."""
+    base, platform, home_struts = _sample_geometry()
+    assert np.all(np.abs(poses_deg[:, [3, 5]]) <= 180.0) and np.all(np.abs(poses_deg[:, 4]) <= 90.0)
+    tol = 1e-9 * 2 * home_struts.max()                  # round-off of lengths ~1.5 m
+    for x, y, z, a, b, c in poses_deg:
+        R = _rotation(*np.deg2rad([a, b, c]))
+        legs = np.array([x, y, z]) + platform @ R.T - base
+        L = np.linalg.norm(legs, axis=1)
+        assert np.all(L >= home_struts / 2 + stroke_mm - tol) and np.all(L <= 2 * home_struts - stroke_mm + tol)
+        u = legs / L[:, None]
+        sin_t = math.sin(math.radians(tilt_deg))
+        assert np.all(u[:, 2] >= sin_t - 1e-12)            # U joints: within 90° - tilt of the base normal
+        assert np.all(u @ R[:, 2] >= sin_t - 1e-12)        # S joints: of the platform normal
+
+
+def _import_sample(runner, hal, ini, out):
+    res = runner.invoke(cli, ["import", "linuxcnc", str(hal), str(ini), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    return res
+
+
+def _default_tilt_deg():
+    """The default tilt margin on the sample, from the typed-in values: atan(3/r_p) +
+    atan(3/L_min), L_min = half the shortest strut at home (the strut range allowed)."""
+    _, platform, home_struts = _sample_geometry()
+    r_p = np.linalg.norm(platform, axis=1).min()
+    return math.degrees(math.atan(3 / r_p) + math.atan(3 / (home_struts.min() / 2)))
+
+
+@pytest.mark.parametrize("options,stroke,tilt", [
+    ([], 3.0, None), (["--stroke-margin", "3", "--tilt-margin", "3"], 3.0, 3.0), (["--stroke-margin", "2"], 2.0, None),
+    (["--tilt-margin", "2"], 3.0, 2.0), (["--margin", "3"], 3.0, 3.0)])
+def test_linuxcnc_sample_plans_inside_its_geometry_with_every_margin_option(tmp_path, options, stroke, tilt):
+    """LinuxCNC's hexapod sample allows struts of ±1000 inch: ``plan`` used to refuse every
+    option but --margin ("give --stroke-margin and --tilt-margin", then the same with both)
+    and with --margin 3 planned x = 3938 mm, a = -9450 deg on this 673 mm machine. Every
+    option now plans, inside what the geometry reaches, and the note names the loose limit."""
+    runner = CliRunner()
+    hal, ini = write_linuxcnc_hexapod_sample(tmp_path / "cfg")
+    machine = tmp_path / "hexapod.yaml"
+    _import_sample(runner, hal, ini, machine)
+    out = tmp_path / "p.csv"
+    res = runner.invoke(cli, ["plan", str(machine), "--setup", "full-pose-paper1", "--n", "8", "--n-candidates", "300",
+                              "--seed", "3", *options, "--units-comment", "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    names = ["x", "y", "z", "a", "b", "c"]
+    poses = read_table(out, names, kinds={})[names]
+    _assert_within_the_geometry(poses, stroke, _default_tilt_deg() if tilt is None else tilt)
+    assert f"[JOINT_N] MIN_LIMIT/MAX_LIMIT of {ini}" in res.output and "-25400 to 25400 mm" in res.output
+    assert "(377.8 to 1511 mm)" in res.output                 # L_h / 2 and 2 L_h, L_h = 755.6 mm
+    assert "joint tilt limits beyond 90°" in res.output
+    assert f"workspace box ([AXIS_X..C] MIN_LIMIT/MAX_LIMIT of {ini}) is mostly beyond" in res.output
+    assert "# note: the strut range of legs 1, 2, 3, 4, 5, 6" in out.read_text()   # the file records it
+
+
+def test_linuxcnc_sample_planning_box_is_mostly_reachable(tmp_path):
+    """The box planning draws from lies within what the geometry reaches: by our own
+    kinematics, a good part of uniform poses in it are poses of the machine, where in the box
+    of the configured limits (the former one) almost none are."""
+    hal, ini = write_linuxcnc_hexapod_sample(tmp_path)
+    machine = machine_from_linuxcnc(hal, ini).machine
+    plan = plan_poses(machine, builtin_setup("full-pose-paper1"), 8, n_candidates=300, seed=1, margin=3.0)
+    assert len(plan.notes) == 3 and "[JOINT_N] MIN_LIMIT/MAX_LIMIT" in plan.notes[0]
+    assert f"workspace box ([AXIS_X..C] MIN_LIMIT/MAX_LIMIT of {ini}) is mostly beyond" in plan.notes[2]
+    base, platform, home_struts = _sample_geometry()
+    rng = np.random.default_rng(0)
+
+    def reachable_fraction(box):
+        poses = box[:, 0] + rng.random((4000, 6)) * (box[:, 1] - box[:, 0])
+        R = np.array([_rotation(*p[3:]) for p in poses])
+        legs = poses[:, None, :3] + np.einsum("nrc,ic->nir", R, platform) - base
+        L = np.linalg.norm(legs, axis=2)
+        u = legs / L[..., None]
+        ok = ((L >= home_struts / 2) & (L <= 2 * home_struts) & (u[..., 2] > 0)
+              & (np.einsum("nir,nr->ni", u, R[:, :, 2]) > 0)).all(axis=1)
+        return ok.mean()
+
+    new, former = reachable_fraction(plan.box), reachable_fraction(machine.workspace_box())
+    assert np.all(np.abs(plan.box[3:]) <= np.array([[np.pi], [np.pi / 2], [np.pi]]))
+    assert new > 0.05 > 0.005 > former, (new, former)
+
+
+def test_debian_linuxcnc_sample_plans_inside_its_geometry(tmp_path):
+    """The same on LinuxCNC's own files, where Debian's linuxcnc-uspace installed them."""
+    import gzip
+
+    files = {}
+    for name in ("kinematics.hal", "hexapod.ini"):
+        for candidate in (DEBIAN_SAMPLE / name, DEBIAN_SAMPLE / f"{name}.gz"):
+            if candidate.is_file():
+                files[name] = candidate
+    if len(files) < 2:
+        pytest.skip(f"LinuxCNC's hexapod sample is not installed ({DEBIAN_SAMPLE}: Debian's linuxcnc-uspace)")
+    for name, path in files.items():                   # read as they are, gunzipped when compressed
+        data = gzip.decompress(path.read_bytes()) if path.suffix == ".gz" else path.read_bytes()
+        (tmp_path / name).write_bytes(data)
+    runner = CliRunner()
+    machine = tmp_path / "hexapod.yaml"
+    res = _import_sample(runner, tmp_path / "kinematics.hal", tmp_path / "hexapod.ini", machine)
+    assert "-25400 to 25400 mm" in res.output
+    out = tmp_path / "p.csv"
+    res = runner.invoke(cli, ["plan", str(machine), "--setup", "full-pose-paper1", "--n", "8", "--n-candidates",
+                              "300", "--margin", "3", "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    names = ["x", "y", "z", "a", "b", "c"]
+    _assert_within_the_geometry(read_table(out, names, kinds={})[names], 3.0, 3.0)
+    assert "[JOINT_N] MIN_LIMIT/MAX_LIMIT" in res.output
+
+
+def test_info_reports_the_sample_workspace_within_its_geometry(tmp_path):
+    """``pkmcal info`` on the sample: the single-axis ranges from home are those of the
+    machine within its geometry (x within ±2 L_h, where the configured struts reached
+    4.4 m), with the notes naming the loose limits."""
+    runner = CliRunner()
+    hal, ini = write_linuxcnc_hexapod_sample(tmp_path / "cfg")
+    machine = tmp_path / "hexapod.yaml"
+    _import_sample(runner, hal, ini, machine)
+    res = runner.invoke(cli, ["info", str(machine), "--n-poses", "20"])
+    assert res.exit_code == 0, res.output
+    assert "note: the strut range of legs 1, 2, 3, 4, 5, 6 (-25400 to 25400 mm" in res.output
+    _, _, home_struts = _sample_geometry()
+    x_line = next(line for line in res.output.splitlines() if line.startswith("  x "))
+    lo, hi = (float(v) for v in x_line.split()[1:4:2])
+    assert -2 * home_struts.max() < lo < 0 < hi < 2 * home_struts.max(), x_line

@@ -26,6 +26,18 @@ EULER_SEQUENCE = "xyz"
 POSE_COLUMNS = ("x", "y", "z", "a", "b", "c")
 LENGTH_UNIT = "mm"
 FILE_ANGLE_UNIT = "deg"
+#: The range of each Euler angle (a, b, c), radians, in which the convention represents every
+#: rotation once (away from gimbal lock; :func:`matrix_to_euler` returns these): a and c in
+#: (−π, π], b in [−π/2, π/2]. A planning box of orientations never reaches beyond it.
+EULER_RANGES = ((-np.pi, np.pi), (-np.pi / 2, np.pi / 2), (-np.pi, np.pi))
+
+
+def wrap_angle(angle: np.ndarray) -> np.ndarray:
+    """Angles (radians, any shape) brought into (−π, π] by whole turns: the same rotation
+    about the same axis. Angles already in (−π, π] are returned unchanged, bit for bit."""
+    x = np.asarray(angle, dtype=float)
+    outside = (x > np.pi) | (x <= -np.pi)
+    return np.where(outside, np.pi - np.mod(np.pi - x, 2.0 * np.pi), x)
 
 
 def euler_to_matrix(abc: np.ndarray) -> np.ndarray:

@@ -1,7 +1,9 @@
 """``pkmcal info [MACHINE]``: what a machine is, where it can go, and whether its IK and FK agree.
 
 1. The machine summary (:meth:`Hexapod.summary`).
-2. Single-axis workspace: from the home pose, each pose coordinate is moved alone (the others
+2. Single-axis workspace of the machine within what its geometry reaches
+   (:meth:`Mechanism.within_geometry`, as ``pkmcal plan``: limits looser than that are
+   noted and clipped): from the home pose, each pose coordinate is moved alone (the others
    stay at home) over a grid of 1001 values; the reachable interval around home (every limit of
    ``check_limits`` satisfied) is then refined at both ends by bisection to 1e-6 mm/deg. This is
    the "travel range" of hexapod data sheets. The limit that stops each end is named.
@@ -155,6 +157,9 @@ def info_cmd(machine: str, n_poses: int | None, poses: str | None, seed: int) ->
     summary = mech.summary()
     click.echo(summary)
     click.echo(_parameter_lines(mech))
+    mech, notes = mech.within_geometry()     # the workspace of what the geometry reaches, as plan's
+    for note in notes:
+        click.echo(f"note: {note}")
     home = np.asarray(mech.home_pose, dtype=float)
     angle = np.array(mech.pose_is_angle)
     unit = lambda k: "deg" if angle[k] else "mm"  # noqa: E731

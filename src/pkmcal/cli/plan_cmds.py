@@ -150,10 +150,13 @@ def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, 
         f"pkmcal plan {mech.name} --setup {setup_spec} --n {n_poses} --algorithm {sel.algorithm} "
         f"--seed {seed}; maximised {sel.criterion}",
         f"safety margin: {plan.describe_margin()}",
+        *(f"note: {n}" for n in plan.notes),
         _format_indices(sel.indices)]), output)
     say = summary_echo(output)
     say(f"candidates: {plan.candidates.describe()}")
     say(f"safety margin: {plan.describe_margin()}")
+    for note in plan.notes:
+        say(f"note: {note}")
     say(f"identifiable parameters: {plan.model.n_params} ({plan.model.method}; gauge fixed: "
         f"{', '.join(plan.model.report.fixed) or 'none'})")
     say(f"{sel.algorithm}: {len(sel.chosen)} poses, maximised {sel.criterion}; {sel.message}")

@@ -25,21 +25,30 @@ length L; pkmcal's reading is λ = L − L0. What this module reads:
   converted to mm) and ``ANGULAR_UNITS``, ``[TRAJ] HOME`` (the world home X Y Z A B C: the
   machine's home pose, the FK start pose), ``[KINS] KINEMATICS`` (must be genhexkins) and
   ``JOINTS`` (6), and per joint ``[JOINT_N] TYPE`` (LINEAR), ``UNITS``, ``MIN_LIMIT``,
-  ``MAX_LIMIT``, ``HOME_OFFSET`` (LinuxCNC's default 0) and ``HOME``.
+  ``MAX_LIMIT``, ``HOME_OFFSET`` (LinuxCNC's default 0) and ``HOME``, and the soft limits
+  ``[AXIS_X..C] MIN_LIMIT``/``MAX_LIMIT`` (world coordinates, ``[TRAJ]`` units) as the
+  workspace box when all six are set (angles beyond A, C ±180° and B ±90°, the range in
+  which the Euler angles represent each orientation once, are clipped to it with a note).
 
 Leg offsets (``offsets``): ``"home-offset"`` (default) L0_i = HOME_OFFSET_N, the strut
 length at the home switch, so that readings are zero there (what
 :func:`pkmcal.io.export_linuxcnc.linuxcnc_ini` writes); ``"zero"`` L0_i = 0, genhexkins' own
 convention: the reading is the joint value, the strut length (its home-switch value is kept
 in ``metadata.linuxcnc.home_switch_reading`` so that an export writes HOME_OFFSET =
-L0 + reading). The stroke is [MIN_LIMIT − L0, MAX_LIMIT − L0]. ``[JOINT_N] HOME`` is
-compared with the strut lengths at ``[TRAJ] HOME`` (a note when they differ).
+L0 + reading). The stroke is [MIN_LIMIT − L0, MAX_LIMIT − L0], written as the file says; a
+strut range beyond what struts of their home length reach (between half and twice it:
+:mod:`pkmcal.mechanisms.hexapod_reach`; LinuxCNC's own hexapod sample allows ±1000 inch on
+29.75-inch struts) is reported in a note naming MIN_LIMIT/MAX_LIMIT, and planning keeps
+within the reachable range. ``[JOINT_N] HOME`` is compared with the strut lengths at
+``[TRAJ] HOME`` (a note when they differ).
 
 Round trip: machine → :func:`~pkmcal.io.export_linuxcnc.linuxcnc_hal` +
 :func:`~pkmcal.io.export_linuxcnc.linuxcnc_ini` → :func:`machine_from_linuxcnc` gives the
 same joints, offsets, home pose exactly and the stroke to one rounding
 (``tests/test_linuxcnc_import.py``). Limits pkmcal checks that LinuxCNC has no setting for
-(joint tilts, leg diameter, workspace) are not in the files; a note says to add them.
+(joint tilts, leg diameter) are not in the files; a note says to add them. Where each limit
+came from is recorded in ``metadata.limits_from`` (stroke, workspace), which planning's notes
+name.
 """
 
 from __future__ import annotations
@@ -53,9 +62,11 @@ from pathlib import Path
 
 import numpy as np
 
+from pkmcal.conventions import EULER_RANGES, wrap_angle
 from pkmcal.errors import InputFileError, PkmcalError
 from pkmcal.io.export_linuxcnc import HAL_PREFIX
 from pkmcal.io.limits import MAX_MAGNITUDE
+from pkmcal.mechanisms.hexapod_reach import loose_stroke_note
 
 #: ``[TRAJ] LINEAR_UNITS`` / ``[JOINT_N] UNITS`` values → mm per unit.
 LINEAR_UNITS = {"mm": 1.0, "metric": 1.0, "cm": 10.0, "in": 25.4, "inch": 25.4, "imperial": 25.4}
@@ -372,9 +383,6 @@ def machine_from_linuxcnc(hal: str | os.PathLike, ini_path: str | os.PathLike | 
         raise PkmcalError(f"[JOINT_{n}] HOME_OFFSET = {L0[n]!r} mm is not a strut length; use --offsets zero "
                           "(readings = joint values) or fix HOME_OFFSET")
     stroke = np.stack([lo - L0, hi - L0], axis=1)
-    if np.any(lo <= 0):
-        notes.append("joint limits allow strut lengths <= 0 (genhexkins refuses them): the stroke in the machine "
-                     "file is not the machine's; set [JOINT_N] MIN_LIMIT/MAX_LIMIT to the real strut range")
     home = None
     traj_home = ini.get("TRAJ", "HOME")
     if traj_home is not None:
@@ -389,7 +397,17 @@ def machine_from_linuxcnc(hal: str | os.PathLike, ini_path: str | os.PathLike | 
         angles = [deg_to_rad(TextFloat(nums[3 + k], words[3 + k])) if afactor == 1.0 and len(words) > 3 + k
                   else float(np.deg2rad(nums[3 + k] * afactor)) for k in range(3)]
         home = np.array([v * factor for v in nums[:3]] + angles)
+        if np.any(wrap_angle(home[3:]) != home[3:]):
+            home[3:] = wrap_angle(home[3:])
+            notes.append(f"[TRAJ] HOME = {traj_home[0]}: its angles are written within (-180, 180] deg, the same "
+                         "orientation by whole turns")
+    afactor = _unit_factor(ini, "TRAJ", "ANGULAR_UNITS", ANGULAR_UNITS, 1.0)
+    workspace = _axis_limits(ini, factor, afactor, notes) if have_ini else None
     metadata = {"linuxcnc": {"hal": hal_src, **({"ini": ini.path} if have_ini else {}), "offsets": offsets}}
+    metadata["limits_from"] = {"stroke": "--joint-limits" if joint_limits is not None
+                               else f"[JOINT_N] MIN_LIMIT/MAX_LIMIT of {ini.path}"}
+    if workspace is not None:
+        metadata["limits_from"]["workspace"] = f"[AXIS_X..C] MIN_LIMIT/MAX_LIMIT of {ini.path}"
     if np.any(switch != 0):
         metadata["linuxcnc"]["home_switch_reading"] = [float(v) for v in switch]
     if name is None:
@@ -397,20 +415,58 @@ def machine_from_linuxcnc(hal: str | os.PathLike, ini_path: str | os.PathLike | 
         name = got[0].strip() if got is not None and got[0].strip() else Path(hal_src).stem
     try:
         machine = Hexapod(name=name, base=base, platform=platform, offset=L0, stroke=stroke, home=home,
+                          workspace=workspace,
                           description=f"imported from LinuxCNC genhexkins configuration {Path(hal_src).name}"
                                       + (f" + {Path(ini.path).name}" if have_ini else ""),
                           metadata=metadata)
     except PkmcalError as exc:
         raise PkmcalError(f"{hal_src}: {exc}") from None
+    _, loose = loose_stroke_note(machine)
+    if loose is not None:
+        notes.append(loose + ("; genhexkins refuses struts of length 0 or less" if np.any(lo <= 0) else ""))
     if np.any(~np.isnan(joint_home)) and traj_home is not None:
         L = machine.leg_lengths(machine.home_pose)[0]
         dev = np.nanmax(np.abs(L - joint_home))
         if dev > 1e-6 * max(1.0, float(np.nanmax(np.abs(joint_home)))):
             notes.append(f"[JOINT_N] HOME differ from the strut lengths at [TRAJ] HOME by up to {dev:.6g} mm "
                          "(after homing, the joints stand where [JOINT_N] HOME says; check that both describe one pose)")
-    notes.append("LinuxCNC has no setting for the joint tilt limits, the leg diameter or the workspace: add "
-                 "'limits:' (and 'workspace:') to the machine file for planning (docs/file-formats.md)")
+    notes.append("LinuxCNC has no setting for the joint tilt limits or the leg diameter: add 'limits:' to the "
+                 "machine file for planning (docs/file-formats.md)")
     return LinuxcncImport(machine=machine, notes=tuple(notes))
+
+
+def _axis_limits(ini: IniFile, factor: float, afactor: float, notes: list[str]) -> np.ndarray | None:
+    """The workspace box (6, 2) (mm, rad) of the soft limits ``[AXIS_X..C] MIN_LIMIT/MAX_LIMIT``
+    (in ``[TRAJ]`` units: ``factor`` mm and ``afactor`` degrees per unit), or None with a
+    note when one is not set (LinuxCNC's default is ±1e99, no limit: ``src/emc/ini/iniaxis.cc``
+    loadAxis with ``DEFAULT_AXIS_MIN_LIMIT``/``MAX_LIMIT``) or beyond any machine. Angles
+    beyond the Euler angles' range (a, c ±180°, b ±90°) are clipped to it, with a note."""
+    box = np.full((6, 2), np.nan)
+    for k, axis in enumerate("XYZABC"):
+        for j, key in enumerate(("MIN_LIMIT", "MAX_LIMIT")):
+            v = _ini_number(ini, f"AXIS_{axis}", key)
+            if v is not None and abs(v * (factor if k < 3 else afactor)) <= MAX_MAGNITUDE:
+                box[k, j] = v * factor if k < 3 else np.deg2rad(v * afactor)
+    unset = [f"AXIS_{a}" for a, row in zip("XYZABC", box) if np.isnan(row).any()]
+    if unset:
+        which = "[AXIS_*]" if len(unset) == 6 else f"[{'], ['.join(unset)}]"
+        notes.append(f"no {which} MIN_LIMIT/MAX_LIMIT within ±{MAX_MAGNITUDE:g} (LinuxCNC's default: no limit): no "
+                     "'workspace:' imported; planning searches the reach about home")
+        return None
+    bad = [a for a, row in zip("XYZABC", box) if row[1] < row[0]]
+    if bad:
+        got = ini.get(f"AXIS_{bad[0]}", "MAX_LIMIT")
+        raise InputFileError(got[1], f"[AXIS_{bad[0]}] MAX_LIMIT < MIN_LIMIT", line=got[2])
+    bounds = np.array(EULER_RANGES)
+    clipped = np.stack([np.maximum(box[3:, 0], bounds[:, 0]), np.minimum(box[3:, 1], bounds[:, 1])], axis=1)
+    wide = [k for k in range(3) if np.any(clipped[k] != box[3 + k])]
+    if wide:
+        notes.append("; ".join(f"[AXIS_{'ABC'[k]}] MIN_LIMIT/MAX_LIMIT = {np.rad2deg(box[3 + k, 0]):.6g}/"
+                               f"{np.rad2deg(box[3 + k, 1]):.6g} deg" for k in wide)
+                     + " reach beyond the range in which the Euler angles represent each orientation once (A, C "
+                       "±180 deg, B ±90 deg): the workspace keeps within it")
+        box[3:] = clipped
+    return box
 
 
 __all__ = ["ANGULAR_UNITS", "IniFile", "LINEAR_UNITS", "LinuxcncImport", "OFFSET_MODES", "machine_from_linuxcnc",

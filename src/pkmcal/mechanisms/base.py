@@ -258,6 +258,22 @@ class Mechanism(ABC):
         that shape; None (default): :meth:`workspace_box` is the planning box itself."""
         return None
 
+    def limit_source(self, limit: str, default: str) -> str:
+        """Where the machine's ``limit`` (``"stroke"``, ``"workspace"``) was set, for messages:
+        the importer's record (``metadata.limits_from``, e.g. ``[JOINT_N] MIN_LIMIT/MAX_LIMIT
+        of hexapod.ini``) or ``default``."""
+        record = self.metadata.get("limits_from") if self.metadata else None
+        found = record.get(limit) if isinstance(record, Mapping) else None
+        return found if isinstance(found, str) and found else default
+
+    def within_geometry(self) -> tuple["Mechanism", tuple[str, ...]]:
+        """This machine with its limits clipped to what its joint geometry reaches, and one
+        note (a line of text) per limit that was looser: planning plans on it
+        (:func:`pkmcal.planning.plan.plan_poses`). Default: the machine itself, no notes
+        (limits that are the geometry's own); the 6-UPS hexapod's struts and joint tilts:
+        :mod:`pkmcal.mechanisms.hexapod_reach`."""
+        return self, ()
+
     @property
     def length_scale(self) -> float:
         """A length (mm) that turns the platform's rotations into displacements (rad × mm),

@@ -283,6 +283,14 @@ class Hexapod(SpatialPlatform):
         :meth:`workspace_box`'s (mm of leg length) on machines with leg gains g ≠ 1."""
         return None if self.workspace is not None else self._box_shape(self.stroke[:, 1] - self.stroke[:, 0])
 
+    def within_geometry(self) -> tuple["Hexapod", tuple[str, ...]]:
+        """The machine with its stroke within what struts of its home length reach and its
+        joint tilts below 90°, with a note per limit that was looser
+        (:func:`pkmcal.mechanisms.hexapod_reach.reachable_machine`)."""
+        from pkmcal.mechanisms.hexapod_reach import reachable_machine
+
+        return reachable_machine(self)
+
     @property
     def length_scale(self) -> float:
         """The platform joint radius (mm): :attr:`platform_radius`."""

@@ -98,13 +98,15 @@ def planning_model(mechanism: Mechanism, setup: MeasurementSetup, *, method: str
     """The identifiable parameters and their scaling for planning (module docstring).
 
     ``reference`` poses default to :data:`N_REFERENCE` random checked poses of the
-    workspace box (seed 0); ``free`` restricts the candidate parameters (names/patterns).
+    workspace box (seed 0) of the machine within what its geometry reaches
+    (:meth:`~pkmcal.mechanisms.base.Mechanism.within_geometry`, as the plan's candidates);
+    ``free`` restricts the candidate parameters (names/patterns).
     """
     from pkmcal.planning.candidates import generate_candidates
 
     method = method or default_method(setup, mechanism)
     if reference is None:
-        reference = generate_candidates(mechanism, setup, kind="random", n=N_REFERENCE,
+        reference = generate_candidates(mechanism.within_geometry()[0], setup, kind="random", n=N_REFERENCE,
                                         rng=np.random.default_rng(0)).poses
     J, ok, names = raw_blocks(mechanism, setup, reference, method)
     J = J[ok]

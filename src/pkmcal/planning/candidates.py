@@ -18,8 +18,16 @@ home: coordinate i spans ``home_i ± t_i·h_i`` with t_i ∈ (0, 1] the largest 
 (bisection, 24 halvings, all axes in one check per halving) at which both poses
 home ± t_i h_i e_i are reachable (with the safety margin) and measurable, for the default
 shape h = (s, s, s/2, s/r, s/r, s/r), s = the mean actuator stroke (reading units) and
-r = the platform joint radius (mm) (the angles rotate a platform joint by s). Random and
-grid candidates are drawn in this box and filtered. Corner selection (paper 1) needs all 64 corners
+r = the platform joint radius (mm) (the angles rotate a platform joint by s). Either box
+stays within the range in which the Euler angles represent each orientation once
+(:func:`angle_bounds`: a, c within ±180°, b within ±90°, from
+:data:`~pkmcal.conventions.EULER_RANGES`): the search goes no further, a declared box
+beyond it is clipped with a note (the rotations beyond are those inside, by whole turns
+or by the convention's other branch). A declared box of which fewer than 1 %
+(:data:`MIN_REACHED_FRACTION`) of 2000 uniform poses (seed 0) pass the checks is shrunk, on
+each side of home along each coordinate, to the reach from home (the same bisection), with
+a note: the candidates are drawn where the machine reaches, not in a box 99 % beyond it.
+Random and grid candidates are drawn in this box and filtered. Corner selection (paper 1) needs all 64 corners
 reachable: :func:`corner_box` shrinks the box about its centre by the largest common scale
 t ∈ (0, 1] whose corners all pass (same bisection).
 
@@ -55,7 +63,7 @@ from typing import Callable
 
 import numpy as np
 
-from pkmcal.conventions import POSE_COLUMNS, euler_to_matrix
+from pkmcal.conventions import EULER_RANGES, POSE_COLUMNS, euler_to_matrix
 from pkmcal.errors import InputFileError, PkmcalError
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.mechanisms.frame import Frame
@@ -72,6 +80,10 @@ CHUNK_SIZE = 50_000
 Progress = Callable[[int, int], None]
 #: Default safety margin: mm for stroke and collision, degrees for the joint tilts.
 DEFAULT_MARGIN = 0.1
+#: A declared workspace box of which fewer than this fraction of uniform poses pass the
+#: checks is shrunk to the reach from home (:func:`workspace_box`); and the probe's size.
+MIN_REACHED_FRACTION = 0.01
+N_PROBE = 2000
 
 
 @dataclass(frozen=True)
@@ -242,16 +254,91 @@ def corner_box(mechanism: Mechanism, box: np.ndarray, setup: MeasurementSetup | 
     return _scaled_box(center, half, t)
 
 
+def angle_bounds(mechanism: Mechanism) -> np.ndarray:
+    """Bounds (n, 2) of each pose coordinate in a planning box: the Euler angles' ranges
+    (:data:`~pkmcal.conventions.EULER_RANGES`: a and c ±π, b ±π/2) on a machine with the
+    pose convention, ±π on any other angle, unbounded lengths."""
+    n = mechanism.n_dof
+    bounds = np.tile([-np.inf, np.inf], (n, 1))
+    angle = np.flatnonzero(np.asarray(mechanism.pose_is_angle, dtype=bool))
+    bounds[angle] = [-np.pi, np.pi]
+    if "pose-convention" in mechanism.abilities and n == len(POSE_COLUMNS):
+        bounds[3:6] = EULER_RANGES
+    return bounds
+
+
+def _clip_box(mechanism: Mechanism, box: np.ndarray, notes: list[str] | None, what: str) -> np.ndarray:
+    """``box`` clipped to :func:`angle_bounds`, with a note naming the coordinates clipped."""
+    bounds = angle_bounds(mechanism)
+    clipped = np.stack([np.maximum(box[:, 0], bounds[:, 0]), np.minimum(box[:, 1], bounds[:, 1])], axis=1)
+    changed = np.flatnonzero(np.any(clipped != box, axis=1))
+    if notes is not None and len(changed):
+        notes.append(f"{what}: " + ", ".join(
+            f"{mechanism.pose_names[i]} [{np.rad2deg(box[i, 0]):.6g}, {np.rad2deg(box[i, 1]):.6g}] deg -> "
+            f"[{np.rad2deg(clipped[i, 0]):.6g}, {np.rad2deg(clipped[i, 1]):.6g}]" for i in changed)
+            + " (beyond the range in which the Euler angles represent each orientation once: a, c ±180, b ±90)")
+    return clipped
+
+
+def _reached_part(mechanism: Mechanism, box: np.ndarray, setup, margin, measurability,
+                  notes: list[str] | None) -> np.ndarray:
+    """A declared ``box`` of which fewer than :data:`MIN_REACHED_FRACTION` of
+    :data:`N_PROBE` uniform poses (seed 0) pass the checks, shrunk on each side of home along
+    each coordinate to the reach from home (bisection, as the search); with a note. The box
+    unchanged otherwise, or when home is outside it."""
+    home = np.asarray(mechanism.home_pose, dtype=float)
+    if not np.all((box[:, 0] <= home) & (home <= box[:, 1])):
+        return box
+    probe = random_poses(box, N_PROBE, np.random.default_rng(0))
+    reached = float(check_candidates(mechanism, setup, probe, margin=margin, measurability=measurability).ok.mean())
+    if reached >= MIN_REACHED_FRACTION:
+        return box
+    n = len(home)
+    edge = np.concatenate([box[:, 1] - home, box[:, 0] - home])      # the upper sides, then the lower
+
+    def ok(t):
+        poses = np.tile(home, (2 * n, 1))
+        poses[np.arange(2 * n), np.tile(np.arange(n), 2)] += t * edge
+        return check_candidates(mechanism, setup, poses, margin=margin, measurability=measurability).ok
+
+    t = _bisect_scales(ok, 2 * n)
+    if not np.any(t > 0):
+        return box                                   # home fails the checks: the candidates' error says so
+    shrunk = np.stack([home + t[n:] * edge[n:], home + t[:n] * edge[:n]], axis=1)
+    if notes is not None:
+        changed = np.flatnonzero(np.any(shrunk != box, axis=1))
+        unit = ["deg" if a else "mm" for a in mechanism.pose_is_angle]
+        shown = [np.where(np.asarray(mechanism.pose_is_angle)[:, None], np.rad2deg(b), b) for b in (box, shrunk)]
+        source = mechanism.limit_source("workspace", "'workspace:' in the machine file")
+        notes.append(f"the machine's workspace box ({source}) is mostly beyond what the machine reaches "
+                     f"({100 * reached:.2g} % of "
+                     f"{N_PROBE} uniform poses in it pass the limits): planning draws in the reach from home along "
+                     "each coordinate: " + ", ".join(
+                         f"{mechanism.pose_names[i]} [{shown[0][i, 0]:.6g}, {shown[0][i, 1]:.6g}] -> "
+                         f"[{shown[1][i, 0]:.4g}, {shown[1][i, 1]:.4g}] {unit[i]}" for i in changed)
+                     + "; set it to the poses the machine reaches")
+    return shrunk
+
+
 @blas_single_threaded
 def workspace_box(mechanism: Mechanism, setup: MeasurementSetup | None = None, *,
-                  margin: float = DEFAULT_MARGIN, measurability: Measurability = Measurability()) -> np.ndarray:
+                  margin: float = DEFAULT_MARGIN, measurability: Measurability = Measurability(),
+                  notes: list[str] | None = None) -> np.ndarray:
     """The machine's declared box, or the largest reachable box around home along its
-    :meth:`~pkmcal.mechanisms.base.Mechanism.reach_search_shape` (module docstring)."""
+    :meth:`~pkmcal.mechanisms.base.Mechanism.reach_search_shape` (module docstring); either
+    within :func:`angle_bounds` (a declared box beyond them is clipped, with a note appended
+    to ``notes``; the search never goes beyond them). A declared box that is mostly beyond
+    the machine's reach is shrunk to it (:func:`_reached_part`, with a note)."""
     shape = mechanism.reach_search_shape()
-    if shape is None:
-        return np.array(mechanism.workspace_box(), dtype=float).reshape(mechanism.n_dof, 2)
     home = np.asarray(mechanism.home_pose, dtype=float)
-    half = np.asarray(shape, dtype=float)
+    if shape is None:
+        source = mechanism.limit_source("workspace", "'workspace:' in the machine file")
+        box = _clip_box(mechanism, np.array(mechanism.workspace_box(), dtype=float).reshape(mechanism.n_dof, 2),
+                        notes, f"the machine's workspace box ({source}) is clipped")
+        return _reached_part(mechanism, box, setup, margin, measurability, notes)
+    bounds = angle_bounds(mechanism)
+    # the search is symmetric about home: no further than the farther bound on either side
+    half = np.minimum(np.asarray(shape, dtype=float), np.maximum(bounds[:, 1] - home, home - bounds[:, 0]))
     n = len(half)
 
     def ok(t):               # the poses home ± t_i h_i e_i of every axis i in one check
@@ -266,7 +353,7 @@ def workspace_box(mechanism: Mechanism, setup: MeasurementSetup | None = None, *
                           f"{', '.join(mechanism.pose_names[i] for i in np.flatnonzero(reach <= 1e-6 * half))} "
                           "within the limits and the safety margin; check the home pose, the margin and the sensor "
                           "set-up")
-    return np.stack([home - reach, home + reach], axis=1)
+    return _clip_box(mechanism, np.stack([home - reach, home + reach], axis=1), None, "")
 
 
 # -- generators -------------------------------------------------------------------------

@@ -7,7 +7,9 @@ the planned one. With joint position errors of size δ (mm):
 
 * the platform turns by up to about δ / r_p (r_p: the smallest platform joint radius), which
   tilts every spherical joint by as much, and each leg's direction changes by about δ / L
-  (L: the shortest leg, L0 + lowest reading); hence the **joint tilt margin**
+  (L: the shortest leg, L0 + lowest reading, within what the geometry reaches:
+  :meth:`~pkmcal.mechanisms.base.Mechanism.within_geometry`, so that a configuration that
+  allows struts of length ≤ 0 still has one); hence the **joint tilt margin**
 
       Δθ = atan(δ / r_p) + atan(δ / L_min)                          (degrees on the command line)
 
@@ -23,7 +25,7 @@ paper 2's Table 4 (1–3 mm). On the prototype (r_p = 70 mm, L_min = 305 mm) it 
 3.02°, and every pose of the indicator tutorial's plan is then reached by
 ``stewart-prototype-real`` (18 of 45 exceeded its 29° S-joint tilt with the former default of
 0.1 mm / 0.1°). A machine expected to deviate more needs larger margins (``--stroke-margin``,
-``--tilt-margin``).
+``--tilt-margin``). A margin that is given is not derived (:func:`resolve_margin`).
 
 **Deltas** (:class:`DeltaSafetyMargin`; the platform only translates, so only the arm
 direction and the nozzle position move):
@@ -139,6 +141,20 @@ def _delta_margin(mechanism: Mechanism, d: float) -> DeltaSafetyMargin:
                                     f"atan({d:g}/{fore:.4g}), 3 x {d:g}")
 
 
+def _tilt_margin(mechanism: Mechanism, joint_error_mm: float) -> tuple[float, str]:
+    """The default joint tilt margin (degrees) and its derivation: atan(δ / r_p) + atan(δ / L_min),
+    L_min the shortest leg the geometry allows (:meth:`~pkmcal.mechanisms.base.Mechanism.within_geometry`:
+    a stroke that allows struts of zero length or less gives none)."""
+    reach, _ = mechanism.within_geometry()
+    r_p = float(np.min(np.linalg.norm(np.asarray(reach.platform), axis=1)))
+    l_min = float(np.min(reach.lengths_from_readings(reach.stroke[:, 0])))
+    if r_p <= 0 or l_min <= 0:
+        raise PkmcalError(f"machine '{mechanism.name}': cannot derive the joint tilt margin (smallest platform joint "
+                          f"radius {r_p:g} mm, shortest leg {l_min:g} mm); give --tilt-margin (or --margin)")
+    tilt = math.degrees(math.atan(joint_error_mm / r_p) + math.atan(joint_error_mm / l_min))
+    return tilt, f"atan({joint_error_mm:g}/{r_p:.4g}) + atan({joint_error_mm:g}/{l_min:.4g})"
+
+
 def default_margin(mechanism: Mechanism,
                    joint_error_mm: float = ASSUMED_JOINT_ERROR_MM) -> SafetyMargin | DeltaSafetyMargin | None:
     """The margins of the module docstring for ``mechanism`` (None if its limits take none)."""
@@ -146,34 +162,27 @@ def default_margin(mechanism: Mechanism,
         return None
     if mechanism.kind in ("linear-delta", "rotary-delta"):
         return _delta_margin(mechanism, joint_error_mm)
-    r_p = float(np.min(np.linalg.norm(np.asarray(mechanism.platform), axis=1)))
-    l_min = float(np.min(mechanism.lengths_from_readings(mechanism.stroke[:, 0])))
-    if r_p <= 0 or l_min <= 0:
-        raise PkmcalError(f"machine '{mechanism.name}': cannot derive safety margins (smallest platform joint "
-                          f"radius {r_p:g} mm, shortest leg {l_min:g} mm); give --stroke-margin and --tilt-margin")
-    tilt = math.degrees(math.atan(joint_error_mm / r_p) + math.atan(joint_error_mm / l_min))
+    tilt, how = _tilt_margin(mechanism, joint_error_mm)
     return SafetyMargin(joint_error_mm, tilt, CLEARANCE_MARGIN_MM,
-                        f"default for joint errors up to {joint_error_mm:g} mm: atan({joint_error_mm:g}/{r_p:.4g}) + "
-                        f"atan({joint_error_mm:g}/{l_min:.4g})")
+                        f"default for joint errors up to {joint_error_mm:g} mm: {how}")
 
 
 def resolve_margin(mechanism: Mechanism, *, stroke_mm: float | None = None, tilt_deg: float | None = None,
                    clearance_mm: float | None = None) -> SafetyMargin | DeltaSafetyMargin | None:
-    """The default margins of ``mechanism`` with the given ones replacing them."""
-    found = default_margin(mechanism)
-    if found is None:
-        return None
+    """The default margins of ``mechanism`` with the given ones replacing them (a default
+    that is replaced is not derived: a machine whose tilt margin cannot be derived plans
+    with a given one)."""
     given = [n for n, v in (("stroke", stroke_mm), ("tilt", tilt_deg), ("clearance", clearance_mm)) if v is not None]
-    if not given:
-        return found
-    if isinstance(found, DeltaSafetyMargin):
-        raise PkmcalError(f"machine '{mechanism.name}' is a {mechanism.kind}: its margins are {found.describe()}; "
-                          "the stroke, tilt and clearance margins are a hexapod's: give --margin X for X on every "
-                          "limit instead")
+    if not given or not has_margins(mechanism):
+        return default_margin(mechanism)
+    if mechanism.kind in ("linear-delta", "rotary-delta"):
+        raise PkmcalError(f"machine '{mechanism.name}' is a {mechanism.kind}: its margins are "
+                          f"{default_margin(mechanism).describe()}; the stroke, tilt and clearance margins are a "
+                          "hexapod's: give --margin X for X on every limit instead")
     source = "given: " + ", ".join(given) + ("" if len(given) == 3 else "; others default")
-    return SafetyMargin(found.stroke_mm if stroke_mm is None else float(stroke_mm),
-                        found.tilt_deg if tilt_deg is None else float(tilt_deg),
-                        found.clearance_mm if clearance_mm is None else float(clearance_mm), source)
+    return SafetyMargin(ASSUMED_JOINT_ERROR_MM if stroke_mm is None else float(stroke_mm),
+                        _tilt_margin(mechanism, ASSUMED_JOINT_ERROR_MM)[0] if tilt_deg is None else float(tilt_deg),
+                        CLEARANCE_MARGIN_MM if clearance_mm is None else float(clearance_mm), source)
 
 
 def planning_checks(mechanism: Mechanism, margin: SafetyMargin | DeltaSafetyMargin | float | None

@@ -7,10 +7,12 @@ Jacobian rows on the identifiable parameters, in batches: :func:`candidate_block
 :func:`pose_set_indices` gives O1..O5 (:mod:`.indices`) of any pose set with the same
 parameters and scaling, so ``pkmcal plan`` and ``pkmcal observability`` agree.
 
-Candidates are checked inside the nominal machine's limits by the safety margins of
-:mod:`.margins` (by default those a real machine with joint errors of 3 mm survives), and
-the stages report progress through an optional ``progress(stage)`` announcer
-(:data:`pkmcal.progress.Stages`).
+Candidates are checked inside the nominal machine's limits, clipped first to what its joint
+geometry reaches (:meth:`~pkmcal.mechanisms.base.Mechanism.within_geometry`: a controller's
+configuration may allow struts of metres on a machine of decimetres, with a note in
+:attr:`Plan.notes`), by the safety margins of :mod:`.margins` (by default those a real
+machine with joint errors of 3 mm survives), and the stages report progress through an
+optional ``progress(stage)`` announcer (:data:`pkmcal.progress.Stages`).
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from typing import Callable
 
 import numpy as np
 
+from pkmcal.conventions import wrap_angle
 from pkmcal.errors import PkmcalError
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.parallel import IN_PROCESS
@@ -47,7 +50,9 @@ class Plan:
     ``selection`` (indices into the candidates, O1..O5), the ``candidates``, the model and the
     safety ``margin`` the candidates were checked with (a :class:`SafetyMargin` or
     :class:`DeltaSafetyMargin`, a single number on every limit, or None for a machine whose
-    limits take none)."""
+    limits take none); ``notes``: what the plan changed of what it was given (limits looser
+    than the geometry reaches, :meth:`~pkmcal.mechanisms.base.Mechanism.within_geometry`; a workspace
+    box or candidate angles beyond the Euler angles' range), one line each."""
 
     poses: np.ndarray
     commands: np.ndarray
@@ -56,6 +61,7 @@ class Plan:
     model: PlanningModel
     box: np.ndarray | None = None
     margin: SafetyMargin | DeltaSafetyMargin | float | None = None
+    notes: tuple[str, ...] = ()
 
     def describe_margin(self) -> str:
         """The safety margin in words (what ``pkmcal plan`` prints)."""
@@ -147,10 +153,12 @@ def plan_poses(mechanism: Mechanism, setup: MeasurementSetup, n: int, *, algorit
         raise PkmcalError(f"unknown selection algorithm '{algorithm}'; use one of {', '.join(ALGORITHMS)}")
     announce = progress or (lambda stage: None)
     rng = np.random.default_rng(seed)
-    if margin is None:
-        margin = resolve_margin(mechanism)
     nominal = mechanism
-    mechanism, check_margin = planning_checks(mechanism, margin)
+    reachable, geometry_notes = mechanism.within_geometry()
+    notes = list(geometry_notes)
+    if margin is None:
+        margin = resolve_margin(reachable)
+    mechanism, check_margin = planning_checks(reachable, margin)
     kw = dict(margin=check_margin, measurability=measurability)
     chunked = dict(chunk_size=chunk_size, chunk_map=chunk_map, **kw)
     box = None
@@ -158,7 +166,7 @@ def plan_poses(mechanism: Mechanism, setup: MeasurementSetup, n: int, *, algorit
         if candidates is not None:
             raise PkmcalError("--algorithm corners draws among the workspace-box corners; do not give --candidates")
         announce("workspace box")
-        box = workspace_box(mechanism, setup, **kw)
+        box = workspace_box(mechanism, setup, notes=notes, **kw)
         cand = generate_candidates(mechanism, setup, kind="corners", box=box,
                                    progress=announce("candidates"), **chunked)
         box = corner_box(mechanism, box, setup, **kw)
@@ -177,7 +185,7 @@ def plan_poses(mechanism: Mechanism, setup: MeasurementSetup, n: int, *, algorit
                               f"cannot be measured ({cand.describe()}); move the pivot or shorten the bar")
     elif candidates is None:
         announce("workspace box")
-        box = workspace_box(mechanism, setup, **kw)
+        box = workspace_box(mechanism, setup, notes=notes, **kw)
         step = announce("candidates")
         if grid is not None:
             cand = generate_candidates(mechanism, setup, kind="grid", grid_per_axis=grid, box=box, progress=step,
@@ -188,6 +196,7 @@ def plan_poses(mechanism: Mechanism, setup: MeasurementSetup, n: int, *, algorit
     else:
         step = announce("candidates")
         poses = candidates if isinstance(candidates, np.ndarray) else read_candidates_csv(candidates, mechanism)
+        poses = _wrapped(nominal, poses, notes)
         cand = generate_candidates(mechanism, setup, kind="file", poses=poses, progress=step, **chunked)
     if n > len(cand.poses):
         raise PkmcalError(f"asked for {n} poses but only {len(cand.poses)} candidates are reachable and "
@@ -204,7 +213,21 @@ def plan_poses(mechanism: Mechanism, setup: MeasurementSetup, n: int, *, algorit
     sel = select(G, n, algorithm=algorithm, index=index, rng=rng, positions=cand.poses,
                  progress=announce(f"selection ({algorithm})"))
     poses = cand.poses[sel.chosen]
-    return Plan(poses, nominal.ik(poses), sel, cand, model, box, margin)
+    return Plan(poses, nominal.ik(poses), sel, cand, model, box, margin, tuple(notes))
+
+
+def _wrapped(mechanism: Mechanism, poses: np.ndarray, notes: list[str]) -> np.ndarray:
+    """Candidate ``poses`` with their angles brought into (−180°, 180°] by whole turns (the
+    same orientations; :func:`~pkmcal.conventions.wrap_angle`), a note counting them."""
+    poses = mechanism.as_pose_array(poses)
+    angle = np.flatnonzero(np.asarray(mechanism.pose_is_angle, dtype=bool))
+    wrapped = poses.copy()
+    wrapped[:, angle] = wrap_angle(poses[:, angle])
+    moved = np.any(wrapped != poses, axis=1) & np.all(np.isfinite(poses), axis=1)
+    if moved.any():
+        notes.append(f"{int(moved.sum())} of the {len(poses)} candidate poses have angles beyond ±180 deg; they are "
+                     "planned and written with the same angles brought into (-180, 180] by whole turns")
+    return wrapped
 
 
 def pose_set_indices(mechanism: Mechanism, setup: MeasurementSetup, poses: np.ndarray, *,
