@@ -62,47 +62,35 @@ class NotModelled(Exception):
 
 # -- rotations ---------------------------------------------------------------------------------
 
-def _rx(t):
-    c, s, o, z = np.cos(t), np.sin(t), np.ones_like(t), np.zeros_like(t)
-    return np.stack([np.stack([o, z, z], -1), np.stack([z, c, -s], -1), np.stack([z, s, c], -1)], -2)
-
-
-def _ry(t):
-    c, s, o, z = np.cos(t), np.sin(t), np.ones_like(t), np.zeros_like(t)
-    return np.stack([np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)], -2)
-
-
-def _rz(t):
-    c, s, o, z = np.cos(t), np.sin(t), np.ones_like(t), np.zeros_like(t)
-    return np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)], -2)
-
-
-def _drx(t):
-    c, s, z = np.cos(t), np.sin(t), np.zeros_like(t)
-    return np.stack([np.stack([z, z, z], -1), np.stack([z, -s, -c], -1), np.stack([z, c, -s], -1)], -2)
-
-
-def _dry(t):
-    c, s, z = np.cos(t), np.sin(t), np.zeros_like(t)
-    return np.stack([np.stack([-s, z, c], -1), np.stack([z, z, z], -1), np.stack([-c, z, -s], -1)], -2)
-
-
-def _drz(t):
-    c, s, z = np.cos(t), np.sin(t), np.zeros_like(t)
-    return np.stack([np.stack([-s, -c, z], -1), np.stack([c, -s, z], -1), np.stack([z, z, z], -1)], -2)
+def _axis_rotation(t, axis: int, derivative: bool = False) -> np.ndarray:
+    """Rotation by t (...,) about coordinate axis ``axis`` (0 x, 1 y, 2 z), (..., 3, 3), or its
+    derivative in t."""
+    t = np.asarray(t, dtype=float)
+    c, s = np.cos(t), np.sin(t)
+    i, j = [(1, 2), (2, 0), (0, 1)][axis]        # the plane turned: e_i → c e_i + s e_j
+    out = np.zeros(t.shape + (3, 3))
+    if derivative:
+        c, s = -s, c
+    else:
+        out[..., axis, axis] = 1.0
+    out[..., i, i] = c
+    out[..., j, j] = c
+    out[..., j, i] = s
+    out[..., i, j] = -s
+    return out
 
 
 def rotation(angles) -> np.ndarray:
     """R = Rz(c)·Ry(b)·Rx(a) of angles (..., 3) in radians, (..., 3, 3)."""
     angles = np.asarray(angles, dtype=float)
-    return _rz(angles[..., 2]) @ _ry(angles[..., 1]) @ _rx(angles[..., 0])
+    return _axis_rotation(angles[..., 2], 2) @ _axis_rotation(angles[..., 1], 1) @ _axis_rotation(angles[..., 0], 0)
 
 
 def rotation_derivatives(angles) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """∂R/∂a, ∂R/∂b, ∂R/∂c (each (..., 3, 3)) of :func:`rotation`."""
-    a, b, c = angles[..., 0], angles[..., 1], angles[..., 2]
-    Rx, Ry, Rz = _rx(a), _ry(b), _rz(c)
-    return Rz @ Ry @ _drx(a), Rz @ _dry(b) @ Rx, _drz(c) @ Ry @ Rx
+    Rx, Ry, Rz = (_axis_rotation(angles[..., k], k) for k in range(3))
+    dRx, dRy, dRz = (_axis_rotation(angles[..., k], k, derivative=True) for k in range(3))
+    return Rz @ Ry @ dRx, Rz @ dRy @ Rx, dRz @ Ry @ Rx
 
 
 def euler(R) -> np.ndarray:
@@ -233,16 +221,20 @@ def forward_kinematics(q: np.ndarray, rho: np.ndarray, start: np.ndarray, tol: f
     ``tol`` (mm, rad) — well inside the noise, and exact enough that the fit's finite
     differences of the pose are not spoiled."""
     x = np.array(start, dtype=float)
-    done = np.zeros(len(x), dtype=bool)
-    for _ in range(max_iter):
-        lam, A, _ = inverse_kinematics(x, rho, derivatives=True)
-        step = np.linalg.solve(A, (lam - q)[..., None])[..., 0]
-        x -= step
-        small = np.max(np.abs(step), axis=1) < tol
-        if small.all():
-            done[:] = True
-            break
-    res = np.max(np.abs(inverse_kinematics(x, rho) - q), axis=1)
+    with np.errstate(all="ignore"):
+        for _ in range(max_iter):
+            lam, A, _ = inverse_kinematics(x, rho, derivatives=True)
+            bad = ~(np.all(np.isfinite(A), axis=(1, 2)) & np.all(np.isfinite(lam), axis=1))
+            if bad.any():                     # a diverged pose stays put (and is reported)
+                A[bad], lam[bad] = np.eye(6), q[bad]
+            try:
+                step = np.linalg.solve(A, (lam - q)[..., None])[..., 0]
+            except np.linalg.LinAlgError:     # a singular pose: least squares, pose by pose
+                step = np.stack([np.linalg.lstsq(a, d, rcond=None)[0] for a, d in zip(A, lam - q)])
+            x -= step
+            if np.all(np.max(np.abs(step), axis=1) < tol):
+                break
+        res = np.max(np.abs(inverse_kinematics(x, rho) - q), axis=1)
     return x, (res < 1e-9) & np.all(np.isfinite(x), axis=1)
 
 
@@ -263,9 +255,10 @@ class Sensor:
     positions: np.ndarray | None = None      # indicators (K, 2)
     plane_offset: float = 0.0
 
-    def predict(self, x: np.ndarray, s: np.ndarray) -> np.ndarray:
-        """Readings (N, m) of poses x (N, 6) at sensor parameters s."""
-        p, R = x[:, 0:3], rotation(x[:, 3:6])
+    def predict(self, x: np.ndarray, s: np.ndarray, R: np.ndarray | None = None) -> np.ndarray:
+        """Readings (N, m) of poses x (N, 6) at sensor parameters s (R: the poses' rotations,
+        when known)."""
+        p, R = x[:, 0:3], rotation(x[:, 3:6]) if R is None else R
         if self.kind == "full-pose":
             pw, Rw, pt, Rt = s[0:3], rotation(s[3:6]), s[6:9], rotation(s[9:12])
             pos = pw + (p + R @ pt) @ Rw.T
@@ -514,7 +507,8 @@ class Referee:
                 J = np.zeros(r.shape + (len(theta),))
                 J[..., :48] = HAi @ B
                 if free_s:
-                    J[..., 48:] = -self._ds(lambda ss: sens.predict(x, ss), s)
+                    R = rotation(x[:, 3:6])
+                    J[..., 48:] = -self._ds(lambda ss: sens.predict(x, ss, R), s)
             if cov:
                 C = np.diag(self.setup.sigma_y**2) + (HAi * self.setup.sigma_q**2) @ np.swapaxes(HAi, 1, 2)
         return r, J, C
@@ -572,9 +566,10 @@ class Referee:
         _, J, C = self.evaluate(theta, jac=True, cov=True)
         return (np.linalg.inv(np.linalg.cholesky(C)) @ J[..., self.idx]).reshape(-1, len(self.idx))
 
-    def fit(self, tol: float = 1e-15) -> Fit:
-        """Minimise Σ|W_j r_j|² (Levenberg–Marquardt, MINPACK through scipy, Jacobian scaling)."""
-        z0 = self.theta0[self.idx]
+    def fit(self, tol: float = 1e-15, start=None) -> Fit:
+        """Minimise Σ|W_j r_j|² (Levenberg–Marquardt, MINPACK through scipy, Jacobian scaling)
+        from the files' values, or from θ = ``start`` (the weights stay those of the files)."""
+        z0 = (self.theta0 if start is None else np.asarray(start, dtype=float))[self.idx]
         sol = least_squares(self.whitened, z0, jac=self.whitened_jacobian, method="lm", x_scale="jac",
                             ftol=tol, xtol=tol, gtol=tol, max_nfev=200 * (len(z0) + 1))
         theta = self.theta(sol.x)
@@ -611,16 +606,32 @@ def covariance_deviation(Jw: np.ndarray, cov: np.ndarray) -> tuple[float, float]
 
 
 def referee(machine_file, setup_file, measurement_file, method: str, *, free=None, fixed=(), weighted=True,
-            y=None) -> tuple[Referee, Fit]:
+            y=None, start=None) -> tuple[Referee, Fit]:
     """Fit the campaign of these three files (``y``: other sensor readings in place of the
-    file's, e.g. noise-free ones); returns the problem and its fit."""
+    file's, e.g. noise-free ones; ``start``: θ to start from); returns the problem and its fit."""
     machine = read_hexapod(machine_file)
     setup = read_setup(setup_file)
     meas = read_measurements(measurement_file, machine, setup.sensor)
     if y is not None:
         meas = Measurements(meas.q, np.asarray(y, dtype=float), meas.commanded)
     ref = Referee(machine, setup, meas, method, free=free, fixed=fixed, weighted=weighted)
-    return ref, ref.fit()
+    return ref, ref.fit(start=start)
+
+
+def exact_readings(ref: Referee, machine_file, setup_file) -> np.ndarray:
+    """The sensor readings (N, m) the machine of ``machine_file`` would give, read by the sensor
+    of ``setup_file`` (its values), at ``ref``'s actuator readings, without noise: the data of
+    a campaign's truth, to find the truth's representative in a gauge (fit them with the gauge
+    held: zero residual, or the held parameters are no gauge)."""
+    truth = read_hexapod(machine_file)
+    sensor = read_setup(setup_file).sensor
+    if sensor.kind != ref.sensor.kind or sensor.names != ref.sensor.names:
+        raise NotModelled(f"{setup_file}: another sensor than the fit's")
+    start = ref.start
+    x, ok = forward_kinematics(ref.meas.q, truth.params, start)
+    if not ok.all():
+        raise NotModelled("the true machine's FK did not converge for every pose")
+    return sensor.predict(x, sensor.values)
 
 
 # -- comparing with pkmcal's answer, read from its files -----------------------------------------
@@ -758,11 +769,12 @@ def trials_needed(r: int, loss: float = LOSS, threshold: float = THRESHOLD, z: f
     return math.ceil(z**2 * (4 * loss / (delta**2 * r) + 2 * loss**2 / delta**2))
 
 
-def efficiency_ratio(e_pkmcal: np.ndarray, e_referee: np.ndarray, jw: np.ndarray) -> float:
-    """R̂ of :func:`trials_needed`: errors (K, r) and whitened Jacobians (K, M, r), eᵀFe = |J_w e|²."""
-    num = np.sum(np.einsum("kmi,ki->km", jw, e_pkmcal) ** 2)
-    den = np.sum(np.einsum("kmi,ki->km", jw, e_referee) ** 2)
-    return float(num / den)
+def efficiency_ratio(e_pkmcal: np.ndarray, e_referee: np.ndarray, jw: np.ndarray | None = None) -> float:
+    """R̂ of :func:`trials_needed`: parameter errors (K, r) with whitened Jacobians (K, M, r),
+    eᵀFe = |J_w e|²; or, ``jw`` None, whitened prediction errors (K, M) as they are."""
+    if jw is not None:
+        e_pkmcal, e_referee = np.einsum("kmi,ki->km", jw, e_pkmcal), np.einsum("kmi,ki->km", jw, e_referee)
+    return float(np.sum(e_pkmcal**2) / np.sum(e_referee**2))
 
 
 #: Probability with which a correct covariance fails a coverage check (any seed).
@@ -772,6 +784,18 @@ FALSE_FAILURE = 1e-6
 def mahalanobis(e: np.ndarray, cov: np.ndarray) -> np.ndarray:
     """d² = eᵀC⁻¹e per campaign: errors (K, r), covariances (K, r, r)."""
     return np.einsum("ki,ki->k", e, np.linalg.solve(cov, e[..., None])[..., 0])
+
+
+def prediction_d2(jw: np.ndarray, cov: np.ndarray, delta: np.ndarray) -> float:
+    """d² of a whitened prediction error Δ (M,) under the covariance ``cov`` of the parameters
+    propagated to the predictions, J_w C J_wᵀ (rank r): |A⁺Δ|² with A = J_w L, C = L Lᵀ. For
+    the GLS estimate Δ ≈ J_w e, e ~ N(0, (J_wᵀJ_w)⁻¹), so with the right C, d² ~ χ²_r; it
+    is gauge-free and blind to how curved the parametrisation is (only the predictions
+    count)."""
+    d = np.sqrt(np.diag(cov))
+    A = (jw * d) @ np.linalg.cholesky(cov / np.outer(d, d))
+    c = np.linalg.lstsq(A, delta, rcond=None)[0]
+    return float(c @ c)
 
 
 def coverage_bands(K: int, r: int, level: float = 0.95):
