@@ -618,6 +618,19 @@ def referee(machine_file, setup_file, measurement_file, method: str, *, free=Non
     return ref, ref.fit(start=start)
 
 
+def truth_in_gauge(ref: Referee, fit: Fit, real_file, true_setup_file) -> np.ndarray:
+    """The true machine and sensor (``real_file``, ``true_setup_file``) as the parameters held
+    by ``ref`` see them (all parameters, mm and rad): the referee's fit of the truth's
+    noise-free readings (:func:`exact_readings`) from ``fit``; its residual must vanish, else
+    the held parameters were no gauge (an assertion)."""
+    y = exact_readings(ref, real_file, true_setup_file)
+    exact = Referee(ref.machine, ref.setup, Measurements(ref.meas.q, y, ref.meas.commanded), ref.method, free=ref.free)
+    got = exact.fit(start=fit.theta, tol=1e-10)   # a zero-residual fit: stop once it is ~1e-10 σ
+    r, _, _ = exact.evaluate(got.theta, jac=False)
+    assert np.max(np.abs(r)) < 1e-7, f"the truth's exact readings are not fitted with {ref.free} free: {np.abs(r).max()}"
+    return got.theta
+
+
 def exact_readings(ref: Referee, machine_file, setup_file) -> np.ndarray:
     """The sensor readings (N, m) the machine of ``machine_file`` would give, read by the sensor
     of ``setup_file`` (its values), at ``ref``'s actuator readings, without noise: the data of
@@ -798,6 +811,47 @@ def prediction_d2(jw: np.ndarray, cov: np.ndarray, delta: np.ndarray) -> float:
     return float(c @ c)
 
 
+@dataclass
+class PredictionTrials:
+    """The Monte Carlo of whitened prediction errors (Δ = W(h(θ̂) − h(θ*)): the fit's residual
+    at θ̂ less that at the truth's representative in the gauge; gauge-free and blind to the
+    parametrisation's curvature), pkmcal's and the referee's, with pkmcal's d² under its
+    a-priori covariance (:func:`prediction_d2`), whether it is inside its file covariance's
+    95 % ellipsoid, and its per-parameter errors in its file σ."""
+
+    r: int
+    pkmcal: list = field(default_factory=list)
+    referee: list = field(default_factory=list)
+    d2: list = field(default_factory=list)
+    inside: list = field(default_factory=list)
+    z: list = field(default_factory=list)
+
+    def add(self, ref: Referee, fit: Fit, fit_json: dict, truth: np.ndarray) -> None:
+        at_truth = ref.whitened(truth[ref.idx])
+        theta = fit.theta.copy()
+        theta[ref.idx] = pkmcal_values(fit_json, fit.free)
+        self.pkmcal.append(ref.whitened(theta[ref.idx]) - at_truth)
+        self.referee.append(fit.residual - at_truth)
+        jw = ref.whitened_jacobian_at(theta)
+        self.d2.append(prediction_d2(jw, fit_json["covariance_prior"], self.pkmcal[-1]))
+        self.inside.append(prediction_d2(jw, fit_json["covariance"], self.pkmcal[-1]) <= stats_chi2_ppf(0.95, self.r))
+        self.z.append((theta[ref.idx] - truth[ref.idx]) / np.sqrt(np.diag(fit_json["covariance"])))
+
+    def check(self) -> str:
+        """Assert the efficiency ratio (:func:`trials_needed`) and the coverage
+        (:func:`coverage_bands`); returns the summary."""
+        K = len(self.d2)
+        ratio = efficiency_ratio(np.array(self.pkmcal), np.array(self.referee))
+        (lo, hi), min_inside = coverage_bands(K, self.r)
+        summary = (f"K={K}: MSE ratio pkmcal/referee {ratio:.6f}; mean d² {np.mean(self.d2):.2f} (band {lo:.2f}.."
+                   f"{hi:.2f}); {sum(self.inside)} of {K} inside the 95 % ellipsoid (at least {min_inside}); "
+                   f"per-parameter 95 % intervals hold {np.mean(np.abs(np.array(self.z)) <= 1.96):.3f} of the errors")
+        assert abs(ratio - 1.0) <= THRESHOLD - 1.0, summary
+        assert lo <= np.mean(self.d2) <= hi, summary
+        assert sum(self.inside) >= min_inside, summary
+        return summary
+
+
 def coverage_bands(K: int, r: int, level: float = 0.95):
     """Under a correct covariance (errors Gaussian to first order): K·mean(d²) ~ χ²_{Kr}, and
     the count of campaigns inside the ``level`` ellipsoid ~ Binomial(K, level). Returns
@@ -846,6 +900,23 @@ def identify(machine_file, meas_file, setup_file, out_file, *options) -> dict:
 
     return json.loads(run_pkmcal("identify", machine_file, meas_file, "--setup", setup_file, "-o", out_file,
                                  "--json", *options))
+
+
+def simulate_reached(folder, machine_file, setup_file, poses_file, seed: int, n: int, errors_mm: float = 5.0):
+    """A campaign: a real machine with every parameter off by U(−errors, errors) mm (``pkmcal
+    simulate --random-errors``, seeded; the leg-collision check off, as paper 1's
+    reproduction: the prototype's legs nearly touch), ``n`` of the poses it reaches (a seeded
+    random choice). Returns (measurement file, real machine file), or None when it reaches
+    fewer than ``n``."""
+    every, meas, real = (folder / f"{name}-{seed}.{ext}" for name, ext in
+                         (("reached", "csv"), ("meas", "csv"), ("real", "yaml")))
+    run_pkmcal("simulate", machine_file, "--random-errors", errors_mm, "--save-real", real, "--setup", setup_file,
+               "--poses", poses_file, "--seed", seed, "--ignore-limit", "leg_collision", "-o", every)
+    reached = sum(1 for ln in open(every, encoding="utf-8") if ln.strip()) - 1
+    if reached < n:
+        return None
+    keep_rows(every, meas, np.random.default_rng(seed).permutation(reached)[:n])
+    return meas, real
 
 
 def keep_rows(src, dst, rows) -> None:

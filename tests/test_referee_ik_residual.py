@@ -48,15 +48,7 @@ def campaign(files, seed: int):
     """Paper 1's campaign number ``seed``: (measurements of 15 reached corners, real machine),
     or None when the real machine reaches fewer than 15 corners."""
     folder, machine, setup, poses = files
-    every, real, meas = (folder / f"{name}-{seed}.{ext}" for name, ext in
-                         (("corners-measured", "csv"), ("real", "yaml"), ("meas", "csv")))
-    rg.run_pkmcal("simulate", machine, "--random-errors", ERROR_MM, "--save-real", real, "--setup", setup,
-                  "--poses", poses, "--seed", seed, "--ignore-limit", "leg_collision", "-o", every)
-    reached = sum(1 for ln in open(every, encoding="utf-8") if ln.strip()) - 1
-    if reached < N_POSES:
-        return None
-    rg.keep_rows(every, meas, np.random.default_rng(seed).permutation(reached)[:N_POSES])
-    return meas, real
+    return rg.simulate_reached(folder, machine, setup, poses, seed, N_POSES, ERROR_MM)
 
 
 def test_referee_derivatives_match_its_own_central_differences(files):

@@ -54,30 +54,9 @@ def files(tmp_path_factory):
 
 
 def campaign(files, seed: int):
-    """Campaign ``seed``: (measurements of 30 reached poses, real machine file), or None when
-    the real machine reaches fewer than 30 of the planned poses."""
+    """Campaign ``seed``: (measurements of 30 reached poses, real machine file) or None."""
     folder, machine, true_setup, _, poses = files
-    every, meas, real = folder / f"reached-{seed}.csv", folder / f"meas-{seed}.csv", folder / f"real-{seed}.yaml"
-    rg.run_pkmcal("simulate", machine, "--random-errors", ERROR_MM, "--save-real", real, "--setup", true_setup,
-                  "--poses", poses, "--seed", seed, "--ignore-limit", "leg_collision", "-o", every)
-    reached = sum(1 for ln in open(every, encoding="utf-8") if ln.strip()) - 1
-    if reached < N_POSES:
-        return None
-    rg.keep_rows(every, meas, np.random.default_rng(seed).permutation(reached)[:N_POSES])
-    return meas, real
-
-
-def truth_in_gauge(ref: rg.Referee, fit: rg.Fit, real, true_setup) -> np.ndarray:
-    """The true machine and tracker as the gauge held by ``ref`` sees them (all parameters):
-    the referee's fit of the truth's noise-free readings; its residual must vanish, else the
-    held parameters were no gauge."""
-    y = rg.exact_readings(ref, real, true_setup)
-    exact = rg.Referee(ref.machine, ref.setup, rg.Measurements(ref.meas.q, y, ref.meas.commanded), ref.method,
-                       free=ref.free)
-    got = exact.fit(start=fit.theta, tol=1e-10)   # a zero-residual fit: stop once it is ~1e-10 σ
-    r, _, _ = exact.evaluate(got.theta, jac=False)
-    assert np.max(np.abs(r)) < 1e-7, f"the truth's exact readings are not fitted with {ref.free} free: {np.abs(r).max()} mm"
-    return got.theta
+    return rg.simulate_reached(folder, machine, true_setup, poses, seed, N_POSES, ERROR_MM)
 
 
 def test_tracker_campaign_pkmcal_equals_referee(files, tmp_path):
@@ -97,7 +76,7 @@ def test_tracker_campaign_pkmcal_equals_referee(files, tmp_path):
     for n in gauge:                                    # held at the files' values
         assert rg.pkmcal_values(fit_json, [n])[0] == pytest.approx(everything.theta0[everything.names.index(n)], abs=1e-12)
     rg.assert_agree(fit_json, ref, fit, tmp_path / "cal.yaml")
-    truth_in_gauge(ref, fit, real, true_setup)
+    rg.truth_in_gauge(ref, fit, real, true_setup)
 
 
 def test_tracker_monte_carlo_efficiency_and_coverage(files):
@@ -117,12 +96,9 @@ def test_tracker_monte_carlo_efficiency_and_coverage(files):
     χ²_39 (mean 41.8 over 26 campaigns). The predictions are also what the gauge cannot
     touch."""
     _, machine, true_setup, setup, _ = files
-    r = 39
-    K = rg.trials_needed(r)
-    d_pk, d_ref, d2, inside, z = [], [], [], [], []
-    level = rg.stats_chi2_ppf(0.95, r)
+    trials = rg.PredictionTrials(r=39)
     seed = 200
-    while len(d_pk) < K:
+    while len(trials.d2) < rg.trials_needed(trials.r):
         seed += 1
         made = campaign(files, seed)
         if made is None:
@@ -131,21 +107,5 @@ def test_tracker_monte_carlo_efficiency_and_coverage(files):
         fit_json = rg.identify_api(machine, meas, setup, method="fk-residual")
         ref, fit = rg.referee(machine, setup, meas, "fk-residual", fixed=fit_json["gauge"])
         rg.assert_agree(fit_json, ref, fit)
-        truth = truth_in_gauge(ref, fit, real, true_setup)
-        at_truth = ref.whitened(truth[ref.idx])
-        theta_pk = fit.theta.copy()
-        theta_pk[ref.idx] = rg.pkmcal_values(fit_json, fit.free)
-        d_pk.append(ref.whitened(theta_pk[ref.idx]) - at_truth)
-        d_ref.append(fit.residual - at_truth)
-        jw = ref.whitened_jacobian_at(theta_pk)
-        d2.append(rg.prediction_d2(jw, fit_json["covariance_prior"], d_pk[-1]))
-        inside.append(rg.prediction_d2(jw, fit_json["covariance"], d_pk[-1]) <= level)
-        z.append((theta_pk[ref.idx] - truth[ref.idx]) / np.sqrt(np.diag(fit_json["covariance"])))
-    ratio = rg.efficiency_ratio(np.array(d_pk), np.array(d_ref))
-    (lo, hi), min_inside = rg.coverage_bands(K, r)
-    summary = (f"K={K}: MSE ratio pkmcal/referee {ratio:.6f}; mean d² {np.mean(d2):.2f} (band {lo:.2f}..{hi:.2f}); "
-               f"{sum(inside)} of {K} inside the 95 % ellipsoid (at least {min_inside}); per-parameter 95 % "
-               f"intervals hold {np.mean(np.abs(np.array(z)) <= 1.96):.3f} of the parameter errors")
-    assert abs(ratio - 1.0) <= rg.THRESHOLD - 1.0, summary
-    assert lo <= np.mean(d2) <= hi, summary
-    assert sum(inside) >= min_inside, summary
+        trials.add(ref, fit, fit_json, rg.truth_in_gauge(ref, fit, real, true_setup))
+    trials.check()
