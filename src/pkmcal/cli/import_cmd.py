@@ -13,6 +13,8 @@ checked to load back to the same machine (:func:`pkmcal.io.machine_file.save_mac
 
 from __future__ import annotations
 
+import os
+
 import click
 
 from pkmcal.cli.options import check_output, examples, output_option, to_stdout
@@ -94,14 +96,14 @@ def linuxcnc_cmd(hal: str, ini: str | None, output: str | None, offsets: str, jo
         click.echo(f"wrote {output}", err=True)
 
 
-def _write_delta(machine, output: str | None, source: str) -> None:
+def _write_delta(machine, output: str | None, source: str, kind: str = "linear delta") -> None:
     from pkmcal.io.machine_file import machine_to_text, save_machine
 
     if to_stdout(output):
         click.echo(machine_to_text(machine), nl=False)
     else:
         save_machine(machine, output)
-    click.echo(f"machine '{machine.name}': linear delta from {source}", err=True)
+    click.echo(f"machine '{machine.name}': {kind} from {source}", err=True)
     if not to_stdout(output):
         click.echo(f"wrote {output}", err=True)
 
@@ -116,23 +118,61 @@ def _delta_name(path: str, name: str | None) -> str:
 
 @import_group.command("klipper", epilog=examples(
     "pkmcal import klipper examples/klipper/printer.cfg -o delta.yaml",
+    "pkmcal import klipper printer.cfg -o delta.yaml --setup-output probe.yaml",
     "pkmcal import klipper examples/klipper/printer.cfg --name my-kossel"))
 @click.argument("config", metavar="PRINTER.cfg")
 @output_option("DELTA.yaml", "Machine file to write")
 @click.option("--name", metavar="NAME", help="Machine name (default: the config file's name).")
-def klipper_cmd(config: str, output: str | None, name: str | None) -> None:
-    """Read a Klipper delta printer's printer.cfg as a pkmcal linear-delta machine file.
+@click.option("--setup-output", "setup_output", metavar="PROBE.yaml",
+              help="Also write the z-probe setup of this printer: its [probe] or [bltouch] x_offset, y_offset, "
+                   "z_offset, with the noise of the built-in z-probe-klipper (give it to plan, simulate, import "
+                   "klipper-probe and identify with --setup).")
+def klipper_cmd(config: str, output: str | None, name: str | None, setup_output: str | None) -> None:
+    """Read a Klipper delta printer's printer.cfg as a pkmcal machine file, as Klipper reads it.
 
-    Reads [printer] kinematics: delta, delta_radius, print_radius, minimum_z_position and,
-    per [stepper_a|b|c], angle (default 210, 330, 90), arm_length and position_endstop
-    (b and c default to a's), following [include] files, with the SAVE_CONFIG (#*#) block
-    of DELTA_CALIBRATE overriding what is above it. The inverse of 'pkmcal export --format
-    klipper'.
+    kinematics: delta — [printer] delta_radius, print_radius, minimum_z_position and, per
+    [stepper_a|b|c], angle (default 210, 330, 90), arm_length and position_endstop (b and c
+    default to a's); the rail travel and build radius are those Klipper's kinematics allow.
+    kinematics: rotary_delta — [printer] shoulder_radius, shoulder_height and per stepper
+    angle (default 30, 150, 270), upper_arm_length, lower_arm_length, position_endstop.
+    As Klipper: [include] files are read where they stand (globs, relative to the including
+    file; later values win); an option of the SAVE_CONFIG (#*#) block that the main file
+    also sets is overridden by the main file's, and the whole block is ignored when anything
+    follows it (a note says so). [probe] / [bltouch] offsets are printed, and written as a
+    setup with --setup-output. The inverse of 'pkmcal export --format klipper'.
     """
     check_output(output, [config])
-    from pkmcal.io.delta_firmware import read_klipper
+    if setup_output is not None:
+        check_output(setup_output, [config])
+        if output is not None and os.path.abspath(setup_output) == os.path.abspath(output):
+            raise PkmcalError("-o and --setup-output name the same file; choose two paths")
+    from pkmcal.io.delta_firmware import RotaryFirmware, read_klipper_printer
 
-    _write_delta(read_klipper(config).machine(_delta_name(config, name)), output, f"Klipper config {config}")
+    printer = read_klipper_printer(config)
+    for note in printer.notes:
+        click.echo(f"note: {note}", err=True)
+    kind = "rotary delta" if isinstance(printer.firmware, RotaryFirmware) else "linear delta"
+    _write_delta(printer.machine(_delta_name(config, name)), output, f"Klipper config {config}", kind)
+    if printer.probe_offset is not None:
+        x, y, z = printer.probe_offset
+        click.echo(f"probe: [{printer.probe_section}] x_offset {x:g}, y_offset {y:g}, z_offset {z:g} mm"
+                   + ("" if setup_output else " (write them as a setup with --setup-output PROBE.yaml, or give them "
+                      "as probe_offset in your setup file)"), err=True)
+    if setup_output is not None:
+        if printer.probe_offset is None:
+            raise PkmcalError(f"{config} has no [probe] or [bltouch] section: there is no probe offset to write; "
+                              "drop --setup-output or add the probe's section")
+        from dataclasses import replace
+
+        import numpy as np
+
+        from pkmcal.io.setup_file import save_setup
+        from pkmcal.sensors.library import builtin_setup
+
+        setup = builtin_setup("z-probe-klipper")
+        setup = replace(setup, sensor=replace(setup.sensor, probe_offset=np.array(printer.probe_offset)))
+        save_setup(setup, setup_output)
+        click.echo(f"wrote {setup_output} (z-probe setup with the probe offset of {config})", err=True)
 
 
 @import_group.command("marlin", epilog=examples(

@@ -189,15 +189,10 @@ def stable_position(value: str, where: str, line: int | None, key: str) -> np.nd
 
 def saved_values(src: str) -> dict[tuple[str, str], tuple[str, str, int | None]]:
     """(section, key) → (value, file, line) of a Klipper config with its includes and
-    ``#*#`` block (later values win)."""
-    from pkmcal.io.delta_firmware import _read_sections
+    ``#*#`` block, as Klipper reads them (:func:`pkmcal.io.klipper_config.read_config`)."""
+    from pkmcal.io.klipper_config import read_config
 
-    values: dict[tuple[str, str], tuple[str, str, int | None]] = {}
-    for where, parser, lines in _read_sections(src):
-        for section in parser.sections():
-            for key, value in parser.items(section):
-                values[(section.strip(), key)] = (value, where, lines.get((section.strip(), key)))
-    return values
+    return {k: (o.value, o.path, o.line) for k, o in read_config(src).options.items()}
 
 
 def carriages_from_steps(values, steps: np.ndarray, machine, src: str) -> tuple[np.ndarray, np.ndarray]:
