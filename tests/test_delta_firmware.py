@@ -12,11 +12,14 @@ from hypothesis import strategies as st
 from pkmcal.errors import InputFileError
 from pkmcal.io.delta_firmware import (
     DeltaFirmware,
+    RotaryFirmware,
     firmware_subset,
     klipper_text,
     marlin_text,
     read_klipper,
+    read_klipper_printer,
     read_marlin,
+    rotary_firmware_subset,
 )
 from pkmcal.mechanisms.linear_delta import PARAM_NAMES
 
@@ -92,14 +95,128 @@ def _write(tmp_path, name, text):
 
 
 def test_klipper_config_with_include_and_saved_block(tmp_path):
+    """klippy/configfile.py _strip_duplicates: an option of the #*# block that the main
+    file also sets is commented out, so the main file's value is the one Klipper runs
+    (changed from pkmcal's old reading, where the block won: radius 174.210123 and
+    endstop_a 296.68193 were read although Klipper runs 174.75 and 297.05)."""
     _write(tmp_path, "mainsail.cfg", "[virtual_sdcard]\npath: ~/printer_data/gcodes\n")
-    fw = read_klipper(_write(tmp_path, "printer.cfg", PRINTER_CFG))
-    # the SAVE_CONFIG block overrides the sections above it
-    assert fw.radius == 174.210123
+    printer = read_klipper_printer(_write(tmp_path, "printer.cfg", PRINTER_CFG))
+    fw = printer.firmware
+    assert fw.radius == 174.75
     assert fw.angles_deg == (210.114221, 329.707221, 90.0)
     assert fw.arms == (333.0, 333.0, 333.0)
-    assert fw.endstops == (296.68193, 297.383285, 296.91701)
+    assert fw.endstops == (297.05, 297.383285, 296.91701)
     assert fw.print_radius == 140.0 and fw.min_z == -5.0
+    assert any("[printer] delta_radius, [stepper_a] arm_length, [stepper_a] position_endstop override" in n
+               for n in printer.notes)
+
+
+def test_the_example_printer_cfg_imports_to_what_klipper_runs():
+    """examples/klipper/printer.cfg: Klipper runs delta_radius 174.75 and stepper_a's
+    position_endstop 297.05 of the main file (pkmcal read 174.210 and 296.68 before)."""
+    from pathlib import Path
+
+    fw = read_klipper(str(Path(__file__).parents[1] / "examples" / "klipper" / "printer.cfg"))
+    assert fw.radius == 174.75 and fw.endstops == (297.05, 297.383285, 296.91701)
+    assert fw.angles_deg == (210.114221, 329.707221, 90.0)
+
+
+_BLOCK = ("\n#*# <---------------------- SAVE_CONFIG ---------------------->\n"
+          "#*# DO NOT EDIT THIS BLOCK OR BELOW. The contents are auto-generated.\n#*#\n"
+          "#*# [printer]\n#*# delta_radius = 101.5\n#*#\n#*# [stepper_b]\n#*# angle = 331.25\n")
+_MAIN = ("[printer]\nkinematics: delta\ndelta_radius: 100\n[stepper_a]\narm_length: 250 # mm\n"
+         "position_endstop: 300\n")
+
+
+@pytest.mark.parametrize("tail, block_read", [
+    ("", True),                                   # the block as SAVE_CONFIG writes it
+    ("\n\n\n", True),                             # trailing blank lines are stripped first
+    ("[extra]\nkey: 1\n", False),                # anything after the block: the whole block ignored
+    ("#*#x\n", False),                            # a '#*#' line without the space
+    ("\n#*# [stepper_c]\n#*# angle = 91\n", False),   # a blank line inside the block
+])
+def test_saved_block_is_read_or_ignored_as_klipper_does(tmp_path, tail, block_read):
+    """klippy/configfile.py _find_autosave_data: after the header every line must start
+    with '#*# ' (or be '#*#'); otherwise Klipper ignores the whole block. The main file's
+    delta_radius wins over the block's in any case."""
+    printer = read_klipper_printer(_write(tmp_path, "printer.cfg", _MAIN + _BLOCK + tail))
+    fw = printer.firmware
+    assert fw.radius == 100.0
+    assert fw.angles_deg == ((210.0, 331.25, 90.0) if block_read else (210.0, 330.0, 90.0))
+    assert any("SAVE_CONFIG (#*#) block is ignored" in n for n in printer.notes) is not block_read
+
+
+def test_a_saved_line_above_the_header_voids_the_block(tmp_path):
+    text = _MAIN.replace("[stepper_a]", "#*# [stepper_b]\n[stepper_a]") + _BLOCK
+    printer = read_klipper_printer(_write(tmp_path, "printer.cfg", text))
+    assert printer.firmware.angles_deg == (210.0, 330.0, 90.0)
+    assert any("line 4 starts with '#*# '" in n for n in printer.notes)
+
+
+def test_include_is_applied_where_it_stands(tmp_path):
+    """klippy/configfile.py _parse_config: the lines above an [include] are read first,
+    then the included files (a glob, in sorted order, relative to the including file),
+    then the lines below; later values win."""
+    (tmp_path / "parts").mkdir()
+    _write(tmp_path / "parts", "b.cfg", "[printer]\ndelta_radius: 103\n[stepper_a]\nangle: 211\n")
+    _write(tmp_path / "parts", "a.cfg", "[printer]\ndelta_radius: 102\n[include ../more/c.cfg]\n")
+    (tmp_path / "more").mkdir()
+    _write(tmp_path / "more", "c.cfg", "[stepper_b]\nangle: 329\n")
+    text = _MAIN + "[include parts/*.cfg]\n[include none/*.cfg]\n[printer]\ndelta_radius: 104\n"
+    fw = read_klipper(_write(tmp_path, "printer.cfg", text))
+    assert fw.radius == 104.0 and fw.angles_deg == (211.0, 329.0, 90.0)
+    fw = read_klipper(_write(tmp_path, "printer.cfg", _MAIN + "[include parts/*.cfg]\n"))
+    assert fw.radius == 103.0
+    fw = read_klipper(_write(tmp_path, "printer.cfg", "[include parts/b.cfg]\n" + _MAIN))
+    assert fw.radius == 100.0
+    _write(tmp_path, "loop.cfg", "[include printer.cfg]\n")
+    with pytest.raises(InputFileError, match="loops back"):
+        read_klipper(_write(tmp_path, "printer.cfg", _MAIN + "[include loop.cfg]\n"))
+
+
+def test_comments_as_klipper_strips_them(tmp_path):
+    """A '#' anywhere ends the line (klippy/configfile.py _parse_config); ';' after white
+    space (RawConfigParser inline_comment_prefixes)."""
+    text = _MAIN.replace("delta_radius: 100", "delta_radius: 100#.5 ; comment")
+    assert read_klipper(_write(tmp_path, "printer.cfg", text)).radius == 100.0
+
+
+def test_probe_offsets_and_rotary_deltas(tmp_path):
+    p = read_klipper_printer(_write(tmp_path, "printer.cfg", _MAIN + "[bltouch]\nx_offset: -2.5\nz_offset: 1.25\n"))
+    assert p.probe_offset == (-2.5, 0.0, 1.25) and p.probe_section == "bltouch"
+    with pytest.raises(InputFileError, match="probe.*z_offset"):
+        read_klipper_printer(_write(tmp_path, "printer.cfg", _MAIN + "[probe]\nx_offset: 1\n"))
+    with pytest.raises(InputFileError, match="one probe"):
+        read_klipper_printer(_write(tmp_path, "printer.cfg", _MAIN + "[probe]\nz_offset: 1\n[bltouch]\nz_offset: 1\n"))
+    rotary = ("[printer]\nkinematics: rotary_delta\nshoulder_radius: 33.9\nshoulder_height: 412.9\n"
+              "[stepper_a]\nposition_endstop: 252\nupper_arm_length: 170\nlower_arm_length: 320\n"
+              "[stepper_c]\nangle: 271\nposition_endstop: 250\n")
+    fw = read_klipper(_write(tmp_path, "printer.cfg", rotary))
+    assert fw == RotaryFirmware(33.9, 412.9, (30.0, 150.0, 271.0), (170.0,) * 3, (320.0,) * 3, (252.0, 252.0, 250.0))
+    m = fw.machine("r")
+    # each arm's reading is 0 (at its switch) with the nozzle at (0, 0, position_endstop)
+    lam = m.ik(np.c_[np.zeros((3, 2)), fw.endstops])
+    np.testing.assert_allclose(np.diag(lam), 0.0, rtol=0, atol=1e-12)
+    back, dropped = rotary_firmware_subset(m)
+    assert dropped == []
+    np.testing.assert_allclose(back.endstops, fw.endstops, rtol=0, atol=1e-9)
+    assert (back.shoulder_radius, back.upper_arms, back.angles_deg) == (33.9, fw.upper_arms, fw.angles_deg)
+
+
+def test_travel_and_build_radius_are_klippers(tmp_path):
+    """klippy/kinematics/delta.py: max_xy = min(print_radius, arm − radius,
+    ratio_to_xy(12)); the lowest carriage Klipper commands is at minimum_z on the far edge,
+    so a pose there uses the whole travel and one 1 mm lower is beyond it."""
+    text = _MAIN.replace("[stepper_a]", "print_radius: 500\nminimum_z_position: -3\n[stepper_a]")
+    fw = read_klipper(_write(tmp_path, "printer.cfg", text))
+    r, arm = 100.0, 250.0
+    ratio_xy = 12 * np.sqrt(arm**2 / 145.0) - r          # no step settings: the half-step term left out
+    assert fw.print_radius == pytest.approx(ratio_xy, abs=1e-12)
+    m = fw.machine("m")
+    edge = np.array([[fw.print_radius * np.cos(np.deg2rad(30)), fw.print_radius * np.sin(np.deg2rad(30)), -3.0]])
+    margins = m.check_limits(edge).margins
+    assert margins["travel"][0] == pytest.approx(0.0, abs=1e-9)
+    assert m.check_limits(edge - [0, 0, 1.0]).margins["travel"][0] < -0.5
 
 
 def test_klipper_defaults_follow_stepper_a_and_the_standard_angles(tmp_path):
@@ -141,7 +258,10 @@ def test_round_trips_are_exact(tmp_path_factory, fw):
     d = tmp_path_factory.mktemp("rt")
     cfg = "[printer]\nkinematics: delta\nprint_radius: {!r}\n\n".format(fw.print_radius) + klipper_text(fw)
     back = read_klipper(_write(d, "printer.cfg", cfg))
-    assert back == fw
+    # the ten numbers exactly; the build radius is Klipper's, min(print_radius, ...)
+    assert (back.radius, back.angles_deg, back.arms, back.endstops) == (fw.radius, fw.angles_deg, fw.arms,
+                                                                          fw.endstops)
+    assert back.print_radius <= fw.print_radius
     # machine → firmware numbers → machine: lengths bit for bit; angles through one
     # radian → degree → radian conversion, each correctly rounded: within 2 ulp
     m = fw.machine("m")
@@ -195,7 +315,8 @@ def test_export_names_what_the_firmware_cannot_hold():
     ("[printer]\nkinematics: delta\n[stepper_a]\narm_length: 300\nposition_endstop: 290\n",
      "\\[printer\\] has no 'delta_radius'"),
     ("[printer]\nkinematics: delta\ndelta_radius: abc\n", "delta_radius: expected a number, got 'abc'"),
-    ("[stepper_a]\nno section header problem\n", "not a Klipper config file"),
+    ("[stepper_a]\nno section header problem\n", "line 2: not a Klipper config"),
+    ("kinematics: delta\n", "line 1: not a Klipper config: an option before any"),
     ("[include missing.cfg]\n[printer]\nkinematics: delta\n", "no such file"),
 ])
 def test_bad_klipper_configs_name_the_file_and_key(tmp_path, text, message):

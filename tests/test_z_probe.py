@@ -266,7 +266,10 @@ def test_saved_block_stable_positions_give_back_the_carriage_positions(tmp_path)
     m = read_klipper(str(path)).machine("p")
     sd = 40.0 / (200 * 16)
     steps = (m.reading_reference[None, :] - m.ik(nozzle)) / sd
-    block = ["#*# <---------------------- SAVE_CONFIG ---------------------->", "#*# [delta_calibrate]"]
+    # the header Klipper's SAVE_CONFIG writes (klippy/configfile.py AUTOSAVE_HEADER): a block
+    # under its first line only is not read by Klipper, nor now by pkmcal
+    block = ["#*# <---------------------- SAVE_CONFIG ---------------------->",
+             "#*# DO NOT EDIT THIS BLOCK OR BELOW. The contents are auto-generated.", "#*#", "#*# [delta_calibrate]"]
     for k, row in enumerate(steps):
         block += [f"#*# height{k} = 1.25", f"#*# height{k}_pos = " + ",".join(f"{v:.3f}" for v in row)]
     block += ["#*# manual_height0 = 0.1", "#*# manual_height0_pos = 1.0,2.0,3.0"]

