@@ -42,7 +42,9 @@ from pkmcal.io.calibration_json import (  # noqa: F401
     "pkmcal export calibrated.yaml --format json -o calibrated.json",
     "pkmcal export stewart-prototype --format linuxcnc",
     "pkmcal export kossel-mini --format klipper",
-    "pkmcal export kossel-mini --format marlin"))
+    "pkmcal export kossel-mini --format marlin",
+    "pkmcal export kossel-mini --format marlin --marlin-version 1.1.9",
+    "pkmcal export kossel-mini --format klipper --config examples/klipper/printer.cfg -o printer-saved.cfg"))
 @click.argument("calibrated", metavar="CALIBRATED.yaml")
 @click.option("--format", "fmt", type=click.Choice(["linuxcnc", "json", "klipper", "marlin"]), required=True,
               help="linuxcnc: genhexkins HAL setp lines (hexapods); json: parameters with std and correlation; "
@@ -65,12 +67,19 @@ from pkmcal.io.calibration_json import (  # noqa: F401
               help="klipper: write the whole printer.cfg as Klipper's SAVE_CONFIG would leave it with this "
                    "calibration: the #*# block updated (its other sections kept) and the main file's copies of the "
                    "saved options commented out, so that Klipper runs the saved values. Needs -o (never the input).")
+@click.option("--marlin-version", "marlin_version", type=click.Choice(["1.1.9", "2.0.x", "2.1.x"]), default="2.1.x",
+              show_default=True,
+              help="marlin: the Marlin the settings are for (M665's letters and homing differ: 1.1.9 and 2.0.x "
+                   "have no rod trims in M665 and read B as the calibration radius).")
+@click.option("--steps-per-mm", "steps_per_mm", type=float, metavar="STEPS",
+              help="marlin, --marlin-version 2.0.x: the towers' steps per mm (M92), for its homing's extra "
+                   "MIN_STEPS_PER_SEGMENT + 1 steps.")
 @click.option("--json", "as_json", is_flag=True,
               help="With --measurements: print the refit report as JSON on standard output (the settings then need "
                    "-o FILE).")
 def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None, measurements: str | None = None,
                setup_spec: str | None = None, heldout: str | None = None, klipper_config: str | None = None,
-               as_json: bool = False) -> None:
+               marlin_version: str = "2.1.x", steps_per_mm: float | None = None, as_json: bool = False) -> None:
     """Export the machine in CALIBRATED.yaml (a machine file or built-in name) for a controller.
 
     linuxcnc: 'setp genhexkins.base.N.x|y|z' and 'setp genhexkins.platform.N.x|y|z'
@@ -130,7 +139,7 @@ def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None, m
         refit = None
         if measurements is not None:
             refit = _refit(machine, measurements, setup_spec, heldout, calibrated)
-        text = _delta_firmware_text(machine, fmt, refit, klipper_config)
+        text = _delta_firmware_text(machine, fmt, refit, klipper_config, marlin_version, steps_per_mm)
     else:
         text = format_calibration_json(machine, source=os.fspath(calibrated))
     if ini_text is not None:
@@ -168,7 +177,8 @@ def _refit(machine, measurements: str, setup_spec: str | None, heldout: str | No
     return firmware_refit(machine, setup, meas, held)
 
 
-def _delta_firmware_text(machine, fmt: str, refit=None, klipper_config: str | None = None) -> str:
+def _delta_firmware_text(machine, fmt: str, refit=None, klipper_config: str | None = None,
+                         marlin_version: str = "2.1.x", steps_per_mm: float | None = None) -> str:
     """The Klipper or Marlin text of a linear delta (or of its firmware-limited ``refit``),
     or Klipper's of a rotary delta; what the machine has that the firmware cannot hold, and
     what the refit costs, on standard error. With ``klipper_config`` the user's printer.cfg
@@ -178,8 +188,8 @@ def _delta_firmware_text(machine, fmt: str, refit=None, klipper_config: str | No
         also = " and, to Klipper, rotary deltas" if fmt == "klipper" else ""
         raise PkmcalError(f"--format {fmt} exports linear delta printers{also}; machine '{machine.name}' is a "
                           f"{machine.kind or 'machine of another kind'}")
-    from pkmcal.io.delta_firmware import (firmware_subset, klipper_saved_config, klipper_text, marlin_text,
-                                          rotary_firmware_subset)
+    from pkmcal.io.delta_firmware import firmware_subset, klipper_saved_config, klipper_text, rotary_firmware_subset
+    from pkmcal.io.marlin_settings import marlin_text
 
     fw, dropped = (rotary_firmware_subset if rotary else firmware_subset)(machine)
     angles = dict(zip(machine.param_names, machine.param_is_angle))
@@ -201,7 +211,12 @@ def _delta_firmware_text(machine, fmt: str, refit=None, klipper_config: str | No
                    "--measurements MEAS.csv --setup SETUP (and --heldout HELDOUT.csv)", err=True)
     if fmt == "klipper" and klipper_config is not None:
         return klipper_saved_config(klipper_config, fw)
-    return klipper_text(fw) if fmt == "klipper" else marlin_text(fw)
+    if fmt == "klipper":
+        return klipper_text(fw)
+    text, lost = marlin_text(fw, marlin_version, None if steps_per_mm is None else (steps_per_mm,) * 3)
+    for line in lost:
+        click.echo(f"pkmcal: warning: {line}", err=True)
+    return text
 
 
 __all__ = ["calibration_json", "export_cmd", "format_calibration_json"]

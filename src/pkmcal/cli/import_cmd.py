@@ -118,7 +118,7 @@ def _delta_name(path: str, name: str | None) -> str:
 
 @import_group.command("klipper", epilog=examples(
     "pkmcal import klipper examples/klipper/printer.cfg -o delta.yaml",
-    "pkmcal import klipper printer.cfg -o delta.yaml --setup-output probe.yaml",
+    "pkmcal import klipper examples/klipper/printer.cfg -o kossel.yaml --setup-output probe.yaml",
     "pkmcal import klipper examples/klipper/printer.cfg --name my-kossel"))
 @click.argument("config", metavar="PRINTER.cfg")
 @output_option("DELTA.yaml", "Machine file to write")
@@ -149,6 +149,9 @@ def klipper_cmd(config: str, output: str | None, name: str | None, setup_output:
     from pkmcal.io.delta_firmware import RotaryFirmware, read_klipper_printer
 
     printer = read_klipper_printer(config)
+    if setup_output is not None and printer.probe_offset is None:
+        raise PkmcalError(f"{config} has no [probe] or [bltouch] section: there is no probe offset to write; "
+                          "drop --setup-output or add the probe's section")
     for note in printer.notes:
         click.echo(f"note: {note}", err=True)
     kind = "rotary delta" if isinstance(printer.firmware, RotaryFirmware) else "linear delta"
@@ -159,9 +162,6 @@ def klipper_cmd(config: str, output: str | None, name: str | None, setup_output:
                    + ("" if setup_output else " (write them as a setup with --setup-output PROBE.yaml, or give them "
                       "as probe_offset in your setup file)"), err=True)
     if setup_output is not None:
-        if printer.probe_offset is None:
-            raise PkmcalError(f"{config} has no [probe] or [bltouch] section: there is no probe offset to write; "
-                              "drop --setup-output or add the probe's section")
         from dataclasses import replace
 
         import numpy as np
@@ -176,22 +176,38 @@ def klipper_cmd(config: str, output: str | None, name: str | None, setup_output:
 
 
 @import_group.command("marlin", epilog=examples(
-    "pkmcal import marlin examples/marlin/m503.txt -o delta.yaml"))
+    "pkmcal import marlin examples/marlin/m503.txt -o delta.yaml",
+    "pkmcal import marlin examples/marlin/m503.txt --marlin-version 2.1.x --missing zero"))
 @click.argument("settings", metavar="M503.txt")
 @output_option("DELTA.yaml", "Machine file to write")
 @click.option("--name", metavar="NAME", help="Machine name (default: the file's name).")
-def marlin_cmd(settings: str, output: str | None, name: str | None) -> None:
+@click.option("--marlin-version", "version", type=click.Choice(["1.1.x", "1.1.9", "2.0.x", "2.1.x"]),
+              help="The Marlin that printed the settings (M115 prints it): M665's letters and homing differ between "
+                   "versions. Needed unless the text tells (I J K: 1.1.x; A, C: 2.1.x).")
+@click.option("--missing", type=click.Choice(["error", "zero"]), default="error", show_default=True,
+              help="A trim or M666 adjustment the version prints but the file lacks: an error, or 0 (noted).")
+@click.option("--height", type=float, metavar="MM",
+              help="Marlin 1.1.x only (its M665 has no H): the nozzle height at home, MANUAL_Z_HOME_POS plus M206 Z.")
+def marlin_cmd(settings: str, output: str | None, name: str | None, version: str | None, missing: str,
+               height: float | None) -> None:
     """Read a Marlin delta printer's M665/M666 settings as a pkmcal linear-delta machine file.
 
     A text file with the printer's M665 and M666 lines (the output of M503, 'echo:' and ';'
-    comments allowed, or a G-code file): M665 L (rod) with trims A B C, R (radius), H
-    (height at home, without the M851 probe z offset), tower angle trims X Y Z; M666 X Y Z
-    endstop adjustments (<= 0). The inverse of 'pkmcal export --format marlin'.
+    comments allowed, or a G-code file), read as the stated Marlin version runs them: 1.1.x
+    M665 L R S A B C (rod trims) I J K (angle trims); 1.1.9 and 2.0.x M665 L R H S B X Y Z (B
+    the calibration radius, not geometry); 2.1.x M665 L R H S X Y Z A B C; M666 X Y Z endstop
+    adjustments (<= 0), with each version's homing (1.1.9 moves 0.1 mm further, 2.0.x 7 steps
+    further, needing M92; 2.1.x skips adjustments of 6 steps or fewer) and, on 2.x, the M851
+    Z probe offset in the home height. The inverse of 'pkmcal export --format marlin'.
     """
     check_output(output, [settings])
-    from pkmcal.io.delta_firmware import read_marlin
+    from pkmcal.io.marlin_settings import read_marlin_settings
 
-    _write_delta(read_marlin(settings).machine(_delta_name(settings, name)), output, f"Marlin settings {settings}")
+    result = read_marlin_settings(settings, version, missing=missing, height=height)
+    for note in result.notes:
+        click.echo(f"note: {note}", err=True)
+    _write_delta(result.firmware.machine(_delta_name(settings, name)), output,
+                 f"Marlin {result.version} settings {settings}")
 
 
 from pkmcal.cli.klipper_probe_cmd import klipper_analyze_cmd, klipper_probe_cmd  # noqa: E402  (Klipper results)

@@ -433,69 +433,20 @@ def klipper_saved_config(path: str, fw: DeltaFirmware | RotaryFirmware) -> str:
 
 # -- Marlin -------------------------------------------------------------------------------------
 
-_WORD = re.compile(r"([A-Za-z])\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)")
-_MARLIN_ANGLES = KLIPPER_TOWER_ANGLES_DEG   # Marlin's towers: 210, 330, 90° plus the trims
+
+def read_marlin(path: str, version: str | None = None, **options) -> DeltaFirmware:
+    """The delta of Marlin's ``M665``/``M666`` lines as Marlin ``version`` runs them
+    (:func:`pkmcal.io.marlin_settings.read_marlin_settings`)."""
+    from pkmcal.io.marlin_settings import read_marlin_settings
+
+    return read_marlin_settings(path, version, **options).firmware
 
 
-def read_marlin(path: str) -> DeltaFirmware:
-    """The delta of Marlin's ``M665``/``M666`` lines: a G-code file, or ``M503`` output
-    (``echo:`` prefixes and ``;`` comments allowed); later lines override earlier ones."""
-    try:
-        with open(path, encoding="utf-8") as fh:
-            lines = fh.read().splitlines()
-    except OSError as exc:
-        raise InputFileError(path, f"cannot read the Marlin settings ({exc.strerror})") from None
-    m665: dict[str, float] = {}
-    m666: dict[str, float] = {}
-    for k, raw in enumerate(lines, start=1):
-        line = raw.split(";", 1)[0].strip()
-        line = re.sub(r"^(echo:|//)\s*", "", line).strip()
-        code = re.match(r"^M(665|666)\b(.*)$", line, flags=re.IGNORECASE)
-        if not code:
-            continue
-        target = m665 if code.group(1) == "665" else m666
-        rest = code.group(2)
-        words = _WORD.findall(rest)
-        if _WORD.sub("", rest).strip():
-            raise InputFileError(path, f"cannot read '{raw.strip()}' (expected letter-number words such as "
-                                 "L215.0 R105.0)", line=k)
-        for letter, number in words:
-            target[letter.upper()] = float(number)
-    for needed in ("L", "R", "H"):
-        if needed not in m665:
-            raise InputFileError(path, f"no M665 {needed} value; pkmcal needs M665 L (diagonal rod), R (radius) "
-                                 "and H (height); print them with M503")
-    trims = tuple(m665.get(c, 0.0) for c in "ABC")
-    angle_trims = tuple(m665.get(c, 0.0) for c in "XYZ")
-    adj = tuple(m666.get(c, 0.0) for c in "XYZ")
-    if any(a > 0 for a in adj):
-        raise InputFileError(path, "M666 endstop adjustments must be ≤ 0 (Marlin ignores positive ones); got "
-                             f"{', '.join(f'{c}{a:g}' for c, a in zip('XYZ', adj))}")
-    H = m665["H"]
-    return DeltaFirmware(radius=m665["R"], angles_deg=tuple(a + t for a, t in zip(_MARLIN_ANGLES, angle_trims)),
-                         arms=tuple(m665["L"] + t for t in trims), endstops=tuple(H - a for a in adj))
+def marlin_text(fw: DeltaFirmware, version: str = "2.1.x", **options) -> str:
+    """``M665``/``M666`` lines for Marlin ``version`` (:func:`pkmcal.io.marlin_settings.marlin_text`)."""
+    from pkmcal.io.marlin_settings import marlin_text as text
 
-
-def _marlin_number(v: float) -> str:
-    """Marlin keeps 32-bit floats (about 7 significant digits): 6 decimals (1 nm, 1e-6°)
-    are beyond what it holds, and short enough to read."""
-    text = f"{v:.6f}".rstrip("0").rstrip(".")
-    return "0" if text in ("-0", "") else text
-
-
-def marlin_text(fw: DeltaFirmware) -> str:
-    """``M665``/``M666`` lines (then ``M500`` to store them): L the mean arm with per-tower
-    trims A B C, angle trims X Y Z from 210/330/90°, H the lowest endstop height and the
-    M666 adjustments (≤ 0) of the others; numbers to 6 decimals (:func:`_marlin_number`)."""
-    L = float(np.mean(fw.arms))
-    H = float(min(fw.endstops))
-    words = {"L": L, "R": fw.radius, "H": H}
-    words.update({c: a - n for c, a, n in zip("XYZ", fw.angles_deg, _MARLIN_ANGLES)})
-    words.update({c: a - L for c, a in zip("ABC", fw.arms)})
-    adj = {c: min(0.0, H - e) for c, e in zip("XYZ", fw.endstops)}
-    m665 = "M665 " + " ".join(f"{c}{_marlin_number(v)}" for c, v in words.items())
-    m666 = "M666 " + " ".join(f"{c}{_marlin_number(v)}" for c, v in adj.items())
-    return "\n".join([m665, m666, "M500 ; store in EEPROM", ""])
+    return text(fw, version, **options)[0]
 
 
 __all__ = ["DeltaFirmware", "Dropped", "KlipperPrinter", "RotaryFirmware", "exact_rewrite", "firmware_subset",
