@@ -243,3 +243,25 @@ def test_save_config_text_is_what_klipper_reads_back(tmp_path):
     assert res.exit_code == 0, res.output
     assert again.read_text() == text
     assert load_machine(str(cal)).name == machine.name
+
+
+def test_delta_calibrate_default_points_fit_the_imported_travel():
+    """Issue 25: with a fixed travel of 400 mm, one of DELTA_CALIBRATE's default points on
+    Klipper's kossel-plus config needed 403 mm and was clipped. The travel Klipper's
+    kinematics allow (down to minimum_z at the build radius) holds all seven points
+    (klippy/extras/delta_calibrate.py DeltaCalibrate.__init__: the centre and six points at
+    radius·(.95, .90, .85, .70, .75, .80), 90° + 60°·i)."""
+    import math
+    from dataclasses import replace
+
+    printer = read_klipper_printer(str(CONFIGS / "printer-anycubic-kossel-plus-2017.cfg"))
+    radius = float(klipper_fileconfig(CONFIGS / "printer-anycubic-kossel-plus-2017.cfg").getsection(
+        "delta_calibrate").get("radius"))
+    scatter = (.95, .90, .85, .70, .75, .80)
+    pts = [(0.0, 0.0)] + [(math.cos(math.radians(90 + 60 * i)) * radius * s,
+                           math.sin(math.radians(90 + 60 * i)) * radius * s) for i, s in enumerate(scatter)]
+    poses = np.c_[np.array(pts), np.zeros(7)]
+    report = printer.machine("kossel-plus").check_limits(poses)
+    assert not any(v.any() for v in report.violations.values())
+    old = replace(printer.firmware, travel=None).machine("fixed-400")       # pkmcal's old default
+    assert old.check_limits(poses).violations["travel"].sum() == 1

@@ -221,9 +221,9 @@ def check_klipper(printer_cfg: str | os.PathLike, machine, poses: np.ndarray | N
 
     kin = klipper_kinematics(printer_cfg)
     expected_kind = {"delta": "linear-delta", "rotary_delta": "rotary-delta"}[kin.kind]
-    if getattr(machine, "kind", None) != expected_kind:
+    if machine.kind != expected_kind:
         raise PkmcalError(f"{os.fspath(printer_cfg)} is a Klipper '{kin.kind}' printer; machine '{machine.name}' is "
-                          f"a {getattr(machine, 'kind', type(machine).__name__)}")
+                          f"a {machine.kind or 'machine of another kind'}")
     poses = workspace_poses(machine) if poses is None else np.asarray(poses, dtype=float)
     lam = machine.ik(poses)
     if kin.kind == "delta":
