@@ -306,3 +306,12 @@ def test_delta_calibrate_default_points_fit_the_imported_travel():
     assert not any(v.any() for v in report.violations.values())
     old = replace(printer.firmware, travel=None).machine("fixed-400")       # pkmcal's old default
     assert old.check_limits(poses).violations["travel"].sum() == 1
+
+
+@needs_klipper
+def test_check_klipper_refuses_the_wrong_kind_of_machine():
+    from pkmcal.errors import PkmcalError
+
+    rotary = read_klipper(str(CONFIGS / "example-rotary-delta.cfg")).machine("r")
+    with pytest.raises(PkmcalError, match="is a Klipper 'delta' printer; machine 'r' is a rotary-delta"):
+        check_klipper(CONFIGS / "example-delta.cfg", rotary)
