@@ -499,3 +499,20 @@ def test_cli_import_klipper_writes_the_probe_setup(tmp_path):
                                    str(tmp_path / "p2.yaml")])
     assert res.exit_code == 2 and "no [probe] or [bltouch] section" in res.output
     assert not (tmp_path / "b.yaml").exists()
+
+
+def test_outputs_never_overwrite_an_included_file(tmp_path):
+    """Issue 25: 'import klipper -o arms.cfg' overwrote a file that printer.cfg includes."""
+    from click.testing import CliRunner
+
+    from pkmcal.cli.main import cli
+
+    arms = _write(tmp_path, "arms.cfg", "[stepper_a]\narm_length: 250\n")
+    cfg = _write(tmp_path, "printer.cfg", _MAIN + "[include arms.cfg]\n")
+    before = (tmp_path / "arms.cfg").read_text()
+    run = CliRunner().invoke
+    for args in (["import", "klipper", cfg, "-o", arms],
+                 ["export", "kossel-mini", "--format", "klipper", "--config", cfg, "-o", arms]):
+        res = run(cli, args)
+        assert res.exit_code == 2 and "arms.cfg" in res.output, res.output
+    assert (tmp_path / "arms.cfg").read_text() == before

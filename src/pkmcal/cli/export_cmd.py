@@ -118,6 +118,10 @@ def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None, m
             raise PkmcalError("--config writes a whole printer.cfg: name the new file with -o (never the input)")
     check_output(output, [calibrated] + [p for p in (measurements, heldout, setup_spec, klipper_config)
                                          if p is not None])
+    if klipper_config is not None:                 # nor any file the printer.cfg includes
+        from pkmcal.io.klipper_config import read_config
+
+        check_output(output, read_config(klipper_config).files)
     if ini is not None:
         if fmt != "linuxcnc":
             raise PkmcalError("--ini writes LinuxCNC INI sections; use it with --format linuxcnc")

@@ -149,6 +149,9 @@ def klipper_cmd(config: str, output: str | None, name: str | None, setup_output:
     from pkmcal.io.delta_firmware import RotaryFirmware, read_klipper_printer
 
     printer = read_klipper_printer(config)
+    for out in (output, setup_output):             # nor any file printer.cfg includes
+        if out is not None:
+            check_output(out, list(printer.files))
     if setup_output is not None and printer.probe_offset is None:
         raise PkmcalError(f"{config} has no [probe] or [bltouch] section: there is no probe offset to write; "
                           "drop --setup-output or add the probe's section")

@@ -266,6 +266,8 @@ class KlipperPrinter:
     probe_offset: tuple[float, float, float] | None
     probe_section: str | None
     notes: tuple[str, ...]
+    #: The files read: printer.cfg and its includes (an output may be none of them).
+    files: tuple[str, ...] = ()
 
     def machine(self, name: str):
         return self.firmware.machine(name)
@@ -384,7 +386,7 @@ def read_klipper_printer(path: str) -> KlipperPrinter:
         raise InputFileError(kin.path, f"[printer] kinematics is '{kind}'; pkmcal imports 'kinematics: delta' and "
                              "'kinematics: rotary_delta'", line=kin.line)
     offset, section = _probe(cfg, path)
-    return KlipperPrinter(fw, offset, section, tuple(notes))
+    return KlipperPrinter(fw, offset, section, tuple(notes), tuple(cfg.files))
 
 
 def read_klipper(path: str) -> DeltaFirmware | RotaryFirmware:
