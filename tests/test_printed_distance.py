@@ -260,7 +260,10 @@ def _printer_cfg(tmp_path, meas):
     for t in "abc":
         lines += [f"[stepper_{t}]", "rotation_distance: 40", "microsteps: 16", "arm_length: 215",
                   "position_endstop: 250", ""]
-    lines += ["#*# <---------------------- SAVE_CONFIG ---------------------->", "#*# [delta_calibrate]"]
+    # the whole header Klipper writes (klippy/configfile.py AUTOSAVE_HEADER): Klipper, and now
+    # pkmcal, read no block under its first line only
+    lines += ["#*# <---------------------- SAVE_CONFIG ---------------------->",
+              "#*# DO NOT EDIT THIS BLOCK OR BELOW. The contents are auto-generated.", "#*#", "#*# [delta_calibrate]"]
     steps = (ref[None, :] - meas.actuators[:, :3]) / step, (ref[None, :] - meas.actuators[:, 3:]) / step
     n_h = int(np.sum(meas.readings[:, 1] == 0))
     for i in range(n_h):

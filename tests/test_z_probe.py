@@ -266,7 +266,10 @@ def test_saved_block_stable_positions_give_back_the_carriage_positions(tmp_path)
     m = read_klipper(str(path)).machine("p")
     sd = 40.0 / (200 * 16)
     steps = (m.reading_reference[None, :] - m.ik(nozzle)) / sd
-    block = ["#*# <---------------------- SAVE_CONFIG ---------------------->", "#*# [delta_calibrate]"]
+    # the header Klipper's SAVE_CONFIG writes (klippy/configfile.py AUTOSAVE_HEADER): a block
+    # under its first line only is not read by Klipper, nor now by pkmcal
+    block = ["#*# <---------------------- SAVE_CONFIG ---------------------->",
+             "#*# DO NOT EDIT THIS BLOCK OR BELOW. The contents are auto-generated.", "#*#", "#*# [delta_calibrate]"]
     for k, row in enumerate(steps):
         block += [f"#*# height{k} = 1.25", f"#*# height{k}_pos = " + ",".join(f"{v:.3f}" for v in row)]
     block += ["#*# manual_height0 = 0.1", "#*# manual_height0_pos = 1.0,2.0,3.0"]
@@ -285,6 +288,13 @@ def test_saved_block_stable_positions_give_back_the_carriage_positions(tmp_path)
     path.write_text(base.replace("microsteps: 16\n\n[stepper_c]", "\n[stepper_c]") + "\n".join(block))
     with pytest.raises(PkmcalError, match=r"\[stepper_b\] has rotation_distance but no microsteps"):
         read_klipper_probe(path, m)
+    # the printer's [probe] offsets against the setup's: x, y must agree, a z difference is noted
+    path.write_text(base + "[probe]\npin: ^PA1\nx_offset: 0\ny_offset: 18\nz_offset: 1.0\n" + "\n".join(block) + "\n")
+    with pytest.raises(PkmcalError, match=r"\[probe\] x_offset, y_offset are 0, 18 mm but the setup's probe_offset has "
+                                          r"0, 0.*--setup-output"):
+        read_klipper_probe(path, m, (0.0, 0.0, 1.25))
+    res = read_klipper_probe(path, m, (0.0, 18.0, 1.25))
+    assert any("z_offset 1 mm, the setup's 1.25 mm" in n for n in res.notes)
 
 
 def test_files_without_probe_results_are_refused(tmp_path):

@@ -42,7 +42,9 @@ from pkmcal.io.calibration_json import (  # noqa: F401
     "pkmcal export calibrated.yaml --format json -o calibrated.json",
     "pkmcal export stewart-prototype --format linuxcnc",
     "pkmcal export kossel-mini --format klipper",
-    "pkmcal export kossel-mini --format marlin"))
+    "pkmcal export kossel-mini --format marlin",
+    "pkmcal export kossel-mini --format marlin --marlin-version 1.1.9",
+    "pkmcal export kossel-mini --format klipper --config examples/klipper/printer.cfg -o printer-saved.cfg"))
 @click.argument("calibrated", metavar="CALIBRATED.yaml")
 @click.option("--format", "fmt", type=click.Choice(["linuxcnc", "json", "klipper", "marlin"]), required=True,
               help="linuxcnc: genhexkins HAL setp lines (hexapods); json: parameters with std and correlation; "
@@ -61,11 +63,23 @@ from pkmcal.io.calibration_json import (  # noqa: F401
 @click.option("--heldout", "heldout", metavar="HELDOUT.csv",
               help="With --measurements: measurements not used in any fit; the report adds each model's held-out "
                    "rms on them.")
+@click.option("--config", "klipper_config", metavar="PRINTER.cfg",
+              help="klipper: write the whole printer.cfg as Klipper's SAVE_CONFIG would leave it with this "
+                   "calibration: the #*# block updated (its other sections kept) and the main file's copies of the "
+                   "saved options commented out, so that Klipper runs the saved values. Needs -o (never the input).")
+@click.option("--marlin-version", "marlin_version", type=click.Choice(["1.1.9", "2.0.x", "2.1.x"]), default="2.1.x",
+              show_default=True,
+              help="marlin: the Marlin the settings are for (M665's letters and homing differ: 1.1.9 and 2.0.x "
+                   "have no rod trims in M665 and read B as the calibration radius).")
+@click.option("--steps-per-mm", "steps_per_mm", type=float, metavar="STEPS",
+              help="marlin, --marlin-version 2.0.x: the towers' steps per mm (M92), for its homing's extra "
+                   "MIN_STEPS_PER_SEGMENT + 1 steps.")
 @click.option("--json", "as_json", is_flag=True,
               help="With --measurements: print the refit report as JSON on standard output (the settings then need "
                    "-o FILE).")
 def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None, measurements: str | None = None,
-               setup_spec: str | None = None, heldout: str | None = None, as_json: bool = False) -> None:
+               setup_spec: str | None = None, heldout: str | None = None, klipper_config: str | None = None,
+               marlin_version: str = "2.1.x", steps_per_mm: float | None = None, as_json: bool = False) -> None:
     """Export the machine in CALIBRATED.yaml (a machine file or built-in name) for a controller.
 
     linuxcnc: 'setp genhexkins.base.N.x|y|z' and 'setp genhexkins.platform.N.x|y|z'
@@ -76,6 +90,9 @@ def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None, m
     delta_radius and [stepper_a|b|c] angle, arm_length, position_endstop sections, or the
     M665/M666 lines; every identified parameter the firmware cannot hold (rail leans,
     unequal radii, a tool offset) is listed on standard error with the value dropped.
+    klipper also exports rotary deltas ([printer] shoulder_radius, shoulder_height;
+    [stepper_a|b|c] angle, position_endstop, upper_arm_length, lower_arm_length). With
+    --config PRINTER.cfg the output is that printer.cfg after Klipper's SAVE_CONFIG.
 
     With --measurements MEAS.csv (and --setup, --heldout HELDOUT.csv): the firmware-limited
     refit. The machine is fitted again with only the firmware's numbers free (one radius,
@@ -94,7 +111,17 @@ def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None, m
     if as_json and to_stdout(output):
         raise PkmcalError("--json prints the refit report on standard output; write the settings to a file with "
                           "-o FILE")
-    check_output(output, [calibrated] + [p for p in (measurements, heldout, setup_spec) if p is not None])
+    if klipper_config is not None:
+        if fmt != "klipper":
+            raise PkmcalError("--config is the user's Klipper printer.cfg; use it with --format klipper")
+        if to_stdout(output):
+            raise PkmcalError("--config writes a whole printer.cfg: name the new file with -o (never the input)")
+    check_output(output, [calibrated] + [p for p in (measurements, heldout, setup_spec, klipper_config)
+                                         if p is not None])
+    if klipper_config is not None:                 # nor any file the printer.cfg includes
+        from pkmcal.io.klipper_config import read_config
+
+        check_output(output, read_config(klipper_config).files)
     if ini is not None:
         if fmt != "linuxcnc":
             raise PkmcalError("--ini writes LinuxCNC INI sections; use it with --format linuxcnc")
@@ -116,7 +143,7 @@ def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None, m
         refit = None
         if measurements is not None:
             refit = _refit(machine, measurements, setup_spec, heldout, calibrated)
-        text = _delta_firmware_text(machine, fmt, refit)
+        text = _delta_firmware_text(machine, fmt, refit, klipper_config, marlin_version, steps_per_mm)
     else:
         text = format_calibration_json(machine, source=os.fspath(calibrated))
     if ini_text is not None:
@@ -154,20 +181,25 @@ def _refit(machine, measurements: str, setup_spec: str | None, heldout: str | No
     return firmware_refit(machine, setup, meas, held)
 
 
-def _delta_firmware_text(machine, fmt: str, refit=None) -> str:
-    """The Klipper or Marlin text of a linear delta (or of its firmware-limited ``refit``);
-    what the machine has that the firmware cannot hold, and what the refit costs, on
-    standard error."""
-    if machine.kind != "linear-delta":
-        raise PkmcalError(f"--format {fmt} exports linear delta printers; machine '{machine.name}' is a "
+def _delta_firmware_text(machine, fmt: str, refit=None, klipper_config: str | None = None,
+                         marlin_version: str = "2.1.x", steps_per_mm: float | None = None) -> str:
+    """The Klipper or Marlin text of a linear delta (or of its firmware-limited ``refit``),
+    or Klipper's of a rotary delta; what the machine has that the firmware cannot hold, and
+    what the refit costs, on standard error. With ``klipper_config`` the user's printer.cfg
+    as Klipper's SAVE_CONFIG leaves it."""
+    rotary = fmt == "klipper" and machine.kind == "rotary-delta" and refit is None
+    if machine.kind != "linear-delta" and not rotary:
+        also = " and, to Klipper, rotary deltas" if fmt == "klipper" else ""
+        raise PkmcalError(f"--format {fmt} exports linear delta printers{also}; machine '{machine.name}' is a "
                           f"{machine.kind or 'machine of another kind'}")
-    from pkmcal.io.delta_firmware import firmware_subset, klipper_text, marlin_text
+    from pkmcal.io.delta_firmware import firmware_subset, klipper_saved_config, klipper_text, rotary_firmware_subset
+    from pkmcal.io.marlin_settings import marlin_text
 
-    fw, dropped = firmware_subset(machine)
+    fw, dropped = (rotary_firmware_subset if rotary else firmware_subset)(machine)
     angles = dict(zip(machine.param_names, machine.param_is_angle))
     for d in dropped:
         click.echo(f"pkmcal: warning: {d.describe(angles[d.name])}", err=True)
-    if refit is None and fw.origin != (0.0, 0.0):   # the exact rewrite of unequal radii (io/delta_firmware.py)
+    if refit is None and getattr(fw, "origin", (0.0, 0.0)) != (0.0, 0.0):   # the exact rewrite of unequal radii (io/delta_firmware.py)
         click.echo(f"pkmcal: note: the towers are written about their circle's centre, x {fw.origin[0]:.6g}, y "
                    f"{fw.origin[1]:.6g} mm of the calibrated frame: the firmware's x, y are the calibrated ones less "
                    "that (z unchanged), and its machine is the calibrated one exactly", err=True)
@@ -181,7 +213,14 @@ def _delta_firmware_text(machine, fmt: str, refit=None) -> str:
         click.echo(f"pkmcal: note: the firmware uses the machine without these {len(dropped)} parameter(s); for the "
                    "best machine it can hold and what dropping them costs, give the measurements: "
                    "--measurements MEAS.csv --setup SETUP (and --heldout HELDOUT.csv)", err=True)
-    return klipper_text(fw) if fmt == "klipper" else marlin_text(fw)
+    if fmt == "klipper" and klipper_config is not None:
+        return klipper_saved_config(klipper_config, fw)
+    if fmt == "klipper":
+        return klipper_text(fw)
+    text, lost = marlin_text(fw, marlin_version, None if steps_per_mm is None else (steps_per_mm,) * 3)
+    for line in lost:
+        click.echo(f"pkmcal: warning: {line}", err=True)
+    return text
 
 
 __all__ = ["calibration_json", "export_cmd", "format_calibration_json"]

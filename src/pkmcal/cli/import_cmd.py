@@ -13,6 +13,8 @@ checked to load back to the same machine (:func:`pkmcal.io.machine_file.save_mac
 
 from __future__ import annotations
 
+import os
+
 import click
 
 from pkmcal.cli.options import check_output, examples, output_option, to_stdout
@@ -94,14 +96,14 @@ def linuxcnc_cmd(hal: str, ini: str | None, output: str | None, offsets: str, jo
         click.echo(f"wrote {output}", err=True)
 
 
-def _write_delta(machine, output: str | None, source: str) -> None:
+def _write_delta(machine, output: str | None, source: str, kind: str = "linear delta") -> None:
     from pkmcal.io.machine_file import machine_to_text, save_machine
 
     if to_stdout(output):
         click.echo(machine_to_text(machine), nl=False)
     else:
         save_machine(machine, output)
-    click.echo(f"machine '{machine.name}': linear delta from {source}", err=True)
+    click.echo(f"machine '{machine.name}': {kind} from {source}", err=True)
     if not to_stdout(output):
         click.echo(f"wrote {output}", err=True)
 
@@ -116,42 +118,99 @@ def _delta_name(path: str, name: str | None) -> str:
 
 @import_group.command("klipper", epilog=examples(
     "pkmcal import klipper examples/klipper/printer.cfg -o delta.yaml",
+    "pkmcal import klipper examples/klipper/printer.cfg -o kossel.yaml --setup-output probe.yaml",
     "pkmcal import klipper examples/klipper/printer.cfg --name my-kossel"))
 @click.argument("config", metavar="PRINTER.cfg")
 @output_option("DELTA.yaml", "Machine file to write")
 @click.option("--name", metavar="NAME", help="Machine name (default: the config file's name).")
-def klipper_cmd(config: str, output: str | None, name: str | None) -> None:
-    """Read a Klipper delta printer's printer.cfg as a pkmcal linear-delta machine file.
+@click.option("--setup-output", "setup_output", metavar="PROBE.yaml",
+              help="Also write the z-probe setup of this printer: its [probe] or [bltouch] x_offset, y_offset, "
+                   "z_offset, with the noise of the built-in z-probe-klipper (give it to plan, simulate, import "
+                   "klipper-probe and identify with --setup).")
+def klipper_cmd(config: str, output: str | None, name: str | None, setup_output: str | None) -> None:
+    """Read a Klipper delta printer's printer.cfg as a pkmcal machine file, as Klipper reads it.
 
-    Reads [printer] kinematics: delta, delta_radius, print_radius, minimum_z_position and,
-    per [stepper_a|b|c], angle (default 210, 330, 90), arm_length and position_endstop
-    (b and c default to a's), following [include] files, with the SAVE_CONFIG (#*#) block
-    of DELTA_CALIBRATE overriding what is above it. The inverse of 'pkmcal export --format
-    klipper'.
+    kinematics: delta — [printer] delta_radius, print_radius, minimum_z_position and, per
+    [stepper_a|b|c], angle (default 210, 330, 90), arm_length and position_endstop (b and c
+    default to a's); the rail travel and build radius are those Klipper's kinematics allow.
+    kinematics: rotary_delta — [printer] shoulder_radius, shoulder_height and per stepper
+    angle (default 30, 150, 270), upper_arm_length, lower_arm_length, position_endstop.
+    As Klipper: [include] files are read where they stand (globs, relative to the including
+    file; later values win); an option of the SAVE_CONFIG (#*#) block that the main file
+    also sets is overridden by the main file's, and the whole block is ignored when anything
+    follows it (a note says so). [probe] / [bltouch] offsets are printed, and written as a
+    setup with --setup-output. The inverse of 'pkmcal export --format klipper'.
     """
     check_output(output, [config])
-    from pkmcal.io.delta_firmware import read_klipper
+    if setup_output is not None:
+        check_output(setup_output, [config])
+        if output is not None and os.path.abspath(setup_output) == os.path.abspath(output):
+            raise PkmcalError("-o and --setup-output name the same file; choose two paths")
+    from pkmcal.io.delta_firmware import RotaryFirmware, read_klipper_printer
 
-    _write_delta(read_klipper(config).machine(_delta_name(config, name)), output, f"Klipper config {config}")
+    printer = read_klipper_printer(config)
+    for out in (output, setup_output):             # nor any file printer.cfg includes
+        if out is not None:
+            check_output(out, list(printer.files))
+    if setup_output is not None and printer.probe_offset is None:
+        raise PkmcalError(f"{config} has no [probe] or [bltouch] section: there is no probe offset to write; "
+                          "drop --setup-output or add the probe's section")
+    for note in printer.notes:
+        click.echo(f"note: {note}", err=True)
+    kind = "rotary delta" if isinstance(printer.firmware, RotaryFirmware) else "linear delta"
+    _write_delta(printer.machine(_delta_name(config, name)), output, f"Klipper config {config}", kind)
+    if printer.probe_offset is not None:
+        x, y, z = printer.probe_offset
+        click.echo(f"probe: [{printer.probe_section}] x_offset {x:g}, y_offset {y:g}, z_offset {z:g} mm"
+                   + ("" if setup_output else " (write them as a setup with --setup-output PROBE.yaml, or give them "
+                      "as probe_offset in your setup file)"), err=True)
+    if setup_output is not None:
+        from dataclasses import replace
+
+        import numpy as np
+
+        from pkmcal.io.setup_file import save_setup
+        from pkmcal.sensors.library import builtin_setup
+
+        setup = builtin_setup("z-probe-klipper")
+        setup = replace(setup, sensor=replace(setup.sensor, probe_offset=np.array(printer.probe_offset)))
+        save_setup(setup, setup_output)
+        click.echo(f"wrote {setup_output} (z-probe setup with the probe offset of {config})", err=True)
 
 
 @import_group.command("marlin", epilog=examples(
-    "pkmcal import marlin examples/marlin/m503.txt -o delta.yaml"))
+    "pkmcal import marlin examples/marlin/m503.txt -o delta.yaml",
+    "pkmcal import marlin examples/marlin/m503.txt --marlin-version 2.1.x --missing zero"))
 @click.argument("settings", metavar="M503.txt")
 @output_option("DELTA.yaml", "Machine file to write")
 @click.option("--name", metavar="NAME", help="Machine name (default: the file's name).")
-def marlin_cmd(settings: str, output: str | None, name: str | None) -> None:
+@click.option("--marlin-version", "version", type=click.Choice(["1.1.x", "1.1.9", "2.0.x", "2.1.x"]),
+              help="The Marlin that printed the settings (M115 prints it): M665's letters and homing differ between "
+                   "versions. Needed unless the text tells (I J K: 1.1.x; A, C: 2.1.x).")
+@click.option("--missing", type=click.Choice(["error", "zero"]), default="error", show_default=True,
+              help="A trim or M666 adjustment the version prints but the file lacks: an error, or 0 (noted).")
+@click.option("--height", type=float, metavar="MM",
+              help="Marlin 1.1.x only (its M665 has no H): the nozzle height at home, MANUAL_Z_HOME_POS plus M206 Z.")
+def marlin_cmd(settings: str, output: str | None, name: str | None, version: str | None, missing: str,
+               height: float | None) -> None:
     """Read a Marlin delta printer's M665/M666 settings as a pkmcal linear-delta machine file.
 
     A text file with the printer's M665 and M666 lines (the output of M503, 'echo:' and ';'
-    comments allowed, or a G-code file): M665 L (rod) with trims A B C, R (radius), H
-    (height at home, without the M851 probe z offset), tower angle trims X Y Z; M666 X Y Z
-    endstop adjustments (<= 0). The inverse of 'pkmcal export --format marlin'.
+    comments allowed, or a G-code file), read as the stated Marlin version runs them: 1.1.x
+    M665 L R S A B C (rod trims) I J K (angle trims); 1.1.9 and 2.0.x M665 L R H S B X Y Z (B
+    the calibration radius, not geometry); 2.1.x M665 L R H S X Y Z A B C; M666 X Y Z endstop
+    adjustments (<= 0), with each version's homing (1.1.9 moves 0.1 mm further, 2.0.x 7 steps
+    further, needing M92; 2.1.x skips adjustments of 6 steps or fewer) and, on 2.x, the M851
+    Z probe offset in the home height. The inverse of 'pkmcal export --format marlin'.
     """
     check_output(output, [settings])
-    from pkmcal.io.delta_firmware import read_marlin
+    from pkmcal.io.marlin_settings import read_marlin_settings
 
-    _write_delta(read_marlin(settings).machine(_delta_name(settings, name)), output, f"Marlin settings {settings}")
+    result = read_marlin_settings(settings, version, missing=missing, height=height)
+    for note in result.notes:
+        click.echo(f"note: {note}", err=True)
+    _write_delta(result.firmware.machine(_delta_name(settings, name)), output,
+                 f"Marlin {result.version} settings {settings}")
 
 
 from pkmcal.cli.klipper_probe_cmd import klipper_analyze_cmd, klipper_probe_cmd  # noqa: E402  (Klipper results)

@@ -43,15 +43,12 @@ machine → Klipper config → machine is exact (Marlin: to the 6 decimals writt
 
 from __future__ import annotations
 
-import configparser
-import glob
-import os
 import re
 from dataclasses import dataclass
 
 import numpy as np
 
-from pkmcal.errors import InputFileError
+from pkmcal.errors import InputFileError, PkmcalError
 from pkmcal.io._yaml import rad_to_deg_text
 from pkmcal.mechanisms.linear_delta import (
     KLIPPER_TOWER_ANGLES_DEG,
@@ -60,10 +57,6 @@ from pkmcal.mechanisms.linear_delta import (
     LinearDelta,
     klipper_delta,
 )
-
-#: The lines of Klipper's SAVE_CONFIG block start with this.
-SAVED_PREFIX = "#*#"
-
 
 @dataclass(frozen=True)
 class DeltaFirmware:
@@ -79,6 +72,10 @@ class DeltaFirmware:
     #: Where the firmware's x, y origin is in the calibrated machine's frame (mm): not
     #: (0, 0) after an :func:`exact_rewrite` of unequal radii or a tool offset.
     origin: tuple[float, float] = (0.0, 0.0)
+    #: Each carriage's travel below its switch and the flattest arm (rad) that the firmware
+    #: commands, when read from a config (:func:`read_klipper`); None: pkmcal's defaults.
+    travel: tuple[float, float, float] | None = None
+    min_arm_angle: float | None = None
 
     def machine(self, name: str) -> LinearDelta:
         limits = {}
@@ -86,6 +83,10 @@ class DeltaFirmware:
             limits["print_radius"] = self.print_radius
         if self.min_z is not None:
             limits["min_z"] = self.min_z
+        if self.travel is not None:
+            limits["travel"] = np.array(self.travel)
+        if self.min_arm_angle is not None:
+            limits["min_arm_angle"] = self.min_arm_angle
         return klipper_delta(name, self.radius, self.arms, self.endstops, self.angles_deg, **limits)
 
 
@@ -158,199 +159,298 @@ def firmware_subset(machine: LinearDelta) -> tuple[DeltaFirmware, list[Dropped]]
 # -- Klipper ------------------------------------------------------------------------------------
 
 
-def _parser() -> configparser.ConfigParser:
-    """Klipper's config dialect: ``key: value`` or ``key = value``, ``#``/``;`` comments
-    (also after a value), indented continuation lines, no interpolation, case-kept keys,
-    sections that may repeat (later values win)."""
-    return configparser.ConfigParser(delimiters=(":", "="), comment_prefixes=("#", ";"),
-                                     inline_comment_prefixes=("#", ";"), interpolation=None, strict=False)
+@dataclass(frozen=True)
+class RotaryFirmware:
+    """Klipper's ``kinematics: rotary_delta`` numbers (klippy/kinematics/rotary_delta.py
+    ``RotaryDeltaKinematics.__init__``; mm, degrees): ``[printer] shoulder_radius,
+    shoulder_height``, per ``[stepper_a|b|c]`` ``angle`` (default 30, 150, 270°),
+    ``upper_arm_length``, ``lower_arm_length`` and ``position_endstop`` (b and c default to
+    a's), ``minimum_z_position``.
+
+    In pkmcal's :class:`~pkmcal.mechanisms.rotary_delta.RotaryDelta` the frame is
+    Klipper's (origin on the bed, z up: every shoulder at ``height`` = shoulder_height),
+    arm i's ``angle``, ``radius`` = shoulder_radius, ``upper``, ``forearm`` = lower arm.
+    Klipper's stepper angle is the upper arm's angle *above* the outward horizontal
+    (``RotaryDeltaCalibration.elbow_coord``), pkmcal's φ the angle below it: φ = −angle.
+    The switch: Klipper's ``abs_endstop`` is the stepper angle where the nozzle is at
+    (0, 0, position_endstop); pkmcal's motor zero ζ_i is φ there, so a reading
+    λ_i = φ_i − ζ_i is the angle the arm turned down from its switch — Klipper's
+    ``calc_stable_position`` times the step angle, the quantity its DELTA_CALIBRATE
+    stores."""
+
+    shoulder_radius: float
+    shoulder_height: float
+    angles_deg: tuple[float, float, float]
+    upper_arms: tuple[float, float, float]
+    lower_arms: tuple[float, float, float]
+    endstops: tuple[float, float, float]
+    min_z: float = 0.0
+
+    def _nominal(self, name: str, zero=(0.0, 0.0, 0.0), **limits):
+        from pkmcal.mechanisms import rotary_delta as rd
+
+        rho = np.zeros(len(rd.PARAM_NAMES))
+        for i in range(3):
+            rho[rd.param_position("angle", i)] = np.deg2rad(self.angles_deg[i])
+            rho[rd.param_position("radius", i)] = self.shoulder_radius
+            rho[rd.param_position("height", i)] = self.shoulder_height
+            rho[rd.param_position("upper", i)] = self.upper_arms[i]
+            rho[rd.param_position("forearm", i)] = self.lower_arms[i]
+            rho[rd.param_position("zero", i)] = zero[i]
+        return rd.RotaryDelta(name=name, rho=rho, **limits)
+
+    def switch_angles(self) -> np.ndarray:
+        """φ_i (rad) of arm i with the nozzle at (0, 0, position_endstop_i): minus Klipper's
+        ``abs_endstops`` (``RotaryDeltaCalibration.__init__``)."""
+        m = self._nominal("switches")
+        phi = m.ik(np.c_[np.zeros((3, 2)), np.array(self.endstops)])
+        return np.array([phi[i, i] for i in range(3)])
+
+    def max_xy(self) -> float:
+        """rotary_delta.py ``__init__``: max_xy² = min(min(shoulder_radius + upper),
+        min(lower − shoulder_radius))²."""
+        return float(min(min(self.shoulder_radius + u for u in self.upper_arms),
+                         min(lo - self.shoulder_radius for lo in self.lower_arms)))
+
+    def machine(self, name: str):
+        zero = self.switch_angles()
+        if not np.all(np.isfinite(zero)):
+            raise PkmcalError(f"rotary delta '{name}': an arm cannot reach (0, 0, position_endstop); check "
+                              "shoulder_radius, shoulder_height and the arm lengths")
+        # Klipper limits the nozzle to a cylinder (max_xy, min_z..max_z = min position_endstop);
+        # it has no motor range and no joint cone: pkmcal's motor range runs from the highest
+        # switch down to the upper arm pointing straight down, the cone is the full 90°
+        return self._nominal(name, zero, motor_range=(float(np.min(zero)), float(np.pi / 2)),
+                             max_joint_angle=float(np.pi / 2), workspace_radius=self.max_xy(),
+                             z_range=(self.min_z, float(min(self.endstops))))
 
 
-def _split_saved(text: str) -> tuple[str, str]:
-    """(the config above the SAVE_CONFIG block, the block without its ``#*#`` prefixes)."""
-    lines = text.splitlines()
-    start = next((k for k, line in enumerate(lines) if line.startswith(SAVED_PREFIX)), len(lines))
-    saved = [line[len(SAVED_PREFIX):].removeprefix(" ") for line in lines[start:] if line.startswith(SAVED_PREFIX)]
-    first = next((k for k, line in enumerate(saved) if line.lstrip().startswith("[")), len(saved))
-    # the block's banner lines come before its first section; keep the line count
-    return "\n".join(lines[:start]), "\n" * first + "\n".join(saved[first:])
+def rotary_firmware_subset(machine) -> tuple[RotaryFirmware, list[Dropped]]:
+    """Klipper's rotary-delta numbers of ``machine`` (a pkmcal RotaryDelta) and what they
+    drop: one shoulder radius and height (the means), no axis yaw or tilt, the tool offset's
+    z in the height (exact: it shifts every shoulder) and its x, y dropped. The endstops:
+    each arm's switch angle (its zero ζ_i) with the nozzle on the axis,
+    position_endstop_i = E_z − sqrt(b_i² − |E_xy|²) of that elbow E (the nozzle below it)."""
+    from pkmcal.mechanisms import rotary_delta as rd
+
+    g = rd.LAYOUT.split(machine.params)
+    tool = machine.params[-3:]
+    radius = float(g["radius"][0]) if np.all(g["radius"] == g["radius"][0]) else float(np.mean(g["radius"]))
+    heights = g["height"] + tool[2]
+    height = float(heights[0]) if np.all(heights == heights[0]) else float(np.mean(heights))
+    dropped = [Dropped(f"radius_{t}", float(r), radius) for t, r in zip(rd.ARMS, g["radius"]) if r != radius]
+    dropped += [Dropped(f"height_{t}", float(h), height - float(tool[2]))
+                for t, h in zip(rd.ARMS, g["height"]) if h + tool[2] != height]
+    for p in ("axis_yaw", "axis_tilt"):
+        dropped += [Dropped(f"{p}_{t}", float(v), 0.0) for t, v in zip(rd.ARMS, g[p]) if v != 0.0]
+    dropped += [Dropped(n, float(v), 0.0) for n, v in zip(rd.PARAM_NAMES[-3:-1], tool[:2]) if v != 0.0]
+    zeta, a, b = g["zero"], g["upper"], g["forearm"]
+    th = g["angle"]
+    reach = radius + a * np.cos(zeta)                       # the elbow's distance from the axis
+    ez = height - a * np.sin(zeta)
+    ends = ez - np.sqrt(b**2 - reach**2)
+    fw = RotaryFirmware(shoulder_radius=radius, shoulder_height=height,
+                        angles_deg=tuple(float(rad_to_deg_text(t)) for t in th),
+                        upper_arms=tuple(float(v) for v in a), lower_arms=tuple(float(v) for v in b),
+                        endstops=tuple(float(e) for e in ends), min_z=float(machine.z_range[0]))
+    return fw, dropped
 
 
-def _key_lines(text: str) -> dict[tuple[str, str], int]:
-    """(section, key) → the 1-based line of its last assignment, for the messages."""
-    out: dict[tuple[str, str], int] = {}
-    section = None
-    for k, line in enumerate(text.splitlines(), start=1):
-        head = re.match(r"^\[([^\]]+)\]", line)
-        if head:
-            section = head.group(1).strip()
-            continue
-        key = re.match(r"^([A-Za-z0-9_]+)\s*[:=]", line)
-        if key and section is not None:
-            out[(section, key.group(1).lower())] = k
-    return out
+@dataclass(frozen=True)
+class KlipperPrinter:
+    """What ``pkmcal import klipper`` reads from a printer.cfg: the kinematics' numbers,
+    the probe's offsets (``[probe]`` or ``[bltouch]`` x_offset, y_offset, z_offset; None
+    without either) and notes for the user."""
+
+    firmware: DeltaFirmware | RotaryFirmware
+    probe_offset: tuple[float, float, float] | None
+    probe_section: str | None
+    notes: tuple[str, ...]
+    #: The files read: printer.cfg and its includes (an output may be none of them).
+    files: tuple[str, ...] = ()
+
+    def machine(self, name: str):
+        return self.firmware.machine(name)
 
 
-#: One parsed part of a config: (path, parser, (section, key) → line, line offset).
-_Part = tuple[str, configparser.ConfigParser, dict]
+#: klippy/kinematics/delta.py: moves slow down where the tower moves SLOW_RATIO times faster
+#: than the nozzle; the build radius stops at 4·SLOW_RATIO.
+SLOW_RATIO = 3.0
 
 
-def _parse(text: str, path: str, what: str) -> configparser.ConfigParser:
-    parser = _parser()
+def _half_step(cfg, path: str) -> tuple[float | None, str]:
+    """Half the smallest step distance of [stepper_a|b|c] (delta.py ``__init__``:
+    ``half_min_step_dist``), or None and why when the file does not give it."""
+    from pkmcal.io.klipper_probe import _step_distance
+
+    values = {k: (o.value, o.path, o.line) for k, o in cfg.options.items()}
     try:
-        parser.read_string(text, source=path)
-    except configparser.Error as exc:
-        line = getattr(exc, "lineno", None)
-        detail = " ".join(str(getattr(exc, "message", exc)).split()).split(" file: ")[0]
-        raise InputFileError(path, f"{what}: {detail}", line=line) from None
-    return parser
+        return 0.5 * min(_step_distance(values, t, path) for t in TOWERS), ""
+    except InputFileError as exc:
+        return None, str(exc)
 
 
-def _read_sections(path: str, seen: tuple[str, ...] = ()) -> list[_Part]:
-    """The parsed file and, in Klipper's order, the files its ``[include PATTERN]``
-    sections name (relative to the including file; globs allowed), then its SAVE_CONFIG
-    block."""
-    real = os.path.realpath(path)
-    if real in seen:
-        raise InputFileError(path, "[include] loops back to this file")
-    try:
-        with open(path, encoding="utf-8") as fh:
-            text = fh.read()
-    except OSError as exc:
-        raise InputFileError(path, f"cannot read the Klipper config ({exc.strerror})") from None
-    body, saved = _split_saved(text)
-    parser = _parse(body, path, "not a Klipper config file")
-    out: list[_Part] = []
-    for section in parser.sections():
-        if section.startswith("include "):
-            pattern = os.path.join(os.path.dirname(path), section[len("include "):].strip())
-            matches = sorted(glob.glob(pattern))
-            if not matches and not glob.has_magic(pattern):
-                raise InputFileError(path, f"[{section}]: no such file {pattern}")
-            for inc in matches:
-                out.extend(_read_sections(inc, seen + (real,)))
-    out.append((path, parser, _key_lines(body)))
-    if saved.strip():
-        n_body = len(body.splitlines())
-        block = _parse(saved, path, "the SAVE_CONFIG (#*#) block is not valid")
-        out.append((path, block, {k: v + n_body for k, v in _key_lines(saved).items()}))
-    return out
+def _linear(cfg, path: str, notes: list[str]) -> DeltaFirmware:
+    """klippy/kinematics/delta.py ``DeltaKinematics.__init__`` (Klipper v0.12)."""
+    radius = cfg.float("printer", "delta_radius", above=0.0)
+    print_radius = cfg.float("printer", "print_radius", radius, above=0.0)
+    arm_a = cfg.float("stepper_a", "arm_length", above=radius)
+    arms = tuple(cfg.float(f"stepper_{t}", "arm_length", arm_a, above=radius) for t in TOWERS)
+    # stepper.py PrinterRail: position_endstop of b and c default to a's; with
+    # need_position_minmax=False the rail's range is [0, position_endstop]
+    end_a = cfg.float("stepper_a", "position_endstop")
+    ends = tuple(cfg.float(f"stepper_{t}", "position_endstop", end_a) for t in TOWERS)
+    for t, e in zip(TOWERS, ends):
+        if e < 0:
+            opt = cfg.get(f"stepper_{t}", "position_endstop") or cfg.get("stepper_a", "position_endstop")
+            raise InputFileError(opt.path, f"[stepper_{t}] position_endstop = {e:g}: Klipper requires it between "
+                                 "position_min (0) and position_max", line=opt.line)
+    angles = tuple(cfg.float(f"stepper_{t}", "angle", a) for t, a in zip(TOWERS, KLIPPER_TOWER_ANGLES_DEG))
+    max_z = min(ends)
+    min_z = cfg.float("printer", "minimum_z_position", 0.0, maxval=max_z)
+    # the build radius: min(print_radius, shortest arm − radius, ratio_to_xy(4·SLOW_RATIO))
+    half, why = _half_step(cfg, path)
+    min_arm = min(arms)
+
+    def ratio_to_xy(ratio: float, h: float) -> float:
+        return ratio * np.sqrt(min_arm**2 / (ratio**2 + 1.0) - h**2) + h - radius
+
+    ratio_xy = ratio_to_xy(4.0 * SLOW_RATIO, 0.0 if half is None else half)
+    max_xy = float(min(print_radius, min_arm - radius, ratio_xy))
+    if half is None and max_xy == ratio_xy:
+        notes.append(f"Klipper's build radius {max_xy:.6g} mm is computed without its half-step term (a few µm): "
+                     f"{why}")
+    # the carriage travel: from the switch (abs_endstop = position_endstop + sqrt(arm² −
+    # radius²)) down to the lowest carriage Klipper commands, the nozzle at minimum_z at the
+    # build radius on the far side of the tower (check_move: z >= min_z, x² + y² <= max_xy²)
+    arm = np.array(arms)
+    far = np.sqrt(np.maximum(arm**2 - (radius + max_xy) ** 2, 0.0))
+    travel = np.array(ends) + np.sqrt(arm**2 - radius**2) - (min_z + far)
+    flattest = float(np.min(np.arcsin(far / arm)))
+    return DeltaFirmware(radius=radius, angles_deg=angles, arms=arms, endstops=ends, print_radius=max_xy,
+                         min_z=min_z, travel=tuple(float(v) for v in travel), min_arm_angle=flattest)
 
 
-def read_klipper(path: str) -> DeltaFirmware:
-    """The delta of a Klipper config (with its includes and SAVE_CONFIG block)."""
-    values: dict[tuple[str, str], tuple[str, str, int | None]] = {}   # (section, key) -> (value, file, line)
-    for where, parser, lines in _read_sections(path):
-        for section in parser.sections():
-            for key, value in parser.items(section):
-                values[(section.strip(), key)] = (value, where, lines.get((section.strip(), key)))
+def _rotary(cfg, path: str) -> RotaryFirmware:
+    """klippy/kinematics/rotary_delta.py ``RotaryDeltaKinematics.__init__`` (Klipper v0.12)."""
+    sr = cfg.float("printer", "shoulder_radius", above=0.0)
+    sh = cfg.float("printer", "shoulder_height", above=0.0)
+    ua = cfg.float("stepper_a", "upper_arm_length", above=0.0)
+    la = cfg.float("stepper_a", "lower_arm_length", above=0.0)
+    upper = tuple(cfg.float(f"stepper_{t}", "upper_arm_length", ua, above=0.0) for t in TOWERS)
+    lower = tuple(cfg.float(f"stepper_{t}", "lower_arm_length", la, above=0.0) for t in TOWERS)
+    angles = tuple(cfg.float(f"stepper_{t}", "angle", a) for t, a in zip(TOWERS, ROTARY_ANGLES_DEG))
+    end_a = cfg.float("stepper_a", "position_endstop")
+    ends = tuple(cfg.float(f"stepper_{t}", "position_endstop", end_a) for t in TOWERS)
+    min_z = cfg.float("printer", "minimum_z_position", 0.0, maxval=min(ends))
+    return RotaryFirmware(shoulder_radius=sr, shoulder_height=sh, angles_deg=angles, upper_arms=upper,
+                          lower_arms=lower, endstops=ends, min_z=min_z)
 
-    def get(section: str, key: str, default=None, required: bool = False):
-        if (section, key) not in values:
-            if required:
-                raise InputFileError(path, f"[{section}] has no '{key}'; a Klipper delta needs it")
-            return default
-        value, where, line = values[(section, key)]
-        try:
-            number = float(value)
-        except ValueError:
-            raise InputFileError(where, f"[{section}] {key}: expected a number, got '{value}'", line=line) from None
-        if not np.isfinite(number):
-            raise InputFileError(where, f"[{section}] {key}: expected a finite number, got '{value}'", line=line)
-        return number
 
-    kin = values.get(("printer", "kinematics"))
+#: klippy/kinematics/rotary_delta.py: the default arm angles of stepper_a, b, c (degrees).
+ROTARY_ANGLES_DEG = (30.0, 150.0, 270.0)
+#: The sections of Klipper's probes whose x_offset, y_offset, z_offset pkmcal reads
+#: (klippy/extras/probe.py ``PrinterProbe``: x_offset, y_offset default 0, z_offset
+#: required; bltouch.py reads them through the same probe code).
+PROBE_SECTIONS = ("probe", "bltouch")
+
+
+def _probe(cfg, path: str) -> tuple[tuple[float, float, float] | None, str | None]:
+    found = [s for s in PROBE_SECTIONS if cfg.has_section(s)]
+    if not found:
+        return None, None
+    if len(found) > 1:
+        # Klipper: both register the object 'probe' ("Printer object 'probe' already created")
+        raise InputFileError(path, "both [probe] and [bltouch]: Klipper allows one probe; remove one")
+    s = found[0]
+    return (cfg.float(s, "x_offset", 0.0), cfg.float(s, "y_offset", 0.0), cfg.float(s, "z_offset")), s
+
+
+def read_klipper_printer(path: str) -> KlipperPrinter:
+    """The delta printer a Klipper config describes, read as Klipper reads it
+    (:mod:`pkmcal.io.klipper_config`: includes in place, the SAVE_CONFIG block under the main
+    file's values), with its probe offsets."""
+    from pkmcal.io.klipper_config import read_config
+
+    cfg = read_config(path)
+    notes = list(cfg.notes)
+    kin = cfg.get("printer", "kinematics")
     if kin is None:
         raise InputFileError(path, "no [printer] kinematics; is this a Klipper printer.cfg?")
-    if kin[0].strip() != "delta":
-        raise InputFileError(kin[1], f"[printer] kinematics is '{kin[0].strip()}'; pkmcal imports "
-                             "'kinematics: delta' (linear delta printers)", line=kin[2])
-    radius = get("printer", "delta_radius", required=True)
-    arm_a = get("stepper_a", "arm_length", required=True)
-    end_a = get("stepper_a", "position_endstop", required=True)
-    arms = tuple(get(f"stepper_{t}", "arm_length", arm_a) for t in TOWERS)
-    ends = tuple(get(f"stepper_{t}", "position_endstop", end_a) for t in TOWERS)
-    angles = tuple(get(f"stepper_{t}", "angle", a) for t, a in zip(TOWERS, KLIPPER_TOWER_ANGLES_DEG))
-    return DeltaFirmware(radius=radius, angles_deg=angles, arms=arms, endstops=ends,
-                         print_radius=get("printer", "print_radius", radius),
-                         min_z=get("printer", "minimum_z_position", 0.0))
+    kind = kin.value.strip()
+    if kind == "delta":
+        fw: DeltaFirmware | RotaryFirmware = _linear(cfg, path, notes)
+    elif kind == "rotary_delta":
+        fw = _rotary(cfg, path)
+    else:
+        raise InputFileError(kin.path, f"[printer] kinematics is '{kind}'; pkmcal imports 'kinematics: delta' and "
+                             "'kinematics: rotary_delta'", line=kin.line)
+    offset, section = _probe(cfg, path)
+    return KlipperPrinter(fw, offset, section, tuple(notes), tuple(cfg.files))
 
 
-def klipper_text(fw: DeltaFirmware) -> str:
+def read_klipper(path: str) -> DeltaFirmware | RotaryFirmware:
+    """The delta of a Klipper config, read as Klipper reads it (:func:`read_klipper_printer`)."""
+    return read_klipper_printer(path).firmware
+
+
+def klipper_values(fw: DeltaFirmware | RotaryFirmware) -> dict[str, dict[str, str]]:
+    """Section → option → text of what Klipper's SAVE_CONFIG saves after DELTA_CALIBRATE
+    (delta.py / rotary_delta.py ``save_state``), plus a rotary delta's arm lengths; numbers
+    in shortest round-trip form (Klipper writes ``%.6f``)."""
+    if isinstance(fw, RotaryFirmware):
+        out = {"printer": {"shoulder_radius": repr(fw.shoulder_radius), "shoulder_height": repr(fw.shoulder_height)}}
+        for t, ang, ua, la, end in zip(TOWERS, fw.angles_deg, fw.upper_arms, fw.lower_arms, fw.endstops):
+            out[f"stepper_{t}"] = {"angle": repr(ang), "position_endstop": repr(end), "upper_arm_length": repr(ua),
+                                   "lower_arm_length": repr(la)}
+        return out
+    out = {"printer": {"delta_radius": repr(fw.radius)}}
+    for t, ang, arm, end in zip(TOWERS, fw.angles_deg, fw.arms, fw.endstops):
+        out[f"stepper_{t}"] = {"angle": repr(ang), "arm_length": repr(arm), "position_endstop": repr(end)}
+    return out
+
+
+def klipper_text(fw: DeltaFirmware | RotaryFirmware) -> str:
     """The sections Klipper's ``SAVE_CONFIG`` writes for a delta, to paste into (or replace
     in) printer.cfg; numbers in shortest round-trip form."""
-    lines = ["[printer]", f"delta_radius = {fw.radius!r}", ""]
-    for t, ang, arm, end in zip(TOWERS, fw.angles_deg, fw.arms, fw.endstops):
-        lines += [f"[stepper_{t}]", f"angle = {ang!r}", f"arm_length = {arm!r}", f"position_endstop = {end!r}", ""]
+    lines = []
+    for section, opts in klipper_values(fw).items():
+        lines += [f"[{section}]"] + [f"{k} = {v}" for k, v in opts.items()] + [""]
     return "\n".join(lines)
+
+
+def klipper_saved_config(path: str, fw: DeltaFirmware | RotaryFirmware) -> str:
+    """The user's printer.cfg ``path`` as Klipper's SAVE_CONFIG leaves it with ``fw`` saved
+    (:func:`pkmcal.io.klipper_config.save_config_text`): the ``#*#`` block updated, the main
+    file's copies of the saved options commented out."""
+    from pkmcal.io.klipper_config import save_config_text
+
+    kin = read_klipper(path)
+    if type(kin) is not type(fw):
+        what = {DeltaFirmware: "delta", RotaryFirmware: "rotary_delta"}
+        raise InputFileError(path, f"this printer.cfg is a '{what[type(kin)]}' printer; the machine is a "
+                             f"'{what[type(fw)]}'")
+    return save_config_text(path, klipper_values(fw))
 
 
 # -- Marlin -------------------------------------------------------------------------------------
 
-_WORD = re.compile(r"([A-Za-z])\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)")
-_MARLIN_ANGLES = KLIPPER_TOWER_ANGLES_DEG   # Marlin's towers: 210, 330, 90° plus the trims
+
+def read_marlin(path: str, version: str | None = None, **options) -> DeltaFirmware:
+    """The delta of Marlin's ``M665``/``M666`` lines as Marlin ``version`` runs them
+    (:func:`pkmcal.io.marlin_settings.read_marlin_settings`)."""
+    from pkmcal.io.marlin_settings import read_marlin_settings
+
+    return read_marlin_settings(path, version, **options).firmware
 
 
-def read_marlin(path: str) -> DeltaFirmware:
-    """The delta of Marlin's ``M665``/``M666`` lines: a G-code file, or ``M503`` output
-    (``echo:`` prefixes and ``;`` comments allowed); later lines override earlier ones."""
-    try:
-        with open(path, encoding="utf-8") as fh:
-            lines = fh.read().splitlines()
-    except OSError as exc:
-        raise InputFileError(path, f"cannot read the Marlin settings ({exc.strerror})") from None
-    m665: dict[str, float] = {}
-    m666: dict[str, float] = {}
-    for k, raw in enumerate(lines, start=1):
-        line = raw.split(";", 1)[0].strip()
-        line = re.sub(r"^(echo:|//)\s*", "", line).strip()
-        code = re.match(r"^M(665|666)\b(.*)$", line, flags=re.IGNORECASE)
-        if not code:
-            continue
-        target = m665 if code.group(1) == "665" else m666
-        rest = code.group(2)
-        words = _WORD.findall(rest)
-        if _WORD.sub("", rest).strip():
-            raise InputFileError(path, f"cannot read '{raw.strip()}' (expected letter-number words such as "
-                                 "L215.0 R105.0)", line=k)
-        for letter, number in words:
-            target[letter.upper()] = float(number)
-    for needed in ("L", "R", "H"):
-        if needed not in m665:
-            raise InputFileError(path, f"no M665 {needed} value; pkmcal needs M665 L (diagonal rod), R (radius) "
-                                 "and H (height); print them with M503")
-    trims = tuple(m665.get(c, 0.0) for c in "ABC")
-    angle_trims = tuple(m665.get(c, 0.0) for c in "XYZ")
-    adj = tuple(m666.get(c, 0.0) for c in "XYZ")
-    if any(a > 0 for a in adj):
-        raise InputFileError(path, "M666 endstop adjustments must be ≤ 0 (Marlin ignores positive ones); got "
-                             f"{', '.join(f'{c}{a:g}' for c, a in zip('XYZ', adj))}")
-    H = m665["H"]
-    return DeltaFirmware(radius=m665["R"], angles_deg=tuple(a + t for a, t in zip(_MARLIN_ANGLES, angle_trims)),
-                         arms=tuple(m665["L"] + t for t in trims), endstops=tuple(H - a for a in adj))
+def marlin_text(fw: DeltaFirmware, version: str = "2.1.x", **options) -> str:
+    """``M665``/``M666`` lines for Marlin ``version`` (:func:`pkmcal.io.marlin_settings.marlin_text`)."""
+    from pkmcal.io.marlin_settings import marlin_text as text
+
+    return text(fw, version, **options)[0]
 
 
-def _marlin_number(v: float) -> str:
-    """Marlin keeps 32-bit floats (about 7 significant digits): 6 decimals (1 nm, 1e-6°)
-    are beyond what it holds, and short enough to read."""
-    text = f"{v:.6f}".rstrip("0").rstrip(".")
-    return "0" if text in ("-0", "") else text
-
-
-def marlin_text(fw: DeltaFirmware) -> str:
-    """``M665``/``M666`` lines (then ``M500`` to store them): L the mean arm with per-tower
-    trims A B C, angle trims X Y Z from 210/330/90°, H the lowest endstop height and the
-    M666 adjustments (≤ 0) of the others; numbers to 6 decimals (:func:`_marlin_number`)."""
-    L = float(np.mean(fw.arms))
-    H = float(min(fw.endstops))
-    words = {"L": L, "R": fw.radius, "H": H}
-    words.update({c: a - n for c, a, n in zip("XYZ", fw.angles_deg, _MARLIN_ANGLES)})
-    words.update({c: a - L for c, a in zip("ABC", fw.arms)})
-    adj = {c: min(0.0, H - e) for c, e in zip("XYZ", fw.endstops)}
-    m665 = "M665 " + " ".join(f"{c}{_marlin_number(v)}" for c, v in words.items())
-    m666 = "M666 " + " ".join(f"{c}{_marlin_number(v)}" for c, v in adj.items())
-    return "\n".join([m665, m666, "M500 ; store in EEPROM", ""])
-
-
-__all__ = ["DeltaFirmware", "Dropped", "exact_rewrite", "firmware_subset", "klipper_text", "marlin_text",
-           "read_klipper", "read_marlin"]
+__all__ = ["DeltaFirmware", "Dropped", "KlipperPrinter", "RotaryFirmware", "exact_rewrite", "firmware_subset",
+           "klipper_saved_config", "klipper_text", "klipper_values", "marlin_text", "read_klipper",
+           "read_klipper_printer", "read_marlin", "rotary_firmware_subset"]

@@ -20,7 +20,10 @@ Two sources a Klipper user has:
   that) and Z has 6. ``Result is z=`` lines (a repeat of the samples' average or median) are
   not poses and are skipped.
 
-* **The SAVE_CONFIG block** (``#*#``) of ``printer.cfg`` after ``DELTA_CALIBRATE``:
+* **The SAVE_CONFIG block** (``#*#``) of ``printer.cfg`` after ``DELTA_CALIBRATE``, read as
+  Klipper reads it (:mod:`pkmcal.io.klipper_config`: a block that anything follows is ignored,
+  and said so); the setup's probe x, y offsets must be the config's ``[probe]``/``[bltouch]``
+  ones (:func:`check_probe_offset`):
   ``[delta_calibrate] heightN = H`` and ``heightN_pos = a,b,c``, Klipper's *stable
   positions*: the steps each carriage travelled down from its endstop switch, independent of
   the kinematic parameters. With the step distance d of each tower
@@ -189,15 +192,10 @@ def stable_position(value: str, where: str, line: int | None, key: str) -> np.nd
 
 def saved_values(src: str) -> dict[tuple[str, str], tuple[str, str, int | None]]:
     """(section, key) → (value, file, line) of a Klipper config with its includes and
-    ``#*#`` block (later values win)."""
-    from pkmcal.io.delta_firmware import _read_sections
+    ``#*#`` block, as Klipper reads them (:func:`pkmcal.io.klipper_config.read_config`)."""
+    from pkmcal.io.klipper_config import read_config
 
-    values: dict[tuple[str, str], tuple[str, str, int | None]] = {}
-    for where, parser, lines in _read_sections(src):
-        for section in parser.sections():
-            for key, value in parser.items(section):
-                values[(section.strip(), key)] = (value, where, lines.get((section.strip(), key)))
-    return values
+    return {k: (o.value, o.path, o.line) for k, o in read_config(src).options.items()}
 
 
 def carriages_from_steps(values, steps: np.ndarray, machine, src: str) -> tuple[np.ndarray, np.ndarray]:
@@ -207,7 +205,31 @@ def carriages_from_steps(values, steps: np.ndarray, machine, src: str) -> tuple[
     return machine.reading_reference[None, :] - steps * dist[None, :], dist
 
 
+def check_probe_offset(src: str, offset: np.ndarray) -> list[str]:
+    """The setup's probe offset against the printer.cfg's ``[probe]``/``[bltouch]``
+    (:func:`pkmcal.io.delta_firmware.read_klipper_printer`): an x, y that differ is an error
+    (the probe points would be wrong), a z that differs a note (a z_offset changed since)."""
+    from pkmcal.io.delta_firmware import read_klipper_printer
+
+    try:
+        printer = read_klipper_printer(src)
+    except InputFileError:
+        return []                        # not a delta printer.cfg: nothing to compare with
+    if printer.probe_offset is None:
+        return []
+    cfg = np.array(printer.probe_offset)
+    if np.any(cfg[:2] != offset[:2]):
+        raise InputFileError(src, f"[{printer.probe_section}] x_offset, y_offset are {cfg[0]:g}, {cfg[1]:g} mm but the "
+                             f"setup's probe_offset has {offset[0]:g}, {offset[1]:g}: give the setup of this probe "
+                             f"(pkmcal import klipper {src} --setup-output PROBE.yaml)")
+    if cfg[2] != offset[2]:
+        return [f"{src}: [{printer.probe_section}] z_offset {cfg[2]:g} mm, the setup's {offset[2]:g} mm: probe_z uses "
+                "the setup's"]
+    return []
+
+
 def _from_saved_block(src: str, machine, offset: np.ndarray) -> ProbeImport:
+    offset_notes = check_probe_offset(src, offset)
     values = saved_values(src)
     heights, manual = [], 0
     for (section, key), (value, where, line) in values.items():
@@ -228,8 +250,11 @@ def _from_saved_block(src: str, machine, offset: np.ndarray) -> ProbeImport:
         pv, pwhere, pline = values[(section, pos_key)]
         heights.append((int(m.group(2)), h, stable_position(pv, pwhere, pline, pos_key), line))
     if not heights:
-        raise NoProbeResults(src, "the #*# block has no [delta_calibrate] heightN / heightN_pos entries; run "
-                             "DELTA_CALIBRATE and SAVE_CONFIG first")
+        from pkmcal.io.klipper_config import read_config
+
+        ignored = [n.split(": ", 1)[1] for n in read_config(src).notes if "block is ignored" in n]
+        raise NoProbeResults(src, (ignored[0] if ignored else "the #*# block has no [delta_calibrate] heightN / "
+                                   "heightN_pos entries; run DELTA_CALIBRATE and SAVE_CONFIG first"))
     heights.sort()
     lam, dist = carriages_from_steps(values, np.array([s for _, _, s, _ in heights]), machine, src)
     lines = np.array([ln if ln is not None else 0 for *_, ln in heights])
@@ -243,11 +268,12 @@ def _from_saved_block(src: str, machine, offset: np.ndarray) -> ProbeImport:
                         rows=np.arange(1, len(heights) + 1))
     notes = [f"{src}: {len(heights)} DELTA_CALIBRATE height(s) from the #*# block; step distances "
              f"{', '.join(f'{d:.6g}' for d in dist)} mm; probe_z = height - z_offset {offset[2]!r} mm of the setup"]
+    notes += offset_notes
     if manual:
         notes.append(f"{src}: {manual} manual_height entr{'y' if manual == 1 else 'ies'} skipped (nozzle heights "
                      "measured by hand, not probe readings)")
     return ProbeImport(meas, tuple(notes))
 
 
-__all__ = ["NEW_LINE", "NoProbeResults", "OLD_LINE", "ProbeImport", "carriages_from_steps", "read_klipper_file",
-           "read_klipper_probe", "saved_values", "stable_position"]
+__all__ = ["NEW_LINE", "NoProbeResults", "OLD_LINE", "ProbeImport", "carriages_from_steps", "check_probe_offset",
+           "read_klipper_file", "read_klipper_probe", "saved_values", "stable_position"]

@@ -1,0 +1,1 @@
+"""Real controllers (LinuxCNC, Klipper) run on pkmcal's exports."""
