@@ -225,9 +225,13 @@ def test_a_clipped_policy_that_dropped_most_poses_is_named():
     from pkmcal.identification.fit_verdict import diagnose
     from pkmcal.identification.priors import NO_PRIORS
 
+    machine = load_machine("stewart-prototype")
+
     class Result:
         priors, dropped, used_poses = NO_PRIORS, np.zeros(0, dtype=int), np.arange(10)
         residuals_weighted, residual_names = np.ones((10, 6)), tuple("xyzabc")
+        mechanism, names, param_is_angle = machine, machine.param_names, ()
+        initial = estimate = machine.params
 
     class Meas:
         actuators, notes = np.zeros((10, 6)), ()
