@@ -52,6 +52,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pkmcal.errors import InputFileError
+from pkmcal.io.inputs import read_input_text
 from pkmcal.io._yaml import rad_to_deg_text
 from pkmcal.mechanisms.linear_delta import (
     KLIPPER_TOWER_ANGLES_DEG,
@@ -213,11 +214,7 @@ def _read_sections(path: str, seen: tuple[str, ...] = ()) -> list[_Part]:
     real = os.path.realpath(path)
     if real in seen:
         raise InputFileError(path, "[include] loops back to this file")
-    try:
-        with open(path, encoding="utf-8") as fh:
-            text = fh.read()
-    except OSError as exc:
-        raise InputFileError(path, f"cannot read the Klipper config ({exc.strerror})") from None
+    text = read_input_text(path, "Klipper config")
     body, saved = _split_saved(text)
     parser = _parse(body, path, "not a Klipper config file")
     out: list[_Part] = []
@@ -294,11 +291,7 @@ _MARLIN_ANGLES = KLIPPER_TOWER_ANGLES_DEG   # Marlin's towers: 210, 330, 90° pl
 def read_marlin(path: str) -> DeltaFirmware:
     """The delta of Marlin's ``M665``/``M666`` lines: a G-code file, or ``M503`` output
     (``echo:`` prefixes and ``;`` comments allowed); later lines override earlier ones."""
-    try:
-        with open(path, encoding="utf-8") as fh:
-            lines = fh.read().splitlines()
-    except OSError as exc:
-        raise InputFileError(path, f"cannot read the Marlin settings ({exc.strerror})") from None
+    lines = read_input_text(path, "Marlin settings file").splitlines()
     m665: dict[str, float] = {}
     m666: dict[str, float] = {}
     for k, raw in enumerate(lines, start=1):
