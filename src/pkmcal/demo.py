@@ -168,7 +168,7 @@ def run_demo(config: DemoConfig = DemoConfig(), progress: Progress | None = None
     from pkmcal.identification.engine import identify
     from pkmcal.identification.simulation import simulate_campaign
     from pkmcal.identification.verification import verify
-    from pkmcal.io.atomic import atomic_write_text
+    from pkmcal.io.atomic import atomic_write_text, make_folder
     from pkmcal.io.export_linuxcnc import linuxcnc_hal
     from pkmcal.io.machine_file import load_machine, save_machine
     from pkmcal.io.measurements import save_measurements
@@ -260,7 +260,7 @@ def run_demo(config: DemoConfig = DemoConfig(), progress: Progress | None = None
 
     # 5. export -------------------------------------------------------------------------
     step("export")
-    out.mkdir(parents=True, exist_ok=True)
+    make_folder(out, "--out")
     files: dict[str, Path] = {}
     files["calibrated"] = out / f"{calibrated.name}.yaml"
     save_machine(calibrated, files["calibrated"])

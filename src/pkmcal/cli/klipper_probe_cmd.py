@@ -43,10 +43,11 @@ def klipper_probe_cmd(source: str, machine_spec: str, setup_spec: str, output: s
     at the logged positions; probe_z is 0 at every trigger (the probe point on the bed).
     """
     check_output(output, [source])
-    from pkmcal.io.klipper_probe import read_klipper_probe
+    from pkmcal.io.klipper_probe import read_klipper_probe, require_linear_delta
     from pkmcal.io.lookup import load_machine
 
     machine = load_machine(machine_spec)
+    require_linear_delta(machine, "Klipper's probe results", f"--machine {machine_spec}")
     setup = _setup_of_kind(setup_spec, machine, "z-probe", "Klipper's probe results")
     result = read_klipper_probe(source, machine, setup.sensor.probe_offset)
     _write(result, machine, setup, output, f"from Klipper probe results {source}", "pose(s)")
@@ -137,15 +138,13 @@ def klipper_analyze_cmd(source: str, machine_spec: str, setup_spec: str, output:
     and 'distance'; a height row holds one probed point twice and 'probe_z'.
     """
     check_output(output, [source])
-    from pkmcal.errors import PkmcalError
     from pkmcal.io.klipper_analyze import read_klipper_analyze
+    from pkmcal.io.klipper_probe import require_linear_delta
     from pkmcal.io.lookup import load_machine
     from pkmcal.mechanisms.pose_pairs import PosePairs
 
     machine = load_machine(machine_spec)
-    if machine.kind != "linear-delta":
-        raise PkmcalError(f"--machine {machine_spec}: DELTA_ANALYZE is Klipper's linear delta calibration; machine "
-                          f"'{machine.name}' is a {machine.kind or 'machine of another kind'}")
+    require_linear_delta(machine, "DELTA_ANALYZE results", f"--machine {machine_spec}")
     pairs = PosePairs(machine)
     setup = _setup_of_kind(setup_spec, pairs, "printed-distance", "DELTA_ANALYZE results")
     result = read_klipper_analyze(source, machine, setup.sensor.probe_offset)

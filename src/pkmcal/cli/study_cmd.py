@@ -35,7 +35,7 @@ def study(study_file, output, seed, trials, workers, dask_address, resume, quiet
     Same seed, same bits, whatever the number of workers or the backend. The progress bar
     (stderr) shows only on a terminal.
     """
-    from pkmcal.errors import PkmcalError
+    from pkmcal.errors import PkmcalError, one_line
     from pkmcal.progress import bars_enabled
     from pkmcal.study import load_study, run_study
 
@@ -55,7 +55,7 @@ def study(study_file, output, seed, trials, workers, dask_address, resume, quiet
     if quiet:
         return
     n_cfg = len({int(c) for c in result.columns["config"]})
-    click.echo(f"study '{spec.name}': {n_cfg} configuration(s) x {spec.trials} trials; ran {result.trials_run} "
+    click.echo(f"study '{one_line(spec.name)}': {n_cfg} configuration(s) x {spec.trials} trials; ran {result.trials_run} "
                f"trial(s) in {result.seconds:.1f} s ({result.backend}, {result.workers} worker(s))")
     shown = {"heldout_position_rms_mm": ("position", "mm"), "heldout_tilt_rms_deg": ("tilt", "deg"),
              "heldout_height_rms_mm": ("height", "mm"),
@@ -69,7 +69,8 @@ def study(study_file, output, seed, trials, workers, dask_address, resume, quiet
         parts = [f"{name} {rows[m]['median']:.4g} {unit}" for m, (name, unit) in shown.items()
                  if m in rows and rows[m]["n"] and not (name == "orientation" and "heldout_tilt_rms_deg" in rows)]
         compared = r0.get("heldout_compare") or "commanded"
-        click.echo(f"  {r0['machine']} | {r0['setup']} | {r0['plan']} {int(r0['n_poses'])} | {r0['method']}: "
+        labels = " | ".join(one_line(str(r0[k])) for k in ("machine", "setup", "plan"))   # labels may hold a newline
+        click.echo(f"  {labels} {int(r0['n_poses'])} | {one_line(str(r0['method']))}: "
                    f"held-out rms after, median: {', '.join(parts) or 'no trial completed'}"
                    + ("" if compared == "commanded" else f" (compared: {compared})"))
     failed = [r for r in result.summary if r["metric"] == "failed" and r["mean"] > 0]

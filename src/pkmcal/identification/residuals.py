@@ -293,15 +293,22 @@ def single_threaded_blas(scipy: bool = True):
 # -- parameter selection ---------------------------------------------------------------
 
 
+def pattern_matches(names: tuple[str, ...], pat: str) -> list[int]:
+    """Indices of the parameter ``names`` that the shell pattern ``pat`` of a ``free``/``fix``
+    list names (a sensor parameter named without ``@LABEL``: that parameter in every session)."""
+    hits = [i for i, n in enumerate(names) if fnmatchcase(n, pat)]
+    if not hits and "@" not in pat:
+        # several sessions: a sensor parameter named without @LABEL is that parameter in every session
+        hits = [i for i, n in enumerate(names) if fnmatchcase(n, pat + "@*")]
+    return hits
+
+
 def _match(names: tuple[str, ...], patterns, what: str) -> list[int]:
     if isinstance(patterns, str):
         patterns = [p for p in patterns.replace(",", " ").split() if p]
     out: list[int] = []
     for pat in patterns:
-        hits = [i for i, n in enumerate(names) if fnmatchcase(n, pat)]
-        if not hits and "@" not in pat:
-            # several sessions: a sensor parameter named without @LABEL is that parameter in every session
-            hits = [i for i, n in enumerate(names) if fnmatchcase(n, pat + "@*")]
+        hits = pattern_matches(names, pat)
         if not hits:
             raise PkmcalError(f"{what}: no parameter matches '{pat}'; the parameters are {', '.join(names)}")
         out.extend(h for h in hits if h not in out)

@@ -14,7 +14,10 @@ this host that no longer exists, or (another host's) older than :data:`STALE_AFT
 Commands call :func:`check_output_path` / :func:`check_output_dir` for every output before
 they load or compute anything, so that a bad location (a missing or read-only folder, a
 path ending in ``/``, an empty name, a name the file system cannot hold, an input file) is
-refused before any output — of this or another location — is written.
+refused before any output — of this or another location — is written. Permission bits are
+not the whole answer (a superuser passes them in ``/proc`` and on read-only or
+root-squashed mounts), so the folder a file would be created in is also tried: a hidden
+``.pkmcal-write-check-*`` file is created there and removed at once.
 """
 
 from __future__ import annotations
@@ -81,7 +84,7 @@ def _location_problem(output: str, what: str) -> str | None:
         target = output if what == "folder" else directory
         if not os.access(target, os.W_OK | os.X_OK):
             return f"no write permission in {'it' if what == 'folder' else 'its folder'}"
-        return None
+        return _cannot_create_in(target, "it" if what == "folder" else "its folder")
     # The output does not exist yet: its nearest existing ancestor must be a writable folder
     # (a file needs its own folder to exist; a folder is created with its parents).
     parent = path.parent if what == "file" else path
@@ -101,7 +104,20 @@ def _location_problem(output: str, what: str) -> str | None:
             return f"'{parent}' is not a folder"
         if not os.access(parent, os.W_OK | os.X_OK):
             return f"no write permission in the folder '{parent}'"
-        return None
+        return _cannot_create_in(str(parent), f"the folder '{parent}'")
+
+
+def _cannot_create_in(folder: str, name: str) -> str | None:
+    """Why no file can be created in the existing ``folder`` (called ``name`` in the message),
+    or None, found by creating one and removing it: permission bits do not tell everything
+    (a superuser passes ``os.access`` in ``/proc``, on a read-only or root-squashed mount)."""
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".pkmcal-write-check-", dir=folder)
+    except OSError as exc:
+        return f"nothing can be created in {name} ({exc.strerror or exc})"
+    os.close(fd)
+    _unlink_quietly(probe)
+    return None
 
 
 def check_output_path(output: str | os.PathLike, inputs: Iterable[str | os.PathLike | None] = ()) -> None:
@@ -127,6 +143,17 @@ def check_output_dir(folder: str | os.PathLike, option: str = "output folder") -
     problem = _location_problem(text, "folder")
     if problem is not None:
         raise PkmcalError(f"cannot write {option} '{text}': {problem}")
+
+
+def make_folder(folder: str | os.PathLike, option: str = "output folder") -> Path:
+    """Create the output folder ``folder`` with its parents (nothing if it exists);
+    :class:`PkmcalError` naming ``option`` when it cannot be."""
+    path = Path(folder)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise PkmcalError(f"cannot create {option} '{folder}': {exc.strerror or exc}; choose another path") from None
+    return path
 
 
 def _exists(path: str | os.PathLike) -> bool:

@@ -65,6 +65,7 @@ import numpy as np
 from pkmcal.conventions import EULER_RANGES, wrap_angle
 from pkmcal.errors import InputFileError, PkmcalError
 from pkmcal.io.export_linuxcnc import HAL_PREFIX
+from pkmcal.io.inputs import read_input_bytes
 from pkmcal.io.limits import MAX_MAGNITUDE
 from pkmcal.mechanisms.hexapod_reach import loose_stroke_note
 
@@ -98,13 +99,7 @@ class IniFile:
 
 
 def _read_text(path: str, what: str) -> str:
-    try:
-        with open(path, "rb") as fh:
-            data = fh.read(20_000_001)
-    except OSError as exc:
-        raise InputFileError(path, f"cannot read the {what}: {exc.strerror or exc}") from None
-    if len(data) > 20_000_000:
-        raise InputFileError(path, f"is larger than 20 MB: not a LinuxCNC {what}")
+    data = read_input_bytes(path, what, 20_000_000)
     if b"\x00" in data:
         raise InputFileError(path, f"contains NUL bytes: not a text {what}")
     try:

@@ -45,8 +45,10 @@ from pkmcal.io.klipper_probe import (
     NoProbeResults,
     ProbeImport,
     carriages_from_steps,
+    numbered_entries,
     read_klipper_file,
     read_klipper_probe,
+    require_linear_delta,
     saved_values,
     stable_position,
 )
@@ -63,7 +65,6 @@ ANALYZE_ARGS = {"CENTER_DISTS": 6, "CENTER_PILLAR_WIDTHS": 3, "OUTER_DISTS": 6, 
                 "SCALE": 1}
 _COMMAND = re.compile(r"\bDELTA_ANALYZE\b(.*)$", flags=re.IGNORECASE)
 _ARG = re.compile(r"([A-Za-z_]+)\s*=\s*(\S+)")
-_DISTANCE = re.compile(r"^distance(\d+)$")
 
 
 def object_point_pairs(scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
@@ -90,6 +91,7 @@ def read_klipper_analyze(path: str | os.PathLike, machine, probe_offset=(0.0, 0.
     """The printed distances and probe heights of a printer.cfg or log (module docstring) as
     measurements of ``machine`` read as pose pairs; ``machine`` is the firmware's
     configuration (a linear delta), ``probe_offset`` the z-probe's (mm)."""
+    require_linear_delta(machine, "DELTA_ANALYZE results")
     src, text, saved = read_klipper_file(path)
     offset = np.asarray(probe_offset, dtype=float)
     if saved:
@@ -127,11 +129,9 @@ def _pairs(src, dist, heights, machine) -> ProbeImport:
 
 def _saved_distances(src: str, machine):
     values = saved_values(src)
+    section = "delta_calibrate"
     found = []
-    for (section, key), (value, where, line) in values.items():
-        m = _DISTANCE.match(key) if section == "delta_calibrate" else None
-        if m is None:
-            continue
+    for n, key, value, where, line in numbered_entries(values, "distance"):
         try:
             d = float(value)
         except ValueError:
@@ -146,11 +146,10 @@ def _saved_distances(src: str, machine):
                 raise InputFileError(where, f"[delta_calibrate] {key} has no {key}{suffix}", line=line)
             pv, pwhere, pline = values[(section, key + suffix)]
             pos.append(stable_position(pv, pwhere, pline, key + suffix))
-        found.append((int(m.group(1)), d, pos[0], pos[1], line or 0))
+        found.append((n, d, pos[0], pos[1], line or 0))
     if not found:
         raise InputFileError(src, "the #*# block has no [delta_calibrate] distanceN entries; run DELTA_ANALYZE with "
                              "the measured distances, then DELTA_ANALYZE CALIBRATE=extended and SAVE_CONFIG")
-    found.sort()
     steps = np.array([f[2] for f in found] + [f[3] for f in found])
     lam, step = carriages_from_steps(values, steps, machine, src)
     n = len(found)

@@ -121,13 +121,9 @@ def _parser() -> configparser.RawConfigParser:
 
 def read_text(path: str) -> str:
     """klippy/configfile.py ``_read_config_file``: the whole file, CR LF as LF."""
-    try:
-        with open(path, encoding="utf-8") as fh:
-            return fh.read().replace("\r\n", "\n")
-    except UnicodeDecodeError as exc:
-        raise InputFileError(path, f"not a UTF-8 text file (byte {exc.start})") from None
-    except OSError as exc:
-        raise InputFileError(path, f"cannot read the Klipper config ({exc.strerror})") from None
+    from pkmcal.io.inputs import read_input_text   # regular files only, UTF-8 errors with their line
+
+    return read_input_text(path, "Klipper config").replace("\r\n", "\n")
 
 
 def find_autosave(data: str) -> tuple[str, str, str | None, int]:

@@ -48,7 +48,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pkmcal.errors import InputFileError
+from pkmcal.errors import InputFileError, PkmcalError
+from pkmcal.io.inputs import read_input_bytes
 from pkmcal.io.measurements import Measurements
 
 _NUM = r"([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)"
@@ -56,7 +57,6 @@ _NUM = r"([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)"
 OLD_LINE = re.compile(rf"probe at {_NUM}\s*,\s*{_NUM} is z={_NUM}")
 #: Later Klipper: the probe point x, y and the nozzle z less z_offset.
 NEW_LINE = re.compile(rf"probe: at {_NUM}\s*,\s*{_NUM} bed will contact at z={_NUM}")
-_HEIGHT = re.compile(r"^(manual_)?height(\d+)$")
 
 
 class NoProbeResults(InputFileError):
@@ -75,6 +75,7 @@ def read_klipper_probe(path: str | os.PathLike, machine, probe_offset=(0.0, 0.0,
     """The probe results of a Klipper log or printer.cfg (module docstring) as measurements
     of ``machine`` (a linear delta whose parameters are the firmware's); ``probe_offset``
     Klipper's x_offset, y_offset, z_offset (mm), as in the z-probe setup."""
+    require_linear_delta(machine, "Klipper's probe results")
     src, text, saved = read_klipper_file(path)
     offset = np.asarray(probe_offset, dtype=float)
     if saved:
@@ -82,14 +83,23 @@ def read_klipper_probe(path: str | os.PathLike, machine, probe_offset=(0.0, 0.0,
     return _from_lines(src, text, machine, offset)
 
 
+def require_linear_delta(machine, what: str, option: str | None = None) -> None:
+    """Refuse a ``machine`` that is not a linear delta: ``what`` (Klipper's probe results, its
+    DELTA_ANALYZE distances) are carriage positions of Klipper's ``kinematics: delta``, and
+    a stable position counts steps below a carriage's endstop. ``option``: how the user gave
+    the machine (``--machine kossel.yaml``), named in the message."""
+    if machine.kind != "linear-delta":
+        given = f"{option}: " if option else ""
+        raise PkmcalError(f"{given}{what} are read with a linear delta printer (Klipper's 'kinematics: delta'); machine "
+                          f"'{machine.name}' is a {machine.kind or 'machine of another kind'}: give the printer's "
+                          "machine file (pkmcal import klipper printer.cfg) or a built-in linear delta (kossel-mini)")
+
+
 def read_klipper_file(path: str | os.PathLike) -> tuple[str, str, bool]:
     """(path, text, whether it is a printer.cfg with a DELTA_CALIBRATE ``#*#`` block)."""
     src = os.fspath(path)
-    try:
-        with open(src, encoding="utf-8", errors="replace") as fh:
-            text = fh.read()
-    except OSError as exc:
-        raise InputFileError(src, f"cannot read the Klipper file ({exc.strerror})") from None
+    # a console log may hold bytes of any encoding around the probe lines, which are ASCII
+    text = read_input_bytes(src, "Klipper file").decode("utf-8", errors="replace")
     return src, text, any(line.startswith("#*#") for line in text.splitlines()) and "[delta_calibrate]" in text
 
 
@@ -228,18 +238,41 @@ def check_probe_offset(src: str, offset: np.ndarray) -> list[str]:
     return []
 
 
+def numbered_entries(values, name: str) -> list[tuple[int, str, str, str, int | None]]:
+    """``(N, key, value, file, line)`` of the ``[delta_calibrate] <name>N`` entries, N = 0, 1,
+    2, ..., as Klipper reads them back (klippy/extras/delta_calibrate.py,
+    ``DeltaCalibrate.__init__``: ``<name>0``, ``<name>1``, ... up to the first one missing).
+    Klipper refuses at start-up an option that no module reads (klippy/configfile.py,
+    ``check_unused``), so an entry it would not read — a number with a leading zero
+    (``height00``, which would also be ``height0``'s number here), or one after a gap — is an
+    error naming it."""
+    rx = re.compile(rf"^{re.escape(name)}([0-9]+)$")
+    found: dict[int, tuple[str, str, str, int | None]] = {}
+    for (section, key), (value, where, line) in values.items():
+        m = rx.match(key) if section == "delta_calibrate" else None
+        if m is None:
+            continue
+        if m.group(1) != str(int(m.group(1))):
+            raise InputFileError(where, f"[delta_calibrate] {key}: Klipper numbers these entries {name}0, {name}1, ... "
+                                 f"without leading zeros, and refuses '{key}' as an option it does not read; rename or "
+                                 "remove it", line=line)
+        found[int(m.group(1))] = (key, value, where, line)
+    for n in sorted(found):
+        if n > 0 and n - 1 not in found:
+            key, _, where, line = found[n]
+            raise InputFileError(where, f"[delta_calibrate] {key}: there is no {name}{n - 1}; Klipper reads {name}0, "
+                                 f"{name}1, ... up to the first one missing, and refuses '{key}' as an option it does "
+                                 f"not read; number the entries from {name}0 without gaps", line=line)
+    return [(n, *found[n]) for n in sorted(found)]
+
+
 def _from_saved_block(src: str, machine, offset: np.ndarray) -> ProbeImport:
     offset_notes = check_probe_offset(src, offset)
     values = saved_values(src)
-    heights, manual = [], 0
-    for (section, key), (value, where, line) in values.items():
-        m = _HEIGHT.match(key) if section == "delta_calibrate" else None
-        if m is None:
-            continue
-        if m.group(1):
-            manual += 1
-            continue
-        pos_key = f"height{m.group(2)}_pos"
+    section = "delta_calibrate"
+    heights = []
+    for n, key, value, where, line in numbered_entries(values, "height"):
+        pos_key = f"{key}_pos"
         if (section, pos_key) not in values:
             raise InputFileError(where, f"[delta_calibrate] {key} has no {pos_key}", line=line)
         try:
@@ -248,7 +281,8 @@ def _from_saved_block(src: str, machine, offset: np.ndarray) -> ProbeImport:
             raise InputFileError(where, f"[delta_calibrate] {key}: expected a number, got '{value}'", line=line) \
                 from None
         pv, pwhere, pline = values[(section, pos_key)]
-        heights.append((int(m.group(2)), h, stable_position(pv, pwhere, pline, pos_key), line))
+        heights.append((n, h, stable_position(pv, pwhere, pline, pos_key), line))
+    manual = len(numbered_entries(values, "manual_height"))
     if not heights:
         from pkmcal.io.klipper_config import read_config
 
@@ -267,7 +301,7 @@ def _from_saved_block(src: str, machine, offset: np.ndarray) -> ProbeImport:
     meas = Measurements(actuators=lam, readings=readings, commanded=fk.poses, source=src, lines=lines,
                         rows=np.arange(1, len(heights) + 1))
     notes = [f"{src}: {len(heights)} DELTA_CALIBRATE height(s) from the #*# block; step distances "
-             f"{', '.join(f'{d:.6g}' for d in dist)} mm; probe_z = height - z_offset {offset[2]!r} mm of the setup"]
+             f"{', '.join(f'{d:.6g}' for d in dist)} mm; probe_z = height - z_offset {float(offset[2])!r} mm of the setup"]
     notes += offset_notes
     if manual:
         notes.append(f"{src}: {manual} manual_height entr{'y' if manual == 1 else 'ies'} skipped (nozzle heights "
@@ -276,4 +310,5 @@ def _from_saved_block(src: str, machine, offset: np.ndarray) -> ProbeImport:
 
 
 __all__ = ["NEW_LINE", "NoProbeResults", "OLD_LINE", "ProbeImport", "carriages_from_steps", "check_probe_offset",
-           "read_klipper_file", "read_klipper_probe", "saved_values", "stable_position"]
+           "numbered_entries", "read_klipper_file", "read_klipper_probe", "require_linear_delta", "saved_values",
+           "stable_position"]

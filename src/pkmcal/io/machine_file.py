@@ -54,6 +54,7 @@ from pkmcal.io._yaml import (
     rad_to_deg_text,
 )
 from pkmcal.io.atomic import atomic_write_text
+from pkmcal.io.inputs import read_input_text
 from pkmcal.io.limits import MAX_DESCRIPTION_CHARS, MAX_NAME_CHARS, magnitude_problem
 from pkmcal.io.lookup import load_machine  # noqa: F401  (re-exported: the front door lives in io.lookup)
 from pkmcal.mechanisms.base import Mechanism
@@ -728,17 +729,7 @@ def machine_from_text(text: str, source: object = "<machine file>") -> Mechanism
 
 def read_machine_file(path: str | os.PathLike) -> Mechanism:
     """The machine in the YAML file ``path``; :class:`InputFileError` when it cannot be used."""
-    try:
-        with open(path, "rb") as fh:
-            raw = fh.read(_MAX_FILE_BYTES + 1)
-    except OSError as exc:
-        raise InputFileError(path, f"cannot read the machine file: {exc.strerror or exc}") from None
-    if len(raw) > _MAX_FILE_BYTES:
-        raise InputFileError(path, f"larger than {_MAX_FILE_BYTES // 1_000_000} MB: not a machine file")
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise InputFileError(path, f"not a UTF-8 text file (byte {exc.start}); save it as UTF-8 YAML") from None
+    text = read_input_text(path, "machine file", _MAX_FILE_BYTES, "save it as UTF-8 YAML")
     machine = machine_from_text(text, path)
     record_source("machine", machine.name, os.fspath(path))
     return machine

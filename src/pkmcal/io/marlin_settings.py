@@ -88,11 +88,9 @@ class MarlinImport:
 
 
 def _lines(path: str) -> list[str]:
-    try:
-        with open(path, encoding="utf-8") as fh:
-            return fh.read().splitlines()
-    except OSError as exc:
-        raise InputFileError(path, f"cannot read the Marlin settings ({exc.strerror})") from None
+    from pkmcal.io.inputs import read_input_text   # regular files only, UTF-8 errors with their line
+
+    return read_input_text(path, "Marlin settings file").splitlines()
 
 
 def _codes(path: str) -> dict[str, tuple[dict[str, float], dict[str, int]]]:

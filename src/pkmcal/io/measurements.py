@@ -32,6 +32,7 @@ import numpy as np
 from pkmcal.conventions import POSE_COLUMNS
 from pkmcal.errors import InputFileError, PkmcalError
 from pkmcal.io.import_mapping import ImportMapping
+from pkmcal.io.inputs import read_input_text
 from pkmcal.io.orientation import euler_triples, orientation_given, small_angle_limit
 from pkmcal.io.tables import DEFAULT_ALIASES, check_magnitudes, column_kinds, from_file_units, mapped_name, read_table, to_file_units, write_table
 from pkmcal.mechanisms.base import Mechanism
@@ -144,13 +145,7 @@ def load_measurements(path: str | os.PathLike, machine: Mechanism, setup: Measur
     kinds = {**act_kinds, **column_kinds(legs, (False,) * len(legs)),
              **column_kinds(reading_cols, sensor.reading_is_angle),
              **column_kinds(cmd_cols, machine.pose_is_angle)}
-    try:
-        with open(src, "rb") as fh:
-            text = fh.read().decode("utf-8-sig")
-    except OSError as exc:
-        raise InputFileError(src, f"cannot read the measurement file: {exc.strerror or exc}") from None
-    except UnicodeDecodeError as exc:
-        raise InputFileError(src, f"not a UTF-8 text file (byte {exc.start}); save it as UTF-8 CSV") from None
+    text = read_input_text(src, "measurement file", fix="save it as UTF-8 CSV")
     header = _header(text, mapping)
     given = set(header)
     order = (mapping.quaternion_order if mapping is not None else None) or "xyzw"

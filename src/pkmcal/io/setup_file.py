@@ -85,7 +85,6 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Annotated, Any, Callable, Literal, Union
 
 import numpy as np
@@ -103,6 +102,7 @@ from pkmcal.io._yaml import (
     rad_to_deg_text,
 )
 from pkmcal.io.atomic import atomic_write_text
+from pkmcal.io.inputs import read_input_text
 from pkmcal.io.limits import MAX_DESCRIPTION_CHARS, magnitude_problem
 from pkmcal.io.lookup import load_setup  # noqa: F401  (re-exported: the front door lives in io.lookup)
 from pkmcal.mechanisms.statics import StaticsModel
@@ -351,11 +351,7 @@ def read_setup_file(path: str | os.PathLike, machine=None) -> MeasurementSetup:
 
     Raises :class:`~pkmcal.errors.InputFileError` naming the file, line and key.
     """
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputFileError(path, f"cannot read the setup file: {exc}") from None
+    text = read_input_text(path, "setup file", fix="save it as UTF-8 YAML")
     try:
         data, lines = parse_yaml(text)
     except YamlSyntaxError as exc:
@@ -381,7 +377,7 @@ def read_setup_file(path: str | os.PathLike, machine=None) -> MeasurementSetup:
                      ("target",): _Point, ("simulation",): _Simulation, ("bed",): _Bed}.get(loc[:-1], _Setup)
             what = f"is not a setup key here; remove or correct it (allowed: {', '.join(model.model_fields)})"
         else:
-            what = _describe(err)
+            what = describe_error(err)
         _fail(path, lines, loc, what)
     setup = _build(path, lines, spec, data)
     if spec.prior:
@@ -474,16 +470,21 @@ def _priors(path, lines, prior: dict) -> tuple:
     return tuple(out)
 
 
-def _describe(err: dict) -> str:
-    """One pydantic error in the file's words (no coercion happens: say what was given)."""
+def describe_error(err: dict) -> str:
+    """One pydantic error of a strict schema (a setup or study file) in the file's words (no
+    coercion happens: say what was given)."""
     kind, value = err["type"], plain(err.get("input"))
     shown = {True: "true", False: "false", None: "null"}.get(value, repr(value)) if not isinstance(
         value, (list, dict, float, int)) or isinstance(value, bool) else repr(value)
     shown = shown if len(shown) <= 60 else shown[:57] + "..."
+    why = ("; true/false is not a number" if isinstance(value, bool) else
+           "; it is quoted text: remove the quotes" if isinstance(value, str) else "")
     if kind == "float_type":
-        why = ("; true/false is not a number" if isinstance(value, bool) else
-               "; it is quoted text: remove the quotes" if isinstance(value, str) else "")
         return f"expected a number, got {shown}{why}"
+    if kind in ("int_type", "int_from_float"):
+        return f"expected a whole number, got {shown}{why}"
+    if kind == "bool_type":
+        return f"expected true or false, got {shown}"
     if kind == "finite_number":
         return f"expected a finite number, got {shown}"
     if kind == "string_type":

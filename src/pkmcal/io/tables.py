@@ -30,6 +30,7 @@ import numpy as np
 
 from pkmcal.errors import InputFileError, PkmcalError, PkmcalWarning, one_line
 from pkmcal.io.atomic import atomic_write_text
+from pkmcal.io.inputs import has_nul, not_utf8, open_input
 from pkmcal.io.limits import MAX_MAGNITUDE, magnitude_problem
 
 if TYPE_CHECKING:
@@ -340,24 +341,29 @@ def _text_lines(src: str, text: str | None):
             raise InputFileError(src, "contains NUL bytes: not a text CSV file")
         yield from text.splitlines()
         return
+    fix = "save the table as UTF-8 CSV"
     try:
-        with open(src, "rb") as fh:
-            decoder, offset, nul = codecs.getincrementaldecoder("utf-8")(), 0, False
+        with open_input(src, "table") as fh:
+            decoder, offset, newlines, nul = codecs.getincrementaldecoder("utf-8")(), 0, 0, None
             while piece := fh.read(1 << 20):
+                pending = decoder.getstate()[0]        # the start of a character cut by the last piece
                 try:
                     decoder.decode(piece)
                 except UnicodeDecodeError as exc:
-                    raise InputFileError(src, f"not a UTF-8 text file (byte {offset + exc.start}); save the table "
-                                              "as UTF-8 CSV") from None
-                nul = nul or b"\x00" in piece
+                    buf = pending + piece
+                    raise not_utf8(src, buf[exc.start], offset - len(pending) + exc.start,
+                                   newlines + buf.count(b"\n", 0, exc.start) + 1, fix) from None
+                if nul is None and (k := piece.find(b"\x00")) >= 0:
+                    nul = (offset + k, newlines + piece.count(b"\n", 0, k) + 1)
                 offset += len(piece)
+                newlines += piece.count(b"\n")
+            pending = decoder.getstate()[0]
             try:
                 decoder.decode(b"", final=True)
             except UnicodeDecodeError as exc:
-                raise InputFileError(src, f"not a UTF-8 text file (byte {offset + exc.start}); save the table "
-                                          "as UTF-8 CSV") from None
-            if nul:
-                raise InputFileError(src, "contains NUL bytes: not a text CSV file")
+                raise not_utf8(src, pending[exc.start], offset - len(pending) + exc.start, newlines + 1, fix) from None
+            if nul is not None:
+                raise has_nul(src, *nul, "table")
             fh.seek(0)
             for k, raw in enumerate(fh):  # split at b"\n": no byte of a multi-byte UTF-8 character is 0x0A
                 line = raw.decode("utf-8")

@@ -26,7 +26,7 @@ import numpy as np
 
 from pkmcal import __version__
 from pkmcal.errors import PkmcalError
-from pkmcal.io.atomic import atomic_write_bytes
+from pkmcal.io.atomic import atomic_write_bytes, make_folder
 from pkmcal.report import figures as F
 from pkmcal.report.data import PosePoints, ReportData, pose_points, summarise
 
@@ -455,7 +455,7 @@ def write_report(data: ReportData, out_dir: str | os.PathLike, png: bool = True)
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise PkmcalError(f"report folder '{out}' exists and is not a folder; choose another --out/--report path")
-    out.mkdir(parents=True, exist_ok=True)
+    make_folder(out, "the report folder")
     figs = build_figures(data, png=png)
     written = []
     for f in figs:

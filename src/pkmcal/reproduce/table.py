@@ -125,13 +125,13 @@ class Reproduction:
         from pathlib import Path
 
         from pkmcal.errors import PkmcalError
-        from pkmcal.io.atomic import atomic_write_bytes
+        from pkmcal.io.atomic import atomic_write_bytes, make_folder
         from pkmcal.report.figures import render
 
         out = Path(out_dir)
         if out.exists() and not out.is_dir():
             raise PkmcalError(f"figure folder '{out}' exists and is not a folder; choose another --figures path")
-        out.mkdir(parents=True, exist_ok=True)
+        make_folder(out, "--figures")
         written = []
         for spec in self.figures:
             fig = render(spec.build(), spec.name, spec.caption, png)

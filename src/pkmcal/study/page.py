@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from pkmcal import __version__
-from pkmcal.io.atomic import atomic_write_bytes, atomic_write_text
+from pkmcal.io.atomic import atomic_write_bytes, atomic_write_text, make_folder
 from pkmcal.report.html import CSS, inline_svg
 from pkmcal.study.plots import study_figures
 from pkmcal.study.results import COLUMNS, SCALE_COLUMNS, summary_lookup
@@ -143,7 +143,7 @@ def render_page(study, ctx, cols: dict, summary: list, figs) -> str:
 def write_page(study, ctx, cols: dict, summary: list, out: Path) -> Path:
     """Write the figures and ``index.html`` into ``out``; returns the page's path."""
     figs = study_figures(cols, summary)
-    (out / "figures").mkdir(exist_ok=True)
+    make_folder(out / "figures", "the figure folder")
     for f in figs:
         atomic_write_bytes(out / "figures" / f"{f.name}.svg", f.svg)
         if f.png is not None:

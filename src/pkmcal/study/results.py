@@ -39,6 +39,7 @@ import numpy as np
 
 from pkmcal.errors import PkmcalError
 from pkmcal.io.atomic import atomic_write_text
+from pkmcal.io.inputs import read_input_text
 
 #: 97.5 % quantile of the standard normal distribution (scipy.stats.norm.ppf(0.975)).
 Z95 = 1.959963984540054
@@ -140,7 +141,9 @@ def column_type(name: str) -> str:
 
 def cell(value, kind: str) -> str:
     """One CSV cell: floats as ``repr`` (empty for NaN or None), ints, flags as 1/0, text
-    quoted when it must be."""
+    quoted (RFC 4180: in double quotes, a quote doubled) when it holds a comma, a quote, a
+    line break, or leading or trailing white space, so that ``csv`` and ``pandas.read_csv``
+    read back exactly the text written."""
     if value is None:
         return ""
     if kind == "float":
@@ -152,9 +155,8 @@ def cell(value, kind: str) -> str:
         return "1" if value else "0"
     s = str(value)
     if any(ch in s for ch in ',"\n\r') or s != s.strip():
-        buf = io.StringIO()
-        csv.writer(buf, lineterminator="").writerow([s])
-        s = buf.getvalue()
+        # RFC 4180 by hand: csv.writer with lineterminator="" leaves a line break unquoted
+        s = '"' + s.replace('"', '""') + '"'
     return s
 
 
@@ -183,16 +185,17 @@ class ResultFolder:
         return self.path / "manifest.json"
 
     def read_manifest(self) -> dict | None:
-        try:
-            return json.loads(self.manifest.read_text(encoding="utf-8"))
-        except FileNotFoundError:
+        if not os.path.lexists(self.manifest):
             return None
-        except (OSError, ValueError) as exc:
+        try:
+            return json.loads(read_input_text(self.manifest, "study manifest"))
+        except (PkmcalError, ValueError) as exc:
             raise PkmcalError(f"'{self.manifest}' is unreadable ({exc}); it is not a pkmcal study folder, or it "
                               "is damaged: choose another -o") from None
 
     def open(self, resume: bool, study_name: str, trials: int) -> None:
-        """Create the folder (or check it for ``--resume``) and write the running manifest."""
+        """Create the folder (or check it for ``--resume``) and write the running manifest;
+        what this created is remembered for :meth:`discard`."""
         man = self.read_manifest()
         if man is None:
             if self.path.exists() and any(self.path.iterdir()) and not resume:
@@ -205,6 +208,10 @@ class ResultFolder:
             raise PkmcalError(f"'{self.path}' holds results of a different study or seed ('{man.get('study')}', "
                               "other machines, setups, plans, methods, held-out set, seed or pkmcal version); "
                               "--resume continues only the same study: choose another -o")
+        # what is new, in the order to remove it: the manifest, parts/, the folder, its new parents
+        made = [self.path / "parts", self.path, *self.path.parents]
+        self._created = ((self.manifest,) if man is None else ()) + tuple(
+            made[:next((k for k, p in enumerate(made) if p.exists()), len(made))])
         try:
             (self.path / "parts").mkdir(parents=True, exist_ok=True)
         except OSError as exc:
@@ -214,6 +221,20 @@ class ResultFolder:
         for name in ("trials.csv", "summary.csv"):
             if man is not None and (self.path / name).exists():
                 os.unlink(self.path / name)
+
+    def discard(self) -> bool:
+        """After a failure: when no trial has finished (no part file), remove what :meth:`open`
+        created (the manifest, ``parts/``, the folder itself), so that the same command can be
+        run again; a folder that held anything before is left as it was. Returns whether the
+        folder holds finished trials (then it is kept for ``--resume``). Never raises."""
+        if self.done():
+            return True
+        for p in getattr(self, "_created", ()):
+            try:
+                os.rmdir(p) if p != self.manifest else os.unlink(p)
+            except OSError:
+                pass
+        return False
 
     def write_manifest(self, study_name: str, trials: int, complete: bool, extra: dict | None = None) -> None:
         doc = {"format": "pkmcal-study-results", "study": study_name, "fingerprint": self.fingerprint,
@@ -240,16 +261,17 @@ class ResultFolder:
         for p in sorted((self.path / "parts").glob("c*-t*-*.csv")):
             if not PART_NAME.match(p.name):
                 continue
-            with open(p, encoding="utf-8", newline="") as fh:
-                text = fh.read()
-            lines = text.splitlines()
-            if not lines or lines[0] != ",".join(self.names):
+            records = read_records(p)
+            if not records or tuple(records[0]) != self.names:
                 raise PkmcalError(f"part file '{p}' has other columns than this study writes; it belongs to another "
                                   "version: choose another -o")
-            for line, cells in zip(lines[1:], csv.reader(lines[1:])):
+            for cells in records[1:]:
+                if len(cells) != len(self.names):
+                    raise PkmcalError(f"part file '{p}' has a row of {len(cells)} cells for {len(self.names)} "
+                                      "columns; it is damaged: delete it and run again with --resume")
                 t = int(cells[i_trial])
                 if t < trials:
-                    rows.append((int(cells[i_cfg]), t, line))
+                    rows.append((int(cells[i_cfg]), t, record_line(cells)))
         rows.sort(key=lambda r: (r[0], r[1]))
         return [r[2] for r in rows]
 
@@ -257,10 +279,27 @@ class ResultFolder:
 # -- reading a table back ----------------------------------------------------------------
 
 
+def read_records(path: str | os.PathLike) -> list[list[str]]:
+    """The CSV records of a file this module wrote: a quoted cell may hold line breaks
+    (a trial's message, a label), so records are read by the csv module, never split at
+    line ends."""
+    return list(csv.reader(io.StringIO(read_input_text(path, "study table"), newline="")))
+
+
+def record_line(cells: list[str]) -> str:
+    """The CSV text of a record read back (:func:`read_records`): the bytes :func:`format_row`
+    wrote (every cell of another type is plain text that needs no quotes)."""
+    return ",".join(cell(v, "str") for v in cells)
+
+
 def parse_table(header: tuple[str, ...], lines: list[str]) -> dict[str, np.ndarray]:
-    """Columns of the data ``lines``: float/int/flag columns as float arrays (NaN where
-    empty), text columns as object arrays."""
-    cells = list(csv.reader(lines)) if lines else []
+    """Columns of the data ``lines`` (one CSV record each, which may hold quoted line
+    breaks): float/int/flag columns as float arrays (NaN where empty), text columns as
+    object arrays."""
+    return _columns(header, list(csv.reader(lines)) if lines else [])
+
+
+def _columns(header: tuple[str, ...], cells: list[list[str]]) -> dict[str, np.ndarray]:
     out: dict[str, np.ndarray] = {}
     for k, name in enumerate(header):
         col = [row[k] for row in cells]
@@ -273,11 +312,10 @@ def parse_table(header: tuple[str, ...], lines: list[str]) -> dict[str, np.ndarr
 
 def read_trials(path: str | os.PathLike) -> dict[str, np.ndarray]:
     """The columns of a ``trials.csv`` (see :func:`parse_table`)."""
-    with open(path, encoding="utf-8", newline="") as fh:
-        lines = fh.read().splitlines()
-    if not lines:
+    records = read_records(path)
+    if not records:
         raise PkmcalError(f"'{path}' is empty")
-    return parse_table(tuple(next(csv.reader([lines[0]]))), lines[1:])
+    return _columns(tuple(records[0]), records[1:])
 
 
 # -- statistics --------------------------------------------------------------------------

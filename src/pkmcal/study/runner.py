@@ -4,8 +4,12 @@
 
 1. :func:`pkmcal.study.trial.prepare` plans the candidate pools, the ``once`` selections
    and the held-out poses (in this process);
-2. the results folder is opened (:class:`~pkmcal.study.results.ResultFolder`): new, or
-   ``resume`` — then only the trials missing from its part files are run;
+2. the Dask cluster is reached (``dask``), then the results folder is opened
+   (:class:`~pkmcal.study.results.ResultFolder`; its location was tried before step 1): new,
+   or ``resume`` — then only the trials missing from its part files are run. A run that
+   fails before any trial finished removes what it created (an unreachable scheduler
+   creates nothing), so the same command can be run again; once a trial has finished, the
+   folder is kept and the message says to continue with ``--resume``;
 3. a pilot runs the first missing trial of every campaign here, which times a trial per
    campaign for the batch sizes (:func:`pkmcal.study.backends.batches`) and is kept as
    the first part of that campaign (same bits as in any worker);
@@ -30,7 +34,7 @@ import numpy as np
 
 from pkmcal.errors import PkmcalError
 from pkmcal.progress import Progress
-from pkmcal.io.atomic import atomic_write_text
+from pkmcal.io.atomic import atomic_write_text, check_output_dir
 from pkmcal.study import backends
 from pkmcal.study.results import (
     ResultFolder,
@@ -106,9 +110,18 @@ def run_study(study: Study, out: str | Path, *, workers: int | None = None, dask
     if workers is not None and workers < 1:
         raise PkmcalError(f"--workers must be at least 1; got {workers}")
     out = Path(out)
+    check_output_dir(out, "-o")
     ctx = prepare(study)
+    backend, n_workers, own_client, cluster = "inprocess", 1, None, None
+    if dask is not None and client is None:     # before the folder: an unreachable cluster leaves nothing
+        client, cluster = backends.dask_client(dask, workers)
+        own_client = client
     folder = ResultFolder(out, study.fingerprint(), ctx.names)
-    folder.open(resume, study.name, study.trials)
+    try:
+        folder.open(resume, study.name, study.trials)
+    except BaseException:
+        _close(own_client, cluster)
+        raise
     done = folder.done()
     todo = {c.index: [t for t in range(study.trials) if t not in done.get(c.index, ())] for c in ctx.campaigns}
     todo = {c: v for c, v in todo.items() if v}
@@ -125,7 +138,6 @@ def run_study(study: Study, out: str | Path, *, workers: int | None = None, dask
         if callback is not None:
             callback(finished[0], total)
 
-    backend, n_workers, own_client, cluster = "inprocess", 1, None, None
     t_run = time.perf_counter()
     try:
         # pilot: the first missing trial of every campaign, here (times the batches)
@@ -136,11 +148,8 @@ def run_study(study: Study, out: str | Path, *, workers: int | None = None, dask
             per_trial[c] = res[4]
             on_batch(*res)
         todo = {c: v for c, v in todo.items() if v}
-        if dask is not None or client is not None:
+        if client is not None:
             backend = "dask"
-            if client is None:
-                client, cluster = backends.dask_client(dask, workers)
-                own_client = client
             n_workers = backends.dask_workers(client)
             work = backends.batches(todo, per_trial, n_workers, backends.TARGET_SECONDS_DASK)
             if work:
@@ -155,15 +164,33 @@ def run_study(study: Study, out: str | Path, *, workers: int | None = None, dask
                 backends.run_pool(ctx, work, on_batch, min(n_workers, len(work)))
     except KeyboardInterrupt:
         bar.close()
+        if not folder.discard():
+            raise PkmcalError(f"interrupted before any trial finished; nothing was kept in '{out}'") from None
         raise PkmcalError(f"interrupted; the finished trials are in '{out}': run the same command with --resume "
                           "to continue") from None
+    except PkmcalError as exc:
+        bar.close()
+        if not folder.discard():
+            raise
+        raise _resumable(exc, out, "continue") from None
+    except BaseException:
+        bar.close()
+        folder.discard()
+        raise
     finally:
         bar.close()
-        if own_client is not None:
-            own_client.close()
-        if cluster is not None:
-            cluster.close()
+        _close(own_client, cluster)
     run_seconds = time.perf_counter() - t_run
+    try:
+        return _finish(study, ctx, folder, figures, n_todo, total, backend, n_workers, t0, run_seconds)
+    except PkmcalError as exc:      # every trial is done: --resume writes the results without running any
+        raise _resumable(exc, out, "write the results") from None
+
+
+def _finish(study: Study, ctx, folder: ResultFolder, figures: bool, n_todo: int, total: int, backend: str,
+            n_workers: int, t0: float, run_seconds: float) -> StudyRun:
+    """Step 5 (module docstring): the results of the finished trials in ``folder``."""
+    out = folder.path
     lines = folder.read_parts(study.trials)
     if len(lines) != study.trials * ctx.n_configs:
         raise PkmcalError(f"'{out}': {len(lines)} result rows for {study.trials * ctx.n_configs} expected; the part "
@@ -186,6 +213,21 @@ def run_study(study: Study, out: str | Path, *, workers: int | None = None, dask
     folder.write_manifest(study.name, study.trials, complete=True,
                           extra={"files": ["trials.csv", "summary.csv"] + (["index.html"] if figures else [])})
     return StudyRun(out, cols, summary, n_todo, seconds, backend, n_workers, run_seconds)
+
+
+def _resumable(exc: PkmcalError, out: Path, what: str) -> PkmcalError:
+    """``exc`` saying that the finished trials are kept in ``out`` for ``--resume``."""
+    if "--resume" in str(exc):
+        return exc
+    return PkmcalError(f"{exc}; the finished trials are in '{out}': run the same command with --resume to {what}")
+
+
+def _close(client, cluster) -> None:
+    """Close the Dask client and cluster this run started (None: nothing)."""
+    if client is not None:
+        client.close()
+    if cluster is not None:
+        cluster.close()
 
 
 __all__ = ["StudyRun", "run_study"]

@@ -69,6 +69,7 @@ for ``pkmcal plan`` (no ``margin``: the safety margins a real machine survives,
 
 from __future__ import annotations
 
+import difflib
 import fnmatch
 import hashlib
 import json
@@ -81,11 +82,13 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from pkmcal.errors import InputFileError, PkmcalError
-from pkmcal.identification.residuals import METHODS as ENGINE_METHODS
+from pkmcal.identification.residuals import METHODS as ENGINE_METHODS, pattern_matches
 from pkmcal.reproduce.paper3_baselines import BASELINES
 from pkmcal.io._yaml import YamlSyntaxError, parse_yaml
+from pkmcal.io.inputs import read_input_text
+from pkmcal.io.limits import MAX_MAGNITUDE, magnitude_problem
 from pkmcal.io.machine_file import load_machine, machine_to_text
-from pkmcal.io.setup_file import load_setup, setup_to_yaml
+from pkmcal.io.setup_file import describe_error, load_setup, setup_to_yaml
 from pkmcal.mechanisms.base import Mechanism
 from pkmcal.planning.blocks import default_method
 from pkmcal.planning.selection import ALGORITHMS
@@ -99,13 +102,32 @@ MAX_POSES = 100_000
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    # strict: a number is a number (true is not 1, "10" is not 10), a flag is true or false
+    model_config = ConfigDict(extra="forbid", strict=True)
+
+
+def _plausible(v):
+    """A length or angle (mm, degrees) within :data:`~pkmcal.io.limits.MAX_MAGNITUDE`: an
+    error size of 1e308 is a wrong number, and overflowed the random draws."""
+    if v is not None and (problem := magnitude_problem(v, None)) is not None:
+        raise ValueError(problem)
+    return v
+
+
+def _factor(v):
+    """A factor (or each of a list) of at most :data:`~pkmcal.io.limits.MAX_MAGNITUDE`."""
+    for x in v if isinstance(v, list) else [v]:
+        if x is not None and not abs(x) <= MAX_MAGNITUDE:
+            raise ValueError(f"{x!r} is not a plausible factor (at most {MAX_MAGNITUDE:g}); check the number")
+    return v
 
 
 class _ErrorGroup(_Strict):
     parameters: str
     distribution: Literal["uniform", "normal"]
     size: float = Field(ge=0.0, allow_inf_nan=False)
+
+    _size = field_validator("size")(_plausible)
 
 
 class _Machine(_Strict):
@@ -131,7 +153,9 @@ class _Setup(_Strict):
         values = v if isinstance(v, list) else [v]
         if not values or not all(np.isfinite(x) and x >= 0 for x in values):
             raise ValueError("give one finite factor ≥ 0, or one per reading of the setup")
-        return v
+        return _factor(v)
+
+    _scales = field_validator("actuator_noise_scale", "object_scale")(_factor)
 
 
 class _Plan(_Strict):
@@ -142,6 +166,8 @@ class _Plan(_Strict):
     margin: float | None = Field(None, ge=0.0, allow_inf_nan=False)
     index: Literal["O1", "O2", "O3", "O4", "O5"] | None = None
     label: str | None = None
+
+    _margin = field_validator("margin")(_plausible)
 
     @field_validator("algorithm")
     @classmethod
@@ -492,11 +518,14 @@ def scaled_noise(setup: MeasurementSetup, reading, actuator: float) -> Measureme
 # -- loading -----------------------------------------------------------------------------
 
 
+def _file_loc(loc: tuple) -> tuple:
+    """A pydantic error location without the names of union branches (``str``, ``list[float]``)."""
+    return tuple(p for p in loc if not (isinstance(p, str) and ("[" in p or p in ("str", "int", "float", "_Method"))))
+
+
 def _key_text(loc: tuple) -> str:
     text = ""
-    for p in loc:
-        if isinstance(p, str) and ("[" in p or p in ("str", "int", "float", "_Method")):
-            continue
+    for p in _file_loc(loc):
         text += f"[{p}]" if isinstance(p, int) else (f".{p}" if text else str(p))
     return text or "(top level)"
 
@@ -524,12 +553,7 @@ def load_study(path: str | os.PathLike) -> Study:
     Raises :class:`~pkmcal.errors.InputFileError` naming the file, the line and the key.
     """
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise PkmcalError(f"study file '{path}' does not exist") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputFileError(path, f"cannot read the study file: {exc}") from None
+    text = read_input_text(p, "study file", fix="save it as UTF-8 YAML")
     try:
         data, lines = parse_yaml(text)
     except YamlSyntaxError as exc:
@@ -541,13 +565,17 @@ def load_study(path: str | os.PathLike) -> Study:
     except ValidationError as exc:
         errs = exc.errors()
         err = next((e for e in errs if e["type"] == "extra_forbidden"), errs[0])
+        # a value of a union (methods: a name or a mapping; one factor or a list): the branch
+        # that got furthest into it says what is wrong
+        first = _file_loc(err["loc"])
+        err = max((e for e in errs if _file_loc(e["loc"])[:len(first)] == first), key=lambda e: len(_file_loc(e["loc"])))
         loc = tuple(err["loc"])
         if err["type"] == "extra_forbidden":
             msg = "is not a study key here; remove or correct it"
         elif err["type"] == "missing":
             msg = "is missing"
         else:
-            msg = err["msg"][0].lower() + err["msg"][1:]
+            msg = describe_error(err)
         raise InputFileError(path, f"key '{_key_text(loc)}': {msg}", line=_line(lines, loc)) from None
     return _build(p, spec, lines, text)
 
@@ -608,6 +636,33 @@ def _object_scale(path, lines, i: int, given: _Setup, setup: MeasurementSetup, m
         except PkmcalError as exc:
             _fail(path, lines, ("setups", i, "object_scale" if given.object_scale is not None else "setup"), str(exc))
     return scale
+
+
+def _check_parameter_names(path, lines, machines: list[MachineSpec], setups: list[SetupSpec],
+                           methods: list[MethodSpec]) -> None:
+    """Every name or pattern of a method's ``free:`` and ``fix:`` lists names a parameter of each
+    machine and setup it fits (as the engine matches them,
+    :func:`~pkmcal.identification.residuals.pattern_matches`); a misspelt one made every
+    trial of those configurations fail."""
+    for i, me in enumerate(methods):
+        for key, patterns in (("free", me.free), ("fix", me.fix)):
+            if patterns is None or isinstance(patterns, str):
+                continue
+            for j, pat in enumerate(patterns):
+                for k, m in enumerate(machines):
+                    for sp in setups:
+                        bound = sp.bound[k] if sp.bound else sp.setup
+                        if bound is None or not me.fits(m.label, sp.label):
+                            continue
+                        names = tuple(m.nominal.param_names) + tuple(bound.sensor.param_names)
+                        if pattern_matches(names, pat):
+                            continue
+                        close = difflib.get_close_matches(pat, names, n=3)
+                        hint = (f"did you mean {' or '.join(repr(c) for c in close)}?" if close else
+                                f"the parameters are {', '.join(names)}")
+                        _fail(path, lines, ("methods", i, key, j), f"'{pat}' names no parameter of machine "
+                              f"'{m.label}' with setup '{sp.label}', so every trial of method '{me.label}' would "
+                              f"fail; {hint}")
 
 
 def _fail(path, lines, loc: tuple, message: str):
@@ -719,6 +774,8 @@ def _build(path: Path, spec: _Study, lines: dict, text: str) -> Study:
                                   None if me.free is None else tuple(me.free), fix,
                                   None if me.machines is None else tuple(me.machines),
                                   None if me.setups is None else tuple(me.setups)))
+
+    _check_parameter_names(path, lines, machines, setups, methods)
 
     h = spec.heldout
     if (h.poses is None) == (h.file is None):
