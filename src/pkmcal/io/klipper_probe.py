@@ -267,7 +267,6 @@ def numbered_entries(values, name: str) -> list[tuple[int, str, str, str, int | 
 
 
 def _from_saved_block(src: str, machine, offset: np.ndarray) -> ProbeImport:
-    offset_notes = check_probe_offset(src, offset)
     values = saved_values(src)
     section = "delta_calibrate"
     heights = []
@@ -290,6 +289,7 @@ def _from_saved_block(src: str, machine, offset: np.ndarray) -> ProbeImport:
         raise NoProbeResults(src, (ignored[0] if ignored else "the #*# block has no [delta_calibrate] heightN / "
                                    "heightN_pos entries; run DELTA_CALIBRATE and SAVE_CONFIG first"))
     heights.sort()
+    offset_notes = check_probe_offset(src, offset)   # after the block's own errors
     lam, dist = carriages_from_steps(values, np.array([s for _, _, s, _ in heights]), machine, src)
     lines = np.array([ln if ln is not None else 0 for *_, ln in heights])
     readings = np.array([[h - offset[2]] for _, h, _, _ in heights])
