@@ -239,3 +239,16 @@ def test_a_clipped_policy_that_dropped_most_poses_is_named():
     causes = diagnose(Result(), None, Meas(), n_read=30)
     assert any("left out 20 of the 30 poses" in c for c in causes)
     assert not any("left out" in c for c in diagnose(Result(), None, Meas(), n_read=12))
+
+
+def test_the_python_api_warns_where_the_command_refuses(campaign):
+    import pkmcal
+    from pkmcal.errors import PkmcalWarning
+
+    machine = pkmcal.load_machine("stewart-prototype")
+    setup = pkmcal.load_setup("full-pose-paper1", machine)
+    with pytest.warns(PkmcalWarning):                      # the reader's note on the radians
+        meas = pkmcal.load_measurements(campaign / "rotvec_rad.csv", machine, setup)
+    with pytest.warns(PkmcalWarning, match="would refuse this fit.*--angle-unit rad"):
+        result = pkmcal.identify(machine, setup, meas)
+    assert not result.verdict.acceptable

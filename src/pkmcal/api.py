@@ -155,10 +155,26 @@ def identify(machine: Mechanism, setup: MeasurementSetup, measurements, **option
     :func:`pkmcal.identification.engine.identify`: method, free, fix, loss, reject, priors,
     ...). ``result.mechanism`` is the calibrated machine (with its covariance),
     ``result.sensor`` the identified sensor, ``result.parameters`` one
-    :class:`~pkmcal.identification.engine.ParameterEstimate` per parameter in file units."""
-    from pkmcal.identification.engine import identify as _identify
+    :class:`~pkmcal.identification.engine.ParameterEstimate` per parameter in file units.
 
-    return _identify(machine, setup, measurements, **options)
+    A fit that ``pkmcal identify`` would refuse to write
+    (:mod:`pkmcal.identification.fit_verdict`: χ² beyond what the noise allows, absurd
+    geometry, not converged) is returned with a :class:`~pkmcal.errors.PkmcalWarning` that
+    says why; ``result.verdict`` is the verdict on the fit alone (without the readers' notes)."""
+    import warnings
+
+    from pkmcal.errors import PkmcalWarning
+    from pkmcal.identification.engine import identify as _identify
+    from pkmcal.identification.fit_verdict import input_causes, judge
+    from pkmcal.io.measurements import Measurements
+
+    result = _identify(machine, setup, measurements, **options)
+    causes = input_causes(machine, setup, measurements) if isinstance(measurements, Measurements) else []
+    verdict = judge(result, causes)
+    if not verdict.acceptable:
+        warnings.warn(f"pkmcal identify would refuse this fit: {verdict.with_diagnoses(causes).text()}", PkmcalWarning,
+                      stacklevel=2)
+    return result
 
 
 def verify(calibrated: Mechanism, real: Mechanism, poses: np.ndarray, nominal: Mechanism | None = None,
