@@ -29,8 +29,9 @@ docs/file-formats.md:
   function theorem, ∂r_j/∂ρ = H A⁻¹ ∂λ/∂ρ. The GLS estimate minimises Σ_j |W_j r_j(θ)|² with
   W_j = chol(Σ_j)⁻¹ evaluated once at the starting values (the objective pkmcal documents:
   the weights are a constant of the fit), solved by ``scipy.optimize.least_squares`` to
-  tolerances far below pkmcal's; the covariance is (Jᵀ W Jᵀ ...)⁻¹ = (J_wᵀ J_w)⁻¹ with the
-  weights recomputed at the solution (the Gauss–Markov covariance, pkmcal's "a-priori").
+  tolerances far below pkmcal's; the covariance is (J_wᵀ J_w)⁻¹ (J_w = W ∂r/∂θ) with the
+  weights recomputed at the solution (the Gauss–Markov covariance, pkmcal's "a-priori"),
+  from an SVD (:func:`covariance_of`).
 
 Noise: standard deviations (``distribution: uniform``: half-widths h, σ = h/√3); the
 full-pose orientation as ``orientation_deg`` (or ``orientation`` in radians).
@@ -39,7 +40,16 @@ What the referee does not model it refuses (:class:`NotModelled`): other machine
 priors, several sessions, quaternion or rotation-vector columns, sensors other than these
 three. A fit is general in the machine, the poses, the sensor's placement and which sensor
 parameters are free (the setup's ``free:``, as pkmcal reads it), so any campaign of these
-three sensors on any hexapod can be refereed.
+three sensors on any hexapod can be refereed: :func:`referee` (three files, a method, the
+parameters to hold) → :class:`Fit`.
+
+Below the referee, apart: what compares it with pkmcal's answer (:func:`assert_agree`, its
+tolerances derived from pkmcal's stopping rule and the referee's differences), the Monte
+Carlo statistics (:func:`trials_needed` derives the number of campaigns), and the few lines
+that drive pkmcal to make a campaign's files and fit them (``run_pkmcal``, ``identify``,
+``identify_api``, ``simulate_reached``), which import pkmcal inside themselves; the referee's
+fit never calls them (``tests/test_referee_ik_residual.py`` fits a campaign in a process
+where pkmcal cannot be imported).
 """
 
 from __future__ import annotations
