@@ -29,8 +29,9 @@ docs/file-formats.md:
   function theorem, ∂r_j/∂ρ = H A⁻¹ ∂λ/∂ρ. The GLS estimate minimises Σ_j |W_j r_j(θ)|² with
   W_j = chol(Σ_j)⁻¹ evaluated once at the starting values (the objective pkmcal documents:
   the weights are a constant of the fit), solved by ``scipy.optimize.least_squares`` to
-  tolerances far below pkmcal's; the covariance is (Jᵀ W Jᵀ ...)⁻¹ = (J_wᵀ J_w)⁻¹ with the
-  weights recomputed at the solution (the Gauss–Markov covariance, pkmcal's "a-priori").
+  tolerances far below pkmcal's; the covariance is (J_wᵀ J_w)⁻¹ (J_w = W ∂r/∂θ) with the
+  weights recomputed at the solution (the Gauss–Markov covariance, pkmcal's "a-priori"),
+  from an SVD (:func:`covariance_of`).
 
 Noise: standard deviations (``distribution: uniform``: half-widths h, σ = h/√3); the
 full-pose orientation as ``orientation_deg`` (or ``orientation`` in radians).
@@ -39,7 +40,16 @@ What the referee does not model it refuses (:class:`NotModelled`): other machine
 priors, several sessions, quaternion or rotation-vector columns, sensors other than these
 three. A fit is general in the machine, the poses, the sensor's placement and which sensor
 parameters are free (the setup's ``free:``, as pkmcal reads it), so any campaign of these
-three sensors on any hexapod can be refereed.
+three sensors on any hexapod can be refereed: :func:`referee` (three files, a method, the
+parameters to hold) → :class:`Fit`.
+
+Below the referee, apart: what compares it with pkmcal's answer (:func:`assert_agree`, its
+tolerances derived from pkmcal's stopping rule and the referee's differences), the Monte
+Carlo statistics (:func:`trials_needed` derives the number of campaigns), and the few lines
+that drive pkmcal to make a campaign's files and fit them (``run_pkmcal``, ``identify``,
+``identify_api``, ``simulate_reached``), which import pkmcal inside themselves; the referee's
+fit never calls them (``tests/test_referee_ik_residual.py`` fits a campaign in a process
+where pkmcal cannot be imported).
 """
 
 from __future__ import annotations
@@ -649,22 +659,11 @@ def exact_readings(ref: Referee, machine_file, setup_file) -> np.ndarray:
 
 # -- comparing with pkmcal's answer, read from its files -----------------------------------------
 
-def pkmcal_values(fit_json: dict, names) -> np.ndarray:
-    """The estimates of ``names`` in ``pkmcal identify --json`` (file units) in mm and rad."""
-    out = []
-    for n in names:
-        p = fit_json["parameters"][n]
-        out.append(math.radians(p["estimate"]) if p["unit"] == "deg" else p["estimate"])
-    return np.array(out)
-
-
-def pkmcal_std_prior(fit_json: dict, names) -> np.ndarray:
-    """The a-priori (noise-model) σ of ``names`` in ``pkmcal identify --json``, mm and rad."""
-    out = []
-    for n in names:
-        p = fit_json["parameters"][n]
-        out.append(math.radians(p["std_prior"]) if p["unit"] == "deg" else p["std_prior"])
-    return np.array(out)
+def pkmcal_values(fit_json: dict, names, key: str = "estimate") -> np.ndarray:
+    """``key`` (``estimate``, ``std_prior``, ...) of the parameters ``names`` in ``pkmcal
+    identify --json`` (file units: degrees for angle parameters), in mm and rad."""
+    return np.array([math.radians(p[key]) if p["unit"] == "deg" else p[key]
+                     for p in (fit_json["parameters"][n] for n in names)])
 
 
 def file_covariance(machine_file) -> tuple[tuple[str, ...], np.ndarray]:
@@ -738,7 +737,7 @@ def assert_agree(fit_json: dict, ref: Referee, fit: Fit, calibrated=None) -> flo
     # the covariance: the referee's information at pkmcal's estimate
     jw = ref.whitened_jacobian_at(theta)
     ctol = covariance_tolerance(jw)
-    ratio = pkmcal_std_prior(fit_json, fit.free) / np.sqrt(np.diag(covariance_of(jw)))
+    ratio = pkmcal_values(fit_json, fit.free, "std_prior") / np.sqrt(np.diag(covariance_of(jw)))
     assert np.max(np.abs(ratio - 1)) <= ctol, f"a-priori σ: pkmcal/referee within {ratio.min()}..{ratio.max()} (> {ctol:.3g})"
     if calibrated is not None:
         names, cov_file = file_covariance(calibrated)
@@ -850,6 +849,28 @@ class PredictionTrials:
         assert lo <= np.mean(self.d2) <= hi, summary
         assert sum(self.inside) >= min_inside, summary
         return summary
+
+
+def prediction_monte_carlo(campaign, machine_file, setup_file, true_setup_file, r: int, first_seed: int) -> str:
+    """:class:`PredictionTrials` over K = :func:`trials_needed` (r) campaigns ``campaign(seed)``
+    → (measurement file, real machine file) or None (skipped), seeds from ``first_seed``:
+    pkmcal's fk-residual fit (``pkmcal.identify`` on the files) and the referee's in pkmcal's
+    gauge, equal per campaign (:func:`assert_agree`), errors against the truth's
+    representative in that gauge (:func:`truth_in_gauge`, the sensor of ``true_setup_file``).
+    Asserts the efficiency and the coverage; returns the summary."""
+    trials = PredictionTrials(r=r)
+    seed = first_seed
+    while len(trials.d2) < trials_needed(r):
+        made = campaign(seed)
+        seed += 1
+        if made is None:
+            continue
+        meas, real = made
+        fit_json = identify_api(machine_file, meas, setup_file, method="fk-residual")
+        ref, fit = referee(machine_file, setup_file, meas, "fk-residual", fixed=fit_json["gauge"])
+        assert_agree(fit_json, ref, fit)
+        trials.add(ref, fit, fit_json, truth_in_gauge(ref, fit, real, true_setup_file))
+    return trials.check()
 
 
 def coverage_bands(K: int, r: int, level: float = 0.95):

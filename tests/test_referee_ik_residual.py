@@ -140,3 +140,44 @@ def test_paper1_monte_carlo_efficiency_and_coverage(files, tmp_path):
     assert plain_ratio > 1.0 + rg.LOSS, summary
     assert lo <= np.mean(d2) <= hi, summary
     assert sum(inside) >= min_inside, summary
+
+
+#: A full-pose instrument standing off the base and turned, on a tool 40 mm above the platform:
+#: as surveyed (the fit's start, its frame and the tool's position free) and as it stands (the
+#: simulation's truth); mm and degrees.
+SURVEYED_FULL_POSE = """\
+sensor: full-pose
+world: {x: 350.0, y: -20.0, z: -15.0, a: 0.0, b: 0.0, c: 30.0}
+tool: {x: 0.0, y: 0.0, z: 40.0, a: 0.0, b: 0.0, c: 10.0}
+free: [world.x, world.y, world.z, world.a, world.b, world.c, tool.x, tool.y, tool.z]
+noise: {position: 0.01, orientation_deg: 0.003, actuator: 0.004}
+"""
+TRUE_FULL_POSE = SURVEYED_FULL_POSE.replace("x: 350.0, y: -20.0, z: -15.0, a: 0.0, b: 0.0, c: 30.0",
+                                            "x: 353.5, y: -18.2, z: -12.9, a: 0.8, b: -1.1, c: 31.5") \
+                                   .replace("x: 0.0, y: 0.0, z: 40.0", "x: 2.1, y: -1.4, z: 43.0")
+
+
+def test_any_full_pose_campaign_pkmcal_equals_referee(files, tmp_path):
+    """The referee is not built for paper 1's files: a machine whose legs read in half-lengths
+    (gain 2, stroke 0–25), an instrument whose frame and tool offset are unknown (free, so
+    pkmcal fixes a gauge, which the referee checks), Gaussian noise, and a measurement file
+    that starts with a units comment (``simulate --units-comment``): the same agreement."""
+    folder, machine, _, poses = files
+    text = machine.read_text(encoding="utf-8").replace("  stroke: [0.0, 50.0]", "  stroke: [0.0, 25.0]\n  gain: 2.0")
+    assert text.count("gain: 2.0") == 6
+    geared = tmp_path / "geared.yaml"
+    geared.write_text(text, encoding="utf-8")
+    setup, true_setup = tmp_path / "surveyed.yaml", tmp_path / "true.yaml"
+    setup.write_text(SURVEYED_FULL_POSE, encoding="utf-8")
+    true_setup.write_text(TRUE_FULL_POSE, encoding="utf-8")
+    every, real = tmp_path / "every.csv", tmp_path / "real.yaml"
+    rg.run_pkmcal("simulate", geared, "--random-errors", ERROR_MM, "--save-real", real, "--setup", true_setup,
+                  "--poses", poses, "--seed", 5, "--ignore-limit", "leg_collision", "--units-comment", "-o", every)
+    assert open(every, encoding="utf-8").readline().startswith("# units:")
+    fit_json = rg.identify(geared, every, setup, tmp_path / "cal.yaml", "--method", "ik-residual")
+    gauge = fit_json["gauge"]
+    everything, _ = rg.referee(geared, setup, every, "ik-residual")
+    assert everything.rank()[0] == len(everything.free) - len(gauge), gauge
+    ref, fit = rg.referee(geared, setup, every, "ik-residual", fixed=gauge)
+    assert ref.rank()[0] == len(fit.free)
+    rg.assert_agree(fit_json, ref, fit, tmp_path / "cal.yaml")

@@ -96,16 +96,4 @@ def test_tracker_monte_carlo_efficiency_and_coverage(files):
     χ²_39 (mean 41.8 over 26 campaigns). The predictions are also what the gauge cannot
     touch."""
     _, machine, true_setup, setup, _ = files
-    trials = rg.PredictionTrials(r=39)
-    seed = 200
-    while len(trials.d2) < rg.trials_needed(trials.r):
-        seed += 1
-        made = campaign(files, seed)
-        if made is None:
-            continue
-        meas, real = made
-        fit_json = rg.identify_api(machine, meas, setup, method="fk-residual")
-        ref, fit = rg.referee(machine, setup, meas, "fk-residual", fixed=fit_json["gauge"])
-        rg.assert_agree(fit_json, ref, fit)
-        trials.add(ref, fit, fit_json, rg.truth_in_gauge(ref, fit, real, true_setup))
-    trials.check()
+    rg.prediction_monte_carlo(lambda seed: campaign(files, seed), machine, setup, true_setup, r=39, first_seed=201)
