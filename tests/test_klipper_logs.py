@@ -315,6 +315,13 @@ def test_manual_probing_is_read(tmp_path):
     log.write_text("MANUAL_PROBE\nACCEPT\n// Z position is 0.150\n")
     with pytest.raises(PkmcalError, match="line 3: a MANUAL_PROBE result .* there is none"):
         read_klipper_probe(log, NOMINAL)
+    # after G28 a delta is at the forward kinematics of its switches (x, y 0 on a symmetric one)
+    log.write_text("G28\nMANUAL_PROBE\nACCEPT\n// Z position is 0.150\nG91\nG1 X5\nMANUAL_PROBE\n// Z position is 0.2\n")
+    with pytest.raises(PkmcalError, match=r"line 8: a MANUAL_PROBE result .* \(G91: relative moves\)"):
+        read_klipper_probe(log, NOMINAL)
+    log.write_text("G28\nMANUAL_PROBE\nACCEPT\n// Z position is 0.150\n")
+    np.testing.assert_allclose(read_klipper_probe(log, NOMINAL).measurements.commanded, [[0.0, 0.0, 0.15]],
+                               rtol=0, atol=1e-9)
 
 
 ANALYZE = ("DELTA_ANALYZE CENTER_DISTS=74.33,74.32,74.60,74.67,74.08,74.04\n"
@@ -395,6 +402,8 @@ def test_outputs_never_overwrite_an_input_or_an_included_file(tmp_path):
                                            str(machine), "-o", str(tmp_path / target)])
             assert res.exit_code == 2, (command, target, res.output)
             assert "pkmcal never overwrites its inputs" in res.output
+    res = CliRunner().invoke(cli, ["import", "klipper", str(tmp_path / "printer.cfg"), "-o", str(tmp_path / "arms.cfg")])
+    assert res.exit_code == 2 and "pkmcal never overwrites its inputs" in res.output
     assert (tmp_path / "arms.cfg").read_text() == before
 
 

@@ -26,7 +26,8 @@ Two sources a Klipper user has:
   - ``Z position is Z`` (MANUAL_PROBE then ACCEPT; klippy/extras/manual_probe.py
     ``ManualProbe.manual_probe_finalize``): the nozzle touched the bed at z = Z, at the x, y
     it was moved to before (the last absolute ``G0``/``G1 X Y`` of the log, as the console
-    echoes typed commands): ``probe_z`` = −z_offset (the probe point that far below the
+    echoes typed commands, or after a ``G28`` the machine's home: the forward kinematics of
+    its switch readings, klippy/kinematics/delta.py ``home_position``): ``probe_z`` = −z_offset (the probe point that far below the
     nozzle on the bed);
   - ``Adding manual height: X,Y,Z is actually z=H`` (``DELTA_ANALYZE MANUAL_HEIGHT=H``;
     klippy/extras/delta_calibrate.py ``DeltaCalibrate.add_manual_height``): the nozzle at
@@ -70,11 +71,6 @@ from pkmcal.errors import InputFileError, PkmcalError
 from pkmcal.io.inputs import read_input_bytes
 from pkmcal.io.measurements import Measurements
 
-_NUM = r"([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)"
-#: Klipper before 2024: the nozzle position at the trigger.
-OLD_LINE = re.compile(rf"probe at {_NUM}\s*,\s*{_NUM} is z={_NUM}")
-#: Later Klipper: the probe point x, y and the nozzle z less z_offset.
-NEW_LINE = re.compile(rf"probe: at {_NUM}\s*,\s*{_NUM} bed will contact at z={_NUM}")
 _TOKEN = r"(\S+?)"
 
 
@@ -122,6 +118,7 @@ _MENTIONS = re.compile(r"probe at|probe: at|bed will contact|Adding manual heigh
 _MOVE = re.compile(r"(?:^|[\s:$>])G0*[01](?=\s|$)(.*)$", flags=re.IGNORECASE)
 _WORD = re.compile(r"\b([XY])\s*([-+]?(?:\d+\.?\d*|\.\d+))", flags=re.IGNORECASE)
 _MODE = re.compile(r"(?:^|[\s:$>])G9([01])(?=\s|$)", flags=re.IGNORECASE)
+_HOME = re.compile(r"(?:^|[\s:$>])G28(?=\s|$)", flags=re.IGNORECASE)
 #: Unreadable lines listed in the note (the rest counted).
 SHOWN_LINES = 5
 
@@ -184,6 +181,12 @@ def _from_lines(src: str, text: str, machine, offset: np.ndarray, formats=KLIPPE
         mode = _MODE.search(line)
         if mode:
             relative = mode.group(1) == "1"
+        if _HOME.search(line) and not _MENTIONS.search(line):
+            # a delta homes all towers to its switches, the toolhead then at their forward
+            # kinematics (klippy/kinematics/delta.py DeltaKinematics.__init__ home_position, home)
+            home = machine.fk(np.asarray(machine.reading_reference, dtype=float)[None, :]).poses[0]
+            xy = [float(home[0]), float(home[1])]
+            continue
         move = _MOVE.search(line)
         if move and not _MENTIONS.search(line):
             for axis, value in _WORD.findall(move.group(1)):
@@ -452,6 +455,6 @@ def _from_saved_block(src: str, machine, offset: np.ndarray) -> ProbeImport:
     return ProbeImport(meas, tuple(notes))
 
 
-__all__ = ["NEW_LINE", "NoProbeResults", "OLD_LINE", "ProbeImport", "carriages_from_steps", "check_probe_offset",
+__all__ = ["NoProbeResults", "ProbeImport", "carriages_from_steps", "check_probe_offset",
            "KLIPPER_FORMATS", "LineFormat", "numbered_entries", "read_klipper_file", "read_klipper_probe", "require_linear_delta", "saved_values",
            "stable_position"]
