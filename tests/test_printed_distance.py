@@ -366,6 +366,8 @@ def delta_analyze_log() -> str:
 
     lines = ["// Klipper console of a Kossel Mini (z_offset 0): DELTA_CALIBRATE, then Klipper's calibrate_size.stl",
              "// printed and measured with calipers (0.01 mm); a simulated printer (see tests/test_printed_distance.py)",
+             "// that printed the object with the config it probed with (nothing saved in between): --object-machine "
+             "kossel-mini",
              "DELTA_CALIBRATE"]
     lines += [f"// probe at {x:.3f},{y:.3f} is z={zz:.6f}" for (x, y), zz in zip(xy, z)]
     lines += [f"DELTA_ANALYZE CENTER_DISTS={values(meas[:6])}", f"DELTA_ANALYZE CENTER_PILLAR_WIDTHS={values(cw)}",
