@@ -246,10 +246,14 @@ def _probe_summary(say, plan, setup, target: float | None) -> None:
     n = len(plan.poses)
     ladder = sorted({k for k in (n // 2, n, 2 * n, 4 * n) if plan.model.n_params <= k <= len(plan.candidates.poses)}
                     | {n})
-    curve = height_sigma(plan, ladder)
-    say("predicted first-layer error (rms sigma of the height over the reachable bed, from the identifiability of "
-        "the points and the setup's noise): " + ", ".join(f"{k} points {s:.3g} mm" + (" (this plan)" if k == n else "")
-                                                          for k, s in curve))
+    curve = [(k, s) for k, s in height_sigma(plan, ladder) if np.isfinite(s)]
+    if not curve:
+        say(f"predicted first-layer error: none ({n} points give fewer readings than the {plan.model.n_params} "
+            "identifiable parameters)")
+    else:
+        say("predicted first-layer error (rms sigma of the height over the reachable bed, from the identifiability of "
+            "the points and the setup's noise): " + ", ".join(f"{k} points {s:.3g} mm" + (" (this plan)" if k == n
+                                                                                          else "") for k, s in curve))
     if target is not None:
         need, tried = points_for_height_sigma(plan, target)
         if need is None:
@@ -259,10 +263,11 @@ def _probe_summary(say, plan, setup, target: float | None) -> None:
         else:
             sigma = dict(tried)[need]
             say(f"target first-layer sigma {target:g} mm: {need} points ({sigma:.3g} mm); plan them with --n {need}")
-    rep_id = identifiability(plan.model.mechanism, setup, plan.poses)
-    for entry in rep_id.named:
-        if entry["status"] != "identified":
-            say(describe_named(entry))
+    if curve:
+        for entry in identifiability(plan.model.mechanism, setup, plan.poses).named:
+            if entry["status"] != "identified":
+                say(describe_named(entry))
+
 
 @click.command("observability", epilog=examples(
     "pkmcal observability stewart-prototype --setup indicators-prototype --poses poses.csv",

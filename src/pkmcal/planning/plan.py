@@ -288,6 +288,9 @@ def height_sigma(plan: Plan, n_values, *, check: np.ndarray | None = None) -> li
     J = (J * model.scale)[solved]
     out = []
     for n in n_values:
+        if int(n) * model.rows_per_pose < model.n_params or int(n) > len(G):
+            out.append((int(n), float("inf")))      # fewer readings than parameters, or than candidates
+            continue
         sel = select(G, int(n), algorithm="default")
         rows = G[sel.chosen].reshape(-1, G.shape[-1])
         try:
