@@ -507,3 +507,11 @@ def test_the_two_configs_of_the_enhanced_procedure_give_the_printer_mixing_them_
     # calipers to 0.01 mm on 65 mm: the example's own bound (test_printed_distance.py); mixing is 10 times worse
     assert errors["right"] < 0.03, errors
     assert errors["mixed"] > 10 * errors["right"], errors
+
+
+def test_a_machine_that_cannot_reach_the_bed_is_told_what_to_do():
+    res = CliRunner().invoke(cli, ["plan", "delta-picker", "--setup", "z-probe-klipper", "--n", "20",
+                                   "--n-candidates", "50"])
+    assert res.exit_code == 2
+    assert "a Z probe's points are planned on the bed, z = 0 mm of the setup" in res.output
+    assert "--probe-anywhere" in res.output

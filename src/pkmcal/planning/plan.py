@@ -179,6 +179,37 @@ def plan_poses(mechanism: Mechanism, setup: MeasurementSetup, n: int, *, algorit
     mechanism, check_margin = planning_checks(reachable, margin)
     kw = dict(margin=check_margin, measurability=measurability)
     chunked = dict(chunk_size=chunk_size, chunk_map=chunk_map, **kw)
+    try:
+        box, cand = _candidate_set(algorithm, candidates, grid, n, n_candidates, rng, nominal, mechanism, setup, notes,
+                                   kw, chunked, announce, circle_plane)
+    except PkmcalError as exc:
+        if not bed:
+            raise
+        z = float(getattr(setup.sensor, "bed", np.zeros(3))[0])
+        raise PkmcalError(f"{exc} (a Z probe's points are planned on the bed, z = {z:g} mm of the setup, where the "
+                          f"probe triggers: machine '{nominal.name}' must reach it; give the bed's height in the setup, "
+                          "or plan the points anywhere in the volume: --probe-anywhere, on_bed=False)") from None
+    if n > len(cand.poses):
+        raise PkmcalError(f"asked for {n} poses but only {len(cand.poses)} candidates are reachable and "
+                          f"measurable ({cand.describe()}); ask for fewer poses or give more candidates")
+    announce("planning model")
+    model = model or planning_model(nominal, setup, method=method)   # the nominal's scaling (= observability)
+    # in this process the block batches run on local threads, in place (candidate_blocks)
+    G, ok = candidate_blocks(model, cand.poses, chunk_map=None if chunk_map is IN_PROCESS else chunk_map)
+    if not ok.all():
+        rejected = dict(cand.rejected)
+        rejected["pose_not_solved"] = rejected.get("pose_not_solved", 0) + int((~ok).sum())
+        cand = CandidateSet(cand.poses[ok], cand.n_tested, rejected, cand.kind)
+        G = G[ok]
+    sel = select(G, n, algorithm=algorithm, index=index, rng=rng, positions=cand.poses,
+                 progress=announce(f"selection ({algorithm})"))
+    poses = cand.poses[sel.chosen]
+    return Plan(poses, nominal.ik(poses), sel, cand, model, box, margin, tuple(notes), bed)
+
+
+def _candidate_set(algorithm, candidates, grid, n, n_candidates, rng, nominal, mechanism, setup, notes, kw, chunked,
+                   announce, circle_plane):
+    """(workspace box or None, the checked candidates) of :func:`plan_poses`."""
     box = None
     if algorithm == "corners":
         if candidates is not None:
@@ -216,22 +247,7 @@ def plan_poses(mechanism: Mechanism, setup: MeasurementSetup, n: int, *, algorit
         poses = candidates if isinstance(candidates, np.ndarray) else read_candidates_csv(candidates, mechanism)
         poses = _wrapped(nominal, poses, notes)
         cand = generate_candidates(mechanism, setup, kind="file", poses=poses, progress=step, **chunked)
-    if n > len(cand.poses):
-        raise PkmcalError(f"asked for {n} poses but only {len(cand.poses)} candidates are reachable and "
-                          f"measurable ({cand.describe()}); ask for fewer poses or give more candidates")
-    announce("planning model")
-    model = model or planning_model(nominal, setup, method=method)   # the nominal's scaling (= observability)
-    # in this process the block batches run on local threads, in place (candidate_blocks)
-    G, ok = candidate_blocks(model, cand.poses, chunk_map=None if chunk_map is IN_PROCESS else chunk_map)
-    if not ok.all():
-        rejected = dict(cand.rejected)
-        rejected["pose_not_solved"] = rejected.get("pose_not_solved", 0) + int((~ok).sum())
-        cand = CandidateSet(cand.poses[ok], cand.n_tested, rejected, cand.kind)
-        G = G[ok]
-    sel = select(G, n, algorithm=algorithm, index=index, rng=rng, positions=cand.poses,
-                 progress=announce(f"selection ({algorithm})"))
-    poses = cand.poses[sel.chosen]
-    return Plan(poses, nominal.ik(poses), sel, cand, model, box, margin, tuple(notes), bed)
+    return box, cand
 
 
 def _wrapped(mechanism: Mechanism, poses: np.ndarray, notes: list[str]) -> np.ndarray:
