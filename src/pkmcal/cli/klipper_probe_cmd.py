@@ -45,6 +45,11 @@ def klipper_probe_cmd(source: str, machine_spec: str, setup_spec: str, output: s
     endstops, converted with each stepper's rotation_distance, microsteps,
     full_steps_per_rotation and gear_ratio). The carriage positions are those of MACHINE
     at the logged positions; probe_z is 0 at every trigger (the probe point on the bed).
+    Manual probing is read too (with a setup whose probe x, y offset is 0): MANUAL_PROBE's
+    'Z position is Z' (at the x, y of the last G1 X Y) and DELTA_ANALYZE MANUAL_HEIGHT's
+    'Adding manual height: X,Y,Z is actually z=H'. A value that is not finite or beyond any
+    printer is refused with its line; lines that mention a probe result but cannot be read
+    are counted in a note.
     """
     check_output(output, input_files(source, machine_spec, setup_spec))
     from pkmcal.io.klipper_probe import read_klipper_probe, require_linear_delta
