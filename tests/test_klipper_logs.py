@@ -316,7 +316,8 @@ def test_manual_probing_is_read(tmp_path):
     with pytest.raises(PkmcalError, match="line 3: a MANUAL_PROBE result .* there is none"):
         read_klipper_probe(log, NOMINAL)
     # after G28 a delta is at the forward kinematics of its switches (x, y 0 on a symmetric one)
-    log.write_text("G28\nMANUAL_PROBE\nACCEPT\n// Z position is 0.150\nG91\nG1 X5\nMANUAL_PROBE\n// Z position is 0.2\n")
+    log.write_text("G28\nMANUAL_PROBE\nACCEPT\n// Z position is 0.150\nG91\nG1 X5\nMANUAL_PROBE\n"
+                   "// Z position is 0.2\n")
     with pytest.raises(PkmcalError, match=r"line 8: a MANUAL_PROBE result .* \(G91: relative moves\)"):
         read_klipper_probe(log, NOMINAL)
     log.write_text("G28\nMANUAL_PROBE\nACCEPT\n// Z position is 0.150\n")
@@ -402,7 +403,8 @@ def test_outputs_never_overwrite_an_input_or_an_included_file(tmp_path):
                                            str(machine), "-o", str(tmp_path / target)])
             assert res.exit_code == 2, (command, target, res.output)
             assert "pkmcal never overwrites its inputs" in res.output
-    res = CliRunner().invoke(cli, ["import", "klipper", str(tmp_path / "printer.cfg"), "-o", str(tmp_path / "arms.cfg")])
+    res = CliRunner().invoke(cli, ["import", "klipper", str(tmp_path / "printer.cfg"), "-o",
+                                   str(tmp_path / "arms.cfg")])
     assert res.exit_code == 2 and "pkmcal never overwrites its inputs" in res.output
     assert (tmp_path / "arms.cfg").read_text() == before
 
@@ -465,7 +467,8 @@ def _enhanced_log(after_save, printed_by):
         return ",".join(f"{x:.2f}" for x in v)
 
     lines = ["DELTA_CALIBRATE"] + [f"// probe at {x:.3f},{y:.3f} is z={zz:.6f}" for (x, y), zz in zip(xy, z)]
-    lines += ["SAVE_CONFIG", f"DELTA_ANALYZE CENTER_DISTS={values(meas[:6])}", "DELTA_ANALYZE CENTER_PILLAR_WIDTHS=9,9,9",
+    lines += ["SAVE_CONFIG", f"DELTA_ANALYZE CENTER_DISTS={values(meas[:6])}",
+              "DELTA_ANALYZE CENTER_PILLAR_WIDTHS=9,9,9",
               f"DELTA_ANALYZE OUTER_DISTS={values(meas[6:])}", "DELTA_ANALYZE OUTER_PILLAR_WIDTHS=9,9,9,9,9,9"]
     return "\n".join(lines) + "\n", t
 

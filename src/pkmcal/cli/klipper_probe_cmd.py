@@ -222,4 +222,5 @@ def klipper_analyze_cmd(source: str, machine_spec: str, setup_spec: str, output:
            "row(s)")
 
 
-__all__ = ["input_files", "klipper_analyze_cmd", "klipper_probe_cmd", "marlin_probe_cmd", "machine_and_setup", "machine_read_by", "single_pose_setup_of"]
+__all__ = ["input_files", "klipper_analyze_cmd", "klipper_probe_cmd", "machine_and_setup", "machine_read_by",
+           "marlin_probe_cmd", "single_pose_setup_of"]

@@ -225,9 +225,9 @@ def _saved_distances(src: str, machine):
     nominal = np.linalg.norm(fk.poses[:n, :3] - fk.poses[n:, :3], axis=1)
     for k, f in enumerate(found):
         if not abs(f[1] / nominal[k] - 1.0) <= TYPO_FRACTION:
-            raise InputFileError(src, f"[delta_calibrate] distance{f[0]} = {f[1]:g} mm is {f[1] / nominal[k]:.3g} times "
-                                 f"the {nominal[k]:.4g} mm between its two points (distance{f[0]}_pos1, _pos2): a likely "
-                                 "typo; correct it (or run DELTA_ANALYZE again)", line=f[4])
+            raise InputFileError(src, f"[delta_calibrate] distance{f[0]} = {f[1]:g} mm is {f[1] / nominal[k]:.3g} "
+                                 f"times the {nominal[k]:.4g} mm between its two points (distance{f[0]}_pos1, "
+                                 "_pos2): a likely typo; correct it (or run DELTA_ANALYZE again)", line=f[4])
     notes = [f"{src}: {n} DELTA_ANALYZE distance(s) from the #*# block; step distances "
              f"{', '.join(f'{d:.6g}' for d in step)} mm"]
     return (lam[:n], lam[n:], np.array([f[1] for f in found]), fk.poses[:n], fk.poses[n:],
@@ -301,9 +301,9 @@ def _logged_distances(src: str, text: str, printer, machine):
              f"'{printer.name}' (the config the object was printed with)" + (
                  "" if printer is machine else f", in the readings of machine '{machine.name}'")]
     if unknown:
-        notes.append(f"{src}: {len(unknown)} DELTA_ANALYZE argument(s) that are none of Klipper's were skipped (Klipper "
-                     f"ignores them too): {', '.join(unknown[:SHOWN_LINES])}" + (", ..." if len(unknown) > SHOWN_LINES
-                                                                                 else ""))
+        shown = ", ".join(unknown[:SHOWN_LINES]) + (", ..." if len(unknown) > SHOWN_LINES else "")
+        notes.append(f"{src}: {len(unknown)} DELTA_ANALYZE argument(s) that are none of Klipper's were skipped "
+                     f"(Klipper ignores them too): {shown}")
     return lam[:12], lam[12:], d, p1, p2, np.full(12, last_line), notes
 
 

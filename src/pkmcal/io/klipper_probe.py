@@ -27,8 +27,8 @@ Two sources a Klipper user has:
     ``ManualProbe.manual_probe_finalize``): the nozzle touched the bed at z = Z, at the x, y
     it was moved to before (the last absolute ``G0``/``G1 X Y`` of the log, as the console
     echoes typed commands, or after a ``G28`` the machine's home: the forward kinematics of
-    its switch readings, klippy/kinematics/delta.py ``home_position``): ``probe_z`` = −z_offset (the probe point that far below the
-    nozzle on the bed);
+    its switch readings, klippy/kinematics/delta.py ``home_position``): ``probe_z`` =
+    −z_offset (the probe point that far below the nozzle on the bed);
   - ``Adding manual height: X,Y,Z is actually z=H`` (``DELTA_ANALYZE MANUAL_HEIGHT=H``;
     klippy/extras/delta_calibrate.py ``DeltaCalibrate.add_manual_height``): the nozzle at
     X, Y, Z as the firmware believes was measured H above the bed: ``probe_z`` = H − z_offset.
@@ -249,9 +249,9 @@ def _result(src: str, k: int, fmt: LineFormat, values: list[float], xy, relative
         return (values[0] - offset[0], values[1] - offset[1], values[2] + offset[2]), 0.0
     if offset[0] != 0 or offset[1] != 0:
         raise InputFileError(src, f"a manual probe result ({fmt.means.split(' (')[0]}) is the nozzle's, not the "
-                             f"probe's: with the setup's probe x, y offset {offset[0]:g}, {offset[1]:g} mm it cannot be "
-                             "read as the probe's; import the manual results with a setup whose probe_offset has x, y "
-                             "0 (e.g. the built-in z-probe-klipper)", line=k)
+                             f"probe's: with the setup's probe x, y offset {offset[0]:g}, {offset[1]:g} mm it cannot "
+                             "be read as the probe's; import the manual results with a setup whose probe_offset has "
+                             "x, y 0 (e.g. the built-in z-probe-klipper)", line=k)
     if fmt.kind == "manual-height":          # the nozzle H above the bed: the probe point H - z_offset
         return tuple(values[:3]), values[3] - offset[2]
     if relative or xy[0] is None or xy[1] is None:
@@ -455,6 +455,6 @@ def _from_saved_block(src: str, machine, offset: np.ndarray) -> ProbeImport:
     return ProbeImport(meas, tuple(notes))
 
 
-__all__ = ["NoProbeResults", "ProbeImport", "carriages_from_steps", "check_probe_offset",
-           "KLIPPER_FORMATS", "LineFormat", "numbered_entries", "read_klipper_file", "read_klipper_probe", "require_linear_delta", "saved_values",
-           "stable_position"]
+__all__ = ["KLIPPER_FORMATS", "LineFormat", "NoProbeResults", "ProbeImport", "carriages_from_steps",
+           "check_probe_offset", "numbered_entries", "read_klipper_file", "read_klipper_probe",
+           "require_linear_delta", "saved_values", "stable_position"]

@@ -187,8 +187,8 @@ def plan_poses(mechanism: Mechanism, setup: MeasurementSetup, n: int, *, algorit
             raise
         z = float(getattr(setup.sensor, "bed", np.zeros(3))[0])
         raise PkmcalError(f"{exc} (a Z probe's points are planned on the bed, z = {z:g} mm of the setup, where the "
-                          f"probe triggers: machine '{nominal.name}' must reach it; give the bed's height in the setup, "
-                          "or plan the points anywhere in the volume: --probe-anywhere, on_bed=False)") from None
+                          f"probe triggers: machine '{nominal.name}' must reach it; give the bed's height in the "
+                          "setup, or plan the points anywhere in the volume: --probe-anywhere, on_bed=False)") from None
     if n > len(cand.poses):
         raise PkmcalError(f"asked for {n} poses but only {len(cand.poses)} candidates are reachable and "
                           f"measurable ({cand.describe()}); ask for fewer poses or give more candidates")
