@@ -303,6 +303,27 @@ def test_a_setup_label_with_a_newline_runs_and_resumes(tmp_path, monkeypatch):
     assert res.trials_run == 1 and (out / "trials.csv").read_bytes() == ref
 
 
+def test_a_trial_message_with_newlines(tmp_path):
+    """A real machine 100 m off (errors of 1e5 mm) reaches none of the poses: every trial
+    fails with the simulation's message of several lines (old: IndexError after all trials,
+    and again under --resume). The study ends (exit 0, the failures noted), and pandas and
+    a resumed run read the message back exactly."""
+    text = STUDY.replace("    real: stewart-prototype-real\n",
+                         '    errors:\n      - {parameters: "b*", distribution: normal, size: 1.0e5}\n')
+    p, out = _study(tmp_path, text), tmp_path / "r"
+    args = ["study", str(p), "-o", str(out), "--workers", "1", "--no-figures"]
+    res = invoke(args, tmp_path)
+    assert res.exit_code == 0 and "100.0% of the trials of configuration 0 failed" in res.stdout, res.output
+    messages = list(pd.read_csv(out / "trials.csv")["message"])
+    assert len(messages) == 2 and all(m.startswith("the real machine reaches none of the 15 planned poses") and
+                                      "\n  dropped (fk-not-converged" in m for m in messages), messages
+    assert list(read_trials(out / "trials.csv")["message"]) == messages
+    ref = (out / "trials.csv").read_bytes()
+    os.unlink(sorted((out / "parts").iterdir())[-1])
+    assert invoke(args + ["--resume"], tmp_path).exit_code == 0
+    assert (out / "trials.csv").read_bytes() == ref
+
+
 def test_a_study_label_with_a_newline_keeps_stdout_one_line_per_configuration(tmp_path):
     res = invoke(["study", str(_study(tmp_path, STUDY.replace("label: indicators", 'label: "a\\nb"'))), "-o",
                   str(tmp_path / "r"), "--workers", "1", "--no-figures"], tmp_path)
