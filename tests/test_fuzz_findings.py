@@ -186,6 +186,29 @@ def test_every_reader_names_the_bad_byte(base, tmp_path):
     assert info.value.line == 2
 
 
+def test_klipper_configs_are_read_as_klippers_open_reads_them(base, tmp_path):
+    """Klipper reads its config with open(filename, 'r') (klippy/configfile.py
+    _read_config_file): a lone CR ends a line, a byte-order mark is kept and its parser then
+    refuses the file. Through the shared reader's UTF-8 decoding (old, on main after the
+    merge) the CR-only file was one line ('no [printer] kinematics') and the BOM was dropped."""
+    lf = base / "printer.cfg"
+    cr, bom = tmp_path / "cr.cfg", tmp_path / "bom.cfg"
+    cr.write_bytes(lf.read_bytes().replace(b"\n", b"\r"))
+    bom.write_bytes(b"\xef\xbb\xbf" + lf.read_bytes())
+    assert read_klipper(str(cr)) == read_klipper(str(lf))
+    with pytest.raises(InputFileError, match="line 1: .*Klipper's parser refuses it too"):
+        read_klipper(str(bom))
+    try:    # Klipper's own parser, when the controllers extra is installed
+        from klippy import configfile  # noqa: F401
+    except ImportError:
+        return
+    from pkmcal.controllers.klipper import klipper_fileconfig
+
+    klipper_fileconfig(str(cr))
+    with pytest.raises(PkmcalError, match="Klipper's parser refuses the file"):
+        klipper_fileconfig(str(bom))
+
+
 # -- tracebacks: Klipper's #*# block ------------------------------------------------------------
 
 
