@@ -104,6 +104,8 @@ FIFO_COMMANDS = {   # (command line, which input is the pipe, what the message c
     "import klipper-analyze": (["import", "klipper-analyze", "{}/p", "--machine", "kossel-mini", "-o",
                                 "{}/out.csv"], "Klipper file"),
     "import klipper include": (["import", "klipper", "{}/inc.cfg", "-o", "{}/out.yaml"], "Klipper config"),
+    "export --config": (["export", "kossel-mini", "--format", "klipper", "--config", "{}/p", "-o", "{}/out.cfg"],
+                        "Klipper config"),
     "import linuxcnc hal": (["import", "linuxcnc", "{}/p", "{}/hexapod.ini", "-o", "{}/out.yaml"], "HAL file"),
     "import linuxcnc ini": (["import", "linuxcnc", "{}/hexapod.hal", "{}/p", "-o", "{}/out.yaml"], "INI file"),
     "machine file": (["info", "{}/p.yaml"], "machine file"),
