@@ -35,6 +35,11 @@ Two sources a Klipper user has:
   point was at H − z_offset above the bed, ``probe_z`` = H − z_offset of the setup (0 when
   the setup's offset is the one the calibration ran with). ``manual_heightN`` entries
   (nozzle heights measured by hand) are not probe readings and are skipped with a note.
+  The entries are numbered as Klipper reads them back (:func:`numbered_entries`: ``height0``,
+  ``height1``, ... to the first missing); one Klipper would not read is an error.
+
+The machine is a linear delta (:func:`require_linear_delta`): carriage readings and stable
+positions are Klipper's ``kinematics: delta``'s.
 
 The measurements carry the firmware's belief of each pose as the commanded pose
 (``cmd_x, cmd_y, cmd_z``: the logged nozzle position, or the machine's FK of λ).
