@@ -22,7 +22,9 @@ length L; pkmcal's reading is λ = L − L0. What this module reads:
   the line: ``#`` and ``;`` are comments only at a line's start), a trailing ``\\`` continues
   a value, ``#INCLUDE FILE`` (one level), the first of repeated keys wins. Read:
   ``[TRAJ] LINEAR_UNITS`` (mm, metric, cm, inch, in, imperial: HAL and joint values are
-  converted to mm) and ``ANGULAR_UNITS``, ``[TRAJ] HOME`` (the world home X Y Z A B C: the
+  converted to mm; a unit other than mm is kept as ``metadata.linuxcnc.linear_units`` so that
+  ``pkmcal export --format linuxcnc`` writes the files back in it) and ``ANGULAR_UNITS``,
+  ``[TRAJ] HOME`` (the world home X Y Z A B C: the
   machine's home pose, the FK start pose), ``[KINS] KINEMATICS`` (must be genhexkins) and
   ``JOINTS`` (6), and per joint ``[JOINT_N] TYPE`` (LINEAR), ``UNITS``, ``MIN_LIMIT``,
   ``MAX_LIMIT``, ``HOME_OFFSET`` (LinuxCNC's default 0) and ``HOME``.
@@ -390,6 +392,11 @@ def machine_from_linuxcnc(hal: str | os.PathLike, ini_path: str | os.PathLike | 
                   else float(np.deg2rad(nums[3 + k] * afactor)) for k in range(3)]
         home = np.array([v * factor for v in nums[:3]] + angles)
     metadata = {"linuxcnc": {"hal": hal_src, **({"ini": ini.path} if have_ini else {}), "offsets": offsets}}
+    if factor != 1.0:
+        # the unit of the controller's files, so that an export writes them back in it
+        # (pkmcal.io.export_linuxcnc.export_unit)
+        unit = length_unit if length_unit is not None else ini.get("TRAJ", "LINEAR_UNITS")[0]
+        metadata["linuxcnc"]["linear_units"] = unit.strip().lower()
     if np.any(switch != 0):
         metadata["linuxcnc"]["home_switch_reading"] = [float(v) for v in switch]
     if name is None:
