@@ -44,7 +44,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from helpers import require_controller
+from helpers import assert_user_error, require_controller
 
 from pkmcal.cli.main import cli
 from pkmcal.controllers import linuxcnc as lc
@@ -218,3 +218,30 @@ def test_the_comparison_sees_a_micrometre(case):
     wrong = lc.compare(moved, case.check.run)
     assert 1e-4 < wrong.ik_max <= 1e-3 + 1e-9
     assert case.check.ok and not wrong.ok
+
+
+# -- pkmcal check linuxcnc -------------------------------------------------------------------
+
+def test_check_command_example_runs_linuxcnc():
+    """The example of 'pkmcal check --help' (run here, not by tests/test_cli_examples.py)."""
+    require_controller(lc.missing_reason())
+    res = ok(run(*"check linuxcnc stewart-prototype".split()))
+    assert "world mode: largest |LinuxCNC joint - pkmcal strut length|" in res.stdout
+    assert "LinuxCNC moves as pkmcal predicts" in res.stderr
+
+
+@pytest.mark.parametrize("case", ["hexapod-sim-inch"], indirect=True)
+def test_check_command_reads_the_users_files(case):
+    res = ok(run("check", "linuxcnc", case.calibrated, "--hal", case.hal, "--ini", case.ini, "--json"))
+    import json
+
+    got = json.loads(res.stdout)
+    assert got["ok"] and got["linear_unit"] == "inch" and got["world_mode"]["poses"] >= 20
+    assert got["world_mode"]["max_joint_diff_mm"] <= 1e-9
+    assert got["joint_mode"]["max_pose_diff_mm"] <= got["joint_mode"]["bound"]
+
+
+def test_check_without_linuxcnc_is_a_user_error(monkeypatch, tmp_path):
+    monkeypatch.setenv("PATH", str(tmp_path))          # no 'linuxcnc' command on it
+    assert_user_error(run("check", "linuxcnc", "stewart-prototype"), "LinuxCNC is not installed",
+                      "apt-get install linuxcnc-uspace")

@@ -396,17 +396,40 @@ class LinuxcncCheck:
                 and (not len(self.jog_miss) or float(np.max(np.abs(self.jog_miss))) <= 2 * stop)
                 and bool(np.all(np.abs(self.fk_diff) <= self.fk_bound[:, None])))
 
+    ignored_limits: tuple[str, ...] = ()   # the machine's limits its home violates (not used to pick poses)
+
+    def to_dict(self) -> dict:
+        """The figures of :meth:`lines` (mm, degrees), for ``pkmcal check linuxcnc --json``."""
+        r = self.run
+        stop = r.stop_tolerance * r.mm_per_unit
+        return {"machine": self.machine, "linear_unit": r.linear_unit, "seconds": r.seconds, "ok": self.ok,
+                "world_mode": {"poses": len(self.poses), "max_joint_diff_mm": self.ik_max,
+                               "tolerance_mm": IK_TOLERANCE_MM},
+                "homing": {"max_joint_diff_mm": float(np.max(np.abs(self.home_joint_diff))), "tolerance_mm": stop},
+                "joint_mode": {"jogs": len(self.fk_diff), "max_pose_diff_mm": self.fk_max_mm,
+                               "max_pose_diff_deg": self.fk_max_deg,
+                               "bound": float(np.max(self.fk_bound)) if len(self.fk_bound) else 0.0,
+                               "max_jog_miss_mm": float(np.max(np.abs(self.jog_miss))) if len(self.jog_miss) else 0.0,
+                               "jog_tolerance_mm": 2 * stop},
+                "ignored_limits": list(self.ignored_limits)}
+
     def lines(self) -> list[str]:
         r = self.run
-        return [
+        stop = r.stop_tolerance * r.mm_per_unit
+        notes = ([f"note: the home pose violates the machine's {', '.join(self.ignored_limits)} limit(s); the poses "
+                  "were chosen without them"] if self.ignored_limits else [])
+        return notes + [
             f"LinuxCNC ran machine '{self.machine}' ({r.linear_unit}) in {r.seconds:.1f} s: "
             f"{len(self.poses)} poses by MDI G53 G0, {len(self.fk_diff)} by joint jogs",
-            f"world mode: largest |LinuxCNC joint - pkmcal strut length| {self.ik_max:.3g} mm "
-            f"(after homing {float(np.max(np.abs(self.home_joint_diff))):.3g} mm)",
+            f"world mode: largest |LinuxCNC joint - pkmcal strut length| {self.ik_max:.3g} mm (tolerance "
+            f"{IK_TOLERANCE_MM:g} mm)",
+            f"homing: joints within {float(np.max(np.abs(self.home_joint_diff))):.3g} mm of the exported HOME "
+            f"(LinuxCNC's joint planner stops within {stop:.3g} mm)",
             f"joint mode: largest |LinuxCNC pose - pkmcal fk| of the joints held {self.fk_max_mm:.3g} mm, "
             f"{self.fk_max_deg:.3g} deg (bound from genhexkins' convergence criterion "
             f"{float(np.max(self.fk_bound)) if len(self.fk_bound) else 0.0:.3g}); joints stopped within "
-            f"{float(np.max(np.abs(self.jog_miss))) if len(self.jog_miss) else 0.0:.3g} mm of the jog targets",
+            f"{float(np.max(np.abs(self.jog_miss))) if len(self.jog_miss) else 0.0:.3g} mm of the jog targets "
+            f"(tolerance {2 * stop:.3g} mm)",
         ]
 
 
@@ -561,7 +584,8 @@ def compare(machine, run: LinuxcncRun) -> LinuxcncCheck:
     fk_bound = np.maximum(bound_internal, np.rad2deg(bound_internal))
     return LinuxcncCheck(machine=machine.name, run=run, poses=poses, ik_diff=ik_diff, world_diff=world_diff,
                          home_joint_diff=home_joint_diff, fk_diff=fk_diff, fk_bound=fk_bound, fk_residual=residual,
-                         jog_miss=(run.joints_held - run.jog_targets) * u)
+                         jog_miss=(run.joints_held - run.jog_targets) * u,
+                         ignored_limits=limits_violated_at_home(machine))
 
 
 def check_machine(machine, files: ControllerFiles | None = None, *, n_poses: int = 24, seed: int = 0,
