@@ -232,7 +232,13 @@ def test_check_command_example_runs_linuxcnc():
 
 @pytest.mark.parametrize("case", ["hexapod-sim-inch"], indirect=True)
 def test_check_command_reads_the_users_files(case):
-    res = ok(run("check", "linuxcnc", case.calibrated, "--hal", case.hal, "--ini", case.ini, "--json"))
+    """LinuxCNC's own hexapod.ini, updated by 'pkmcal export --update-ini' for the calibrated
+    machine, with the HAL file of that export, through 'pkmcal check linuxcnc'."""
+    hal, ini = case.folder / "user.hal", case.folder / "hexapod-calibrated.ini"
+    ok(run("export", case.calibrated, "--format", "linuxcnc", "-o", hal, "--update-ini", SAMPLE / "hexapod.ini",
+           "--ini", ini))
+    assert "LINEAR_UNITS = inch" in ini.read_text() and "PYVCP = hexapod.xml" in ini.read_text()
+    res = ok(run("check", "linuxcnc", case.calibrated, "--hal", hal, "--ini", ini, "--json"))
     import json
 
     got = json.loads(res.stdout)
