@@ -176,3 +176,13 @@ def test_a_home_linuxcnc_cannot_home_to_is_an_error(tmp_path):
     (tmp_path / "low.yaml").write_text(machine_to_text(low))
     assert_user_error(run("export", tmp_path / "low.yaml", "--format", "linuxcnc", "--ini", tmp_path / "j.ini"),
                       "outside the exported joint limits", "--stroke-margin")
+
+
+def test_only_units_linuxcnc_reads_are_written():
+    """LinuxCNC's task knows mm, metric, in, inch, imperial (milltask's unit table): no cm."""
+    from pkmcal.errors import PkmcalError
+
+    m = builtin_machine("stewart-prototype")
+    assert "LINEAR_UNITS = inch" in linuxcnc_ini(m, "in")          # a synonym is written as LinuxCNC's name
+    with pytest.raises(PkmcalError, match="not one LinuxCNC reads"):
+        linuxcnc_ini(m, "cm")

@@ -61,7 +61,7 @@ def linuxcnc_cmd(calibrated: str, hal: str | None, ini: str | None, n_poses: int
 
     from pkmcal.controllers import linuxcnc as lc
     from pkmcal.errors import InputFileError
-    from pkmcal.io.export_linuxcnc import check_hexapod, linuxcnc_hal, linuxcnc_ini
+    from pkmcal.io.export_linuxcnc import check_hexapod, ini_units, linuxcnc_hal, linuxcnc_ini
     from pkmcal.io.lookup import load_machine
 
     machine = load_machine(calibrated)
@@ -74,7 +74,8 @@ def linuxcnc_cmd(calibrated: str, hal: str | None, ini: str | None, n_poses: int
         except OSError as exc:
             raise InputFileError(path, f"cannot read it: {exc.strerror or exc}") from None
 
-    hal_text = read(hal) if hal is not None else linuxcnc_hal(machine)
+    # a file not given is exported, in the unit of the INI file when that one is given
+    hal_text = read(hal) if hal is not None else linuxcnc_hal(machine, ini_units(ini) if ini is not None else None)
     ini_text = read(ini) if ini is not None else linuxcnc_ini(machine)
     source = " + ".join(p for p in (hal, ini) if p is not None) or f"pkmcal export of {calibrated}"
     files = lc.controller_files(hal_text, ini_text, source=source)

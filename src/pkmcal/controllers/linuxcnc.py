@@ -177,7 +177,7 @@ def headless_config(files: ControllerFiles, display: str, name: str = "pkmcal-ch
     owned: dict[str, list[tuple[str, str]]] = {}
     for (section, key), value in files.owned.items():
         owned.setdefault(section, []).append((key, value))
-    unit_code = "G20" if np.isclose(u, 25.4) else "G21"
+    unit_code, _ = _program_units(u)
 
     def section(name: str, *keys: tuple[str, object]) -> list[str]:
         own = owned.get(name, [])
@@ -262,6 +262,17 @@ def host_lock(wait: float = 600.0):
         os.close(fd)      # releases the lock
 
 
+def _program_units(mm_per_unit: float) -> tuple[str, float]:
+    """``(G-code, program units per controller unit)`` of the MDI moves: G20 (inch) on an inch
+    machine, else G21 (mm), so that the numbers sent are in the machine's own unit."""
+    if mm_per_unit == 25.4:
+        return "G20", 1.0
+    if mm_per_unit == 1.0:
+        return "G21", 1.0
+    raise PkmcalError(f"LinuxCNC runs in mm or inch ([TRAJ] LINEAR_UNITS); these files are in units of "
+                      f"{mm_per_unit:g} mm")
+
+
 def stop_tolerance(mm_per_unit: float) -> float:
     """Where LinuxCNC's joint planner stops (controller units): within ``TINY_DP = 0.001 a T²``
     of its target, a the joint's acceleration limit and T the servo period (LinuxCNC
@@ -295,10 +306,12 @@ def run_linuxcnc(files: ControllerFiles, poses: np.ndarray, jog_targets: np.ndar
         Path(work, "kinematics.hal").write_text(files.hal)
         Path(work, "pkmcal.tbl").write_text("")
         Path(work, "pkmcal.var").write_text("")
-        unit_code = "G20" if np.isclose(files.mm_per_unit, 25.4) else "G21"
+        unit_code, program_per_unit = _program_units(files.mm_per_unit)
         speed = _SPEED_MM / files.mm_per_unit
+        program = poses.copy()
+        program[:, :3] *= program_per_unit
         Path(work, JOB_FILE).write_text(json.dumps({
-            "poses": poses.tolist(), "joint_targets": jog_targets.tolist(), "units_code": unit_code,
+            "poses": program.tolist(), "joint_targets": jog_targets.tolist(), "units_code": unit_code,
             "jog_velocity": speed, "timeout": 60.0}))
         env = {k: v for k, v in os.environ.items() if k != "DISPLAY"}
         fifo = tempfile.mkdtemp(prefix="pkmcal-rtapi-", dir="/tmp")   # short: a socket path lives there

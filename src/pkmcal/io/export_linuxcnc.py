@@ -143,9 +143,10 @@ DEFAULT_STROKE_MARGIN = 0.01
 #: The comment line of an exported INI giving the margins (mm), which ``pkmcal import
 #: linuxcnc`` adds back to read the stroke.
 STROKE_MARGIN_COMMENT = "# pkmcal.stroke_margin_mm ="
-#: LinuxCNC's ``[TRAJ] LINEAR_UNITS`` names pkmcal writes, mm per unit (the reader,
-#: :data:`pkmcal.io.import_linuxcnc.LINEAR_UNITS`, takes these and their synonyms).
-EXPORT_UNITS = {"mm": 1.0, "cm": 10.0, "inch": 25.4}
+#: LinuxCNC's ``[TRAJ] LINEAR_UNITS`` names pkmcal writes, mm per unit. LinuxCNC knows mm,
+#: metric, in, inch and imperial (the unit table of its task, ``milltask``; no cm), so a
+#: machine is written in mm or in inch.
+EXPORT_UNITS = {"mm": 1.0, "inch": 25.4}
 
 
 def export_unit(machine: Hexapod, linear_unit: str | None = None) -> tuple[str, float]:
@@ -161,10 +162,10 @@ def export_unit(machine: Hexapod, linear_unit: str | None = None) -> tuple[str, 
     if linear_unit is None:
         return "mm", 1.0
     key = str(linear_unit).strip().lower()
-    if key not in LINEAR_UNITS:
-        raise PkmcalError(f"machine '{machine.name}': LinuxCNC length unit '{linear_unit}' is not one of "
-                          f"{', '.join(LINEAR_UNITS)}")
-    factor = LINEAR_UNITS[key]
+    factor = LINEAR_UNITS.get(key)
+    if factor not in EXPORT_UNITS.values():
+        raise PkmcalError(f"machine '{machine.name}': length unit '{linear_unit}' is not one LinuxCNC reads; write "
+                          "the configuration in mm or inch ([TRAJ] LINEAR_UNITS = mm, metric, in, inch or imperial)")
     name = next(n for n, f in EXPORT_UNITS.items() if f == factor)
     return name, factor
 
