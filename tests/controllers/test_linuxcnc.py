@@ -251,3 +251,31 @@ def test_check_without_linuxcnc_is_a_user_error(monkeypatch, tmp_path):
     monkeypatch.setenv("PATH", str(tmp_path))          # no 'linuxcnc' command on it
     assert_user_error(run("check", "linuxcnc", "stewart-prototype"), "LinuxCNC is not installed",
                       "apt-get install linuxcnc-uspace")
+
+
+def test_host_lock_waits_for_a_live_linuxcnc_and_ignores_a_stale_lock(monkeypatch, tmp_path):
+    """LinuxCNC runs once per host: a run waits while another LinuxCNC holds its lock file, and
+    a lock file no LinuxCNC process holds (a crashed run) does not block (files of this test's
+    own, never LinuxCNC's real /tmp/linuxcnc.lock)."""
+    monkeypatch.setattr(lc, "LOCK_FILE", str(tmp_path / "pkmcal.lock"))
+    monkeypatch.setattr(lc, "LINUXCNC_LOCK", str(tmp_path / "linuxcnc.lock"))
+    (tmp_path / "linuxcnc.lock").write_text("")
+    monkeypatch.setattr(lc, "_linuxcnc_processes", lambda: [])
+    with lc.host_lock(wait=0.5):
+        pass
+    monkeypatch.setattr(lc, "_linuxcnc_processes", lambda: [12345])
+    with pytest.raises(lc.PkmcalError, match="another LinuxCNC is running"):
+        with lc.host_lock(wait=0.5):
+            pass
+    # and a second pkmcal run waits for the first one's lock
+    import fcntl
+    import os
+
+    fd = os.open(lc.LOCK_FILE, os.O_RDWR)
+    fcntl.flock(fd, fcntl.LOCK_EX)
+    try:
+        with pytest.raises(lc.PkmcalError, match="another pkmcal LinuxCNC run"):
+            with lc.host_lock(wait=0.5):
+                pass
+    finally:
+        os.close(fd)

@@ -239,7 +239,8 @@ class LinuxcncRun:
 @contextlib.contextmanager
 def host_lock(wait: float = 600.0):
     """Hold :data:`LOCK_FILE` (waiting up to ``wait`` s for another pkmcal run), and wait
-    until no other LinuxCNC holds :data:`LINUXCNC_LOCK`."""
+    until no other LinuxCNC holds :data:`LINUXCNC_LOCK` (a lock file with no LinuxCNC
+    process running is stale and does not count)."""
     fd = os.open(LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o666)
     try:
         deadline = time.monotonic() + wait
@@ -252,7 +253,7 @@ def host_lock(wait: float = 600.0):
                     raise PkmcalError(f"another pkmcal LinuxCNC run held {LOCK_FILE} for {wait:g} s; try again when "
                                       "it has finished") from None
                 time.sleep(0.2)
-        while os.path.exists(LINUXCNC_LOCK):
+        while os.path.exists(LINUXCNC_LOCK) and _linuxcnc_processes():
             if time.monotonic() > deadline:
                 raise PkmcalError(f"another LinuxCNC is running on this host ({LINUXCNC_LOCK} exists; LinuxCNC runs "
                                   "one instance per host): stop it, or remove the file if no LinuxCNC runs")
@@ -279,6 +280,26 @@ def stop_tolerance(mm_per_unit: float) -> float:
     ``src/emc/motion/simple_tp.c``, ``simple_tp_update``; homing's last move and joint jogs use
     this planner)."""
     return 0.001 * (_ACCEL_MM / mm_per_unit) * _SERVO_PERIOD ** 2
+
+
+#: Process names of a running LinuxCNC (its start script, server, task and realtime host).
+_LINUXCNC_PROGRAMS = ("linuxcnc", "linuxcncsvr", "milltask", "rtapi_app")
+
+
+def _linuxcnc_processes() -> list[int]:
+    """Pids of running LinuxCNC programs (read from /proc, only to know whether LinuxCNC's
+    lock file is live: a lock left by a crashed run has none, and LinuxCNC's start script
+    removes it itself)."""
+    pids = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/comm") as fh:
+                    if fh.read().strip() in _LINUXCNC_PROGRAMS:
+                        pids.append(int(entry))
+            except OSError:
+                continue
+    return pids
 
 
 def _unprivileged_uid() -> int:
