@@ -503,6 +503,30 @@ def write_linuxcnc_hexapod_sample(folder: Path) -> tuple[Path, Path]:
     return folder / "kinematics.hal", folder / "hexapod.ini"
 
 
+# -- the real controllers (tests/controllers/) ----------------------------------------------------
+
+def in_ci(environ=None) -> bool:
+    """True when the ``CI`` environment variable is set (to anything but empty, ``0``,
+    ``false``, ``no``: the rule of tests/conftest.py's Hypothesis profile)."""
+    import os
+
+    environ = os.environ if environ is None else environ
+    return environ.get("CI", "").strip().lower() not in ("", "0", "false", "no")
+
+
+def require_controller(reason: str | None) -> None:
+    """Skip the test with ``reason`` (one line: why the controller cannot run here), or fail
+    it in CI, where .ci/run installs the controllers and a skip would hide that they did not
+    run; nothing when ``reason`` is None."""
+    import pytest
+
+    if reason is None:
+        return
+    if in_ci():
+        pytest.fail(f"in CI the controller tests must run: {reason}", pytrace=False)
+    pytest.skip(reason)
+
+
 def probe_triggers(nominal, real, sensor, xy, *, noise=0.0, rng=None, z0=5.0):
     """Klipper's probing on a simulated printer: the firmware (``nominal``) lowers the nozzle
     down its vertical line at each (x, y) until the ``real`` machine's probe point meets the

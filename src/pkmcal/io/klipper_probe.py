@@ -54,6 +54,11 @@ Two sources a Klipper user has:
   ``manual_heightN_pos`` entries (the nozzle's height measured by hand, DELTA_ANALYZE
   MANUAL_HEIGHT) are read the same way, with a setup whose probe x, y offset is 0. A height
   that is not finite or beyond any printer's is refused naming its line.
+  The entries are numbered as Klipper reads them back (:func:`numbered_entries`: ``height0``,
+  ``height1``, ... to the first missing); one Klipper would not read is an error.
+
+The machine is a linear delta (:func:`require_linear_delta`): carriage readings and stable
+positions are Klipper's ``kinematics: delta``'s.
 
 The measurements carry the firmware's belief of each pose as the commanded pose
 (``cmd_x, cmd_y, cmd_z``: the logged nozzle position, or the machine's FK of λ).
