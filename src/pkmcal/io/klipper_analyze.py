@@ -137,9 +137,24 @@ def read_klipper_analyze(path: str | os.PathLike, machine, probe_offset=(0.0, 0.
         heights = read_klipper_probe(src, machine, offset)
     except NoProbeResults:
         heights = None
-    if not saved and heights is not None:
+    if saved:
+        _check_saved_typos(src, dist)        # after the block's own errors (its heights' numbering)
+    elif heights is not None:
         dist[-1].extend(_check_configs(src, text, machine, object_machine, heights))
     return _pairs(src, dist, heights, machine)
+
+
+def _check_saved_typos(src: str, dist) -> None:
+    """A #*# ``distanceN`` far from the firmware's own distance between its two points
+    (Klipper's ``get_position_from_stable`` of the config of this file): the measured one is
+    that within a printer's error, not :data:`TYPO_FRACTION` off (module docstring, "Typos")."""
+    _, _, d, cmd1, cmd2, lines, _ = dist
+    nominal = np.linalg.norm(cmd1[:, :3] - cmd2[:, :3], axis=1)
+    for k in range(len(d)):            # distance0, 1, ... in order (numbered_entries)
+        if not abs(d[k] / nominal[k] - 1.0) <= TYPO_FRACTION:
+            raise InputFileError(src, f"[delta_calibrate] distance{k} = {d[k]:g} mm is {d[k] / nominal[k]:.3g} "
+                                 f"times the {nominal[k]:.4g} mm between its two points (distance{k}_pos1, "
+                                 "_pos2): a likely typo; correct it (or run DELTA_ANALYZE again)", line=int(lines[k]))
 
 
 def _check_configs(src: str, text: str, machine, object_machine, heights: ProbeImport) -> list[str]:
@@ -220,14 +235,6 @@ def _saved_distances(src: str, machine):
         k = int(np.flatnonzero(~fk.converged)[0]) % n
         raise InputFileError(src, f"distance{found[k][0]}: the carriages are out of the reach of machine "
                              f"'{machine.name}'; is it the machine file of this printer.cfg?", line=found[k][4])
-    # the firmware's own distance between the two points (Klipper's get_position_from_stable, the
-    # config of this file): the measured one is that within a printer's error, not 10 times it
-    nominal = np.linalg.norm(fk.poses[:n, :3] - fk.poses[n:, :3], axis=1)
-    for k, f in enumerate(found):
-        if not abs(f[1] / nominal[k] - 1.0) <= TYPO_FRACTION:
-            raise InputFileError(src, f"[delta_calibrate] distance{f[0]} = {f[1]:g} mm is {f[1] / nominal[k]:.3g} "
-                                 f"times the {nominal[k]:.4g} mm between its two points (distance{f[0]}_pos1, "
-                                 "_pos2): a likely typo; correct it (or run DELTA_ANALYZE again)", line=f[4])
     notes = [f"{src}: {n} DELTA_ANALYZE distance(s) from the #*# block; step distances "
              f"{', '.join(f'{d:.6g}' for d in step)} mm"]
     return (lam[:n], lam[n:], np.array([f[1] for f in found]), fk.poses[:n], fk.poses[n:],
