@@ -38,8 +38,9 @@ import numpy as np
 #: (klippy/extras/probe.py ProbePointsHelper.__init__).
 HORIZONTAL_MOVE_Z = 5.0
 #: Travel and lift speeds (mm/min in G-code F words): Klipper's probe-points helper default
-#: speed 50 mm/s and its probe's default lift speed 5 mm/s (probe.py ``ProbePointsHelper``,
-#: ``PrinterProbe.__init__``).
+#: speed 50 mm/s (also its first move down from home: ``ProbePointsHelper._move_next``, "Use
+#: full speed to first probe position") and its probe's default lift speed 5 mm/s
+#: (probe.py ``ProbePointsHelper.__init__``, ``PrinterProbe.__init__``).
 TRAVEL_F = 3000
 LIFT_F = 300
 #: The macro's name (Klipper upper-cases G-code commands).
@@ -57,7 +58,7 @@ def klipper_probe_macro(nozzle_xy: np.ndarray, probe_offset, header: list[str]) 
     off = np.asarray(probe_offset, dtype=float)
     lines = [f"# {h}" for h in header]
     lines += [f"[gcode_macro {MACRO_NAME}]", f"description: pkmcal plan: probe {len(nozzle_xy)} points on the bed",
-              "gcode:", "    G28", "    G90", f"    G1 Z{z:.3f} F{LIFT_F}"]
+              "gcode:", "    G28", "    G90", f"    G1 Z{z:.3f} F{TRAVEL_F}"]
     for k, (x, y) in enumerate(np.asarray(nozzle_xy, dtype=float), start=1):
         lines += [f"    # point {k} of {len(nozzle_xy)}: the probe point at {x + off[0]:.3f}, {y + off[1]:.3f}",
                   f"    G1 X{x:.3f} Y{y:.3f} F{TRAVEL_F}", "    PROBE", f"    G1 Z{z:.3f} F{LIFT_F}"]
@@ -69,7 +70,7 @@ def marlin_probe_gcode(probe_xy: np.ndarray, probe_offset, header: list[str]) ->
     (N, 2) mm; ``probe_offset`` the setup's (x, y, z) mm; ``header`` comment lines."""
     z = _travel_z(probe_offset)
     lines = [f"; {h}" for h in header]
-    lines += ["G28", "G90", f"G1 Z{z:.3f} F{LIFT_F}"]
+    lines += ["G28", "G90", f"G1 Z{z:.3f} F{TRAVEL_F}"]
     for k, (x, y) in enumerate(np.asarray(probe_xy, dtype=float), start=1):
         lines.append(f"G30 X{x:.2f} Y{y:.2f} ; point {k} of {len(probe_xy)} (the probe's position)")
     return "\n".join(lines) + "\n"
