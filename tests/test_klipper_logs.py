@@ -518,3 +518,29 @@ def test_a_machine_that_cannot_reach_the_bed_is_told_what_to_do():
     assert res.exit_code == 2
     assert "a Z probe's points are planned on the bed, z = 0 mm of the setup" in res.output
     assert "--probe-anywhere" in res.output
+
+
+def test_predicted_first_layer_sigma_is_the_spread_of_fits(plan):
+    """The σ the plan prints against the spread of real fits (FIGAROH's test of reported
+    errors): 60 noisy campaigns of the plan's points on the nominal printer, each fitted by
+    pkmcal.identify on the plan's identifiable parameters; the rms over trials and check
+    points of the fitted model's height error where the firmware puts the first layer.
+    Tolerance: an rms from 60 trials has a relative standard deviation of at most
+    1/sqrt(2·60) = 9 % (one degree of freedom per trial, the check points being correlated);
+    3 of them, 27 %."""
+    from pkmcal.identification.engine import identify
+    from pkmcal.identification.simulation import simulate_campaign
+
+    setup = _setup()
+    check = plan.candidates.poses[:100]
+    predicted = height_sigma(plan, [len(plan.poses)], check=check)[0][1]
+    q = NOMINAL.ik(check)
+    errors = []
+    for trial in range(60):
+        sim = simulate_campaign(NOMINAL, NOMINAL, setup, plan.poses, np.random.default_rng(100 + trial),
+                                ignore_limits=("min_z",))
+        cal = identify(NOMINAL, setup, sim.measurements, free=list(plan.model.names)).mechanism
+        errors.append(setup.sensor.predict(cal.frame(cal.fk(q).poses))[:, 0] - setup.sensor.predict(
+            NOMINAL.frame(check))[:, 0])
+    measured = float(np.sqrt(np.mean(np.square(errors))))
+    assert 1 / 1.27 < measured / predicted < 1.27, (measured, predicted)
