@@ -88,14 +88,19 @@ def linuxcnc_cmd(calibrated: str, hal: str | None, ini: str | None, n_poses: int
     ini_text = read(ini) if ini is not None else linuxcnc_ini(machine)
     source = " + ".join(p for p in (hal, ini) if p is not None) or f"pkmcal export of {calibrated}"
     files = lc.controller_files(hal_text, ini_text, source=source)
-    result = lc.check_machine(machine, files, n_poses=n_poses, seed=seed)
+    _report(lc.check_machine(machine, files, n_poses=n_poses, seed=seed), as_json, "LinuxCNC", "the files are")
+
+
+def _report(result, as_json: bool, controller: str, what: str) -> None:
+    """The comparison's lines (or JSON) on standard output, the verdict on standard error,
+    exit code 1 when the controller does not move as pkmcal predicts."""
     if as_json:
         click.echo(json.dumps(result.to_dict(), indent=2, allow_nan=False))
     else:
         for line in result.lines():
             click.echo(line)
-    verdict = ("LinuxCNC moves as pkmcal predicts" if result.ok else
-               "LinuxCNC does NOT move as pkmcal predicts: check that the files are the export of this machine")
+    verdict = (f"{controller} moves as pkmcal predicts" if result.ok else
+               f"{controller} does NOT move as pkmcal predicts: check that {what} the export of this machine")
     click.echo(f"pkmcal: {verdict}", err=True)
     if not result.ok:
         sys.exit(1)
@@ -125,17 +130,8 @@ def klipper_cmd(printer_cfg: str, calibrated: str, n_poses: int, seed: int, as_j
 
     read_input_bytes(printer_cfg, "Klipper config")    # a regular file, or a clear error
     machine = load_machine(calibrated)
-    result = check_klipper(printer_cfg, machine, workspace_poses(machine, n_poses, seed))
-    if as_json:
-        click.echo(json.dumps(result.to_dict(), indent=2, allow_nan=False))
-    else:
-        for line in result.lines():
-            click.echo(line)
-    verdict = ("Klipper moves as pkmcal predicts" if result.ok else
-               "Klipper does NOT move as pkmcal predicts: check that the config is the export of this machine")
-    click.echo(f"pkmcal: {verdict}", err=True)
-    if not result.ok:
-        sys.exit(1)
+    _report(check_klipper(printer_cfg, machine, workspace_poses(machine, n_poses, seed)), as_json, "Klipper",
+            "the config is")
 
 
 __all__ = ["check_group", "klipper_cmd", "linuxcnc_cmd"]
