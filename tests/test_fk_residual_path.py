@@ -149,12 +149,13 @@ def _warm_started(self, theta):
 
 
 def test_a_stop_at_no_minimum_is_no_success(campaign, monkeypatch):
-    """With main's warm-started FK put back, the engine's own check at the stop (a new method
-    object, whose FK starts from the commanded poses) finds that the point Levenberg–Marquardt
+    """With main's warm-started FK put back (declared path dependent, as it was), the engine's
+    own check at the stop (a new method object, whose FK starts from the commanded poses) finds that the point Levenberg–Marquardt
     stopped at is no minimum of the residual (main's trial points near it had their poses on
     the other FK solution), and reports the fit as failed with the cost; with today's FK the
     same check passes on the same campaign."""
     monkeypatch.setattr(FKResidual, "poses_at", _warm_started)
+    monkeypatch.setattr(FKResidual, "path_independent", False)     # as main's FK was not
     fit = _fit(campaign)
     assert not fit.success
     assert fit.status == engine.STATUS_NOT_STATIONARY
@@ -175,6 +176,7 @@ def test_a_stop_that_does_not_reproduce_is_no_success(campaign, monkeypatch):
         return x + np.array([1e-3 * self._calls, 0, 0, 0, 0, 0]), ok
 
     monkeypatch.setattr(FKResidual, "poses_at", drifting)
+    monkeypatch.setattr(FKResidual, "path_independent", False)
     fit = _fit(campaign)
     assert not fit.success
     assert fit.status == engine.STATUS_NOT_REPRODUCED

@@ -27,9 +27,9 @@ triangular inverse prove full rank when they can, else the full analysis (SVD, n
 space, gauge) runs; an unidentifiable set is a :class:`PkmcalError` naming the
 unobservable combination and what to fix; by default the engine fixes the suggested gauge
 itself (``fix="auto"``). When the rank was proven, the result's identifiability report is
-computed on first use. A solver's stop is a success only when a new method object (no pose
-solve of the fit's earlier points to start from) reproduces its cost there and finds no
-descent (:func:`_checked`).
+computed on first use. A solver's stop is a success only when the residual there reproduces
+the cost the solver saw and shows no descent (:func:`_checked`; evaluated by a new method
+object where the method's pose solves start from earlier points).
 """
 
 from __future__ import annotations
@@ -580,9 +580,10 @@ STATUS_NOT_STATIONARY = -3
 
 
 def _checked(sol: _Solution, fresh, least_squares: bool = True) -> _Solution:
-    """``sol``, confirmed by a fresh objective ``fresh`` (a new method object, whose pose
-    solves start from the commanded poses and not from the fit's earlier points), or ``sol``
-    as a failure:
+    """``sol``, confirmed by the objective ``fresh`` evaluated at its point (the solver's own
+    where the method's residual is a function of θ alone, ``Method.path_independent``; else
+    one on a new method object, whose pose solves start from the commanded poses and not from
+    the fit's earlier points), or ``sol`` as a failure:
 
     * :data:`STATUS_NOT_REPRODUCED` where ½‖f‖² there is not what the solver saw;
     * :data:`STATUS_NOT_STATIONARY` (``least_squares``: a sum-of-squares objective, no robust
@@ -1015,15 +1016,20 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
         else:
             sol = _least_squares(obj, theta0[free_idx], jac=jac, method=lsq_method, ftol=ftol, xtol=xtol,
                                  gtol=gtol, max_nfev=max_nfev, loss=loss, f_scale=f_scale, n_data=rows.shape[0])
-        if not meth.single_step:
-            # the stop must reproduce, and be a minimum, with a new method object (_checked)
-            again = make_method(method, model, weighted, form=form)
-            again.sensor_columns = sensor_free
-            fresh = _Objective(again, theta0, free_idx, W)
-            sol = _checked(sol, PriorObjective(fresh, prior, free_idx) if len(prior) else fresh,
-                           least_squares=loss == "linear")
     theta = obj.theta(sol.x)
     ev = meth.evaluate(theta, jac=True, cov=True)   # only the free columns of ev.J are used
+    if not meth.single_step:
+        # the stop must reproduce, and be a minimum (_checked): on this evaluation where the
+        # method's residual is a function of θ alone, else on a new method object's
+        check = obj
+        if not meth.path_independent:
+            again = make_method(method, model, weighted, form=form)
+            again.sensor_columns = sensor_free
+            check = _Objective(again, theta0, free_idx, W)
+            check = PriorObjective(check, prior, free_idx) if len(prior) else check
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            sol = _checked(sol, check, least_squares=loss == "linear")
     if not ev.converged.all():
         bad = used[np.flatnonzero(~ev.converged)]
         notes.append("the pose could not be solved at the identified machine for pose(s) "

@@ -431,13 +431,17 @@ class Method(ABC):
     a method may skip the sensor-parameter columns of J and fill them with NaN.
     ``prewhitened``: the weighted residual already has unit covariance (the engine applies
     no whitening). ``single_step``: the engine takes one Gauss–Newton step from the start
-    instead of iterating to convergence.
+    instead of iterating to convergence. ``path_independent``: the residual at θ is the
+    same whatever the object evaluated before (no pose solve started from an earlier
+    point's poses), so the engine checks the solver's stop on this object's own evaluation
+    at the solution instead of a new object's (``engine._checked``).
     """
 
     name: str
     sensor_columns: bool = True
     prewhitened: bool = False
     single_step: bool = False
+    path_independent: bool = False
 
     def __init__(self, model: Model, weighted: bool = True):
         self.model = model
@@ -485,6 +489,7 @@ class IKResidual(Method):
     """``ik-residual``: r_j = q_j − IK(x̂_j, ρ), x̂_j from a full-pose sensor (paper 1)."""
 
     name = "ik-residual"
+    path_independent = True     # the measured poses depend on s alone
 
     def __init__(self, model: Model, weighted: bool = True, form: str = "plain"):
         super().__init__(model, weighted)
@@ -612,6 +617,7 @@ class FKResidual(Method):
     """``fk-residual``: r_j = y_j − h(FK(q_j, ρ), s) (paper 2)."""
 
     name = "fk-residual"
+    path_independent = True     # FK from the start poses, θ0's poses, or along θ0 → θ
 
     def __init__(self, model: Model, weighted: bool = True):
         super().__init__(model, weighted)
@@ -728,13 +734,19 @@ class FKResidual(Method):
             HAi = self._piece(st, "HAi", lambda: self._HAi(A, sensor_pose_jacobian(mech, sensor, x, frame, rho, s)))
         if jac:
             # ∂r/∂ρ = H A⁻¹ B (− ∂h/∂ρ at fixed x), ∂r/∂s = −G (skipped when no sensor parameter
-            # is free), ∂r/∂δq = −H A⁻¹ (x = FK(q + δq): A ∂x/∂δq = I)
-            Jr = HAi @ B
-            Gr = sensor_mech_jacobian(mech, sensor, x, frame, rho, s)
-            if Gr is not None:
-                Jr = Jr - Gr
-            J = _full_jacobian(Jr, -sensor.param_jacobian(frame, s) if self.sensor_columns else None,
-                               m.n_sensor, m.offset_jacobian(-HAi) if m.n_offsets else None)
+            # is free), ∂r/∂δq = −H A⁻¹ (x = FK(q + δq): A ∂x/∂δq = I); kept for this θ (the
+            # engine's end evaluation and its check of the solver's stop both ask for it)
+            def jacobian():
+                Jr = HAi @ B
+                Gr = sensor_mech_jacobian(mech, sensor, x, frame, rho, s)
+                if Gr is not None:
+                    Jr = Jr - Gr
+                out = _full_jacobian(Jr, -sensor.param_jacobian(frame, s) if self.sensor_columns else None,
+                                     m.n_sensor, m.offset_jacobian(-HAi) if m.n_offsets else None)
+                out.flags.writeable = False      # shared by the callers at this θ
+                return out
+
+            J = self._piece(st, ("J", self.sensor_columns), jacobian)
         if cov:
             C = _diag_cov(m.sigma_y, m.n_poses) + _sandwich(HAi, m.sigma_q)
         measured = sensor.measured_readings(frame)      # the rows are the readings
