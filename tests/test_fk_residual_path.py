@@ -210,3 +210,70 @@ def test_poses_outside_the_start_poses_reach_are_solved_by_continuation(reading_
     assert m.same_branch(x, cmd, rho).all()
     _assert_after_equals_alone(model, far, th0)
     _assert_after_equals_alone(model, th0, far)
+
+
+def _backtracking_reference(m, q, guess, equations=None, tol=1e-11, max_iter=40):
+    """The shared FK solver's iteration written plainly, one row at a time (every step length
+    tried in turn, the first that does not increase ‖e‖² taken): the formula the solver's
+    batched line search, which evaluates the shorter steps only where the full one fails,
+    replaces. Returns (poses, rows that took a shorter step at least once)."""
+    n = m.n_dof
+
+    def e(x, rows):
+        return q[rows] - m.ik(x) if equations is None else equations(x, q[rows], False)[0]
+
+    def cost(r):
+        return np.where(np.all(np.isfinite(r), axis=-1), np.sum(r**2, axis=-1), np.inf)
+
+    x = np.array(guess, dtype=float)
+    done = np.zeros(len(x), dtype=bool)
+    shortened = np.zeros(len(x), dtype=bool)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = e(x, slice(None))
+        f = cost(r)
+        for _ in range(max_iter):
+            A = m.actuator_pose_jacobian(x) if equations is None else equations(x, q, True)[1]
+            At = np.swapaxes(A, 1, 2)
+            dx = np.linalg.solve(At @ A + 1e-12 * np.eye(n), At @ np.nan_to_num(r)[..., None])[..., 0]
+            dx = np.where(np.isfinite(dx) & ~done[:, None], dx, 0.0)
+            for j in np.flatnonzero(~done):
+                for t in 0.5 ** np.arange(12):
+                    rc = e((x[j] + t * dx[j])[None], [j])[0]
+                    if cost(rc) <= f[j] * (1.0 + 1e-12) + 1e-300:
+                        x[j], r[j], f[j] = x[j] + t * dx[j], rc, cost(rc)
+                        shortened[j] |= t < 1.0
+                        break
+                else:
+                    done[j] = True
+            done |= np.max(np.abs(dx), axis=1) <= tol * (1.0 + np.max(np.abs(x), axis=1))
+            if done.all():
+                break
+    return x, shortened
+
+
+@pytest.mark.parametrize("closure", [True, False])
+def test_fk_line_search_equals_the_plain_backtracking(closure):
+    """The shared solver (:func:`pkmcal.mechanisms.solver.solve_fk`) on the 6-RSS, on its
+    loop-closure equations and on λ − IK (NaN outside a rod's reach, where some rows need a
+    shorter step), from guesses about 3 mm and 0.04 rad off whose IK is defined: the poses of
+    the plain iteration, to rounding (1e-12 mm / rad: the same arithmetic per row, batched
+    against one row at a time)."""
+    from test_rss_hexapod import _reachable
+
+    from pkmcal.mechanisms import builtin_machine
+    from pkmcal.mechanisms.solver import solve_fk
+
+    m = builtin_machine("servo-stewart")
+    poses = _reachable(m, 200, 5)
+    rng = np.random.default_rng(3)
+    guess = poses + rng.normal(0.0, 1.0, poses.shape) * np.array([3.0, 3.0, 3.0, 0.04, 0.04, 0.04])
+    with np.errstate(invalid="ignore"):
+        inside = np.all(np.isfinite(m.ik(guess)), axis=1)
+    q, guess = m.ik(poses[inside]), guess[inside]
+    equations = m._closure(m._rho(None)) if closure else None
+    got = solve_fk(m, q, guess, equations=equations)
+    want, shortened = _backtracking_reference(m, q, guess, equations)
+    assert got.converged.sum() >= 0.9 * len(q)
+    if not closure:
+        assert shortened.any()           # the shorter steps are exercised
+    np.testing.assert_allclose(got.poses, want, rtol=0, atol=1e-12)

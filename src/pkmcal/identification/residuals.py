@@ -43,11 +43,17 @@ the ρ columns. Parameters are passed explicitly: ``mech.ik_and_jacobians(x, par
       2. Newton from its pose at θ0 (the model's values; the FK of 1. there);
       3. continuation along θ0 → θ: θ_t = θ0 + t (θ − θ0), t = 1/K … 1
          (K = :data:`FK_CONTINUATION_STEPS`), each Newton from the previous pose, from its
-         pose at θ0,
+         pose at θ0, a failed step cut into K again (:data:`FK_CONTINUATION_DEPTH` times),
     that converges on the start pose's assembly mode, each a function of θ. 2. and 3. are
     for a start pose outside a chain's reach at θ (a mechanism whose IK is NaN there gives
-    Newton no direction): on a 6-RSS fit with such an FK, 93 of 150 commanded poses were
-    outside a rod's reach at the fit's solution, every pose solvable from its pose at θ0.
+    Newton no direction): on a 6-RSS fit with the shared solver on λ − IK instead of its
+    loop-closure FK (tests/test_engine.py), 93 of 150 commanded poses were outside a rod's
+    reach at the fit's minimum, and 4 poses needed 3.; main's warm starts (one pose solve
+    per evaluation) found that minimum in 1.2 s CPU, these in 3.5 s. On machines whose FK finds
+    the pose from the start (the hexapod, the loop-closure FK of the 6-RSS and 6-PUS, the
+    delta's closed form) 1. alone runs: 2.5 Newton iterations per pose against main's 1.5 on
+    paper 2's 100-pose indicator fit (2000 against 1200 in all; the fit 10.1-10.4 ms against
+    9.8 ms, benchmarks/identification.py --quick, same run).
 
 ``projection`` (paper 3 §2, eq. 4–10; general errors-in-variables)
     e_j(x, θ) = W [y_j − h(x, s); q_j − IK(x, ρ)] with W = Σ_e^{-1/2} (identity if
@@ -93,7 +99,10 @@ METHODS = ("ik-residual", "fk-residual", "projection", "projection-single")
 IK_FORMS = ("plain", "squared")
 
 #: Steps of the fk-residual's continuation along θ0 → θ, and how many times a failed step
-#: is cut into as many again (:meth:`FKResidual._follow`): steps down to 8⁻³ of the way.
+#: is cut into as many again (:meth:`FKResidual._follow`): steps down to 4⁻⁴ of the way.
+#: On the 6-RSS fit below (150 poses), 8 steps without cutting left 4 poses unsolved at the
+#: fit's minimum, 32 solved them; the whole fit took 3.5 s CPU with 4 steps cut 3 times,
+#: 8.0 s with 8 cut twice, 4.6 s with 2 cut 7 times (one run each, 2026-12-03).
 FK_CONTINUATION_STEPS = 4
 FK_CONTINUATION_DEPTH = 3
 

@@ -9,10 +9,12 @@ A = ∂q/∂x alone (:class:`~pkmcal.mechanisms.base.Mechanism`):
 
 each step backtracked (x + t Δx, t = 1, ½, …, 2⁻¹¹, the first t with f not larger; IK is
 NaN outside a chain's reach and then counts as f = ∞; the shorter steps are evaluated only
-for the rows whose full step does not decrease f). For l = n this is Newton's method on
-q = IK(x) (AᵀA Δx = Aᵀr ⇔ A Δx = r for regular A); for l > n (redundant actuation) the
-readings of a real machine are not exactly consistent and the solver returns the
-least-squares pose. Per pose: it stops when the step is below ``tol`` relative to the
+for the rows whose full step does not decrease f, the same poses bit for bit as evaluating
+all twelve: the 6-RSS's loop-closure FK of 150 poses from their commanded poses (599
+iterations) took 5.8 ms instead of 14.4 ms, best of 20, 2026-12-03). For l = n this is
+Newton's method on q = IK(x) (AᵀA Δx = Aᵀr ⇔ A Δx = r for regular A); for l > n
+(redundant actuation) the readings of a real machine are not exactly consistent and the
+solver returns the least-squares pose. Per pose: it stops when the step is below ``tol`` relative to the
 pose's size (or no step decreases f); it has converged when it stopped and the largest
 remaining |q − IK(x)| is at most ``res_tol``.
 
