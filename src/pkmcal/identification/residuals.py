@@ -32,12 +32,28 @@ the ρ columns. Parameters are passed explicitly: ``mech.ik_and_jacobians(x, par
     assembly mode than its start pose (``FKResult.ok``), are flagged (``converged``); the engine drops those that fail at the nominal machine (error if
     more than 10 %), rejects a trial point where one fails (``engine._Objective``) and
     reports those failing at the solution. A pose whose FK fails keeps the residual at
-    its last converged pose (finite, for reports; not a derivative of its Jacobian row).
-    FK is warm-started from the previous evaluation's poses (initially the commanded
-    poses, else home); a pose whose FK fails from there is solved again from that start
-    pose, so that a far trial point (whose poses are poor starts for the next) leaves no
-    pose failing at the points after it: on a 6-RSS fit, 45 of 150 poses failed at the
-    nominal machine itself from such warm starts, all solvable from the commanded poses.
+    its pose at θ0 (finite, for reports; not a derivative of its Jacobian row).
+    x_j(θ) is a function of θ alone (a least-squares solver assumes the residual is): never
+    warm-started from an earlier evaluation, whose poses depend on the order in which the
+    solver tried its points (a far trial point left a tracker campaign's pose on another
+    FK solution of the same assembly mode, c = 168° where 1° was commanded, and
+    Levenberg–Marquardt stopped on ``xtol`` at cost 2.8e6 where the residual from the
+    commanded poses gives 1.2e8; the fit's minimum is 5.568). Per pose, the first of
+      1. Newton from its start pose (the commanded pose, else home);
+      2. Newton from its pose at θ0 (the model's values; the FK of 1. there);
+      3. continuation along θ0 → θ: θ_t = θ0 + t (θ − θ0), t = 1/K … 1
+         (K = :data:`FK_CONTINUATION_STEPS`), each Newton from the previous pose, from its
+         pose at θ0, a failed step cut into K again (:data:`FK_CONTINUATION_DEPTH` times),
+    that converges on the start pose's assembly mode, each a function of θ. 2. and 3. are
+    for a start pose outside a chain's reach at θ (a mechanism whose IK is NaN there gives
+    Newton no direction): on a 6-RSS fit with the shared solver on λ − IK instead of its
+    loop-closure FK (tests/test_engine.py), 93 of 150 commanded poses were outside a rod's
+    reach at the fit's minimum, and 4 poses needed 3.; main's warm starts (one pose solve
+    per evaluation) found that minimum in 1.2 s CPU, these in 3.5 s. On machines whose FK finds
+    the pose from the start (the hexapod, the loop-closure FK of the 6-RSS and 6-PUS, the
+    delta's closed form) 1. alone runs: 2.5 Newton iterations per pose against main's 1.5 on
+    paper 2's 100-pose indicator fit (2000 against 1200 in all; the fit 10.1-10.4 ms against
+    9.8 ms, benchmarks/identification.py --quick, same run).
 
 ``projection`` (paper 3 §2, eq. 4–10; general errors-in-variables)
     e_j(x, θ) = W [y_j − h(x, s); q_j − IK(x, ρ)] with W = Σ_e^{-1/2} (identity if
@@ -57,8 +73,9 @@ block in its session's columns (:meth:`Model.offset_jacobian`); the first sessio
 A :class:`Method` object is the objective of one fit and owns that fit's scratch: the
 eliminated poses (and the Jacobian pieces A, B, H A⁻¹ computed from them) of the last θ it
 was evaluated at, so that the residual and the Jacobian the solver asks for separately at
-one point share one pose solve (``Method._at``); the warm-start poses of the fk-residual's
-FK and the projection's pose solve; the ik-residual's measured poses at the last s.
+one point share one pose solve (``Method._at``); the fk-residual's poses at θ0 (its
+fallback starts); the warm-start poses of the projection's pose solve; the ik-residual's
+measured poses at the last s.
 Machines and sensors hold no state.
 """
 
@@ -80,6 +97,14 @@ from pkmcal.sensors.sessions import Sessions, bind_sessions, offset_names
 
 METHODS = ("ik-residual", "fk-residual", "projection", "projection-single")
 IK_FORMS = ("plain", "squared")
+
+#: Steps of the fk-residual's continuation along θ0 → θ, and how many times a failed step
+#: is cut into as many again (:meth:`FKResidual._follow`): steps down to 4⁻⁴ of the way.
+#: On the 6-RSS fit below (150 poses), 8 steps without cutting left 4 poses unsolved at the
+#: fit's minimum, 32 solved them; the whole fit took 3.5 s CPU with 4 steps cut 3 times,
+#: 8.0 s with 8 cut twice, 4.6 s with 2 cut 7 times (one run each, 2026-12-03).
+FK_CONTINUATION_STEPS = 4
+FK_CONTINUATION_DEPTH = 3
 
 #: Newton tolerance (mm/rad) and iteration cap for inverting the full-pose sensor and for
 #: the projection's inner pose solve.
@@ -415,13 +440,17 @@ class Method(ABC):
     a method may skip the sensor-parameter columns of J and fill them with NaN.
     ``prewhitened``: the weighted residual already has unit covariance (the engine applies
     no whitening). ``single_step``: the engine takes one Gauss–Newton step from the start
-    instead of iterating to convergence.
+    instead of iterating to convergence. ``path_independent``: the residual at θ is the
+    same whatever the object evaluated before (no pose solve started from an earlier
+    point's poses), so the engine checks the solver's stop on this object's own evaluation
+    at the solution instead of a new object's (``engine._checked``).
     """
 
     name: str
     sensor_columns: bool = True
     prewhitened: bool = False
     single_step: bool = False
+    path_independent: bool = False
 
     def __init__(self, model: Model, weighted: bool = True):
         self.model = model
@@ -432,7 +461,7 @@ class Method(ABC):
         """``solve(θ)``: a dict of the eliminated poses and what depends on them, kept for
         the last θ together with the pieces :meth:`_piece` adds. A solver asks for the
         residual and then for the Jacobian at the same point; both must see the same poses
-        (the fk-residual's warm-started FK would otherwise be re-solved and differ at
+        (the projection's warm-started pose solve would otherwise be re-solved and differ at
         round-off), and the engine's start and end evaluations reuse the solver's."""
         theta = np.ascontiguousarray(theta, dtype=float)
         key = theta.tobytes()
@@ -469,6 +498,7 @@ class IKResidual(Method):
     """``ik-residual``: r_j = q_j − IK(x̂_j, ρ), x̂_j from a full-pose sensor (paper 1)."""
 
     name = "ik-residual"
+    path_independent = True     # the measured poses depend on s alone
 
     def __init__(self, model: Model, weighted: bool = True, form: str = "plain"):
         super().__init__(model, weighted)
@@ -596,6 +626,7 @@ class FKResidual(Method):
     """``fk-residual``: r_j = y_j − h(FK(q_j, ρ), s) (paper 2)."""
 
     name = "fk-residual"
+    path_independent = True     # FK from the start poses, θ0's poses, or along θ0 → θ
 
     def __init__(self, model: Model, weighted: bool = True):
         super().__init__(model, weighted)
@@ -606,7 +637,8 @@ class FKResidual(Method):
                 f"'{mech.name}' has {mech.n_actuators} for {mech.n_dof}: use --method projection"
             )
         self._start = model.start_poses()
-        self._guess = self._start.copy()
+        #: the poses at θ0 and where they were solved (computed on first need), fallback 2 and 3
+        self._base: tuple[np.ndarray, np.ndarray] | None = None
 
     def rows_per_pose(self) -> int:
         return self.model.sensor.n_readings
@@ -617,27 +649,77 @@ class FKResidual(Method):
     def row_units(self) -> tuple[str, ...]:
         return tuple("rad" if a else "mm" for a in self.model.sensor.reading_is_angle)
 
+    def _fk(self, theta, idx, guess, precise: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """(poses, solved) of the poses ``idx`` at θ by Newton from ``guess`` (len(idx), n):
+        converged, finite, and on the assembly mode of the guess."""
+        m = self.model
+        solve = m.mechanism.fk_precise if precise else m.mechanism.fk
+        fk = solve(m.q_at(theta)[idx], guess, params=m.parts(theta)[0])
+        return fk.poses, fk.ok & np.all(np.isfinite(fk.poses), axis=1)
+
+    def _base_poses(self) -> tuple[np.ndarray, np.ndarray]:
+        """(poses (N, n), solved (N,)) at θ0, from the start poses (fallbacks 2 and 3)."""
+        if self._base is None:
+            x0, ok0 = self._fk(self.model.theta0, np.arange(self.model.n_poses), self._start)
+            self._base = (np.where(ok0[:, None], x0, self._start), ok0)
+        return self._base
+
+    def poses_at(self, theta) -> tuple[np.ndarray, np.ndarray]:
+        """(x (N, n), solved (N,)): FK of every pose at θ, a function of θ alone (module
+        docstring: from the start poses, else from the poses at θ0, else by continuation
+        along θ0 → θ); where none solves, the pose at θ0 (finite) with solved False."""
+        m = self.model
+        theta = np.asarray(theta, dtype=float)
+        idx = np.arange(m.n_poses)
+        x, ok = self._fk(theta, idx, self._start)
+        if ok.all():
+            return x, ok
+        x0, ok0 = self._base_poses()
+        x = np.where(ok[:, None], x, x0)
+        bad = idx[~ok & ok0]
+        if len(bad) and not np.array_equal(theta, m.theta0):
+            xb, okb = self._fk(theta, bad, x0[bad])
+            x[bad[okb]] = xb[okb]
+            ok[bad[okb]] = True
+            bad = bad[~okb]
+            if len(bad):
+                xc, okc = self._follow(theta, bad, x0[bad], 0.0, 1.0, FK_CONTINUATION_DEPTH)
+                x[bad[okc]] = xc[okc]
+                ok[bad[okc]] = True
+        return x, ok
+
+    def _follow(self, theta, idx, x, t0: float, t1: float, depth: int) -> tuple[np.ndarray, np.ndarray]:
+        """(poses, solved) of the poses ``idx`` at θ_t1 (θ_t = θ0 + t (θ − θ0)) followed
+        from their poses ``x`` at θ_t0 in :data:`FK_CONTINUATION_STEPS` equal steps, each a
+        Newton solve from the previous step's pose on its assembly mode (polished at t = 1);
+        a pose whose step fails is followed again over that step in as many sub-steps, down
+        to ``depth`` levels, and is given up where the finest step fails (its path left the
+        reach, or went through a singularity)."""
+        theta0 = self.model.theta0
+        x = np.array(x, dtype=float)
+        alive = np.ones(len(idx), dtype=bool)
+        ts = t0 + (t1 - t0) * np.arange(1, FK_CONTINUATION_STEPS + 1) / FK_CONTINUATION_STEPS
+        ts[-1] = t1
+        prev = t0
+        for t in ts:
+            a = np.flatnonzero(alive)
+            if not len(a):
+                break
+            xt, okt = self._fk(theta0 + t * (theta - theta0), idx[a], x[a], precise=t == 1.0)
+            x[a[okt]] = xt[okt]
+            failed = a[~okt]
+            if len(failed) and depth > 0:
+                xs, oks = self._follow(theta, idx[failed], x[failed], prev, t, depth - 1)
+                x[failed[oks]] = xs[oks]
+                failed = failed[~oks]
+            alive[failed] = False
+            prev = t
+        return x, alive
+
     def _solve(self, theta):
         m = self.model
         rho, s = m.parts(theta)
-        q = m.q_at(theta)
-        fk = m.mechanism.fk_precise(q, self._guess, rho)
-        x = fk.poses
-        ok = fk.ok & np.all(np.isfinite(x), axis=1)
-        # the warm start may be a pose of an earlier trial point far from θ (outside its
-        # reach, or on a path Newton cannot follow): solve those poses again from the fit's
-        # start poses (where they were not already), so that no trial point leaves a pose
-        # failing for good
-        bad = np.flatnonzero(~ok & np.any(self._guess != self._start, axis=1)) if not ok.all() else ()
-        if len(bad):
-            again = m.mechanism.fk_precise(q[bad], self._start[bad], rho)
-            fixed = again.ok & np.all(np.isfinite(again.poses), axis=1)
-            x = x.copy()
-            x[bad[fixed]] = again.poses[fixed]
-            ok[bad[fixed]] = True
-        # warm start the next evaluation from the converged poses (this fit's scratch)
-        self._guess = np.where(ok[:, None], x, self._guess)
-        x = np.where(ok[:, None], x, self._guess)
+        x, ok = self.poses_at(theta)
         frame = m.mechanism.frame(x, rho)
         return {"rho": rho, "s": s, "x": x, "frame": frame, "ok": ok,
                 "r": m.sensor.reading_residual(m.y, m.sensor.predict(frame, s))}
@@ -661,13 +743,19 @@ class FKResidual(Method):
             HAi = self._piece(st, "HAi", lambda: self._HAi(A, sensor_pose_jacobian(mech, sensor, x, frame, rho, s)))
         if jac:
             # ∂r/∂ρ = H A⁻¹ B (− ∂h/∂ρ at fixed x), ∂r/∂s = −G (skipped when no sensor parameter
-            # is free), ∂r/∂δq = −H A⁻¹ (x = FK(q + δq): A ∂x/∂δq = I)
-            Jr = HAi @ B
-            Gr = sensor_mech_jacobian(mech, sensor, x, frame, rho, s)
-            if Gr is not None:
-                Jr = Jr - Gr
-            J = _full_jacobian(Jr, -sensor.param_jacobian(frame, s) if self.sensor_columns else None,
-                               m.n_sensor, m.offset_jacobian(-HAi) if m.n_offsets else None)
+            # is free), ∂r/∂δq = −H A⁻¹ (x = FK(q + δq): A ∂x/∂δq = I); kept for this θ (the
+            # engine's end evaluation and its check of the solver's stop both ask for it)
+            def jacobian():
+                Jr = HAi @ B
+                Gr = sensor_mech_jacobian(mech, sensor, x, frame, rho, s)
+                if Gr is not None:
+                    Jr = Jr - Gr
+                out = _full_jacobian(Jr, -sensor.param_jacobian(frame, s) if self.sensor_columns else None,
+                                     m.n_sensor, m.offset_jacobian(-HAi) if m.n_offsets else None)
+                out.flags.writeable = False      # shared by the callers at this θ
+                return out
+
+            J = self._piece(st, ("J", self.sensor_columns), jacobian)
         if cov:
             C = _diag_cov(m.sigma_y, m.n_poses) + _sandwich(HAi, m.sigma_q)
         measured = sensor.measured_readings(frame)      # the rows are the readings
