@@ -599,11 +599,12 @@ def reading_space_rss(monkeypatch):
 
 
 def test_fk_residual_after_a_far_trial_point_equals_fresh(reading_space_rss):
-    """A trial point far from θ (every crank pivot 5 mm off) makes some poses' FK fail and
-    leaves the others' warm starts there; back at θ0 every pose solves again and the
-    residual is a fresh method's to the FK's tolerance (1e-11 relative steps: ~1e-9 mm),
-    not that of poses stuck at starts outside the reach (main: up to 4 poses failing at
-    θ0, residuals off by 4 mm)."""
+    """A trial point far from θ (every crank pivot 5 mm off), where the commanded poses are
+    outside a rod's reach, is solved by continuation from θ0 (since issue 24's referee: the
+    FK is a function of θ alone, tests/test_fk_residual_path.py); back at θ0 every pose
+    solves again and the residual is a fresh method's to the FK's tolerance (1e-11 relative
+    steps: ~1e-9 mm), not that of poses stuck at starts outside the reach (before issue 14:
+    up to 4 poses failing at θ0, residuals off by 4 mm)."""
     from pkmcal.mechanisms.rss_hexapod import PARAM_NAMES
 
     m, campaign = reading_space_rss
@@ -618,7 +619,7 @@ def test_fk_residual_after_a_far_trial_point_equals_fresh(reading_space_rss):
         far[PARAM_NAMES.index(f"s{i + 1}.x")] += 5.0 * (-1) ** i
         far[PARAM_NAMES.index(f"s{i + 1}.y")] += 5.0 * (-1) ** (i // 2)
     meth = make_method("fk-residual", model)
-    assert not meth.evaluate(far, jac=False, cov=False).converged.all()
+    assert meth.evaluate(far, jac=False, cov=False).converged.all()
     back = meth.evaluate(th0, jac=False, cov=False)
     assert back.converged.all()
     np.testing.assert_allclose(back.r, fresh.r, rtol=0, atol=1e-8)
