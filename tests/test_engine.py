@@ -603,7 +603,7 @@ def test_fk_residual_after_a_far_trial_point_equals_fresh(reading_space_rss):
     outside a rod's reach, is solved by continuation from θ0 (since issue 24's referee: the
     FK is a function of θ alone, tests/test_fk_residual_path.py); back at θ0 every pose
     solves again and the residual is a fresh method's to the FK's tolerance (1e-11 relative
-    steps: ~1e-9 mm), not that of poses stuck at starts outside the reach (before issue 14:
+    steps: ~1e-9 mm), not that of poses stuck at starts outside the reach (an earlier main:
     up to 4 poses failing at θ0, residuals off by 4 mm)."""
     from pkmcal.mechanisms.rss_hexapod import PARAM_NAMES
 
