@@ -496,3 +496,29 @@ def test_locations_are_tried_not_only_checked(tmp_path):
     check_output_dir(tmp_path / "new" / "folder")
     check_output_path(tmp_path / "out.csv")
     assert list(tmp_path.iterdir()) == []       # the trial files are gone
+
+
+# -- an output that is a device or a named pipe -----------------------------------------------------
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no named pipes on this system")
+def test_an_output_that_is_a_named_pipe_is_written_into_not_replaced(tmp_path):
+    """(Old: the atomic write's os.replace put a regular file where the pipe was; as root,
+    '-o /dev/null' turned /dev/null into a file, 2026-12-03.) A character device or a named
+    pipe is written in place: here a reader gets the whole table and the pipe stays a pipe
+    (a FIFO rather than /dev/null itself, which a regression would destroy)."""
+    import stat
+    import threading
+
+    from pkmcal.io.atomic import atomic_write_text
+
+    pipe = tmp_path / "out.csv"
+    os.mkfifo(pipe)
+    got = []
+    reader = threading.Thread(target=lambda: got.append(pipe.read_text()), daemon=True)
+    reader.start()
+    check_output_path(pipe)
+    atomic_write_text(pipe, "x,y\n1,2\n")
+    reader.join(timeout=30)
+    assert got == ["x,y\n1,2\n"] and stat.S_ISFIFO(os.stat(pipe).st_mode)
+    assert [p.name for p in tmp_path.iterdir()] == ["out.csv"]          # no temporary file left

@@ -18,6 +18,11 @@ refused before any output — of this or another location — is written. Permis
 not the whole answer (a superuser passes them in ``/proc`` and on read-only or
 root-squashed mounts), so the folder a file would be created in is also tried: a hidden
 ``.pkmcal-write-check-*`` file is created there and removed at once.
+
+An existing output that is a character device or a named pipe (``-o /dev/null``, a pipe
+another program reads) is written in place, not replaced: :func:`os.replace` would put a
+regular file where the device was (as root, ``-o /dev/null`` turned ``/dev/null`` into a
+file, 2026-12-03). A block device or a socket is refused.
 """
 
 from __future__ import annotations
@@ -79,6 +84,10 @@ def _location_problem(output: str, what: str) -> str | None:
     if st is not None:
         if what == "file" and stat.S_ISDIR(st.st_mode):
             return "it is a folder; give a file name"
+        if what == "file" and (stat.S_ISBLK(st.st_mode) or stat.S_ISSOCK(st.st_mode)):
+            return "it is a block device or a socket, not a file; give a file name"
+        if what == "file" and _written_in_place(st.st_mode):
+            return None if os.access(output, os.W_OK) else "no write permission"
         if what == "folder" and not stat.S_ISDIR(st.st_mode):
             return "it exists and is not a folder; give a folder"
         target = output if what == "folder" else directory
@@ -227,13 +236,31 @@ def remove_stale_temporaries(target: str | os.PathLike, now: float | None = None
     return removed
 
 
+def _written_in_place(mode: int) -> bool:
+    """Whether an existing output of ``st_mode`` ``mode`` is written in place (module
+    docstring): a character device or a named pipe."""
+    return stat.S_ISCHR(mode) or stat.S_ISFIFO(mode)
+
+
 @contextlib.contextmanager
 def atomic_writer(path: str | os.PathLike, binary: bool = False) -> Iterator[IO]:
     """A file that becomes ``path`` when the block ends without an exception, atomically; on
     an exception it is deleted and ``path`` is left as it was. Text (UTF-8, ``\\n`` line
     ends kept), or bytes with ``binary=True``. An existing file keeps its permission bits; a
-    new one gets ``0o666 & ~umask``. Raises :class:`PkmcalError` if it cannot be written."""
+    new one gets ``0o666 & ~umask``. An existing character device or named pipe is written
+    in place (module docstring). Raises :class:`PkmcalError` if it cannot be written."""
     target = Path(path)
+    try:
+        in_place = _written_in_place(os.stat(target).st_mode)
+    except OSError:
+        in_place = False
+    if in_place:
+        try:
+            with (open(target, "wb") if binary else open(target, "w", encoding="utf-8", newline="")) as fh:
+                yield fh
+        except OSError as exc:
+            raise PkmcalError(f"cannot write '{path}': {exc.strerror or exc}") from None
+        return
     directory = target.parent if str(target.parent) else Path(".")
     remove_stale_temporaries(target)
     try:
