@@ -224,11 +224,10 @@ def _bed_violations(mechanism: Mechanism, setup: MeasurementSetup, safe: np.ndar
     from pkmcal.study.printed import BED_LIMITS
 
     out = {name: np.zeros(len(safe), dtype=bool) for name in BED_LIMITS}   # the nozzle at the bed
-    points = getattr(setup.sensor, "probe_points", None)
-    if points is None:
+    if "touch-probe" not in setup.sensor.abilities:     # declares probe_points (sensors/base.py)
         return out
     at_probe = safe.copy()
-    at_probe[:, 0:3] = points(mechanism.frame(safe))
+    at_probe[:, 0:3] = setup.sensor.probe_points(mechanism.frame(safe))
     edge = mechanism.check_limits(at_probe, margin=margin, margins=False).violations
     bad = np.zeros(len(safe), dtype=bool)
     for name in BED_EDGE_LIMITS:

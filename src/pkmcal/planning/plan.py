@@ -185,7 +185,7 @@ def plan_poses(mechanism: Mechanism, setup: MeasurementSetup, n: int, *, algorit
     except PkmcalError as exc:
         if not bed:
             raise
-        z = float(getattr(setup.sensor, "bed", np.zeros(3))[0])
+        z = float(setup.sensor.bed[0]) if "touch-probe" in setup.sensor.abilities else 0.0
         raise PkmcalError(f"{exc} (a Z probe's points are planned on the bed, z = {z:g} mm of the setup, where the "
                           f"probe triggers: machine '{nominal.name}' must reach it; give the bed's height in the "
                           "setup, or plan the points anywhere in the volume: --probe-anywhere, on_bed=False)") from None

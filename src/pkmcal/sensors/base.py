@@ -15,7 +15,8 @@ Declared, not probed: ``readable(frame)`` says which frames the sensor can read 
 not; ``works_with(mechanism)`` whether it can measure a machine at all; ``invertible``
 whether the readings determine the frame (``invert``: the full-pose sensor of paper 1);
 ``abilities`` optional features (``"touch-probe"``: reads where it triggers when lowered,
-:meth:`Sensor.measured_frames`; ``"tool-point"``: a planar tool point with
+:meth:`Sensor.measured_frames`, its probe point ``probe_points(frame)`` and its bed plane
+``bed`` (z_b, α, β); ``"tool-point"``: a planar tool point with
 ``tool_point``/``tool_frame_jacobian``).
 
 The actuators are the machine's own sensor: their readings are ``q = IK(x, ρ)``, with the
