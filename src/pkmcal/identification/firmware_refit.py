@@ -76,6 +76,9 @@ class FirmwareRefit:
     priors: tuple[str, ...]
     method: str
     notes: tuple[str, ...] = ()
+    #: the refit's standard deviations of its free numbers (internal units, by name; the
+    #: common radius, fitted outside the engine, has none)
+    std: dict = dataclasses.field(default_factory=dict)
 
     @property
     def machine(self):
@@ -166,15 +169,35 @@ def _with_sensor_fitted(machine, setup, measurements, method: str, priors):
     return dataclasses.replace(setup, sensor=fit.sensor)
 
 
+def refit_free(machine, setup, priors=()) -> tuple[str, ...]:
+    """The firmware's numbers (besides the common radius) the refit frees: those the
+    calibration freed (its record's ``free`` and ``gauge``), so that a parameter the
+    calibration held (a delta's arms from Z-probe heights) stays at its value; without that
+    record, the firmware's numbers but those the sensor cannot see without a prior on them
+    (:func:`pkmcal.identification.residuals.held_without_length`)."""
+    from pkmcal.identification.residuals import held_without_length
+
+    record = (machine.metadata or {}).get("calibration") or {}
+    if "free" in record:
+        chosen = set(record.get("free") or ()) | set(record.get("gauge") or ())
+        return tuple(n for n in FIRMWARE_FREE if n in chosen)
+    held = set(held_without_length(machine, setup.sensor, priors))
+    return tuple(n for n in FIRMWARE_FREE if n not in held)
+
+
 def firmware_refit(machine, setup, measurements, heldout=None, *, method: str | None = None,
-                   priors=None) -> FirmwareRefit:
+                   priors=None, free: tuple[str, ...] | None = None) -> FirmwareRefit:
     """Refit the linear delta ``machine`` (a calibrated one) with only its firmware's numbers
     free, and score the full model, the firmware's numbers without a refit and the refit on
     ``measurements`` (and ``heldout``) (module docstring).
 
     ``method`` default: the calibration record's, else the engine's default; ``priors``
     default: the calibration record's (:func:`recorded_priors`); priors on parameters the
-    firmware cannot hold are left out (they are held at 0), and so are the setup's own."""
+    firmware cannot hold are left out (they are held at 0), and so are the setup's own.
+    The firmware's numbers the calibration held stay held (:func:`refit_free`; ``free``, a
+    subset of :data:`FIRMWARE_FREE`, names them instead); a refit
+    with no residual left over for its free numbers (the common radius among them) is an
+    error: it would reproduce the measurements exactly and nothing would check it."""
     from scipy.optimize import minimize_scalar
 
     from pkmcal.identification.engine import identify
@@ -199,11 +222,15 @@ def firmware_refit(machine, setup, measurements, heldout=None, *, method: str | 
     if held_priors:
         notes.append("priors on parameters the firmware holds at 0 are left out: "
                      + ", ".join(p.text() for p in held_priors))
+    firmware_free = refit_free(machine, setup, priors) if free is None else tuple(free)
+    if unknown := [n for n in firmware_free if n not in FIRMWARE_FREE]:
+        raise PkmcalError(f"the firmware-limited refit frees only the firmware's numbers ({', '.join(FIRMWARE_FREE)}) "
+                          f"and the common radius; not {', '.join(unknown)}")
     fit_priors = tuple(dataclasses.replace(p, origin="calibration record") for p in priors
-                       if matches(p, FIRMWARE_FREE) or matches(p, setup.sensor.param_names))
+                       if matches(p, firmware_free) or matches(p, setup.sensor.param_names))
     radius_priors = [(p, n) for p in priors for n in matches(p, RADII)]
     bare = dataclasses.replace(setup, priors=())
-    free = list(FIRMWARE_FREE) + [n for n in setup.sensor.default_free]
+    free = list(firmware_free) + [n for n in setup.sensor.default_free]
     start = dropped_machine(machine)
     r0 = float(start.params[PARAM_NAMES.index("radius_a")])
     idx = [PARAM_NAMES.index(n) for n in RADII]
@@ -231,6 +258,14 @@ def firmware_refit(machine, setup, measurements, heldout=None, *, method: str | 
     best = fit_at(opt.x)
     if not best.success:
         raise PkmcalError(f"the firmware-limited refit did not converge ({best.message})")
+    dof = int(best.uncertainty.dof) - 1          # the common radius is a free number too
+    if dof <= 0:
+        raise PkmcalError(f"the firmware-limited refit has {len(best.free) + 1} free numbers (one common radius, "
+                          f"{', '.join(best.free)}) for {len(best.free) + 1 + dof} residuals of {len(best.used_poses)} "
+                          "poses: it would fit them exactly and nothing would check it; measure more points (Klipper's "
+                          "7 are too few for a refit), or export the calibration as it is with --no-refit")
+    if held_firmware := [n for n in FIRMWARE_FREE if n not in firmware_free]:
+        notes.append(f"held as the calibration held them: {', '.join(held_firmware)}")
     refit_machine = best.mechanism.with_params(best.mechanism.params, name=machine.name)
     refit_setup = dataclasses.replace(bare, sensor=best.sensor)
 
@@ -249,7 +284,7 @@ def firmware_refit(machine, setup, measurements, heldout=None, *, method: str | 
               score("firmware-limited refit (exported)", refit_machine, refit_setup))
     return FirmwareRefit(*scores, free=tuple(n for n in best.free), gauge=tuple(best.gauge),
                          priors=tuple(p.text() for p in priors if p not in held_priors), method=method,
-                         notes=tuple(notes))
+                         notes=tuple(notes), std={n: float(v) for n, v in zip(best.free, best.std)})
 
 
 __all__ = [
@@ -261,5 +296,6 @@ __all__ = [
     "dropped_machine",
     "firmware_refit",
     "recorded_priors",
+    "refit_free",
     "residual_rms",
 ]
