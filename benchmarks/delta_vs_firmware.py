@@ -33,6 +33,15 @@ into the firmware's own parameter model and scored on the true printer.
   exactly that; *refit* the export with the firmware-limited refit asked for by name
   (``--measurements probe.csv --setup z-probe-klipper``); *prior* with the rods measured (each rod's true length + N(0, 0.1 mm), as
   calipers give) as ``--prior arm_a=M±0.1`` (etc.) to identify.
+* **The printed object** (Klipper's enhanced mode, :func:`klipper_enhanced`): DELTA_CALIBRATE
+  on Klipper's 7 default points, the calibration object printed by the true printer under
+  that config and measured with calipers (σ 0.02 mm), DELTA_ANALYZE's extended calibration
+  (arms free) — ``klipper_object``; and pkmcal on the same data from the SAVE_CONFIG block
+  Klipper writes (``import klipper-analyze``, ``identify --setup printed-distance-klipper``,
+  ``export``) — ``pkmcal_object``, compared with ``klipper_object``.
+* **Refusals**: where ``export`` refuses a number the data do not determine, the benchmark
+  does what the message says a user may do, accepts it by name (``--accept-undetermined``)
+  and exports again; how often is counted (``refused_then_accepted``).
 * **Score**: each exported config is read into Klipper's ``DeltaCalibration`` (the firmware's
   own parameter model: its ``calc_stable_position`` turns a commanded nozzle position into
   carriage steps), the true printer moves its carriages there, and the true nozzle position
@@ -42,10 +51,12 @@ into the firmware's own parameter model and scored on the true printer.
   error, the rms of the true nozzle heights where the firmware puts z = 0.
 
 Printed: per set and per how (``nominal`` = printer.cfg unchanged, ``klipper``,
-``pkmcal_default``, ``pkmcal_refit``, ``pkmcal_prior``) the median and worst 3-D rms and first-layer rms (mm)
-and the median solve time (s; pkmcal: the three commands after ``import klipper``, in this
-process; Klipper: ``probe_finalize``), how many printers pkmcal's default path is worse than
-Klipper on (3-D rms, beyond 0.5 µm), and the median improvement over Klipper (%). Last line:
+``pkmcal_default``, ``pkmcal_refit``, ``pkmcal_prior``, ``klipper_object``,
+``pkmcal_object``) the median and worst 3-D rms and first-layer rms (mm), the median solve
+time (s; pkmcal: its commands after ``import klipper``, in this process; Klipper:
+``probe_finalize``, and the extended calibration for the object), failures and refusals, and
+for pkmcal's paths how many printers they are worse than Klipper on (3-D rms, beyond 0.5 µm;
+the object path against Klipper's enhanced mode) and the median improvement (%). Last line:
 one JSON object.
 
     python benchmarks/delta_vs_firmware.py [--printers 20] [--seed 0] [--quick]
@@ -60,6 +71,7 @@ import configparser
 import json
 import math
 import os
+import re
 import shutil
 import sys
 import tempfile
@@ -76,10 +88,11 @@ NOMINAL = {"radius": 105.2, "angles": (210.0, 330.0, 90.0), "arms": (215.0,) * 3
 STEP = 40.0 / (200 * 16)          # mm per step: rotation_distance 40, 200 full steps, 16 microsteps
 TRIGGER_STD = 0.005               # mm, the probe's scatter
 CALIPER_STD = 0.1                 # mm, rods measured
+CALIPER_OBJECT_STD = 0.02         # mm, the printed object's distances (the printed-distance-klipper setup's σ)
 ERRORS = {"arm": 0.3, "angle": 0.3, "radius": 0.3, "endstop": 0.5, "lean": 0.1}   # ± (uniform), mm and degrees
 #: The firmware-limited refit asked for by name (``export --measurements … --setup …``).
 REFIT_ARGS = ("--measurements", "WORK/probe.csv", "--setup", "z-probe-klipper")
-HOWS = ("nominal", "klipper", "pkmcal_default", "pkmcal_refit", "pkmcal_prior")
+HOWS = ("nominal", "klipper", "pkmcal_default", "pkmcal_refit", "pkmcal_prior", "klipper_object", "pkmcal_object")
 
 
 # -- the truth: this benchmark's own delta model ----------------------------------------------------------------
@@ -227,18 +240,68 @@ def klipper_delta_calibrate(printer_cfg: str):
     return dc, configfile
 
 
+def _saved(store: _ConfigFile) -> dict:
+    """The ten numbers DELTA_CALIBRATE saved (``DeltaCalibration.save_state``)."""
+    s = store.saved
+    return {"radius": float(s[("printer", "delta_radius")]),
+            "angles": tuple(float(s[(f"stepper_{t}", "angle")]) for t in "abc"),
+            "arms": tuple(float(s[(f"stepper_{t}", "arm_length")]) for t in "abc"),
+            "endstops": tuple(float(s[(f"stepper_{t}", "position_endstop")]) for t in "abc")}
+
+
+def klipper_enhanced(printer_cfg: str, truth: Truth, rng) -> tuple[dict, float, str]:
+    """Klipper's enhanced delta calibration (docs/Delta_Calibrate.md): DELTA_CALIBRATE on its
+    own 7 default points (the ``[delta_calibrate]`` radius), SAVE_CONFIG, the calibration
+    object (docs/prints/calibrate_size.stl) printed with that config and measured with
+    calipers (σ CALIPER_OBJECT_STD), DELTA_ANALYZE with the measurements (its
+    ``measurements_to_distances``: pillar widths given as 0, the distances as the measured
+    centre-to-centre ones) and ``CALIBRATE=extended``. Returns the saved numbers, the time of
+    the two solves, and the SAVE_CONFIG block Klipper writes (its ``[delta_calibrate]``
+    heights and distances in steps below the endstops)."""
+    from types import SimpleNamespace
+
+    from klippy.extras.delta_calibrate import measurements_to_distances
+
+    dc, store = klipper_delta_calibrate(printer_cfg)
+    fw0 = klipper_calibration(NOMINAL)
+    reported, _ = probe(truth, fw0, np.array(dc.probe_helper.probe_points, dtype=float), rng)
+    t0 = time.perf_counter()
+    dc.probe_finalize((0.0, 0.0, 0.0), [list(map(float, p)) for p in reported])
+    seconds = time.perf_counter() - t0
+    basic = klipper_calibration(_saved(store))                 # SAVE_CONFIG, RESTART
+    dc.last_probe_positions = [(0.0, fw0.calc_stable_position(list(map(float, p)))) for p in reported]
+    dc.printer._objects["toolhead"] = _Toolhead(SimpleNamespace(get_calibration=lambda: basic))
+    # the object's points (Klipper's own geometry) printed by the real printer under the new config
+    zero = {"SCALE": [1.0], "CENTER_DISTS": [0.0] * 6, "CENTER_PILLAR_WIDTHS": [0.0] * 3,
+            "OUTER_DISTS": [0.0] * 6, "OUTER_PILLAR_WIDTHS": [0.0] * 6}
+    pairs = measurements_to_distances(zero, basic)
+    steps = np.array([[p1, p2] for _, p1, p2 in pairs], dtype=float)        # (12, 2, 3) steps below the switches
+    real = truth.nozzle(truth.switch[None, :] - steps.reshape(-1, 3) * STEP,
+                        np.array([basic.get_position_from_stable(list(s)) for s in steps.reshape(-1, 3)]))
+    real = real.reshape(-1, 2, 3)
+    measured = np.linalg.norm(real[:, 1] - real[:, 0], axis=1) + rng.standard_normal(len(real)) * CALIPER_OBJECT_STD
+    dc.delta_analyze_entry = dict(zero, CENTER_DISTS=[float(d) for d in measured[:6]],
+                                  OUTER_DISTS=[float(d) for d in measured[6:]])
+    t0 = time.perf_counter()
+    dc.do_extended_calibration()
+    seconds += time.perf_counter() - t0
+    from pkmcal.io.klipper_config import AUTOSAVE_HEADER
+
+    sections: dict = {}
+    for (section, option), value in store.saved.items():
+        sections.setdefault(section, []).append(f"{option} = {value}")
+    block = AUTOSAVE_HEADER + "\n".join(f"#*# [{sec}]\n" + "\n".join(f"#*# {o}" for o in opts) + "\n#*#"
+                                         for sec, opts in sections.items()) + "\n"
+    return _saved(store), seconds, block
+
+
 def klipper_solve(printer_cfg: str, reported: np.ndarray) -> tuple[dict, float]:
     """DELTA_CALIBRATE's result on the probe positions (its ``probe_finalize``) and its time."""
     dc, store = klipper_delta_calibrate(printer_cfg)
     t0 = time.perf_counter()
     dc.probe_finalize((0.0, 0.0, 0.0), [list(map(float, p)) for p in reported])
     seconds = time.perf_counter() - t0
-    s = store.saved
-    cfg = {"radius": float(s[("printer", "delta_radius")]),
-           "angles": tuple(float(s[(f"stepper_{t}", "angle")]) for t in "abc"),
-           "arms": tuple(float(s[(f"stepper_{t}", "arm_length")]) for t in "abc"),
-           "endstops": tuple(float(s[(f"stepper_{t}", "position_endstop")]) for t in "abc")}
-    return cfg, seconds
+    return _saved(store), seconds
 
 
 def read_exported(path: str) -> dict:
@@ -274,7 +337,50 @@ def log_text(reported: np.ndarray) -> str:
     return "\n".join(lines) + "\n"
 
 
-def pkmcal_path(work: str, reported: np.ndarray, arm_prior: np.ndarray | None, *export_args: str) -> tuple[dict, float]:
+REFUSED = re.compile(r"(\w+): the measurements do not determine it")
+
+
+def export(work: str, *args: str) -> bool:
+    """``pkmcal export cal.yaml --format klipper -o out.cfg ARGS`` as a user runs it: when the
+    export is refused for numbers the data do not determine, the user accepts them by name
+    (as the message says) and runs it again; True when that happened."""
+    cmd = ("export", os.path.join(work, "cal.yaml"), "--format", "klipper", "-o", os.path.join(work, "out.cfg"),
+           *(a.replace("WORK", work) for a in args))
+    try:
+        pkmcal(*cmd)
+        return False
+    except RuntimeError as exc:
+        names = REFUSED.findall(str(exc))
+        if "the export is refused" not in str(exc) or not names:
+            raise
+        pkmcal(*cmd, *(a for n in names for a in ("--accept-undetermined", n)))
+        return True
+
+
+def pkmcal_object_path(work: str, block: str) -> tuple[dict, float, bool]:
+    """pkmcal on Klipper's enhanced-mode data: ``import klipper-analyze`` of the printer.cfg
+    with the SAVE_CONFIG block (heights and distances), ``identify --setup
+    printed-distance-klipper``, ``export --format klipper``."""
+    with open(os.path.join(work, "printer.cfg"), encoding="utf-8") as fh:
+        cfg = fh.read()
+    saved = os.path.join(work, "saved-printer.cfg")
+    with open(saved, "w", encoding="utf-8") as fh:
+        fh.write(cfg.rstrip("\n") + "\n" + block)
+    t0 = time.perf_counter()
+    pkmcal("import", "klipper-analyze", saved, "--machine", os.path.join(work, "delta.yaml"), "-o",
+           os.path.join(work, "pairs.csv"))
+    pkmcal("identify", os.path.join(work, "delta.yaml"), os.path.join(work, "pairs.csv"), "--setup",
+           "printed-distance-klipper", "-o", os.path.join(work, "cal.yaml"))
+    refused = export(work)
+    seconds = time.perf_counter() - t0
+    out = read_exported(os.path.join(work, "out.cfg"))
+    for f in ("pairs.csv", "cal.yaml", "out.cfg", "saved-printer.cfg"):
+        os.remove(os.path.join(work, f))
+    return out, seconds, refused
+
+
+def pkmcal_path(work: str, reported: np.ndarray, arm_prior: np.ndarray | None,
+                *export_args: str) -> tuple[dict, float, bool]:
     """pkmcal's commands after ``import klipper`` on one printer's probe log: the exported
     config's ten numbers and the commands' time."""
     with open(os.path.join(work, "probe.log"), "w", encoding="utf-8") as fh:
@@ -286,14 +392,13 @@ def pkmcal_path(work: str, reported: np.ndarray, arm_prior: np.ndarray | None, *
                                           for a in ("--prior", f"arm_{t}={m:.3f}±{CALIPER_STD}")]
     pkmcal("identify", os.path.join(work, "delta.yaml"), os.path.join(work, "probe.csv"), "--setup",
            "z-probe-klipper", *prior, "-o", os.path.join(work, "cal.yaml"))
-    pkmcal("export", os.path.join(work, "cal.yaml"), "--format", "klipper", "-o", os.path.join(work, "out.cfg"),
-           *(a.replace("WORK", work) for a in export_args))
+    refused = export(work, *export_args)
     seconds = time.perf_counter() - t0
     for f in ("probe.csv", "cal.yaml"):
         os.remove(os.path.join(work, f))
     cfg = read_exported(os.path.join(work, "out.cfg"))
     os.remove(os.path.join(work, "out.cfg"))
-    return cfg, seconds
+    return cfg, seconds, refused
 
 
 # -- the score ----------------------------------------------------------------------------------------------------
@@ -330,15 +435,25 @@ def rings() -> np.ndarray:
 
 def run_set(leans: bool, printers: int, seed: int, work: str, grid: np.ndarray) -> dict:
     rng = np.random.default_rng([seed, int(leans)])
+    rng_object = np.random.default_rng([seed, int(leans), 1])    # its own stream: the other paths' draws unchanged
     fw0 = klipper_calibration(NOMINAL)
     xy = rings()
     rows = {h: {"rms3d": [], "first_layer": [], "solve_s": []} for h in HOWS}
     failures = {h: 0 for h in HOWS}
+    refusals = {h: 0 for h in HOWS}
     for _ in range(printers):
         truth, arms = random_truth(rng, leans)
         reported, _ = probe(truth, fw0, xy, rng)
         measured = arms + rng.standard_normal(3) * CALIPER_STD
-        results = {"nominal": (NOMINAL, 0.0), "klipper": klipper_solve(os.path.join(work, "printer.cfg"), reported)}
+        results = {"nominal": (NOMINAL, 0.0, False),
+                   "klipper": (*klipper_solve(os.path.join(work, "printer.cfg"), reported), False)}
+        cfg, seconds, block = klipper_enhanced(os.path.join(work, "printer.cfg"), truth, rng_object)
+        results["klipper_object"] = (cfg, seconds, False)
+        try:
+            results["pkmcal_object"] = pkmcal_object_path(work, block)
+        except RuntimeError as exc:
+            print(f"pkmcal_object: {exc}", file=sys.stderr)
+            failures["pkmcal_object"] += 1
         for how, prior, export_args in (("pkmcal_default", None, ()),
                                         ("pkmcal_refit", None, REFIT_ARGS), ("pkmcal_prior", measured, ())):
             try:
@@ -346,7 +461,8 @@ def run_set(leans: bool, printers: int, seed: int, work: str, grid: np.ndarray) 
             except RuntimeError as exc:
                 print(f"{how}: {exc}", file=sys.stderr)
                 failures[how] += 1
-        for how, (cfg, seconds) in results.items():
+        for how, (cfg, seconds, refused) in results.items():
+            refusals[how] += int(refused)
             r3, fl = score(truth, cfg, grid)
             rows[how]["rms3d"].append(r3)
             rows[how]["first_layer"].append(fl)
@@ -359,9 +475,12 @@ def run_set(leans: bool, printers: int, seed: int, work: str, grid: np.ndarray) 
                     "first_layer_median_mm": float(np.median(a["first_layer"])) if len(a["rms3d"]) else None,
                     "first_layer_worst_mm": float(np.max(a["first_layer"])) if len(a["rms3d"]) else None,
                     "solve_s_median": float(np.median(a["solve_s"])) if len(a["rms3d"]) else None,
-                    "failures": failures[how], "rms3d_mm": [round(v, 6) for v in r["rms3d"]]}
-    k = np.array(rows["klipper"]["rms3d"])
+                    "failures": failures[how], "refused_then_accepted": refusals[how],
+                    "rms3d_mm": [round(v, 6) for v in r["rms3d"]]}
     for how in HOWS[2:]:
+        if how == "klipper_object":
+            continue
+        k = np.array(rows["klipper_object" if how == "pkmcal_object" else "klipper"]["rms3d"])
         p = np.array(rows[how]["rms3d"])
         if len(p) == len(k):
             out[how]["worse_than_klipper"] = int(np.sum(p > k + 5e-4))
@@ -393,7 +512,11 @@ def main(argv: list[str] | None = None) -> dict:
                       f" mm, first layer median {r['first_layer_median_mm']:.4f} (worst "
                       f"{r['first_layer_worst_mm']:.4f}) mm, solve {r['solve_s_median']:.3f} s"
                       + (f", worse than Klipper on {r['worse_than_klipper']}, median improvement "
-                         f"{r['improvement_over_klipper_pct']:.1f} %" if "worse_than_klipper" in r else ""))
+                         f"{r['improvement_over_klipper_pct']:.1f} %" if r.get("improvement_over_klipper_pct")
+                         is not None else "")
+                      + (f", export refused (undetermined numbers) and accepted by name on "
+                         f"{r['refused_then_accepted']}" if r["refused_then_accepted"] else "")
+                      + (f", failed on {r['failures']}" if r["failures"] else ""))
     out["seconds"] = time.perf_counter() - t0
     if args.quick:
         out["quick"] = True

@@ -205,36 +205,41 @@ LENGTH_TOLERANCE = 1e-3
 def _undetermined_lines(machine, accepted: tuple[str, ...], refit=None) -> list[str]:
     """What the calibration's measurements leave undetermined, one plain line each (printed on
     standard error and written as comments): the record's ``undetermined`` directions (from
-    identify) and each firmware number whose standard deviation is above its tolerance (the
-    calibrated ``machine``'s covariance, or the firmware-limited ``refit``'s own when it is
-    what is exported), which is an error unless ``accepted`` names it."""
+    identify) and each firmware number whose standard deviation is above its tolerance
+    (:func:`pkmcal.io.delta_firmware.firmware_sigmas` of the calibrated ``machine``'s
+    covariance, or of the firmware-limited ``refit``'s own when it is what is exported; a
+    machine with leaning rails exported as it is: its parameters' own), which is an error
+    unless ``accepted`` names it."""
     from fnmatch import fnmatchcase
 
     from pkmcal.identification.firmware_refit import FIRMWARE_FREE, RADII
+    from pkmcal.io.delta_firmware import FIRMWARE_NUMBERS, firmware_sigmas
 
     if machine.kind != "linear-delta":
         return []
     record = (machine.metadata or {}).get("calibration") or {}
     lines = [str(e.get("text") or e.get("meaning")) for e in record.get("undetermined") or ()]
+    known = tuple(FIRMWARE_NUMBERS) + FIRMWARE_FREE + RADII
     for pat in accepted:
-        if not any(fnmatchcase(n, pat) for n in FIRMWARE_FREE + RADII):
+        if not any(fnmatchcase(n, pat) for n in known):
             raise PkmcalError(f"--accept-undetermined '{pat}': no firmware number has this name; the names are "
-                              f"{', '.join(FIRMWARE_FREE + RADII)}")
+                              f"{', '.join(FIRMWARE_NUMBERS)}")
     names = list(machine.param_names)
-    cov = getattr(machine, "covariance", None)
-    if refit is not None:
-        stds = dict(refit.std)
-    elif cov is not None:
-        stds = {n: float(np.sqrt(max(cov[k, k], 0.0))) for k, n in enumerate(names)}
-    else:
+    source = refit.machine if refit is not None else machine
+    cov = refit.covariance if refit is not None else getattr(machine, "covariance", None)
+    if cov is None:
         return lines
     arm = float(np.mean([machine.params[names.index(f"arm_{t}")] for t in "abc"]))
     radius = float(np.mean([machine.params[names.index(f"radius_{t}")] for t in "abc"]))
+    stds = firmware_sigmas(source, cov)
+    if stds is None:       # leaning rails, exported as they are: the calibrated parameters' own sigmas
+        stds = {n: float(np.sqrt(max(cov[names.index(n), names.index(n)], 0.0))) for n in RADII + FIRMWARE_FREE}
+        angle_names = {n for n in stds if n.startswith("angle_")}
+    else:
+        angle_names = {"angle_a", "angle_b"}
     refused = []
-    for n in RADII + FIRMWARE_FREE:
-        k = names.index(n)
-        sigma = stds.get(n, 0.0)
-        angle = bool(machine.param_is_angle[k])
+    for n, sigma in stds.items():
+        angle = n in angle_names
         tol = LENGTH_TOLERANCE * arm / (radius if angle else 1.0)
         if not sigma > tol:
             continue

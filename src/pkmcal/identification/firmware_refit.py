@@ -76,9 +76,9 @@ class FirmwareRefit:
     priors: tuple[str, ...]
     method: str
     notes: tuple[str, ...] = ()
-    #: the refit's standard deviations of its free numbers (internal units, by name; the
-    #: common radius, fitted outside the engine, has none)
-    std: dict = dataclasses.field(default_factory=dict)
+    #: the refit's covariance (p, p) of the machine parameters (internal units; zero rows for
+    #: held ones; the common radius, fitted outside the engine, is held in it)
+    covariance: np.ndarray | None = None
 
     @property
     def machine(self):
@@ -174,15 +174,25 @@ def refit_free(machine, setup, priors=()) -> tuple[str, ...]:
     calibration freed (its record's ``free`` and ``gauge``), so that a parameter the
     calibration held (a delta's arms from Z-probe heights) stays at its value; without that
     record, the firmware's numbers but those the sensor cannot see without a prior on them
-    (:func:`pkmcal.identification.residuals.held_without_length`)."""
-    from pkmcal.identification.residuals import held_without_length
+    (:func:`pkmcal.identification.residuals.sensor_held_parameters`)."""
+    from pkmcal.identification.residuals import sensor_held_parameters
 
     record = (machine.metadata or {}).get("calibration") or {}
     if "free" in record:
         chosen = set(record.get("free") or ()) | set(record.get("gauge") or ())
         return tuple(n for n in FIRMWARE_FREE if n in chosen)
-    held = set(held_without_length(machine, setup.sensor, priors))
+    held = set(sensor_held_parameters(machine, setup.sensor, priors))
     return tuple(n for n in FIRMWARE_FREE if n not in held)
+
+
+def _machine_covariance(result) -> np.ndarray:
+    """The (p, p) covariance of ``result``'s machine parameters (zero for the held ones)."""
+    names = list(result.mechanism.param_names)
+    cov = np.zeros((len(names), len(names)))
+    k = [i for i, n in enumerate(result.free) if n in names]
+    idx = [names.index(result.free[i]) for i in k]
+    cov[np.ix_(idx, idx)] = np.asarray(result.covariance)[np.ix_(k, k)]
+    return cov
 
 
 def firmware_refit(machine, setup, measurements, heldout=None, *, method: str | None = None,
@@ -284,7 +294,7 @@ def firmware_refit(machine, setup, measurements, heldout=None, *, method: str | 
               score("firmware-limited refit (exported)", refit_machine, refit_setup))
     return FirmwareRefit(*scores, free=tuple(n for n in best.free), gauge=tuple(best.gauge),
                          priors=tuple(p.text() for p in priors if p not in held_priors), method=method,
-                         notes=tuple(notes), std={n: float(v) for n, v in zip(best.free, best.std)})
+                         notes=tuple(notes), covariance=_machine_covariance(best))
 
 
 __all__ = [

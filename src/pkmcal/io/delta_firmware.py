@@ -127,6 +127,56 @@ def exact_rewrite(machine: LinearDelta) -> tuple[float, np.ndarray, np.ndarray, 
     return R, angles, endstops, c
 
 
+#: The firmware's own numbers of a linear delta whose standard deviations
+#: :func:`firmware_sigmas` gives: Klipper's coordinate descent frees the radius, angle_a,
+#: angle_b and the endstops (the arms in its extended mode) and holds angle_c
+#: (klippy/kinematics/delta.py, ``DeltaCalibration.coordinate_descent_params``), so the
+#: angles are those relative to tower c's, free of the turn of the whole tower set.
+FIRMWARE_NUMBERS = ("delta_radius", "angle_a", "angle_b", "arm_a", "arm_b", "arm_c", "endstop_a", "endstop_b",
+                    "endstop_c")
+
+
+def firmware_sigmas(machine: LinearDelta, covariance: np.ndarray) -> dict[str, float] | None:
+    """Standard deviations of the firmware's numbers (:data:`FIRMWARE_NUMBERS`; mm, rad)
+    of a vertical-rail ``machine`` whose parameters have ``covariance`` (p, p): the
+    covariance propagated through its :func:`exact_rewrite` (the towers about their circle's
+    centre, the angles relative to tower c's), J Σ Jᵀ with J by central differences (steps
+    1e-5 mm, 1e-7 rad: the rewrite is smooth, so the truncation error is ~1e-10 of σ). These
+    do not depend on the gauge the fit chose (the slide and turn of the tower set are not in
+    them). None for a machine with leaning rails (no exact firmware form)."""
+    rho = np.asarray(machine.params, dtype=float)
+    is_angle = np.asarray(machine.param_is_angle, dtype=bool)
+
+    def numbers(r):
+        out = exact_rewrite(_Params(r))
+        if out is None:
+            return None
+        R, ang, E, _ = out
+        arms = r[[PARAM_NAMES.index(f"arm_{t}") for t in TOWERS]]
+        return np.r_[R, ang[0] - ang[2], ang[1] - ang[2], arms, E]
+
+    if numbers(rho) is None:
+        return None
+    cov = np.asarray(covariance, dtype=float)
+    cols = np.flatnonzero(np.diag(cov) > 0)
+    J = np.zeros((len(FIRMWARE_NUMBERS), len(cols)))
+    for j, k in enumerate(cols):
+        h = 1e-7 if is_angle[k] else 1e-5
+        up, down = rho.copy(), rho.copy()
+        up[k] += h
+        down[k] -= h
+        J[:, j] = (numbers(up) - numbers(down)) / (2 * h)
+    var = np.einsum("ij,jk,ik->i", J, cov[np.ix_(cols, cols)], J)
+    return dict(zip(FIRMWARE_NUMBERS, np.sqrt(np.maximum(var, 0.0)).tolist()))
+
+
+class _Params:
+    """What :func:`exact_rewrite` reads of a machine: its parameter vector."""
+
+    def __init__(self, params):
+        self.params = params
+
+
 def firmware_subset(machine: LinearDelta) -> tuple[DeltaFirmware, list[Dropped]]:
     """The firmware numbers of ``machine`` and what they drop. Vertical rails: the
     :func:`exact_rewrite` (nothing dropped; ``origin`` says where the firmware's origin

@@ -131,10 +131,13 @@ class LinearDelta(TranslatingMechanism):
     #: DELTA_CALIBRATE holds them (klippy/kinematics/delta.py,
     #: ``DeltaCalibration.coordinate_descent_params``: the arms only in its extended mode,
     #: with printed distances): the arms, whose common scale with the radius heights leave
-    #: to σ ≈ 1.5 % (a 100 mm part 1.5 mm off), and the rail leans, which heights confuse
-    #: with the endstops and angles (fitted from a bed they make the print's shape worse,
-    #: docs/studies.md). A prior on the measured arms frees them (it fixes the scale).
-    held_without_length: ClassVar[tuple[str, ...]] = ("arm_*", "lean_*")
+    #: to σ ≈ 1.5 % (a 100 mm part 1.5 mm off). A prior on the measured arms frees them.
+    held_without_length: ClassVar[tuple[str, ...]] = ("arm_*",)
+    #: Held by default when every reading is on the bed (a Z probe, a printed object), as
+    #: Klipper holds them (it has none): the rail leans, which such readings confuse with the
+    #: endstops and angles (fitted from a bed they make the print's shape worse, even with
+    #: the printed object: docs/studies.md).
+    held_on_one_plane: ClassVar[tuple[str, ...]] = ("lean_*",)
 
     def __post_init__(self) -> None:
         self._freeze_params()

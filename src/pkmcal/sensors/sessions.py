@@ -190,6 +190,10 @@ class SessionSensor(Sensor):
         return any(s.sees_length for s in self.sensors)
 
     @property
+    def reads_one_plane(self) -> bool:  # type: ignore[override]
+        return all(s.reads_one_plane for s in self.sensors)
+
+    @property
     def reading_names(self) -> tuple[str, ...]:
         return self.sensors[0].reading_names
 

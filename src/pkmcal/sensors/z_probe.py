@@ -94,6 +94,7 @@ class ZProbeSensor(Sensor):
     #: heights only: a common scale of the machine changes them by a hair (a delta's arms
     #: and radius together: σ 1.5 % from 37 points, `pkmcal identifiability`)
     sees_length = False
+    reads_one_plane = True
 
     def __post_init__(self) -> None:
         self._init_params()
