@@ -220,3 +220,25 @@ def test_a_refit_with_no_residual_to_spare_is_refused(printer):
                        free=("angle_a", "angle_b", "angle_c", "endstop_a", "endstop_b", "endstop_c"))
     with pytest.raises(PkmcalError, match="frees only the firmware's numbers"):
         firmware_refit(fit.mechanism, setup, meas, priors=(), free=("lean_radial_a",))
+
+
+def test_klippers_seven_points_and_its_printed_object_take_the_default_path(printer, tmp_path):
+    """Klipper's standard 7 probe points fit by default (6 free numbers, one degree of freedom
+    left: the arms held), and a printed-object calibration (examples/klipper/delta-analyze.log)
+    exports, with the firmware-limited refit on its pairs when asked (was refused)."""
+    nominal, setup, meas, _ = _fit(printer)
+    seven = Measurements(actuators=meas.actuators[:7], readings=meas.readings[:7], commanded=meas.commanded[:7])
+    fit = identify(nominal, setup, seven)
+    assert fit.success and fit.uncertainty.dof == 1 and len(fit.free) == 6
+    run = CliRunner()
+    log = str(Path(__file__).resolve().parent.parent / "examples" / "klipper" / "delta-analyze.log")
+    for args in (["import", "klipper-analyze", log, "--machine", "kossel-mini", "-o", "pairs.csv"],
+                 ["identify", "kossel-mini", "pairs.csv", "--setup", "printed-distance-klipper", "-o", "obj.yaml"],
+                 ["export", "obj.yaml", "--format", "klipper", "-o", "obj.cfg"]):
+        res = _invoke(run, tmp_path, args)
+        assert res.exit_code == 0, (args, res.output)
+    held = load_machine(str(tmp_path / "obj.yaml")).metadata["calibration"]
+    assert set(ARMS) <= set(held["free"]) and not set(LEANS) & set(held["free"])
+    res = _invoke(run, tmp_path, ["export", "obj.yaml", "--format", "klipper", "--measurements", "pairs.csv",
+                                  "-o", "refit.cfg"])
+    assert res.exit_code == 0 and "firmware-limited refit (exported)" in res.output, res.output

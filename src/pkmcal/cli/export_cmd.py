@@ -313,19 +313,19 @@ def _refit(machine, measurements: str, setup_spec: str | None, heldout: str | No
     if machine.kind != "linear-delta":
         raise PkmcalError(f"--measurements refits a linear delta for its firmware; machine '{machine.name}' is a "
                           f"{machine.kind or 'machine of another kind'}")
+    from pkmcal.cli.klipper_probe_cmd import machine_read_by
     from pkmcal.identification.firmware_refit import firmware_refit
     from pkmcal.io.measurements import load_measurements
-    from pkmcal.io.lookup import load_setup
 
     if setup_spec is None:
         setup_spec = ((machine.metadata or {}).get("calibration") or {}).get("setup")
         if setup_spec is None:
             raise PkmcalError(f"{calibrated} has no calibration record naming its setup: give --setup SETUP (the "
                               "setup of the measurements, e.g. z-probe-klipper)")
-    setup = load_setup(setup_spec, machine)
-    meas = load_measurements(measurements, machine, setup)
-    held = None if heldout is None else load_measurements(heldout, machine, setup)
-    return firmware_refit(machine, setup, meas, held)
+    read, setup = machine_read_by(machine, setup_spec)     # printed distances: the machine read as pose pairs
+    meas = load_measurements(measurements, read, setup)
+    held = None if heldout is None else load_measurements(heldout, read, setup)
+    return firmware_refit(read, setup, meas, held)
 
 
 def _delta_firmware_text(machine, fmt: str, refit=None, klipper_config: str | None = None,

@@ -82,7 +82,10 @@ class FirmwareRefit:
 
     @property
     def machine(self):
-        return self.refit.machine
+        """The refit machine (the machine itself when the measurements read it as pose pairs)."""
+        from pkmcal.mechanisms.pose_pairs import single_machine
+
+        return single_machine(self.refit.machine)
 
     def lines(self) -> list[str]:
         """The report, one statement per line (``pkmcal export`` prints them on stderr)."""
@@ -115,8 +118,10 @@ def dropped_machine(machine):
     mean radius), with the reading reference of ``machine`` (so that it reads the same
     measurements)."""
     from pkmcal.io.delta_firmware import firmware_subset
+    from pkmcal.mechanisms.pose_pairs import single_machine
 
-    return machine.with_params(firmware_subset(machine)[0].machine(machine.name).params, name=machine.name)
+    single = single_machine(machine)        # a machine read as pose pairs (printed distances): its own numbers
+    return machine.with_params(firmware_subset(single)[0].machine(machine.name).params, name=machine.name)
 
 
 def recorded_priors(machine) -> tuple:
