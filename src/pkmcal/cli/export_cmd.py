@@ -10,7 +10,13 @@
   (:mod:`pkmcal.io.delta_firmware`), what it cannot hold listed on standard error; with
   ``--measurements`` (``--setup``, ``--heldout``, ``--json``) the firmware-limited refit is
   exported instead, with the fit and held-out RMS of the full model, of its firmware numbers
-  and of the refit (:mod:`pkmcal.identification.firmware_refit`).
+  and of the refit (:mod:`pkmcal.identification.firmware_refit`); without it, the refit on
+  the measurements the calibration record names (unchanged: their SHA-256) when the machine
+  has what the firmware cannot hold (``--no-refit``: never). What the calibration's data left
+  undetermined (the record's ``undetermined``) is printed and written as comments; a firmware
+  number whose standard deviation (:func:`pkmcal.io.delta_firmware.firmware_sigmas`) is above
+  its tolerance — 0.1 % of the arm for lengths, for an angle the one that moves a tower that
+  far — is refused unless ``--accept-undetermined NAME`` (issue 25).
 * ``--format json``: the identified parameters ρ with their standard deviations σ_i and
   correlations ρ_ij = Σ_ij / (σ_i σ_j) from the machine file's covariance Σ, units,
   conventions and calibration metadata (:func:`pkmcal.io.calibration_json.calibration_json`).

@@ -19,6 +19,10 @@ with its automatic gauge (a Z probe on a level bed cannot see the towers turned 
 the common radius, which the engine's per-tower parameters cannot tie, is the minimiser of
 that fit's cost over R (Brent's method, :func:`scipy.optimize.minimize_scalar`).
 
+The firmware's numbers the calibration held stay held (:func:`refit_free`: the record's
+``free``; a delta's arms from Z-probe heights alone), and a refit with no residual left over
+for its free numbers (the common radius counted) is an error, not an exact interpolation.
+
 Three models are scored on the same measurements (and on held-out ones when given): the
 full calibrated model, the firmware's numbers of it without a refit, and the refit. Each
 score is the RMS of the raw residual rows (measured − predicted reading, mm for a Z probe:

@@ -38,7 +38,11 @@ engine fits them; columns: the candidate parameters) is analysed as follows.
   of ε that the measurements leave (linearised at the nominal machine). It is *unidentifiable*
   when u' = 0 or v/σ_1 is at most ``rtol``; *weak* below
   ``weak_ratio``; *not determined* when σ exceeds the tolerance the machine declares for it
-  (a genuine but noise-swamped direction); else *identified*.
+  (a genuine but noise-swamped direction); else *identified*. After a fit,
+  :func:`undetermined_directions` judges them on every parameter the machine does not hold
+  (what the data can see, not what one fit freed), with the fit's priors as rows, and says
+  which of the direction's parameters the fit held (issue 25: what ``identify`` and
+  ``export`` print).
 """
 
 from __future__ import annotations

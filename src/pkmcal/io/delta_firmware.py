@@ -33,6 +33,11 @@ B̃_i − c, the firmware's machine (R, θ'_i, L_i, E'_i) with
 origin c: in the firmware's x, y every position is the calibrated one less c (``origin``),
 z unchanged. Nothing is dropped; the export says where the firmware's origin is.
 
+The standard deviations of the firmware's numbers (:func:`firmware_sigmas`, what ``export``
+judges against its tolerances) are the calibration's covariance Σ propagated through that
+rewrite, J Σ Jᵀ, with the angles relative to tower c's (Klipper holds angle_c): numbers of
+the firmware's own frame, free of the fit's gauge.
+
 What neither firmware can hold otherwise — rail leans (and, on leaning rails, the radius
 differences and tool offset, replaced by their mean and 0) — is listed by
 :func:`firmware_subset` with the value that was dropped, so that an export never loses a
