@@ -527,6 +527,10 @@ def undetermined_directions(machine, setup, poses, priors=(), held=(), method: s
             continue
         e = dict(e, held=[n for n in e["direction"] if n in set(held)])
         text = describe_named(e)
+        others = [names[i] for i in cand if names[i] in set(held) and names[i] not in e["direction"]]
+        if others:
+            text += (f" (judged with the {len(others)} parameter(s) this fit held, {', '.join(others[:3])}"
+                     f"{', ...' if len(others) > 3 else ''}, free too: what the data alone can tell)")
         if e["held"]:
             text += (f"; this fit held {', '.join(e['held'])} at the machine file's values, so the result is as right "
                      "along it as those values are")
