@@ -501,3 +501,50 @@ def write_linuxcnc_hexapod_sample(folder: Path) -> tuple[Path, Path]:
     (folder / "kinematics.hal").write_text("\n".join(hal) + "\n")
     (folder / "hexapod.ini").write_text("\n".join(ini) + "\n")
     return folder / "kinematics.hal", folder / "hexapod.ini"
+
+
+# -- the real controllers (tests/controllers/) ----------------------------------------------------
+
+def in_ci(environ=None) -> bool:
+    """True when the ``CI`` environment variable is set (to anything but empty, ``0``,
+    ``false``, ``no``: the rule of tests/conftest.py's Hypothesis profile)."""
+    import os
+
+    environ = os.environ if environ is None else environ
+    return environ.get("CI", "").strip().lower() not in ("", "0", "false", "no")
+
+
+def require_controller(reason: str | None) -> None:
+    """Skip the test with ``reason`` (one line: why the controller cannot run here), or fail
+    it in CI, where .ci/run installs the controllers and a skip would hide that they did not
+    run; nothing when ``reason`` is None."""
+    import pytest
+
+    if reason is None:
+        return
+    if in_ci():
+        pytest.fail(f"in CI the controller tests must run: {reason}", pytrace=False)
+    pytest.skip(reason)
+
+
+def probe_triggers(nominal, real, sensor, xy, *, noise=0.0, rng=None, z0=5.0):
+    """Klipper's probing on a simulated printer: the firmware (``nominal``) lowers the nozzle
+    down its vertical line at each (x, y) until the ``real`` machine's probe point meets the
+    real bed (``sensor``), or, with ``noise``, stands that far (a normal draw) above it: the
+    trigger's scatter. Returns the carriage positions λ (N, 3) at the triggers and the
+    firmware's positions (x, y, z) there. Secant steps in z, vectorised over the points."""
+    xy = np.asarray(xy, dtype=float)
+    target = np.zeros(len(xy)) if not noise else rng.standard_normal(len(xy)) * noise
+
+    def height(z):
+        lam = nominal.ik(np.c_[xy, z])
+        return sensor.predict(real.frame(real.fk(lam).poses))[:, 0] - target, lam
+
+    z, dz = np.full(len(xy), z0), 1e-3
+    for _ in range(20):
+        h0, _ = height(z)
+        h1, _ = height(z + dz)
+        z = z - h0 * dz / (h1 - h0)
+    h, lam = height(z)
+    assert np.max(np.abs(h)) < 1e-11
+    return lam, np.c_[xy, z]

@@ -23,7 +23,9 @@ OUTPUT_OPTIONS = ("-o", "--output", "--save-real", "--out", "--report", ">")
 #: The repository's example input files (``examples/...`` in an example reads them).
 EXAMPLE_FILES = Path(__file__).resolve().parent.parent / "examples"
 #: Examples run elsewhere (the same command line, by another test).
-RUN_ELSEWHERE = {"pkmcal demo": "tests/test_demo.py runs the default demo"}
+RUN_ELSEWHERE = {"pkmcal demo": "tests/test_demo.py runs the default demo",
+                 "pkmcal check linuxcnc stewart-prototype": "tests/controllers/test_linuxcnc.py runs it where LinuxCNC "
+                                                            "is installed (and in CI)"}
 
 
 def help_text(*path: str) -> str:

@@ -232,7 +232,8 @@ def test_klippers_seven_points_and_its_printed_object_take_the_default_path(prin
     assert fit.success and fit.uncertainty.dof == 1 and len(fit.free) == 6
     run = CliRunner()
     log = str(Path(__file__).resolve().parent.parent / "examples" / "klipper" / "delta-analyze.log")
-    for args in (["import", "klipper-analyze", log, "--machine", "kossel-mini", "-o", "pairs.csv"],
+    for args in (["import", "klipper-analyze", log, "--machine", "kossel-mini", "--object-machine", "kossel-mini",
+                  "-o", "pairs.csv"],
                  ["identify", "kossel-mini", "pairs.csv", "--setup", "printed-distance-klipper", "-o", "obj.yaml"],
                  ["export", "obj.yaml", "--format", "klipper", "-o", "obj.cfg"]):
         res = _invoke(run, tmp_path, args)

@@ -113,8 +113,11 @@ def test_joint_comments_carry_offsets_limits_and_home():
     assert sorted(joints) == list(range(6))
     J = np.array([joints[n] for n in range(6)])
     np.testing.assert_array_equal(J[:, 0], m.offset)
-    np.testing.assert_array_equal(J[:, 1], m.offset + m.stroke[:, 0])
-    np.testing.assert_array_equal(J[:, 2], m.offset + m.stroke[:, 1])
+    # the joint limits stand the default stroke margin (1 % of the 80 mm stroke) inside it
+    np.testing.assert_array_equal(J[:, 1], m.offset + m.stroke[:, 0] + 0.8)
+    np.testing.assert_array_equal(J[:, 2], m.offset + m.stroke[:, 1] - 0.8)
+    _, _, joints = parse_hal(linuxcnc_hal(m, stroke_margin=0.0))
+    np.testing.assert_array_equal([joints[n][1] for n in range(6)], m.offset + m.stroke[:, 0])
     np.testing.assert_array_equal(J[:, 3], m.leg_lengths(m.home_pose)[0])
     # homing: a joint set to L0 + λ is the strut length genhexkins expects at that reading
     poses = random_poses(m, 20, 2)

@@ -43,7 +43,12 @@ POSIX_FIFO = pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="named pipes a
 
 @contextlib.contextmanager
 def deadline(seconds: int):
-    """Fail instead of hanging: a blocking open() of a named pipe is interrupted by SIGALRM."""
+    """Fail instead of hanging: a blocking open() of a named pipe is interrupted by SIGALRM
+    (POSIX; elsewhere no deadline, and no named pipes either)."""
+    if not hasattr(signal, "SIGALRM"):
+        yield
+        return
+
     def expire(signum, frame):
         raise AssertionError(f"still running after {seconds} s: the command hangs")
     old = signal.signal(signal.SIGALRM, expire)
@@ -104,6 +109,8 @@ FIFO_COMMANDS = {   # (command line, which input is the pipe, what the message c
     "import klipper-analyze": (["import", "klipper-analyze", "{}/p", "--machine", "kossel-mini", "-o",
                                 "{}/out.csv"], "Klipper file"),
     "import klipper include": (["import", "klipper", "{}/inc.cfg", "-o", "{}/out.yaml"], "Klipper config"),
+    "export --config": (["export", "kossel-mini", "--format", "klipper", "--config", "{}/p", "-o", "{}/out.cfg"],
+                        "Klipper config"),
     "import linuxcnc hal": (["import", "linuxcnc", "{}/p", "{}/hexapod.ini", "-o", "{}/out.yaml"], "HAL file"),
     "import linuxcnc ini": (["import", "linuxcnc", "{}/hexapod.hal", "{}/p", "-o", "{}/out.yaml"], "INI file"),
     "machine file": (["info", "{}/p.yaml"], "machine file"),
@@ -184,6 +191,29 @@ def test_every_reader_names_the_bad_byte(base, tmp_path):
     with pytest.raises(InputFileError, match="byte 0xFF at byte offset 6 is not UTF-8") as info:
         decode_utf8("f", b"\xef\xbb\xbfa\nb\xff", "table")
     assert info.value.line == 2
+
+
+def test_klipper_configs_are_read_as_klippers_open_reads_them(base, tmp_path):
+    """Klipper reads its config with open(filename, 'r') (klippy/configfile.py
+    _read_config_file): a lone CR ends a line, a byte-order mark is kept and its parser then
+    refuses the file. Through the shared reader's UTF-8 decoding (old, on main after the
+    merge) the CR-only file was one line ('no [printer] kinematics') and the BOM was dropped."""
+    lf = base / "printer.cfg"
+    cr, bom = tmp_path / "cr.cfg", tmp_path / "bom.cfg"
+    cr.write_bytes(lf.read_bytes().replace(b"\n", b"\r"))
+    bom.write_bytes(b"\xef\xbb\xbf" + lf.read_bytes())
+    assert read_klipper(str(cr)) == read_klipper(str(lf))
+    with pytest.raises(InputFileError, match="line 1: .*Klipper's parser refuses it too"):
+        read_klipper(str(bom))
+    try:    # Klipper's own parser, when the controllers extra is installed
+        from klippy import configfile  # noqa: F401
+    except ImportError:
+        return
+    from pkmcal.controllers.klipper import klipper_fileconfig
+
+    klipper_fileconfig(str(cr))
+    with pytest.raises(PkmcalError, match="Klipper's parser refuses the file"):
+        klipper_fileconfig(str(bom))
 
 
 # -- tracebacks: Klipper's #*# block ------------------------------------------------------------
@@ -301,6 +331,27 @@ def test_a_setup_label_with_a_newline_runs_and_resumes(tmp_path, monkeypatch):
     os.unlink(sorted((out / "parts").iterdir())[-1])
     res = run_study(study, out, workers=1, resume=True, figures=False)
     assert res.trials_run == 1 and (out / "trials.csv").read_bytes() == ref
+
+
+def test_a_trial_message_with_newlines(tmp_path):
+    """A real machine 100 m off (errors of 1e5 mm) reaches none of the poses: every trial
+    fails with the simulation's message of several lines (old: IndexError after all trials,
+    and again under --resume). The study ends (exit 0, the failures noted), and pandas and
+    a resumed run read the message back exactly."""
+    text = STUDY.replace("    real: stewart-prototype-real\n",
+                         '    errors:\n      - {parameters: "b*", distribution: normal, size: 1.0e5}\n')
+    p, out = _study(tmp_path, text), tmp_path / "r"
+    args = ["study", str(p), "-o", str(out), "--workers", "1", "--no-figures"]
+    res = invoke(args, tmp_path)
+    assert res.exit_code == 0 and "100.0% of the trials of configuration 0 failed" in res.stdout, res.output
+    messages = list(pd.read_csv(out / "trials.csv")["message"])
+    assert len(messages) == 2 and all(m.startswith("the real machine reaches none of the 15 planned poses") and
+                                      "\n  dropped (fk-not-converged" in m for m in messages), messages
+    assert list(read_trials(out / "trials.csv")["message"]) == messages
+    ref = (out / "trials.csv").read_bytes()
+    os.unlink(sorted((out / "parts").iterdir())[-1])
+    assert invoke(args + ["--resume"], tmp_path).exit_code == 0
+    assert (out / "trials.csv").read_bytes() == ref
 
 
 def test_a_study_label_with_a_newline_keeps_stdout_one_line_per_configuration(tmp_path):
@@ -424,6 +475,7 @@ def test_a_failed_study_keeps_only_what_resume_needs(tmp_path, monkeypatch):
     ["identify", "{}/machine.yaml", "{}/meas_ind.csv", "--setup", "{}/ind.yaml", "-o", "{}/out.yaml", "--report",
      "/proc/pkmcal-report"],
     ["demo", "--out", "/proc/pkmcal-demo"],
+    ["study", "{}/study-quick.yaml", "-o", "/proc/pkmcal-study"],
     ["identify", "{}/machine.yaml", "{}/meas_ind.csv", "--setup", "{}/ind.yaml", "-o", "/proc/out.yaml"],
 ])
 def test_output_into_a_folder_nothing_can_be_written_in(base, tmp_path, args):

@@ -361,7 +361,7 @@ def test_linuxcnc_ini_values_against_a_hand_computation():
     m = replace(PROTOTYPE, gains=gains, actuator_unit="rev", stroke=np.tile([0.0, 9.9], (6, 1)),
                 home=PROTOTYPE.home_pose)
     np.testing.assert_array_equal(leg_gains(m), gains)
-    ini = linuxcnc_ini(m)
+    ini = linuxcnc_ini(m, stroke_margin=0.0)         # the limits at the stroke's ends (no margin)
     section = ini.split("[JOINT_1]")[1].split("[JOINT_2]")[0]
     values = dict(line.split(" = ") for line in section.strip().splitlines())
     assert float(values["MIN_LIMIT"]) == 305.0
@@ -369,9 +369,11 @@ def test_linuxcnc_ini_values_against_a_hand_computation():
     assert float(values["HOME_OFFSET"]) == 305.0
     assert float(values["HOME"]) == PROTOTYPE.leg_lengths(PROTOTYPE.home_pose)[0, 1]
     assert "#   joint 1: gain 5.05 mm/rev" in ini and "(encoder/step counts per rev) / gain" in ini
-    s = joint_settings(m)
+    s = joint_settings(m, stroke_margin=0.0)
     np.testing.assert_array_equal(s["MAX_LIMIT"], 305.0 + gains * 9.9)
-    hal = linuxcnc_hal(m)
+    # the default margin is 1 % of each joint's stroke in mm of strut: 0.01·5.05·9.9 for leg 2
+    np.testing.assert_allclose(joint_settings(m)["MIN_LIMIT"][1], 305.0 + 0.01 * 5.05 * 9.9, rtol=0, atol=1e-12)
+    hal = linuxcnc_hal(m, stroke_margin=0.0)
     assert "# pkmcal.joint.1 leg=2 L0=305.0 MIN_LIMIT=305.0 MAX_LIMIT=354.995" in hal and "gain=5.05" in hal
     # and a machine without gains writes exactly what it wrote before (no gain lines)
     assert "Leg gains" not in linuxcnc_ini(PROTOTYPE) and "gain=" not in linuxcnc_hal(PROTOTYPE)

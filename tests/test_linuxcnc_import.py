@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 
 from pkmcal.cli.main import cli
 from pkmcal.errors import InputFileError, PkmcalError
-from pkmcal.io.export_linuxcnc import joint_settings, linuxcnc_hal, linuxcnc_ini
+from pkmcal.io.export_linuxcnc import check_home, joint_settings, linuxcnc_hal, linuxcnc_ini
 from pkmcal.io.import_linuxcnc import machine_from_linuxcnc, read_hal_genhexkins, read_ini
 from pkmcal.io.machine_file import load_machine, machine_from_text, machine_to_text
 from pkmcal.mechanisms.hexapod import Hexapod
@@ -84,6 +84,12 @@ def machines(draw):
 @given(machines())
 def test_round_trip_machine_hal_ini_machine(tmp_path_factory, machine):
     d = tmp_path_factory.mktemp("rt")
+    try:
+        check_home(machine, joint_settings(machine))
+    except PkmcalError:                 # a home LinuxCNC cannot home to: the INI is refused
+        with pytest.raises(PkmcalError, match="home pose"):
+            linuxcnc_ini(machine)
+        return
     hal, ini = export_files(d, machine)
     back = machine_from_linuxcnc(hal, ini).machine
     assert_same_kinematics(back, machine)
@@ -234,7 +240,7 @@ def test_ini_syntax_include_first_key_continuation(tmp_path):
     assert_same_kinematics(back, m)                       # the later MIN_LIMIT = 1.0 is not used
     parsed = read_ini(tmp_path / "main.ini")
     value, file, line = parsed.get("joint_0", "min_limit")
-    assert value == "305.0" and file.endswith("joints.inc") and line == 3
+    assert value == "305.5" and file.endswith("joints.inc") and line == 3    # the stroke 0.5 mm inside
 
 
 @pytest.mark.parametrize("edit, fragment", [
@@ -242,7 +248,7 @@ def test_ini_syntax_include_first_key_continuation(tmp_path):
     (("JOINTS = 6", "JOINTS = 9"), "[KINS] JOINTS = 9: genhexkins has 6 joints"),
     (("LINEAR_UNITS = mm", "LINEAR_UNITS = furlong"), "[TRAJ] LINEAR_UNITS = 'furlong': unknown unit"),
     (("[JOINT_2]\nTYPE = LINEAR", "[JOINT_2]\nTYPE = ANGULAR"), "[JOINT_2] TYPE = ANGULAR"),
-    (("MAX_LIMIT = 355.0\nHOME_OFFSET = 305.0\nHOME = 330.00000017978624\n\n[JOINT_3]",
+    (("MAX_LIMIT = 354.5\nHOME_OFFSET = 305.0\nHOME = 330.00000017978624\n\n[JOINT_3]",
       "MAX_LIMIT = abc\nHOME_OFFSET = 305.0\nHOME = 330.00000017978624\n\n[JOINT_3]"),
      "[JOINT_2] MAX_LIMIT = 'abc' is not a number"),
 ])
@@ -260,7 +266,7 @@ def test_missing_limits_need_an_ini_or_the_option(tmp_path):
     hal, ini = export_files(tmp_path, builtin_machine("stewart-prototype"))
     with pytest.raises(PkmcalError, match=r"no INI file gives the joint limits; give the INI file or --joint-limits"):
         machine_from_linuxcnc(hal)
-    ini.write_text(ini.read_text().replace("MIN_LIMIT = 305.0\n", "", 1))
+    ini.write_text(ini.read_text().replace("MIN_LIMIT = 305.5\n", "", 1))
     with pytest.raises(PkmcalError, match=r"has no \[JOINT_N\] MIN_LIMIT/MAX_LIMIT for joints 0"):
         machine_from_linuxcnc(hal, ini)
 
@@ -280,8 +286,9 @@ def test_gains_enter_the_joint_limits_and_home_offset():
     m = replace(plain, gains=g)
     np.testing.assert_array_equal(export_linuxcnc.leg_gains(m), g)
     s = joint_settings(m)
-    np.testing.assert_array_equal(s["MIN_LIMIT"], m.offset + g * m.stroke[:, 0])
-    np.testing.assert_array_equal(s["MAX_LIMIT"], m.offset + g * m.stroke[:, 1])
+    np.testing.assert_array_equal(s["margin"], 0.01 * (g * 50.0))        # 1 % of each joint's stroke in mm
+    np.testing.assert_array_equal(s["MIN_LIMIT"], m.offset + g * m.stroke[:, 0] + s["margin"])
+    np.testing.assert_array_equal(s["MAX_LIMIT"], m.offset + g * m.stroke[:, 1] - s["margin"])
     ini = linuxcnc_ini(m)
     assert "i.e. divide the scale that made the readings by the gain" in ini and "#   joint 2: gain 0.99 mm/mm" in ini
 

@@ -300,7 +300,7 @@ def test_console_lines_give_the_object_pairs(tmp_path):
     log.write_text("// probe at 0.000,0.000 is z=0.012500\n"
                    "DELTA_ANALYZE CENTER_DISTS=74,74,74,74,74,74 CENTER_PILLAR_WIDTHS=9,9,9\n"
                    "Recv: // ok\nDELTA_ANALYZE OUTER_DISTS=74,74,74,74,74,74 OUTER_PILLAR_WIDTHS=9,9,9,9,9,9\n")
-    got = read_klipper_analyze(log, FIRMWARE)
+    got = read_klipper_analyze(log, FIRMWARE, object_machine=FIRMWARE)   # printed with the probe's config
     m = got.measurements
     assert len(m) == 13
     p1, p2 = object_point_pairs()
@@ -366,6 +366,8 @@ def delta_analyze_log() -> str:
 
     lines = ["// Klipper console of a Kossel Mini (z_offset 0): DELTA_CALIBRATE, then Klipper's calibrate_size.stl",
              "// printed and measured with calipers (0.01 mm); a simulated printer (see tests/test_printed_distance.py)",
+             "// that printed the object with the config it probed with (nothing saved in between): --object-machine "
+             "kossel-mini",
              "DELTA_CALIBRATE"]
     lines += [f"// probe at {x:.3f},{y:.3f} is z={zz:.6f}" for (x, y), zz in zip(xy, z)]
     lines += [f"DELTA_ANALYZE CENTER_DISTS={values(meas[:6])}", f"DELTA_ANALYZE CENTER_PILLAR_WIDTHS={values(cw)}",
@@ -385,7 +387,8 @@ def test_cli_fits_the_printed_distances_and_exports_klippers_numbers(tmp_path):
 
     run = CliRunner()
     pairs, cal, cfg = tmp_path / "pairs.csv", tmp_path / "cal.yaml", tmp_path / "saved.cfg"
-    res = run.invoke(cli, ["import", "klipper-analyze", str(EXAMPLE_LOG), "--machine", "kossel-mini", "-o", str(pairs)])
+    res = run.invoke(cli, ["import", "klipper-analyze", str(EXAMPLE_LOG), "--machine", "kossel-mini",
+                           "--object-machine", "kossel-mini", "-o", str(pairs)])   # the example saved nothing between
     assert res.exit_code == 0, res.output
     res = run.invoke(cli, ["identify", "kossel-mini", str(pairs), "--setup", "printed-distance-klipper", "--free",
                            "angle_*,radius_*,arm_*,endstop_*", "--fix", "auto", "-o", str(cal), "--heldout", str(pairs)])
@@ -476,7 +479,7 @@ def test_held_out_reading_statistics_count_the_readings_each_row_takes():
     from pkmcal.mechanisms.library import builtin_machine
 
     machine = builtin_machine("kossel-mini")
-    meas = read_klipper_analyze(EXAMPLE_LOG, machine).measurements
+    meas = read_klipper_analyze(EXAMPLE_LOG, machine, object_machine=machine).measurements
     sensor = builtin_setup("printed-distance-klipper").sensor
     pred = predict(PosePairs(machine), sensor, meas, "nominal")
     assert pred.measured is not None and int(pred.measured.sum()) == 19
@@ -496,7 +499,7 @@ def test_cli_identifiability_reads_pose_pairs_and_refuses_what_pairs_cannot_do(t
     from pkmcal.mechanisms.library import builtin_machine
 
     machine = builtin_machine("kossel-mini")
-    meas = read_klipper_analyze(EXAMPLE_LOG, machine).measurements
+    meas = read_klipper_analyze(EXAMPLE_LOG, machine, object_machine=machine).measurements
     poses = tmp_path / "pairs.csv"
     cols = ("x", "y", "z", "x_2", "y_2", "z_2")
     poses.write_text(",".join(cols) + "\n" + "\n".join(",".join(repr(float(v)) for v in row) for row in meas.commanded)

@@ -375,7 +375,8 @@ def test_report_of_printed_distances_draws_pairs_not_tilts(tmp_path):
     log = Path(__file__).resolve().parents[1] / "examples" / "klipper" / "delta-analyze.log"
     run = CliRunner()
     pairs = tmp_path / "pairs.csv"
-    res = run.invoke(cli, ["import", "klipper-analyze", str(log), "--machine", "kossel-mini", "-o", str(pairs)])
+    res = run.invoke(cli, ["import", "klipper-analyze", str(log), "--machine", "kossel-mini", "--object-machine",
+                           "kossel-mini", "-o", str(pairs)])   # the example's object: printed with the probe's config
     assert res.exit_code == 0, res.output
     res = run.invoke(cli, ["identify", "kossel-mini", str(pairs), "--setup", "printed-distance-klipper",
                            "-o", str(tmp_path / "cal.yaml"), "--report", str(tmp_path / "rep")])

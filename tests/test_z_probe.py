@@ -23,7 +23,7 @@ import math
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from helpers import assert_jacobian_matches_fd
+from helpers import assert_jacobian_matches_fd, probe_triggers
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -46,29 +46,6 @@ KLIPPER_SET = tuple(f"{p}_{t}" for p in ("angle", "radius", "arm", "endstop") fo
 #: A gauge of the Klipper set on a level bed: tower c's position and tower b's radius pin the
 #: rotation about z and the horizontal translation, which no height sees.
 GAUGE = ("angle_c", "radius_b", "radius_c")
-
-
-def probe_triggers(nominal, real, sensor, xy, *, noise=0.0, rng=None, z0=5.0):
-    """Klipper's probing on a simulated printer: the firmware (``nominal``) lowers the nozzle
-    down its vertical line at each (x, y) until the ``real`` machine's probe point meets the
-    real bed (``sensor``), or, with ``noise``, stands that far (a normal draw) above it: the
-    trigger's scatter. Returns the carriage positions λ (N, 3) at the triggers and the
-    firmware's positions (x, y, z) there. Secant steps in z, vectorised over the points."""
-    xy = np.asarray(xy, dtype=float)
-    target = np.zeros(len(xy)) if not noise else rng.standard_normal(len(xy)) * noise
-
-    def height(z):
-        lam = nominal.ik(np.c_[xy, z])
-        return sensor.predict(real.frame(real.fk(lam).poses))[:, 0] - target, lam
-
-    z, dz = np.full(len(xy), z0), 1e-3
-    for _ in range(20):
-        h0, _ = height(z)
-        h1, _ = height(z + dz)
-        z = z - h0 * dz / (h1 - h0)
-    h, lam = height(z)
-    assert np.max(np.abs(h)) < 1e-11
-    return lam, np.c_[xy, z]
 
 
 def _disc(n, radius, rng):
@@ -246,7 +223,7 @@ def test_probe_lines_give_back_the_carriage_positions(tmp_path):
         path.write_text("PROBE_ACCURACY at X:0.000 Y:0.000 Z:10.000\n" + text + "\n// Result is z=0.123456\n")
         got = read_klipper_probe(path, m, offset).measurements
         np.testing.assert_allclose(got.actuators, m.ik(nozzle), rtol=0, atol=1e-9)
-        np.testing.assert_array_equal(got.readings, np.zeros((3, 1)))
+        np.testing.assert_array_equal(got.readings[:3], np.zeros((3, 1)))
         np.testing.assert_allclose(got.commanded, nozzle, rtol=0, atol=1e-9)
         assert got.lines.tolist() == [2, 3, 4]
 
@@ -276,14 +253,20 @@ def test_saved_block_stable_positions_give_back_the_carriage_positions(tmp_path)
     path.write_text(base + "\n".join(block) + "\n")
     res = read_klipper_probe(path, m, (0.0, 0.0, 1.25))
     got = res.measurements
+    # the manual height (DELTA_ANALYZE MANUAL_HEIGHT: the nozzle measured 0.1 above the bed) is
+    # read after the probe heights: its carriages from its steps, probe_z = 0.1 - z_offset
+    manual_steps = np.array([1.0, 2.0, 3.0])
+    np.testing.assert_allclose(got.actuators[3], m.reading_reference - manual_steps * np.array([sd, sd, 0.0125]),
+                               rtol=0, atol=1e-9)
+    assert got.readings[3, 0] == pytest.approx(0.1 - 1.25, abs=1e-12)
+    assert any("1 manual height(s)" in n for n in res.notes)
     # %.3f steps: within 0.0005 step
-    np.testing.assert_allclose(got.actuators, m.ik(nozzle), rtol=0, atol=0.0005 * sd * 1.000001)
-    np.testing.assert_array_equal(got.readings, np.zeros((3, 1)))
-    np.testing.assert_allclose(got.commanded, nozzle, rtol=0, atol=1e-3)
-    assert any("manual_height" in n for n in res.notes)
+    np.testing.assert_allclose(got.actuators[:3], m.ik(nozzle), rtol=0, atol=0.0005 * sd * 1.000001)
+    np.testing.assert_array_equal(got.readings[:3], np.zeros((3, 1)))
+    np.testing.assert_allclose(got.commanded[:3], nozzle, rtol=0, atol=1e-3)
     # the gear ratio divides the step; a missing microsteps is named
     path.write_text(base.replace("microsteps: 16\narm", "microsteps: 16\ngear_ratio: 2:1\narm") + "\n".join(block))
-    lam_a = read_klipper_probe(path, m, (0.0, 0.0, 1.25)).measurements.actuators[:, 0]
+    lam_a = read_klipper_probe(path, m, (0.0, 0.0, 1.25)).measurements.actuators[:3, 0]
     np.testing.assert_allclose(m.reading_reference[0] - lam_a, steps[:, 0] * sd / 2, rtol=1e-6, atol=1e-9)
     path.write_text(base.replace("microsteps: 16\n\n[stepper_c]", "\n[stepper_c]") + "\n".join(block))
     with pytest.raises(PkmcalError, match=r"\[stepper_b\] has rotation_distance but no microsteps"):
@@ -293,6 +276,10 @@ def test_saved_block_stable_positions_give_back_the_carriage_positions(tmp_path)
     with pytest.raises(PkmcalError, match=r"\[probe\] x_offset, y_offset are 0, 18 mm but the setup's probe_offset has "
                                           r"0, 0.*--setup-output"):
         read_klipper_probe(path, m, (0.0, 0.0, 1.25))
+    # a manual height is the nozzle's: not read as a probe with an x, y offset
+    with pytest.raises(PkmcalError, match=r"manual_height0: a manual height is the nozzle's"):
+        read_klipper_probe(path, m, (0.0, 18.0, 1.25))
+    path.write_text(path.read_text().replace("#*# manual_height0 = 0.1\n#*# manual_height0_pos = 1.0,2.0,3.0\n", ""))
     res = read_klipper_probe(path, m, (0.0, 18.0, 1.25))
     assert any("z_offset 1 mm, the setup's 1.25 mm" in n for n in res.notes)
 

@@ -99,7 +99,9 @@ def plan(machine: Mechanism, setup: MeasurementSetup, n: int, *, algorithm: str 
          seed: int | None = 0, n_candidates: int = 2000, **options) -> Plan:
     """Choose ``n`` poses to measure (``pkmcal plan``; :func:`pkmcal.planning.plan.plan_poses`
     takes the other ``options``). ``plan.poses`` (n, n_dof) internal units, ``plan.commands``
-    the nominal actuator commands, ``plan.selection.indices`` O1..O5.
+    the nominal actuator commands, ``plan.selection.indices`` O1..O5. A Z probe's points lie
+    on the bed (``plan.on_bed``; ``on_bed=False`` plans them anywhere in the volume), and
+    :func:`pkmcal.planning.plan.height_sigma` predicts their first-layer error.
 
     >>> import pkmcal
     >>> m = pkmcal.load_machine("stewart-prototype")

@@ -315,3 +315,22 @@ def test_check_klipper_refuses_the_wrong_kind_of_machine():
     rotary = read_klipper(str(CONFIGS / "example-rotary-delta.cfg")).machine("r")
     with pytest.raises(PkmcalError, match="is a Klipper 'delta' printer; machine 'r' is a rotary-delta"):
         check_klipper(CONFIGS / "example-delta.cfg", rotary)
+
+
+@needs_klipper
+def test_pkmcal_check_klipper_is_the_same_comparison_on_the_users_files(tmp_path):
+    """``pkmcal check klipper PRINTER.cfg CALIBRATED.yaml``: exit 0 and the differences of
+    :func:`check_klipper` on the export; exit 1 on Klipper's example unchanged."""
+    import json
+
+    machine = _calibrated_linear()
+    path = _export(tmp_path, machine, "example-delta.cfg", True)
+    cal = path.parent / "calibrated.yaml"
+    run = CliRunner().invoke
+    res = run(cli, ["check", "klipper", str(path), str(cal), "--n-poses", "50", "--seed", "3", "--json"])
+    assert res.exit_code == 0, res.output
+    d = json.loads(res.stdout)
+    expected = check_klipper(path, machine, workspace_poses(machine, 50, seed=3))
+    assert d["ok"] and d["max_stepper_diff"] == expected.max_stepper_diff < TOL
+    bad = run(cli, ["check", "klipper", str(CONFIGS / "example-delta.cfg"), str(cal), "--n-poses", "50"])
+    assert bad.exit_code == 1 and "does NOT move as pkmcal predicts" in bad.stderr, bad.output

@@ -70,13 +70,16 @@ from pkmcal.sensors.library import BUILTIN_SETUPS
               help="With --sessions: re-home the actuators before each later session, their zeros moved by "
                    "U(-MM, MM) mm (rotary: MM/1000 rad); the file records the readings of the moved zeros "
                    "(identify --session-offsets estimates them as dq_i@LABEL).")
+@click.option("--probe-anywhere", is_flag=True,
+              help="Z probes: read the probe at poses off the bed too (a probe on gauge blocks); by default a pose "
+                   "whose probe point is not on the bed is refused (a probe reads only where it touches the bed).")
 @output_option("MEAS.csv", "Measurement CSV")
 @units_comment_option
 @quiet_option
 @import_options
 def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_real, setup_spec, poses, seed,
                  ignore_limits, output, units_comment, quiet, mapping, n_sessions=None, session_errors=5.0,
-                 session_offsets=None) -> None:
+                 session_offsets=None, probe_anywhere=False) -> None:
     """Simulate measuring POSES.csv on a real machine commanded with the nominal MACHINE.
 
     The actuators are commanded by MACHINE's inverse kinematics; the real machine goes where
@@ -93,6 +96,10 @@ def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_rea
 
     With --sessions S the file has a 'session' column (last) and the summary lists each
     session's true sensor parameters (and actuator offsets), mm and degrees.
+
+    A Z probe reads only on the bed: a pose whose probe point the nominal machine puts off
+    the bed (more than 0.001 mm) is refused, naming its row, unless --probe-anywhere
+    ('pkmcal plan' plans a Z probe's points on the bed).
     """
     if (real_spec is None) == (random_errors is None):
         raise PkmcalError("give the real machine with --real REAL, or draw one with --random-errors MM")
@@ -110,6 +117,11 @@ def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_rea
     nominal = load_machine(machine)
     setup = load_setup(setup_spec, nominal)
     commanded = read_poses(poses, nominal, mapping)
+    if not probe_anywhere and _refuse_off_bed(nominal, setup, commanded, poses):
+        # probe points on the bed: the real nozzle may be found below it (study.printed.BED_LIMITS)
+        from pkmcal.study.printed import bed_limits
+
+        ignore_limits = tuple(dict.fromkeys(tuple(ignore_limits) + bed_limits(nominal)))
     rng = np.random.default_rng(seed)
     if random_errors is not None:
         real = perturb_machine(nominal, random_errors, rng, distribution=error_distribution,
@@ -153,6 +165,34 @@ def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_rea
     else:
         click.echo(summary)
         click.echo(f"wrote {output}" + (f" and {save_real}" if save_real else ""))
+
+
+#: How far from the bed (mm) a commanded probe point may be and still be read as on it: the
+#: 0.001 mm to which Klipper prints positions (a pose file rounded to 3 decimals is on the bed).
+BED_TOLERANCE_MM = 1e-3
+
+
+def _refuse_off_bed(nominal, setup, commanded: np.ndarray, path: str) -> bool:
+    """A Z probe reads where it touches the bed: refuse the first commanded pose whose probe
+    point the nominal machine puts more than :data:`BED_TOLERANCE_MM` off the bed (the
+    sensor's reading there, :mod:`pkmcal.sensors.z_probe`). Whether the setup is a Z probe
+    (then every pose is on the bed, and the real machine's bed limits are not checked at
+    them, as a study's ``on_bed``: :mod:`pkmcal.study.printed`)."""
+    from pkmcal.study.printed import probes_the_bed
+
+    if not probes_the_bed(setup.sensor):
+        return False
+    with np.errstate(invalid="ignore"):
+        height = setup.sensor.predict(nominal.frame(commanded))[:, 0]
+    off = np.flatnonzero(~(np.abs(height) <= BED_TOLERANCE_MM))
+    if off.size:
+        k = int(off[0])
+        where = ", ".join(f"{n} {v:g}" for n, v in zip(nominal.pose_names, commanded[k]))
+        raise PkmcalError(f"{path}, pose {k + 1} ({where}): the Z probe's point is {height[k]:.4g} mm from the bed "
+                          f"there ({off.size} of {len(commanded)} poses off the bed); a probe reads only where it "
+                          "touches the bed: plan the poses with 'pkmcal plan' (on the bed by default), or give "
+                          "--probe-anywhere for a probe on gauge blocks")
+    return True
 
 
 def _simulate_sessions(nominal, real, setup, commanded, rng, n_sessions: int, errors: float, offsets_mm,

@@ -46,6 +46,7 @@ from pkmcal.io.calibration_json import (  # noqa: F401
 @click.command("export", epilog=examples(
     "pkmcal export calibrated.yaml --format linuxcnc -o kinematics.hal",
     "pkmcal export calibrated.yaml --format linuxcnc -o kinematics.hal --ini joints.ini",
+    "pkmcal export calibrated.yaml --format linuxcnc -o kinematics.hal --update-ini joints.ini --ini machine.ini",
     "pkmcal export calibrated.yaml --format json -o calibrated.json",
     "pkmcal export stewart-prototype --format linuxcnc",
     "pkmcal export kossel-mini --format klipper",
@@ -60,6 +61,14 @@ from pkmcal.io.calibration_json import (  # noqa: F401
 @click.option("--ini", "ini", metavar="FILE.ini",
               help="linuxcnc: also write the INI sections [TRAJ], [KINS], [JOINT_0..5] (joint limits, HOME_OFFSET, "
                    "HOME) matching the HAL file, to merge into the machine's INI file.")
+@click.option("--update-ini", "update_ini", metavar="EXISTING.ini",
+              help="linuxcnc: the machine's own INI file; --ini then writes a copy of it with only the keys pkmcal "
+                   "owns updated ([TRAJ] HOME, [KINS], the [JOINT_0..5] TYPE, limits, HOME_OFFSET and HOME), in its "
+                   "[TRAJ] LINEAR_UNITS (the HAL file too), every other byte kept.")
+@click.option("--stroke-margin", "stroke_margin", type=float, metavar="MM",
+              help="linuxcnc: how far inside each end of the stroke the joint limits stand, mm of strut (default 1 %% "
+                   "of each joint's stroke: room for the following error and the homing repeatability; 0: the "
+                   "stroke's ends).")
 @click.option("--measurements", "measurements", metavar="MEAS.csv",
               help="klipper / marlin: refit the machine with only the firmware's numbers free (rail leans and tool "
                    "offset at 0) on these measurements, export that refit, and report on standard error the fit "
@@ -93,15 +102,20 @@ from pkmcal.io.calibration_json import (  # noqa: F401
 @click.option("--json", "as_json", is_flag=True,
               help="With --measurements: print the refit report as JSON on standard output (the settings then need "
                    "-o FILE).")
-def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None, measurements: str | None = None,
-               setup_spec: str | None = None, heldout: str | None = None, klipper_config: str | None = None,
-               marlin_version: str = "2.1.x", steps_per_mm: float | None = None, as_json: bool = False,
-               no_refit: bool = False, accept_undetermined: tuple[str, ...] = ()) -> None:
+def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None, update_ini: str | None = None,
+               stroke_margin: float | None = None, measurements: str | None = None, setup_spec: str | None = None,
+               heldout: str | None = None, klipper_config: str | None = None, marlin_version: str = "2.1.x",
+               steps_per_mm: float | None = None, as_json: bool = False, no_refit: bool = False,
+               accept_undetermined: tuple[str, ...] = ()) -> None:
     """Export the machine in CALIBRATED.yaml (a machine file or built-in name) for a controller.
 
     linuxcnc: 'setp genhexkins.base.N.x|y|z' and 'setp genhexkins.platform.N.x|y|z'
     (N = 0..5 = leg N+1, mm) and comment lines with each joint's leg offset L0 (HOME_OFFSET),
-    joint limits and home strut length; --ini FILE writes them as INI sections too. json:
+    joint limits and home strut length; --ini FILE writes them as INI sections too, or, with
+    --update-ini EXISTING.ini, as a copy of the machine's own INI file with only pkmcal's keys
+    changed. Lengths are in the unit of the INI file the machine was imported from (or of
+    EXISTING.ini), mm otherwise; the joint limits stand --stroke-margin inside the stroke; a
+    home pose outside the joint limits or the machine's joint tilts is an error. json:
     every parameter (mm, deg) with its std, the correlation matrix, units, conventions and
     the file's calibration metadata. klipper / marlin (linear deltas): the [printer]
     delta_radius and [stepper_a|b|c] angle, arm_length, position_endstop sections, or the
@@ -146,18 +160,24 @@ def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None, m
             raise PkmcalError("--config is the user's Klipper printer.cfg; use it with --format klipper")
         if to_stdout(output):
             raise PkmcalError("--config writes a whole printer.cfg: name the new file with -o (never the input)")
-    check_output(output, [calibrated] + [p for p in (measurements, heldout, setup_spec, klipper_config)
+    check_output(output, [calibrated] + [p for p in (measurements, heldout, setup_spec, klipper_config, update_ini)
                                          if p is not None])
     if klipper_config is not None:                 # nor any file the printer.cfg includes
         from pkmcal.io.klipper_config import read_config
 
         check_output(output, read_config(klipper_config).files)
+    if (update_ini is not None or stroke_margin is not None) and fmt != "linuxcnc":
+        raise PkmcalError("--update-ini and --stroke-margin belong to the LinuxCNC export; use them with --format "
+                          "linuxcnc")
+    if update_ini is not None and ini is None:
+        raise PkmcalError(f"--update-ini {update_ini}: give --ini NEW.ini, the updated copy to write (the input is "
+                          "never overwritten)")
     if ini is not None:
         if fmt != "linuxcnc":
             raise PkmcalError("--ini writes LinuxCNC INI sections; use it with --format linuxcnc")
         if ini == "-" or not ini.strip():
             raise PkmcalError(f"--ini '{ini}': give a file name (the HAL text goes to -o or standard output)")
-        check_output(ini, [calibrated])
+        check_output(ini, [calibrated] + ([update_ini] if update_ini is not None else []))
         if output is not None and os.path.abspath(ini) == os.path.abspath(output):
             raise PkmcalError("-o and --ini name the same file; choose two paths")
     from pkmcal.io.lookup import load_machine
@@ -165,10 +185,21 @@ def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None, m
     machine = load_machine(calibrated)
     ini_text = None
     if fmt == "linuxcnc":
-        from pkmcal.io.export_linuxcnc import linuxcnc_hal, linuxcnc_ini
+        from pkmcal.io import export_linuxcnc as ex
 
-        text = linuxcnc_hal(machine)
-        ini_text = linuxcnc_ini(machine) if ini is not None else None
+        unit = ex.ini_units(update_ini) if update_ini is not None else None
+        text = ex.linuxcnc_hal(machine, unit, stroke_margin)
+        if update_ini is not None:
+            ini_text = ex.updated_ini(update_ini, machine, stroke_margin)
+        elif ini is not None:
+            ini_text = ex.linuxcnc_ini(machine, unit, stroke_margin)
+        else:                               # the HAL file alone: its comments give the home, so say it
+            try:
+                ex.check_home(machine, ex.joint_settings(machine, ex.export_unit(machine)[1], stroke_margin))
+            except PkmcalError as exc:
+                click.echo(f"pkmcal: warning: {exc}", err=True)
+        for line in ex.home_warnings(machine):
+            click.echo(f"pkmcal: warning: {line}", err=True)
     elif fmt in ("klipper", "marlin"):
         refit = None
         if measurements is not None:
@@ -198,7 +229,9 @@ def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None, m
     if not to_stdout(output):
         click.echo(f"wrote {output} ({fmt})", err=True)
     if ini_text is not None:
-        click.echo(f"wrote {ini} (LinuxCNC INI sections [TRAJ], [KINS], [JOINT_0..5])", err=True)
+        what = (f"a copy of {update_ini} with pkmcal's keys updated" if update_ini is not None
+                else "LinuxCNC INI sections [TRAJ], [KINS], [JOINT_0..5]")
+        click.echo(f"wrote {ini} ({what})", err=True)
 
 
 #: Tolerance of the firmware's numbers (the standard deviation beyond which the measurements

@@ -213,9 +213,10 @@ def marlin_cmd(settings: str, output: str | None, name: str | None, version: str
                  f"Marlin {result.version} settings {settings}")
 
 
-from pkmcal.cli.klipper_probe_cmd import klipper_analyze_cmd, klipper_probe_cmd  # noqa: E402  (Klipper results)
+from pkmcal.cli.klipper_probe_cmd import klipper_analyze_cmd, klipper_probe_cmd, marlin_probe_cmd  # noqa: E402
 
 import_group.add_command(klipper_probe_cmd)
 import_group.add_command(klipper_analyze_cmd)
+import_group.add_command(marlin_probe_cmd)
 
 __all__ = ["import_group", "klipper_cmd", "linuxcnc_cmd", "marlin_cmd"]

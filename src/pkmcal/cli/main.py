@@ -60,6 +60,8 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
                "Export the machine in CALIBRATED.yaml (a machine file or built-in name) for a controller."),
     "import": ("pkmcal.cli.import_cmd", "import_group",
                "Make a machine file from a controller's configuration (LinuxCNC, Klipper, Marlin)."),
+    "check": ("pkmcal.cli.check_cmd", "check_group",
+              "Run exported files through the installed controller and compare with pkmcal's model."),
     "demo": ("pkmcal.cli.demo_cmd", "demo",
              "Calibrate the built-in prototype end to end on a simulated 'real' machine."),
     "reproduce": ("pkmcal.cli.reproduce_cmd", "reproduce",

@@ -185,6 +185,12 @@ def klipper_kinematics(path: str | os.PathLike) -> KlipperKinematics:
     return KlipperKinematics(kind, kin, config)
 
 
+#: Largest difference (mm, or rad for a rotary delta's arms) between Klipper's numbers and
+#: pkmcal's accepted by ``pkmcal check klipper``: both are double-precision evaluations of
+#: the same closed forms (measured about 1e-13 on the exports: tests/controllers/test_klipper.py).
+TOLERANCE = 1e-9
+
+
 @dataclass(frozen=True)
 class KlipperCheck:
     """The largest differences between Klipper running a config and a pkmcal machine over
@@ -196,6 +202,20 @@ class KlipperCheck:
     max_position_diff: float
     stepper_unit: str
 
+    @property
+    def ok(self) -> bool:
+        return self.max_stepper_diff <= TOLERANCE and self.max_position_diff <= TOLERANCE
+
+    def to_dict(self) -> dict:
+        return {"n_poses": self.n_poses, "max_stepper_diff": self.max_stepper_diff, "stepper_unit": self.stepper_unit,
+                "max_position_diff_mm": self.max_position_diff, "tolerance": TOLERANCE, "ok": self.ok}
+
+    def lines(self) -> list[str]:
+        return [f"Klipper's rails against pkmcal's inverse kinematics over {self.n_poses} nozzle positions: largest "
+                f"difference {self.max_stepper_diff:.3g} {self.stepper_unit} (tolerance {TOLERANCE:g})",
+                f"Klipper's forward kinematics of those rails against the positions: largest difference "
+                f"{self.max_position_diff:.3g} mm (tolerance {TOLERANCE:g})"]
+
 
 def workspace_poses(machine, n: int = 200, seed: int = 0) -> np.ndarray:
     """``n`` nozzle positions inside the machine's limits (uniform in its workspace box,
@@ -203,10 +223,13 @@ def workspace_poses(machine, n: int = 200, seed: int = 0) -> np.ndarray:
     rng = np.random.default_rng(seed)
     box = machine.workspace_box()
     out = []
-    while sum(len(o) for o in out) < n:
+    for _ in range(100):
+        if sum(len(o) for o in out) >= n:
+            return np.concatenate(out)[:n]
         p = box[:, 0] + (box[:, 1] - box[:, 0]) * rng.random((4 * n, 3))
         out.append(p[~np.any(list(machine.check_limits(p).violations.values()), axis=0)])
-    return np.concatenate(out)[:n]
+    raise PkmcalError(f"machine '{machine.name}': fewer than {n} of {400 * n} positions of its workspace box are "
+                      "within its limits; check the machine's limits and workspace")
 
 
 def check_klipper(printer_cfg: str | os.PathLike, machine, poses: np.ndarray | None = None) -> KlipperCheck:

@@ -203,7 +203,7 @@ def _additions(machine, setup, poses, method, names, notes):
 
         try:
             plan = plan_poses(machine, setup, len(poses), algorithm=alg, seed=PLAN_SEED, n_candidates=PLAN_CANDIDATES,
-                              method=method)
+                              method=method, on_bed=False)      # lowered by where_read below
         except PkmcalError as exc:
             notes.append(f"planner '{alg}': no poses ({exc})")
             continue

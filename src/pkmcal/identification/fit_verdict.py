@@ -116,9 +116,9 @@ RULE = (f"refused when the fit did not converge, its cost is not finite, P(chi2_
         "moved by more than the machine's size (90 deg for an angle)")
 
 
-def judge(result, input_causes: Sequence[str] = ()) -> FitVerdict:
+def judge(result, causes: Sequence[str] = ()) -> FitVerdict:
     """The verdict of the rule of the module docstring on an
-    :class:`~.engine.IdentificationResult` (no diagnoses yet). ``input_causes``: what
+    :class:`~.engine.IdentificationResult` (no diagnoses yet). ``causes``: what
     :func:`input_causes` found wrong in the inputs; with any, a χ² beyond the noise's tail
     is refused without the slack (the slack is for an optimistic noise, and here the excess
     has a known cause)."""
@@ -134,7 +134,7 @@ def judge(result, input_causes: Sequence[str] = ()) -> FitVerdict:
         problems.append(f"chi2/E[chi2] = {u.birge_ratio:.4g} ({u.chi2:.6g} over E[chi2] {_nu(u):g}): the residuals "
                         f"are {np.sqrt(u.birge_ratio):.3g} times the noise the setup states, beyond what the noise "
                         f"allows even if every noise sigma were {NOISE_SLACK:g} times larger (P < {TAIL:g})")
-    elif input_causes and beyond_noise(u):
+    elif causes and beyond_noise(u):
         problems.append(f"chi2/E[chi2] = {u.birge_ratio:.4g} ({u.chi2:.6g} over E[chi2] {_nu(u):g}) is beyond the "
                         f"{TAIL:g} tail of the noise model, and the input files look wrong")
     problems += _implausible_moves(result)

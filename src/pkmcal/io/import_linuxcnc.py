@@ -22,13 +22,17 @@ length L; pkmcal's reading is λ = L − L0. What this module reads:
   the line: ``#`` and ``;`` are comments only at a line's start), a trailing ``\\`` continues
   a value, ``#INCLUDE FILE`` (one level), the first of repeated keys wins. Read:
   ``[TRAJ] LINEAR_UNITS`` (mm, metric, cm, inch, in, imperial: HAL and joint values are
-  converted to mm) and ``ANGULAR_UNITS``, ``[TRAJ] HOME`` (the world home X Y Z A B C: the
+  converted to mm; a unit other than mm is kept as ``metadata.linuxcnc.linear_units`` so that
+  ``pkmcal export --format linuxcnc`` writes the files back in it) and ``ANGULAR_UNITS``,
+  ``[TRAJ] HOME`` (the world home X Y Z A B C: the
   machine's home pose, the FK start pose), ``[KINS] KINEMATICS`` (must be genhexkins) and
   ``JOINTS`` (6), and per joint ``[JOINT_N] TYPE`` (LINEAR), ``UNITS``, ``MIN_LIMIT``,
   ``MAX_LIMIT``, ``HOME_OFFSET`` (LinuxCNC's default 0) and ``HOME``, and the soft limits
   ``[AXIS_X..C] MIN_LIMIT``/``MAX_LIMIT`` (world coordinates, ``[TRAJ]`` units) as the
   workspace box when all six are set (angles beyond A, C ±180° and B ±90°, the range in
-  which the Euler angles represent each orientation once, are clipped to it with a note).
+  which the Euler angles represent each orientation once, are clipped to it with a note). The joint limits are the
+  stroke, widened by the stroke margins of the comment ``# pkmcal.stroke_margin_mm = ...``
+  where pkmcal's export wrote one (its limits stand that far inside the stroke).
 
 Leg offsets (``offsets``): ``"home-offset"`` (default) L0_i = HOME_OFFSET_N, the strut
 length at the home switch, so that readings are zero there (what
@@ -272,6 +276,24 @@ def read_hal_genhexkins(path: str | os.PathLike, ini: IniFile | None = None) -> 
 
 # -- machine ------------------------------------------------------------------------------
 
+def _stroke_margin_comment(path: str) -> np.ndarray | None:
+    """The six stroke margins (mm) of the comment pkmcal's export writes into the INI file
+    (:data:`pkmcal.io.export_linuxcnc.STROKE_MARGIN_COMMENT`), or None."""
+    from pkmcal.io.export_linuxcnc import STROKE_MARGIN_COMMENT
+
+    for number, line in enumerate(_read_text(path, "INI file").splitlines(), start=1):
+        if line.strip().startswith(STROKE_MARGIN_COMMENT):
+            words = line.strip()[len(STROKE_MARGIN_COMMENT):].split()
+            try:
+                margin = np.array([float(w) for w in words])
+            except ValueError:
+                margin = np.array([])
+            if margin.shape != (6,) or not np.all(np.isfinite(margin) & (margin >= 0)):
+                raise InputFileError(path, f"'{STROKE_MARGIN_COMMENT}' must give 6 lengths >= 0 (mm)", line=number)
+            return margin
+    return None
+
+
 @dataclass(frozen=True)
 class LinuxcncImport:
     """The machine read from a LinuxCNC configuration and what the user should know
@@ -365,6 +387,11 @@ def machine_from_linuxcnc(hal: str | os.PathLike, ini_path: str | os.PathLike | 
         joint_home[n] = np.nan if h is None else h
     if joint_limits is not None:
         lo[:], hi[:] = float(joint_limits[0]), float(joint_limits[1])
+    elif have_ini:
+        margin = _stroke_margin_comment(ini.path)
+        if margin is not None:          # pkmcal's export wrote the limits this far inside the stroke
+            lo -= margin
+            hi += margin
     no_limits = [n for n in range(6) if np.isnan(lo[n]) or np.isnan(hi[n])]
     if no_limits:
         where = (f"the INI file {ini.path} has no [JOINT_N] MIN_LIMIT/MAX_LIMIT for joints "
@@ -403,6 +430,11 @@ def machine_from_linuxcnc(hal: str | os.PathLike, ini_path: str | os.PathLike | 
                                else f"[JOINT_N] MIN_LIMIT/MAX_LIMIT of {ini.path}"}
     if workspace is not None:
         metadata["limits_from"]["workspace"] = f"[AXIS_X..C] MIN_LIMIT/MAX_LIMIT of {ini.path}"
+    if factor != 1.0:
+        # the unit of the controller's files, so that an export writes them back in it
+        # (pkmcal.io.export_linuxcnc.export_unit)
+        unit = length_unit if length_unit is not None else ini.get("TRAJ", "LINEAR_UNITS")[0]
+        metadata["linuxcnc"]["linear_units"] = unit.strip().lower()
     if np.any(switch != 0):
         metadata["linuxcnc"]["home_switch_reading"] = [float(v) for v in switch]
     if name is None:

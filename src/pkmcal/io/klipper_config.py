@@ -43,6 +43,7 @@ Each rule below is Klipper's own, cited to ``klippy/configfile.py`` (Klipper v0.
 
 from __future__ import annotations
 
+import codecs
 import configparser
 import glob
 import io
@@ -120,10 +121,15 @@ def _parser() -> configparser.RawConfigParser:
 
 
 def read_text(path: str) -> str:
-    """klippy/configfile.py ``_read_config_file``: the whole file, CR LF as LF."""
-    from pkmcal.io.inputs import read_input_text   # regular files only, UTF-8 errors with their line
+    """klippy/configfile.py ``_read_config_file``: the whole file as its ``open(filename, 'r')``
+    reads it — UTF-8, CR LF and a lone CR as LF (Python's text mode), a byte-order mark kept
+    (Klipper's parser then refuses the file: 'File contains no section headers') — through
+    :mod:`pkmcal.io.inputs` (regular files only, a byte that is not UTF-8 named with its line)."""
+    from pkmcal.io.inputs import decode_utf8, read_input_bytes
 
-    return read_input_text(path, "Klipper config").replace("\r\n", "\n")
+    data = read_input_bytes(path, "Klipper config")
+    bom = "\ufeff" if data.startswith(codecs.BOM_UTF8) else ""     # decode_utf8 drops it; open() does not
+    return bom + decode_utf8(path, data, "Klipper config").replace("\r\n", "\n").replace("\r", "\n")
 
 
 def find_autosave(data: str) -> tuple[str, str, str | None, int]:

@@ -20,6 +20,23 @@ Two sources a Klipper user has:
   that) and Z has 6. ``Result is z=`` lines (a repeat of the samples' average or median) are
   not poses and are skipped.
 
+  Manual probing (the nozzle itself touching the bed, or measured above it), read only with
+  a setup whose probe x, y offset is 0 (the nozzle is not the probe otherwise):
+
+  - ``Z position is Z`` (MANUAL_PROBE then ACCEPT; klippy/extras/manual_probe.py
+    ``ManualProbe.manual_probe_finalize``): the nozzle touched the bed at z = Z, at the x, y
+    it was moved to before (the last absolute ``G0``/``G1 X Y`` of the log, as the console
+    echoes typed commands, or after a ``G28`` the machine's home: the forward kinematics of
+    its switch readings, klippy/kinematics/delta.py ``home_position``): ``probe_z`` =
+    −z_offset (the probe point that far below the nozzle on the bed);
+  - ``Adding manual height: X,Y,Z is actually z=H`` (``DELTA_ANALYZE MANUAL_HEIGHT=H``;
+    klippy/extras/delta_calibrate.py ``DeltaCalibrate.add_manual_height``): the nozzle at
+    X, Y, Z as the firmware believes was measured H above the bed: ``probe_z`` = H − z_offset.
+
+  Every number is refused, naming its line, when it is not finite or beyond what any
+  printer has (:func:`pkmcal.io.limits.magnitude_problem`); a line that mentions a probe
+  result but is not one of these formats is counted and its line numbers shown in a note.
+
 * **The SAVE_CONFIG block** (``#*#``) of ``printer.cfg`` after ``DELTA_CALIBRATE``, read as
   Klipper reads it (:mod:`pkmcal.io.klipper_config`: a block that anything follows is ignored,
   and said so); the setup's probe x, y offsets must be the config's ``[probe]``/``[bltouch]``
@@ -33,8 +50,15 @@ Two sources a Klipper user has:
   :attr:`~pkmcal.mechanisms.linear_delta.LinearDelta.reading_reference`). H is the nozzle's
   height above the bed when the probe triggered (Klipper stores its z_offset): the probe
   point was at H − z_offset above the bed, ``probe_z`` = H − z_offset of the setup (0 when
-  the setup's offset is the one the calibration ran with). ``manual_heightN`` entries
-  (nozzle heights measured by hand) are not probe readings and are skipped with a note.
+  the setup's offset is the one the calibration ran with). ``manual_heightN`` and
+  ``manual_heightN_pos`` entries (the nozzle's height measured by hand, DELTA_ANALYZE
+  MANUAL_HEIGHT) are read the same way, with a setup whose probe x, y offset is 0. A height
+  that is not finite or beyond any printer's is refused naming its line.
+  The entries are numbered as Klipper reads them back (:func:`numbered_entries`: ``height0``,
+  ``height1``, ... to the first missing); one Klipper would not read is an error.
+
+The machine is a linear delta (:func:`require_linear_delta`): carriage readings and stable
+positions are Klipper's ``kinematics: delta``'s.
 
 The measurements carry the firmware's belief of each pose as the commanded pose
 (``cmd_x, cmd_y, cmd_z``: the logged nozzle position, or the machine's FK of λ).
@@ -52,11 +76,56 @@ from pkmcal.errors import InputFileError, PkmcalError
 from pkmcal.io.inputs import read_input_bytes
 from pkmcal.io.measurements import Measurements
 
-_NUM = r"([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)"
-#: Klipper before 2024: the nozzle position at the trigger.
-OLD_LINE = re.compile(rf"probe at {_NUM}\s*,\s*{_NUM} is z={_NUM}")
-#: Later Klipper: the probe point x, y and the nozzle z less z_offset.
-NEW_LINE = re.compile(rf"probe: at {_NUM}\s*,\s*{_NUM} bed will contact at z={_NUM}")
+_TOKEN = r"(\S+?)"
+
+
+@dataclass(frozen=True)
+class LineFormat:
+    """One console line a probe result is read from: ``pattern`` (its numbers as tokens,
+    read with ``float``), what it ``means`` (in the import's note), and how its numbers
+    become the nozzle position and the reading: ``kind`` ``nozzle`` (x, y, z: the nozzle at
+    the trigger), ``probe-point`` (x, y the probe point, z the nozzle less z_offset: the
+    setup's offset added back), ``manual-height`` (the nozzle at x, y, z, actually h above
+    the bed) or ``manual-touch`` (the nozzle touching the bed at z; x, y those of the last
+    ``G0``/``G1`` move before it)."""
+
+    pattern: re.Pattern
+    means: str
+    kind: str
+
+
+#: The lines of Klipper's console (module docstring), each cited to the code that prints it.
+KLIPPER_FORMATS = (
+    # klippy/extras/probe.py PrinterProbe._probe: "probe at %.3f,%.3f is z=%.6f" (toolhead position)
+    LineFormat(re.compile(rf"probe at {_TOKEN}\s*,\s*{_TOKEN} is z={_TOKEN}(?:\s|$)"),
+               "probe at X,Y is z=Z (nozzle position)", "nozzle"),
+    # Klipper from 2024, probe.py: "probe: at %.3f,%.3f bed will contact at z=%.6f"
+    LineFormat(re.compile(rf"probe: at {_TOKEN}\s*,\s*{_TOKEN} bed will contact at z={_TOKEN}(?:\s|$)"),
+               "probe: at X,Y bed will contact at z=Z (probe point; the setup's probe offset added back)",
+               "probe-point"),
+    # klippy/extras/delta_calibrate.py DeltaCalibrate.add_manual_height (DELTA_ANALYZE MANUAL_HEIGHT=H):
+    # "Adding manual height: %.3f,%.3f,%.3f is actually z=%.3f"
+    LineFormat(re.compile(rf"Adding manual height: {_TOKEN}\s*,\s*{_TOKEN}\s*,\s*{_TOKEN} is actually "
+                          rf"z={_TOKEN}(?:\s|$)"),
+               "Adding manual height: X,Y,Z is actually z=H (DELTA_ANALYZE MANUAL_HEIGHT: the nozzle at X,Y,Z is H "
+               "above the bed)", "manual-height"),
+    # klippy/extras/manual_probe.py ManualProbe.manual_probe_finalize (MANUAL_PROBE, ACCEPT):
+    # "Z position is %.3f", the nozzle touching the bed at the x, y it was moved to
+    LineFormat(re.compile(rf"Z position is {_TOKEN}(?:\s|$)"),
+               "Z position is Z (MANUAL_PROBE: the nozzle touching the bed at the x, y of the last G1 move)",
+               "manual-touch"),
+)
+#: A line that names a probe result: one that none of the formats reads is counted as
+#: unreadable (shown in the import's note), never silently dropped.
+_MENTIONS = re.compile(r"probe at|probe: at|bed will contact|Adding manual height|Z position is|Bed X:",
+                       flags=re.IGNORECASE)
+#: A typed G0/G1 move (console echo: "G1 X10 Y20", "Send: G1 ...", "$ G1 ..."), and its words.
+_MOVE = re.compile(r"(?:^|[\s:$>])G0*[01](?=\s|$)(.*)$", flags=re.IGNORECASE)
+_WORD = re.compile(r"\b([XY])\s*([-+]?(?:\d+\.?\d*|\.\d+))", flags=re.IGNORECASE)
+_MODE = re.compile(r"(?:^|[\s:$>])G9([01])(?=\s|$)", flags=re.IGNORECASE)
+_HOME = re.compile(r"(?:^|[\s:$>])G28(?=\s|$)", flags=re.IGNORECASE)
+#: Unreadable lines listed in the note (the rest counted).
+SHOWN_LINES = 5
 
 
 class NoProbeResults(InputFileError):
@@ -103,35 +172,99 @@ def read_klipper_file(path: str | os.PathLike) -> tuple[str, str, bool]:
     return src, text, any(line.startswith("#*#") for line in text.splitlines()) and "[delta_calibrate]" in text
 
 
-def _from_lines(src: str, text: str, machine, offset: np.ndarray) -> ProbeImport:
-    nozzle, lines, formats = [], [], set()
+def _from_lines(src: str, text: str, machine, offset: np.ndarray, formats=KLIPPER_FORMATS,
+                firmware: str = "Klipper") -> ProbeImport:
+    """The probe results of a console log's lines (module docstring) in ``formats``
+    (:class:`LineFormat`), with the unreadable ones counted."""
+    from pkmcal.io.limits import magnitude_problem
+
+    nozzle, readings, lines, used = [], [], [], set()
+    unreadable: list[int] = []
+    xy: list[float | None] = [None, None]
+    relative = False
     for k, line in enumerate(text.splitlines(), start=1):
-        m_old, m_new = OLD_LINE.search(line), NEW_LINE.search(line)
-        if m_old:
-            x, y, z = (float(v) for v in m_old.groups())
-            formats.add("probe at X,Y is z=Z (nozzle position)")
-        elif m_new:
-            bx, by, bz = (float(v) for v in m_new.groups())
-            x, y, z = bx - offset[0], by - offset[1], bz + offset[2]
-            formats.add("probe: at X,Y bed will contact at z=Z (probe point; the setup's probe offset added back)")
-        else:
+        mode = _MODE.search(line)
+        if mode:
+            relative = mode.group(1) == "1"
+        if _HOME.search(line) and not _MENTIONS.search(line):
+            # a delta homes all towers to its switches, the toolhead then at their forward
+            # kinematics (klippy/kinematics/delta.py DeltaKinematics.__init__ home_position, home)
+            home = machine.fk(np.asarray(machine.reading_reference, dtype=float)[None, :]).poses[0]
+            xy = [float(home[0]), float(home[1])]
             continue
-        if not all(np.isfinite([x, y, z])):
-            raise InputFileError(src, "a probe position is not a finite number", line=k)
-        nozzle.append((x, y, z))
+        move = _MOVE.search(line)
+        if move and not _MENTIONS.search(line):
+            for axis, value in _WORD.findall(move.group(1)):
+                i = "XY".index(axis.upper())
+                xy[i] = None if relative else float(value)
+            continue
+        for fmt in formats:
+            m = fmt.pattern.search(line)
+            if m:
+                break
+        else:
+            if _MENTIONS.search(line):
+                unreadable.append(k)
+            continue
+        try:
+            values = [float(v) for v in m.groups()]
+        except ValueError:
+            unreadable.append(k)
+            continue
+        for v in values:
+            problem = magnitude_problem(v)
+            if problem is not None:
+                raise InputFileError(src, f"{fmt.means.split(' (')[0]}: {problem}; a probe result is a position on "
+                                     "the printer: correct or delete this line", line=k)
+        nozzle_k, reading = _result(src, k, fmt, values, xy, relative, offset)
+        nozzle.append(nozzle_k)
+        readings.append(reading)
         lines.append(k)
+        used.add(fmt.means)
     if not nozzle:
-        raise NoProbeResults(src, "no probe results found: expected Klipper lines 'probe at X,Y is z=Z' or "
+        raise NoProbeResults(src, "no probe results found: expected " + ("Klipper lines 'probe at X,Y is z=Z' or "
                              "'probe: at X,Y bed will contact at z=Z' (PROBE, PROBE_ACCURACY, DELTA_CALIBRATE "
-                             "output), or a printer.cfg with a DELTA_CALIBRATE #*# block")
+                             "output), 'Z position is Z' (MANUAL_PROBE) or 'Adding manual height: X,Y,Z is actually "
+                             "z=H' (DELTA_ANALYZE MANUAL_HEIGHT), or a printer.cfg with a DELTA_CALIBRATE #*# block"
+                             if firmware == "Klipper" else "Marlin's G30 lines 'Bed X: x Y: y Z: z'")
+                             + (f"; {_unreadable_text(unreadable)}" if unreadable else ""))
     poses = np.array(nozzle)
     lam = machine.ik(poses)
     _check_reach(src, lam, np.array(lines), machine)
-    meas = Measurements(actuators=lam, readings=np.zeros((len(poses), 1)), commanded=poses, source=src,
+    meas = Measurements(actuators=lam, readings=np.array(readings)[:, None], commanded=poses, source=src,
                         lines=np.array(lines), rows=np.arange(1, len(poses) + 1))
-    notes = [f"{src}: {len(poses)} probe result(s), format {', '.join(sorted(formats))}; carriage positions "
+    notes = [f"{src}: {len(poses)} probe result(s), format {', '.join(sorted(used))}; carriage positions "
              f"from machine '{machine.name}' (its firmware configuration)"]
+    if unreadable:
+        notes.append(f"{src}: {_unreadable_text(unreadable)}")
     return ProbeImport(meas, tuple(notes))
+
+
+def _unreadable_text(unreadable: list[int]) -> str:
+    shown = ", ".join(str(k) for k in unreadable[:SHOWN_LINES]) + (", ..." if len(unreadable) > SHOWN_LINES else "")
+    return (f"{len(unreadable)} line(s) that mention a probe result could not be read and were skipped (line "
+            f"{shown}); check them")
+
+
+def _result(src: str, k: int, fmt: LineFormat, values: list[float], xy, relative: bool, offset: np.ndarray):
+    """(nozzle position (3,), reading probe_z) of one line (:class:`LineFormat`)."""
+    if fmt.kind == "nozzle":
+        return tuple(values), 0.0
+    if fmt.kind == "probe-point":
+        return (values[0] - offset[0], values[1] - offset[1], values[2] + offset[2]), 0.0
+    if offset[0] != 0 or offset[1] != 0:
+        raise InputFileError(src, f"a manual probe result ({fmt.means.split(' (')[0]}) is the nozzle's, not the "
+                             f"probe's: with the setup's probe x, y offset {offset[0]:g}, {offset[1]:g} mm it cannot "
+                             "be read as the probe's; import the manual results with a setup whose probe_offset has "
+                             "x, y 0 (e.g. the built-in z-probe-klipper)", line=k)
+    if fmt.kind == "manual-height":          # the nozzle H above the bed: the probe point H - z_offset
+        return tuple(values[:3]), values[3] - offset[2]
+    if relative or xy[0] is None or xy[1] is None:
+        raise InputFileError(src, "a MANUAL_PROBE result (Z position is Z) is read at the x, y of the last absolute "
+                             "G0/G1 X Y move before it, and there is none" + (" (G91: relative moves)" if relative
+                                                                              else "") + "; keep the G1 X.. Y.. "
+                             "command in the log before MANUAL_PROBE", line=k)
+    return (xy[0], xy[1], values[0]), -offset[2]   # the nozzle on the bed: the probe point z_offset below
 
 
 def _check_reach(src, lam, lines, machine) -> None:
@@ -266,11 +399,14 @@ def numbered_entries(values, name: str) -> list[tuple[int, str, str, str, int | 
     return [(n, *found[n]) for n in sorted(found)]
 
 
-def _from_saved_block(src: str, machine, offset: np.ndarray) -> ProbeImport:
-    values = saved_values(src)
+def _saved_heights(values, name: str) -> list:
+    """``(N, H, steps (3,), line)`` of the ``[delta_calibrate] <name>N`` / ``<name>N_pos``
+    entries (``height``, ``manual_height``), each H a finite, plausible height."""
+    from pkmcal.io.limits import magnitude_problem
+
     section = "delta_calibrate"
     heights = []
-    for n, key, value, where, line in numbered_entries(values, "height"):
+    for n, key, value, where, line in numbered_entries(values, name):
         pos_key = f"{key}_pos"
         if (section, pos_key) not in values:
             raise InputFileError(where, f"[delta_calibrate] {key} has no {pos_key}", line=line)
@@ -279,36 +415,51 @@ def _from_saved_block(src: str, machine, offset: np.ndarray) -> ProbeImport:
         except ValueError:
             raise InputFileError(where, f"[delta_calibrate] {key}: expected a number, got '{value}'", line=line) \
                 from None
+        problem = magnitude_problem(h)
+        if problem is not None:
+            raise InputFileError(where, f"[delta_calibrate] {key}: {problem}; correct or delete it", line=line)
         pv, pwhere, pline = values[(section, pos_key)]
         heights.append((n, h, stable_position(pv, pwhere, pline, pos_key), line))
-    manual = len(numbered_entries(values, "manual_height"))
-    if not heights:
+    return sorted(heights, key=lambda h: h[0])
+
+
+def _from_saved_block(src: str, machine, offset: np.ndarray) -> ProbeImport:
+    values = saved_values(src)
+    heights = _saved_heights(values, "height")
+    manual = _saved_heights(values, "manual_height")
+    if not heights and not manual:
         from pkmcal.io.klipper_config import read_config
 
         ignored = [n.split(": ", 1)[1] for n in read_config(src).notes if "block is ignored" in n]
         raise NoProbeResults(src, (ignored[0] if ignored else "the #*# block has no [delta_calibrate] heightN / "
                                    "heightN_pos entries; run DELTA_CALIBRATE and SAVE_CONFIG first"))
-    heights.sort()
     offset_notes = check_probe_offset(src, offset)   # after the block's own errors
-    lam, dist = carriages_from_steps(values, np.array([s for _, _, s, _ in heights]), machine, src)
-    lines = np.array([ln if ln is not None else 0 for *_, ln in heights])
-    readings = np.array([[h - offset[2]] for _, h, _, _ in heights])
+    if manual and (offset[0] != 0 or offset[1] != 0):
+        raise InputFileError(src, f"[delta_calibrate] manual_height0: a manual height is the nozzle's, not the "
+                             f"probe's: with the setup's probe x, y offset {offset[0]:g}, {offset[1]:g} mm it cannot "
+                             "be read as the probe's; import it with a setup whose probe_offset has x, y 0",
+                             line=manual[0][3])
+    both = heights + manual
+    lam, dist = carriages_from_steps(values, np.array([s for _, _, s, _ in both]), machine, src)
+    lines = np.array([ln if ln is not None else 0 for *_, ln in both])
+    # probe_z: the probe point's height, H - z_offset (delta_calibrate.py: heightN is the nozzle's
+    # height at the trigger, Klipper stores its z_offset; manual_heightN the nozzle's measured height)
+    readings = np.array([[h - offset[2]] for _, h, _, _ in both])
     fk = machine.fk(lam)
     if not np.all(fk.converged):
         k = int(np.flatnonzero(~fk.converged)[0])
-        raise InputFileError(src, f"height{heights[k][0]}_pos: the carriages are out of the reach of machine "
+        key = "height" if k < len(heights) else "manual_height"
+        raise InputFileError(src, f"{key}{both[k][0]}_pos: the carriages are out of the reach of machine "
                              f"'{machine.name}'; is it the machine file of this printer.cfg?", line=int(lines[k]))
     meas = Measurements(actuators=lam, readings=readings, commanded=fk.poses, source=src, lines=lines,
-                        rows=np.arange(1, len(heights) + 1))
-    notes = [f"{src}: {len(heights)} DELTA_CALIBRATE height(s) from the #*# block; step distances "
+                        rows=np.arange(1, len(both) + 1))
+    notes = [f"{src}: {len(heights)} DELTA_CALIBRATE height(s)" + (f" and {len(manual)} manual height(s) "
+             "(DELTA_ANALYZE MANUAL_HEIGHT)" if manual else "") + " from the #*# block; step distances "
              f"{', '.join(f'{d:.6g}' for d in dist)} mm; probe_z = height - z_offset {float(offset[2])!r} mm of the setup"]
     notes += offset_notes
-    if manual:
-        notes.append(f"{src}: {manual} manual_height entr{'y' if manual == 1 else 'ies'} skipped (nozzle heights "
-                     "measured by hand, not probe readings)")
     return ProbeImport(meas, tuple(notes))
 
 
-__all__ = ["NEW_LINE", "NoProbeResults", "OLD_LINE", "ProbeImport", "carriages_from_steps", "check_probe_offset",
-           "numbered_entries", "read_klipper_file", "read_klipper_probe", "require_linear_delta", "saved_values",
-           "stable_position"]
+__all__ = ["KLIPPER_FORMATS", "LineFormat", "NoProbeResults", "ProbeImport", "carriages_from_steps",
+           "check_probe_offset", "numbered_entries", "read_klipper_file", "read_klipper_probe",
+           "require_linear_delta", "saved_values", "stable_position"]

@@ -45,6 +45,17 @@ singularity) and measurability:
 
 Rejected candidates are counted by reason.
 
+**On the bed** (``Measurability(on_bed=True)``, the default of ``pkmcal plan`` with a Z probe:
+:func:`pkmcal.planning.plan.plan_poses`): a printer probes its bed only, so every candidate
+is first lowered to where its probe triggers (:func:`pkmcal.identification.advice.where_read`,
+the study's ``on_bed``), then checked there: the machine's bed limits
+(:data:`pkmcal.study.printed.BED_LIMITS`, ``min_z``) are not checked (the nozzle is at the
+bed, or z_offset above it), and the probe point (the nozzle plus the probe's x, y offset,
+:meth:`~pkmcal.sensors.z_probe.ZProbeSensor.probe_points`) must lie inside the machine's
+build radius (:data:`BED_EDGE_LIMITS`, with the same margin; Klipper's delta
+``print_radius``, klippy/kinematics/delta.py ``DeltaKinematics.__init__``): rejected as
+``probe_point_radius``. The accepted candidates are the lowered poses.
+
 **Large sets** (:func:`generate_candidates`): candidates are drawn and checked in chunks
 of :data:`CHUNK_SIZE` poses, so memory stays bounded by the chunk and the accepted poses;
 a chunk is a picklable unit of work (:func:`check_chunk`) that an executor's ``map`` can
@@ -84,6 +95,9 @@ DEFAULT_MARGIN = 0.1
 #: checks is shrunk to the reach from home (:func:`workspace_box`); and the probe's size.
 MIN_REACHED_FRACTION = 0.01
 N_PROBE = 2000
+#: Limits of a machine that bound where its bed is: the probe point of an on-bed candidate
+#: is checked against them (module docstring, "On the bed").
+BED_EDGE_LIMITS = ("print_radius",)
 
 
 @dataclass(frozen=True)
@@ -92,19 +106,23 @@ class Measurability:
 
     ``travel`` (lo, hi) indicator reading range, mm; ``plate_radius`` platform plate
     radius for the indicator touch points, mm; ``sight_cone`` line-of-sight half-angle,
-    radians (full-pose and position sensors).
+    radians (full-pose and position sensors); ``on_bed`` a Z probe's candidates lowered
+    onto the bed before they are checked (module docstring, "On the bed").
     """
 
     travel: tuple[float, float] | None = None
     plate_radius: float | None = None
     sight_cone: float | None = None
+    on_bed: bool = False
 
 
 @dataclass(frozen=True)
 class CandidateCheck:
-    """Per-pose verdicts: ``violations`` reason → (N,) bool; ``ok`` (N,) all passed."""
+    """Per-pose verdicts: ``violations`` reason → (N,) bool; ``ok`` (N,) all passed;
+    ``poses`` the poses checked when they are not those given (lowered onto the bed)."""
 
     violations: dict[str, np.ndarray]
+    poses: np.ndarray | None = None
 
     @property
     def ok(self) -> np.ndarray:
@@ -182,13 +200,42 @@ def check_candidates(mechanism: Mechanism, setup: MeasurementSetup | None, poses
                      margin: float = DEFAULT_MARGIN, measurability: Measurability = Measurability()) -> CandidateCheck:
     """Limits (with ``margin``) and measurability of every pose; see module docstring."""
     poses = mechanism.as_pose_array(poses)
+    lowered = None
+    if measurability.on_bed and setup is not None:
+        from pkmcal.identification.advice import where_read
+
+        with np.errstate(invalid="ignore"):
+            lowered = poses = where_read(mechanism, setup.sensor, poses)
     finite = np.all(np.isfinite(poses), axis=1)
     safe = np.where(finite[:, None], poses, mechanism.home_pose)
     lim = mechanism.check_limits(safe, margin=margin, margins=False)   # verdicts only: the faster path
     viol = {k: v | ~finite for k, v in lim.violations.items()}
+    if lowered is not None:
+        viol.update(_bed_violations(mechanism, setup, safe, margin, finite))
     if setup is not None:
         viol.update(measurability_violations(setup, safe, measurability))
-    return CandidateCheck(viol)
+    return CandidateCheck(viol, lowered)
+
+
+def _bed_violations(mechanism: Mechanism, setup: MeasurementSetup, safe: np.ndarray, margin: float,
+                    finite: np.ndarray) -> dict[str, np.ndarray]:
+    """The checks of an on-bed candidate (module docstring, "On the bed"): its bed limits
+    dropped, its probe point inside the build radius."""
+    from pkmcal.study.printed import BED_LIMITS
+
+    out = {name: np.zeros(len(safe), dtype=bool) for name in BED_LIMITS}   # the nozzle at the bed
+    points = getattr(setup.sensor, "probe_points", None)
+    if points is None:
+        return out
+    at_probe = safe.copy()
+    at_probe[:, 0:3] = points(mechanism.frame(safe))
+    edge = mechanism.check_limits(at_probe, margin=margin, margins=False).violations
+    bad = np.zeros(len(safe), dtype=bool)
+    for name in BED_EDGE_LIMITS:
+        if name in edge:
+            bad |= edge[name]
+    out["probe_point_radius"] = bad | ~finite
+    return out
 
 
 # -- the workspace box ------------------------------------------------------------------
@@ -410,7 +457,8 @@ def check_chunk(poses: np.ndarray, *, mechanism: Mechanism, setup: MeasurementSe
     """:func:`check_candidates` of one chunk: the unit of work that
     :func:`generate_candidates` maps over the chunks; a module-level function of picklable
     arguments, so that a process pool or Dask can run it."""
-    return CheckedChunk(poses, check_candidates(mechanism, setup, poses, margin=margin, measurability=measurability))
+    check = check_candidates(mechanism, setup, poses, margin=margin, measurability=measurability)
+    return CheckedChunk(poses if check.poses is None else check.poses, check)
 
 
 class _Accepted:

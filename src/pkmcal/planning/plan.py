@@ -52,7 +52,8 @@ class Plan:
     :class:`DeltaSafetyMargin`, a single number on every limit, or None for a machine whose
     limits take none); ``notes``: what the plan changed of what it was given (limits looser
     than the geometry reaches, :meth:`~pkmcal.mechanisms.base.Mechanism.within_geometry`; a workspace
-    box or candidate angles beyond the Euler angles' range), one line each."""
+    box or candidate angles beyond the Euler angles' range), one line each; ``on_bed``: a Z
+    probe's points lowered onto the bed (:func:`plan_poses`)."""
 
     poses: np.ndarray
     commands: np.ndarray
@@ -62,6 +63,7 @@ class Plan:
     box: np.ndarray | None = None
     margin: SafetyMargin | DeltaSafetyMargin | float | None = None
     notes: tuple[str, ...] = ()
+    on_bed: bool = False
 
     def describe_margin(self) -> str:
         """The safety margin in words (what ``pkmcal plan`` prints)."""
@@ -125,7 +127,7 @@ def plan_poses(mechanism: Mechanism, setup: MeasurementSetup, n: int, *, algorit
                margin: SafetyMargin | DeltaSafetyMargin | float | None = None,
                measurability: Measurability = Measurability(), method: str | None = None,
                model: PlanningModel | None = None, progress: Stages | None = None, circle_plane: str = "xy",
-               chunk_size: int = CHUNK_SIZE, chunk_map: Callable = IN_PROCESS) -> Plan:
+               chunk_size: int = CHUNK_SIZE, chunk_map: Callable = IN_PROCESS, on_bed: bool | None = None) -> Plan:
     """Choose ``n`` poses to measure (paper 2 §4, paper 1 §IV).
 
     ``candidates``: an array (N, 6) (mm, rad) or a CSV path (x, y, z, a, b, c in mm, deg);
@@ -147,7 +149,23 @@ def plan_poses(mechanism: Mechanism, setup: MeasurementSetup, n: int, *, algorit
     their planning blocks (:func:`candidate_blocks`); both steps are mapped by ``chunk_map``
     (default :data:`~pkmcal.parallel.IN_PROCESS`: in this process, in order). The plan does not
     depend on ``chunk_size``.
+
+    ``on_bed``: plan a Z probe's points on the bed (every candidate lowered to where its
+    probe triggers, its probe point inside the build radius:
+    :class:`~pkmcal.planning.candidates.Measurability`, "On the bed" in
+    :mod:`pkmcal.planning.candidates`), as a printer probes; None (default) does so for a
+    sensor that probes the bed (:func:`pkmcal.study.printed.probes_the_bed`); False plans
+    the probe's points anywhere in the volume (a probe on gauge blocks).
     """
+    from dataclasses import replace
+
+    from pkmcal.study.printed import probes_the_bed
+
+    bed = probes_the_bed(setup.sensor) if on_bed is None else bool(on_bed)
+    if bed and not probes_the_bed(setup.sensor):
+        raise PkmcalError(f"on-bed planning lowers a Z probe onto the bed; the setup's '{setup.sensor.kind}' sensor "
+                          "is not a probe (plan it without on_bed)")
+    measurability = replace(measurability, on_bed=bed)
     algorithm = str(algorithm).lower()
     if algorithm not in ALGORITHMS:
         raise PkmcalError(f"unknown selection algorithm '{algorithm}'; use one of {', '.join(ALGORITHMS)}")
@@ -161,6 +179,37 @@ def plan_poses(mechanism: Mechanism, setup: MeasurementSetup, n: int, *, algorit
     mechanism, check_margin = planning_checks(reachable, margin)
     kw = dict(margin=check_margin, measurability=measurability)
     chunked = dict(chunk_size=chunk_size, chunk_map=chunk_map, **kw)
+    try:
+        box, cand = _candidate_set(algorithm, candidates, grid, n, n_candidates, rng, nominal, mechanism, setup, notes,
+                                   kw, chunked, announce, circle_plane)
+    except PkmcalError as exc:
+        if not bed:
+            raise
+        z = float(getattr(setup.sensor, "bed", np.zeros(3))[0])
+        raise PkmcalError(f"{exc} (a Z probe's points are planned on the bed, z = {z:g} mm of the setup, where the "
+                          f"probe triggers: machine '{nominal.name}' must reach it; give the bed's height in the "
+                          "setup, or plan the points anywhere in the volume: --probe-anywhere, on_bed=False)") from None
+    if n > len(cand.poses):
+        raise PkmcalError(f"asked for {n} poses but only {len(cand.poses)} candidates are reachable and "
+                          f"measurable ({cand.describe()}); ask for fewer poses or give more candidates")
+    announce("planning model")
+    model = model or planning_model(nominal, setup, method=method)   # the nominal's scaling (= observability)
+    # in this process the block batches run on local threads, in place (candidate_blocks)
+    G, ok = candidate_blocks(model, cand.poses, chunk_map=None if chunk_map is IN_PROCESS else chunk_map)
+    if not ok.all():
+        rejected = dict(cand.rejected)
+        rejected["pose_not_solved"] = rejected.get("pose_not_solved", 0) + int((~ok).sum())
+        cand = CandidateSet(cand.poses[ok], cand.n_tested, rejected, cand.kind)
+        G = G[ok]
+    sel = select(G, n, algorithm=algorithm, index=index, rng=rng, positions=cand.poses,
+                 progress=announce(f"selection ({algorithm})"))
+    poses = cand.poses[sel.chosen]
+    return Plan(poses, nominal.ik(poses), sel, cand, model, box, margin, tuple(notes), bed)
+
+
+def _candidate_set(algorithm, candidates, grid, n, n_candidates, rng, nominal, mechanism, setup, notes, kw, chunked,
+                   announce, circle_plane):
+    """(workspace box or None, the checked candidates) of :func:`plan_poses`."""
     box = None
     if algorithm == "corners":
         if candidates is not None:
@@ -198,22 +247,7 @@ def plan_poses(mechanism: Mechanism, setup: MeasurementSetup, n: int, *, algorit
         poses = candidates if isinstance(candidates, np.ndarray) else read_candidates_csv(candidates, mechanism)
         poses = _wrapped(nominal, poses, notes)
         cand = generate_candidates(mechanism, setup, kind="file", poses=poses, progress=step, **chunked)
-    if n > len(cand.poses):
-        raise PkmcalError(f"asked for {n} poses but only {len(cand.poses)} candidates are reachable and "
-                          f"measurable ({cand.describe()}); ask for fewer poses or give more candidates")
-    announce("planning model")
-    model = model or planning_model(nominal, setup, method=method)   # the nominal's scaling (= observability)
-    # in this process the block batches run on local threads, in place (candidate_blocks)
-    G, ok = candidate_blocks(model, cand.poses, chunk_map=None if chunk_map is IN_PROCESS else chunk_map)
-    if not ok.all():
-        rejected = dict(cand.rejected)
-        rejected["pose_not_solved"] = rejected.get("pose_not_solved", 0) + int((~ok).sum())
-        cand = CandidateSet(cand.poses[ok], cand.n_tested, rejected, cand.kind)
-        G = G[ok]
-    sel = select(G, n, algorithm=algorithm, index=index, rng=rng, positions=cand.poses,
-                 progress=announce(f"selection ({algorithm})"))
-    poses = cand.poses[sel.chosen]
-    return Plan(poses, nominal.ik(poses), sel, cand, model, box, margin, tuple(notes))
+    return box, cand
 
 
 def _wrapped(mechanism: Mechanism, poses: np.ndarray, notes: list[str]) -> np.ndarray:
@@ -240,3 +274,76 @@ def pose_set_indices(mechanism: Mechanism, setup: MeasurementSetup, poses: np.nd
         raise PkmcalError(f"the pose of row(s) {', '.join(str(i + 1) for i in bad[:10])} cannot be solved at the "
                           "nominal machine (forward kinematics did not converge); remove them")
     return observability_indices(G)
+
+
+def height_sigma(plan: Plan, n_values, *, check: np.ndarray | None = None) -> list[tuple[int, float]]:
+    """The predicted first-layer error of a Z-probe plan as a function of its number of
+    points: for each n of ``n_values``, the rms over ``check`` poses (default: the plan's
+    accepted candidates, uniform over the reachable bed) of the standard deviation of the
+    reading there, predicted from the identifiability of the n points the plan's selection
+    (D-optimal, ``default``) chooses among the same candidates:
+
+        σ²(c) = j_c D M⁻¹ D j_cᵀ,    M = Σ_{j chosen} G_jᵀ G_j,
+
+    G_j the whitened, scaled blocks of the plan's model (the setup's noise: the probe's
+    repeatability ``noise.reading`` and the carriages' ``noise.actuator``;
+    :mod:`pkmcal.planning.blocks`), j_c the unweighted residual Jacobian at c on the same
+    identifiable parameters and D their column scales. For a Z probe j_c δθ is the change
+    of the height the model predicts for the nozzle commanded to c: the error of the first
+    layer there. ``[(n, rms σ mm)]``; σ = inf where the n points do not determine the
+    identifiable parameters (M singular)."""
+    model = plan.model
+    pool = plan.candidates.poses
+    G, ok = candidate_blocks(model, pool)
+    G = G[ok]
+    check = pool if check is None else check
+    from pkmcal.planning.blocks import raw_blocks
+
+    J, solved, _ = raw_blocks(model.mechanism, model.setup, check, model.method, weighted=False,
+                              columns=model.free_index)
+    J = (J * model.scale)[solved]
+    out = []
+    for n in n_values:
+        if int(n) * model.rows_per_pose < model.n_params or int(n) > len(G):
+            out.append((int(n), float("inf")))      # fewer readings than parameters, or than candidates
+            continue
+        sel = select(G, int(n), algorithm="default")
+        rows = G[sel.chosen].reshape(-1, G.shape[-1])
+        try:
+            L = np.linalg.cholesky(rows.T @ rows)
+        except np.linalg.LinAlgError:
+            out.append((int(n), float("inf")))
+            continue
+        # σ²(c) = |L⁻¹ j_cᵀ|² summed over c's rows
+        V = np.linalg.solve(L, J.reshape(-1, J.shape[-1]).T)
+        out.append((int(n), float(np.sqrt(np.sum(V ** 2) / len(J)))))
+    return out
+
+
+def points_for_height_sigma(plan: Plan, target: float, *, check: np.ndarray | None = None
+                            ) -> tuple[int | None, list[tuple[int, float]]]:
+    """The smallest number of points n whose predicted rms first-layer σ
+    (:func:`height_sigma`) is at most ``target`` mm, found by doubling from the plan's own
+    n then bisecting (σ falls about as 1/√n), among the plan's candidates; None when even
+    all of them do not reach it. Also every (n, σ) evaluated, by n."""
+    n_max = len(plan.candidates.poses)
+    seen: dict[int, float] = {}
+
+    def sigma(n: int) -> float:
+        if n not in seen:
+            seen[n] = height_sigma(plan, [n], check=check)[0][1]
+        return seen[n]
+
+    n_min = max(1, -(-plan.model.n_params // plan.model.rows_per_pose))
+    lo, hi = n_min - 1, max(len(plan.poses), n_min)
+    while sigma(hi) > target:
+        if hi >= n_max:
+            return None, sorted(seen.items())
+        lo, hi = hi, min(2 * hi, n_max)
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if mid < n_min or sigma(mid) > target:
+            lo = mid
+        else:
+            hi = mid
+    return hi, sorted(seen.items())

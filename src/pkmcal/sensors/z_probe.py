@@ -151,6 +151,11 @@ class ZProbeSensor(Sensor):
         J[:, 0, 5] = P[:, 0] / np.cos(b) ** 2 - P[:, 1] * np.tan(a) * np.sin(b) / np.cos(b) ** 2
         return J
 
+    def probe_points(self, frame: Frame, params: np.ndarray | None = None) -> np.ndarray:
+        """P = p + R t (N, 3): where the probe point is with the platform at ``frame`` (mm)."""
+        t, _ = self._parts(params)
+        return self._point(frame, t)[1]
+
     def measured_frames(self, frame: Frame) -> Frame:
         """Where the probe triggers when lowered straight down from ``frame``: y falls 1:1
         with the frame's height (∂y/∂p_z = g_z = 1), so the frame moved by (0, 0, −y(frame))

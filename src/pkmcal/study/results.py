@@ -4,7 +4,10 @@
 machine × setup × plan × number of poses × method), columns :data:`COLUMNS` (units in the
 names: ``_mm``, ``_deg``; flags as 1/0; a missing value is an empty cell), ordered by
 configuration then trial. Floats are written as their shortest round-trip ``repr``, so the
-same results give the same bytes.
+same results give the same bytes. Text (labels, a failed trial's message) is quoted as RFC
+4180 says when it holds a comma, a quote or a line break, and every reader here reads
+records with the ``csv`` module (never split at line ends), so ``csv``, ``pandas.read_csv``
+and ``--resume`` read back exactly the text written.
 
 **Part files** (``parts/c<campaign>-t<first>-<last>.csv``, one per finished batch, each
 written atomically): what ``--resume`` reads back; a trial is done when its campaign and

@@ -64,7 +64,12 @@ for ``pkmcal plan`` (no ``margin``: the safety margins a real machine survives,
 :func:`pkmcal.planning.margins.default_margin`; a number: that margin on every limit).
 
 :func:`load_study` validates a file with pydantic and resolves it into a :class:`Study`
-(machines and setups loaded); errors name the file, line and key.
+(machines and setups loaded); errors name the file, line and key. The schema is strict: a
+number is a number (``trials: true`` and ``trials: "10"`` are errors, not 1 and 10), a flag is
+``true`` or ``false``; lengths, angles and factors beyond
+:data:`~pkmcal.io.limits.MAX_MAGNITUDE` are refused; every name or pattern of a method's
+``free:``/``fix:`` must name a parameter of each machine and setup the method fits (a typo
+would fail every one of its trials), the message giving the closest names.
 """
 
 from __future__ import annotations

@@ -190,7 +190,8 @@ def prepare(study: Study, progress=None) -> Context:
             for pi, p in enumerate(study.plans):
                 pool_kind = "corners" if p.algorithm == "corners" else "random"
                 pool = plan_poses(m.nominal, planned, 1, algorithm=pool_kind, n_candidates=p.candidates,
-                                  margin=p.margin, seed=seed_for(study.seed, KEY_POOL, mi, si, pi))
+                                  margin=p.margin, seed=seed_for(study.seed, KEY_POOL, mi, si, pi),
+                                  on_bed=False)     # lowered below where the setup says so
                 poses = pool.candidates.poses
                 if s.on_bed:        # a printer's probe points: where its probe triggers on the bed
                     poses = where_read(m.nominal, planned.sensor, poses)
