@@ -243,3 +243,20 @@ def test_klippers_seven_points_and_its_printed_object_take_the_default_path(prin
     res = _invoke(run, tmp_path, ["export", "obj.yaml", "--format", "klipper", "--measurements", "pairs.csv",
                                   "-o", "refit.cfg"])
     assert res.exit_code == 0 and "firmware-limited refit (exported)" in res.output, res.output
+
+
+def test_rods_freed_from_heights_are_announced_by_identify_and_refused_by_export(printer):
+    """The rods freed by name without a prior: identify warns that export will refuse them
+    (their sigma 0.22 mm, over 0.1 % of the arm), and export does, until accepted by name."""
+    run = CliRunner()
+    res = _invoke(run, printer, ["identify", "delta.yaml", "probe.csv", "--setup", "z-probe-klipper", "--free",
+                                 "angle_*,radius_*,arm_*,endstop_*", "--fix", "auto", "-o", "rods-free.yaml"])
+    assert res.exit_code == 0, res.output
+    warned = [ln for ln in res.output.splitlines() if "will refuse it unless accepted by name" in ln]
+    assert [ln.split(":")[1].strip() for ln in warned] == list(ARMS), warned
+    out = _invoke(run, printer, ["export", "rods-free.yaml", "--format", "marlin", "-o", "r.gcode"])
+    assert out.exit_code == 2 and "the export is refused: arm_a: the measurements do not determine it" in out.output
+    out = _invoke(run, printer, ["export", "rods-free.yaml", "--format", "marlin", "-o", "r.gcode",
+                                 "--accept-undetermined", "arm_*"])
+    assert out.exit_code == 0, out.output
+    assert ";   arm_b: the measurements do not determine it" in (printer / "r.gcode").read_text()

@@ -31,7 +31,6 @@ import json
 import os
 
 import click
-import numpy as np
 
 from pkmcal.cli.options import check_output, emit, examples, output_option, to_stdout
 from pkmcal.errors import PkmcalError
@@ -234,25 +233,17 @@ def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None, u
         click.echo(f"wrote {ini} ({what})", err=True)
 
 
-#: Tolerance of the firmware's numbers (the standard deviation beyond which the measurements
-#: do not determine one): 0.1 % of the mean arm for lengths (the tolerance of the delta's
-#: named scale direction: a 100 mm print 0.1 mm off); for a tower angle, the angle that
-#: moves the tower by that length at the mean radius.
-LENGTH_TOLERANCE = 1e-3
-
-
 def _undetermined_lines(machine, accepted: tuple[str, ...], refit=None) -> list[str]:
     """What the calibration's measurements leave undetermined, one plain line each (printed on
     standard error and written as comments): the record's ``undetermined`` directions (from
     identify) and each firmware number whose standard deviation is above its tolerance
-    (:func:`pkmcal.io.delta_firmware.firmware_sigmas` of the calibrated ``machine``'s
-    covariance, or of the firmware-limited ``refit``'s own when it is what is exported; a
-    machine with leaning rails exported as it is: its parameters' own), which is an error
-    unless ``accepted`` names it."""
+    (:func:`pkmcal.io.delta_firmware.undetermined_firmware_numbers` of the calibrated
+    ``machine``'s covariance, or of the firmware-limited ``refit``'s own when it is what is
+    exported), which is an error unless ``accepted`` names it."""
     from fnmatch import fnmatchcase
 
     from pkmcal.identification.firmware_refit import FIRMWARE_FREE, RADII
-    from pkmcal.io.delta_firmware import FIRMWARE_NUMBERS, firmware_sigmas
+    from pkmcal.io.delta_firmware import FIRMWARE_NUMBERS, undetermined_firmware_numbers
 
     if machine.kind != "linear-delta":
         return []
@@ -263,29 +254,12 @@ def _undetermined_lines(machine, accepted: tuple[str, ...], refit=None) -> list[
         if not any(fnmatchcase(n, pat) for n in known):
             raise PkmcalError(f"--accept-undetermined '{pat}': no firmware number has this name; the names are "
                               f"{', '.join(FIRMWARE_NUMBERS)}")
-    names = list(machine.param_names)
     source = refit.machine if refit is not None else machine
     cov = refit.covariance if refit is not None else getattr(machine, "covariance", None)
     if cov is None:
         return lines
-    arm = float(np.mean([machine.params[names.index(f"arm_{t}")] for t in "abc"]))
-    radius = float(np.mean([machine.params[names.index(f"radius_{t}")] for t in "abc"]))
-    stds = firmware_sigmas(source, cov)
-    if stds is None:       # leaning rails, exported as they are: the calibrated parameters' own sigmas
-        stds = {n: float(np.sqrt(max(cov[names.index(n), names.index(n)], 0.0))) for n in RADII + FIRMWARE_FREE}
-        angle_names = {n for n in stds if n.startswith("angle_")}
-    else:
-        angle_names = {"angle_a", "angle_b"}
     refused = []
-    for n, sigma in stds.items():
-        angle = n in angle_names
-        tol = LENGTH_TOLERANCE * arm / (radius if angle else 1.0)
-        if not sigma > tol:
-            continue
-        shown = (f"{np.rad2deg(sigma):.3g} deg, tolerance {np.rad2deg(tol):.3g} deg (the tower moved "
-                 f"{LENGTH_TOLERANCE * arm:.3g} mm, 0.1 % of the {arm:.4g} mm arm, at the {radius:.4g} mm radius)"
-                 if angle else f"{sigma:.3g} mm, tolerance {tol:.3g} mm (0.1 % of the {arm:.4g} mm arm)")
-        line = f"{n}: the measurements do not determine it (sigma {shown})"
+    for n, line in undetermined_firmware_numbers(source, cov):
         if any(fnmatchcase(n, pat) for pat in accepted):
             lines.append(f"{line}; exported as accepted with --accept-undetermined")
         else:

@@ -75,6 +75,20 @@ def _undetermined(nominal, setup, meas, result, priors) -> list[dict]:
     return undetermined_directions(nominal, setup, poses, priors=priors, held=held, method=result.method)
 
 
+def _firmware_numbers_undetermined(result) -> list[tuple[str, str]]:
+    """The firmware numbers of a calibrated linear delta with vertical rails that its
+    covariance leaves beyond tolerance (what export refuses:
+    :func:`pkmcal.io.delta_firmware.undetermined_firmware_numbers`); none for other machines
+    and for leaning rails, which export refits first."""
+    from pkmcal.identification.firmware_refit import machine_covariance
+    from pkmcal.io.delta_firmware import exact_rewrite, undetermined_firmware_numbers
+
+    mech = result.mechanism
+    if mech.kind != "linear-delta" or exact_rewrite(mech) is None:
+        return []
+    return undetermined_firmware_numbers(mech, machine_covariance(result))
+
+
 @click.command("identify", epilog=examples(
     "pkmcal identify stewart-prototype meas.csv --setup indicators-prototype -o calibrated.yaml",
     "pkmcal identify stewart-prototype meas.csv --setup indicators-prototype -o hexapod-A.yaml --name hexapod-A-2026",
@@ -246,7 +260,9 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
                                   "and run again, or write it anyway with --accept-bad-fit (recorded in the file)")
     undetermined = _undetermined(nominal, setup, meas, result, priors) if baseline is None else []
     hints = [f"warning: {w}" for w in clipped_lines] + [f"warning: {c}" for c in causes] + \
-        [f"warning: {e['text']}" for e in undetermined]
+        [f"warning: {e['text']}" for e in undetermined] + \
+        [f"warning: {line}: 'pkmcal export --format klipper|marlin' will refuse it unless accepted by name "
+         f"(--accept-undetermined {n})" for n, line in _firmware_numbers_undetermined(result)]
     if not verdict.acceptable:
         hints.append(f"warning: written with --accept-bad-fit although the fit is refused: {verdict.text()}")
     if hints:

@@ -194,7 +194,7 @@ def refit_free(machine, setup, priors=()) -> tuple[str, ...]:
     return tuple(n for n in FIRMWARE_FREE if n not in held)
 
 
-def _machine_covariance(result) -> np.ndarray:
+def machine_covariance(result) -> np.ndarray:
     """The (p, p) covariance of ``result``'s machine parameters (zero for the held ones)."""
     names = list(result.mechanism.param_names)
     cov = np.zeros((len(names), len(names)))
@@ -303,7 +303,7 @@ def firmware_refit(machine, setup, measurements, heldout=None, *, method: str | 
               score("firmware-limited refit (exported)", refit_machine, refit_setup))
     return FirmwareRefit(*scores, free=tuple(n for n in best.free), gauge=tuple(best.gauge),
                          priors=tuple(p.text() for p in priors if p not in held_priors), method=method,
-                         notes=tuple(notes), covariance=_machine_covariance(best))
+                         notes=tuple(notes), covariance=machine_covariance(best))
 
 
 __all__ = [
@@ -314,6 +314,7 @@ __all__ = [
     "Score",
     "dropped_machine",
     "firmware_refit",
+    "machine_covariance",
     "recorded_priors",
     "refit_free",
     "residual_rms",

@@ -175,6 +175,43 @@ def firmware_sigmas(machine: LinearDelta, covariance: np.ndarray) -> dict[str, f
     return dict(zip(FIRMWARE_NUMBERS, np.sqrt(np.maximum(var, 0.0)).tolist()))
 
 
+#: Tolerance of the firmware's numbers (the standard deviation beyond which the measurements
+#: do not determine one): 0.1 % of the mean arm for lengths (the tolerance of the delta's
+#: named scale direction: a 100 mm print 0.1 mm off); for a tower angle, the angle that
+#: moves the tower by that length at the mean radius.
+LENGTH_TOLERANCE = 1e-3
+
+
+def undetermined_firmware_numbers(machine: LinearDelta, covariance: np.ndarray) -> list[tuple[str, str]]:
+    """(name, plain line) of each firmware number of ``machine`` whose standard deviation
+    under ``covariance`` (:func:`firmware_sigmas`; a machine with leaning rails, which has no
+    exact firmware form: its parameters' own) is above its tolerance (:data:`LENGTH_TOLERANCE`):
+    what ``export`` refuses unless accepted by name and ``identify`` warns of."""
+    names = list(machine.param_names)
+    rho = machine.params
+    arm = float(np.mean([rho[names.index(f"arm_{t}")] for t in TOWERS]))
+    radius = float(np.mean([rho[names.index(f"radius_{t}")] for t in TOWERS]))
+    stds = firmware_sigmas(machine, covariance)
+    if stds is None:
+        own = [f"{p}_{t}" for p in ("radius", "angle", "arm", "endstop") for t in TOWERS]
+        cov = np.asarray(covariance, dtype=float)
+        stds = {n: float(np.sqrt(max(cov[names.index(n), names.index(n)], 0.0))) for n in own}
+        angle_names = {n for n in stds if n.startswith("angle_")}
+    else:
+        angle_names = {"angle_a", "angle_b"}
+    out = []
+    for n, sigma in stds.items():
+        angle = n in angle_names
+        tol = LENGTH_TOLERANCE * arm / (radius if angle else 1.0)
+        if not sigma > tol:
+            continue
+        shown = (f"{np.rad2deg(sigma):.3g} deg, tolerance {np.rad2deg(tol):.3g} deg (the tower moved "
+                 f"{LENGTH_TOLERANCE * arm:.3g} mm, 0.1 % of the {arm:.4g} mm arm, at the {radius:.4g} mm radius)"
+                 if angle else f"{sigma:.3g} mm, tolerance {tol:.3g} mm (0.1 % of the {arm:.4g} mm arm)")
+        out.append((n, f"{n}: the measurements do not determine it (sigma {shown})"))
+    return out
+
+
 class _Params:
     """What :func:`exact_rewrite` reads of a machine: its parameter vector."""
 
