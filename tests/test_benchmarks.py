@@ -42,6 +42,8 @@ _FIT_FIGURES = ("ms", "fd_ms", "wall_ms", "fd_wall_ms", "solve_ms", "fd_solve_ms
 _SELECTIONS = ("default_30_of_2000", "default_110_of_10000", "cuckoo_30_of_2000", "cuckoo_O1_30_of_2000",
                "default_O4_30_of_2000")
 _PLANS = ("plan_110_of_100000", "plan_110_of_1000000")
+_DELTA_HOWS = ("nominal", "klipper", "pkmcal_default", "pkmcal_refit", "pkmcal_prior", "klipper_object",
+               "pkmcal_object")
 _MC_SETUPS = ("full-pose-paper1", "indicators-prototype")
 
 #: Per benchmark: the keys (paths into the JSON object) its docstring promises.
@@ -49,6 +51,12 @@ PROMISED: dict[str, list[tuple[str, ...]]] = {
     "cli_startup": [(k,) for k in ("python_s", "help_s", "machines_s", "ik_10_s", "help_median_s",
                                    "machines_median_s", "ik_10_median_s")]
     + _each([("imports", c) for c in ("help", "machines", "ik_10")], ("heavy_s", "slowest_top_level_s")),
+    "delta_vs_firmware": [(k,) for k in ("printers", "seed", "probe_points", "grid_points", "seconds")]
+    + _each([(s, h) for s in ("no_leans", "leans") for h in _DELTA_HOWS],
+            ("rms3d_median_mm", "rms3d_worst_mm", "first_layer_median_mm", "first_layer_worst_mm", "solve_s_median",
+             "failures", "refused_then_accepted"))
+    + _each([(s, h) for s in ("no_leans", "leans") for h in _DELTA_HOWS[2:] if h != "klipper_object"],
+            ("worse_than_klipper", "improvement_over_klipper_pct")),
     "identification": [(f"{fit}_{f}",) for fit in ("ik_residual", "fk_residual") for f in _FIT_FIGURES]
     + [(f"{fit}_problems",) for fit in ("ik_residual", "fk_residual")]
     + _each([("ik_residual_problems", 0), ("fk_residual_problems", 0)],

@@ -28,6 +28,7 @@ from click.testing import CliRunner
 from pkmcal.cli.main import cli
 from pkmcal.identification.engine import identify
 from pkmcal.identification.firmware_refit import (
+    FIRMWARE_FREE,
     HELD,
     dropped_machine,
     firmware_refit,
@@ -42,6 +43,9 @@ from pkmcal.mechanisms.linear_delta import PARAM_NAMES
 from pkmcal.sensors.base import NoiseModel
 
 TRIGGER_STD = 0.005
+#: The full model: every parameter but the tool offset (a Z probe's default holds the arms and
+#: the leans, which heights alone do not determine; these tests fit them, with priors on the arms)
+ALL = ",".join(f"{p}_*" for p in ("angle", "radius", "arm", "endstop", "lean"))
 
 
 def _probe(nominal, real, sensor, xy, rng=None):
@@ -119,9 +123,9 @@ def test_noise_free_refit_of_a_firmware_representable_printer_predicts_it_exactl
     clean = _noise_free(setup)
     # the full model, fitted on weighted rows with a noise-free setup's weights undefined: use
     # the noisy setup's weights (the data are exact either way)
-    full = identify(nominal, setup, meas, xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    full = identify(nominal, setup, meas, free=ALL.split(","), fix="auto", xtol=1e-15, ftol=1e-15, gtol=1e-15)
     assert full.success and full.rms_residual < 1e-8
-    ref = firmware_refit(full.mechanism, setup, meas, held, priors=())
+    ref = firmware_refit(full.mechanism, setup, meas, held, priors=(), free=FIRMWARE_FREE)
     assert ref.refit.fit_rms["mm"] < 1e-8 and ref.refit.heldout_rms["mm"] < 1e-8
     # independently of the fit: the real printer's held-out triggers read 0 on the refit
     cal = ref.machine
@@ -163,7 +167,7 @@ def test_unequal_radii_on_vertical_rails_cost_nothing_without_a_refit():
 
 def test_a_leaning_rail_costs_a_measurable_amount_and_the_refit_beats_dropping_it():
     nominal, setup, real, meas, held, priors = _campaign(5, 0.5)
-    full = identify(nominal, setup, meas, priors=priors)
+    full = identify(nominal, setup, meas, free=ALL.split(","), fix="auto", priors=priors)
     ref = firmware_refit(full.mechanism, setup, meas, held, priors=priors)
     f, r = ref.full.fit_rms["mm"], ref.refit.fit_rms["mm"]
     assert r ** 2 - f ** 2 > _chance_limit(f, 60, 6)      # beyond what six numbers gain by chance
@@ -193,12 +197,26 @@ def test_export_with_measurements_writes_the_refit_and_reports_the_cost(tmp_path
     monkeypatch.chdir(tmp_path)
     priors = _files(tmp_path)
     runner = CliRunner()
-    args = ["identify", "nominal.yaml", "meas.csv", "--setup", "z-probe-klipper", "-o", "cal.yaml"]
+    args = ["identify", "nominal.yaml", "meas.csv", "--setup", "z-probe-klipper", "--free", ALL, "--fix", "auto",
+            "-o", "cal.yaml"]
     for p in priors:
         args += ["--prior", f"{p.pattern}={p.mean!r}±{p.std!r}"]
     assert runner.invoke(cli, args).exit_code == 0
-    plain = runner.invoke(cli, ["export", "cal.yaml", "--format", "klipper", "-o", "plain.cfg"])
-    assert plain.exit_code == 0 and "--measurements MEAS.csv --setup SETUP" in plain.output
+    # without --measurements: the refit on the measurements the calibration record names
+    default = runner.invoke(cli, ["export", "cal.yaml", "--format", "klipper", "-o", "default.cfg"])
+    assert default.exit_code == 0, default.output
+    assert "refitting for the firmware on the calibration's measurements meas.csv" in default.output
+    # the calibrated numbers without the refit: the leans traded with the radii, endstops and
+    # angles leave those with sigmas far beyond tolerance: refused unless accepted by name
+    plain = runner.invoke(cli, ["export", "cal.yaml", "--format", "klipper", "--no-refit", "-o", "plain.cfg"])
+    assert plain.exit_code == 2 and "the export is refused" in plain.output and "radius_b" in plain.output
+    assert not (tmp_path / "plain.cfg").exists()
+    plain = runner.invoke(cli, ["export", "cal.yaml", "--format", "klipper", "--no-refit", "-o", "plain.cfg",
+                                "--accept-undetermined", "radius_*", "--accept-undetermined", "angle_*",
+                                "--accept-undetermined", "endstop_*"])
+    assert plain.exit_code == 0 and "--measurements MEAS.csv --setup SETUP" in plain.output, plain.output
+    assert "exported as accepted with --accept-undetermined" in plain.output
+    assert "# pkmcal:" in (tmp_path / "plain.cfg").read_text()
     res = runner.invoke(cli, ["export", "cal.yaml", "--format", "klipper", "--measurements", "meas.csv",
                               "--heldout", "held.csv", "-o", "refit.cfg"])   # setup from the calibration record
     assert res.exit_code == 0, res.output
@@ -218,6 +236,7 @@ def test_export_with_measurements_writes_the_refit_and_reports_the_cost(tmp_path
     assert (back.radius, back.angles_deg, back.arms, back.endstops) == (fw.radius, fw.angles_deg, fw.arms,
                                                                          fw.endstops)
     assert (tmp_path / "refit.cfg").read_text() != (tmp_path / "plain.cfg").read_text()
+    assert (tmp_path / "refit.cfg").read_text() == (tmp_path / "default.cfg").read_text()
     line = next(ln for ln in res.output.splitlines() if "firmware-limited refit (exported)" in ln)
     assert f"{ref.refit.heldout_rms['mm']:.4g} mm" in line
     js = runner.invoke(cli, ["export", "cal.yaml", "--format", "marlin", "--measurements", "meas.csv", "--setup",

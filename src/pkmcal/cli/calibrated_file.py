@@ -144,7 +144,7 @@ def identify_heldout_validation(calibrated, cal_setup, nominal, before, path: st
 
 
 def with_calibration_record(result, machine: str, measurements: str, setup_spec: str, name: str | None,
-                             setup=None, before=None, accepted=None):
+                             setup=None, before=None, accepted=None, undetermined=()):
     """The identified machine under its own name with a ``calibration`` record in its
     metadata (kept in the machine file; ``pkmcal export --format json`` shows it): name,
     calibrated-from, UTC date, pkmcal version, command line, the inputs with their SHA-256
@@ -153,6 +153,9 @@ def with_calibration_record(result, machine: str, measurements: str, setup_spec:
     sensor) the identified setup goes under ``setup:`` (:func:`setup_block`).
     ``accepted``: the :class:`~pkmcal.identification.fit_verdict.FitVerdict` of a refused fit
     written with ``--accept-bad-fit``, stored as ``calibration.accepted_bad_fit``.
+    ``undetermined``: the named directions the data left undetermined
+    (:func:`~pkmcal.identification.identifiability.undetermined_directions`), stored as
+    ``calibration.undetermined`` (what ``export`` prints and writes as comments).
     ``SOURCE_DATE_EPOCH`` fixes the date, so that the same inputs give the same bytes."""
     from pkmcal import __version__
     from pkmcal.cli.provenance import command_line, input_record, utc_timestamp
@@ -172,6 +175,7 @@ def with_calibration_record(result, machine: str, measurements: str, setup_spec:
                    "measurements": input_record(measurements)},
         "method": result.method, "weighted": bool(result.weighted), "measurements": str(measurements),
         "setup": str(setup_spec), "n_poses": int(len(result.used_poses)), "n_free": int(len(result.free)),
+        "free": [str(n) for n in result.free],
         "gauge": list(result.gauge), "rms_residual": float(result.rms_residual),
         # undefined (null) without degrees of freedom
         "reduced_chi2": float(u.reduced_chi2) if np.isfinite(u.reduced_chi2) else None, "std": u.description,
@@ -180,6 +184,12 @@ def with_calibration_record(result, machine: str, measurements: str, setup_spec:
         record["loss"] = result.loss
     if accepted is not None:
         record["accepted_bad_fit"] = {"problems": list(accepted.problems), "diagnoses": list(accepted.diagnoses)}
+    if undetermined:
+        record["undetermined"] = [{"meaning": e["meaning"], "status": e["status"], "unit": e["unit"],
+                                   "sigma": float(e["sigma"]) if np.isfinite(e["sigma"]) else None,
+                                   "tolerance": float(e["tolerance"]), "held": list(e["held"]), "remedy": e["remedy"],
+                                   "text": e["text"]}
+                                  for e in undetermined]
     sc = result.screening
     if sc is not None and sc.rejected:
         record["rejected_poses"] = [o.pose for o in sc.rejected]

@@ -10,7 +10,13 @@
   (:mod:`pkmcal.io.delta_firmware`), what it cannot hold listed on standard error; with
   ``--measurements`` (``--setup``, ``--heldout``, ``--json``) the firmware-limited refit is
   exported instead, with the fit and held-out RMS of the full model, of its firmware numbers
-  and of the refit (:mod:`pkmcal.identification.firmware_refit`).
+  and of the refit (:mod:`pkmcal.identification.firmware_refit`); without it, the refit on
+  the measurements the calibration record names (unchanged: their SHA-256) when the machine
+  has what the firmware cannot hold (``--no-refit``: never). What the calibration's data left
+  undetermined (the record's ``undetermined``) is printed and written as comments; a firmware
+  number whose standard deviation (:func:`pkmcal.io.delta_firmware.firmware_sigmas`) is above
+  its tolerance — 0.1 % of the arm for lengths, for an angle the one that moves a tower that
+  far — is refused unless ``--accept-undetermined NAME`` (issue 25).
 * ``--format json``: the identified parameters ρ with their standard deviations σ_i and
   correlations ρ_ij = Σ_ij / (σ_i σ_j) from the machine file's covariance Σ, units,
   conventions and calibration metadata (:func:`pkmcal.io.calibration_json.calibration_json`).
@@ -83,13 +89,23 @@ from pkmcal.io.calibration_json import (  # noqa: F401
 @click.option("--steps-per-mm", "steps_per_mm", type=float, metavar="STEPS",
               help="marlin, --marlin-version 2.0.x: the towers' steps per mm (M92), for its homing's extra "
                    "MIN_STEPS_PER_SEGMENT + 1 steps.")
+@click.option("--no-refit", "no_refit", is_flag=True,
+              help="klipper / marlin: export the calibrated machine's own numbers, without the firmware-limited "
+                   "refit that export otherwise makes from the measurements its calibration record names when the "
+                   "machine has what the firmware cannot hold (rail leans, a tool offset).")
+@click.option("--accept-undetermined", "accept_undetermined", multiple=True, metavar="NAME",
+              help="klipper / marlin: export although the measurements leave this firmware number (a name or "
+                   "pattern, e.g. 'arm_*'; repeatable) with a standard deviation above its tolerance (0.1 % of the "
+                   "arm for lengths; for angles, the angle that moves a tower by that much); without it such an "
+                   "export is refused.")
 @click.option("--json", "as_json", is_flag=True,
               help="With --measurements: print the refit report as JSON on standard output (the settings then need "
                    "-o FILE).")
 def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None, update_ini: str | None = None,
                stroke_margin: float | None = None, measurements: str | None = None, setup_spec: str | None = None,
                heldout: str | None = None, klipper_config: str | None = None, marlin_version: str = "2.1.x",
-               steps_per_mm: float | None = None, as_json: bool = False) -> None:
+               steps_per_mm: float | None = None, as_json: bool = False, no_refit: bool = False,
+               accept_undetermined: tuple[str, ...] = ()) -> None:
     """Export the machine in CALIBRATED.yaml (a machine file or built-in name) for a controller.
 
     linuxcnc: 'setp genhexkins.base.N.x|y|z' and 'setp genhexkins.platform.N.x|y|z'
@@ -108,8 +124,17 @@ def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None, u
     [stepper_a|b|c] angle, position_endstop, upper_arm_length, lower_arm_length). With
     --config PRINTER.cfg the output is that printer.cfg after Klipper's SAVE_CONFIG.
 
+    klipper / marlin refuse a firmware number the calibration's measurements leave with a
+    standard deviation above its tolerance (arms from Z-probe heights alone) unless it is
+    accepted by name (--accept-undetermined), and print what the measurements do not
+    determine (the calibration record's 'undetermined', from identify), also as comments in
+    the exported text.
+
+    The firmware-limited refit is made by default when the machine has what the firmware
+    cannot hold and its calibration record names the measurements and the setup (the file
+    unchanged since identify: its SHA-256); --no-refit exports the numbers as they are.
     With --measurements MEAS.csv (and --setup, --heldout HELDOUT.csv): the firmware-limited
-    refit. The machine is fitted again with only the firmware's numbers free (one radius,
+    refit on those. The machine is fitted again with only the firmware's numbers free (one radius,
     per tower angle, arm, endstop; leans and tool offset held at 0; the calibration's
     method and priors), the refit is what is exported (the best machine the firmware can
     hold), and standard error (or --json) shows what dropping the rest costs: the residual
@@ -119,6 +144,10 @@ def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None, u
     if (setup_spec is not None or heldout is not None or as_json) and measurements is None:
         raise PkmcalError("--setup, --heldout and --json belong to the firmware-limited refit: give --measurements "
                           "MEAS.csv too")
+    if (no_refit or accept_undetermined) and fmt not in ("klipper", "marlin"):
+        raise PkmcalError(f"--no-refit and --accept-undetermined are for --format klipper or marlin, not {fmt}")
+    if no_refit and measurements is not None:
+        raise PkmcalError("--no-refit exports without the refit that --measurements asks for: give one of them")
     if measurements is not None and fmt not in ("klipper", "marlin"):
         raise PkmcalError(f"--measurements refits a linear delta for its firmware: use it with --format klipper or "
                           f"marlin, not {fmt}")
@@ -174,7 +203,18 @@ def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None, u
         refit = None
         if measurements is not None:
             refit = _refit(machine, measurements, setup_spec, heldout, calibrated)
+        elif not no_refit:
+            recorded = _recorded_measurements(machine, calibrated)
+            if recorded is not None:
+                check_output(output, [recorded[0]])
+                click.echo(f"pkmcal: note: refitting for the firmware on the calibration's measurements {recorded[0]} "
+                           f"(setup {recorded[1]}; --no-refit exports the calibrated numbers as they are)", err=True)
+                refit = _refit(machine, recorded[0], recorded[1], None, calibrated)
+        comments = _undetermined_lines(machine, accept_undetermined, refit)
+        for line in comments:
+            click.echo(f"pkmcal: warning: {line}", err=True)
         text = _delta_firmware_text(machine, fmt, refit, klipper_config, marlin_version, steps_per_mm)
+        text = _with_comments(text, comments, "#" if fmt == "klipper" else ";")
     else:
         text = format_calibration_json(machine, source=os.fspath(calibrated))
     if ini_text is not None:
@@ -193,25 +233,112 @@ def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None, u
         click.echo(f"wrote {ini} ({what})", err=True)
 
 
+def _undetermined_lines(machine, accepted: tuple[str, ...], refit=None) -> list[str]:
+    """What the calibration's measurements leave undetermined, one plain line each (printed on
+    standard error and written as comments): the record's ``undetermined`` directions (from
+    identify) and each firmware number whose standard deviation is above its tolerance
+    (:func:`pkmcal.io.delta_firmware.undetermined_firmware_numbers` of the calibrated
+    ``machine``'s covariance, or of the firmware-limited ``refit``'s own when it is what is
+    exported), which is an error unless ``accepted`` names it."""
+    from fnmatch import fnmatchcase
+
+    from pkmcal.identification.firmware_refit import FIRMWARE_FREE, RADII
+    from pkmcal.io.delta_firmware import FIRMWARE_NUMBERS, undetermined_firmware_numbers
+
+    if machine.kind != "linear-delta":
+        return []
+    record = (machine.metadata or {}).get("calibration") or {}
+    lines = [str(e.get("text") or e.get("meaning")) for e in record.get("undetermined") or ()]
+    known = tuple(FIRMWARE_NUMBERS) + FIRMWARE_FREE + RADII
+    for pat in accepted:
+        if not any(fnmatchcase(n, pat) for n in known):
+            raise PkmcalError(f"--accept-undetermined '{pat}': no firmware number has this name; the names are "
+                              f"{', '.join(FIRMWARE_NUMBERS)}")
+    source = refit.machine if refit is not None else machine
+    cov = refit.covariance if refit is not None else getattr(machine, "covariance", None)
+    if cov is None:
+        return lines
+    refused = []
+    for n, line in undetermined_firmware_numbers(source, cov):
+        if any(fnmatchcase(n, pat) for pat in accepted):
+            lines.append(f"{line}; exported as accepted with --accept-undetermined")
+        else:
+            refused.append(line)
+    if refused:
+        remedy = next((str(e["remedy"]) for e in record.get("undetermined") or () if e.get("remedy")),
+                      "add measurements that see it, or a prior on its measured value")
+        raise PkmcalError("the export is refused: " + "; ".join(refused) + "; the firmware would hold these numbers "
+                          f"as if they were known: {remedy}; or export them anyway with "
+                          "--accept-undetermined NAME")
+    return lines
+
+
+def _with_comments(text: str, lines: list[str], mark: str) -> str:
+    """``text`` after comment lines (``mark``: '#' for Klipper, ';' for Marlin's G-code) that
+    say what the measurements did not determine."""
+    if not lines:
+        return text
+    import textwrap
+
+    head = [f"{mark} pkmcal: what the calibration's measurements did not determine:"]
+    for line in lines:
+        head += textwrap.wrap(line, width=100, initial_indent=f"{mark}   ", subsequent_indent=f"{mark}     ",
+                              break_on_hyphens=False)
+    return "\n".join(head) + "\n\n" + text
+
+
+def _recorded_measurements(machine, calibrated: str) -> tuple[str, str] | None:
+    """The measurement file and setup the calibration record names, when the machine has
+    what its firmware cannot hold (so that a refit changes what is exported) and the file
+    is there unchanged (the record's SHA-256); else None, with a note on standard error
+    saying why there is no refit."""
+    from pkmcal.cli.provenance import input_record
+    from pkmcal.io.delta_firmware import firmware_subset
+
+    if machine.kind != "linear-delta" or not firmware_subset(machine)[1]:
+        return None                                # the firmware holds this machine exactly: nothing to refit
+    record = (machine.metadata or {}).get("calibration") or {}
+    path, setup = record.get("measurements"), record.get("setup")
+    if not path or not setup:
+        click.echo(f"pkmcal: note: {calibrated} has no calibration record naming its measurements and setup: no "
+                   "firmware-limited refit (give --measurements MEAS.csv --setup SETUP)", err=True)
+        return None
+    want = ((record.get("inputs") or {}).get("measurements") or {}).get("sha256")
+    candidates = [path] if os.path.isabs(path) else [path, os.path.join(os.path.dirname(os.fspath(calibrated)), path)]
+    for p in candidates:
+        if os.path.isfile(p):
+            if want is not None and input_record(p).get("sha256") != want:
+                click.echo(f"pkmcal: note: {p} has changed since the calibration (its SHA-256 differs from the "
+                           "record's): no firmware-limited refit on it (give --measurements MEAS.csv to refit)",
+                           err=True)
+                return None
+            setup_path = setup if os.path.isabs(setup) or os.path.exists(setup) else \
+                os.path.join(os.path.dirname(os.fspath(calibrated)), setup)
+            return p, setup_path if os.path.exists(setup_path) else setup
+    click.echo(f"pkmcal: note: the calibration's measurements {path} are not found: no firmware-limited refit "
+               "(give --measurements MEAS.csv)", err=True)
+    return None
+
+
 def _refit(machine, measurements: str, setup_spec: str | None, heldout: str | None, calibrated: str):
     """The firmware-limited refit of ``machine`` on the measurement files
     (:func:`pkmcal.identification.firmware_refit.firmware_refit`)."""
     if machine.kind != "linear-delta":
         raise PkmcalError(f"--measurements refits a linear delta for its firmware; machine '{machine.name}' is a "
                           f"{machine.kind or 'machine of another kind'}")
+    from pkmcal.cli.klipper_probe_cmd import machine_read_by
     from pkmcal.identification.firmware_refit import firmware_refit
     from pkmcal.io.measurements import load_measurements
-    from pkmcal.io.lookup import load_setup
 
     if setup_spec is None:
         setup_spec = ((machine.metadata or {}).get("calibration") or {}).get("setup")
         if setup_spec is None:
             raise PkmcalError(f"{calibrated} has no calibration record naming its setup: give --setup SETUP (the "
                               "setup of the measurements, e.g. z-probe-klipper)")
-    setup = load_setup(setup_spec, machine)
-    meas = load_measurements(measurements, machine, setup)
-    held = None if heldout is None else load_measurements(heldout, machine, setup)
-    return firmware_refit(machine, setup, meas, held)
+    read, setup = machine_read_by(machine, setup_spec)     # printed distances: the machine read as pose pairs
+    meas = load_measurements(measurements, read, setup)
+    held = None if heldout is None else load_measurements(heldout, read, setup)
+    return firmware_refit(read, setup, meas, held)
 
 
 def _delta_firmware_text(machine, fmt: str, refit=None, klipper_config: str | None = None,

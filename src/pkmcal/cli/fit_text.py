@@ -55,13 +55,21 @@ def free_statement(result, free_opt: list[str] | None, setup) -> str:
     if several:   # NAME@LABEL of the setup's free: names, and the sessions' actuator offsets
         setup_free = set(result.sensor.default_free)
         offsets = {n for n in names[p + len(result.sensor.param_names):]}
-    from pkmcal.identification.residuals import default_fixed_parameters
+    from pkmcal.identification.residuals import default_fixed_parameters, sensor_held_parameters
 
     held_by_machine = [n for n in default_fixed_parameters(result.mechanism) if n not in result.free]
+    held_by_sensor = [] if free_opt is not None else \
+        [n for n in sensor_held_parameters(result.mechanism, result.sensor)
+         if n not in result.free and n not in held_by_machine]
     if free_opt is not None:
         src = "--free"
-    elif held_by_machine:
-        src = f"all but {', '.join(held_by_machine)}, which the machine holds unless freed by name; no --free given"
+    elif held_by_machine or held_by_sensor:
+        parts = ([f"{', '.join(held_by_machine)}, which the machine holds unless freed by name"]
+                 if held_by_machine else []) + \
+            ([f"{', '.join(held_by_sensor)}, which this sensor cannot determine (it reads heights only, or only on "
+              "the bed; held at the machine file's values unless freed by name or given a prior, e.g. the measured "
+              "rods)"] if held_by_sensor else [])
+        src = f"all but {'; and '.join(parts)}; no --free given"
     else:
         src = "all, no --free given"
     text = f"free parameters: {len(mech_free)} of {p} machine parameters ({src})"

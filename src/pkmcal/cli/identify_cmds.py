@@ -58,6 +58,37 @@ def merged_free(free: list[str] | None, setup) -> list[str] | None:
     return list(free) + [n for n in setup.sensor.default_free if n not in free]
 
 
+def _undetermined(nominal, setup, meas, result, priors) -> list[dict]:
+    """The named directions (a delta's common scale of arms and radius) these measurements
+    and priors leave undetermined, at the measurements' commanded poses (else the poses the
+    fit solved): :func:`pkmcal.identification.identifiability.undetermined_directions`."""
+    from pkmcal.identification.engine import measurement_arrays
+    from pkmcal.identification.identifiability import undetermined_directions
+
+    if result.sessions is not None or not nominal.named_directions():
+        return []
+    cmd = measurement_arrays(meas)[2]
+    poses = cmd if cmd is not None else getattr(result, "poses", None)
+    if poses is None:
+        return []
+    held = [n for n in result.mechanism.param_names if n not in result.free and n not in result.gauge]
+    return undetermined_directions(nominal, setup, poses, priors=priors, held=held, method=result.method)
+
+
+def _firmware_numbers_undetermined(result) -> list[tuple[str, str]]:
+    """The firmware numbers of a calibrated linear delta with vertical rails that its
+    covariance leaves beyond tolerance (what export refuses:
+    :func:`pkmcal.io.delta_firmware.undetermined_firmware_numbers`); none for other machines
+    and for leaning rails, which export refits first."""
+    from pkmcal.identification.firmware_refit import machine_covariance
+    from pkmcal.io.delta_firmware import exact_rewrite, undetermined_firmware_numbers
+
+    mech = result.mechanism
+    if mech.kind != "linear-delta" or exact_rewrite(mech) is None:
+        return []
+    return undetermined_firmware_numbers(mech, machine_covariance(result))
+
+
 @click.command("identify", epilog=examples(
     "pkmcal identify stewart-prototype meas.csv --setup indicators-prototype -o calibrated.yaml",
     "pkmcal identify stewart-prototype meas.csv --setup indicators-prototype -o hexapod-A.yaml --name hexapod-A-2026",
@@ -227,7 +258,11 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
             if not accept_bad_fit:
                 raise PkmcalError(f"the fit is refused: {verdict.text()}; nothing written to {output}: mend the cause "
                                   "and run again, or write it anyway with --accept-bad-fit (recorded in the file)")
-    hints = [f"warning: {w}" for w in clipped_lines] + [f"warning: {c}" for c in causes]
+    undetermined = _undetermined(nominal, setup, meas, result, priors) if baseline is None else []
+    hints = [f"warning: {w}" for w in clipped_lines] + [f"warning: {c}" for c in causes] + \
+        [f"warning: {e['text']}" for e in undetermined] + \
+        [f"warning: {line}: 'pkmcal export --format klipper|marlin' will refuse it unless accepted by name "
+         f"(--accept-undetermined {n})" for n, line in _firmware_numbers_undetermined(result)]
     if not verdict.acceptable:
         hints.append(f"warning: written with --accept-bad-fit although the fit is refused: {verdict.text()}")
     if hints:
@@ -242,7 +277,8 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     cal_setup = identified_setup_of(setup, result) if baseline is None else None
     text = machine_to_text(with_calibration_record(result, machine, measurements, setup_spec, name,
                                                    setup=cal_setup, before=before,
-                                                   accepted=None if verdict.acceptable else verdict))
+                                                   accepted=None if verdict.acceptable else verdict,
+                                                   undetermined=undetermined))
     check_loads_back(text, "(standard output)" if to_stdout(output) else output)
     validation = None
     if heldout is not None:

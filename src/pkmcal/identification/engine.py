@@ -891,7 +891,7 @@ def _identify(machine, setup, measurements, *, method, free, fix, weighted, form
         used = np.setdiff1d(used, np.asarray(exclude, dtype=int))
         model = model.subset(used)
 
-    cand, explicit = candidate_parameters(model, free, fix)
+    cand, explicit = candidate_parameters(model, free, fix, priors=priors)
     if not cand:
         raise PkmcalError("no free parameters to identify (check --free / --fix)")
     theta_given = model.theta0             # the values given (reported as ``initial``)

@@ -19,6 +19,10 @@ with its automatic gauge (a Z probe on a level bed cannot see the towers turned 
 the common radius, which the engine's per-tower parameters cannot tie, is the minimiser of
 that fit's cost over R (Brent's method, :func:`scipy.optimize.minimize_scalar`).
 
+The firmware's numbers the calibration held stay held (:func:`refit_free`: the record's
+``free``; a delta's arms from Z-probe heights alone), and a refit with no residual left over
+for its free numbers (the common radius counted) is an error, not an exact interpolation.
+
 Three models are scored on the same measurements (and on held-out ones when given): the
 full calibrated model, the firmware's numbers of it without a refit, and the refit. Each
 score is the RMS of the raw residual rows (measured − predicted reading, mm for a Z probe:
@@ -76,10 +80,16 @@ class FirmwareRefit:
     priors: tuple[str, ...]
     method: str
     notes: tuple[str, ...] = ()
+    #: the refit's covariance (p, p) of the machine parameters (internal units; zero rows for
+    #: held ones; the common radius, fitted outside the engine, is held in it)
+    covariance: np.ndarray | None = None
 
     @property
     def machine(self):
-        return self.refit.machine
+        """The refit machine (the machine itself when the measurements read it as pose pairs)."""
+        from pkmcal.mechanisms.pose_pairs import single_machine
+
+        return single_machine(self.refit.machine)
 
     def lines(self) -> list[str]:
         """The report, one statement per line (``pkmcal export`` prints them on stderr)."""
@@ -112,8 +122,10 @@ def dropped_machine(machine):
     mean radius), with the reading reference of ``machine`` (so that it reads the same
     measurements)."""
     from pkmcal.io.delta_firmware import firmware_subset
+    from pkmcal.mechanisms.pose_pairs import single_machine
 
-    return machine.with_params(firmware_subset(machine)[0].machine(machine.name).params, name=machine.name)
+    single = single_machine(machine)        # a machine read as pose pairs (printed distances): its own numbers
+    return machine.with_params(firmware_subset(single)[0].machine(machine.name).params, name=machine.name)
 
 
 def recorded_priors(machine) -> tuple:
@@ -166,15 +178,45 @@ def _with_sensor_fitted(machine, setup, measurements, method: str, priors):
     return dataclasses.replace(setup, sensor=fit.sensor)
 
 
+def refit_free(machine, setup, priors=()) -> tuple[str, ...]:
+    """The firmware's numbers (besides the common radius) the refit frees: those the
+    calibration freed (its record's ``free`` and ``gauge``), so that a parameter the
+    calibration held (a delta's arms from Z-probe heights) stays at its value; without that
+    record, the firmware's numbers but those the sensor cannot see without a prior on them
+    (:func:`pkmcal.identification.residuals.sensor_held_parameters`)."""
+    from pkmcal.identification.residuals import sensor_held_parameters
+
+    record = (machine.metadata or {}).get("calibration") or {}
+    if "free" in record:
+        chosen = set(record.get("free") or ()) | set(record.get("gauge") or ())
+        return tuple(n for n in FIRMWARE_FREE if n in chosen)
+    held = set(sensor_held_parameters(machine, setup.sensor, priors))
+    return tuple(n for n in FIRMWARE_FREE if n not in held)
+
+
+def machine_covariance(result) -> np.ndarray:
+    """The (p, p) covariance of ``result``'s machine parameters (zero for the held ones)."""
+    names = list(result.mechanism.param_names)
+    cov = np.zeros((len(names), len(names)))
+    k = [i for i, n in enumerate(result.free) if n in names]
+    idx = [names.index(result.free[i]) for i in k]
+    cov[np.ix_(idx, idx)] = np.asarray(result.covariance)[np.ix_(k, k)]
+    return cov
+
+
 def firmware_refit(machine, setup, measurements, heldout=None, *, method: str | None = None,
-                   priors=None) -> FirmwareRefit:
+                   priors=None, free: tuple[str, ...] | None = None) -> FirmwareRefit:
     """Refit the linear delta ``machine`` (a calibrated one) with only its firmware's numbers
     free, and score the full model, the firmware's numbers without a refit and the refit on
     ``measurements`` (and ``heldout``) (module docstring).
 
     ``method`` default: the calibration record's, else the engine's default; ``priors``
     default: the calibration record's (:func:`recorded_priors`); priors on parameters the
-    firmware cannot hold are left out (they are held at 0), and so are the setup's own."""
+    firmware cannot hold are left out (they are held at 0), and so are the setup's own.
+    The firmware's numbers the calibration held stay held (:func:`refit_free`; ``free``, a
+    subset of :data:`FIRMWARE_FREE`, names them instead); a refit
+    with no residual left over for its free numbers (the common radius among them) is an
+    error: it would reproduce the measurements exactly and nothing would check it."""
     from scipy.optimize import minimize_scalar
 
     from pkmcal.identification.engine import identify
@@ -199,11 +241,15 @@ def firmware_refit(machine, setup, measurements, heldout=None, *, method: str | 
     if held_priors:
         notes.append("priors on parameters the firmware holds at 0 are left out: "
                      + ", ".join(p.text() for p in held_priors))
+    firmware_free = refit_free(machine, setup, priors) if free is None else tuple(free)
+    if unknown := [n for n in firmware_free if n not in FIRMWARE_FREE]:
+        raise PkmcalError(f"the firmware-limited refit frees only the firmware's numbers ({', '.join(FIRMWARE_FREE)}) "
+                          f"and the common radius; not {', '.join(unknown)}")
     fit_priors = tuple(dataclasses.replace(p, origin="calibration record") for p in priors
-                       if matches(p, FIRMWARE_FREE) or matches(p, setup.sensor.param_names))
+                       if matches(p, firmware_free) or matches(p, setup.sensor.param_names))
     radius_priors = [(p, n) for p in priors for n in matches(p, RADII)]
     bare = dataclasses.replace(setup, priors=())
-    free = list(FIRMWARE_FREE) + [n for n in setup.sensor.default_free]
+    free = list(firmware_free) + [n for n in setup.sensor.default_free]
     start = dropped_machine(machine)
     r0 = float(start.params[PARAM_NAMES.index("radius_a")])
     idx = [PARAM_NAMES.index(n) for n in RADII]
@@ -231,6 +277,14 @@ def firmware_refit(machine, setup, measurements, heldout=None, *, method: str | 
     best = fit_at(opt.x)
     if not best.success:
         raise PkmcalError(f"the firmware-limited refit did not converge ({best.message})")
+    dof = int(best.uncertainty.dof) - 1          # the common radius is a free number too
+    if dof <= 0:
+        raise PkmcalError(f"the firmware-limited refit has {len(best.free) + 1} free numbers (one common radius, "
+                          f"{', '.join(best.free)}) for {len(best.free) + 1 + dof} residuals of {len(best.used_poses)} "
+                          "poses: it would fit them exactly and nothing would check it; measure more points (Klipper's "
+                          "7 are too few for a refit), or export the calibration as it is with --no-refit")
+    if held_firmware := [n for n in FIRMWARE_FREE if n not in firmware_free]:
+        notes.append(f"held as the calibration held them: {', '.join(held_firmware)}")
     refit_machine = best.mechanism.with_params(best.mechanism.params, name=machine.name)
     refit_setup = dataclasses.replace(bare, sensor=best.sensor)
 
@@ -249,7 +303,7 @@ def firmware_refit(machine, setup, measurements, heldout=None, *, method: str | 
               score("firmware-limited refit (exported)", refit_machine, refit_setup))
     return FirmwareRefit(*scores, free=tuple(n for n in best.free), gauge=tuple(best.gauge),
                          priors=tuple(p.text() for p in priors if p not in held_priors), method=method,
-                         notes=tuple(notes))
+                         notes=tuple(notes), covariance=machine_covariance(best))
 
 
 __all__ = [
@@ -260,6 +314,8 @@ __all__ = [
     "Score",
     "dropped_machine",
     "firmware_refit",
+    "machine_covariance",
     "recorded_priors",
+    "refit_free",
     "residual_rms",
 ]

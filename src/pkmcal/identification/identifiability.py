@@ -38,7 +38,11 @@ engine fits them; columns: the candidate parameters) is analysed as follows.
   of ε that the measurements leave (linearised at the nominal machine). It is *unidentifiable*
   when u' = 0 or v/σ_1 is at most ``rtol``; *weak* below
   ``weak_ratio``; *not determined* when σ exceeds the tolerance the machine declares for it
-  (a genuine but noise-swamped direction); else *identified*.
+  (a genuine but noise-swamped direction); else *identified*. After a fit,
+  :func:`undetermined_directions` judges them on every parameter the machine does not hold
+  (what the data can see, not what one fit freed), with the fit's priors as rows, and says
+  which of the direction's parameters the fit held (issue 25: what ``identify`` and
+  ``export`` print).
 """
 
 from __future__ import annotations
@@ -482,3 +486,54 @@ def _identifiability(machine, setup, poses, *, method, free, fix, weighted) -> I
     angles = tuple(n for n, a in zip(names, tuple(machine.param_is_angle) + tuple(setup.sensor.param_is_angle)) if a)
     return dataclasses.replace(rep, basis=f"{method} at {int(ok.sum())} planned poses (noise-free, nominal machine)",
                                n_unsolved=int(np.count_nonzero(~ok)), angle_names=angles, named=named)
+
+
+def undetermined_directions(machine, setup, poses, priors=(), held=(), method: str | None = None) -> list[dict]:
+    """The machine's named directions (:meth:`~pkmcal.mechanisms.base.Mechanism.named_directions`)
+    that ``setup`` at ``poses`` (N, n, the commanded ones) does not determine to their
+    tolerance, with ``priors`` (:class:`~pkmcal.identification.priors.Prior` or strings) as
+    measurements too (a prior row pins its direction, :meth:`ResolvedPriors.augment`):
+    :func:`named_directions_report` on the noise-whitened design Jacobian of every parameter
+    the machine does not hold, whether or not the fit freed it (what the data can see, not
+    what one fit chose). Each entry gets ``held``: the direction's parameters in ``held``
+    (the fit's fixed ones: they stayed at the machine file's values) and ``text``, the plain
+    line (:func:`describe_named` and what the fit did). Issue 25 item 2: ``identify`` and
+    ``export`` print them, the exported file carries them."""
+    from pkmcal.identification.priors import resolve
+    from pkmcal.identification.residuals import Model, candidate_parameters, default_method, single_threaded_blas
+
+    poses = machine.as_pose_array(poses)
+    if method is None:
+        method = default_method(setup, machine)
+    directions = machine.named_directions()
+    if not directions or not len(poses):
+        return []
+    with single_threaded_blas():
+        J, ok, names = design_jacobian(machine, setup.sensor, setup.noise, poses, method, True)
+        if not ok.any():
+            return []
+        with np.errstate(invalid="ignore"):
+            model = Model(machine, setup.sensor, setup.noise, machine.ik(poses[:1]),
+                          setup.sensor.predict(machine.frame(poses[:1])))
+        cand, _ = candidate_parameters(model, None, None)
+        rows = J[ok].reshape(-1, J.shape[-1])[:, cand]
+        rp = resolve(tuple(getattr(setup, "priors", ()) or ()) + tuple(priors or ()), model.names,
+                     model.param_is_angle, model.theta0)
+        rows, _ = rp.augment(rows, cand, "")
+        named = named_directions_report(rows, tuple(names[i] for i in cand), directions)
+    out = []
+    for e in named:
+        if e["status"] == "identified":
+            continue
+        e = dict(e, held=[n for n in e["direction"] if n in set(held)])
+        text = describe_named(e)
+        others = [names[i] for i in cand if names[i] in set(held) and names[i] not in e["direction"]]
+        if others:
+            text += (f" (judged with the {len(others)} parameter(s) this fit held, {', '.join(others[:3])}"
+                     f"{', ...' if len(others) > 3 else ''}, free too: what the data alone can tell)")
+        if e["held"]:
+            text += (f"; this fit held {', '.join(e['held'])} at the machine file's values, so the result is as right "
+                     "along it as those values are")
+        e["text"] = text
+        out.append(e)
+    return out

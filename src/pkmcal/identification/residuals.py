@@ -362,16 +362,43 @@ def default_estimated_index(mechanism) -> np.ndarray:
     return np.array([i for i, n in enumerate(mechanism.param_names) if n not in held], dtype=int)
 
 
-def candidate_parameters(model: Model, free=None, fix=None) -> tuple[list[int], bool]:
+def sensor_held_parameters(mechanism, sensor, priors=()) -> tuple[str, ...]:
+    """The machine parameters a fit holds by default because its ``sensor`` cannot determine
+    them and no prior in ``priors`` (:class:`~pkmcal.identification.priors.Prior` or
+    ``NAME=MEAN±STD`` strings) names them: the mechanism's ``held_without_length`` when the
+    sensor sees no length (``sensor.sees_length`` False: a Z probe reads heights only; a
+    delta's arms) and its ``held_on_one_plane`` when every reading is on one plane
+    (``sensor.reads_one_plane``: a bed; a delta's rail leans). A prior on a parameter is a
+    measurement of it (rods measured with calipers), so it is freed."""
+    patterns = []
+    if not getattr(sensor, "sees_length", True):
+        patterns += list(getattr(mechanism, "held_without_length", ()))
+    if getattr(sensor, "reads_one_plane", False):
+        patterns += list(getattr(mechanism, "held_on_one_plane", ()))
+    if not patterns:
+        return ()
+    from pkmcal.identification.priors import parse_prior
+
+    given = [(parse_prior(p) if isinstance(p, str) else p).pattern for p in (priors or ())]
+    held = _matching(tuple(mechanism.param_names), tuple(patterns))
+    return tuple(n for n in held if not any(fnmatchcase(n, pat) for pat in given))
+
+
+def candidate_parameters(model: Model, free=None, fix=None, priors=None) -> tuple[list[int], bool]:
     """Indices of the parameters to estimate before any automatic gauge, and whether the
     choice was explicit (``free`` or a ``fix`` list given). Without ``free``: every machine
-    parameter but those it holds by default (:func:`default_fixed_parameters`), and the
-    sensor's ``default_free``. The sessions' actuator offsets, when the model has them, are
-    candidates in both cases (``fix`` holds them)."""
+    parameter but those it holds by default (:func:`default_fixed_parameters`) and, when
+    ``priors`` is given (a fit's, possibly empty), those its sensor cannot see
+    (:func:`sensor_held_parameters`); and the sensor's ``default_free``. Without ``priors``
+    (an analysis of what the sensor sees: identifiability, planning) every parameter the
+    machine does not hold is a candidate. The sessions' actuator offsets, when the model has
+    them, are candidates in both cases (``fix`` holds them)."""
     names = model.names
     offsets = list(range(model.n_mech + model.n_sensor, len(names)))
     if free is None:
         held = set(default_fixed_parameters(model.mechanism))
+        if priors is not None:
+            held |= set(sensor_held_parameters(model.mechanism, model.sensor, priors))
         cand = [i for i in range(model.n_mech) if names[i] not in held] + \
             [names.index(n) for n in model.sensor.default_free] + offsets
         explicit = False

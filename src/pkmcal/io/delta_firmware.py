@@ -33,6 +33,11 @@ B̃_i − c, the firmware's machine (R, θ'_i, L_i, E'_i) with
 origin c: in the firmware's x, y every position is the calibrated one less c (``origin``),
 z unchanged. Nothing is dropped; the export says where the firmware's origin is.
 
+The standard deviations of the firmware's numbers (:func:`firmware_sigmas`, what ``export``
+judges against its tolerances) are the calibration's covariance Σ propagated through that
+rewrite, J Σ Jᵀ, with the angles relative to tower c's (Klipper holds angle_c): numbers of
+the firmware's own frame, free of the fit's gauge.
+
 What neither firmware can hold otherwise — rail leans (and, on leaning rails, the radius
 differences and tool offset, replaced by their mean and 0) — is listed by
 :func:`firmware_subset` with the value that was dropped, so that an export never loses a
@@ -125,6 +130,93 @@ def exact_rewrite(machine: LinearDelta) -> tuple[float, np.ndarray, np.ndarray, 
     arm = g["arm"]
     endstops = g["endstop"] + np.sqrt(arm**2 - np.sum(B**2, axis=1)) - np.sqrt(arm**2 - R**2)
     return R, angles, endstops, c
+
+
+#: The firmware's own numbers of a linear delta whose standard deviations
+#: :func:`firmware_sigmas` gives: Klipper's coordinate descent frees the radius, angle_a,
+#: angle_b and the endstops (the arms in its extended mode) and holds angle_c
+#: (klippy/kinematics/delta.py, ``DeltaCalibration.coordinate_descent_params``), so the
+#: angles are those relative to tower c's, free of the turn of the whole tower set.
+FIRMWARE_NUMBERS = ("delta_radius", "angle_a", "angle_b", "arm_a", "arm_b", "arm_c", "endstop_a", "endstop_b",
+                    "endstop_c")
+
+
+def firmware_sigmas(machine: LinearDelta, covariance: np.ndarray) -> dict[str, float] | None:
+    """Standard deviations of the firmware's numbers (:data:`FIRMWARE_NUMBERS`; mm, rad)
+    of a vertical-rail ``machine`` whose parameters have ``covariance`` (p, p): the
+    covariance propagated through its :func:`exact_rewrite` (the towers about their circle's
+    centre, the angles relative to tower c's), J Σ Jᵀ with J by central differences (steps
+    1e-5 mm, 1e-7 rad: the rewrite is smooth, so the truncation error is ~1e-10 of σ). These
+    do not depend on the gauge the fit chose (the slide and turn of the tower set are not in
+    them). None for a machine with leaning rails (no exact firmware form)."""
+    rho = np.asarray(machine.params, dtype=float)
+    is_angle = np.asarray(machine.param_is_angle, dtype=bool)
+
+    def numbers(r):
+        out = exact_rewrite(_Params(r))
+        if out is None:
+            return None
+        R, ang, E, _ = out
+        arms = r[[PARAM_NAMES.index(f"arm_{t}") for t in TOWERS]]
+        return np.r_[R, ang[0] - ang[2], ang[1] - ang[2], arms, E]
+
+    if numbers(rho) is None:
+        return None
+    cov = np.asarray(covariance, dtype=float)
+    cols = np.flatnonzero(np.diag(cov) > 0)
+    J = np.zeros((len(FIRMWARE_NUMBERS), len(cols)))
+    for j, k in enumerate(cols):
+        h = 1e-7 if is_angle[k] else 1e-5
+        up, down = rho.copy(), rho.copy()
+        up[k] += h
+        down[k] -= h
+        J[:, j] = (numbers(up) - numbers(down)) / (2 * h)
+    var = np.einsum("ij,jk,ik->i", J, cov[np.ix_(cols, cols)], J)
+    return dict(zip(FIRMWARE_NUMBERS, np.sqrt(np.maximum(var, 0.0)).tolist()))
+
+
+#: Tolerance of the firmware's numbers (the standard deviation beyond which the measurements
+#: do not determine one): 0.1 % of the mean arm for lengths (the tolerance of the delta's
+#: named scale direction: a 100 mm print 0.1 mm off); for a tower angle, the angle that
+#: moves the tower by that length at the mean radius.
+LENGTH_TOLERANCE = 1e-3
+
+
+def undetermined_firmware_numbers(machine: LinearDelta, covariance: np.ndarray) -> list[tuple[str, str]]:
+    """(name, plain line) of each firmware number of ``machine`` whose standard deviation
+    under ``covariance`` (:func:`firmware_sigmas`; a machine with leaning rails, which has no
+    exact firmware form: its parameters' own) is above its tolerance (:data:`LENGTH_TOLERANCE`):
+    what ``export`` refuses unless accepted by name and ``identify`` warns of."""
+    names = list(machine.param_names)
+    rho = machine.params
+    arm = float(np.mean([rho[names.index(f"arm_{t}")] for t in TOWERS]))
+    radius = float(np.mean([rho[names.index(f"radius_{t}")] for t in TOWERS]))
+    stds = firmware_sigmas(machine, covariance)
+    if stds is None:
+        own = [f"{p}_{t}" for p in ("radius", "angle", "arm", "endstop") for t in TOWERS]
+        cov = np.asarray(covariance, dtype=float)
+        stds = {n: float(np.sqrt(max(cov[names.index(n), names.index(n)], 0.0))) for n in own}
+        angle_names = {n for n in stds if n.startswith("angle_")}
+    else:
+        angle_names = {"angle_a", "angle_b"}
+    out = []
+    for n, sigma in stds.items():
+        angle = n in angle_names
+        tol = LENGTH_TOLERANCE * arm / (radius if angle else 1.0)
+        if not sigma > tol:
+            continue
+        shown = (f"{np.rad2deg(sigma):.3g} deg, tolerance {np.rad2deg(tol):.3g} deg (the tower moved "
+                 f"{LENGTH_TOLERANCE * arm:.3g} mm, 0.1 % of the {arm:.4g} mm arm, at the {radius:.4g} mm radius)"
+                 if angle else f"{sigma:.3g} mm, tolerance {tol:.3g} mm (0.1 % of the {arm:.4g} mm arm)")
+        out.append((n, f"{n}: the measurements do not determine it (sigma {shown})"))
+    return out
+
+
+class _Params:
+    """What :func:`exact_rewrite` reads of a machine: its parameter vector."""
+
+    def __init__(self, params):
+        self.params = params
 
 
 def firmware_subset(machine: LinearDelta) -> tuple[DeltaFirmware, list[Dropped]]:

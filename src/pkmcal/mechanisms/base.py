@@ -182,6 +182,12 @@ class Mechanism(ABC):
     #: Parameter names or shell patterns held at their values unless freed by name (a
     #: hexapod's leg gains, a delta's tool offset).
     default_fixed: tuple[str, ...] = ()
+    #: Parameter names or shell patterns a fit also holds by default when its sensor sees no
+    #: length (``Sensor.sees_length`` False, a Z probe), or reads on one plane only
+    #: (``Sensor.reads_one_plane``, a bed), unless freed by name or given a prior
+    #: (:func:`pkmcal.identification.residuals.sensor_held_parameters`).
+    held_without_length: tuple[str, ...] = ()
+    held_on_one_plane: tuple[str, ...] = ()
     #: Named sets of points among the parameters: set name → point labels, each label P
     #: with parameters ``P.x, P.y, P.z`` (mm). Shown gauge-free after an identification
     #: (:mod:`pkmcal.identification.geometry`); none by default.

@@ -127,6 +127,17 @@ class LinearDelta(TranslatingMechanism):
     LABEL: ClassVar[str] = "linear delta"
     #: Parameters held unless freed by name (exactly absorbed by the tower positions).
     default_fixed: ClassVar[tuple[str, ...]] = TOOL_PARAMS
+    #: Held by default when the sensor reads only heights (a Z probe), as Klipper's
+    #: DELTA_CALIBRATE holds them (klippy/kinematics/delta.py,
+    #: ``DeltaCalibration.coordinate_descent_params``: the arms only in its extended mode,
+    #: with printed distances): the arms, whose common scale with the radius heights leave
+    #: to σ ≈ 1.5 % (a 100 mm part 1.5 mm off). A prior on the measured arms frees them.
+    held_without_length: ClassVar[tuple[str, ...]] = ("arm_*",)
+    #: Held by default when every reading is on the bed (a Z probe, a printed object), as
+    #: Klipper holds them (it has none): the rail leans, which such readings confuse with the
+    #: endstops and angles (fitted from a bed they make the print's shape worse, even with
+    #: the printed object: docs/studies.md).
+    held_on_one_plane: ClassVar[tuple[str, ...]] = ("lean_*",)
 
     def __post_init__(self) -> None:
         self._freeze_params()

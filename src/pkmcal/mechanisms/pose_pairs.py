@@ -110,6 +110,14 @@ class PosePairs(Mechanism):
         return self.single.default_fixed
 
     @property
+    def held_without_length(self) -> tuple[str, ...]:  # type: ignore[override]
+        return self.single.held_without_length
+
+    @property
+    def held_on_one_plane(self) -> tuple[str, ...]:  # type: ignore[override]
+        return self.single.held_on_one_plane
+
+    @property
     def point_sets(self):  # type: ignore[override]
         return self.single.point_sets
 

@@ -74,6 +74,14 @@ class Sensor(ABC):
     #: True when a reading couples two poses: the machine is then read as pose pairs
     #: (:mod:`pkmcal.mechanisms.pose_pairs`; :func:`~pkmcal.mechanisms.pose_pairs.read_by`).
     reads_pose_pairs: bool = False
+    #: False when the readings determine no length of the machine, only heights above a
+    #: plane (a Z probe): a fit then holds by default what such readings leave to within
+    #: more than a print's tolerance (the mechanism's ``held_without_length``).
+    sees_length: bool = True
+    #: True when every reading is taken on one plane (a bed: a Z probe, a printed first
+    #: layer): what only shows across heights (a delta's rail leans) is then held by default
+    #: (the mechanism's ``held_on_one_plane``).
+    reads_one_plane: bool = False
 
     @property
     @abstractmethod

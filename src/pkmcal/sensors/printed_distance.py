@@ -63,6 +63,8 @@ class PrintedDistanceSensor(Sensor):
 
     kind = "printed-distance"
     reads_pose_pairs = True
+    #: the object's points and the probe's are on the bed: a lean shows only across heights
+    reads_one_plane = True
 
     def __post_init__(self) -> None:
         self._init_params()

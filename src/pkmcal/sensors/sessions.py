@@ -186,6 +186,14 @@ class SessionSensor(Sensor):
         return frozenset()     # per-session geometry: no single tool point to offer
 
     @property
+    def sees_length(self) -> bool:  # type: ignore[override]
+        return any(s.sees_length for s in self.sensors)
+
+    @property
+    def reads_one_plane(self) -> bool:  # type: ignore[override]
+        return all(s.reads_one_plane for s in self.sensors)
+
+    @property
     def reading_names(self) -> tuple[str, ...]:
         return self.sensors[0].reading_names
 
