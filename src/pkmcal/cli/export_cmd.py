@@ -255,7 +255,7 @@ def _undetermined_lines(machine, accepted: tuple[str, ...], refit=None) -> list[
             raise PkmcalError(f"--accept-undetermined '{pat}': no firmware number has this name; the names are "
                               f"{', '.join(FIRMWARE_NUMBERS)}")
     source = refit.machine if refit is not None else machine
-    cov = refit.covariance if refit is not None else getattr(machine, "covariance", None)
+    cov = refit.covariance if refit is not None else machine.covariance
     if cov is None:
         return lines
     refused = []

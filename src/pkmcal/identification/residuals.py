@@ -371,10 +371,10 @@ def sensor_held_parameters(mechanism, sensor, priors=()) -> tuple[str, ...]:
     (``sensor.reads_one_plane``: a bed; a delta's rail leans). A prior on a parameter is a
     measurement of it (rods measured with calipers), so it is freed."""
     patterns = []
-    if not getattr(sensor, "sees_length", True):
-        patterns += list(getattr(mechanism, "held_without_length", ()))
-    if getattr(sensor, "reads_one_plane", False):
-        patterns += list(getattr(mechanism, "held_on_one_plane", ()))
+    if not sensor.sees_length:                  # declared by every sensor (sensors/base.py)
+        patterns += list(mechanism.held_without_length)
+    if sensor.reads_one_plane:
+        patterns += list(mechanism.held_on_one_plane)
     if not patterns:
         return ()
     from pkmcal.identification.priors import parse_prior
