@@ -68,9 +68,7 @@ def _undetermined(nominal, setup, meas, result, priors) -> list[dict]:
     if result.sessions is not None or not nominal.named_directions():
         return []
     cmd = measurement_arrays(meas)[2]
-    poses = cmd if cmd is not None else getattr(result, "poses", None)
-    if poses is None:
-        return []
+    poses = cmd if cmd is not None else result.poses
     held = [n for n in result.mechanism.param_names if n not in result.free and n not in result.gauge]
     return undetermined_directions(nominal, setup, poses, priors=priors, held=held, method=result.method)
 
@@ -156,10 +154,11 @@ def _firmware_numbers_undetermined(result) -> list[tuple[str, str]]:
                    "'pkmcal verify CALIBRATED.yaml --measurements HELDOUT.csv' (before / after / "
                    "after_reregistered) and show it in the --report.")
 @click.option("--accept-bad-fit", "accept_bad_fit", is_flag=True,
-              help="Write the calibrated file even when the fit is refused (it did not converge, or its chi2 is "
-                   "beyond what the setup's noise allows even with every noise sigma 3 times larger: the rule of "
-                   "pkmcal.identification.fit_verdict); the file's calibration record says it was accepted and why "
-                   "it was refused.")
+              help="Write the calibrated file even when the fit is refused (it did not converge; its chi2 is "
+                   "beyond what the setup's noise allows even with every noise sigma 3 times larger, or beyond the "
+                   "noise while the input looks wrong; or a machine parameter moved further than the machine's "
+                   "size: the rule of pkmcal.identification.fit_verdict); the file's calibration record says it "
+                   "was accepted and why it was refused.")
 @import_options
 def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fix, free, output, name, as_json,
                  report_dir=None, mapping=None, keep=None, loss="linear", f_scale=None, reject=None,
