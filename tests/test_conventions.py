@@ -211,3 +211,22 @@ def test_euler_ranges_are_those_matrix_to_euler_returns():
     for k, (lo, hi) in enumerate(EULER_RANGES):
         assert lo <= abc[:, k].min() and abc[:, k].max() <= hi
         assert abc[:, k].min() < lo + 0.1 and abc[:, k].max() > hi - 0.1     # and they are reached
+
+
+@pytest.mark.parametrize("mm, text", [(4.92113, "4.921 mm"), (0.01333, "13.33 µm"), (0.1, "0.1000 mm"),
+                                      (0.09999, "99.99 µm"), (123.456, "123.5 mm"), (9.99996, "10.00 mm"),
+                                      (-0.0005, "-0.5000 µm")])
+def test_lengths_for_people(mm, text):
+    """Issue 27 item 4: mm with 4 significant digits, µm below 0.1 mm (hand-written values)."""
+    from pkmcal.conventions import length_text
+
+    assert length_text(mm) == text
+
+
+@pytest.mark.parametrize("deg, text", [(1.5573, "1.557°"), (0.015628, "0.01563°"), (0.0099999, "36.00″"),
+                                       (0.0025, "9.000″")])
+def test_angles_for_people(deg, text):
+    """Degrees with 4 significant digits, arcseconds only below 0.01°."""
+    from pkmcal.conventions import angle_text
+
+    assert angle_text(np.deg2rad(deg)) == text

@@ -37,8 +37,9 @@ def demo_run(tmp_path_factory):
     return cwd, cwd / "pkmcal-demo", proc
 
 
-def _numbers(line: str) -> list[float]:
-    return [float(v) for v in re.findall(r"\d+\.\d+", line)]
+def _micrometres(line: str) -> list[float]:
+    """The lengths of a summary line in µm (printed as mm, or µm below 0.1 mm)."""
+    return [float(v) * (1000.0 if unit == "mm" else 1.0) for v, unit in re.findall(r"(\d+\.\d+) (mm|µm)", line)]
 
 
 def test_demo_prints_progress_and_summary(demo_run):
@@ -47,7 +48,7 @@ def test_demo_prints_progress_and_summary(demo_run):
         assert f"[{k}/6] {step}" in proc.stderr
     lines = proc.stdout.splitlines()
     pos = next(line for line in lines if line.strip().startswith("position error"))
-    before, after = _numbers(pos)[:2]
+    before, after = _micrometres(pos)[:2]
     assert before > 1000.0 and after < 50.0  # µm: millimetres of error become tens of micrometres
     assert any(line.startswith("Report:") and "pkmcal-demo/report.html" in line for line in lines)
 

@@ -151,3 +151,42 @@ def rotation_error(R_a: np.ndarray, R_b: np.ndarray) -> np.ndarray:
         axis=-1,
     )
     return np.arctan2(np.linalg.norm(skew, axis=-1) / 2.0, cos)
+
+
+# -- numbers printed for people (issue 27 item 4) ---------------------------------------------
+
+#: Below this (mm) a length is printed in µm.
+MICROMETRE_BELOW_MM = 0.1
+#: Below this (degrees) an angle is printed in arcseconds.
+ARCSECOND_BELOW_DEG = 0.01
+
+
+def length_text(mm: float, digits: int = 4) -> str:
+    """A length for a person: ``digits`` significant digits, in mm, or in µm below
+    :data:`MICROMETRE_BELOW_MM` (4.921 mm, 13.33 µm)."""
+    mm = float(mm)
+    if abs(mm) < MICROMETRE_BELOW_MM:
+        return f"{_significant(mm * 1000.0, digits)} µm"
+    return f"{_significant(mm, digits)} mm"
+
+
+def angle_text(rad: float, digits: int = 4) -> str:
+    """An angle for a person: ``digits`` significant digits, in degrees, or in arcseconds
+    below :data:`ARCSECOND_BELOW_DEG` (1.557°, 20.5″)."""
+    deg = float(np.degrees(rad))
+    if abs(deg) < ARCSECOND_BELOW_DEG:
+        return f"{_significant(deg * 3600.0, digits)}″"
+    return f"{_significant(deg, digits)}°"
+
+
+def _significant(value: float, digits: int) -> str:
+    """``value`` with ``digits`` significant digits, fixed-point (no exponent), trailing
+    zeros kept (4.900, not 4.9): the digits say the precision."""
+    if value == 0 or not np.isfinite(value):
+        return f"{value:.{digits - 1}f}" if value == 0 else str(value)
+    decimals = max(0, digits - 1 - int(np.floor(np.log10(abs(value)))))
+    text = f"{value:.{decimals}f}"
+    # rounding can add a digit (9.9996 -> 10.000): drop the extra decimal
+    if decimals > 0 and len(text.lstrip("-").replace(".", "").lstrip("0")) > digits:
+        text = f"{value:.{decimals - 1}f}"
+    return text

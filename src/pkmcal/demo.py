@@ -40,7 +40,7 @@ from typing import Callable
 import numpy as np
 
 from pkmcal import __version__
-from pkmcal.conventions import POSE_COLUMNS, poses_to_file_units
+from pkmcal.conventions import POSE_COLUMNS, angle_text, length_text, poses_to_file_units
 from pkmcal.errors import PkmcalError
 
 DEMO_MACHINE = "stewart-prototype"
@@ -110,12 +110,12 @@ class DemoResult:
         v = self.verification.to_dict()
         lines = [
             f"Held-out verification on {v['used']} poses not used for identification:",
-            f"  position error    rms {h['position_rms_before'] * 1000:9.1f} µm -> {h['position_rms_after'] * 1000:7.2f} µm"
-            f"   (max {h['position_max_before'] * 1000:.1f} -> {h['position_max_after'] * 1000:.2f} µm)",
-            f"  orientation error rms {math.degrees(h['orientation_rms_before']) * 3600:9.1f} ″  -> "
-            f"{math.degrees(h['orientation_rms_after']) * 3600:7.2f} ″ "
-            f"   (max {math.degrees(h['orientation_max_before']) * 3600:.1f} -> "
-            f"{math.degrees(h['orientation_max_after']) * 3600:.2f} ″)",
+            f"  position error    rms {length_text(h['position_rms_before']):>10} -> "
+            f"{length_text(h['position_rms_after']):>10}   (max {length_text(h['position_max_before'])} -> "
+            f"{length_text(h['position_max_after'])})",
+            f"  orientation error rms {angle_text(h['orientation_rms_before']):>10} -> "
+            f"{angle_text(h['orientation_rms_after']):>10}   (max {angle_text(h['orientation_max_before'])} -> "
+            f"{angle_text(h['orientation_max_after'])})",
             f"Report:  {self.files['report']}",
             "Files:   " + ", ".join(p.name for k, p in self.files.items() if k != "report"),
         ]
@@ -240,7 +240,7 @@ def run_demo(config: DemoConfig = DemoConfig(), progress: Progress | None = None
     calibrated = replace(calibrated, description=f"{nominal.name} calibrated by pkmcal demo (seed {config.seed}, "
                                                  f"{len(result.used_poses)} poses, {method})")
     step("identify", f"{len(result.free)} parameters, {result.method}, rms residual "
-                     f"{result.rms_residual * 1000:.2f} µm, {result.nfev} evaluations")
+                     f"{length_text(result.rms_residual)}, {result.nfev} evaluations")
 
     # 4. verify -------------------------------------------------------------------------
     step("verify")
@@ -255,8 +255,8 @@ def run_demo(config: DemoConfig = DemoConfig(), progress: Progress | None = None
     lo, hi = pool[:, :2].min(axis=0), pool[:, :2].max(axis=0)
     emap = error_map(nominal, calibrated, real, np.linspace(lo[0], hi[0], k), np.linspace(lo[1], hi[1], k),
                      float(nominal.home_pose[2]))
-    step("verify", f"{int(m.sum())} held-out poses: position rms {headline['position_rms_before'] * 1000:.1f} µm "
-                   f"-> {headline['position_rms_after'] * 1000:.2f} µm")
+    step("verify", f"{int(m.sum())} held-out poses: position rms {length_text(headline['position_rms_before'])} "
+                   f"-> {length_text(headline['position_rms_after'])}")
 
     # 5. export -------------------------------------------------------------------------
     step("export")
