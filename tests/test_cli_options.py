@@ -114,3 +114,22 @@ def test_machines_marks_the_default_once():
     assert res.exit_code == 0
     assert res.stdout.count("default") == 1 and "(default machine) (default)" not in res.stdout
     assert "stewart-prototype " in res.stdout.splitlines()[0] and "(default machine)" in res.stdout.splitlines()[0]
+
+
+def test_help_texts_show_no_formatting_debris():
+    """Issue 27 item 4: '95 %%' (a %-escape click never unescapes) and '[x<=None]' (click's
+    range of an unbounded number) were shown in --help."""
+    import click
+    from click.testing import CliRunner
+
+    from pkmcal.cli.main import COMMANDS, cli
+
+    def helps(path, command):
+        yield path, CliRunner().invoke(cli, [*path, "--help"], terminal_width=200).output
+        if isinstance(command, click.Group):
+            for name, sub in command.commands.items():
+                yield from helps([*path, name], sub)
+
+    for name in COMMANDS:
+        for path, text in helps([name], cli.get_command(None, name)):
+            assert "%%" not in text and "None]" not in text, (path, text)

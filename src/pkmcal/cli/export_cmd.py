@@ -65,7 +65,7 @@ from pkmcal.io.calibration_json import (  # noqa: F401
                    "owns updated ([TRAJ] HOME, [KINS], the [JOINT_0..5] TYPE, limits, HOME_OFFSET and HOME), in its "
                    "[TRAJ] LINEAR_UNITS (the HAL file too), every other byte kept.")
 @click.option("--stroke-margin", "stroke_margin", type=float, metavar="MM",
-              help="linuxcnc: how far inside each end of the stroke the joint limits stand, mm of strut (default 1 %% "
+              help="linuxcnc: how far inside each end of the stroke the joint limits stand, mm of strut (default 1 % "
                    "of each joint's stroke: room for the following error and the homing repeatability; 0: the "
                    "stroke's ends).")
 @click.option("--measurements", "measurements", metavar="MEAS.csv",

@@ -128,7 +128,7 @@ def _firmware_numbers_undetermined(result) -> list[tuple[str, str]]:
                    "Chi2 and the covariance are then taken over the poses within the outlier threshold (the "
                    "robust estimator's sandwich covariance, stated in the output).")
 @click.option("--f-scale", "f_scale", type=FiniteFloat(min=0.0, min_open=True), metavar="SIGMAS",
-              help="Where the robust loss turns from quadratic, in noise sigmas of the whitened rows. Default: 95 %% "
+              help="Where the robust loss turns from quadratic, in noise sigmas of the whitened rows. Default: 95 % "
                    "efficiency at Gaussian noise (" + ", ".join(f"{k} {v:g}" for k, v in DEFAULT_F_SCALE.items())
                    + ").")
 @click.option("--reject", type=FiniteFloat(min=0.0, min_open=True), metavar="K",

@@ -26,5 +26,9 @@ class FiniteFloat(click.FloatRange):
             self.fail(f"{value!r} is not a finite number", param, ctx)
         return super().convert(rv, param, ctx)
 
+    def _describe_range(self) -> str:
+        """The range for the help text; none without bounds (click's own says 'x<=None')."""
+        return "" if self.min is None and self.max is None else super()._describe_range()
+
 
 __all__ = ["FiniteFloat", "SEED"]
