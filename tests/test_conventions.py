@@ -230,3 +230,12 @@ def test_angles_for_people(deg, text):
     from pkmcal.conventions import angle_text
 
     assert angle_text(np.deg2rad(deg)) == text
+
+
+def test_several_values_for_people():
+    """No NumPy repr in user output (issue 27 item 4: '[305. 305. 305. 305. 305. 305.]')."""
+    from pkmcal.conventions import values_text
+
+    assert values_text([305.0] * 6, "mm") == "305 mm (all 6)"
+    assert values_text([305.0, 305.25, 304.9], "mm") == "305, 305.25, 304.9 mm"
+    assert values_text([5.0], "mm/rev") == "5 mm/rev"

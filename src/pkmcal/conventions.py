@@ -179,6 +179,15 @@ def angle_text(rad: float, digits: int = 4) -> str:
     return f"{_significant(deg, digits)}°"
 
 
+def values_text(values, unit: str, digits: int = 6) -> str:
+    """Several values of one quantity for a person: ``305 mm (all 6)`` when they are equal,
+    else ``305, 305.2, 304.9 mm`` (``digits`` significant digits, no NumPy repr)."""
+    v = np.asarray(values, dtype=float).ravel()
+    if v.size and np.all(v == v[0]):
+        return f"{v[0]:.{digits}g} {unit}" + (f" (all {v.size})" if v.size > 1 else "")
+    return ", ".join(f"{x:.{digits}g}" for x in v) + f" {unit}"
+
+
 def _significant(value: float, digits: int) -> str:
     """``value`` with ``digits`` significant digits, fixed-point (no exponent), trailing
     zeros kept (4.900, not 4.9): the digits say the precision."""

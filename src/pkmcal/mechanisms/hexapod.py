@@ -37,7 +37,7 @@ from types import MappingProxyType
 
 import numpy as np
 
-from pkmcal.conventions import euler_to_matrix
+from pkmcal.conventions import euler_to_matrix, values_text
 from pkmcal.errors import PkmcalError
 from pkmcal.mechanisms.base import FKResult, LimitReport
 from pkmcal.mechanisms.spatial import SpatialPlatform
@@ -662,10 +662,10 @@ class Hexapod(SpatialPlatform):
             + (f" — {self.description}" if self.description else ""),
             f"  base joint radius {np.mean(np.linalg.norm(self.base[:, :2], axis=1)):.3f} mm, "
             f"platform joint radius {self.platform_radius:.3f} mm",
-            f"  leg offsets L0 {np.array2string(self.offset, precision=3)} mm, "
+            f"  leg offsets L0 {values_text(self.offset, 'mm')}, "
             f"stroke {self.stroke[0, 0]:g}..{self.stroke[0, 1]:g} {self.actuator_unit}"
             + ("" if np.all(self.gains == 1.0) and self.actuator_unit == DEFAULT_ACTUATOR_UNIT else
-               f", gains {np.array2string(self.gains, precision=6)} mm/{self.actuator_unit}"),
+               f", gains {values_text(self.gains, 'mm/' + self.actuator_unit)}"),
             f"  limits: U-joint tilt {deg(lim.u_joint_tilt)}, S-joint tilt {deg(lim.s_joint_tilt)}, "
             f"leg diameter {'off' if lim.leg_diameter is None else f'{lim.leg_diameter:g} mm'}, "
             f"singularity margin {lim.singularity_margin:g}",

@@ -50,7 +50,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from pkmcal.conventions import euler_pose_jacobian
+from pkmcal.conventions import euler_pose_jacobian, values_text
 from pkmcal.errors import PkmcalError
 from pkmcal.mechanisms.base import LimitReport
 from pkmcal.mechanisms.frame import Frame
@@ -218,7 +218,7 @@ class PUSHexapod(ParameterVector, SpatialPlatform):
         return "\n".join([
             f"{self.name}: 6-PUS sliding-joint hexapod, {len(PARAM_NAMES)} kinematic parameters (readings "
             "lambda1..6 = carriage positions)",
-            f"  legs {np.array2string(g['leg'], precision=3)} mm, strokes "
+            f"  legs {values_text(g['leg'], 'mm')}, strokes "
             f"{self.stroke[0, 0]:g}..{self.stroke[0, 1]:g} mm (leg 1)",
             f"  platform joints at radius {np.mean(np.hypot(g['a'][:, 0], g['a'][:, 1])):.3f} mm; legs within "
             f"{np.rad2deg(self.max_joint_angle):g} deg of the platform normal",

@@ -55,7 +55,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from pkmcal.conventions import euler_pose_jacobian
+from pkmcal.conventions import euler_pose_jacobian, values_text
 from pkmcal.errors import PkmcalError
 from pkmcal.mechanisms.base import LimitReport
 from pkmcal.mechanisms.frame import Frame
@@ -208,7 +208,7 @@ class RSSHexapod(ParameterVector, SpatialPlatform):
             "crank angles)",
             f"  crank pivots at radius {np.mean(np.hypot(g['S'][:, 0], g['S'][:, 1])):.3f} mm, platform joints at "
             f"radius {np.mean(np.hypot(g['a'][:, 0], g['a'][:, 1])):.3f} mm",
-            f"  cranks {np.array2string(g['crank'], precision=3)} mm, rods {np.array2string(g['rod'], precision=3)} mm",
+            f"  cranks {values_text(g['crank'], 'mm')}, rods {values_text(g['rod'], 'mm')}",
             f"  crank angles {lo:g}..{hi:g} deg; rods within {np.rad2deg(self.max_joint_angle):g} deg of the "
             "platform normal",
         ])
