@@ -19,6 +19,8 @@ setup.
 
 from __future__ import annotations
 
+import contextlib
+
 import click
 
 from pkmcal.cli.options import check_output, examples, output_option, to_stdout
@@ -101,10 +103,9 @@ def input_files(source: str, *specs: str | None) -> list[str]:
     from pkmcal.io.klipper_config import read_config
 
     files = [source]
-    try:
+    # not a config (a console log), or one whose errors the import reports: the source alone
+    with contextlib.suppress(PkmcalError, OSError, ValueError):
         files += [f for f in read_config(source).files if f not in files]
-    except (PkmcalError, OSError, ValueError):
-        pass                     # not a config (a console log), or one whose errors the import reports
     return files + [s for s in specs if s is not None]
 
 

@@ -128,13 +128,12 @@ def judge(result, causes: Sequence[str] = ()) -> FitVerdict:
     u = result.uncertainty
     if not np.isfinite(result.cost):
         problems.append("the fit's cost is not finite (a parameter or a prior beyond any machine's scale)")
-    elif not np.isfinite(u.chi2):
-        pass   # a noise of 0 (an exact simulation, fitted unweighted): χ² has no scale to judge by
-    elif beyond_noise(u, NOISE_SLACK):
+    # (a noise of 0, an exact simulation fitted unweighted, makes χ² infinite: no scale to judge by)
+    elif np.isfinite(u.chi2) and beyond_noise(u, NOISE_SLACK):
         problems.append(f"chi2/E[chi2] = {u.birge_ratio:.4g} ({u.chi2:.6g} over E[chi2] {_nu(u):g}): the residuals "
                         f"are {np.sqrt(u.birge_ratio):.3g} times the noise the setup states, beyond what the noise "
                         f"allows even if every noise sigma were {NOISE_SLACK:g} times larger (P < {TAIL:g})")
-    elif causes and beyond_noise(u):
+    elif np.isfinite(u.chi2) and causes and beyond_noise(u):
         problems.append(f"chi2/E[chi2] = {u.birge_ratio:.4g} ({u.chi2:.6g} over E[chi2] {_nu(u):g}) is beyond the "
                         f"{TAIL:g} tail of the noise model, and the input files look wrong")
     problems += _implausible_moves(result)
