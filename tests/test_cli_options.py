@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 from click.testing import CliRunner
 
 from pkmcal.cli.main import cli
@@ -133,3 +134,21 @@ def test_help_texts_show_no_formatting_debris():
     for name in COMMANDS:
         for path, text in helps([name], cli.get_command(None, name)):
             assert "%%" not in text and "None]" not in text, (path, text)
+
+
+@pytest.mark.parametrize("args", [
+    ["export", "stewart-prototype", "--format", "linuxcnc", "--stroke-margin", "nan"],
+    ["export", "kossel-mini", "--format", "marlin", "--steps-per-mm", "inf"],
+    ["export", "kossel-mini", "--format", "marlin", "--steps-per-mm", "0"],
+    ["import", "marlin", "examples/marlin/m503.txt", "--height", "nan"],
+])
+def test_number_options_added_for_the_controllers_refuse_non_finite_and_out_of_range_values(args, tmp_path):
+    """--stroke-margin, --steps-per-mm and --height were plain floats: NaN and inf were taken
+    (a negative margin is the export's own error, tests/test_export_update_ini.py)."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+    args = [str(root / a) if a.startswith("examples/") else a for a in args]
+    res = CliRunner().invoke(cli, [*args, "-o", str(tmp_path / "out")])
+    assert res.exit_code == 2 and "Invalid value" in res.stderr, res.output
+    assert not (tmp_path / "out").exists()

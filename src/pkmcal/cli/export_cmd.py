@@ -33,6 +33,7 @@ import os
 import click
 
 from pkmcal.cli.options import check_output, emit, examples, output_option, to_stdout
+from pkmcal.cli.option_types import FiniteFloat
 from pkmcal.errors import PkmcalError
 # the JSON record moved to pkmcal.io.calibration_json; the names stay importable from here
 from pkmcal.io.calibration_json import (  # noqa: F401
@@ -64,7 +65,7 @@ from pkmcal.io.calibration_json import (  # noqa: F401
               help="linuxcnc: the machine's own INI file; --ini then writes a copy of it with only the keys pkmcal "
                    "owns updated ([TRAJ] HOME, [KINS], the [JOINT_0..5] TYPE, limits, HOME_OFFSET and HOME), in its "
                    "[TRAJ] LINEAR_UNITS (the HAL file too), every other byte kept.")
-@click.option("--stroke-margin", "stroke_margin", type=float, metavar="MM",
+@click.option("--stroke-margin", "stroke_margin", type=FiniteFloat(), metavar="MM",
               help="linuxcnc: how far inside each end of the stroke the joint limits stand, mm of strut (default 1 % "
                    "of each joint's stroke: room for the following error and the homing repeatability; 0: the "
                    "stroke's ends).")
@@ -86,7 +87,7 @@ from pkmcal.io.calibration_json import (  # noqa: F401
               show_default=True,
               help="marlin: the Marlin the settings are for (M665's letters and homing differ: 1.1.9 and 2.0.x "
                    "have no rod trims in M665 and read B as the calibration radius).")
-@click.option("--steps-per-mm", "steps_per_mm", type=float, metavar="STEPS",
+@click.option("--steps-per-mm", "steps_per_mm", type=FiniteFloat(min=0.0, min_open=True), metavar="STEPS",
               help="marlin, --marlin-version 2.0.x: the towers' steps per mm (M92), for its homing's extra "
                    "MIN_STEPS_PER_SEGMENT + 1 steps.")
 @click.option("--no-refit", "no_refit", is_flag=True,

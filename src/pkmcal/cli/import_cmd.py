@@ -18,6 +18,7 @@ import os
 import click
 
 from pkmcal.cli.options import check_output, examples, output_option, to_stdout
+from pkmcal.cli.option_types import FiniteFloat
 from pkmcal.errors import PkmcalError
 
 _OFFSET_HELP = ("home-offset (default): L0 = [JOINT_N] HOME_OFFSET, readings zero at the home switch (as pkmcal "
@@ -189,7 +190,7 @@ def klipper_cmd(config: str, output: str | None, name: str | None, setup_output:
                    "versions. Needed unless the text tells (I J K: 1.1.x; A, C: 2.1.x).")
 @click.option("--missing", type=click.Choice(["error", "zero"]), default="error", show_default=True,
               help="A trim or M666 adjustment the version prints but the file lacks: an error, or 0 (noted).")
-@click.option("--height", type=float, metavar="MM",
+@click.option("--height", type=FiniteFloat(), metavar="MM",
               help="Marlin 1.1.x only (its M665 has no H): the nozzle height at home, MANUAL_Z_HOME_POS plus M206 Z.")
 def marlin_cmd(settings: str, output: str | None, name: str | None, version: str | None, missing: str,
                height: float | None) -> None:
