@@ -44,7 +44,7 @@ def written(tmp_path_factory) -> dict[str, tuple[Path, list[str]]]:
     run("plan", "stewart-prototype", "--setup", "indicators-prototype", "--n", 15, "--n-candidates", 200,
         "--seed", 1, "-o", d / "poses.csv")
     out["plan"] = (d / "poses.csv", POSE + LAMBDA)
-    run("ik", "stewart-prototype", d / "poses.csv", "-o", d / "legs.csv")
+    run("ik", "stewart-prototype", "--poses", d / "poses.csv", "-o", d / "legs.csv")
     out["ik"] = (d / "legs.csv", POSE + [f"l{i}" for i in range(1, 7)] + LAMBDA + ["reachable"])
     (d / "far.csv").write_text("lambda1,lambda2,lambda3,lambda4,lambda5,lambda6\n" + "25,25,25,25,25,25\n"
                                + "-300,-300,-300,-300,-300,-300\n")
@@ -148,7 +148,7 @@ def test_units_comment_is_written_only_when_asked_and_still_read(written, tmp_pa
     args = {
         "plan": ["plan", "stewart-prototype", "--setup", "indicators-prototype", "--n", 15, "--n-candidates", 200,
                  "--seed", 1],
-        "ik": ["ik", "stewart-prototype", poses],
+        "ik": ["ik", "stewart-prototype", "--poses", poses],
         "fk": ["fk", "stewart-prototype", written["ik"][0]],
         "simulate": ["simulate", "stewart-prototype", "--real", "stewart-prototype-real", "--setup",
                      "indicators-prototype", "--poses", poses, "--seed", 2],

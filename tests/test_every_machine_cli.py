@@ -56,7 +56,7 @@ def test_measurement_day_on_every_machine(machine, setup, formats, tmp_path):
     run("info", machine)
     run("plan", machine, "--setup", setup, "--n", 40, "--seed", 1, "-o", d / "poses.csv")
     run("plan", machine, "--setup", setup, "--n", 20, "--algorithm", "random", "--seed", 2, "-o", d / "held.csv")
-    run("ik", machine, d / "poses.csv", "-o", d / "legs.csv")
+    run("ik", machine, "--poses", d / "poses.csv", "-o", d / "legs.csv")
     run("fk", machine, d / "legs.csv", "-o", d / "fk.csv")
     planned, back = _columns(d / "poses.csv"), _columns(d / "fk.csv")
     assert set(back["converged"]) == {"1"}

@@ -118,7 +118,7 @@ FIFO_COMMANDS = {   # (command line, which input is the pipe, what the message c
                     "{}/out.yaml"], "setup file"),
     "measurement file": (["identify", "{}/machine.yaml", "{}/p.csv", "--setup", "{}/ind.yaml", "-o",
                           "{}/out.yaml"], "measurement file"),
-    "pose table": (["ik", "{}/machine.yaml", "{}/p.csv", "-o", "{}/out.csv"], "table"),
+    "pose table": (["ik", "{}/machine.yaml", "--poses", "{}/p.csv", "-o", "{}/out.csv"], "table"),
     "candidates": (["plan", "{}/machine.yaml", "--setup", "{}/ind.yaml", "--n", "5", "--candidates", "{}/p.csv",
                     "-o", "{}/out.csv"], "table"),
     "study file": (["study", "{}/p.yaml", "-o", "{}/res"], "study file"),

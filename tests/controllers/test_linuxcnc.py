@@ -129,7 +129,7 @@ def test_world_mode_joints_are_pkmcal_ik(case):
     poses = np.array(run_.commanded, dtype=float)
     poses[:, :3] *= u                                   # what LinuxCNC was told, in mm and degrees
     write_csv(case.folder / "lc-poses.csv", "x y z a b c".split(), poses)
-    ok(run("ik", case.calibrated, case.folder / "lc-poses.csv", "-o", case.folder / "lc-legs.csv"))
+    ok(run("ik", case.calibrated, "--poses", case.folder / "lc-poses.csv", "-o", case.folder / "lc-legs.csv"))
     legs = read_csv(case.folder / "lc-legs.csv", [f"l{i}" for i in range(1, 7)])
     diff = np.abs(run_.joints * u - legs)
     print(f"{case.name}: largest |LinuxCNC joint - pkmcal ik| over {len(poses)} poses: {diff.max():.3g} mm")

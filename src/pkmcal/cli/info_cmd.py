@@ -28,7 +28,7 @@ from __future__ import annotations
 import click
 import numpy as np
 
-from pkmcal.cli.options import count_or_poses_file, examples
+from pkmcal.cli.options import count_or_poses_file, examples, quiet_accepted
 from pkmcal.cli.option_types import SEED
 from pkmcal.conventions import euler_to_matrix, rotation_error
 from pkmcal.errors import PkmcalError
@@ -146,6 +146,7 @@ def _parameter_lines(mech) -> str:
 @click.option("--poses", metavar="POSES.csv",
               help="Instead: the round trip on the poses of this file (x,y,z mm, a,b,c deg).")
 @click.option("--seed", default=0, show_default=True, type=SEED, help="Seed of the random poses.")
+@quiet_accepted
 def info_cmd(machine: str, n_poses: int | None, poses: str | None, seed: int) -> None:
     """Describe MACHINE (default: stewart-prototype): summary, workspace, IK→FK round trip."""
     from pkmcal.io.lookup import load_machine

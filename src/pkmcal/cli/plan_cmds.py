@@ -25,8 +25,10 @@ from pkmcal.cli.options import (
     check_output,
     emit,
     examples,
+    option,
     output_option,
     poses_file,
+    quiet_accepted,
     quiet_option,
     summary_echo,
     units_comment_option,
@@ -56,19 +58,20 @@ def _format_indices(ind: dict[str, float]) -> str:
 
 
 @click.command("plan", epilog=examples(
-    "pkmcal plan stewart-prototype --setup indicators-prototype --n 45 --seed 1 -o poses.csv",
-    "pkmcal plan stewart-prototype --setup full-pose-paper1 --n 20 --algorithm cuckoo --n-candidates 500 -o cuckoo.csv",
-    "pkmcal plan stewart-prototype --setup indicators-prototype --n 50 --algorithm random --seed 9 -o heldout.csv",
-    "pkmcal plan stewart-prototype --setup indicators-prototype --n 30 --tilt-margin 5 -o cautious.csv",
-    "pkmcal plan planar-3dof-4act --setup planar-tracker --n 12 -o planar-poses.csv",
-    "pkmcal plan stewart-prototype --setup full-pose-paper1 --n 30 --n-candidates 20000 --workers 2 -o large.csv",
-    "pkmcal plan stewart-prototype --setup examples/setup-ballbar.yaml --algorithm circle --n 36 -o circle.csv",
-    "pkmcal plan kossel-mini --setup z-probe-klipper --n 20 --target-accuracy 0.003 -o probe-points.csv",
-    "pkmcal plan kossel-mini --setup z-probe-klipper --n 20 --format klipper -o probe-plan.cfg",
-    "pkmcal plan kossel-mini --setup z-probe-klipper --n 20 --format gcode -o probe-plan.gcode"))
+    "pkmcal plan stewart-prototype --setup indicators-prototype --n-poses 45 --seed 1 -o poses.csv",
+    "pkmcal plan stewart-prototype --setup full-pose-paper1 --n-poses 20 --algorithm cuckoo --n-candidates 500 -o cuckoo.csv",
+    "pkmcal plan stewart-prototype --setup indicators-prototype --n-poses 50 --algorithm random --seed 9 -o heldout.csv",
+    "pkmcal plan stewart-prototype --setup indicators-prototype --n-poses 30 --tilt-margin 5 -o cautious.csv",
+    "pkmcal plan planar-3dof-4act --setup planar-tracker --n-poses 12 -o planar-poses.csv",
+    "pkmcal plan stewart-prototype --setup full-pose-paper1 --n-poses 30 --n-candidates 20000 --workers 2 -o large.csv",
+    "pkmcal plan stewart-prototype --setup examples/setup-ballbar.yaml --algorithm circle --n-poses 36 -o circle.csv",
+    "pkmcal plan kossel-mini --setup z-probe-klipper --n-poses 20 --target-accuracy 0.003 -o probe-points.csv",
+    "pkmcal plan kossel-mini --setup z-probe-klipper --n-poses 20 --format klipper -o probe-plan.cfg",
+    "pkmcal plan kossel-mini --setup z-probe-klipper --n-poses 20 --format gcode -o probe-plan.gcode"))
 @click.argument("machine")
 @click.option("--setup", "setup_spec", required=True, metavar="SETUP.yaml", help=_SETUP_HELP)
-@click.option("--n", "n_poses", type=click.IntRange(min=1), default=30, show_default=True, help="Number of poses to choose.")
+@option("--n-poses", "n_poses", old=("--n",), type=click.IntRange(min=1), default=30, show_default=True,
+        help="Number of poses to choose.")
 @click.option("--candidates", "candidates_path", metavar="FILE.csv", type=click.Path(dir_okay=False),
               help="Candidate poses: columns x,y,z (mm), a,b,c (deg). Default: random poses in the workspace box.")
 @click.option("--n-candidates", type=click.IntRange(min=1), default=2000, show_default=True,
@@ -176,7 +179,7 @@ def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, 
                           measurability=_measurability(indicator_travel, plate_radius, sight_cone),
                           progress=bar.stage, circle_plane=circle_plane, chunk_map=run_chunks,
                           on_bed=False if probe_anywhere else None)
-    command = (f"pkmcal plan {mech.name} --setup {setup_spec} --n {n_poses} --algorithm {plan.selection.algorithm} "
+    command = (f"pkmcal plan {mech.name} --setup {setup_spec} --n-poses {n_poses} --algorithm {plan.selection.algorithm} "
                f"--seed {seed}")
     if fmt != "csv":
         emit(_printer_file(fmt, plan, setup, command, machine, setup_spec), output)
@@ -262,7 +265,7 @@ def _probe_summary(say, plan, setup, target: float | None) -> None:
                 "use a more repeatable probe")
         else:
             sigma = dict(tried)[need]
-            say(f"target first-layer sigma {target:g} mm: {need} points ({sigma:.3g} mm); plan them with --n {need}")
+            say(f"target first-layer sigma {target:g} mm: {need} points ({sigma:.3g} mm); plan them with --n-poses {need}")
     if curve:
         for entry in identifiability(plan.model.mechanism, setup, plan.poses).named:
             if entry["status"] != "identified":
@@ -278,6 +281,7 @@ def _probe_summary(say, plan, setup, target: float | None) -> None:
 @click.option("--setup", "setup_spec", required=True, metavar="SETUP.yaml", help=_SETUP_HELP)
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object (keys O1..O5, n_poses).")
 @import_options
+@quiet_accepted
 def observability_cmd(machine, poses_arg, poses, setup_spec, as_json, mapping=None) -> None:
     """Observability indices O1..O5 of the poses in POSES.csv (columns x,y,z mm, a,b,c deg).
 
