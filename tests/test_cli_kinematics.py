@@ -261,3 +261,28 @@ def test_rotary_actuators_are_degrees_in_files(tmp_path):
     fk = run("fk", "planar-2dof-3act", str(tmp_path / "q.csv"))
     back = read_table("fk", ("x", "y"), text=fk.stdout)
     np.testing.assert_allclose(back.values, [[0, 200], [10, 220]], atol=1e-8)
+
+
+@pytest.mark.parametrize("args", [["stewart-prototype", "--n-poses", "60"], ["planar-3dof-4act"],
+                                  ["kossel-mini", "--n-poses", "40", "--seed", "3"]])
+def test_info_json_is_the_text_and_in_mm_and_degrees(args):
+    """``info --json`` carries every figure the text prints (the text is made from the same
+    dict: info_lines of the parsed JSON is the printed text), its workspace ranges are
+    single_axis_ranges in mm and degrees, and its counts add up."""
+    import json
+
+    from pkmcal.cli.info_cmd import info_lines
+
+    text, js = run("info", *args), run("info", *args, "--json")
+    assert text.exit_code == js.exit_code == 0, js.output
+    data = json.loads(js.stdout)
+    assert info_lines(data) == text.stdout.splitlines()
+    mech, _ = load_machine(args[0]).within_geometry()
+    ranges, stops = single_axis_ranges(mech, np.asarray(mech.home_pose, dtype=float))
+    for k, name in enumerate(mech.pose_names):
+        r = data["workspace"]["ranges"][name]
+        scale = 180.0 / np.pi if mech.pose_is_angle[k] else 1.0
+        assert r["unit"] == ("deg" if mech.pose_is_angle[k] else "mm") and r["stopped_by"] == stops[k]
+        assert [r["min"], r["max"]] == pytest.approx(ranges[k] * scale, rel=1e-12)
+    rt = data["round_trip"]
+    assert rt["returned"] + rt["other_mode"] + rt["other_pose"] + rt["not_converged"] == rt["n"]

@@ -231,3 +231,39 @@ def _poses(tmp_path) -> Path:
     path = tmp_path / "poses.csv"
     path.write_text(format_table({k: p[:, i] for i, k in enumerate("xyzabc")}))
     return path
+
+
+#: Old option spellings as they would appear in a message or docstring (``--calibration-
+#: measurements``, ``--output`` and ``--n-poses`` are not matches; demo's old ``--held-out N``
+#: is also the new spelling of held-out files, so it is not searched).
+OLD_IN_TEXT = re.compile(r"(?<![\w-])(--heldout\b|--measurements\b|--n(?= [0-9N{])|--out\b(?!put))")
+
+#: Texts that still name an old spelling, by file: messages inside the command bodies of
+#: identify, export and verify and the docstrings of calibrated_file, which issue 27 items 1-2
+#: move into the library at the same time as this vocabulary lands (the old spellings they
+#: name still work). Where those texts land, this test names them; update them there and
+#: empty this table.
+KNOWN_OLD_TEXTS = {
+    "src/pkmcal/cli/calibrated_file.py": 2,
+    "src/pkmcal/cli/campaign_cmds.py": 4,
+    "src/pkmcal/cli/export_cmd.py": 10,
+    "src/pkmcal/cli/identify_cmds.py": 1,
+}
+
+
+def test_no_text_names_an_old_spelling():
+    """Messages, help texts and docstrings name the new spellings (the declarations of the
+    old ones, ``old=(...)``, and cli/options.py's description of the mechanism aside), and so
+    do README.md and docs/ (the old-spellings table of docs/options.md aside)."""
+    root = Path(__file__).resolve().parent.parent
+    found: dict[str, list[str]] = {}
+    texts = [p for p in (root / "src" / "pkmcal").rglob("*.py") if p.name != "options.py"]
+    texts += [root / "README.md", *(p for p in (root / "docs").glob("*.md") if p.name != "options.md")]
+    for path in texts:
+        for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+            if "old=(" not in line:
+                found.setdefault(str(path.relative_to(root)), []).extend(
+                    f"{number}: {m.group(1)}" for m in OLD_IN_TEXT.finditer(line))
+    counts = {path: len(hits) for path, hits in found.items() if hits}
+    assert counts == KNOWN_OLD_TEXTS, {path: found.get(path) for path in counts.keys() | KNOWN_OLD_TEXTS.keys()
+                                       if counts.get(path) != KNOWN_OLD_TEXTS.get(path)}

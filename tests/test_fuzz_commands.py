@@ -135,7 +135,7 @@ def templates() -> dict[str, list[str]]:
                    "{}/machine.yaml", "--json", "-o", "{}/out.txt"],
         "export-hal": ["export", "{}/cal.yaml", "--format", "linuxcnc", "-o", "{}/out.hal"],
         "export-json": ["export", "{}/cal.yaml", "--format", "json", "-o", "{}/out.json"],
-        "plan": ["plan", "{}/machine.yaml", "--setup", "{}/ind.yaml", "--n", "14", "--n-candidates", "200",
+        "plan": ["plan", "{}/machine.yaml", "--setup", "{}/ind.yaml", "--n-poses", "14", "--n-candidates", "200",
                  "--algorithm", "random", "-o", "{}/out.csv", "--seed", "1"],
         "info": ["info", "{}/machine.yaml", info_n, "5", "--seed", "1"],
         "info-symmetric": ["info", "symmetric:base_radius=150,platform_radius=80", info_n, "5"],
@@ -393,7 +393,7 @@ def test_fuzz_option_values(base, tmp_path_factory, name, data):
 OUTPUT_SLOTS = {  # command line, the option whose value is replaced (added when missing)
     "ik": "-o", "fk": "-o", "simulate": "-o", "simulate-random": "--save-real", "identify": "--report",
     "identify-indicators": "-o", "verify": "-o", "export-hal": "-o", "export-json": "-o", "plan": "-o",
-    "demo": "--out", "reproduce": "-o"}
+    "demo": "-o", "reproduce": "-o"}
 
 
 @fuzz_settings(40)
@@ -401,7 +401,7 @@ OUTPUT_SLOTS = {  # command line, the option whose value is replaced (added when
 def test_fuzz_bad_output_locations(base, tmp_path_factory, name, data):
     """Every output of every command given an impossible location: refused before anything
     is read, computed or written (exit 2, one line, no file)."""
-    extra = {"demo": ["demo", "--out", "X"], "reproduce": ["reproduce", "paper2-table5", "--quick", "-o", "X"]}
+    extra = {"demo": ["demo", "-o", "X"], "reproduce": ["reproduce", "paper2-table5", "--quick", "-o", "X"]}
     if name in extra:
         d = tmp_path_factory.mktemp("run")
         shutil.copytree(base, d, dirs_exist_ok=True)
@@ -411,7 +411,7 @@ def test_fuzz_bad_output_locations(base, tmp_path_factory, name, data):
     option = OUTPUT_SLOTS[name]
     if option not in args:
         args += [option, "X"]
-    bad = BAD_FOLDERS if option in ("--report", "--out") else BAD_FILES
+    bad = BAD_FOLDERS if option == "--report" or name == "demo" else BAD_FILES
     where = data.draw(st.sampled_from([b for b in bad if not (b == "INPUT" and name in extra)]))
     args[args.index(option) + 1] = _token(where, d, inputs)
     before = snapshot(d)
@@ -812,7 +812,7 @@ def test_uncreatable_report_folder_writes_nothing(tmp_path, base):
 
 def test_uncreatable_demo_folder(tmp_path):
     (tmp_path / "file").write_text("x")
-    assert_user_error(run("demo", "--out", tmp_path / "file" / "out"), "--out", "is not a folder")
+    assert_user_error(run("demo", "-o", tmp_path / "file" / "out"), "-o", "is not a folder")
     assert sorted(os.listdir(tmp_path)) == ["file"]
 
 

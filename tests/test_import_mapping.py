@@ -227,7 +227,7 @@ def test_identifiability_observability_plan(tmp_path):
     for k in ("O1", "O2", "O3", "O4", "O5"):
         assert o2[k] == pytest.approx(o1[k], rel=1e-6), k
 
-    plan = ("plan", "stewart-prototype", "--setup", "indicators-prototype", "--n", "15", "--seed", "1")
+    plan = ("plan", "stewart-prototype", "--setup", "indicators-prototype", "--n-poses", "15", "--seed", "1")
     ok(run(*plan, "--candidates", ref, "-o", tmp_path / "p1.csv"))
     ok(run(*plan, "--candidates", foreign, "-o", tmp_path / "p2.csv", *FOREIGN_OPTS))
     np.testing.assert_allclose(read_table(tmp_path / "p2.csv", POSE_NAMES).values,

@@ -16,7 +16,7 @@ from pkmcal.mechanisms import builtin_machine
 def test_plan_writes_poses_and_commands_in_file_units(name, tmp_path):
     mech = builtin_machine(name)
     out = tmp_path / "poses.csv"
-    res = CliRunner().invoke(cli, ["plan", name, "--setup", "planar-tracker", "--n", "6", "--n-candidates", "80",
+    res = CliRunner().invoke(cli, ["plan", name, "--setup", "planar-tracker", "--n-poses", "6", "--n-candidates", "80",
                                    "-o", str(out)])
     assert res.exit_code == 0, res.output
     assert out.read_text().startswith(",".join(mech.pose_names + mech.actuator_names) + "\n")  # plain CSV
@@ -61,7 +61,7 @@ def test_candidate_angles_beyond_180_are_planned_and_written_wrapped(tmp_path):
     cand = tmp_path / "cand.csv"
     cand.write_text("x,y,z,a,b,c\n" + "".join(",".join(repr(float(v)) for v in row) + "\n" for row in turned))
     out = tmp_path / "p.csv"
-    res = CliRunner().invoke(cli, ["plan", "stewart-prototype", "--setup", "full-pose-paper1", "--n", "12",
+    res = CliRunner().invoke(cli, ["plan", "stewart-prototype", "--setup", "full-pose-paper1", "--n-poses", "12",
                                    "--candidates", str(cand), "-o", str(out)])
     assert res.exit_code == 0, res.output
     assert "30 of the 40 candidate poses have angles beyond ±180 deg" in res.output
@@ -86,7 +86,7 @@ def test_declared_workspace_beyond_the_euler_range_is_clipped_with_a_note(tmp_pa
                        + "workspace: {x: [-20, 20], y: [-20, 20], z: [300, 330], a: [-400, 400], b: [-100, 30], "
                        + "c: [-10, 10]}\n")
     out = tmp_path / "p.csv"
-    res = CliRunner().invoke(cli, ["plan", str(machine), "--setup", "full-pose-paper1", "--n", "8",
+    res = CliRunner().invoke(cli, ["plan", str(machine), "--setup", "full-pose-paper1", "--n-poses", "8",
                                    "--n-candidates", "100", "-o", str(out)])
     assert res.exit_code == 0, res.output
     assert "workspace box ('workspace:' in the machine file) is clipped: a [-400, 400] deg -> [-180, 180], " \

@@ -91,7 +91,7 @@ class Case:
 
 def calibrate(d: Path, machine: str, setup: str, real: list[str]) -> Path:
     """plan → simulate → identify through the command line; the calibrated machine file."""
-    ok(run("plan", machine, "--setup", setup, "--n", 30, "--seed", 1, "-o", d / "poses.csv"))
+    ok(run("plan", machine, "--setup", setup, "--n-poses", 30, "--seed", 1, "-o", d / "poses.csv"))
     ok(run("simulate", machine, *real, "--setup", setup, "--poses", d / "poses.csv", "--seed", 2,
            "-o", d / "meas.csv"))
     ok(run("identify", machine, d / "meas.csv", "--setup", setup, "-o", d / "calibrated.yaml"))
