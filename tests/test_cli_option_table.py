@@ -116,7 +116,7 @@ def test_json_and_quiet_on_every_command_that_prints_a_report():
     whose main output is a table or a file, and the folder commands, have no --json)."""
     figures = {"info", "ik", "fk", "plan", "observability", "simulate", "identifiability", "identify", "verify",
                "export", "check linuxcnc", "check klipper", "demo", "reproduce", "study"}
-    report = figures - {"info", "ik", "fk", "plan", "simulate", "study"}
+    report = figures - {"ik", "fk", "plan", "simulate", "study"}
     assert {c for c in figures if "--quiet" in SHOWN[c]} == figures
     assert {c for c in report if "--json" in SHOWN[c]} == report
 
@@ -205,8 +205,9 @@ def test_ik_takes_its_poses_file_as_an_option(tmp_path):
         "ik [OPTIONS] MACHINE")
 
 
-def test_identify_without_dash_o_writes_to_standard_output(tmp_path):
+def test_identify_without_dash_o_writes_to_standard_output(tmp_path, monkeypatch):
     """README: a missing -o means standard output, for identify as for every command."""
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1798761600")   # the calibration record's date
     sim = CliRunner().invoke(cli, ["simulate", "stewart-prototype", "--real", "stewart-prototype-real", "--setup",
                                    "full-pose-paper1", "--poses", str(_poses(tmp_path)), "--seed", "1"])
     assert sim.exit_code == 0, sim.output
@@ -267,3 +268,12 @@ def test_no_text_names_an_old_spelling():
     counts = {path: len(hits) for path, hits in found.items() if hits}
     assert counts == KNOWN_OLD_TEXTS, {path: found.get(path) for path in counts.keys() | KNOWN_OLD_TEXTS.keys()
                                        if counts.get(path) != KNOWN_OLD_TEXTS.get(path)}
+
+
+@pytest.mark.parametrize("args", [["demo", "-o", "-"], ["study", "examples/study-quick.yaml", "-o", "-"]])
+def test_dash_o_of_a_folder_command_is_refused(args):
+    """'-o -' is standard output everywhere; the commands that write a folder of files say
+    that it cannot hold one (it made a folder named '-')."""
+    root = Path(__file__).resolve().parent.parent
+    res = CliRunner().invoke(cli, [str(root / a) if a.startswith("examples/") else a for a in args])
+    assert res.exit_code == 2 and res.stderr.startswith("pkmcal: error: -o -:") and "give a folder name" in res.stderr

@@ -12,15 +12,14 @@ import time
 
 import click
 
-from pkmcal.cli.options import count_or_poses_file, examples, option, quiet_option
+from pkmcal.cli.options import check_output_folder, count_or_poses_file, examples, option, quiet_option
 from pkmcal.cli.option_types import SEED, FiniteFloat
 from pkmcal.demo import DEMO_MACHINE, DEMO_OUT, DEMO_REAL, DEMO_SETUP, DemoConfig, run_demo
 
 
 @click.command("demo", epilog=examples(
     "pkmcal demo",
-    "pkmcal demo --setup indicators-prototype --n-poses 30 --n-held-out 20 --no-png -o demo-indicators --quiet",
-    "pkmcal demo --n-poses 20 --n-held-out 20 --no-png -o demo-json --quiet --json"))
+    "pkmcal demo --setup indicators-prototype --n-poses 30 --n-held-out 20 --no-png -o demo-indicators --quiet --json"))
 @option("-o", "--output", "out", old=("--out",), default=DEMO_OUT, show_default=True, metavar="DIR/",
               help="Folder for the report and the exported files (created if needed).")
 @click.option("--seed", type=SEED, default=0, show_default=True, help="Random seed (same seed, same bytes).")
@@ -58,6 +57,7 @@ def demo(out, seed, n_poses, poses, n_held_out, setup, machine, real, stroke_mar
     from pkmcal.io.atomic import check_output_dir
     from pkmcal.progress import ProgressBar
 
+    check_output_folder(out, "the demo's output")
     check_output_dir(out, "-o")  # before anything runs: an uncreatable folder is refused at once
     t0 = time.perf_counter()
     n_poses, poses = count_or_poses_file(poses, n_poses, DemoConfig.n_poses)

@@ -3,13 +3,15 @@ spellings kept working with a deprecation note.
 
 * ``-o FILE``: the command's main output (a CSV, a table, JSON, a machine file) goes to FILE,
   written atomically and never over one of the command's inputs; without ``-o``, or with
-  ``-o -``, it goes to standard output (commands with a natural stdout; ``plan``,
+  ``-o -``, it goes to standard output (every command with one main output; ``plan``,
   ``identify`` and ``reproduce`` included) and the human summary to standard error, so the
-  output stays machine-readable.
+  output stays machine-readable. ``demo`` and ``study`` write a folder: ``-o DIR``, and
+  ``-o -`` is refused (:func:`check_output_folder`).
 * ``--units-comment``: a written CSV starts with its units line and comments (default: a
   plain CSV that pandas and csv read with their defaults).
 * ``-q/--quiet``: no progress bar (bars appear only on a terminal anyway, see
-  :mod:`pkmcal.progress`) and no progress notes.
+  :mod:`pkmcal.progress`) and no progress notes; accepted by every command that prints
+  figures, also by those that show no progress (:func:`quiet_accepted`).
 * Old spellings (issue 27 item 3; the table of ``docs/options.md``) keep working, hidden from
   ``--help``: :class:`Option` takes them as ``old=("--heldout",)``, the old positional poses
   file is a :class:`DeprecatedArgument` read by :func:`poses_file`, the old ``--poses N`` is
@@ -79,12 +81,19 @@ def option(*param_decls: str, old: tuple[str, ...] = (), **kwargs):
     return click.option(*param_decls, cls=Option, old=old, **kwargs)
 
 
-def output_option(metavar: str, what: str, *, old: tuple[str, ...] = (), default: str | None = None):
+def output_option(metavar: str, what: str, *, default: str | None = None):
     """``-o/--output`` for a command whose main output is ``what`` (a file path; nothing or
     ``-`` = standard output). ``default`` is what the command gets without ``-o`` (None, or
     :data:`STDOUT` for a command whose body reads ``-``)."""
-    return option("-o", "--output", "output", metavar=metavar, old=old, default=default,
+    return click.option("-o", "--output", "output", metavar=metavar, default=default,
                   help=f"{what} (default: standard output; '-' = standard output).")
+
+
+def check_output_folder(folder: str, what: str) -> None:
+    """``-o`` of a command whose output is a folder of files (``demo``, ``study``): ``-``
+    (standard output) cannot hold one."""
+    if folder == STDOUT:
+        raise PkmcalError(f"-o -: {what} is a folder of files, which standard output cannot hold; give a folder name")
 
 
 def to_stdout(output: str | None) -> bool:
@@ -193,6 +202,6 @@ def poses_file(option: str | None, positional: str | None, command: str) -> str:
     return option
 
 
-__all__ = ["DeprecatedArgument", "Option", "STDOUT", "check_output", "count_or_poses_file", "deprecated", "emit",
+__all__ = ["DeprecatedArgument", "Option", "STDOUT", "check_output", "check_output_folder", "count_or_poses_file", "deprecated", "emit",
            "examples", "option", "output_option", "poses_file", "quiet_accepted", "quiet_option", "summary_echo",
            "to_stdout", "units_comment_option"]
