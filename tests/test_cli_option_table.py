@@ -116,7 +116,7 @@ def test_json_and_quiet_on_every_command_that_prints_a_report():
     whose main output is a table or a file, and the folder commands, have no --json)."""
     figures = {"info", "ik", "fk", "plan", "observability", "simulate", "identifiability", "identify", "verify",
                "export", "check linuxcnc", "check klipper", "demo", "reproduce", "study"}
-    report = figures - {"ik", "fk", "plan", "simulate", "study"}
+    report = figures - {"ik", "fk", "simulate", "study"}
     assert {c for c in figures if "--quiet" in SHOWN[c]} == figures
     assert {c for c in report if "--json" in SHOWN[c]} == report
 
