@@ -67,7 +67,7 @@ def _read_heldout(path: str) -> dict:
 @click.group("history", epilog=examples(
     "pkmcal history add calibrated.yaml --serial KM-0042 --db farm.sqlite",
     "pkmcal history list --db farm.sqlite",
-    "pkmcal history compare KM-0042~1 KM-0042 --db farm.sqlite",
+    "pkmcal history show KM-0042 --db farm.sqlite",
     "pkmcal history fleet --db farm.sqlite",
     "pkmcal history plot KM-0042 -o km-0042.png --db farm.sqlite"))
 def history_group() -> None:
@@ -83,7 +83,7 @@ def history_group() -> None:
 
 @history_group.command("add", epilog=examples(
     "pkmcal history add calibrated.yaml --serial KM-0042 --db farm.sqlite",
-    "pkmcal history add calibrated.yaml --serial KM-0042 --heldout verify.json --db farm.sqlite --json"))
+    "pkmcal history add recalibrated.yaml --serial KM-0042 --heldout verify.json --db farm.sqlite --json"))
 @click.argument("calibrated", metavar="CALIBRATED.yaml")
 @click.option("--serial", required=True, metavar="SERIAL", help="The unit's serial number (one unit = one serial).")
 @click.option("--model", metavar="MODEL", help="The fleet the unit belongs to (default: the machine it was "
@@ -148,7 +148,7 @@ def list_cmd(serial, model, db, as_json) -> None:
 
 
 @history_group.command("show", epilog=examples("pkmcal history show KM-0042 --db farm.sqlite",
-                                               "pkmcal history show 3 --db farm.sqlite --json"))
+                                               "pkmcal history show 1 --db farm.sqlite --json"))
 @click.argument("ref", metavar="REF")
 @_db_option
 @_json_option
@@ -180,7 +180,7 @@ def show_cmd(ref, db, as_json) -> None:
 
 
 @history_group.command("compare", epilog=examples("pkmcal history compare KM-0042~1 KM-0042 --db farm.sqlite",
-                                                  "pkmcal history compare 3 7 --alpha 0.01 --db farm.sqlite --json"))
+                                                  "pkmcal history compare 1 2 --alpha 0.01 --db farm.sqlite --json"))
 @click.argument("a", metavar="A")
 @click.argument("b", metavar="B")
 @_alpha_option

@@ -74,6 +74,7 @@ def plot_history(records: list[CalibrationRecord], path: str | os.PathLike, name
                 ax.plot(held, [v for e, v in zip(errs, vals) if np.isnan(e)], "x", color="grey", label="held")
                 ax.legend(fontsize=7)
             ax.set_title(f"{ref.names[i]} ({unit})")
+            ax.ticklabel_format(axis="y", useOffset=False)
             ax.tick_params(axis="x", labelrotation=30, labelsize=7)
         fig.suptitle(f"{ref.serial} ({ref.model}): {len(records)} calibration(s), bars ±{k:g} sigma")
         buf = io.BytesIO()

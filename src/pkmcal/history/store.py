@@ -226,6 +226,31 @@ def add_calibrated_file(path: str | os.PathLike, *, serial: str, db: str | os.Pa
         return hist.get(new_id)
 
 
+def record_identified(path: str | os.PathLike, db: str | os.PathLike, serial: str | None,
+                      validation=None) -> CalibrationRecord:
+    """What ``pkmcal identify --history DB --serial SERIAL`` does after writing ``path``:
+    :func:`add_calibrated_file` with the held-out validation of ``--heldout`` (its
+    ``to_dict()``) as the record's held-out figures."""
+    if serial is None:
+        raise PkmcalError("--history records the calibration under the unit's serial number: give --serial SERIAL")
+    return add_calibrated_file(path, serial=serial, db=db,
+                               heldout=None if validation is None else validation.to_dict())
+
+
+def check_history_request(db, serial: str | None, to_stdout: bool) -> None:
+    """Refuse ``identify --history`` without ``--serial`` or with the machine file on standard
+    output, before anything is computed."""
+    if db is None:
+        if serial is not None:
+            raise PkmcalError("--serial names the unit for --history DB; give both, or neither")
+        return
+    if serial is None:
+        raise PkmcalError("--history records the calibration under the unit's serial number: give --serial SERIAL")
+    if to_stdout:
+        raise PkmcalError("--history records the calibrated machine file: write it to a file with -o CALIBRATED.yaml")
+    _check_text("--serial", serial)
+
+
 def _check_text(option: str, text: str) -> None:
     from pkmcal.errors import line_problem
 
@@ -476,5 +501,5 @@ def _ensure_schema(conn: sqlite3.Connection, shown: str) -> None:
     conn.execute("COMMIT")
 
 
-__all__ = ["add_calibrated_file", "BUSY_TIMEOUT_S", "DB_ENV", "SCHEMA_VERSION", "CalibrationRecord", "History", "default_db_path",
+__all__ = ["add_calibrated_file", "check_history_request", "record_identified", "BUSY_TIMEOUT_S", "DB_ENV", "SCHEMA_VERSION", "CalibrationRecord", "History", "default_db_path",
            "open_history", "record_from_machine"]
