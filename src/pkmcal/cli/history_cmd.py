@@ -170,7 +170,7 @@ def show_cmd(ref, db, as_json) -> None:
         click.echo(f"input {role}: {what}")
     if rec.heldout:
         after = rec.heldout.get("after") if isinstance(rec.heldout.get("after"), dict) else None
-        click.echo("held-out: " + (", ".join(f"{k} {v:.4g}" for k, v in after.items() if isinstance(v, (int, float))
+        click.echo("held-out, after calibration: " + (", ".join(f"{k} {v:.4g}" for k, v in after.items() if isinstance(v, (int, float))
                                              and v is not None) if after else "recorded (see --json)"))
     v, s, u = rec.display()
     w = max(len(n) for n in rec.names)
