@@ -72,6 +72,12 @@ def test_identify_records_into_the_history(tmp_path):
     bad = CliRunner().invoke(cli, ["identify", "kossel-mini", str(tmp_path / "m1.csv"), *SETUP, "-o", "-",
                                    "--history", str(db), "--serial", "S"])
     assert_user_error(bad, "-o CALIBRATED.yaml")
+    corrupt = tmp_path / "corrupt.sqlite"
+    corrupt.write_bytes(b"\0garbage" * 100)
+    bad = CliRunner().invoke(cli, ["identify", "kossel-mini", str(tmp_path / "m1.csv"), *SETUP, "-o",
+                                   str(tmp_path / "x.yaml"), "--history", str(corrupt), "--serial", "S"])
+    assert_user_error(bad, "corrupt.sqlite", "not a readable pkmcal history")
+    assert not (tmp_path / "x.yaml").exists()                  # refused before anything is written
 
 
 def test_history_user_errors(tmp_path):

@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import multiprocessing
+import os
 import sqlite3
 
 import numpy as np
@@ -108,7 +109,7 @@ def _writer(db, writer, n, barrier):
 def test_several_processes_writing_at_once_lose_no_record(tmp_path):
     db = tmp_path / "new.sqlite"                    # created by the writers themselves, concurrently
     n_proc, n_each = 4, 15
-    ctx = multiprocessing.get_context("fork")
+    ctx = multiprocessing.get_context("spawn")     # no fork of a threaded test process
     barrier = ctx.Barrier(n_proc)
     procs = [ctx.Process(target=_writer, args=(db, w, n_each, barrier)) for w in range(n_proc)]
     for p in procs:
@@ -134,7 +135,7 @@ def test_record_from_a_machine_without_calibration_record_is_refused():
         record_from_machine(pkmcal.load_machine("kossel-mini"), serial="X")
 
 
-@pytest.mark.parametrize("case", ["missing-folder", "folder", "corrupt", "foreign", "newer", "absent"])
+@pytest.mark.parametrize("case", ["missing-folder", "folder", "slash", "corrupt", "foreign", "newer", "absent"])
 def test_a_bad_database_is_a_one_line_user_error(tmp_path, case):
     path = _calibrated_file(tmp_path, 5)
     db = tmp_path / "h.sqlite"
@@ -145,6 +146,9 @@ def test_a_bad_database_is_a_one_line_user_error(tmp_path, case):
         expect = ("does not exist",)
     elif case == "folder":
         db = tmp_path
+        expect = ("is a folder",)
+    elif case == "slash":
+        db = str(tmp_path / "new") + "/"
         expect = ("is a folder",)
     elif case == "corrupt":
         db.write_bytes(b"this is not SQLite at all\n" * 200)
@@ -165,13 +169,13 @@ def test_a_bad_database_is_a_one_line_user_error(tmp_path, case):
     elif case == "absent":
         command = ["history", "list"]
         expect = ("no calibration history",)
-    before = db.read_bytes() if db.is_file() else None
+    before = None if case == "slash" or not db.is_file() else db.read_bytes()
     res = CliRunner().invoke(cli, command + ["--db", str(db)])
     assert_user_error(res, *expect)
     if before is not None:
         assert db.read_bytes() == before            # an input is never damaged
-    if case == "absent":
-        assert not db.exists()
+    if case in ("absent", "slash"):
+        assert not os.path.exists(db)
 
 
 def test_the_default_database_comes_from_the_environment(tmp_path, monkeypatch):

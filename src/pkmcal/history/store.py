@@ -233,8 +233,12 @@ def record_identified(path: str | os.PathLike, db: str | os.PathLike, serial: st
     ``to_dict()``) as the record's held-out figures."""
     if serial is None:
         raise PkmcalError("--history records the calibration under the unit's serial number: give --serial SERIAL")
-    return add_calibrated_file(path, serial=serial, db=db,
-                               heldout=None if validation is None else validation.to_dict())
+    try:
+        return add_calibrated_file(path, serial=serial, db=db,
+                                   heldout=None if validation is None else validation.to_dict())
+    except PkmcalError as exc:
+        raise PkmcalError(f"wrote {path} but did not record it in the history: {exc}; record it with 'pkmcal "
+                          f"history add {path} --serial {serial} --db {db}'") from None
 
 
 def check_history_request(db, serial: str | None, to_stdout: bool) -> None:
@@ -249,6 +253,10 @@ def check_history_request(db, serial: str | None, to_stdout: bool) -> None:
     if to_stdout:
         raise PkmcalError("--history records the calibrated machine file: write it to a file with -o CALIBRATED.yaml")
     _check_text("--serial", serial)
+    if os.path.exists(db):                         # a database that cannot take the record: refused before the fit
+        open_history(db, create=False).close()
+    else:
+        _check_new_path(db, explicit=True)
 
 
 def _check_text(option: str, text: str) -> None:
@@ -418,6 +426,24 @@ def _db_error(path, exc: BaseException, doing: str) -> PkmcalError:
     return PkmcalError(f"{path}: {text} while {doing}; check the --db path (a file in a folder you can write)")
 
 
+def _check_new_path(path, explicit: bool) -> bool:
+    """Refuse a database path that cannot be one (empty, ending in '/', a folder, an explicit
+    path in a missing folder); whether it exists."""
+    text = os.fspath(path)
+    shown = one_line(text)
+    if not text.strip():
+        raise PkmcalError("--db '': give the history database's file name, e.g. --db history.sqlite")
+    if text.endswith(("/", os.sep)) or os.path.isdir(text):
+        raise PkmcalError(f"--db {shown} is a folder; give a file name, e.g. {shown.rstrip('/')}/history.sqlite")
+    if os.path.exists(text):
+        return True
+    parent = os.path.dirname(text) or "."
+    if explicit and not os.path.isdir(parent):
+        raise PkmcalError(f"--db {shown}: the folder {one_line(parent)} does not exist; create it or give another "
+                          "path")
+    return False
+
+
 def open_history(path: str | os.PathLike | None = None, create: bool = True) -> History:
     """Open (``create``: and make if missing, with its folder for the default path) the
     history database ``path`` (None: :func:`default_db_path`); checks its schema version and
@@ -425,20 +451,13 @@ def open_history(path: str | os.PathLike | None = None, create: bool = True) -> 
     explicit = path is not None
     db = Path(path) if explicit else default_db_path()
     shown = one_line(str(db))
-    if not str(db).strip():
-        raise PkmcalError("--db '': give the history database's file name, e.g. --db history.sqlite")
-    if db.is_dir():
-        raise PkmcalError(f"--db {shown} is a folder; give a file name, e.g. {shown.rstrip('/')}/history.sqlite")
-    exists = db.exists()
+    exists = _check_new_path(path if explicit else db, explicit)
     if not exists:
         if not create:
             raise PkmcalError(f"no calibration history at {shown}: record a calibration first with 'pkmcal history "
                               "add CALIBRATED.yaml --serial SERIAL'" + ("" if explicit else f" (or give --db; "
                                                                                             f"{DB_ENV} sets the default)"))
         if not db.parent.exists():
-            if explicit:
-                raise PkmcalError(f"--db {shown}: the folder {one_line(str(db.parent))} does not exist; create it or "
-                                  "give another path")
             try:
                 db.parent.mkdir(parents=True, exist_ok=True)
             except OSError as exc:
