@@ -191,3 +191,30 @@ def test_the_default_database_comes_from_the_environment(tmp_path, monkeypatch):
     assert res.exit_code == 0, res.output
     assert json.loads(res.stdout)["db"] == str(tmp_path / "data" / "pkmcal" / "history.sqlite")
     assert (tmp_path / "data" / "pkmcal" / "history.sqlite").is_file()
+
+
+def test_an_older_schema_is_migrated_in_place(tmp_path, monkeypatch):
+    """The migration mechanism: a version-1 database opened by a pkmcal whose schema is 2
+    (a column added) is migrated, its records kept, and opened again as version 2."""
+    from pkmcal.history import store
+
+    db = tmp_path / "h.sqlite"
+    first = add_calibrated_file(_calibrated_file(tmp_path, 7), serial="HX-7", db=db)
+    monkeypatch.setattr(store, "SCHEMA_VERSION", 2)
+    monkeypatch.setattr(store, "_MIGRATIONS", {1: ("ALTER TABLE calibrations ADD COLUMN note TEXT",)})
+    with store.open_history(db, create=False) as hist:
+        again = hist.get("HX-7")
+    assert np.array_equal(again.covariance, first.covariance)
+    con = sqlite3.connect(db)
+    assert con.execute("SELECT version FROM schema_version").fetchall() == [(2,)]
+    assert "note" in [r[1] for r in con.execute("PRAGMA table_info(calibrations)")]
+    con.close()
+
+
+def test_a_serial_of_digits_is_named_with_a_tilde(tmp_path):
+    db = tmp_path / "h.sqlite"
+    add_calibrated_file(_calibrated_file(tmp_path, 8, "a.yaml"), serial="A", db=db)
+    add_calibrated_file(_calibrated_file(tmp_path, 9, "b.yaml"), serial="1234", db=db)
+    with open_history(db) as hist:
+        assert hist.get("1").serial == "A" and hist.get("#2").serial == "1234"
+        assert hist.get("1234~0").id == 2

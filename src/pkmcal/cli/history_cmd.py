@@ -76,7 +76,7 @@ def history_group() -> None:
     One record per calibration: serial, model, date, parameters with their covariance,
     instrument, held-out figures, the input files' SHA-256 and the pkmcal version. A
     calibration is named by its id (12), a serial (its latest) or SERIAL~N (N before the
-    latest). The database: --db PATH, else $PKMCAL_HISTORY_DB, else
+    latest; a serial of digits only as SERIAL~0). The database: --db PATH, else $PKMCAL_HISTORY_DB, else
     ~/.local/share/pkmcal/history.sqlite.
     """
 

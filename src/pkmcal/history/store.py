@@ -360,7 +360,8 @@ class History:
 
     def get(self, ref: str | int) -> CalibrationRecord:
         """A calibration by reference: its id (``12`` or ``#12``), a serial (its latest
-        calibration) or ``SERIAL~N`` (the N-th before its latest, as git counts)."""
+        calibration) or ``SERIAL~N`` (the N-th before its latest, as git counts; a serial
+        made of digits only is named ``SERIAL~0``)."""
         text = str(ref).strip()
         if text.lstrip("#").isdigit():
             found = self._records("WHERE id = ?", (int(text.lstrip("#")),))
