@@ -143,3 +143,37 @@ def test_a_fleet_flags_the_unit_outside_its_spread(campaign, tmp_path):
     assert [(r.serial, r.name) for r in rep.flagged] == [("KM-7", "endstop_c")]
     assert rep.flagged[0].value - rep.flagged[0].fleet_mean == pytest.approx(3.0, abs=5 * rep.flagged[0].fleet_std)
     assert compare(recs[0], recs[1]).comparable
+
+
+def test_calibrations_in_different_gauges_are_compared_in_one(campaign, tmp_path):
+    """KM-1 again, its farm having changed its calibration script in March: January and
+    February held the gauge angle_a, radius_a, radius_b (--fix), March and April the
+    automatic one (angle_a, radius_a, angle_b with these seeds). Each calibration is
+    re-expressed in the previous one's gauge along the unidentifiable directions recorded
+    with it (pkmcal.history.gauge), and the slip, at the change of gauge, is still the only
+    thing flagged."""
+    machine, setup, poses = campaign
+    real = pkmcal.perturb(machine, 0.1, seed=11)
+    db = tmp_path / "auto.sqlite"
+    with pytest.MonkeyPatch.context() as mp:
+        for k in range(4):
+            r = _drifted(real, "endstop_b", DRIFT_MM) if k >= 2 else real
+            sim = pkmcal.simulate(machine, r, setup, poses, seed=100 + k, ignore_limits=("min_z",))
+            result = pkmcal.identify(machine, setup, sim.measurements, fix=GAUGE if k < 2 else None)
+            mp.setenv("SOURCE_DATE_EPOCH", str(EPOCH + k * MONTH_S))
+            path = tmp_path / f"auto{k}.yaml"
+            pkmcal.save_machine(with_calibration_record(result, "kossel-mini", "m.csv", "z-probe-klipper", f"a{k}"),
+                                path)
+            add_calibrated_file(path, serial="KM-1", db=db)
+    with open_history(db, create=False) as hist:
+        recs = hist.records()
+    held = [tuple(n for n, h in zip(r.names, r.held) if h) for r in recs]
+    assert held[0] == held[1] and held[2] == held[3] and held[1] != held[2]      # the case this test is about
+    comparisons = consecutive(recs, ALPHA)
+    assert all(c.comparable for c in comparisons), [c.reason for c in comparisons]
+    assert [bool(c.regauged) for c in comparisons] == [False, True, False]
+    flagged = [(k, r.name) for k, c in enumerate(comparisons) for r in c.flagged]
+    assert flagged == [(1, "endstop_b")]
+    assert [k for k, c in enumerate(comparisons) if c.jointly_flagged] == [1]
+    row = comparisons[1].flagged[0]
+    assert abs(row.delta - DRIFT_MM) < 5 * row.sigma

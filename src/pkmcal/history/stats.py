@@ -19,12 +19,14 @@ each of the two tests when nothing changed (tests/history/test_stats.py measures
 
 Gauge: a fit that cannot see some combination of parameters holds a gauge set at the
 machine file's values (:mod:`pkmcal.identification.identifiability`), and the free
-parameters are then estimated relative to it. Two calibrations are compared only in the
-same gauge: the same parameters held, at the same values. Otherwise their free parameters
-are different quantities (a rotation of the tower angles absorbed by one fit in angle_b,
-by the other in radius_b) and the comparison is refused with the held sets named; fix the
-gauge explicitly (``pkmcal identify --fix NAMES``) so that every calibration of a fleet
-uses the same one.
+parameters are then estimated relative to it. Two calibrations are compared in one gauge:
+when both hold the same parameters at the same values, directly; when their gauges differ
+(the automatic gauge can change from one campaign to the next), B is first re-expressed in
+A's gauge along the unidentifiable directions recorded with it (:mod:`pkmcal.history.gauge`:
+θ_B + N t with (θ_B + N t)[g_A] = θ_A[g_A], Σ_B' = Π Σ_B Πᵀ). When that is not possible (no
+directions recorded, different held sets outside them, priors) the comparison is refused
+with the held sets named, and the remedy: hold the same gauge in every calibration
+(``pkmcal identify --fix NAMES``).
 
 **A unit against its fleet** (:func:`fleet`, statistical process control across serials).
 Each serial of one model contributes its latest calibration. For a parameter and a unit u,
@@ -150,6 +152,7 @@ class Comparison:
     alpha: float
     comparable: bool
     reason: str = ""
+    regauged: str = ""
     rows: tuple[ParameterDifference, ...] = ()
     held: tuple[str, ...] = ()
     z_limit: float = float("nan")
@@ -175,6 +178,7 @@ class Comparison:
         return {"a": {"id": self.a.id, "serial": self.a.serial, "date": self.a.date},
                 "b": {"id": self.b.id, "serial": self.b.serial, "date": self.b.date},
                 "alpha": self.alpha, "comparable": self.comparable, "reason": self.reason or None,
+                "regauged": self.regauged or None,
                 "held": list(self.held), "z_limit": self.z_limit, "chi2": self.chi2, "dof": self.dof,
                 "chi2_limit": self.chi2_limit, "p_value": self.p_value, "jointly_flagged": self.jointly_flagged,
                 "differ": self.differ, "flagged": [r.name for r in self.flagged],
@@ -186,6 +190,8 @@ class Comparison:
         out = [f"A {self.a.label} -> B {self.b.label}"]
         if not self.comparable:
             return out + [f"not compared: {self.reason}"]
+        if self.regauged:
+            out.append(self.regauged)
         out.append(f"{len(self.rows)} parameters tested ({len(self.held)} held in both, not tested"
                    + (f": {', '.join(self.held)}" if self.held else "") + f"); false-alarm probability "
                    f"{self.alpha:g} per test (Bonferroni: |z| > {self.z_limit:.3g})")
@@ -210,27 +216,44 @@ class Comparison:
         return out
 
 
+def _in_gauge_of(b: CalibrationRecord, a: CalibrationRecord) -> tuple[CalibrationRecord | None, str]:
+    """(``b`` in ``a``'s gauge, note) — ``b`` itself when they share it, else re-expressed
+    along the recorded unidentifiable directions (:func:`pkmcal.history.gauge.regauge`) —
+    or (None, why not)."""
+    from pkmcal.history.gauge import regauge
+
+    why = _gauge_difference(a, b)
+    if why is None:
+        return b, ""
+    if a.names != b.names:
+        return None, why
+    moved, how = regauge(b, a)
+    if moved is None:
+        return None, f"{why} (not re-expressed in one gauge: {how})"
+    return moved, how
+
+
 def compare(a: CalibrationRecord, b: CalibrationRecord, alpha: float = DEFAULT_ALPHA) -> Comparison:
     """Whether calibration ``b`` differs from ``a`` beyond their combined uncertainty
     (module docstring): per parameter z with Bonferroni limits, jointly χ²."""
     _check_alpha(alpha)
-    why = _gauge_difference(a, b)
-    if why is not None:
-        return Comparison(a, b, alpha, comparable=False, reason=why)
+    b_in_a, note = _in_gauge_of(b, a)
+    if b_in_a is None:
+        return Comparison(a, b, alpha, comparable=False, reason=note)
     held = a.held
     idx = np.flatnonzero(~held)
     scale, units = _display_scale(a.units)
-    delta = b.values[idx] - a.values[idx]
-    var = np.diag(a.covariance)[idx] + np.diag(b.covariance)[idx]
+    delta = b_in_a.values[idx] - a.values[idx]
+    var = np.diag(a.covariance)[idx] + np.diag(b_in_a.covariance)[idx]
     sigma = np.sqrt(var)
     z = delta / sigma
     lim = z_limit(alpha, len(idx))
     rows = tuple(ParameterDifference(a.names[i], units[i], float(a.values[i] * scale[i]),
-                                     float(b.values[i] * scale[i]), float(d * scale[i]), float(s * scale[i]),
+                                     float(b_in_a.values[i] * scale[i]), float(d * scale[i]), float(s * scale[i]),
                                      float(zz), bool(abs(zz) > lim))
                  for i, d, s, zz in zip(idx, delta, sigma, z))
-    chi2, dof = joint_chi2(delta, (a.covariance + b.covariance)[np.ix_(idx, idx)])
-    return Comparison(a, b, alpha, comparable=True, rows=rows,
+    chi2, dof = joint_chi2(delta, (a.covariance + b_in_a.covariance)[np.ix_(idx, idx)])
+    return Comparison(a, b, alpha, comparable=True, regauged=note, rows=rows,
                       held=tuple(n for n, h in zip(a.names, held) if h), z_limit=lim, chi2=chi2, dof=dof,
                       chi2_limit=float(_st.chi2.isf(alpha, dof)) if dof else float("nan"),
                       p_value=float(_st.chi2.sf(chi2, dof)) if dof else float("nan"))
@@ -271,6 +294,7 @@ class FleetReport:
     alpha: float
     units: tuple[CalibrationRecord, ...]
     excluded: tuple[tuple[str, str], ...] = ()
+    regauged: tuple[str, ...] = ()
     tested: tuple[str, ...] = ()
     held: tuple[str, ...] = ()
     t_limit: float = float("nan")
@@ -286,6 +310,7 @@ class FleetReport:
         return {"model": self.model, "alpha": self.alpha,
                 "units": [{"serial": r.serial, "id": r.id, "date": r.date} for r in self.units],
                 "excluded": [{"serial": s, "reason": why} for s, why in self.excluded],
+                "regauged": list(self.regauged),
                 "tested": list(self.tested), "held": list(self.held), "t_limit": self.t_limit, "dof": self.dof,
                 "note": self.note or None, "flagged": [r.to_dict() for r in self.flagged],
                 "rows": [r.to_dict() for r in self.rows],
@@ -296,6 +321,9 @@ class FleetReport:
                + (f": {', '.join(r.serial for r in self.units)}" if self.units else "")]
         for s, why in self.excluded:
             out.append(f"  excluded {s}: {why}")
+        if self.regauged:
+            out.append(f"  re-expressed in {self.units[0].serial}'s gauge along the unidentifiable directions: "
+                       f"{', '.join(self.regauged)}")
         if self.note:
             return out + [self.note]
         out.append(f"{len(self.tested)} parameters tested ({len(self.held)} held, not tested); a unit against the "
@@ -320,18 +348,23 @@ def fleet(records: list[CalibrationRecord], alpha: float = DEFAULT_ALPHA, model:
     keys = [(r.names, _gauge(r)) for r in records]
     ref = Counter(keys).most_common(1)[0][0]
     ref_rec = records[keys.index(ref)]
-    units, excluded = [], []
-    for r, k in zip(records, keys):
-        if k == ref:
-            units.append(r)
+    units, excluded, regauged = [ref_rec], [], []
+    for r in records:
+        if r is ref_rec:
+            continue
+        moved, why = _in_gauge_of(r, ref_rec)
+        if moved is None:
+            excluded.append((r.serial, why))
         else:
-            excluded.append((r.serial, _gauge_difference(ref_rec, r) or "a different gauge"))
+            units.append(moved)
+            if why:
+                regauged.append(r.serial)
     n = len(units)
     held = ref_rec.held
     idx = np.flatnonzero(~held)
     held_names = tuple(n_ for n_, h in zip(ref_rec.names, held) if h)
     if n < 3:
-        return FleetReport(name, alpha, tuple(units), tuple(excluded), held=held_names,
+        return FleetReport(name, alpha, tuple(units), tuple(excluded), tuple(regauged), held=held_names,
                            note=f"{n} comparable unit(s): the fleet's spread needs at least 3")
     scale, disp = _display_scale(ref_rec.units)
     x = np.array([r.values[idx] for r in units])                       # (n, m)
@@ -351,8 +384,8 @@ def fleet(records: list[CalibrationRecord], alpha: float = DEFAULT_ALPHA, model:
             rows.append(FleetFlag(units[u].serial, units[u].id, ref_rec.names[i], disp[i], float(x[u, j] * scale[i]),
                                   float(sd[u, j] * scale[i]), float(mean[j] * scale[i]), float(s[j] * scale[i]), tj,
                                   bool(np.isfinite(tj) and abs(tj) > lim)))
-    return FleetReport(name, alpha, tuple(units), tuple(excluded), tuple(ref_rec.names[i] for i in idx), held_names,
-                       lim, dof, tuple(rows))
+    return FleetReport(name, alpha, tuple(units), tuple(excluded), tuple(regauged),
+                       tuple(ref_rec.names[i] for i in idx), held_names, lim, dof, tuple(rows))
 
 
 __all__ = ["DEFAULT_ALPHA", "RANK_RTOL", "Comparison", "FleetFlag", "FleetReport", "ParameterDifference", "compare",

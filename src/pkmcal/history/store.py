@@ -21,8 +21,10 @@ version is refused, an older one migrated by :data:`_MIGRATIONS` in one transact
   :attr:`pkmcal.identification.uncertainty.Uncertainty.description`), ``heldout`` (held-out
   figures, JSON, or NULL), ``inputs`` (the input files' paths, sizes and SHA-256, JSON),
   ``source`` and ``source_sha256`` (the calibrated machine file recorded), ``record`` (the
-  whole calibration record, JSON) and ``covariance``: the machine file's p × p parameter
-  covariance in internal units (mm, rad), little-endian float64, row-major (exact).
+  whole calibration record, JSON), ``covariance``: the machine file's p × p parameter
+  covariance in internal units (mm, rad), little-endian float64, row-major (exact), and
+  ``null_space`` (the directions the calibration's setup cannot see, JSON, for comparing
+  calibrations held in different gauges: :mod:`pkmcal.history.gauge`; NULL when not computed).
 * ``parameters``: one row per parameter of a calibration (for SQL queries): ``name``,
   ``value`` (internal units: mm, rad), ``std`` (√Σ_ii; NULL where held), ``unit``
   (``mm``, ``rad``, ...), ``held`` (1 where the covariance row is zero: held by the fit,
@@ -38,6 +40,7 @@ rows appear together or not at all); the database is in WAL mode with
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import os
 import sqlite3
@@ -64,7 +67,7 @@ _SCHEMA = (
         date TEXT NOT NULL, added TEXT NOT NULL, pkmcal_version TEXT NOT NULL,
         method TEXT, instrument TEXT, setup TEXT, n_poses INTEGER, rms_residual REAL, reduced_chi2 REAL,
         covariance_kind TEXT, heldout TEXT, inputs TEXT NOT NULL, source TEXT, source_sha256 TEXT,
-        record TEXT NOT NULL, covariance BLOB NOT NULL)""",
+        record TEXT NOT NULL, covariance BLOB NOT NULL, null_space TEXT)""",
     """CREATE TABLE parameters (
         calibration INTEGER NOT NULL REFERENCES calibrations(id) ON DELETE CASCADE,
         idx INTEGER NOT NULL, name TEXT NOT NULL, value REAL NOT NULL, std REAL, unit TEXT NOT NULL,
@@ -119,6 +122,7 @@ class CalibrationRecord:
     source: str | None = None
     source_sha256: str | None = None
     record: dict = field(default_factory=dict)
+    null_space: dict | None = None
     id: int | None = None
     added: str | None = None
 
@@ -219,8 +223,13 @@ def add_calibrated_file(path: str | os.PathLike, *, serial: str, db: str | os.Pa
         raise PkmcalError(f"{shown}: no such file; give the calibrated machine file written by 'pkmcal identify'")
     machine = load_machine(path)
     src = input_record(path)
+    from pkmcal.history.gauge import null_space_of
+
     rec = record_from_machine(machine, serial=serial, source=os.fspath(path), source_sha256=src["sha256"],
                               model=model, heldout=heldout)
+    cal = rec.record
+    extra = [str(n) for n in list(cal.get("free") or []) + list(cal.get("gauge") or [])]
+    rec = dataclasses.replace(rec, null_space=null_space_of(machine, (path, cal.get("setup")), rec.method, extra))
     with open_history(db) as hist:
         new_id = hist.add(rec, allow_duplicate=allow_duplicate)
         return hist.get(new_id)
@@ -309,12 +318,12 @@ class History:
                 cur = self._conn.execute(
                     "INSERT INTO calibrations (serial, model, machine, kind, date, added, pkmcal_version, method, "
                     "instrument, setup, n_poses, rms_residual, reduced_chi2, covariance_kind, heldout, inputs, source, "
-                    "source_sha256, record, covariance) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, "
-                    "?, ?)",
+                    "source_sha256, record, covariance, null_space) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, "
+                    "?, ?, ?, ?, ?, ?, ?)",
                     (rec.serial, rec.model, rec.machine, rec.kind, rec.date, rec.added or _now(), rec.pkmcal_version,
                      rec.method, rec.instrument, _json(rec.setup), rec.n_poses, rec.rms_residual, rec.reduced_chi2,
                      rec.covariance_kind, _json(rec.heldout), _json(rec.inputs), rec.source, rec.source_sha256,
-                     _json(rec.record), cov.tobytes()))
+                     _json(rec.record), cov.tobytes(), _json(rec.null_space)))
                 new_id = int(cur.lastrowid)
                 self._conn.executemany(
                     "INSERT INTO parameters (calibration, idx, name, value, std, unit, held) VALUES (?, ?, ?, ?, ?, ?, ?)",
@@ -332,7 +341,7 @@ class History:
     # -- reading ------------------------------------------------------------------------------
     _COLUMNS = ("id, serial, model, machine, kind, date, added, pkmcal_version, method, instrument, setup, n_poses, "
                 "rms_residual, reduced_chi2, covariance_kind, heldout, inputs, source, source_sha256, record, "
-                "covariance")
+                "covariance, null_space")
 
     def _records(self, where: str = "", args: tuple = ()) -> list[CalibrationRecord]:
         try:
@@ -400,7 +409,7 @@ def _json(obj) -> str | None:
 
 def _record_of(row, params) -> CalibrationRecord:
     (rid, serial, model, machine, kind, date, added, version, method, instrument, setup, n_poses, rms, chi2,
-     cov_kind, heldout, inputs, source, sha, record, cov) = row
+     cov_kind, heldout, inputs, source, sha, record, cov, null_space) = row
     p = len(params)
     return CalibrationRecord(
         serial=serial, model=model, machine=machine, kind=kind, date=date, pkmcal_version=version,
@@ -410,7 +419,8 @@ def _record_of(row, params) -> CalibrationRecord:
         instrument=instrument, setup=None if setup is None else json.loads(setup), n_poses=n_poses,
         rms_residual=rms, reduced_chi2=chi2, covariance_kind=cov_kind,
         heldout=None if heldout is None else json.loads(heldout), inputs=json.loads(inputs), source=source,
-        source_sha256=sha, record=json.loads(record), id=int(rid), added=added)
+        source_sha256=sha, record=json.loads(record), null_space=None if null_space is None else json.loads(null_space),
+        id=int(rid), added=added)
 
 
 def _db_error(path, exc: BaseException, doing: str) -> PkmcalError:
