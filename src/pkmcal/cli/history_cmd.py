@@ -191,7 +191,9 @@ def compare_cmd(a, b, alpha, db, as_json) -> None:
 
     Per parameter z = (B - A)/sqrt(sigma_A^2 + sigma_B^2) against the Bonferroni limit, and
     jointly chi2 = d^T (C_A + C_B)^+ d over the identifiable subspace; held parameters (the
-    gauge) are not tested, and calibrations in different gauges are not compared.
+    gauge) are not tested. Calibrations in different gauges are compared after B is
+    re-expressed in A's gauge along the unidentifiable directions recorded with it (said in
+    the output), else not compared (the reason and the --fix that avoids it are printed).
     """
     from pkmcal.history.stats import compare
 
