@@ -74,3 +74,20 @@ def test_a_fleet_takes_a_unit_in_another_gauge_in_the_reference_gauge(two_gauges
     units = [a, dataclasses.replace(b, serial="S2"), dataclasses.replace(a, serial="S3")]
     rep = fleet(units, 1e-3)
     assert rep.regauged == ("S2",) and not rep.excluded and len(rep.units) == 3
+
+
+def test_a_tight_hexapod_gets_its_null_space_from_poses_of_its_nominal_machine(tmp_path):
+    """The calibrated stewart-prototype's home pose sits at a limit (no plan on it): the poses
+    come from the nominal machine its record names; the indicators leave 3 directions."""
+    from pkmcal.cli.calibrated_file import identified_setup_of
+
+    machine = pkmcal.load_machine("stewart-prototype")
+    setup = pkmcal.load_setup("indicators-prototype", machine)
+    poses = pkmcal.plan(machine, setup, 40, seed=1, n_candidates=300).poses
+    result = pkmcal.identify(machine, setup, pkmcal.simulate(machine, machine, setup, poses, seed=2).measurements)
+    path = tmp_path / "hexapod.yaml"
+    pkmcal.save_machine(with_calibration_record(result, "stewart-prototype", "m.csv", "indicators-prototype", "hx",
+                                                setup=identified_setup_of(setup, result)), path)
+    rec = add_calibrated_file(path, serial="HX", db=tmp_path / "h.sqlite")
+    assert len(rec.null_space["directions"]) == len(result.gauge) == 3
+    assert set(result.gauge) <= set(rec.null_space["names"])

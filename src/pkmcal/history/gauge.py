@@ -36,13 +36,34 @@ N_POSES = 40
 N_CANDIDATES = 200
 
 
-def null_space_of(machine, setup_specs, method: str | None, extra: list[str]) -> dict | None:
+def _nominal_of(record: dict):
+    """The nominal machine the calibration record names (a built-in, or a file that still
+    exists), or None."""
+    import os
+
+    from pkmcal.io.lookup import load_machine
+    from pkmcal.mechanisms.library import is_builtin_name
+
+    src = (record.get("inputs") or {}).get("machine") or {}
+    spec = src.get("builtin") or src.get("file")
+    if not isinstance(spec, str) or not (("builtin" in src and is_builtin_name(spec)) or os.path.isfile(spec)):
+        return None
+    try:
+        return load_machine(spec)
+    except PkmcalError:
+        return None
+
+
+def null_space_of(machine, setup_specs, method: str | None, extra: list[str],
+                  record: dict | None = None) -> dict | None:
     """``{"names", "directions"}``: the null space of the identification Jacobian of
     ``machine`` measured with the first loadable setup of ``setup_specs`` (the calibrated
     file's identified setup, then the setup the record names), over the engine's default
     candidates plus ``extra`` (the fit's free and gauge names); one row of coefficients per
     direction, internal units (mm, rad). None when no setup loads or the analysis is not
-    possible for this machine."""
+    possible for this machine. The poses are planned on the calibrated machine, else on the
+    nominal machine of the calibration ``record`` (a tight design whose calibrated home pose
+    sits at a limit does not plan)."""
     from pkmcal.identification.identifiability import identifiability
     from pkmcal.io.lookup import load_setup
     from pkmcal.planning.plan import plan_poses
@@ -58,8 +79,19 @@ def null_space_of(machine, setup_specs, method: str | None, extra: list[str]) ->
             continue
     if setup is None:
         return None
+    poses = None
+    for planned_on in (machine, _nominal_of(record or {})):    # a calibrated tight design may not plan
+        if planned_on is None or planned_on.param_names != machine.param_names:
+            continue
+        try:
+            poses = plan_poses(planned_on, setup, N_POSES, algorithm="random", seed=0,
+                               n_candidates=N_CANDIDATES).poses
+            break
+        except PkmcalError:
+            continue
+    if poses is None:
+        return None
     try:
-        poses = plan_poses(machine, setup, N_POSES, algorithm="random", seed=0, n_candidates=N_CANDIDATES).poses
         rep = identifiability(machine, setup, poses, method=method)
         missing = [n for n in extra if n not in rep.names]
         if missing:

@@ -264,6 +264,21 @@ def consecutive(records: list[CalibrationRecord], alpha: float = DEFAULT_ALPHA) 
     return [compare(a, b, alpha) for a, b in zip(records, records[1:])]
 
 
+def leave_one_out_t(x: np.ndarray) -> np.ndarray:
+    """t of each unit against the others (module docstring), for ``x`` (..., n, m): n units,
+    m parameters; NaN where the others have no spread."""
+    x = np.asarray(x, dtype=float)
+    n = x.shape[-2]
+    mean = (x.sum(axis=-2, keepdims=True) - x) / (n - 1)
+    dev = x[..., None, :, :] - mean[..., :, None, :]          # (..., unit left out, unit, m)
+    eye = np.eye(n, dtype=bool)[:, :, None]
+    ss = np.where(eye, 0.0, dev ** 2).sum(axis=-2)
+    s = np.sqrt(ss / (n - 2))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (x - mean) / (s * np.sqrt(1.0 + 1.0 / (n - 1)))
+    return np.where(s > 0, t, np.nan)
+
+
 @dataclass(frozen=True)
 class FleetFlag:
     """A unit's parameter against the rest of its fleet, in file units: its value and σ,
@@ -373,12 +388,12 @@ def fleet(records: list[CalibrationRecord], alpha: float = DEFAULT_ALPHA, model:
     dof = n - 2
     lim = float(_st.t.isf(alpha / (2 * n * m), dof))
     rows = []
+    t_all = leave_one_out_t(x)
     for u in range(n):
         others = np.delete(x, u, axis=0)
         mean = others.mean(axis=0)
         s = others.std(axis=0, ddof=1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (x[u] - mean) / (s * np.sqrt(1.0 + 1.0 / (n - 1)))
+        t = t_all[u]
         for j, i in enumerate(idx):
             tj = float(t[j]) if np.isfinite(t[j]) else float("nan")    # others all equal: no spread to test
             rows.append(FleetFlag(units[u].serial, units[u].id, ref_rec.names[i], disp[i], float(x[u, j] * scale[i]),
@@ -389,4 +404,4 @@ def fleet(records: list[CalibrationRecord], alpha: float = DEFAULT_ALPHA, model:
 
 
 __all__ = ["DEFAULT_ALPHA", "RANK_RTOL", "Comparison", "FleetFlag", "FleetReport", "ParameterDifference", "compare",
-           "consecutive", "fleet", "joint_chi2", "z_limit"]
+           "consecutive", "fleet", "joint_chi2", "leave_one_out_t", "z_limit"]

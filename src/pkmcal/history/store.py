@@ -229,7 +229,8 @@ def add_calibrated_file(path: str | os.PathLike, *, serial: str, db: str | os.Pa
                               model=model, heldout=heldout)
     cal = rec.record
     extra = [str(n) for n in list(cal.get("free") or []) + list(cal.get("gauge") or [])]
-    rec = dataclasses.replace(rec, null_space=null_space_of(machine, (path, cal.get("setup")), rec.method, extra))
+    rec = dataclasses.replace(rec, null_space=null_space_of(machine, (path, cal.get("setup")), rec.method, extra,
+                                                                 record=cal))
     with open_history(db) as hist:
         new_id = hist.add(rec, allow_duplicate=allow_duplicate)
         return hist.get(new_id)
