@@ -218,3 +218,20 @@ def test_a_serial_of_digits_is_named_with_a_tilde(tmp_path):
     with open_history(db) as hist:
         assert hist.get("1").serial == "A" and hist.get("#2").serial == "1234"
         assert hist.get("1234~0").id == 2
+
+
+def test_a_reader_does_not_wait_for_a_writer(tmp_path, monkeypatch):
+    """WAL mode, and an up-to-date database only read when opened: 'list' while another
+    process holds a write transaction answers at once (here with a busy timeout of 0)."""
+    from pkmcal.history import store
+
+    db = tmp_path / "h.sqlite"
+    add_calibrated_file(_calibrated_file(tmp_path, 10), serial="HX", db=db)
+    writer = sqlite3.connect(db, isolation_level=None)
+    writer.execute("BEGIN IMMEDIATE")
+    writer.execute("UPDATE calibrations SET serial = 'changing'")
+    monkeypatch.setattr(store, "BUSY_TIMEOUT_S", 0.0)
+    with store.open_history(db, create=False) as hist:
+        assert [r.serial for r in hist.records()] == ["HX"]      # the last committed state
+    writer.execute("ROLLBACK")
+    writer.close()

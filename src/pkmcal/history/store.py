@@ -497,29 +497,41 @@ def open_history(path: str | os.PathLike | None = None, create: bool = True) -> 
     return History(db, conn)
 
 
+def _schema_state(conn: sqlite3.Connection, shown: str) -> int | None:
+    """The database's schema version; None for an empty database (refused: another
+    program's database, a damaged or newer one)."""
+    tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+    if not tables:
+        return None
+    if "schema_version" not in tables:
+        raise PkmcalError(f"{shown} is an SQLite database but not a pkmcal history (no schema_version table); "
+                          "give another --db")
+    row = conn.execute("SELECT version FROM schema_version").fetchone()
+    version = None if row is None else row[0]
+    if not isinstance(version, int):
+        raise PkmcalError(f"{shown}: its schema_version table holds no version; the file is damaged: restore it "
+                          "from a backup or give another --db")
+    if version > SCHEMA_VERSION:
+        raise PkmcalError(f"{shown} was written by a newer pkmcal (history schema {version}, this pkmcal reads up "
+                          f"to {SCHEMA_VERSION}); upgrade pkmcal")
+    return version
+
+
 def _ensure_schema(conn: sqlite3.Connection, shown: str) -> None:
-    """Create the tables in an empty database, check the version of an existing one and
-    migrate it; in one ``BEGIN IMMEDIATE`` transaction (two processes creating the same new
-    database: one creates, the other then finds it made)."""
+    """Check the version of the database; create the tables in an empty one and migrate an
+    older one in one ``BEGIN IMMEDIATE`` transaction (two processes creating the same new
+    database: one creates, the other then finds it made). An up-to-date database is only
+    read: a reader neither waits for a writer nor needs write access."""
+    if _schema_state(conn, shown) == SCHEMA_VERSION:
+        return
     conn.execute("BEGIN IMMEDIATE")
     try:
-        tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
-        if not tables:
+        version = _schema_state(conn, shown)
+        if version is None:
             for stmt in _SCHEMA:
                 conn.execute(stmt)
             conn.execute("INSERT INTO schema_version (version) VALUES (?)", (SCHEMA_VERSION,))
         else:
-            if "schema_version" not in tables:
-                raise PkmcalError(f"{shown} is an SQLite database but not a pkmcal history (no schema_version table); "
-                                  "give another --db")
-            row = conn.execute("SELECT version FROM schema_version").fetchone()
-            version = None if row is None else row[0]
-            if not isinstance(version, int):
-                raise PkmcalError(f"{shown}: its schema_version table holds no version; the file is damaged: restore "
-                                  "it from a backup or give another --db")
-            if version > SCHEMA_VERSION:
-                raise PkmcalError(f"{shown} was written by a newer pkmcal (history schema {version}, this pkmcal reads "
-                                  f"up to {SCHEMA_VERSION}); upgrade pkmcal")
             while version < SCHEMA_VERSION:
                 for stmt in _MIGRATIONS[version]:
                     conn.execute(stmt)
