@@ -13,6 +13,8 @@ import sqlite3
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from helpers import assert_user_error
 
 import pkmcal
@@ -235,3 +237,27 @@ def test_a_reader_does_not_wait_for_a_writer(tmp_path, monkeypatch):
         assert [r.serial for r in hist.records()] == ["HX"]      # the last committed state
     writer.execute("ROLLBACK")
     writer.close()
+
+
+_FLOATS = st.floats(allow_nan=False, allow_infinity=False, width=64)
+
+
+@settings(max_examples=40, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(data=st.data(), p=st.integers(1, 8), serial=st.text(min_size=1, max_size=30).filter(lambda t: t.isprintable()
+                                                                                            and t.strip()))
+def test_any_record_round_trips_bit_for_bit(tmp_path_factory, data, p, serial):
+    """Values (−0.0, subnormals, 1e308 included), covariance, serial text: stored and read
+    back to the bit."""
+    values = np.array(data.draw(st.lists(_FLOATS, min_size=p, max_size=p)))
+    cov = np.array(data.draw(st.lists(_FLOATS, min_size=p * p, max_size=p * p))).reshape(p, p)
+    rec = CalibrationRecord(serial=serial, model="m", machine="m", kind="test", date="2026-12-01T00:00:00Z",
+                            pkmcal_version="t", names=tuple(f"q{i}" for i in range(p)), units=("mm",) * p,
+                            values=values, covariance=cov, record={"k": serial})
+    db = tmp_path_factory.mktemp("rt") / "h.sqlite"
+    with open_history(db) as hist:
+        new_id = hist.add(rec)
+    with open_history(db, create=False) as hist:
+        back = hist.get(new_id)
+    assert back.values.tobytes() == values.astype("<f8").tobytes()
+    assert back.covariance.tobytes() == cov.astype("<f8").tobytes()
+    assert back.serial == serial and back.record == {"k": serial} and back.names == rec.names

@@ -21,8 +21,9 @@ version is refused, an older one migrated by :data:`_MIGRATIONS` in one transact
   :attr:`pkmcal.identification.uncertainty.Uncertainty.description`), ``heldout`` (held-out
   figures, JSON, or NULL), ``inputs`` (the input files' paths, sizes and SHA-256, JSON),
   ``source`` and ``source_sha256`` (the calibrated machine file recorded), ``record`` (the
-  whole calibration record, JSON), ``covariance``: the machine file's p × p parameter
-  covariance in internal units (mm, rad), little-endian float64, row-major (exact), and
+  whole calibration record, JSON), ``parameter_values`` and ``covariance``: the machine
+  file's p parameters and p × p parameter covariance in internal units (mm, rad),
+  little-endian float64, row-major (exact to the bit: SQLite's REAL turns −0.0 into 0.0), and
   ``null_space`` (the directions the calibration's setup cannot see, JSON, for comparing
   calibrations held in different gauges: :mod:`pkmcal.history.gauge`; NULL when not computed).
 * ``parameters``: one row per parameter of a calibration (for SQL queries): ``name``,
@@ -67,7 +68,7 @@ _SCHEMA = (
         date TEXT NOT NULL, added TEXT NOT NULL, pkmcal_version TEXT NOT NULL,
         method TEXT, instrument TEXT, setup TEXT, n_poses INTEGER, rms_residual REAL, reduced_chi2 REAL,
         covariance_kind TEXT, heldout TEXT, inputs TEXT NOT NULL, source TEXT, source_sha256 TEXT,
-        record TEXT NOT NULL, covariance BLOB NOT NULL, null_space TEXT)""",
+        record TEXT NOT NULL, parameter_values BLOB NOT NULL, covariance BLOB NOT NULL, null_space TEXT)""",
     """CREATE TABLE parameters (
         calibration INTEGER NOT NULL REFERENCES calibrations(id) ON DELETE CASCADE,
         idx INTEGER NOT NULL, name TEXT NOT NULL, value REAL NOT NULL, std REAL, unit TEXT NOT NULL,
@@ -319,12 +320,13 @@ class History:
                 cur = self._conn.execute(
                     "INSERT INTO calibrations (serial, model, machine, kind, date, added, pkmcal_version, method, "
                     "instrument, setup, n_poses, rms_residual, reduced_chi2, covariance_kind, heldout, inputs, source, "
-                    "source_sha256, record, covariance, null_space) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, "
-                    "?, ?, ?, ?, ?, ?, ?)",
+                    "source_sha256, record, parameter_values, covariance, null_space) VALUES (?, ?, ?, ?, ?, ?, ?, ?, "
+                    "?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                     (rec.serial, rec.model, rec.machine, rec.kind, rec.date, rec.added or _now(), rec.pkmcal_version,
                      rec.method, rec.instrument, _json(rec.setup), rec.n_poses, rec.rms_residual, rec.reduced_chi2,
                      rec.covariance_kind, _json(rec.heldout), _json(rec.inputs), rec.source, rec.source_sha256,
-                     _json(rec.record), cov.tobytes(), _json(rec.null_space)))
+                     _json(rec.record), np.ascontiguousarray(rec.values, dtype="<f8").tobytes(), cov.tobytes(),
+                     _json(rec.null_space)))
                 new_id = int(cur.lastrowid)
                 self._conn.executemany(
                     "INSERT INTO parameters (calibration, idx, name, value, std, unit, held) VALUES (?, ?, ?, ?, ?, ?, ?)",
@@ -342,7 +344,7 @@ class History:
     # -- reading ------------------------------------------------------------------------------
     _COLUMNS = ("id, serial, model, machine, kind, date, added, pkmcal_version, method, instrument, setup, n_poses, "
                 "rms_residual, reduced_chi2, covariance_kind, heldout, inputs, source, source_sha256, record, "
-                "covariance, null_space")
+                "parameter_values, covariance, null_space")
 
     def _records(self, where: str = "", args: tuple = ()) -> list[CalibrationRecord]:
         try:
@@ -410,12 +412,12 @@ def _json(obj) -> str | None:
 
 def _record_of(row, params) -> CalibrationRecord:
     (rid, serial, model, machine, kind, date, added, version, method, instrument, setup, n_poses, rms, chi2,
-     cov_kind, heldout, inputs, source, sha, record, cov, null_space) = row
+     cov_kind, heldout, inputs, source, sha, record, values, cov, null_space) = row
     p = len(params)
     return CalibrationRecord(
         serial=serial, model=model, machine=machine, kind=kind, date=date, pkmcal_version=version,
         names=tuple(r[0] for r in params), units=tuple(r[2] for r in params),
-        values=np.array([r[1] for r in params], dtype=float),
+        values=np.frombuffer(values, dtype="<f8").astype(float),
         covariance=np.frombuffer(cov, dtype="<f8").reshape(p, p).astype(float), method=method,
         instrument=instrument, setup=None if setup is None else json.loads(setup), n_poses=n_poses,
         rms_residual=rms, reduced_chi2=chi2, covariance_kind=cov_kind,
