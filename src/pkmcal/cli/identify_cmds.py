@@ -159,10 +159,15 @@ def _firmware_numbers_undetermined(result) -> list[tuple[str, str]]:
                    "noise while the input looks wrong; or a machine parameter moved further than the machine's "
                    "size: the rule of pkmcal.identification.fit_verdict); the file's calibration record says it "
                    "was accepted and why it was refused.")
+@click.option("--history", "history_db", metavar="DB",
+              help="Also record the calibration in the history database DB (pkmcal history; with --serial), with "
+                   "the --heldout figures.")
+@click.option("--serial", metavar="SERIAL", help="With --history: the unit's serial number.")
 @import_options
 def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fix, free, output, name, as_json,
                  report_dir=None, mapping=None, keep=None, loss="linear", f_scale=None, reject=None,
-                 prior=(), clipped="drop", session_offsets=False, heldout=None, accept_bad_fit=False) -> None:
+                 prior=(), clipped="drop", session_offsets=False, heldout=None, accept_bad_fit=False,
+                 history_db=None, serial=None) -> None:
     """Identify MACHINE's kinematic parameters from MEAS.csv and write CALIBRATED.yaml.
 
     Units: mm, degrees in files and tables. Unidentifiable combinations are fixed
@@ -194,6 +199,9 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     """
     inputs = [machine, measurements, setup_spec] + ([heldout] if heldout is not None else [])
     check_output(output, inputs)
+    from pkmcal.history.store import check_history_request, record_identified
+
+    check_history_request(history_db, serial, to_stdout(output))
     if f_scale is not None and loss == "linear":
         raise PkmcalError("--f-scale sets where a robust --loss turns from quadratic, and the loss is linear (least "
                           f"squares): give --loss ({', '.join(lo for lo in LOSSES if lo != 'linear')}) with it, or "
@@ -308,6 +316,7 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
         if validation is not None:
             d["heldout"] = validation.to_dict()
     emit(text, output)
+    recorded = None if history_db is None else record_identified(output, history_db, serial, validation)
     if report is not None:
         from pkmcal.report import write_report
 
@@ -315,6 +324,8 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     if as_json:
         if report is not None:
             d["report"] = str(written.html)
+        if recorded is not None:
+            d["history"] = {"db": str(history_db), "id": recorded.id, "serial": recorded.serial}
         click.echo(json.dumps(d, indent=2, allow_nan=False))
     else:
         err = to_stdout(output)
@@ -328,6 +339,8 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
             click.echo(validation.format_table(), err=err)
         if not err:
             click.echo(f"wrote {output}" + (f" and {written.html}" if report is not None else ""))
+        if recorded is not None:
+            click.echo(f"recorded #{recorded.id} for serial {recorded.serial} in {history_db}")
         elif report is not None:
             click.echo(f"wrote {written.html}", err=True)
 

@@ -66,6 +66,8 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
              "Calibrate the built-in prototype end to end on a simulated 'real' machine."),
     "reproduce": ("pkmcal.cli.reproduce_cmd", "reproduce",
                   "Regenerate paper table NAME with our numbers beside the published ones."),
+    "history": ("pkmcal.cli.history_cmd", "history_group",
+                "Keep every calibration of a fleet and compare them (SQLite database)."),
     "study": ("pkmcal.cli.study_cmd", "study",
               "Run the Monte Carlo study STUDY.yaml (plan, simulate, identify, verify per trial) into RESULTS/."),
 }
