@@ -3,7 +3,7 @@ byte kept.
 
 Read (RS-274 as LinuxCNC, Klipper and Marlin take it): a line's code ends at ``;`` (a
 comment to the end of the line) and skips ``( … )`` comments (LinuxCNC); its words are a
-letter and a number. A line whose first word is not a G, M, T or N word (Klipper's extended
+letter and a number. A line that does not begin with a word (Klipper's extended
 commands, ``BED_MESH_PROFILE LOAD=default``, macros) is kept as it is.
 
 * **Moves**: a line with ``G0``/``G1`` (``G00``, ``G01``), or, as LinuxCNC reads it (modal
@@ -33,7 +33,7 @@ import numpy as np
 from pkmcal.errors import PkmcalError
 
 _WORD = re.compile(r"([A-Za-z])\s*([-+]?(?:\d+\.?\d*|\.\d+))")
-_FIRST = re.compile(r"\s*[GgMmTtNn]\s*[-+]?[\d.]")
+_FIRST = re.compile(r"\s*[A-Za-z]\s*[-+]?[\d.]")
 
 
 @dataclass(frozen=True)
