@@ -37,9 +37,12 @@ def _counts(text: str | None, what: str, low: int, high: int) -> tuple[int, ...]
 
 
 @click.command("compensate", epilog=examples(
-    "pkmcal compensate calibrated.yaml meas.csv --heldout heldout-meas.csv -o correction.yaml",
-    "pkmcal compensate calibrated.yaml meas.csv --heldout heldout-meas.csv -o correction.yaml --klipper-mesh mesh.cfg",
-    "pkmcal compensate calibrated.yaml meas.csv --heldout heldout-meas.csv --json -o correction.yaml"))
+    "pkmcal identify kossel-mini examples/compensation/warped-bed-meas.csv --setup z-probe-klipper --accept-bad-fit "
+    "-o warped-cal.yaml",
+    "pkmcal compensate warped-cal.yaml examples/compensation/warped-bed-meas.csv --heldout "
+    "examples/compensation/warped-bed-heldout.csv -o bed-correction.yaml --klipper-mesh bed-mesh.cfg",
+    "pkmcal compensate warped-cal.yaml examples/compensation/warped-bed-meas.csv --heldout "
+    "examples/compensation/warped-bed-heldout.csv --json -o bed-correction-2.yaml"))
 @click.argument("calibrated")
 @click.argument("measurements")
 @click.option("--heldout", "heldout_path", required=True, metavar="HELDOUT.csv",
@@ -137,9 +140,12 @@ def _is_pose_file(path: str) -> bool:
 
 
 @click.command("correct", epilog=examples(
-    "pkmcal correct part.gcode -m calibrated.yaml --correction correction.yaml -o part-corrected.gcode",
-    "pkmcal correct poses.csv -m calibrated.yaml -o commanded.csv",
-    "pkmcal correct part.ngc -m calibrated.yaml --nominal stewart-prototype -o part-corrected.ngc"))
+    "pkmcal correct examples/compensation/part.gcode -m warped-cal.yaml --correction bed-correction.yaml "
+    "-o part-corrected.gcode",
+    "pkmcal correct examples/compensation/targets.csv -m warped-cal.yaml --correction bed-correction.yaml "
+    "-o commanded.csv",
+    "pkmcal correct examples/compensation/hexapod.ngc -m calibrated.yaml --nominal stewart-prototype "
+    "--ignore-limit leg_collision -o hexapod-corrected.ngc"))
 @click.argument("program")
 @click.option("-m", "--machine", "calibrated", required=True, metavar="CALIBRATED",
               help="The calibrated machine (pkmcal identify's output).")
@@ -147,9 +153,11 @@ def _is_pose_file(path: str) -> bool:
               help="The kinematics the controller runs (default: the nominal machine the calibration record names).")
 @click.option("--correction", "correction_path", metavar="FILE",
               help="A correction kept by 'pkmcal compensate' (default: the calibrated model alone).")
+@click.option("--ignore-limit", "ignore_limits", multiple=True, metavar="NAME",
+              help="A limit of the calibrated machine not to check (e.g. leg_collision); repeatable.")
 @output_option("OUT", "The corrected program or pose file")
 @import_options
-def correct_cmd(program, calibrated, nominal, correction_path, output, mapping) -> None:
+def correct_cmd(program, calibrated, nominal, correction_path, ignore_limits, output, mapping) -> None:
     """Filter PROGRAM through the calibrated model (plus a correction) for a nominal controller.
 
     A controller that runs the machine's nominal kinematics (a printer whose config was not
@@ -185,7 +193,7 @@ def correct_cmd(program, calibrated, nominal, correction_path, output, mapping) 
                            mapping=mapping)
         targets = from_file_units(table.values, cal.pose_is_angle)
         lines = [int(v) for v in table.lines]
-        result = commands_for(cal, nom, fld, targets)
+        result = commands_for(cal, nom, fld, targets, tuple(ignore_limits))
         _refuse(program, lines, result)
         out = to_file_units(result.commands, cal.pose_is_angle)
         text = format_table({n: out[:, k] for k, n in enumerate(cal.pose_names)})
@@ -209,7 +217,7 @@ def correct_cmd(program, calibrated, nominal, correction_path, output, mapping) 
     targets = np.array([mv.target for mv in moves]).reshape(-1, len(axes))
     from pkmcal.io.tables import from_file_units, to_file_units
 
-    result = commands_for(cal, nom, fld, from_file_units(targets, cal.pose_is_angle))
+    result = commands_for(cal, nom, fld, from_file_units(targets, cal.pose_is_angle), tuple(ignore_limits))
     _refuse(program, [mv.line + 1 for mv in moves], result)
     new = rewrite(src_lines, moves, to_file_units(result.commands, cal.pose_is_angle), axes)
     data = "".join(new).encode("utf-8", errors="surrogateescape")

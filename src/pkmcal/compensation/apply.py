@@ -62,19 +62,30 @@ def model_poses(calibrated: Mechanism, fld: Field | None, targets: np.ndarray) -
                       "iterations): it is too steep to invert; refit it or leave it out")
 
 
-def commands_for(calibrated: Mechanism, nominal: Mechanism, fld: Field | None, targets: np.ndarray) -> Commands:
+def commands_for(calibrated: Mechanism, nominal: Mechanism, fld: Field | None, targets: np.ndarray,
+                 ignore_limits: tuple[str, ...] = ()) -> Commands:
     """What a controller with ``nominal``'s kinematics must be commanded so that the
-    machine ``calibrated`` (+ the correction ``fld``) reaches ``targets`` (module docstring)."""
+    machine ``calibrated`` (+ the correction ``fld``) reaches ``targets`` (module docstring);
+    ``ignore_limits`` names limits not checked (e.g. ``leg_collision``, which a calibration of
+    a tight design may bring into contact on paper)."""
     if calibrated.kind != nominal.kind or calibrated.n_dof != nominal.n_dof:
         raise PkmcalError(f"the nominal machine '{nominal.name}' ({nominal.kind}) is not of the kind of the "
                           f"calibrated one '{calibrated.name}' ({calibrated.kind})")
     x_m = model_poses(calibrated, fld, targets)
-    limits = calibrated.check_limits(x_m, margins=False)
-    reasons = ["" if ok else "outside the calibrated machine's limits (" + ", ".join(limits.reasons(k)) + ")"
-               for k, ok in enumerate(limits.ok)]
+    report = calibrated.check_limits(x_m, margins=False)
+    unknown = [n for n in ignore_limits if n not in report.violations]
+    if unknown:
+        raise PkmcalError(f"machine '{calibrated.name}' has no limit {', '.join(unknown)}; its limits are "
+                          f"{', '.join(report.violations)}")
+    checked = {n: v for n, v in report.violations.items() if n not in ignore_limits}
+    bad = np.zeros(len(x_m), dtype=bool)
+    for v in checked.values():
+        bad |= v
+    reasons = ["outside the calibrated machine's limits (" + ", ".join(n for n, v in checked.items() if v[k]) + ")"
+               if bad[k] else "" for k in range(len(x_m))]
     with np.errstate(invalid="ignore"):
         q = calibrated.ik(x_m)
-    ok = limits.ok & np.all(np.isfinite(q), axis=1)
+    ok = ~bad & np.all(np.isfinite(q), axis=1)
     fk = nominal.fk(np.where(ok[:, None], q, nominal.ik(nominal.home_pose[None])[0]), guess=x_m)
     for k in np.flatnonzero(ok & ~fk.ok):
         reasons[k] = "the nominal kinematics have no pose for these actuator positions (FK failed)"

@@ -261,10 +261,13 @@ def candidates(kind: str, machine: Mechanism, data: Unexplained, counts=MESH_COU
 
 
 def round_bed_radius(machine: Mechanism) -> float | None:
-    """A delta's round bed: its print radius floored to 0.1 mm (Klipper's ``mesh_radius``,
-    bed_mesh.py ``_init_mesh_config``), None for other machines."""
-    radius = getattr(machine, "print_radius", None)
-    return float(np.floor(radius * 10) / 10) if radius else None
+    """A round bed's radius floored to 0.1 mm (Klipper's ``mesh_radius``, bed_mesh.py
+    ``_init_mesh_config``) for a machine that declares a ``print_radius`` limit (a delta:
+    its workspace box is ±that radius in x and y), None for other machines."""
+    if "print_radius" not in machine.check_limits(machine.home_pose[None], margins=False).violations:
+        return None
+    radius = 0.5 * float(np.diff(machine.workspace_box()[0])[0])
+    return float(np.floor(radius * 10) / 10)
 
 
 def folds_of(n: int, k: int = FOLDS, seed: int = 0) -> np.ndarray:
