@@ -117,3 +117,29 @@ def test_model_poses_without_a_field_are_the_targets():
     case = cases.delta(warped=False)
     t = _bed_targets(1.0)
     np.testing.assert_array_equal(model_poses(case.calibrated, None, t), t)
+
+
+def test_split_moves_follow_the_bump_between_their_ends():
+    """A 130 mm first-layer line across the bump: the controller moves straight between the
+    commanded points (in its nominal frame); corrected at its ends only, the middle rides
+    over the bump; split every 5 mm (pkmcal correct --segment 5), it follows it."""
+    from pkmcal.compensation.gcode import parse_moves
+
+    case = cases.delta(warped=True)
+    fld, held_residuals = _kept(case)
+    program = ["G1 X-60 Y-20 Z0.3\n", "G1 X70 Y-20 Z0.3 E5\n"]
+
+    def path_error(segment):
+        moves, _ = parse_moves(program, ("X", "Y", "Z"), "line.gcode", segment)
+        cmd = commands_for(case.calibrated, case.nominal, fld, np.vstack([m.targets for m in moves])).commands
+        t = np.linspace(0.0, 1.0, 21)[:, None]
+        dense = np.vstack([a + t * (b - a) for a, b in zip(cmd[:-1], cmd[1:])])     # the controller's straight moves
+        fk = case.real.fk(case.nominal.ik(dense), guess=dense)
+        assert fk.ok.all()
+        return np.abs(fk.poses[:, 2] - case.error(fk.poses[:, :2]) - 0.3)
+
+    ends_only, split = path_error(None), path_error(5.0)
+    print(f"height error along the line: ends only max {np.max(ends_only):.3f} mm, split every 5 mm {np.max(split):.3f} mm")
+    tol = float(np.sqrt(np.mean(held_residuals**2))) * 4        # a few times what the model + mesh leave
+    assert np.max(split) <= tol, (np.max(split), tol)
+    assert np.max(ends_only) > 2 * tol

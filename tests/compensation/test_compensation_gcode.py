@@ -92,3 +92,38 @@ def test_parse_rewrite_round_trip(rows, ending):
     np.testing.assert_allclose([m.target for m in back], shifted, atol=5e-7)
     for (x, y, z, tail), new in zip(rows, out):
         assert new.endswith(tail + ending)
+
+
+def _split(text, segment=5.0):
+    lines = _lines(text)
+    moves, _ = parse_moves(lines, AXES, "s.gcode", segment=segment)
+    values = np.vstack([m.targets for m in moves])
+    return moves, rewrite(lines, moves, values, AXES)
+
+
+def test_split_relative_extrusion_shares_e():
+    moves, out = _split("M83\nG1 X0 Y0 Z0.3\nG1 X20 Y0 E1.0 F1200 ; long\n")
+    assert len(moves[1].targets) == 4
+    assert "".join(out[2:]) == ("G1 X5 Y0 Z0.3 E0.25\nG1 X10 Y0 Z0.3 E0.25\nG1 X15 Y0 Z0.3 E0.25\n"
+                                "G1 X20 Y0 Z0.3 E0.25 F1200 ; long\n")
+
+
+def test_split_absolute_extrusion_interpolates_e_and_keeps_the_end():
+    moves, out = _split("G92 E10\nG1 X0 Y0 Z0.3\nG1 X0 Y-12 E12\nG28\nG1 X0 Y0 Z1\n", segment=5.0)
+    text = "".join(out)
+    assert "G1 X0 Y-4 Z0.3 E10.666667\nG1 X0 Y-8 Z0.3 E11.333333\nG1 X0 Y-12 Z0.3 E12\n" in text
+    assert len(moves[2].targets) == 1          # after G28: no start to split from
+
+
+@given(st.floats(0.5, 20.0), st.lists(st.tuples(coords, coords), min_size=2, max_size=6),
+       st.floats(0.01, 3.0).map(lambda v: round(v, 3)))
+def test_split_pieces_are_short_and_keep_the_extrusion(segment, xy, e):
+    text = "M83\n" + "".join(f"G1 X{x} Y{y} Z0.2 E{e}\n" for x, y in xy)
+    lines = _lines(text)
+    moves, _ = parse_moves(lines, AXES, "h.gcode", segment=segment)
+    out = rewrite(lines, moves, np.vstack([m.targets for m in moves]), AXES)
+    again, _ = parse_moves("".join(out).splitlines(keepends=True), AXES, "h.gcode")
+    pts = np.array([m.target for m in again])
+    assert np.all(np.linalg.norm(np.diff(pts[:, :2], axis=0), axis=1) <= segment + 1e-5)
+    total = sum(float(w.split("E")[1]) for w in "".join(out).split("\n")[1:] if "E" in w)
+    assert abs(total - e * len(xy)) <= 1e-6 * len(out)       # pieces written to 1e-6, the last takes the rest

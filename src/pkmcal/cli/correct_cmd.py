@@ -19,6 +19,7 @@ import click
 import numpy as np
 
 from pkmcal.cli.import_options import import_options
+from pkmcal.cli.option_types import FiniteFloat
 from pkmcal.cli.options import check_output, emit, examples, output_option, summary_echo, to_stdout
 from pkmcal.errors import PkmcalError, PkmcalWarning
 
@@ -142,6 +143,8 @@ def _is_pose_file(path: str) -> bool:
 @click.command("correct", epilog=examples(
     "pkmcal correct examples/compensation/part.gcode -m warped-cal.yaml --correction bed-correction.yaml "
     "-o part-corrected.gcode",
+    "pkmcal correct examples/compensation/part.gcode -m warped-cal.yaml --correction bed-correction.yaml "
+    "--segment 5 -o part-split.gcode",
     "pkmcal correct examples/compensation/targets.csv -m warped-cal.yaml --correction bed-correction.yaml "
     "-o commanded.csv",
     "pkmcal correct examples/compensation/hexapod.ngc -m calibrated.yaml --nominal stewart-prototype "
@@ -155,9 +158,12 @@ def _is_pose_file(path: str) -> bool:
               help="A correction kept by 'pkmcal compensate' (default: the calibrated model alone).")
 @click.option("--ignore-limit", "ignore_limits", multiple=True, metavar="NAME",
               help="A limit of the calibrated machine not to check (e.g. leg_collision); repeatable.")
+@click.option("--segment", type=FiniteFloat(min=0.1), metavar="MM",
+              help="G-code: split moves longer than MM (in x, y, z) into equal pieces, each corrected, the "
+                   "extrusion shared (as Klipper's bed mesh splits moves every 5 mm). Default: end points only.")
 @output_option("OUT", "The corrected program or pose file")
 @import_options
-def correct_cmd(program, calibrated, nominal, correction_path, ignore_limits, output, mapping) -> None:
+def correct_cmd(program, calibrated, nominal, correction_path, ignore_limits, segment, output, mapping) -> None:
     """Filter PROGRAM through the calibrated model (plus a correction) for a nominal controller.
 
     A controller that runs the machine's nominal kinematics (a printer whose config was not
@@ -167,7 +173,8 @@ def correct_cmd(program, calibrated, nominal, correction_path, ignore_limits, ou
     actuators there are IK(x), and the command is the pose whose nominal IK gives them. A bed
     mesh adds the bed's height under the nozzle to z (targets relative to the bed).
     PROGRAM is G-code (G0/G1 X Y Z [A B C] moves replaced, every other byte kept; G91, G20,
-    arcs and G92 with axes refused with their line) or a pose CSV (.csv: the machine's pose
+    arcs and G92 with axes refused with their line; --segment MM splits long moves so that the
+    correction is applied along them, not only at their ends) or a pose CSV (.csv: the machine's pose
     columns, written back in mm and degrees). A target the calibrated machine cannot reach
     is refused with its line.
     """
@@ -213,12 +220,12 @@ def correct_cmd(program, calibrated, nominal, correction_path, ignore_limits, ou
     if any(len(a) != 1 for a in axes):
         raise PkmcalError(f"machine '{cal.name}' has pose coordinates {', '.join(cal.pose_names)}, which are no "
                           "G-code axis letters; give its targets as a pose CSV")
-    moves, skipped = parse_moves(src_lines, axes, program)
-    targets = np.array([mv.target for mv in moves]).reshape(-1, len(axes))
+    moves, skipped = parse_moves(src_lines, axes, program, segment)
+    targets = np.vstack([mv.targets for mv in moves] or [np.zeros((0, len(axes)))])
     from pkmcal.io.tables import from_file_units, to_file_units
 
     result = commands_for(cal, nom, fld, from_file_units(targets, cal.pose_is_angle), tuple(ignore_limits))
-    _refuse(program, [mv.line + 1 for mv in moves], result)
+    _refuse(program, [mv.line + 1 for mv in moves for _ in range(len(mv.targets))], result)
     new = rewrite(src_lines, moves, to_file_units(result.commands, cal.pose_is_angle), axes)
     data = "".join(new).encode("utf-8", errors="surrogateescape")
     if to_stdout(output):
@@ -227,6 +234,7 @@ def correct_cmd(program, calibrated, nominal, correction_path, ignore_limits, ou
         atomic_write_bytes(output, data)
     say = summary_echo(output)
     say(f"{len(moves)} moves filtered for the controller's kinematics ('{nom.name}')"
+        + (f", split into {len(targets)} pieces of at most {segment:g} mm" if segment else "")
         + ("" if fld is None else f" with the {fld.kind} correction of {correction_path}"))
     if skipped:
         import warnings
