@@ -141,6 +141,9 @@ def unexplained(machine: Mechanism, setup: MeasurementSetup, measurements, kind:
         raise PkmcalError(f"machine '{machine.name}' is redundantly actuated: its measurements cannot be predicted "
                           "from the actuator readings by FK alone, so no correction is fitted for it")
     sensor = setup.sensor
+    if sensor.reads_pose_pairs:
+        raise PkmcalError("a correction is fitted to readings of single poses; printed-object distances read pairs: "
+                          "fit it on the Z probe's measurements (their setup, e.g. z-probe-klipper, with --setup)")
     pred = predict(machine, sensor, measurements, "after")
     keep = np.flatnonzero(pred.ok & np.all(np.isfinite(pred.residuals), axis=1))
     if len(keep) == 0:
