@@ -1,0 +1,631 @@
+"""ISO 9283 performance figures of a calibrated machine, with their GUM uncertainty, and the
+accuracy a calibration predicts before anything is measured.
+
+**Test pattern** (ISO 9283:1998 §6.2–6.3, as we read it). A cube of side s inside the
+workspace, edges parallel to the base frame, centred where the machine works (here: the
+centre of the planning workspace box, the other pose coordinates at home). The poses lie on
+the diagonal plane C1–C2–C7–C8 (through the bottom edge C1–C2 and the opposite top edge
+C7–C8): P1 at the cube's centre, P2…P5 on the plane's two diagonals at 10 % of the diagonal
+from its corners (``CORNER_FRACTION``):
+
+    C1 = c + s/2 (−1, −1, −1),  C2 = c + s/2 (+1, −1, −1),  C7 = c + s/2 (+1, +1, +1),
+    C8 = c + s/2 (−1, +1, +1);  P1 = c,  P_i = c + 0.8 (C_k − c) for (P2, P3, P4, P5) ← (C1, C2, C7, C8)
+
+so that P2–P4 and P3–P5 are opposite on a diagonal (the distance test uses P2–P4). Every
+pose is visited in n = 30 cycles (``CYCLES``; §7.2.1), P1 … P5 in each. The cube is the
+largest whose 3×3×3 grid and P1…P5 pass the planning checks (limits with the safety
+margins, measurability; :func:`pkmcal.planning.candidates.check_candidates`).
+
+**Pose characteristics** (§7.2, 7.3) of a pose with commanded (x_c, y_c, z_c, a_c, b_c, c_c)
+and attained (x_j, …, c_j), j = 1…n; in terms of the errors e_j = attained_j − commanded
+(angles wrapped):
+
+    x̄ = (1/n) Σ x_j (ȳ, z̄, ā, b̄, c̄ likewise)
+    AP_x = x̄ − x_c,  AP_y, AP_z;     AP_P = √(AP_x² + AP_y² + AP_z²)              (7.2.1)
+    AP_a = ā − a_c,  AP_b, AP_c                                                    (7.2.1)
+    l_j = √((x_j − x̄)² + (y_j − ȳ)² + (z_j − z̄)²),  l̄ = (1/n) Σ l_j,
+    S_l = √(Σ (l_j − l̄)² / (n − 1)),     RP_l = l̄ + 3 S_l                         (7.2.2)
+    RP_a = ±3 S_a,  S_a = √(Σ (a_j − ā)² / (n − 1))  (b, c likewise)              (7.2.2)
+
+**Distance characteristics** (§7.5) between two poses 1, 2 of the pattern (P2 and P4):
+
+    D_j = ‖p_1j − p_2j‖,  D_c = ‖p_c1 − p_c2‖,  D̄ = (1/n) Σ D_j
+    AD_P = D̄ − D_c;   AD_x = (1/n) Σ |x_1j − x_2j| − |x_c1 − x_c2|  (y, z likewise)
+    RD = ±3 S_D,  S_D = √(Σ (D_j − D̄)² / (n − 1))
+
+(orientation distance figures are not computed).
+
+**Uncertainty** (GUM, JCGM 100:2008 §5, first order). Each figure F is a function of the
+errors e (5 poses × n cycles × d coordinates); its analytic gradient g = ∂F/∂e is written
+below each formula in the code. The measured errors are e = e_true + ε + G δθ: ε the
+instrument's noise on each reading (independent per reading, the setup's ``noise.reading``
+σ, carried to the pose coordinates by the sensor's inverse, Σ_j = K_j Σ_y K_jᵀ), δθ the
+error of the instrument's registration to the base frame (its identified parameters, common
+to every reading, covariance C_θ). Then
+
+    u²(F) = Σ_j g_jᵀ Σ_j g_j + (Σ_j g_jᵀ G_j) C_θ (Σ_j G_jᵀ g_j),      U = k u, k = 2.
+
+The "true figure" is F(e_true): the machine's own performance in this test, free of the
+instrument's error. A rigid registration error moves every attained pose alike, so it
+changes AP and AD but not RP or RD. Two limits of first order are reported, not hidden:
+AP_P is a norm, so where AP_P ≲ U its distribution is not Gaussian (flagged
+``not-significant``: AP_P not distinguishable from 0); RP is biased upwards by the instrument's own scatter, by
+about the RP an ideally repeatable machine would show, RP_inst ≈ 3.616 σ_eq for isotropic
+noise (σ_eq = √(tr Σ/3); E l̄ = √(8/π) σ, E S_l = √(3 − 8/π) σ for a χ₃ distance); RP with
+RP_inst > 25 % of it is flagged ``instrument_limited`` (ISO 9283 §6.4 asks the measurement
+uncertainty to stay below 25 % of the characteristic measured).
+
+**Predicted accuracy** (before anything is measured). A machine commanded through the
+calibrated model ρ̂ reaches x_r with IK(x_r, ρ) = IK(x_c, ρ̂), so to first order
+
+    δx = x_r − x_c = A⁻¹ B (ρ̂ − ρ),   A = ∂q/∂x,  B = ∂q/∂ρ,   Cov δx = A⁻¹ B C Bᵀ A⁻ᵀ
+
+with C the parameter covariance (the calibrated file's ``uncertainty`` covariance:
+max(1, χ²/E[χ²]) · C_prior, :mod:`pkmcal.identification.uncertainty`; for a plan, the
+noise-model covariance (JᵀJ)⁻¹ of the whitened design Jacobian on the identifiable
+parameters, the gauge the identifiability analysis suggests, :func:`plan_covariance`). The
+position error's 95 % bound is the quantile of ‖δp‖ for δp ~ N(0, S), S the 3×3 block, by
+Patnaik's approximation ‖δp‖² ≈ c χ²_ν with c = Σλ²/Σλ, ν = (Σλ)²/Σλ² (λ the eigenvalues
+of S; exact for equal λ and for one nonzero λ); the orientation bound likewise for the
+rotation δω = E(a, b, c) δ(a, b, c) (:func:`pkmcal.conventions.euler_rate_matrix`). This is
+the expected AP_P of the machine at that pose: "with this plan and this instrument, expect
+≤ X mm at 95 % here".
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pkmcal.conventions import euler_rate_matrix, wrap_angle
+from pkmcal.errors import PkmcalError
+from pkmcal.mechanisms.base import Mechanism
+
+#: Cycles per pose (ISO 9283 §7.2.1).
+CYCLES = 30
+#: P2…P5 lie at this fraction of the diagonal from its corners (ISO 9283 §6.3: (10 ± 2) %).
+CORNER_FRACTION = 0.1
+#: Coverage factor of the expanded uncertainty.
+COVERAGE_FACTOR = 2.0
+#: Pairs of pattern poses (1-based) of the distance characteristics.
+DISTANCE_PAIRS = ((2, 4),)
+#: RP_inst/RP above which a repeatability figure is instrument-limited (ISO 9283: 25 %).
+INSTRUMENT_SHARE = 0.25
+#: E[l̄ + 3 S_l]/σ for an isotropic 3-D Gaussian scatter of σ per axis (module docstring).
+RP_PER_SIGMA = math.sqrt(8.0 / math.pi) + 3.0 * math.sqrt(3.0 - 8.0 / math.pi)
+#: Grid points per cube edge checked when the cube is fitted in the workspace.
+CUBE_GRID = 3
+
+
+def _position_axes(mechanism: Mechanism) -> None:
+    if tuple(mechanism.pose_names[:3]) != ("x", "y", "z"):
+        raise PkmcalError(f"ISO 9283 figures are defined for machines with x, y, z pose coordinates; "
+                          f"'{mechanism.name}' has {', '.join(mechanism.pose_names)}")
+
+
+def _has_orientation(mechanism: Mechanism) -> bool:
+    return tuple(mechanism.pose_names) == ("x", "y", "z", "a", "b", "c")
+
+
+# -- the pattern -----------------------------------------------------------------------------
+
+
+def cube_pattern(center: np.ndarray, side: float, fixed: np.ndarray) -> np.ndarray:
+    """P1…P5 (5, n) of the cube of ``side`` centred at ``center`` (3,) on its diagonal plane
+    C1–C2–C7–C8 (module docstring); the coordinates after x, y, z are those of ``fixed`` (n,)."""
+    c = np.asarray(center, dtype=float)
+    corners = np.array([[-1, -1, -1], [1, -1, -1], [1, 1, 1], [-1, 1, 1]], dtype=float)   # C1, C2, C7, C8
+    pts = np.vstack([c, c + (1.0 - 2.0 * CORNER_FRACTION) * 0.5 * side * corners])
+    out = np.tile(np.asarray(fixed, dtype=float), (5, 1))
+    out[:, :3] = pts
+    return out
+
+
+@dataclass(frozen=True)
+class Iso9283Pattern:
+    """The test pattern: ``poses`` (5, n) P1…P5 (mm, rad), the cube (``center`` (3,),
+    ``side`` mm), ``cycles``; ``notes`` what fitting it in the workspace did."""
+
+    poses: np.ndarray
+    center: np.ndarray
+    side: float
+    cycles: int = CYCLES
+    notes: tuple[str, ...] = ()
+
+    def cycle_poses(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(poses (5·cycles, n), pose label 1…5, cycle 1…n)``: P1…P5 in every cycle."""
+        label = np.tile(np.arange(1, 6), self.cycles)
+        cycle = np.repeat(np.arange(1, self.cycles + 1), 5)
+        return self.poses[label - 1], label, cycle
+
+
+def iso9283_pattern(mechanism: Mechanism, setup=None, *, cycles: int = CYCLES, margin=None,
+                    measurability=None) -> Iso9283Pattern:
+    """The largest ISO 9283 test cube inside ``mechanism``'s workspace (module docstring):
+    centred in the planning workspace box (:func:`~pkmcal.planning.candidates.workspace_box`),
+    the pose coordinates after x, y, z at home, its side the largest (bisection) whose
+    3×3×3 grid and P1…P5 pass the planning checks with ``margin`` (None: the machine's
+    default safety margins, as ``pkmcal plan``) and the setup's measurability."""
+    from pkmcal.planning.candidates import Measurability, _bisect_scale, check_candidates, workspace_box
+    from pkmcal.planning.margins import planning_checks, resolve_margin
+
+    _position_axes(mechanism)
+    if int(cycles) < 2:
+        raise PkmcalError(f"an ISO 9283 pattern needs at least 2 cycles (repeatability); got {cycles}")
+    measurability = Measurability() if measurability is None else measurability
+    reachable, notes = mechanism.within_geometry()
+    notes = list(notes)
+    if margin is None:
+        margin = resolve_margin(reachable)
+    checked, check_margin = planning_checks(reachable, margin)
+    box = workspace_box(checked, setup, margin=check_margin, measurability=measurability, notes=notes)
+    center = box[:3].mean(axis=1)
+    fixed = np.asarray(mechanism.home_pose, dtype=float).copy()
+    s_max = float(np.min(box[:3, 1] - box[:3, 0]))
+    g = np.linspace(-0.5, 0.5, CUBE_GRID)
+    grid = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
+
+    def poses_of(side: float) -> np.ndarray:
+        cube = np.tile(fixed, (len(grid), 1))
+        cube[:, :3] = center + side * grid
+        return np.vstack([cube, cube_pattern(center, side, fixed)])
+
+    def ok(t: float) -> bool:
+        return bool(check_candidates(checked, setup, poses_of(t * s_max), margin=check_margin,
+                                     measurability=measurability).ok.all())
+
+    t = _bisect_scale(ok)
+    if t * s_max <= 1e-6 * max(s_max, 1.0):
+        raise PkmcalError(f"machine '{mechanism.name}': no ISO 9283 cube around {np.round(center, 3).tolist()} mm "
+                          "passes the limits and the safety margins; check the home pose, the margins and the "
+                          "sensor set-up")
+    side = t * s_max
+    return Iso9283Pattern(cube_pattern(center, side, fixed), center, float(side), int(cycles), tuple(notes))
+
+
+def detect_pattern(mechanism: Mechanism, poses: np.ndarray, *, rtol: float = 1e-6
+                   ) -> tuple[np.ndarray, np.ndarray] | str:
+    """``(label (N,) 1…5, P1…P5 (5, n))`` when the commanded ``poses`` (N, n) are an ISO 9283
+    pattern: five distinct poses, each repeated the same number of times (≥ 2), one
+    orientation, P1 the centre of P2…P5, these the corners of a rectangle on a diagonal plane
+    of an axis-parallel cube (edges 0.8 s along an axis and 0.8 s√2 along a face diagonal);
+    P2…P5 numbered in order of first appearance, P4 the pose opposite P2. Otherwise the
+    reason (one sentence). Poses equal to ``rtol`` × their scale are the same pose."""
+    poses = np.asarray(poses, dtype=float)
+    if tuple(mechanism.pose_names[:3]) != ("x", "y", "z") or len(poses) < 10:
+        return "not five poses repeated in cycles"
+    scale = max(1.0, float(np.max(np.abs(poses[:, :3]))))
+    key = np.round(poses / (rtol * scale)).astype(np.int64)
+    uniq, first, inverse, counts = np.unique(key, axis=0, return_index=True, return_inverse=True, return_counts=True)
+    inverse = inverse.reshape(-1)
+    if len(uniq) != 5:
+        return f"{len(uniq)} distinct poses, not the 5 of the ISO 9283 pattern"
+    if len(set(counts.tolist())) != 1:
+        return f"the 5 poses are repeated {sorted(counts.tolist())} times, not the same number of cycles each"
+    order = np.argsort(first)                          # groups in order of first appearance
+    pts = poses[first[order]]
+    if np.ptp(pts[:, 3:], axis=0).max(initial=0.0) > rtol:
+        return "the 5 poses do not share one orientation"
+    p = pts[:, :3]
+    centre_of = np.array([np.abs(p[i] - np.delete(p, i, axis=0).mean(axis=0)).max() for i in range(5)])
+    i1 = int(np.argmin(centre_of))
+    tol = 1e-6 * scale + rtol * scale
+    if centre_of[i1] > tol:
+        return "no pose is the centre of the other four"
+    rest = [i for i in range(5) if i != i1]
+    v = p[rest] - p[i1]
+    opposite = [int(np.argmin(np.abs(v + v[0]).max(axis=1)))]
+    if np.abs(v[opposite[0]] + v[0]).max() > tol:
+        return "the four outer poses are not opposite in pairs about the centre"
+    others = [k for k in range(1, 4) if k != opposite[0]]
+    a, b = v[0], v[others[0]]
+    if np.abs(v[others[1]] + b).max() > tol:
+        return "the four outer poses are not opposite in pairs about the centre"
+    e1, e2 = a - b, a + b                                # the rectangle's two edges
+    l1, l2 = np.linalg.norm(e1), np.linalg.norm(e2)
+    short, long_ = (e1, e2) if l1 <= l2 else (e2, e1)
+    ls, ll = min(l1, l2), max(l1, l2)
+    # the short edge along one axis, the long one along a face diagonal (one zero component)
+    if ls <= tol or abs(ll / ls - math.sqrt(2.0)) > 1e-4 or abs(float(short @ long_)) > 1e-6 * ll * ls \
+            or np.sort(np.abs(short))[1] > 1e-6 * ls or np.sort(np.abs(long_))[0] > 1e-6 * ll:
+        return "the outer poses are not on a diagonal plane of an axis-parallel cube"
+    # labels: P1 the centre; P2 the first outer pose, P4 its opposite, P3 the next, P5 its opposite
+    outer = [rest[0], rest[others[0]], rest[opposite[0]], rest[others[1]]]
+    group_label = np.empty(5, dtype=int)
+    group_label[order[i1]] = 1
+    for lab, i in zip((2, 3, 4, 5), outer):
+        group_label[order[i]] = lab
+    label = group_label[inverse]
+    commanded = np.empty((5, poses.shape[1]))
+    for g in range(5):
+        commanded[group_label[g] - 1] = poses[first[g]]
+    return label, commanded
+
+
+# -- the figures -----------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Figure:
+    """One ISO 9283 figure: ``name`` (AP_P, AP_x, RP_l, AD_P, …), ``pose`` ("P1", "P2-P4"),
+    ``value`` and expanded uncertainty ``U`` (k = 2) in internal units (mm, rad), ``unit``
+    ("mm" or "rad"); ``note`` a flag (``not-significant``, ``instrument-limited``) or ""."""
+
+    name: str
+    pose: str
+    value: float
+    U: float
+    unit: str
+    note: str = ""
+
+    def to_dict(self) -> dict:
+        deg = self.unit == "rad"
+        f = float(np.rad2deg(1.0)) if deg else 1.0
+        unit = "deg" if deg else "mm"
+        return {"figure": self.name, "pose": self.pose, f"value_{unit}": self.value * f, f"U_{unit}": self.U * f,
+                "k": COVERAGE_FACTOR, "note": self.note or None}
+
+
+@dataclass(frozen=True)
+class Iso9283Report:
+    """The figures of an ISO 9283 test (:class:`Figure`), how their uncertainty was
+    propagated (``uncertainty``: one sentence), the cycles, and per pose the 95 % bound of
+    AP_P the calibration's covariance predicts (``predicted_mm``, or None)."""
+
+    figures: tuple[Figure, ...]
+    cycles: int
+    uncertainty: str
+    predicted_mm: tuple[float, ...] | None = None
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+    def get(self, name: str, pose: str) -> Figure:
+        for f in self.figures:
+            if f.name == name and f.pose == pose:
+                return f
+        raise KeyError((name, pose))
+
+    def to_dict(self) -> dict:
+        out = {"standard": "ISO 9283:1998 pose (7.2) and distance (7.5) characteristics", "cycles": self.cycles,
+               "coverage_factor": COVERAGE_FACTOR, "uncertainty": self.uncertainty,
+               "figures": [f.to_dict() for f in self.figures], "notes": list(self.notes)}
+        if self.predicted_mm is not None:
+            out["predicted_AP_P_95_mm"] = {f"P{i + 1}": v for i, v in enumerate(self.predicted_mm)}
+        return out
+
+    def format_table(self) -> str:
+        from pkmcal.conventions import angle_text, length_text
+
+        lines = [f"ISO 9283 (pattern P1..P5, {self.cycles} cycles): value +- U (k = 2)"]
+        poses = list(dict.fromkeys(f.pose for f in self.figures))
+        for pose in poses:
+            parts = []
+            for f in (f for f in self.figures if f.pose == pose):
+                text = length_text if f.unit == "mm" else angle_text
+                parts.append(f"{f.name} {text(f.value)} +- {text(f.U)}" + (f" ({f.note})" if f.note else ""))
+            lines.append(f"  {pose}: " + "; ".join(parts))
+        if self.predicted_mm is not None:
+            lines.append("  predicted by the calibration's covariance (95 %): AP_P <= " + ", ".join(
+                f"P{i + 1} {length_text(v)}" for i, v in enumerate(self.predicted_mm)))
+        lines.append(f"  uncertainty: {self.uncertainty}")
+        lines.extend(f"  note: {n}" for n in self.notes)
+        return "\n".join(lines)
+
+
+def _std(x: np.ndarray) -> np.ndarray:
+    """Sample standard deviation (ddof 1) over axis −1."""
+    return np.sqrt(np.sum((x - x.mean(axis=-1, keepdims=True)) ** 2, axis=-1) / (x.shape[-1] - 1))
+
+
+def _safe(x: np.ndarray) -> np.ndarray:
+    return np.where(x > 0, x, 1.0)
+
+
+def figures_with_gradients(errors: np.ndarray, commanded: np.ndarray, pairs=DISTANCE_PAIRS) -> list[tuple]:
+    """Every figure of the module docstring with its gradient, for errors ``e`` (..., 5, n, d)
+    (d = 3 positions, or 6 with the orientation angles, rad; any leading batch axes, e.g.
+    Monte Carlo campaigns) at the commanded P1…P5 (5, ≥ 3): ``[(name, pose, value (...),
+    unit, {pose index: ∂F/∂e_pose (..., n, d)})]`` (a figure depends on one or two poses'
+    rows only)."""
+    e = np.asarray(errors, dtype=float)
+    *batch, P, n, d = e.shape
+    if n < 2:
+        raise PkmcalError("ISO 9283 repeatability needs at least 2 cycles per pose")
+    cmd = np.asarray(commanded, dtype=float)
+    out = []
+
+    def unit_grad(k: int) -> np.ndarray:
+        g = np.zeros((*batch, n, d))
+        g[..., k] = 1.0 / n                                        # ∂ē_k/∂e_jk = 1/n
+        return g
+
+    for i in range(P):
+        pose = f"P{i + 1}"
+        ep = e[..., i, :, :3]
+        mean = ep.mean(axis=-2)                                   # (..., 3)
+        ap = np.linalg.norm(mean, axis=-1)
+        g = np.zeros((*batch, n, d))
+        g[..., :3] = (mean / (n * _safe(ap))[..., None])[..., None, :] * (ap > 0)[..., None, None]
+        out.append(("AP_P", pose, ap, "mm", {i: g}))               # ∂|ē|/∂e_j = ē/(n|ē|)
+        for k, axis in enumerate("xyz"):
+            out.append((f"AP_{axis}", pose, mean[..., k], "mm", {i: unit_grad(k)}))
+        if d == 6:
+            mo = e[..., i, :, 3:].mean(axis=-2)
+            for k, axis in enumerate("abc"):
+                out.append((f"AP_{axis}", pose, mo[..., k], "rad", {i: unit_grad(3 + k)}))
+        dev = ep - mean[..., None, :]
+        lj = np.linalg.norm(dev, axis=-1)                          # (..., n)
+        u = dev / _safe(lj)[..., None]
+        lbar = lj.mean(axis=-1)
+        S = _std(lj)
+        # ∂l̄/∂e_k = (u_k − ū)/n;  ∂S_l/∂e_k = [(l_k − l̄) u_k − (1/n) Σ_j (l_j − l̄) u_j] / ((n − 1) S_l)
+        g = np.zeros((*batch, n, d))
+        w = (lj - lbar[..., None])[..., None] * u
+        g[..., :3] = (u - u.mean(axis=-2, keepdims=True)) / n + \
+            3.0 * (w - w.mean(axis=-2, keepdims=True)) / ((n - 1) * _safe(S))[..., None, None]
+        out.append(("RP_l", pose, lbar + 3.0 * S, "mm", {i: g}))
+        if d == 6:
+            for k, axis in enumerate("abc"):
+                a = e[..., i, :, 3 + k]
+                sa = _std(a)
+                g = np.zeros((*batch, n, d))
+                g[..., 3 + k] = 3.0 * (a - a.mean(axis=-1, keepdims=True)) / ((n - 1) * _safe(sa))[..., None]
+                out.append((f"RP_{axis}", pose, 3.0 * sa, "rad", {i: g}))   # ∂(3 S_a)/∂a_k
+    for i1, i2 in pairs:
+        if max(i1, i2) > P:
+            continue
+        pose = f"P{i1}-P{i2}"
+        dc = cmd[i1 - 1, :3] - cmd[i2 - 1, :3]
+        vec = dc + e[..., i1 - 1, :, :3] - e[..., i2 - 1, :, :3]  # p_1j − p_2j (..., n, 3)
+        D = np.linalg.norm(vec, axis=-1)
+        w = vec / D[..., None]
+
+        def pair(gp: np.ndarray) -> dict:                          # ∂/∂e_2j = −∂/∂e_1j
+            g = np.zeros((*batch, n, d))
+            g[..., :3] = gp
+            return {i1 - 1: g, i2 - 1: -g}
+
+        out.append(("AD_P", pose, D.mean(axis=-1) - np.linalg.norm(dc), "mm", pair(w / n)))
+        for k, axis in enumerate("xyz"):
+            gp = np.zeros(vec.shape)
+            gp[..., k] = np.sign(vec[..., k]) / n
+            out.append((f"AD_{axis}", pose, np.abs(vec[..., k]).mean(axis=-1) - abs(dc[k]), "mm", pair(gp)))
+        SD = _std(D)
+        gp = 3.0 * (D - D.mean(axis=-1, keepdims=True))[..., None] * w / ((n - 1) * _safe(SD))[..., None, None]
+        out.append(("RD", pose, 3.0 * SD, "mm", pair(gp)))          # ∂(3 S_D)/∂e_1j
+    return out
+
+
+def figure_arrays(errors: np.ndarray, commanded: np.ndarray, *, row_cov: np.ndarray | None = None,
+                  common: np.ndarray | None = None, common_cov: np.ndarray | None = None, pairs=DISTANCE_PAIRS
+                  ) -> list[tuple[str, str, np.ndarray, np.ndarray, str]]:
+    """``[(name, pose, value (...), U (...), unit)]`` of :func:`figures_with_gradients` with
+    the GUM expanded uncertainty U = 2 u (module docstring), over any leading batch axes of
+    ``errors`` (..., 5, n, d), ``row_cov`` (..., 5, n, d, d) and ``common`` (..., 5, n, d, k)."""
+    out = []
+    for name, pose, value, unit, grads in figures_with_gradients(errors, commanded, pairs):
+        var = np.zeros(np.shape(value))
+        if row_cov is not None:
+            for i, g in grads.items():
+                var = var + np.einsum("...ni,...nij,...nj->...", g, row_cov[..., i, :, :, :], g)
+        if common is not None and common_cov is not None:
+            s = sum(np.einsum("...ni,...nik->...k", g, common[..., i, :, :, :]) for i, g in grads.items())
+            var = var + np.einsum("...k,kl,...l->...", s, common_cov, s)
+        out.append((name, pose, value, COVERAGE_FACTOR * np.sqrt(np.clip(var, 0.0, None)), unit))
+    return out
+
+
+def iso9283_figures(errors: np.ndarray, commanded: np.ndarray, *, row_cov: np.ndarray | None = None,
+                    common: np.ndarray | None = None, common_cov: np.ndarray | None = None,
+                    pairs=DISTANCE_PAIRS, uncertainty: str = "", predicted_mm=None,
+                    notes: tuple[str, ...] = ()) -> Iso9283Report:
+    """The ISO 9283 figures (module docstring) of ``errors`` (5, n, d) = attained −
+    commanded (mm, rad; d = 3 or 6) at the commanded P1…P5 (5, ≥ 3), with their expanded
+    uncertainty U = 2 u: ``row_cov`` (5, n, d, d) the covariance of each row's error from
+    the instrument's noise, ``common`` (5, n, d, k) ∂e/∂θ of the registration parameters θ
+    common to all rows and ``common_cov`` (k, k) their covariance (both None: no
+    registration error). Without ``row_cov`` the figures are exact (U = 0)."""
+    e = np.asarray(errors, dtype=float)
+    rp_inst = {}
+    if row_cov is not None:                   # the RP an ideally repeatable machine would show, per pose
+        rc = np.asarray(row_cov)
+        rp_inst["RP_l"] = RP_PER_SIGMA * np.sqrt(np.trace(rc[:, :, :3, :3], axis1=-2, axis2=-1).mean(axis=1) / 3.0)
+        for k, axis in enumerate("abc" if e.shape[-1] == 6 else ""):
+            rp_inst[f"RP_{axis}"] = 3.0 * np.sqrt(rc[:, :, 3 + k, 3 + k].mean(axis=1))
+    figs = []
+    for name, pose, value, U, unit in figure_arrays(e, commanded, row_cov=row_cov, common=common,
+                                                    common_cov=common_cov, pairs=pairs):
+        value, U = float(value), float(U)
+        note = ""
+        if name == "AP_P" and U > 0 and value <= U:
+            note = "not-significant"
+        if name in rp_inst and rp_inst[name][int(pose[1:]) - 1] > INSTRUMENT_SHARE * value:
+            note = "instrument-limited"
+        figs.append(Figure(name, pose, value, U, unit, note))
+    return Iso9283Report(tuple(figs), e.shape[1], uncertainty,
+                         None if predicted_mm is None else tuple(map(float, predicted_mm)), tuple(notes))
+
+
+def arrange(label: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Rows of ``values`` (N, ...) grouped by pattern pose: (5, n, ...) in the order of the
+    rows within each pose (the cycles)."""
+    label = np.asarray(label)
+    groups = [np.flatnonzero(label == k) for k in range(1, 6)]
+    if len({len(g) for g in groups}) != 1:
+        raise PkmcalError("the ISO 9283 poses are not measured in the same number of cycles each "
+                          f"({', '.join(f'P{k + 1}: {len(g)}' for k, g in enumerate(groups))}); measure every pose "
+                          "in every cycle")
+    return np.stack([np.asarray(values)[g] for g in groups])
+
+
+def pose_errors(mechanism: Mechanism, attained: np.ndarray, commanded: np.ndarray) -> np.ndarray:
+    """``attained − commanded`` (N, d) in the coordinates ISO 9283 compares: x, y, z (mm)
+    and, for a machine with a, b, c, the wrapped angle differences (rad)."""
+    _position_axes(mechanism)
+    d = 6 if _has_orientation(mechanism) else 3
+    e = np.asarray(attained, dtype=float)[:, :d] - np.asarray(commanded, dtype=float)[:, :d]
+    if d == 6:
+        e[:, 3:] = wrap_angle(e[:, 3:])
+    return e
+
+
+# -- measured with an instrument ---------------------------------------------------------------
+
+
+#: Central-difference steps of the instrument's inverse: mm for lengths, rad for angles.
+#: Truncation ~h²‖g‴‖/6 (curvature 1/L, L ≳ 10 mm: < 1e-10 mm) against rounding ~ε|x|/h
+#: (|x| ≲ 1e3 mm: < 1e-9 mm); both far below any instrument's σ.
+STEP_MM, STEP_RAD = 1e-4, 1e-6
+
+
+def measured_errors(mechanism: Mechanism, sensor, readings: np.ndarray, commanded: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(e (N, d), K (N, d, m), G (N, d, k))``: the attained pose's errors read from the
+    instrument (full pose: :meth:`~pkmcal.sensors.base.Sensor.invert`; a tracked point: the
+    point in the base frame, R_wᵀ(y − p_w), against the commanded pose's point, position
+    only) at the ``commanded`` poses (N, n), and their derivatives by central differences
+    with respect to the readings y (m) and the sensor's parameters θ (k)."""
+    _position_axes(mechanism)
+    cmd = np.asarray(commanded, dtype=float)
+    y0 = np.asarray(readings, dtype=float)
+    theta0 = np.asarray(sensor.params, dtype=float)
+    if getattr(sensor, "invertible", False) and _has_orientation(mechanism):
+        def err(y, theta):
+            x = mechanism.poses_from_frame(sensor.invert(y, theta))
+            return pose_errors(mechanism, x, cmd)
+    elif sensor.kind == "position":
+        names = list(sensor.param_names)
+        iw = [names.index(f"world.{c}") for c in "xyzabc"]
+        it = [names.index(f"target.{c}") for c in "xyz"]
+        f_c = mechanism.frame(cmd)
+
+        def err(y, theta):
+            from pkmcal.conventions import euler_to_matrix
+
+            Rw = euler_to_matrix(theta[iw[3:]])
+            point = (y - theta[iw[:3]]) @ Rw                          # R_wᵀ (y − p_w), row-wise
+            target = f_c.p + np.einsum("nij,j->ni", f_c.R, theta[it])
+            return point - target
+    else:
+        raise PkmcalError(f"ISO 9283 figures need an instrument that reads the pose or a point of the platform "
+                          f"(full-pose, position); the setup's '{sensor.kind}' sensor reads neither")
+    e0 = err(y0, theta0)
+    steps_y = np.where(np.asarray(sensor.reading_is_angle, dtype=bool), STEP_RAD, STEP_MM)
+    steps_t = np.where(np.asarray(sensor.param_is_angle, dtype=bool), STEP_RAD, STEP_MM)
+    K = np.empty(e0.shape + (y0.shape[1],))
+    for i, h in enumerate(steps_y):
+        dy = np.zeros(y0.shape[1])
+        dy[i] = h
+        K[:, :, i] = (err(y0 + dy, theta0) - err(y0 - dy, theta0)) / (2 * h)
+    G = np.empty(e0.shape + (len(theta0),))
+    for i, h in enumerate(steps_t):
+        dt = np.zeros(len(theta0))
+        dt[i] = h
+        G[:, :, i] = (err(y0, theta0 + dt) - err(y0, theta0 - dt)) / (2 * h)
+    return e0, K, G
+
+
+def measured_report(mechanism: Mechanism, setup, readings: np.ndarray, commanded: np.ndarray, label: np.ndarray, *,
+                    sensor_cov: np.ndarray | None = None, covariance_note: str = "",
+                    machine_covariance: np.ndarray | None = None) -> Iso9283Report:
+    """:func:`iso9283_figures` of an ISO 9283 test measured by ``setup``'s instrument: rows
+    ``readings`` (N, m) at the ``commanded`` poses (N, n), pattern pose ``label`` (N,) 1…5.
+    The instrument's noise is the setup's ``noise.reading`` σ; the registration's
+    covariance ``sensor_cov`` (k, k) over the sensor's parameters (zero rows for those
+    held; None: no registration error), described by ``covariance_note``. With
+    ``machine_covariance`` (p, p) the report carries the AP_P each pose was predicted to
+    have (:func:`predicted_accuracy`)."""
+    e, K, G = measured_errors(mechanism, setup.sensor, readings, commanded)
+    sy = np.broadcast_to(np.asarray(setup.noise.reading_std, dtype=float), (K.shape[-1],))
+    row_cov = np.einsum("nim,m,njm->nij", K, sy ** 2, K)
+    cmd5 = arrange(label, commanded)[:, 0]
+    common = None if sensor_cov is None else arrange(label, G)
+    what = (f"instrument noise ({setup.noise.distribution}, the setup's noise.reading sigma "
+            f"{', '.join(f'{s:g}' for s in sy)} mm/rad per reading)")
+    if sensor_cov is not None:
+        what += f" and the registration of the instrument ({covariance_note or 'its identified covariance'})"
+    predicted = None
+    if machine_covariance is not None:
+        predicted = predicted_accuracy(mechanism, machine_covariance, cmd5).position
+    return iso9283_figures(arrange(label, e), cmd5, row_cov=arrange(label, row_cov), common=common,
+                           common_cov=sensor_cov, uncertainty="GUM first order, k = 2, from the " + what,
+                           predicted_mm=predicted)
+
+
+# -- predicted before measuring ---------------------------------------------------------------
+
+
+def pose_error_covariance(mechanism: Mechanism, covariance: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """Cov δx (N, n, n) of the pose a machine commanded through a model whose parameters have
+    ``covariance`` (p, p) reaches at ``poses`` (N, n): A⁻¹ B C Bᵀ A⁻ᵀ (module docstring)."""
+    if mechanism.n_actuators != mechanism.n_dof:
+        raise PkmcalError(f"machine '{mechanism.name}' has {mechanism.n_actuators} actuators for {mechanism.n_dof} "
+                          "pose coordinates: its accuracy is not predicted from the inverse kinematics alone")
+    poses = mechanism.as_pose_array(poses)
+    C = np.asarray(covariance, dtype=float)
+    if C.shape != (len(mechanism.params),) * 2:
+        raise PkmcalError(f"a covariance of machine '{mechanism.name}' is {len(mechanism.params)} x "
+                          f"{len(mechanism.params)}; got {C.shape}")
+    A, B = mechanism.actuator_jacobians(poses)
+    M = np.linalg.solve(A, B)                                         # A⁻¹ B (N, n, p)
+    return np.einsum("nip,pq,njq->nij", M, C, M)
+
+
+def norm_quantile(cov: np.ndarray, level: float = 0.95) -> np.ndarray:
+    """The ``level`` quantile (N,) of ‖v‖ for v ~ N(0, cov) (N, 3, 3), Patnaik's
+    approximation ‖v‖² ≈ c χ²_ν (module docstring)."""
+    from scipy.stats import chi2
+
+    lam = np.clip(np.linalg.eigvalsh(np.asarray(cov, dtype=float)), 0.0, None)
+    s1, s2 = lam.sum(axis=-1), (lam ** 2).sum(axis=-1)
+    pos = s2 > 0
+    c = np.where(pos, s2 / np.where(pos, s1, 1.0), 0.0)
+    nu = np.where(pos, s1 ** 2 / np.where(pos, s2, 1.0), 1.0)
+    return np.sqrt(c * chi2.ppf(level, nu))
+
+
+@dataclass(frozen=True)
+class PredictedAccuracy:
+    """The ``level`` bounds of the position error (mm) and of the rotation angle (rad, or
+    None) at each of ``poses`` (N, n) that the covariance predicts (module docstring)."""
+
+    poses: np.ndarray
+    position: np.ndarray
+    orientation: np.ndarray | None
+    level: float = 0.95
+
+
+def predicted_accuracy(mechanism: Mechanism, covariance: np.ndarray, poses: np.ndarray, level: float = 0.95
+                       ) -> PredictedAccuracy:
+    """The accuracy a calibration with parameter ``covariance`` (p, p) predicts at ``poses``
+    (module docstring): the ``level`` quantiles of ‖δp‖ and of the rotation angle ‖E δabc‖."""
+    _position_axes(mechanism)
+    poses = mechanism.as_pose_array(poses)
+    S = pose_error_covariance(mechanism, covariance, poses)
+    ori = None
+    if _has_orientation(mechanism):
+        E = euler_rate_matrix(poses[:, 3:6])
+        ori = norm_quantile(E @ S[:, 3:, 3:] @ np.swapaxes(E, 1, 2), level)
+    return PredictedAccuracy(poses, norm_quantile(S[:, :3, :3], level), ori, level)
+
+
+def plan_covariance(mechanism: Mechanism, setup, poses: np.ndarray, method: str | None = None) -> np.ndarray:
+    """The machine's parameter covariance (p, p) a calibration on ``poses`` with ``setup``
+    would have, from the noise model alone: (JᵀJ)⁻¹ of the whitened design Jacobian
+    (:func:`~pkmcal.identification.identifiability.design_jacobian`) on the candidate
+    parameters less the gauge the identifiability analysis suggests, its machine block
+    (the sensor's parameters marginalised), zero rows for parameters not estimated."""
+    from pkmcal.identification.identifiability import design_jacobian, identifiability
+    from pkmcal.identification.residuals import default_method
+    from pkmcal.identification.uncertainty import _inverse_normal, embed
+
+    poses = mechanism.as_pose_array(poses)
+    method = default_method(setup, mechanism) if method is None else method
+    rep = identifiability(mechanism, setup, poses, method=method)
+    J, ok, names = design_jacobian(mechanism, setup.sensor, setup.noise, poses, method)
+    free = [names.index(n) for n in rep.names if n not in rep.fixed]
+    rows = J[ok][:, :, free].reshape(-1, len(free))
+    cov = embed(_inverse_normal(rows), np.asarray(free), len(names))
+    p = len(mechanism.params)
+    return cov[:p, :p]
