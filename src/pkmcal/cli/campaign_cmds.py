@@ -364,10 +364,29 @@ def verify_cmd(calibrated, meas_path, real_spec, poses, nominal, setup_spec, cal
         frames = nom if nom is not None or mode == "commanded" else _nominal_from_record(cal)[0]
         if frames is not None and frames.kind != cal.kind:
             frames = None
-    report = verify(cal, real, read_poses(poses, cal, mapping), nominal=nom, ignore_limits=tuple(ignore_limits),
+    held = read_poses(poses, cal, mapping)
+    report = verify(cal, real, held, nominal=nom, ignore_limits=tuple(ignore_limits),
                     compare=mode, sensors=sensors, true_sensor=true_sensor, frames=frames, setup=setup)
-    text = json.dumps(report.to_dict(), indent=2, allow_nan=False) + "\n" if as_json else report.format_table() + "\n"
-    emit(text, output)
+    iso = None
+    if mode != "tool":     # the held-out poses in the ISO 9283 pattern (plan --pattern iso9283): its figures
+        from pkmcal.identification.iso9283 import verification_figures
+
+        iso = verification_figures(report, cal, held, machine_covariance=cal.covariance)
+    emit(_with_iso(report.to_dict() if as_json else report.format_table(), iso, as_json), output)
+
+
+def _with_iso(out, iso, as_json: bool) -> str:
+    """The verification's JSON (dict) or table (text) with the ISO 9283 figures (key
+    'iso9283'), or why the pattern's figures could not be computed."""
+    if as_json:
+        from pkmcal.io.json_out import finite_or_null
+
+        if iso is not None:
+            out["iso9283"] = iso if isinstance(iso, str) else iso.to_dict()
+        return json.dumps(finite_or_null(out), indent=2, allow_nan=False) + "\n"
+    if iso is not None:
+        out += "\n" + (f"ISO 9283: not computed: {iso}" if isinstance(iso, str) else iso.format_table())
+    return out + "\n"
 
 
 def _identified_setup(path: str, cal, what: str):
@@ -470,8 +489,7 @@ def _verify_measured(calibrated, meas_path, nominal, setup_spec, calib_meas, cli
     notes.extend(f"warning: {w}" for w in lines)
     report = heldout_validation(cal, cal_setup, nom, before_sensor, held, source=str(meas_path), before_note=note,
                                 notes=notes, before_sessions=before_sessions, clipped=tuple(c.to_dict(unit[c.actuator]) for c in found))
-    if as_json:
-        from pkmcal.io.json_out import finite_or_null
+    from pkmcal.identification.iso9283 import heldout_figures
 
-        return json.dumps(finite_or_null(report.to_dict()), indent=2, allow_nan=False) + "\n"
-    return report.format_table() + "\n"
+    iso = heldout_figures(cal, cal_setup, held, identified=cal.metadata.get("setup"), machine_covariance=cal.covariance)
+    return _with_iso(report.to_dict() if as_json else report.format_table(), iso, as_json)

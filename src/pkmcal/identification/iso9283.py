@@ -295,19 +295,45 @@ class Iso9283Report:
         return out
 
     def format_table(self) -> str:
-        from pkmcal.conventions import angle_text, length_text
-
-        lines = [f"ISO 9283 (pattern P1..P5, {self.cycles} cycles): value +- U (k = 2)"]
+        """A table: one row per figure, one column per pose (or pair), ``value ± U`` in
+        the row's unit (µm below 0.1 mm, else mm; arcseconds below 0.01°, else degrees)."""
         poses = list(dict.fromkeys(f.pose for f in self.figures))
-        for pose in poses:
-            parts = []
-            for f in (f for f in self.figures if f.pose == pose):
-                text = length_text if f.unit == "mm" else angle_text
-                parts.append(f"{f.name} {text(f.value)} +- {text(f.U)}" + (f" ({f.note})" if f.note else ""))
-            lines.append(f"  {pose}: " + "; ".join(parts))
+        names = list(dict.fromkeys(f.name for f in self.figures))
+        exact = all(f.U == 0 for f in self.figures)
+        head = f"ISO 9283 (P1..P5 of the test cube, {self.cycles} cycles): " + \
+            ("exact values" if exact else "value +- U (k = 2)")
+        rows = [["figure", *poses]]
+        for name in names:
+            figs = {f.pose: f for f in self.figures if f.name == name}
+            big = max(max(abs(f.value), f.U) for f in figs.values())
+            if figs[next(iter(figs))].unit == "mm":
+                unit, scale, fmt = ("mm", 1.0, "{:.4f}") if big >= 0.1 else ("µm", 1e3, "{:.2f}")
+            else:
+                unit, scale, fmt = ("deg", float(np.rad2deg(1.0)), "{:.4f}") if np.rad2deg(big) >= 0.01 else \
+                    ("arcsec", float(np.rad2deg(1.0)) * 3600.0, "{:.2f}")
+            cells = []
+            for pose in poses:
+                f = figs.get(pose)
+                if f is None:
+                    cells.append("")
+                    continue
+                text = fmt.format(f.value * scale + 0.0)
+                if not exact:
+                    text += " +- " + fmt.format(f.U * scale)
+                cells.append(text + ("*" if f.note else ""))
+            rows.append([f"{name} ({unit})", *cells])
+        width = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+        lines = [head] + ["  " + "  ".join(c.rjust(w) if i else c.ljust(w) for i, (c, w) in enumerate(zip(r, width)))
+                          for r in rows]
+        flagged = sorted({(f.name, f.note) for f in self.figures if f.note})
+        for name, note in flagged:
+            why = {"not-significant": "AP_P within its U of 0: not distinguishable from 0 (first order fails there)",
+                   "instrument-limited": "the instrument alone would show more than 25 % of this repeatability"}[note]
+            lines.append(f"  * {name}: {why}")
         if self.predicted_mm is not None:
             lines.append("  predicted by the calibration's covariance (95 %): AP_P <= " + ", ".join(
-                f"P{i + 1} {length_text(v)}" for i, v in enumerate(self.predicted_mm)))
+                f"P{i + 1} {1e3 * v:.2f} µm" if v < 0.1 else f"P{i + 1} {v:.4f} mm"
+                for i, v in enumerate(self.predicted_mm)))
         lines.append(f"  uncertainty: {self.uncertainty}")
         lines.extend(f"  note: {n}" for n in self.notes)
         return "\n".join(lines)
@@ -490,7 +516,7 @@ def measured_errors(mechanism: Mechanism, sensor, readings: np.ndarray, commande
     cmd = np.asarray(commanded, dtype=float)
     y0 = np.asarray(readings, dtype=float)
     theta0 = np.asarray(sensor.params, dtype=float)
-    if getattr(sensor, "invertible", False) and _has_orientation(mechanism):
+    if sensor.invertible and _has_orientation(mechanism):
         def err(y, theta):
             x = mechanism.poses_from_frame(sensor.invert(y, theta))
             return pose_errors(mechanism, x, cmd)
@@ -541,8 +567,9 @@ def measured_report(mechanism: Mechanism, setup, readings: np.ndarray, commanded
     row_cov = np.einsum("nim,m,njm->nij", K, sy ** 2, K)
     cmd5 = arrange(label, commanded)[:, 0]
     common = None if sensor_cov is None else arrange(label, G)
-    what = (f"instrument noise ({setup.noise.distribution}, the setup's noise.reading sigma "
-            f"{', '.join(f'{s:g}' for s in sy)} mm/rad per reading)")
+    sigma = ", ".join(f"{name} {v:.3g} {'rad' if ang else 'mm'}" for name, v, ang in
+                      zip(setup.sensor.reading_names, sy, setup.sensor.reading_is_angle))
+    what = f"instrument noise ({setup.noise.distribution}; the setup's noise.reading sigma: {sigma})"
     if sensor_cov is not None:
         what += f" and the registration of the instrument ({covariance_note or 'its identified covariance'})"
     predicted = None
@@ -610,22 +637,169 @@ def predicted_accuracy(mechanism: Mechanism, covariance: np.ndarray, poses: np.n
     return PredictedAccuracy(poses, norm_quantile(S[:, :3, :3], level), ori, level)
 
 
-def plan_covariance(mechanism: Mechanism, setup, poses: np.ndarray, method: str | None = None) -> np.ndarray:
+def plan_covariance(mechanism: Mechanism, setup, poses: np.ndarray, method: str | None = None,
+                    report=None) -> np.ndarray:
     """The machine's parameter covariance (p, p) a calibration on ``poses`` with ``setup``
     would have, from the noise model alone: (JᵀJ)⁻¹ of the whitened design Jacobian
     (:func:`~pkmcal.identification.identifiability.design_jacobian`) on the candidate
     parameters less the gauge the identifiability analysis suggests, its machine block
-    (the sensor's parameters marginalised), zero rows for parameters not estimated."""
+    (the sensor's parameters marginalised), zero rows for parameters not estimated.
+    ``report``: the :class:`~pkmcal.identification.identifiability.IdentifiabilityReport` of
+    these poses and ``method`` when already computed (its candidates: a ``free``/``fix``
+    choice)."""
     from pkmcal.identification.identifiability import design_jacobian, identifiability
     from pkmcal.identification.residuals import default_method
     from pkmcal.identification.uncertainty import _inverse_normal, embed
 
     poses = mechanism.as_pose_array(poses)
     method = default_method(setup, mechanism) if method is None else method
-    rep = identifiability(mechanism, setup, poses, method=method)
+    rep = identifiability(mechanism, setup, poses, method=method) if report is None else report
     J, ok, names = design_jacobian(mechanism, setup.sensor, setup.noise, poses, method)
     free = [names.index(n) for n in rep.names if n not in rep.fixed]
     rows = J[ok][:, :, free].reshape(-1, len(free))
     cov = embed(_inverse_normal(rows), np.asarray(free), len(names))
     p = len(mechanism.params)
     return cov[:p, :p]
+
+
+#: Grid points per axis of the predicted-accuracy map over the workspace box.
+MAP_GRID = 7
+
+
+@dataclass(frozen=True)
+class AccuracyMap:
+    """The predicted accuracy (:class:`PredictedAccuracy`) at the reachable points of a
+    ``MAP_GRID``³ grid of the workspace box's x, y, z (the other coordinates at home), and
+    at P1…P5 of the ISO 9283 cube (``cube``); ``covariance`` says which covariance."""
+
+    grid: PredictedAccuracy
+    cube: PredictedAccuracy
+    covariance: str
+
+    def to_dict(self) -> dict:
+        def block(p: PredictedAccuracy) -> dict:
+            out = {"position_95_mm": p.position.tolist()}
+            if p.orientation is not None:
+                out["orientation_95_deg"] = np.rad2deg(p.orientation).tolist()
+            return out
+
+        g = self.grid
+        worst = int(np.argmax(g.position))
+        return {"level": g.level, "covariance": self.covariance, "points": int(len(g.poses)),
+                "position_95_mm": {"median": float(np.median(g.position)), "max": float(g.position[worst]),
+                                   "max_at_mm": g.poses[worst, :3].tolist()},
+                "orientation_95_deg": None if g.orientation is None else {
+                    "median": float(np.rad2deg(np.median(g.orientation))),
+                    "max": float(np.rad2deg(np.max(g.orientation)))},
+                "iso9283_cube": {"poses_mm": self.cube.poses[:, :3].tolist(), **block(self.cube)}}
+
+    def lines(self) -> list[str]:
+        from pkmcal.conventions import angle_text, length_text
+
+        g = self.grid
+        worst = int(np.argmax(g.position))
+        out = [f"predicted accuracy after calibrating on these poses ({100 * g.level:g} % bound of the position error "
+               f"over {len(g.poses)} reachable points of the workspace at the home orientation; {self.covariance}): "
+               f"median {length_text(float(np.median(g.position)))}, at most {length_text(float(g.position[worst]))} "
+               f"(at x {g.poses[worst, 0]:.4g}, y {g.poses[worst, 1]:.4g}, z {g.poses[worst, 2]:.4g} mm)"]
+        if g.orientation is not None:
+            out.append(f"  orientation: median {angle_text(float(np.median(g.orientation)))}, at most "
+                       f"{angle_text(float(np.max(g.orientation)))}")
+        out.append("  expected ISO 9283 AP_P at the cube's P1..P5: " + ", ".join(
+            f"P{i + 1} <= {length_text(v)}" for i, v in enumerate(self.cube.position)))
+        return out
+
+
+def accuracy_map(mechanism: Mechanism, setup, poses: np.ndarray, *, covariance: np.ndarray | None = None,
+                 level: float = 0.95, margin=None, method: str | None = None, report=None) -> AccuracyMap:
+    """The accuracy a calibration on ``poses`` with ``setup`` predicts over the workspace,
+    before anything is measured (module docstring): :func:`plan_covariance` (or a given
+    ``covariance`` (p, p), e.g. a calibrated file's) carried to the reachable points of a
+    grid of the planning workspace box and to the ISO 9283 cube's P1…P5."""
+    from pkmcal.planning.candidates import check_candidates, workspace_box
+    from pkmcal.planning.margins import planning_checks, resolve_margin
+
+    _position_axes(mechanism)
+    what = "the covariance given"
+    if covariance is None:
+        covariance = plan_covariance(mechanism, setup, poses, method, report)
+        what = "noise-model covariance (J^T W J)^-1 of these poses, gauge as identifiability suggests"
+    reachable, _ = mechanism.within_geometry()
+    checked, check_margin = planning_checks(reachable, resolve_margin(reachable) if margin is None else margin)
+    box = workspace_box(checked, setup, margin=check_margin)
+    axes = [np.linspace(lo, hi, MAP_GRID) for lo, hi in box[:3]]
+    pts = np.tile(np.asarray(mechanism.home_pose, dtype=float), (MAP_GRID ** 3, 1))
+    pts[:, :3] = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    pts = pts[check_candidates(checked, setup, pts, margin=check_margin).ok]
+    if not len(pts):
+        raise PkmcalError(f"no point of the workspace grid of '{mechanism.name}' passes its limits at the home "
+                          "orientation: no accuracy map")
+    cube = iso9283_pattern(mechanism, setup, margin=margin)
+    return AccuracyMap(predicted_accuracy(mechanism, covariance, pts, level),
+                       predicted_accuracy(mechanism, covariance, cube.poses, level), what)
+
+
+# -- from a verification ------------------------------------------------------------------------
+
+
+def verification_figures(report, mechanism: Mechanism, poses: np.ndarray, *,
+                         machine_covariance: np.ndarray | None = None) -> Iso9283Report | str | None:
+    """The ISO 9283 figures of a held-out verification against a simulated true machine
+    (:func:`pkmcal.identification.verification.verify`) whose held-out ``poses`` (as given,
+    N × n) follow the pattern (:func:`detect_pattern`): the reached poses against the
+    commanded ones (after the alignment with ``compare="aligned"``), exact (no instrument:
+    U = 0); with ``machine_covariance`` the AP_P each pose was predicted to have. None when
+    the poses are not the pattern; why not (one sentence) when they are but the figures
+    cannot be computed."""
+    found = detect_pattern(mechanism, mechanism.as_pose_array(poses))
+    if isinstance(found, str):
+        return None
+    label, commanded = found
+    after = report.after
+    if report.compare not in ("commanded", "aligned") or after.commanded is None:
+        return (f"ISO 9283 figures compare platform poses (--compare commanded or aligned); this verification "
+                f"compares '{report.compare}'")
+    if not after.valid.all():
+        return f"the real machine does not reach {int(np.count_nonzero(~after.valid))} of the pattern's poses"
+    e = pose_errors(mechanism, after.reached, after.commanded)
+    predicted = None
+    if machine_covariance is not None:
+        predicted = predicted_accuracy(mechanism, machine_covariance, commanded).position
+    return iso9283_figures(arrange(label, e), commanded, predicted_mm=predicted,
+                           uncertainty=f"none: the true machine is simulated and its poses are exact, no instrument "
+                                       f"(U = 0); compared as {report.compare}")
+
+
+def heldout_figures(mechanism: Mechanism, setup, measurements, *, identified: dict | None = None,
+                    machine_covariance: np.ndarray | None = None) -> Iso9283Report | str | None:
+    """The ISO 9283 figures of measured held-out data whose commanded poses (the file's
+    ``cmd_*`` columns) follow the pattern: :func:`measured_report` with the instrument of
+    ``setup`` (its identified sensor) and the registration's covariance from ``identified``,
+    the calibrated file's ``setup:`` block: its ``std`` (mm, degrees) of the sensor's
+    parameters, as a diagonal covariance (the file keeps no correlations between them), and
+    its ``covariance_kind``. None when the commanded poses are not the pattern (or not in
+    the file); why not when they are but the instrument reads neither pose nor point."""
+    if measurements.commanded is None:
+        return None
+    found = detect_pattern(mechanism, measurements.commanded)
+    if isinstance(found, str):
+        return None
+    label, _ = found
+    if not (setup.sensor.invertible and _has_orientation(mechanism)) \
+            and setup.sensor.kind != "position":
+        return (f"the held-out poses follow the ISO 9283 pattern, but the '{setup.sensor.kind}' instrument reads "
+                "neither the pose nor a point of the platform")
+    cov, note = None, ""
+    std = (identified or {}).get("std") or {}
+    if std:
+        names = list(setup.sensor.param_names)
+        angle = dict(zip(names, setup.sensor.param_is_angle))
+        cov = np.zeros((len(names), len(names)))
+        for name, sd in std.items():
+            if name in angle:
+                k = names.index(name)
+                cov[k, k] = float(np.deg2rad(sd) if angle[name] else sd) ** 2
+        note = (f"the calibration's std of {', '.join(std)} as a diagonal covariance: "
+                f"{(identified or {}).get('covariance_kind') or 'identified'}")
+    return measured_report(mechanism, setup, measurements.readings, measurements.commanded, label, sensor_cov=cov,
+                           covariance_note=note, machine_covariance=machine_covariance)
