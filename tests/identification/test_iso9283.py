@@ -309,10 +309,13 @@ def test_predicted_accuracy_covers_monte_carlo_calibrations():
     setup = load_setup("full-pose-paper1", m)
     rng = np.random.default_rng(8)
     plan = m.as_pose_array(rng.uniform(-1, 1, (30, 6)) * [20, 20, 10, 0.08, 0.08, 0.08] + m.home_pose)
-    C = iso.plan_covariance(m, setup, plan)
-    assert np.count_nonzero(np.diag(C)) > 30
+    C = iso.plan_covariance(m, setup, plan)                          # no sensor parameter free: machine block
+    p = len(m.params)
+    assert np.count_nonzero(np.diag(C)) > 30 and not np.any(C[p:]) and not np.any(C[:, p:])
     pat = iso.iso9283_pattern(m, setup)
-    pred = iso.predicted_accuracy(m, C, pat.poses)
+    pred = iso.predicted_accuracy(m, C, pat.poses, sensor=setup.sensor)
+    assert np.array_equal(pred.position, iso.predicted_accuracy(m, C[:p, :p], pat.poses).position)
+    C = C[:p, :p]
     n = 1000
     L = np.linalg.cholesky(C[np.ix_(*(np.flatnonzero(np.diag(C)),) * 2)])
     idx = np.flatnonzero(np.diag(C))
@@ -334,3 +337,49 @@ def test_predicted_accuracy_covers_monte_carlo_calibrations():
     inside_o = (np.array(ori) <= pred.orientation).mean(axis=0)
     assert np.all((lo < inside_p) & (inside_p < hi)), inside_p
     assert np.all((lo < inside_o) & (inside_o < hi)), inside_o
+
+
+@pytest.mark.parametrize("setup_name", ["full-pose", "position"])
+def test_tool_error_jacobian_matches_finite_differences(setup_name):
+    """∂(tool point error)/∂(ρ̂ − ρ, θ̂ − θ) against central differences of the exact error: the
+    true machine's FK of the model's IK, tool point with the true offset, against the
+    commanded tool point with the model's offset (h = 1e-5 mm or rad; the error's curvature
+    ~1/L with L ~ 100 mm: truncation h²/L ~ 1e-12, rounding 1e-16·300/1e-5 ~ 3e-9)."""
+    from pkmcal.conventions import euler_to_matrix, rotation_vector_to_matrix
+    from pkmcal.sensors.position import PositionSensor
+
+    m = load_machine("stewart-prototype")
+    if setup_name == "full-pose":
+        sensor = FullPoseSensor(tool=np.array([10.0, -20.0, 35.0, 0.1, -0.2, 0.3]))
+        it, ir = [6, 7, 8], [9, 10, 11]
+    else:
+        sensor = PositionSensor(target=np.array([10.0, -20.0, 35.0]))
+        names = list(sensor.param_names)
+        it, ir = [names.index(f"target.{c}") for c in "xyz"], []
+    poses = iso.cube_pattern(m.home_pose[:3], 30.0, m.home_pose + [0, 0, 0, 0.05, -0.03, 0.1])
+    J = iso.tool_error_jacobian(m, poses, sensor)
+    rho0, th0 = m.params.copy(), sensor.params.copy()
+
+    def tool_error(rho_hat, th_hat):
+        model = m.with_params(rho_hat)
+        x_r = m.fk(model.ik(poses), guess=poses).poses
+        f_r, f_c = m.frame(x_r), m.frame(poses)
+        R_t, R_hat = (euler_to_matrix(th0[ir]), euler_to_matrix(th_hat[ir])) if ir else (np.eye(3), np.eye(3))
+        dp = (f_r.p + f_r.R @ th0[it]) - (f_c.p + f_c.R @ th_hat[it])
+        if not ir:
+            return dp
+        dR = (f_r.R @ R_t) @ np.swapaxes(f_c.R @ R_hat, 1, 2)       # exp([δω]×)
+        w = np.stack([dR[:, 2, 1] - dR[:, 1, 2], dR[:, 0, 2] - dR[:, 2, 0], dR[:, 1, 0] - dR[:, 0, 1]], 1) / 2
+        assert np.allclose(rotation_vector_to_matrix(w), dR, atol=1e-12)
+        return np.hstack([dp, w])
+
+    h = 1e-5
+    p = len(rho0)
+    for col in [0, 4, 6, 20, 41, p + it[0], p + it[2], *([p + ir[1]] if ir else [])]:
+        dr, dt = np.zeros(p), np.zeros(len(th0))
+        if col < p:
+            dr[col] = h
+        else:
+            dt[col - p] = h
+        fd = (tool_error(rho0 + dr, th0 + dt) - tool_error(rho0 - dr, th0 - dt)) / (2 * h)
+        np.testing.assert_allclose(J[:, :fd.shape[1], col], fd, atol=1e-6, err_msg=str(col))

@@ -35,46 +35,67 @@ and attained (x_j, …, c_j), j = 1…n; in terms of the errors e_j = attained_j
 
 (orientation distance figures are not computed).
 
+**What is measured.** The tool point (TCP) and its frame, in the machine's base frame: the
+instrument reads it in its own frame {W} (a laser tracker's point, a 6-D tracker's frame), and
+the instrument's registration to the base frame, the sensor's ``world.*`` parameters
+(:data:`REGISTRATION`), carries it there: p = R_wᵀ(y_p − p_w), R = R_wᵀ R(y_abc). The TCP
+commanded is the commanded platform pose composed with the calibrated tool offset (full
+pose ``tool.*``, a tracked point ``target.*``): p_c + R_c p̂_t, R_c R̂_t; that offset is part
+of the command (the machine is told to put that point there), not of the measurement.
+Orientation errors are the wrapped differences of the angles a, b, c (ISO 9283 compares
+the angles). A tracked point gives the position figures only.
+
 **Uncertainty** (GUM, JCGM 100:2008 §5, first order). Each figure F is a function of the
 errors e (5 poses × n cycles × d coordinates); its analytic gradient g = ∂F/∂e is written
-below each formula in the code. The measured errors are e = e_true + ε + G δθ: ε the
+beside each formula in the code. The measured errors are e = e_true + ε + G δθ: ε the
 instrument's noise on each reading (independent per reading, the setup's ``noise.reading``
-σ, carried to the pose coordinates by the sensor's inverse, Σ_j = K_j Σ_y K_jᵀ), δθ the
-error of the instrument's registration to the base frame (its identified parameters, common
-to every reading, covariance C_θ). Then
+σ, carried to the errors by K = ∂e/∂y: Σ_j = K_j Σ_y K_jᵀ), δθ the error of the
+registration (common to every reading; covariance C_θ: the calibration's ``std`` of the
+``world.*`` parameters, as a diagonal covariance, since the calibrated file keeps no
+correlations between them; none when the frame was not estimated). Then
 
     u²(F) = Σ_j g_jᵀ Σ_j g_j + (Σ_j g_jᵀ G_j) C_θ (Σ_j G_jᵀ g_j),      U = k u, k = 2.
 
+K and G by central differences of the closed-form error (:data:`STEP_MM`, :data:`STEP_RAD`).
 The "true figure" is F(e_true): the machine's own performance in this test, free of the
 instrument's error. A rigid registration error moves every attained pose alike, so it
 changes AP and AD but not RP or RD. Two limits of first order are reported, not hidden:
 AP_P is a norm, so where AP_P ≲ U its distribution is not Gaussian (flagged
-``not-significant``: AP_P not distinguishable from 0); RP is biased upwards by the instrument's own scatter, by
-about the RP an ideally repeatable machine would show, RP_inst ≈ 3.616 σ_eq for isotropic
-noise (σ_eq = √(tr Σ/3); E l̄ = √(8/π) σ, E S_l = √(3 − 8/π) σ for a χ₃ distance); RP with
-RP_inst > 25 % of it is flagged ``instrument_limited`` (ISO 9283 §6.4 asks the measurement
-uncertainty to stay below 25 % of the characteristic measured).
+``not-significant``: AP_P not distinguishable from 0); RP is biased upwards by the
+instrument's own scatter, by about the RP an ideally repeatable machine would show,
+RP_inst ≈ 3.616 σ_eq for isotropic noise (σ_eq = √(tr Σ/3); E l̄ = √(8/π) σ,
+E S_l = √(3 − 8/π) σ for a χ₃ distance; 3 σ_a for RP_a); RP with RP_inst > 25 % of it is
+flagged ``instrument-limited`` (ISO 9283 asks the instrument's uncertainty to stay below
+25 % of the characteristic tested, as we read it). A simulated true machine
+(``verify --real``) has exact poses: its figures carry U = 0.
 
-**Predicted accuracy** (before anything is measured). A machine commanded through the
-calibrated model ρ̂ reaches x_r with IK(x_r, ρ) = IK(x_c, ρ̂), so to first order
+**Predicted accuracy** (before anything is measured). A machine (true ρ, tool offset θ)
+commanded through the calibrated model (ρ̂, θ̂) reaches x_r with IK(x_r, ρ) = IK(x_c, ρ̂),
+so to first order (:func:`tool_error_jacobian`)
 
-    δx = x_r − x_c = A⁻¹ B (ρ̂ − ρ),   A = ∂q/∂x,  B = ∂q/∂ρ,   Cov δx = A⁻¹ B C Bᵀ A⁻ᵀ
+    δx = x_r − x_c = A⁻¹ B (ρ̂ − ρ),   A = ∂q/∂x,  B = ∂q/∂ρ,   δω = E(a, b, c) δx_abc
+    δp_T = δx_xyz − [R p_t]× δω − R (p̂_t − p_t),   δω_T = δω − R E(t_abc)(t̂_abc − t_abc)
 
-with C the parameter covariance (the calibrated file's ``uncertainty`` covariance:
-max(1, χ²/E[χ²]) · C_prior, :mod:`pkmcal.identification.uncertainty`; for a plan, the
-noise-model covariance (JᵀJ)⁻¹ of the whitened design Jacobian on the identifiable
-parameters, the gauge the identifiability analysis suggests, :func:`plan_covariance`). The
-position error's 95 % bound is the quantile of ‖δp‖ for δp ~ N(0, S), S the 3×3 block, by
-Patnaik's approximation ‖δp‖² ≈ c χ²_ν with c = Σλ²/Σλ, ν = (Σλ)²/Σλ² (λ the eigenvalues
-of S; exact for equal λ and for one nonzero λ); the orientation bound likewise for the
-rotation δω = E(a, b, c) δ(a, b, c) (:func:`pkmcal.conventions.euler_rate_matrix`). This is
-the expected AP_P of the machine at that pose: "with this plan and this instrument, expect
-≤ X mm at 95 % here".
+and Cov(δp_T, δω_T) = J C Jᵀ with C the parameters' covariance: for a plan, the
+noise-model covariance (JᵀJ)⁻¹ of the whitened design Jacobian on the identifiable machine
+and sensor parameters, the gauge the identifiability analysis suggests
+(:func:`plan_covariance`); for a calibrated file, its machine covariance
+(max(1, χ²/E[χ²]) · C_prior, :mod:`pkmcal.identification.uncertainty`), used only when the
+calibration estimated no sensor parameter (the file keeps no machine–sensor covariance).
+Along what the instrument cannot see (a tracked point: the platform's orientation; dial
+indicators: x, y, c; a Z probe: the scale) the prediction depends on the gauge; a tracked
+point's orientation bound is therefore not given. The position error's 95 % bound is the
+quantile of ‖δp_T‖ for δp_T ~ N(0, S), S the 3×3 block, by Patnaik's approximation
+‖δp‖² ≈ c χ²_ν with c = Σλ²/Σλ, ν = (Σλ)²/Σλ² (λ the eigenvalues of S; exact for equal λ
+and for one nonzero λ); the orientation bound likewise for δω_T. This is the expected AP_P
+of the machine at that pose: "with this plan and this instrument, expect ≤ X mm at 95 %
+here".
 """
 
 from __future__ import annotations
 
 import math
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -505,37 +526,55 @@ def pose_errors(mechanism: Mechanism, attained: np.ndarray, commanded: np.ndarra
 STEP_MM, STEP_RAD = 1e-4, 1e-6
 
 
+#: The instrument's registration to the machine's base frame: the sensor parameters whose
+#: covariance the measured figures' uncertainty carries (the tool/target offset is not: it
+#: defines the tool point commanded, exact by definition of the command).
+REGISTRATION = tuple(f"world.{c}" for c in "xyzabc")
+
+
+def _tool_point(mechanism: Mechanism, sensor) -> tuple[list[int], list[int]] | None:
+    """Indices of the sensor's tool offset (position, rotation) in its parameters: full pose
+    ``tool.*`` (position and rotation), a tracked point ``target.*`` (position); None for
+    an instrument that reads neither the pose nor a point of the platform."""
+    names = list(sensor.param_names)
+    if sensor.invertible and _has_orientation(mechanism) and all(f"tool.{c}" in names for c in "xyzabc"):
+        return [names.index(f"tool.{c}") for c in "xyz"], [names.index(f"tool.{c}") for c in "abc"]
+    if sensor.kind == "position" and all(f"target.{c}" in names for c in "xyz"):
+        return [names.index(f"target.{c}") for c in "xyz"], []
+    return None
+
+
 def measured_errors(mechanism: Mechanism, sensor, readings: np.ndarray, commanded: np.ndarray
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(e (N, d), K (N, d, m), G (N, d, k))``: the attained pose's errors read from the
-    instrument (full pose: :meth:`~pkmcal.sensors.base.Sensor.invert`; a tracked point: the
-    point in the base frame, R_wᵀ(y − p_w), against the commanded pose's point, position
-    only) at the ``commanded`` poses (N, n), and their derivatives by central differences
-    with respect to the readings y (m) and the sensor's parameters θ (k)."""
+    """``(e (N, d), K (N, d, m), G (N, d, k))``: the errors of the tool point (TCP) the
+    instrument reads, in the base frame, against the TCP commanded, at the ``commanded``
+    poses (N, n), and their derivatives by central differences with respect to the readings
+    y (m) and the sensor's parameters θ (k). Full pose: attained p = R_wᵀ(y_p − p_w),
+    R = R_wᵀ R(y_abc), commanded p_c + R_c p_t, R_c R_t (orientation errors: wrapped
+    differences of the angles a, b, c); a tracked point: the point only (d = 3)."""
+    from pkmcal.conventions import euler_to_matrix, matrix_to_euler
+
     _position_axes(mechanism)
-    cmd = np.asarray(commanded, dtype=float)
-    y0 = np.asarray(readings, dtype=float)
-    theta0 = np.asarray(sensor.params, dtype=float)
-    if sensor.invertible and _has_orientation(mechanism):
-        def err(y, theta):
-            x = mechanism.poses_from_frame(sensor.invert(y, theta))
-            return pose_errors(mechanism, x, cmd)
-    elif sensor.kind == "position":
-        names = list(sensor.param_names)
-        iw = [names.index(f"world.{c}") for c in "xyzabc"]
-        it = [names.index(f"target.{c}") for c in "xyz"]
-        f_c = mechanism.frame(cmd)
-
-        def err(y, theta):
-            from pkmcal.conventions import euler_to_matrix
-
-            Rw = euler_to_matrix(theta[iw[3:]])
-            point = (y - theta[iw[:3]]) @ Rw                          # R_wᵀ (y − p_w), row-wise
-            target = f_c.p + np.einsum("nij,j->ni", f_c.R, theta[it])
-            return point - target
-    else:
+    tool = _tool_point(mechanism, sensor)
+    if tool is None:
         raise PkmcalError(f"ISO 9283 figures need an instrument that reads the pose or a point of the platform "
                           f"(full-pose, position); the setup's '{sensor.kind}' sensor reads neither")
+    names = list(sensor.param_names)
+    iw = [names.index(n) for n in REGISTRATION]
+    it, ir = tool
+    f_c = mechanism.frame(np.asarray(commanded, dtype=float))
+    y0 = np.asarray(readings, dtype=float)
+    theta0 = np.asarray(sensor.params, dtype=float)
+
+    def err(y, theta):
+        Rw = euler_to_matrix(theta[iw[3:]])
+        e = (y[:, :3] - theta[iw[:3]]) @ Rw - (f_c.p + np.einsum("nij,j->ni", f_c.R, theta[it]))
+        if not ir:
+            return e
+        R_att = np.einsum("ji,njk->nik", Rw, euler_to_matrix(y[:, 3:6]))
+        R_cmd = f_c.R @ euler_to_matrix(theta[ir])
+        return np.hstack([e, wrap_angle(matrix_to_euler(R_att) - matrix_to_euler(R_cmd))])
+
     e0 = err(y0, theta0)
     steps_y = np.where(np.asarray(sensor.reading_is_angle, dtype=bool), STEP_RAD, STEP_MM)
     steps_t = np.where(np.asarray(sensor.param_is_angle, dtype=bool), STEP_RAD, STEP_MM)
@@ -583,20 +622,46 @@ def measured_report(mechanism: Mechanism, setup, readings: np.ndarray, commanded
 # -- predicted before measuring ---------------------------------------------------------------
 
 
-def pose_error_covariance(mechanism: Mechanism, covariance: np.ndarray, poses: np.ndarray) -> np.ndarray:
-    """Cov δx (N, n, n) of the pose a machine commanded through a model whose parameters have
-    ``covariance`` (p, p) reaches at ``poses`` (N, n): A⁻¹ B C Bᵀ A⁻ᵀ (module docstring)."""
+def tool_error_jacobian(mechanism: Mechanism, poses: np.ndarray, sensor=None) -> np.ndarray:
+    """∂(δp_T, δω_T)/∂(ρ̂ − ρ, θ̂ − θ) (N, 6 or 3, p [+ k]): the error of the tool point (and
+    the rotation vector of its frame, base frame), attained − commanded, of a machine (true
+    parameters ρ, tool offset θ) commanded through a model (ρ̂, and with ``sensor`` the tool
+    offset θ̂ in the sensor's parameters): IK(x_r, ρ) = IK(x_c, ρ̂), so
+
+        δx = A⁻¹ B (ρ̂ − ρ),  δp = δx_xyz,  δω = E(a, b, c) δx_abc
+        δp_T = δp − [R p_t]× δω − R (p̂_t − p_t),    δω_T = δω − R E(t_abc) (t̂_abc − t_abc)
+
+    (world.* columns zero: the instrument's registration is not the machine's error)."""
     if mechanism.n_actuators != mechanism.n_dof:
         raise PkmcalError(f"machine '{mechanism.name}' has {mechanism.n_actuators} actuators for {mechanism.n_dof} "
                           "pose coordinates: its accuracy is not predicted from the inverse kinematics alone")
+    _position_axes(mechanism)
     poses = mechanism.as_pose_array(poses)
-    C = np.asarray(covariance, dtype=float)
-    if C.shape != (len(mechanism.params),) * 2:
-        raise PkmcalError(f"a covariance of machine '{mechanism.name}' is {len(mechanism.params)} x "
-                          f"{len(mechanism.params)}; got {C.shape}")
     A, B = mechanism.actuator_jacobians(poses)
-    M = np.linalg.solve(A, B)                                         # A⁻¹ B (N, n, p)
-    return np.einsum("nip,pq,njq->nij", M, C, M)
+    M = np.linalg.solve(A, B)                                         # δx = A⁻¹ B δρ (N, n, p)
+    N, p = len(poses), B.shape[-1]
+    rot = _has_orientation(mechanism)
+    d = 6 if rot else 3
+    k = 0 if sensor is None else len(sensor.params)
+    J = np.zeros((N, d, p + k))
+    J[:, :3, :p] = M[:, :3]
+    if rot:
+        J[:, 3:, :p] = euler_rate_matrix(poses[:, 3:6]) @ M[:, 3:]
+    tool = None if sensor is None else _tool_point(mechanism, sensor)
+    if tool is not None and tool != ([], []):
+        it, ir = tool
+        theta = np.asarray(sensor.params, dtype=float)
+        R = mechanism.frame(poses).R
+        if rot:
+            v = R @ theta[it]                                          # R p_t (N, 3)
+            cross = np.zeros((N, 3, 3))                                # −[v]×
+            cross[:, 0, 1], cross[:, 0, 2], cross[:, 1, 2] = v[:, 2], -v[:, 1], v[:, 0]
+            cross[:, 1, 0], cross[:, 2, 0], cross[:, 2, 1] = -v[:, 2], v[:, 1], -v[:, 0]
+            J[:, :3, :p] += cross @ J[:, 3:, :p]
+        J[:, :3, [p + i for i in it]] = -R
+        if ir:
+            J[:, 3:, [p + i for i in ir]] = -R @ euler_rate_matrix(theta[ir])
+    return J
 
 
 def norm_quantile(cov: np.ndarray, level: float = 0.95) -> np.ndarray:
@@ -623,27 +688,34 @@ class PredictedAccuracy:
     level: float = 0.95
 
 
-def predicted_accuracy(mechanism: Mechanism, covariance: np.ndarray, poses: np.ndarray, level: float = 0.95
-                       ) -> PredictedAccuracy:
-    """The accuracy a calibration with parameter ``covariance`` (p, p) predicts at ``poses``
-    (module docstring): the ``level`` quantiles of ‖δp‖ and of the rotation angle ‖E δabc‖."""
-    _position_axes(mechanism)
-    poses = mechanism.as_pose_array(poses)
-    S = pose_error_covariance(mechanism, covariance, poses)
-    ori = None
-    if _has_orientation(mechanism):
-        E = euler_rate_matrix(poses[:, 3:6])
-        ori = norm_quantile(E @ S[:, 3:, 3:] @ np.swapaxes(E, 1, 2), level)
-    return PredictedAccuracy(poses, norm_quantile(S[:, :3, :3], level), ori, level)
+def predicted_accuracy(mechanism: Mechanism, covariance: np.ndarray, poses: np.ndarray, level: float = 0.95,
+                       sensor=None) -> PredictedAccuracy:
+    """The accuracy a calibration with parameter ``covariance`` predicts at ``poses`` (module
+    docstring): the ``level`` quantiles of the tool point's position error ‖δp_T‖ and of its
+    rotation angle ‖δω_T‖ (:func:`tool_error_jacobian`). ``covariance`` (p, p) over the
+    machine's parameters (the platform frame's origin), or with ``sensor`` (p + k, p + k)
+    over the machine's and the sensor's parameters (the tool point its tool offset defines;
+    no orientation bound when the sensor reads no rotation: a tracked point leaves the
+    platform's orientation to the gauge)."""
+    J = tool_error_jacobian(mechanism, poses, sensor)
+    C = np.asarray(covariance, dtype=float)
+    if C.shape != (J.shape[-1],) * 2:
+        raise PkmcalError(f"a covariance of machine '{mechanism.name}'" + (" and its sensor" if sensor else "")
+                          + f" is {J.shape[-1]} x {J.shape[-1]}; got {C.shape}")
+    S = J @ C @ np.swapaxes(J, 1, 2)
+    reads_rotation = sensor is None or bool((_tool_point(mechanism, sensor) or ([], []))[1])
+    ori = norm_quantile(S[:, 3:, 3:], level) if J.shape[1] == 6 and reads_rotation else None
+    return PredictedAccuracy(mechanism.as_pose_array(poses), norm_quantile(S[:, :3, :3], level), ori, level)
 
 
 def plan_covariance(mechanism: Mechanism, setup, poses: np.ndarray, method: str | None = None,
                     report=None) -> np.ndarray:
-    """The machine's parameter covariance (p, p) a calibration on ``poses`` with ``setup``
-    would have, from the noise model alone: (JᵀJ)⁻¹ of the whitened design Jacobian
+    """The covariance (p + k, p + k) of the machine's and the sensor's parameters a
+    calibration on ``poses`` with ``setup`` would have, from the noise model alone: (JᵀJ)⁻¹
+    of the whitened design Jacobian
     (:func:`~pkmcal.identification.identifiability.design_jacobian`) on the candidate
-    parameters less the gauge the identifiability analysis suggests, its machine block
-    (the sensor's parameters marginalised), zero rows for parameters not estimated.
+    parameters less the gauge the identifiability analysis suggests, zero rows for
+    parameters not estimated (a session's offsets marginalised).
     ``report``: the :class:`~pkmcal.identification.identifiability.IdentifiabilityReport` of
     these poses and ``method`` when already computed (its candidates: a ``free``/``fix``
     choice)."""
@@ -658,8 +730,8 @@ def plan_covariance(mechanism: Mechanism, setup, poses: np.ndarray, method: str 
     free = [names.index(n) for n in rep.names if n not in rep.fixed]
     rows = J[ok][:, :, free].reshape(-1, len(free))
     cov = embed(_inverse_normal(rows), np.asarray(free), len(names))
-    p = len(mechanism.params)
-    return cov[:p, :p]
+    n = len(mechanism.params) + len(setup.sensor.params)
+    return cov[:n, :n]
 
 
 #: Grid points per axis of the predicted-accuracy map over the workspace box.
@@ -735,8 +807,9 @@ def accuracy_map(mechanism: Mechanism, setup, poses: np.ndarray, *, covariance: 
         raise PkmcalError(f"no point of the workspace grid of '{mechanism.name}' passes its limits at the home "
                           "orientation: no accuracy map")
     cube = iso9283_pattern(mechanism, setup, margin=margin)
-    return AccuracyMap(predicted_accuracy(mechanism, covariance, pts, level),
-                       predicted_accuracy(mechanism, covariance, cube.poses, level), what)
+    sensor = setup.sensor if len(covariance) > len(mechanism.params) else None
+    return AccuracyMap(predicted_accuracy(mechanism, covariance, pts, level, sensor),
+                       predicted_accuracy(mechanism, covariance, cube.poses, level, sensor), what)
 
 
 # -- from a verification ------------------------------------------------------------------------
@@ -785,21 +858,26 @@ def heldout_figures(mechanism: Mechanism, setup, measurements, *, identified: di
     if isinstance(found, str):
         return None
     label, _ = found
-    if not (setup.sensor.invertible and _has_orientation(mechanism)) \
-            and setup.sensor.kind != "position":
+    if _tool_point(mechanism, setup.sensor) is None:
         return (f"the held-out poses follow the ISO 9283 pattern, but the '{setup.sensor.kind}' instrument reads "
                 "neither the pose nor a point of the platform")
-    cov, note = None, ""
+    cov, note, notes = None, "", []
     std = (identified or {}).get("std") or {}
-    if std:
+    registered = [n for n in std if n in REGISTRATION]
+    if registered:
         names = list(setup.sensor.param_names)
         angle = dict(zip(names, setup.sensor.param_is_angle))
         cov = np.zeros((len(names), len(names)))
-        for name, sd in std.items():
-            if name in angle:
-                k = names.index(name)
-                cov[k, k] = float(np.deg2rad(sd) if angle[name] else sd) ** 2
-        note = (f"the calibration's std of {', '.join(std)} as a diagonal covariance: "
+        for name in registered:
+            k = names.index(name)
+            cov[k, k] = float(np.deg2rad(std[name]) if angle[name] else std[name]) ** 2
+        note = (f"the calibration's std of {', '.join(registered)} as a diagonal covariance: "
                 f"{(identified or {}).get('covariance_kind') or 'identified'}")
-    return measured_report(mechanism, setup, measurements.readings, measurements.commanded, label, sensor_cov=cov,
-                           covariance_note=note, machine_covariance=machine_covariance)
+    if std and machine_covariance is not None:
+        machine_covariance = None
+        notes.append(f"no predicted AP_P: the calibration also estimated {', '.join(std)}, and the calibrated file "
+                     "keeps no covariance between them and the machine, which the tool point's accuracy needs "
+                     "('pkmcal identifiability --accuracy' predicts it for a plan)")
+    rep = measured_report(mechanism, setup, measurements.readings, measurements.commanded, label, sensor_cov=cov,
+                          covariance_note=note, machine_covariance=machine_covariance)
+    return dataclasses.replace(rep, notes=rep.notes + tuple(notes))
