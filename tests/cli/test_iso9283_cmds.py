@@ -124,3 +124,16 @@ def test_identifiability_predicts_accuracy(campaign):
     text = _run("identifiability", "stewart-prototype", "--setup", "full-pose-paper1", "--poses",
                 campaign / "poses.csv", "--accuracy").stdout
     assert "predicted accuracy after calibrating on these poses" in text
+
+
+def test_no_platform_prediction_after_estimating_the_sensor():
+    """A calibration that estimated sensor parameters (a tracker's target offset) keeps no
+    machine-sensor covariance: the machine block alone would predict the gauge's platform
+    origin (0.8 mm on the prototype with a laser tracker, against 11-20 um measured), so
+    no prediction is printed, and the note says why."""
+    from pkmcal.identification.iso9283 import _without_prediction
+
+    C = np.eye(3)
+    assert _without_prediction(C, {"sensor": {}, "std": {}}) == (C, ())
+    cov, notes = _without_prediction(C, {"std": {"target.x": 0.1}})
+    assert cov is None and "target.x" in notes[0] and "identifiability --accuracy" in notes[0]

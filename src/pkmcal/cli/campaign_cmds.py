@@ -371,7 +371,8 @@ def verify_cmd(calibrated, meas_path, real_spec, poses, nominal, setup_spec, cal
     if mode != "tool":     # the held-out poses in the ISO 9283 pattern (plan --pattern iso9283): its figures
         from pkmcal.identification.iso9283 import verification_figures
 
-        iso = verification_figures(report, cal, held, machine_covariance=cal.covariance)
+        iso = verification_figures(report, cal, held, machine_covariance=cal.covariance,
+                                   identified=cal.metadata.get("setup"))
     emit(_with_iso(report.to_dict() if as_json else report.format_table(), iso, as_json), output)
 
 

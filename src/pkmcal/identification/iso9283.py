@@ -816,12 +816,15 @@ def accuracy_map(mechanism: Mechanism, setup, poses: np.ndarray, *, covariance: 
 
 
 def verification_figures(report, mechanism: Mechanism, poses: np.ndarray, *,
-                         machine_covariance: np.ndarray | None = None) -> Iso9283Report | str | None:
+                         machine_covariance: np.ndarray | None = None, identified: dict | None = None
+                         ) -> Iso9283Report | str | None:
     """The ISO 9283 figures of a held-out verification against a simulated true machine
     (:func:`pkmcal.identification.verification.verify`) whose held-out ``poses`` (as given,
     N × n) follow the pattern (:func:`detect_pattern`): the reached poses against the
     commanded ones (after the alignment with ``compare="aligned"``), exact (no instrument:
-    U = 0); with ``machine_covariance`` the AP_P each pose was predicted to have. None when
+    U = 0); with ``machine_covariance`` the AP_P each pose was predicted to have (not when
+    ``identified``, the calibrated file's ``setup:``, says sensor parameters were estimated:
+    :func:`_without_prediction`). None when
     the poses are not the pattern; why not (one sentence) when they are but the figures
     cannot be computed."""
     found = detect_pattern(mechanism, mechanism.as_pose_array(poses))
@@ -836,11 +839,25 @@ def verification_figures(report, mechanism: Mechanism, poses: np.ndarray, *,
         return f"the real machine does not reach {int(np.count_nonzero(~after.valid))} of the pattern's poses"
     e = pose_errors(mechanism, after.reached, after.commanded)
     predicted = None
+    machine_covariance, notes = _without_prediction(machine_covariance, identified)
     if machine_covariance is not None:
         predicted = predicted_accuracy(mechanism, machine_covariance, commanded).position
-    return iso9283_figures(arrange(label, e), commanded, predicted_mm=predicted,
+    return iso9283_figures(arrange(label, e), commanded, predicted_mm=predicted, notes=notes,
                            uncertainty=f"none: the true machine is simulated and its poses are exact, no instrument "
                                        f"(U = 0); compared as {report.compare}")
+
+
+def _without_prediction(machine_covariance, identified: dict | None) -> tuple[np.ndarray | None, tuple[str, ...]]:
+    """``(machine_covariance, ())``, or ``(None, (why,))`` when the calibrated file's
+    ``setup:`` block ``identified`` has estimated sensor parameters (``std``): the file keeps
+    no covariance between them and the machine, and the machine's block alone describes the
+    platform frame the gauge chose, not the tool point (module docstring)."""
+    std = (identified or {}).get("std") or {}
+    if not std or machine_covariance is None:
+        return machine_covariance, ()
+    return None, (f"no predicted AP_P: the calibration also estimated {', '.join(std)}, and the calibrated file "
+                  "keeps no covariance between them and the machine, which the tool point's accuracy needs "
+                  "('pkmcal identifiability --accuracy' predicts it for a plan)",)
 
 
 def heldout_figures(mechanism: Mechanism, setup, measurements, *, identified: dict | None = None,
@@ -861,7 +878,7 @@ def heldout_figures(mechanism: Mechanism, setup, measurements, *, identified: di
     if _tool_point(mechanism, setup.sensor) is None:
         return (f"the held-out poses follow the ISO 9283 pattern, but the '{setup.sensor.kind}' instrument reads "
                 "neither the pose nor a point of the platform")
-    cov, note, notes = None, "", []
+    cov, note = None, ""
     std = (identified or {}).get("std") or {}
     registered = [n for n in std if n in REGISTRATION]
     if registered:
@@ -873,11 +890,7 @@ def heldout_figures(mechanism: Mechanism, setup, measurements, *, identified: di
             cov[k, k] = float(np.deg2rad(std[name]) if angle[name] else std[name]) ** 2
         note = (f"the calibration's std of {', '.join(registered)} as a diagonal covariance: "
                 f"{(identified or {}).get('covariance_kind') or 'identified'}")
-    if std and machine_covariance is not None:
-        machine_covariance = None
-        notes.append(f"no predicted AP_P: the calibration also estimated {', '.join(std)}, and the calibrated file "
-                     "keeps no covariance between them and the machine, which the tool point's accuracy needs "
-                     "('pkmcal identifiability --accuracy' predicts it for a plan)")
+    machine_covariance, notes = _without_prediction(machine_covariance, identified)
     rep = measured_report(mechanism, setup, measurements.readings, measurements.commanded, label, sensor_cov=cov,
                           covariance_note=note, machine_covariance=machine_covariance)
     return dataclasses.replace(rep, notes=rep.notes + tuple(notes))
