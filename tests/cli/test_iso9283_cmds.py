@@ -137,3 +137,44 @@ def test_no_platform_prediction_after_estimating_the_sensor():
     assert _without_prediction(C, {"sensor": {}, "std": {}}) == (C, ())
     cov, notes = _without_prediction(C, {"std": {"target.x": 0.1}})
     assert cov is None and "target.x" in notes[0] and "identifiability --accuracy" in notes[0]
+
+
+def test_registration_std_carries_into_u():
+    """A calibrated file whose instrument frame was estimated (setup.std of world.*, mm and
+    degrees): with the frame at identity (K = I, ∂e/∂world.x = −1) U of AP_x is
+    2 √(σ²/n + σ_wx²), world.a's std (degrees) enters AP_a in radians and AP_y as z·σ_wa;
+    the tool offset's std does not enter (it defines the point commanded)."""
+    from pkmcal.identification.iso9283 import cube_pattern, heldout_figures
+    from pkmcal.io.measurements import Measurements
+
+    m = load_machine("stewart-prototype")
+    setup = load_setup_full_pose()
+    pat = cube_pattern(m.home_pose[:3], 20.0, m.home_pose)
+    cmd = np.tile(pat, (4, 1))
+    rng = np.random.default_rng(0)
+    y = cmd + rng.normal(scale=0.01, size=cmd.shape) * [1, 1, 1, 1e-3, 1e-3, 1e-3]
+    meas = Measurements(m.ik(cmd), y, commanded=cmd)
+    base = heldout_figures(m, setup, meas)
+    got = heldout_figures(m, setup, meas, identified={"std": {"world.x": 0.02, "world.a": 0.01, "tool.y": 5.0},
+                                                       "covariance_kind": "gls"})
+    sig = setup.noise.reading_std
+    ux = got.get("AP_x", "P1").U
+    assert ux == pytest.approx(2 * math.sqrt(sig[0] ** 2 / 4 + 0.02 ** 2), rel=1e-6)
+    assert base.get("AP_x", "P1").U == pytest.approx(2 * sig[0] / 2, rel=1e-6)
+    ua = got.get("AP_a", "P1").U
+    assert ua == pytest.approx(2 * math.sqrt(sig[3] ** 2 / 4 + np.deg2rad(0.01) ** 2), rel=1e-6)
+    # the frame's rotation about x moves the points' y by z·δa, z the attained z (315 mm at P1
+    # ± the readings' noise: 0.01/315 relative)
+    uy = got.get("AP_y", "P1").U
+    assert uy == pytest.approx(2 * math.sqrt(sig[1] ** 2 / 4 + (pat[0, 2] * np.deg2rad(0.01)) ** 2), rel=1e-4)
+    same = heldout_figures(m, setup, meas, identified={"std": {"world.x": 0.02, "world.a": 0.01}})
+    assert [f.U for f in same.figures] == pytest.approx([f.U for f in got.figures], rel=1e-12)   # tool.y: not carried
+    assert "world.x, world.a" in got.uncertainty and "tool.y" not in got.uncertainty
+    moved = Measurements(meas.actuators[1:], y[1:], commanded=cmd[1:])
+    assert "not the ISO 9283 pattern" in heldout_figures(m, setup, moved)
+
+
+def load_setup_full_pose():
+    from pkmcal.api import load_setup
+
+    return load_setup("full-pose-paper1", load_machine("stewart-prototype"))

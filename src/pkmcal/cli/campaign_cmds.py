@@ -235,7 +235,8 @@ def _simulate_sessions(nominal, real, setup, commanded, rng, n_sessions: int, er
     "pkmcal verify calibrated.yaml --real stewart-prototype-real --nominal stewart-prototype --poses heldout.csv",
     "pkmcal verify calibrated.yaml --real stewart-prototype-real --poses heldout.csv --json -o verify.json",
     "pkmcal verify calibrated.yaml --real stewart-prototype-real --setup indicators-prototype --nominal "
-    "stewart-prototype --poses heldout.csv"))
+    "stewart-prototype --poses heldout.csv",
+    "pkmcal verify calibrated.yaml --real stewart-prototype-real --poses iso9283.csv --compare commanded"))
 @click.argument("calibrated")
 @click.option("--measurements", "meas_path", metavar="HELDOUT.csv",
               help="Measured held-out data (a measurement CSV as identify reads, not used in the fit): predict each "
@@ -295,6 +296,11 @@ def verify_cmd(calibrated, meas_path, real_spec, poses, nominal, setup_spec, cal
     says what is compared (stated in the output and the JSON key 'compare'). JSON keys:
     before/after: {position_mean_mm, position_max_mm, position_rms_mm,
     orientation_mean_deg, ..., tilt_*_deg, height_*_mm}, compare, compared.
+
+    Held-out poses in the ISO 9283 pattern ('pkmcal plan --pattern iso9283'; with
+    --measurements, the cmd_x.. columns): also the standard's AP, RP, AD, RD, each with its
+    expanded uncertainty U (k = 2) from the instrument's noise and registration (exact with
+    --real). JSON key iso9283. docs/accuracy-reports.md.
 
     Redundantly actuated machines (planar-2dof-3act, planar-3dof-4act) with --real: the tool
     point should read the tracker value of each held-out pose; each model commands it (the

@@ -815,6 +815,18 @@ def accuracy_map(mechanism: Mechanism, setup, poses: np.ndarray, *, covariance: 
 # -- from a verification ------------------------------------------------------------------------
 
 
+def _pattern_or_reason(mechanism: Mechanism, poses: np.ndarray):
+    """:func:`detect_pattern`'s ``(label, P1…P5)``; None when the poses are not five poses
+    in cycles at all; why not (a sentence) when five poses repeat but do not make the
+    pattern (a row left out, a pose moved): what a user who ran the pattern needs to know."""
+    found = detect_pattern(mechanism, poses)
+    if not isinstance(found, str):
+        return found
+    if found.startswith("not five") or "distinct poses" in found:
+        return None
+    return f"the held-out poses are five poses in cycles but not the ISO 9283 pattern: {found}"
+
+
 def verification_figures(report, mechanism: Mechanism, poses: np.ndarray, *,
                          machine_covariance: np.ndarray | None = None, identified: dict | None = None
                          ) -> Iso9283Report | str | None:
@@ -824,12 +836,11 @@ def verification_figures(report, mechanism: Mechanism, poses: np.ndarray, *,
     commanded ones (after the alignment with ``compare="aligned"``), exact (no instrument:
     U = 0); with ``machine_covariance`` the AP_P each pose was predicted to have (not when
     ``identified``, the calibrated file's ``setup:``, says sensor parameters were estimated:
-    :func:`_without_prediction`). None when
-    the poses are not the pattern; why not (one sentence) when they are but the figures
-    cannot be computed."""
-    found = detect_pattern(mechanism, mechanism.as_pose_array(poses))
-    if isinstance(found, str):
-        return None
+    :func:`_without_prediction`). None when the poses are not five poses in cycles; why not
+    (one sentence) when they look like the pattern but the figures cannot be computed."""
+    found = _pattern_or_reason(mechanism, mechanism.as_pose_array(poses))
+    if found is None or isinstance(found, str):
+        return found
     label, commanded = found
     after = report.after
     if report.compare not in ("commanded", "aligned") or after.commanded is None:
@@ -867,13 +878,14 @@ def heldout_figures(mechanism: Mechanism, setup, measurements, *, identified: di
     ``setup`` (its identified sensor) and the registration's covariance from ``identified``,
     the calibrated file's ``setup:`` block: its ``std`` (mm, degrees) of the sensor's
     parameters, as a diagonal covariance (the file keeps no correlations between them), and
-    its ``covariance_kind``. None when the commanded poses are not the pattern (or not in
-    the file); why not when they are but the instrument reads neither pose nor point."""
+    its ``covariance_kind``. None when the commanded poses are not five poses in cycles (or
+    not in the file); why not when they look like the pattern but the figures cannot be
+    computed (:func:`_pattern_or_reason`, an instrument that reads neither pose nor point)."""
     if measurements.commanded is None:
         return None
-    found = detect_pattern(mechanism, measurements.commanded)
-    if isinstance(found, str):
-        return None
+    found = _pattern_or_reason(mechanism, measurements.commanded)
+    if found is None or isinstance(found, str):
+        return found
     label, _ = found
     if _tool_point(mechanism, setup.sensor) is None:
         return (f"the held-out poses follow the ISO 9283 pattern, but the '{setup.sensor.kind}' instrument reads "
