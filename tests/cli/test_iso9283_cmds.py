@@ -124,6 +124,14 @@ def test_identifiability_predicts_accuracy(campaign):
     text = _run("identifiability", "stewart-prototype", "--setup", "full-pose-paper1", "--poses",
                 campaign / "poses.csv", "--accuracy").stdout
     assert "predicted accuracy after calibrating on these poses" in text
+    out = campaign / "map.png"
+    _run("identifiability", "stewart-prototype", "--setup", "full-pose-paper1", "--poses", campaign / "poses.csv",
+         "--accuracy", "--accuracy-map", out)
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    res = CliRunner().invoke(cli, ["identifiability", "stewart-prototype", "--setup", "full-pose-paper1", "--poses",
+                                   str(campaign / "poses.csv"), "--accuracy-map", str(campaign / "never.png")])
+    assert_user_error(res, "--accuracy-map", "--accuracy")
+    assert not (campaign / "never.png").exists()
 
 
 def test_no_platform_prediction_after_estimating_the_sensor():

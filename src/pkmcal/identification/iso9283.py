@@ -338,7 +338,7 @@ class Iso9283Report:
                 if f is None:
                     cells.append("")
                     continue
-                text = fmt.format(f.value * scale + 0.0)
+                text = fmt.format(float(fmt.format(f.value * scale)) + 0.0)      # no "-0.00"
                 if not exact:
                     text += " +- " + fmt.format(f.U * scale)
                 cells.append(text + ("*" if f.note else ""))
