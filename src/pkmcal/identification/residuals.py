@@ -47,7 +47,7 @@ the ρ columns. Parameters are passed explicitly: ``mech.ik_and_jacobians(x, par
     that converges on the start pose's assembly mode, each a function of θ. 2. and 3. are
     for a start pose outside a chain's reach at θ (a mechanism whose IK is NaN there gives
     Newton no direction): on a 6-RSS fit with the shared solver on λ − IK instead of its
-    loop-closure FK (tests/test_engine.py), 93 of 150 commanded poses were outside a rod's
+    loop-closure FK (tests/identification/test_engine.py), 93 of 150 commanded poses were outside a rod's
     reach at the fit's minimum, and 4 poses needed 3.; main's warm starts (one pose solve
     per evaluation) found that minimum in 1.2 s CPU, these in 3.5 s. On machines whose FK finds
     the pose from the start (the hexapod, the loop-closure FK of the 6-RSS and 6-PUS, the

@@ -584,7 +584,7 @@ def reading_space_rss(monkeypatch):
     from pkmcal.mechanisms.rss_hexapod import RSSHexapod
 
     monkeypatch.setattr(RSSHexapod, "fk", Mechanism.fk)
-    monkeypatch.syspath_prepend(str(Path(__file__).parent))
+    monkeypatch.syspath_prepend(str(Path(__file__).parents[1] / "mechanisms"))
     from test_rss_hexapod import _reachable
 
     m = builtin_machine("servo-stewart")
@@ -601,7 +601,7 @@ def reading_space_rss(monkeypatch):
 def test_fk_residual_after_a_far_trial_point_equals_fresh(reading_space_rss):
     """A trial point far from θ (every crank pivot 5 mm off), where the commanded poses are
     outside a rod's reach, is solved by continuation from θ0 (since issue 24's referee: the
-    FK is a function of θ alone, tests/test_fk_residual_path.py); back at θ0 every pose
+    FK is a function of θ alone, tests/identification/test_fk_residual_path.py); back at θ0 every pose
     solves again and the residual is a fresh method's to the FK's tolerance (1e-11 relative
     steps: ~1e-9 mm), not that of poses stuck at starts outside the reach (an earlier main:
     up to 4 poses failing at θ0, residuals off by 4 mm)."""

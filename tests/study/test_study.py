@@ -28,7 +28,7 @@ from pkmcal.study.schema import ErrorGroup, MachineSpec, MethodSpec, PlanSpec, S
 from pkmcal.identification.verification import pose_errors
 from pkmcal.study.trial import heldout_columns, pseudo_truth
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 SMALL = """\
 name: small
 seed: 3
@@ -341,7 +341,7 @@ def test_examples_load():
 
 def test_a_setup_that_cannot_measure_the_machine_is_refused():
     """A study built in Python binds each setup to each machine when it is prepared (other
-    machine kinds: tests/test_study_kinds.py)."""
+    machine kinds: tests/study/test_study_kinds.py)."""
     from pkmcal.study.trial import prepare
 
     planar = builtin_machine("planar-2dof-3act")

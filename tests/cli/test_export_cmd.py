@@ -2,7 +2,7 @@
 HAL lines and a JSON record.
 
 The HAL points are parsed back and put through genhexkins' strut-length formula,
-re-implemented independently in ``tests/test_export.py`` from LinuxCNC's C source; they must
+re-implemented independently in ``tests/io/test_export_linuxcnc.py`` from LinuxCNC's C source; they must
 reproduce the calibrated machine's leg lengths: at random poses, and at the measured poses,
 where the strut length is L0_i + λ_i of the calibrated offsets and the measured readings."""
 
@@ -13,7 +13,7 @@ import json
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from test_export import genhexkins_inverse, parse_hal
+from test_export_linuxcnc import genhexkins_inverse, parse_hal
 
 from pkmcal.cli.main import cli
 from pkmcal.io import load_machine, read_table

@@ -124,7 +124,7 @@ def test_klipper_macro_round_trip(plan, tmp_path, fmt):
     from pkmcal.controllers.klipper import klipper_fileconfig
 
     (tmp_path / "plan.cfg").write_text(text)
-    cfg_text = Path(__file__).resolve().parents[1].joinpath("docs/tutorial-files/delta/printer.cfg").read_text()
+    cfg_text = Path(__file__).resolve().parents[2].joinpath("docs/tutorial-files/delta/printer.cfg").read_text()
     (tmp_path / "printer.cfg").write_text(cfg_text + "\n[include plan.cfg]\n")
     parsed = klipper_fileconfig(tmp_path / "printer.cfg").getsection("gcode_macro PKMCAL_PROBE_PLAN").get("gcode")
     commands = [ln for ln in _gcode_lines(parsed) if ln]
@@ -260,7 +260,7 @@ def test_non_finite_and_absurd_probe_values_are_refused_with_their_line(tmp_path
 
 
 def test_non_finite_saved_heights_are_refused_with_their_line(tmp_path):
-    cfg = Path(__file__).resolve().parents[1].joinpath("docs/tutorial-files/delta/printer.cfg").read_text()
+    cfg = Path(__file__).resolve().parents[2].joinpath("docs/tutorial-files/delta/printer.cfg").read_text()
     block = ("#*# <---------------------- SAVE_CONFIG ---------------------->\n"
              "#*# DO NOT EDIT THIS BLOCK OR BELOW. The contents are auto-generated.\n#*#\n#*# [delta_calibrate]\n"
              "#*# height0 = 1e308\n#*# height0_pos = 100,100,100\n")
@@ -389,7 +389,7 @@ def test_the_object_is_read_with_the_config_it_was_printed_with(tmp_path):
 
 
 def test_outputs_never_overwrite_an_input_or_an_included_file(tmp_path):
-    cfg = Path(__file__).resolve().parents[1].joinpath("docs/tutorial-files/delta/printer.cfg").read_text()
+    cfg = Path(__file__).resolve().parents[2].joinpath("docs/tutorial-files/delta/printer.cfg").read_text()
     (tmp_path / "arms.cfg").write_text("[stepper_a]\narm_length: 215\n")
     block = ("#*# <---------------------- SAVE_CONFIG ---------------------->\n"
              "#*# DO NOT EDIT THIS BLOCK OR BELOW. The contents are auto-generated.\n#*#\n#*# [delta_calibrate]\n"
@@ -412,7 +412,7 @@ def test_outputs_never_overwrite_an_input_or_an_included_file(tmp_path):
 def test_saved_distance_typos_and_unknown_arguments(tmp_path):
     """A #*# distanceN far from the firmware's distance between its two points is refused as a
     typo; an argument of DELTA_ANALYZE that Klipper does not take is counted in a note."""
-    cfg = Path(__file__).resolve().parents[1].joinpath("docs/tutorial-files/delta/printer.cfg").read_text()
+    cfg = Path(__file__).resolve().parents[2].joinpath("docs/tutorial-files/delta/printer.cfg").read_text()
     path = tmp_path / "printer.cfg"
     path.write_text(cfg)
     machine = load_machine(str(_import(tmp_path, path)))
@@ -440,7 +440,7 @@ def test_saved_distance_typos_and_unknown_arguments(tmp_path):
 
 
 def _enhanced_log(after_save, printed_by):
-    """Klipper's enhanced calibration on the example's printer (tests/test_printed_distance.py
+    """Klipper's enhanced calibration on the example's printer (tests/sensors/test_printed_distance.py
     EXAMPLE_TRUTH): DELTA_CALIBRATE's 7 points probed with kossel-mini's config, SAVE_CONFIG
     (the config becomes ``after_save``), the object printed with ``printed_by``'s commands and
     measured with calipers to 0.01 mm (pillar widths 9 mm)."""

@@ -275,7 +275,7 @@ def test_too_few_probe_points_to_plan_say_why(tmp_path):
 def test_the_example_loads():
     from pathlib import Path
 
-    study = load_study(Path(__file__).resolve().parents[1] / "examples" / "study-delta-printed-object.yaml")
+    study = load_study(Path(__file__).resolve().parents[2] / "examples" / "study-delta-printed-object.yaml")
     assert study.reads_pose_pairs
     kinds = {s.label: s.setup.sensor.kind for s in study.setups}
     assert kinds == {"probe": "z-probe", "object-0.02": "printed-distance", "object-0.01": "printed-distance"}

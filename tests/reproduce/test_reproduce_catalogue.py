@@ -58,7 +58,7 @@ def test_list_prints_every_item_with_its_status():
 
 
 def _papers_dir() -> Path | None:
-    for base in (Path(__file__).resolve().parents[1], *Path(__file__).resolve().parents):
+    for base in (Path(__file__).resolve().parents[2], *Path(__file__).resolve().parents):
         d = base / ".." / "shared" / "papers"
         if d.is_dir():
             return d

@@ -372,7 +372,7 @@ def test_report_of_printed_distances_draws_pairs_not_tilts(tmp_path):
 
     from pkmcal.cli.main import cli
 
-    log = Path(__file__).resolve().parents[1] / "examples" / "klipper" / "delta-analyze.log"
+    log = Path(__file__).resolve().parents[2] / "examples" / "klipper" / "delta-analyze.log"
     run = CliRunner()
     pairs = tmp_path / "pairs.csv"
     res = run.invoke(cli, ["import", "klipper-analyze", str(log), "--machine", "kossel-mini", "--object-machine",

@@ -37,7 +37,7 @@ from pkmcal.io.tables import read_table
 from pkmcal.study import backends, load_study, run_study
 from pkmcal.study.results import ResultFolder, cell, format_row, parse_table, read_trials
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 POSIX_FIFO = pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="named pipes are POSIX")
 
 

@@ -14,7 +14,7 @@ from pkmcal.reproduce.paper2_study import PAPER_TABLE6
 
 #: The paper's text: shared/ beside the repository (CI, /work/main) or beside its worktree folder.
 PAPER = next((d / "shared" / "papers" / "stewart-calibration-digital-indicators.md"
-              for d in Path(__file__).resolve().parents[1:4]
+              for d in Path(__file__).resolve().parents[2:5]
               if (d / "shared" / "papers" / "stewart-calibration-digital-indicators.md").exists()), Path("missing"))
 
 

@@ -437,7 +437,7 @@ def test_mixed_study_file_errors(tmp_path, change, fragments):
 def test_examples_of_other_machines_load():
     from pathlib import Path
 
-    examples = Path(__file__).resolve().parents[1] / "examples"
+    examples = Path(__file__).resolve().parents[2] / "examples"
     kinds = {}
     for name in ("study-delta-printer.yaml", "study-planar.yaml"):
         s = load_study(examples / name)

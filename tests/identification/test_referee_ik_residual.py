@@ -82,7 +82,7 @@ def test_referee_imports_no_pkmcal(files, tmp_path):
             "ref, fit = rg.referee(sys.argv[2], sys.argv[3], sys.argv[4], 'ik-residual'); "
             "assert 'pkmcal' not in [m.split('.')[0] for m in sys.modules if sys.modules[m] is not None]; "
             "print(len(fit.free), fit.chi2)")
-    out = subprocess.run([sys.executable, "-c", code, str(Path(__file__).parent), str(machine), str(setup), str(meas)],
+    out = subprocess.run([sys.executable, "-c", code, str(Path(__file__).parents[1]), str(machine), str(setup), str(meas)],
                          capture_output=True, text=True, check=False)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split()[0] == "42"

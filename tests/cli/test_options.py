@@ -144,10 +144,10 @@ def test_help_texts_show_no_formatting_debris():
 ])
 def test_number_options_added_for_the_controllers_refuse_non_finite_and_out_of_range_values(args, tmp_path):
     """--stroke-margin, --steps-per-mm and --height were plain floats: NaN and inf were taken
-    (a negative margin is the export's own error, tests/test_export_update_ini.py)."""
+    (a negative margin is the export's own error, tests/cli/test_export_update_ini.py)."""
     from pathlib import Path
 
-    root = Path(__file__).resolve().parent.parent
+    root = Path(__file__).resolve().parents[2]
     args = [str(root / a) if a.startswith("examples/") else a for a in args]
     res = CliRunner().invoke(cli, [*args, "-o", str(tmp_path / "out")])
     assert res.exit_code == 2 and "Invalid value" in res.stderr, res.output

@@ -38,7 +38,7 @@ from pkmcal.io.machine_file import load_machine
 from pkmcal.io.measurements import Measurements, load_measurements
 from pkmcal.io.setup_file import load_setup
 
-FILES = Path(__file__).resolve().parent.parent / "docs" / "tutorial-files" / "delta"
+FILES = Path(__file__).resolve().parents[2] / "docs" / "tutorial-files" / "delta"
 ARMS = ("arm_a", "arm_b", "arm_c")
 LEANS = tuple(f"lean_{k}_{t}" for k in ("radial", "tangential") for t in "abc")
 
@@ -231,7 +231,7 @@ def test_klippers_seven_points_and_its_printed_object_take_the_default_path(prin
     fit = identify(nominal, setup, seven)
     assert fit.success and fit.uncertainty.dof == 1 and len(fit.free) == 6
     run = CliRunner()
-    log = str(Path(__file__).resolve().parent.parent / "examples" / "klipper" / "delta-analyze.log")
+    log = str(Path(__file__).resolve().parents[2] / "examples" / "klipper" / "delta-analyze.log")
     for args in (["import", "klipper-analyze", log, "--machine", "kossel-mini", "--object-machine", "kossel-mini",
                   "-o", "pairs.csv"],
                  ["identify", "kossel-mini", "pairs.csv", "--setup", "printed-distance-klipper", "-o", "obj.yaml"],

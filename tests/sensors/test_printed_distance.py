@@ -339,7 +339,7 @@ def test_setup_file_round_trips(tmp_path):
 #: 0.35° and −0.25° off.
 EXAMPLE_TRUTH = dict(radius=104.8, arms=(215.12, 214.93, 215.06), endstops=(250.62, 249.71, 250.38),
                      angles=(210.35, 329.75, 90.0))
-EXAMPLE_LOG = Path(__file__).resolve().parent.parent / "examples" / "klipper" / "delta-analyze.log"
+EXAMPLE_LOG = Path(__file__).resolve().parents[2] / "examples" / "klipper" / "delta-analyze.log"
 
 
 def delta_analyze_log() -> str:
@@ -365,7 +365,7 @@ def delta_analyze_log() -> str:
         return ",".join(f"{x:.2f}" for x in v)
 
     lines = ["// Klipper console of a Kossel Mini (z_offset 0): DELTA_CALIBRATE, then Klipper's calibrate_size.stl",
-             "// printed and measured with calipers (0.01 mm); a simulated printer (see tests/test_printed_distance.py)",
+             "// printed and measured with calipers (0.01 mm); a simulated printer (see tests/sensors/test_printed_distance.py)",
              "// that printed the object with the config it probed with (nothing saved in between): --object-machine "
              "kossel-mini",
              "DELTA_CALIBRATE"]

@@ -158,7 +158,7 @@ def paper1_study():
     from pkmcal.study import load_study
     from pkmcal.study.trial import prepare
 
-    study = load_study(Path(__file__).resolve().parents[1] / "examples" / "study-paper1.yaml").with_trials(8)
+    study = load_study(Path(__file__).resolve().parents[2] / "examples" / "study-paper1.yaml").with_trials(8)
     return prepare(study)
 
 

@@ -116,7 +116,7 @@ def test_the_example_printer_cfg_imports_to_what_klipper_runs():
     position_endstop 297.05 of the main file (pkmcal read 174.210 and 296.68 before)."""
     from pathlib import Path
 
-    fw = read_klipper(str(Path(__file__).parents[1] / "examples" / "klipper" / "printer.cfg"))
+    fw = read_klipper(str(Path(__file__).parents[2] / "examples" / "klipper" / "printer.cfg"))
     assert fw.radius == 174.75 and fw.endstops == (297.05, 297.383285, 296.91701)
     assert fw.angles_deg == (210.114221, 329.707221, 90.0)
 
@@ -488,7 +488,7 @@ def test_cli_import_klipper_writes_the_probe_setup(tmp_path):
     from pkmcal.cli.main import cli
     from pkmcal.io.setup_file import read_setup_file
 
-    cfg = Path(__file__).parents[1] / "examples" / "klipper" / "printer.cfg"
+    cfg = Path(__file__).parents[2] / "examples" / "klipper" / "printer.cfg"
     out, setup = tmp_path / "k.yaml", tmp_path / "probe.yaml"
     res = CliRunner().invoke(cli, ["import", "klipper", str(cfg), "-o", str(out), "--setup-output", str(setup)])
     assert res.exit_code == 0, res.output

@@ -21,7 +21,7 @@ from pkmcal.io.machine_file import load_machine
 #: Options whose value is a file or folder the example writes.
 OUTPUT_OPTIONS = ("-o", "--output", "--save-real", "--out", "--report", ">")
 #: The repository's example input files (``examples/...`` in an example reads them).
-EXAMPLE_FILES = Path(__file__).resolve().parent.parent / "examples"
+EXAMPLE_FILES = Path(__file__).resolve().parents[2] / "examples"
 #: Examples run elsewhere (the same command line, by another test).
 RUN_ELSEWHERE = {"pkmcal demo": "tests/test_demo.py runs the default demo",
                  "pkmcal check linuxcnc stewart-prototype": "tests/controllers/test_linuxcnc.py runs it where LinuxCNC "

@@ -6,7 +6,7 @@
   depend on L0, so the MAP estimate is L0̂ = (Σ_j Σ_j⁻¹ + P)⁻¹ (Σ_j Σ_j⁻¹ d_j + P μ),
   d_j = L(x̂_j) − q_j, and the posterior covariance is (Σ_j Σ_j⁻¹ + P)⁻¹, computed here from
   the machine's leg lengths and its analytic pose Jacobian (tested against finite
-  differences in tests/test_hexapod_kinematics.py), independently of the engine's residuals.
+  differences in tests/mechanisms/test_hexapod.py), independently of the engine's residuals.
 * Noise-free data with priors at the true values: the truth is the exact minimiser.
 * A prior on a gauge parameter pins the direction the data cannot see: the automatic gauge
   does not fix it, and its estimate and posterior σ are exactly the prior's.

@@ -1,7 +1,7 @@
 """The identification hot path's shortcuts, each against the slower computation it replaces.
 
 * ``Hexapod.actuator_jacobians`` (one compiled pass) against the NumPy twist Jacobian and
-  ∂λ/∂ρ written out here (central differences of IK: tests/test_hexapod_kinematics.py);
+  ∂λ/∂ρ written out here (central differences of IK: tests/mechanisms/test_hexapod.py);
 * ``Hexapod.fk_precise`` (one polishing Newton step) against plain FK: same poses to the
   FK tolerance, IK reproduced to rounding;
 * ``ScaledJacobian.certainly_full_rank`` against the singular values: never claims full
@@ -47,7 +47,7 @@ def test_actuator_jacobians_match_numpy_formulas(machine, seed):
     A, B = machine.actuator_jacobians(poses)
     # reference: the NumPy twist Jacobian, and ∂λ/∂ρ written out from u_i = l_i/‖l_i‖,
     # l_i = p + R a_i − b_i (both are checked against central differences in
-    # test_hexapod_kinematics.py, which now run through the kernel)
+    # mechanisms/test_hexapod.py, which now run through the kernel)
     A_ref = euler_pose_jacobian(machine.twist_jacobian(poses), poses)
     R = euler_to_matrix(poses[:, 3:6])
     legs = poses[:, None, :3] + np.einsum("nrc,ic->nir", R, machine.platform) - machine.base

@@ -117,7 +117,7 @@ def test_a_fit_without_degrees_of_freedom_is_refused(tmp_path):
 def test_radian_angle_columns_and_absurd_chi2_are_warned(tmp_path):
     """Old behaviour: angles written in radians under degree headers calibrated to
     parameters metres off with only χ²/ν in the summary as a hint. Now refused (issue 24:
-    tests/test_fit_refusal.py); written with --accept-bad-fit, the warnings name the columns."""
+    tests/identification/test_fit_verdict.py); written with --accept-bad-fit, the warnings name the columns."""
     meas = simulated(tmp_path, "full-pose-paper1", random_poses(30, 4))
     lines = meas.read_text().splitlines()
     header_i = next(i for i, ln in enumerate(lines) if ln.startswith("lambda1"))
