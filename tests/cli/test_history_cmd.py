@@ -10,7 +10,7 @@ import shlex
 
 from click.testing import CliRunner
 from helpers import assert_user_error
-from test_cli_examples import examples_of, help_text
+from test_examples import examples_of, help_text
 
 from pkmcal.cli.history_cmd import history_group
 from pkmcal.cli.main import cli
