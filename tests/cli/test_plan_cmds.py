@@ -129,3 +129,29 @@ def test_plan_json_is_the_printed_summary(args, tmp_path):
         assert v == pytest.approx(observed[k], rel=1e-9), k
     res = CliRunner().invoke(cli, ["plan", *args, "--json"])
     assert res.exit_code == 2 and "-o FILE" in res.stderr
+
+
+def test_the_iso_pattern_counts_cycles_with_cycles(tmp_path):
+    """--pattern iso9283's size is its number of cycles, --cycles (--n-poses is a selection's
+    size; the pattern's first spelling, --n N, still works with a note); its --json says the
+    same as the file: cycles x 5 poses."""
+    import json
+
+    base = ["plan", "stewart-prototype", "--setup", "full-pose-paper1"]
+    res = CliRunner().invoke(cli, [*base, "--pattern", "iso9283", "--n-poses", "5", "--cycles", "5"])
+    assert res.exit_code == 2 and "leave out --n-poses" in res.stderr, res.output
+    old = CliRunner().invoke(cli, [*base, "--pattern", "iso9283", "--n", "2", "-o", "-"])
+    new = CliRunner().invoke(cli, [*base, "--pattern", "iso9283", "--cycles", "2", "-o", "-"])
+    assert old.exit_code == new.exit_code == 0, old.output
+    assert old.stdout == new.stdout
+    assert ("pkmcal: warning: --n-poses 2 (or --n) with --pattern iso9283 is deprecated; use --cycles 2"
+            in old.stderr.splitlines())
+    res = CliRunner().invoke(cli, [*base, "--cycles", "3"])
+    assert res.exit_code == 2 and "--cycles counts the cycles of --pattern iso9283" in res.stderr, res.output
+    out = tmp_path / "iso.csv"
+    res = CliRunner().invoke(cli, [*base, "--pattern", "iso9283", "--cycles", "3", "-o", str(out), "--json"])
+    assert res.exit_code == 0, res.output
+    d = json.loads(res.stdout)
+    t = read_table(out, ("iso_pose", "cycle"), kinds={})
+    assert d["cycles"] == 3 and d["n_poses"] == 15 == len(t["cycle"]) and sorted(set(t["cycle"])) == [1, 2, 3]
+    assert sorted(set(t["iso_pose"])) == [1, 2, 3, 4, 5] and d["output"] == str(out)

@@ -300,7 +300,7 @@ def verify_cmd(calibrated, meas_path, real_spec, poses, nominal, setup_spec, cal
     orientation_mean_deg, ..., tilt_*_deg, height_*_mm}, compare, compared.
 
     Held-out poses in the ISO 9283 pattern ('pkmcal plan --pattern iso9283'; with
-    --measurements, the cmd_x.. columns): also the standard's AP, RP, AD, RD, each with its
+    --held-out, the cmd_x.. columns): also the standard's AP, RP, AD, RD, each with its
     expanded uncertainty U (k = 2) from the instrument's noise and registration (exact with
     --real). JSON key iso9283. docs/accuracy-reports.md.
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from pkmcal.cli.import_options import import_options
 from pkmcal.cli.option_types import FiniteFloat
-from pkmcal.cli.options import check_output, emit, examples, output_option, summary_echo, to_stdout
+from pkmcal.cli.options import check_output, emit, examples, option, output_option, quiet_accepted, summary_echo, to_stdout
 from pkmcal.errors import PkmcalError, PkmcalWarning
 
 
@@ -40,13 +40,13 @@ def _counts(text: str | None, what: str, low: int, high: int) -> tuple[int, ...]
 @click.command("compensate", epilog=examples(
     "pkmcal identify kossel-mini examples/compensation/warped-bed-meas.csv --setup z-probe-klipper --accept-bad-fit "
     "-o warped-cal.yaml",
-    "pkmcal compensate warped-cal.yaml examples/compensation/warped-bed-meas.csv --heldout "
+    "pkmcal compensate warped-cal.yaml examples/compensation/warped-bed-meas.csv --held-out "
     "examples/compensation/warped-bed-heldout.csv -o bed-correction.yaml --klipper-mesh bed-mesh.cfg",
-    "pkmcal compensate warped-cal.yaml examples/compensation/warped-bed-meas.csv --heldout "
+    "pkmcal compensate warped-cal.yaml examples/compensation/warped-bed-meas.csv --held-out "
     "examples/compensation/warped-bed-heldout.csv --json -o bed-correction-2.yaml"))
 @click.argument("calibrated")
 @click.argument("measurements")
-@click.option("--heldout", "heldout_path", required=True, metavar="HELDOUT.csv",
+@option("--held-out", "heldout_path", old=("--heldout",), required=True, metavar="HELDOUT.csv",
               help="Held-out measurements (as MEAS.csv, not used by the calibration): the correction is kept only "
                    "when it lowers their error significantly.")
 @click.option("--setup", "setup_spec", metavar="SETUP.yaml",
@@ -59,15 +59,16 @@ def _counts(text: str | None, what: str, low: int, high: int) -> tuple[int, ...]
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True,
               help="Seed of the cross-validation's folds.")
 @click.option("--klipper-mesh", "mesh_out", metavar="FILE",
-              help="Also write the bed mesh as Klipper's SAVE_CONFIG block ([bed_mesh PROFILE]); with --printer-cfg "
+              help="Also write the bed mesh as Klipper's SAVE_CONFIG block ([bed_mesh PROFILE]); with --config "
                    "the whole printer.cfg with the block updated.")
-@click.option("--printer-cfg", "printer_cfg", metavar="printer.cfg",
+@option("--config", "printer_cfg", old=("--printer-cfg",), metavar="PRINTER.cfg",
               help="With --klipper-mesh: the printer.cfg whose SAVE_CONFIG block receives the profile (it is read, "
                    "never overwritten).")
 @click.option("--profile", default="default", show_default=True, help="Klipper's profile name.")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
 @output_option("CORRECTION.yaml", "The correction file (written only when the correction is kept)")
 @import_options
+@quiet_accepted
 def compensate_cmd(calibrated, measurements, heldout_path, setup_spec, field, counts, degrees, seed, mesh_out,
                    printer_cfg, profile, as_json, output, mapping) -> None:
     """Fit what CALIBRATED leaves on MEAS.csv, keep it only if HELDOUT.csv confirms it.
@@ -94,7 +95,7 @@ def compensate_cmd(calibrated, measurements, heldout_path, setup_spec, field, co
     if mesh_out is not None:
         check_output_path(mesh_out, inputs + [output])
     elif printer_cfg is not None:
-        raise PkmcalError("--printer-cfg is the printer.cfg the --klipper-mesh output updates; give --klipper-mesh")
+        raise PkmcalError("--config is the printer.cfg the --klipper-mesh output updates; give --klipper-mesh")
     if as_json and to_stdout(output):
         raise PkmcalError("--json prints the report on standard output: write the correction to a file with -o")
     machine, setup = machine_and_setup(calibrated, setup_spec or calibrated)
@@ -163,6 +164,7 @@ def _is_pose_file(path: str) -> bool:
                    "extrusion shared (as Klipper's bed mesh splits moves every 5 mm). Default: end points only.")
 @output_option("OUT", "The corrected program or pose file")
 @import_options
+@quiet_accepted
 def correct_cmd(program, calibrated, nominal, correction_path, ignore_limits, segment, output, mapping) -> None:
     """Filter PROGRAM through the calibrated model (plus a correction) for a nominal controller.
 

@@ -162,7 +162,7 @@ def _firmware_numbers_undetermined(result) -> list[tuple[str, str]]:
                    "was accepted and why it was refused.")
 @click.option("--history", "history_db", metavar="DB",
               help="Also record the calibration in the history database DB (pkmcal history; with --serial), with "
-                   "the --heldout figures.")
+                   "the --held-out figures.")
 @click.option("--serial", metavar="SERIAL", help="With --history: the unit's serial number.")
 @import_options
 @quiet_accepted

@@ -23,6 +23,7 @@ from pkmcal.cli.import_options import import_options
 from pkmcal.cli.options import (
     DeprecatedArgument,
     check_output,
+    deprecated,
     emit,
     examples,
     option,
@@ -121,8 +122,10 @@ def _format_indices(ind: dict[str, float]) -> str:
                    "(rms sigma over the bed) of MM, from the identifiability of the setup.")
 @click.option("--pattern", type=click.Choice(("iso9283",)), default=None,
               help="Instead of a selection: the ISO 9283 test pattern, P1..P5 on the diagonal plane of the largest "
-                   "cube that passes the checks, visited in --n cycles (ISO 9283: 30); 'pkmcal verify' reports "
-                   "ISO 9283 AP/RP/AD/RD on held-out data in this pattern.")
+                   "cube that passes the checks, visited in --cycles cycles; 'pkmcal verify' reports ISO 9283 "
+                   "AP/RP/AD/RD on held-out data in this pattern.")
+@click.option("--cycles", type=click.IntRange(min=1), default=None, metavar="N",
+              help="--pattern iso9283: how many cycles of P1..P5 (ISO 9283 §7.2.1: 30).  [default: 30]")
 @backend_options("in this process")
 @output_option("POSES.csv", "CSV of the chosen poses (or the --format klipper/gcode file)")
 @units_comment_option
@@ -135,7 +138,7 @@ def _format_indices(ind: dict[str, float]) -> str:
 def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, index, algorithm, circle_plane, seed,
              stroke_margin, tilt_margin, clearance_margin, margin, indicator_travel, plate_radius, sight_cone,
              workers, dask_address, output, units_comment=False, quiet=False, mapping=None, probe_anywhere=False,
-             fmt="csv", target_accuracy=None, pattern=None, as_json=False) -> None:
+             fmt="csv", target_accuracy=None, pattern=None, as_json=False, cycles=None) -> None:
     """Choose N poses of MACHINE to measure with SETUP (paper 2 §4, paper 1 §IV).
 
     Every candidate is checked on the nominal machine (stroke, joint tilts, leg collision,
@@ -185,12 +188,23 @@ def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, 
                           "(its limits: workspace box, reach, transmission angle); remove the margin options")
     safety = margin if margin is not None else resolve_margin(mech, stroke_mm=stroke_margin, tilt_deg=tilt_margin,
                                                                 clearance_mm=clearance_margin)
+    if pattern is None and cycles is not None:
+        raise PkmcalError("--cycles counts the cycles of --pattern iso9283; a selection's size is --n-poses")
     if pattern is not None:
-        _emit_pattern(mech, setup, n_poses, safety, _measurability(indicator_travel, plate_radius, sight_cone), output,
-                      units_comment, f"pkmcal plan {mech.name} --setup {setup_spec} --pattern {pattern} --n-poses {n_poses}",
+        from pkmcal.identification.iso9283 import CYCLES
+
+        if click.get_current_context().get_parameter_source("n_poses") is not click.core.ParameterSource.DEFAULT:
+            if cycles is not None:
+                raise PkmcalError(f"--pattern iso9283 visits P1..P5 in --cycles {cycles}; leave out --n-poses (a "
+                                  "selection's size)")
+            deprecated(f"--n-poses {n_poses} (or --n) with --pattern iso9283", f"--cycles {n_poses}")
+            cycles = n_poses
+        cycles = CYCLES if cycles is None else cycles
+        _emit_pattern(mech, setup, cycles, safety, _measurability(indicator_travel, plate_radius, sight_cone), output,
+                      units_comment, f"pkmcal plan {mech.name} --setup {setup_spec} --pattern {pattern} --cycles {cycles}",
                       {"--candidates": candidates_path, "--grid": grid, "--index": index,
                        "--algorithm": None if algorithm == "default" else algorithm,
-                       "--format": None if fmt == "csv" else fmt, "--target-accuracy": target_accuracy})
+                       "--format": None if fmt == "csv" else fmt, "--target-accuracy": target_accuracy}, as_json)
         return
     candidates = read_candidates_csv(candidates_path, mech, mapping) if candidates_path else None
     with chunk_map(workers, dask_address) as run_chunks, ProgressBar("plan", quiet=quiet) as bar:
@@ -270,9 +284,10 @@ def _emit_csv(plan, mech, command: str, output, units_comment: bool) -> None:
 
 
 def _emit_pattern(mech, setup, cycles: int, safety, measurability, output, units_comment: bool, command: str,
-                  unused: dict) -> None:
+                  unused: dict, as_json: bool = False) -> None:
     """``plan --pattern iso9283``: the pattern of :func:`~pkmcal.identification.iso9283.iso9283_pattern`
-    as a CSV (poses, nominal commands, ``iso_pose`` 1..5, ``cycle``) and its summary."""
+    as a CSV (poses, nominal commands, ``iso_pose`` 1..5, ``cycle``) and its summary (``--json``:
+    ``pattern``, ``centre_mm``, ``side_mm``, ``cycles``, ``n_poses``, ``notes``, ``output``)."""
     from pkmcal.identification.iso9283 import iso9283_pattern
 
     for name, value in unused.items():
@@ -289,6 +304,11 @@ def _emit_pattern(mech, setup, cycles: int, safety, measurability, output, units
     emit(format_table(cols, units_comment=units_comment, comments=[
         command, f"ISO 9283 cube: centre {c} mm, side {pat.side:.6g} mm; P1..P5 on its diagonal plane C1-C2-C7-C8, "
         f"{pat.cycles} cycles", *(f"note: {n}" for n in pat.notes)]), output)
+    if as_json:
+        click.echo(json.dumps({"pattern": "iso9283", "centre_mm": [float(v) for v in pat.center],
+                               "side_mm": float(pat.side), "cycles": int(pat.cycles), "n_poses": int(len(poses)),
+                               "notes": list(pat.notes), "output": output}, indent=2, allow_nan=False))
+        return
     say = summary_echo(output)
     say(f"ISO 9283 pattern: cube centre {c} mm, side {pat.side:.6g} mm (the largest whose 3x3x3 grid and P1..P5 pass "
         f"the limits with the safety margins and the setup's measurability); P1..P5 x {pat.cycles} cycles = "

@@ -21,7 +21,7 @@ from pkmcal.cli.main import cli
 from pkmcal.cli.options import Option
 from pkmcal.errors import PkmcalWarning
 
-DOC = Path(__file__).resolve().parent.parent / "docs" / "options.md"
+DOC = Path(__file__).resolve().parents[2] / "docs" / "options.md"
 _TICKED = re.compile(r"`([^`]+)`")
 
 
@@ -44,21 +44,20 @@ def doc_tables(text: str) -> dict[str, list[list[str]]]:
     return tables
 
 
-def option_table() -> dict[str, dict]:
-    """Long name → ``{"spellings": {...}, "commands": {...}}`` from every table whose header
-    starts with 'option' (one option per row; an option may have several rows for different
-    commands, never two rows for one command)."""
-    table: dict[str, dict] = {}
+def option_table() -> dict[tuple[str, str], set[str]]:
+    """``(long name, command)`` → the option's spellings, from every table whose header starts
+    with 'option' (one option per row; an option may have several rows, e.g. one with a short
+    spelling for one command, never two rows for one command)."""
+    table: dict[tuple[str, str], set[str]] = {}
     for row in doc_tables(DOC.read_text(encoding="utf-8"))["option"]:
         spellings = {s for s in _TICKED.findall(row[0]) if s.startswith("-")}
         assert spellings, row
         name = max(spellings, key=len)
         commands = set(_TICKED.findall(row[-1]))
         assert commands, f"{name}: no command listed"
-        entry = table.setdefault(name, {"spellings": spellings, "commands": set()})
-        assert entry["spellings"] == spellings, f"{name}: rows spell it differently"
-        assert not entry["commands"] & commands, f"{name}: two rows for {entry['commands'] & commands}"
-        entry["commands"] |= commands
+        for command in commands:
+            assert (name, command) not in table, f"{name}: two rows for {command}"
+            table[name, command] = spellings
     return table
 
 
@@ -97,17 +96,15 @@ def test_every_option_shown_in_a_help_is_in_the_table():
     missing = []
     for command, shown in SHOWN.items():
         for name, spellings in shown.items():
-            entry = table.get(name)
-            if entry is None or command not in entry["commands"]:
+            if (name, command) not in table:
                 missing.append(f"{name} ({command})")
             else:
-                assert spellings == entry["spellings"], (command, name, spellings, entry["spellings"])
+                assert spellings == table[name, command], (command, name, spellings, table[name, command])
     assert not missing, f"options without their row (or command) in {DOC.name}: {', '.join(missing)}"
 
 
 def test_every_command_of_the_table_shows_its_options():
-    wrong = [f"{name} ({command})" for name, entry in option_table().items() for command in entry["commands"]
-             if name not in SHOWN.get(command, {})]
+    wrong = [f"{name} ({command})" for name, command in option_table() if name not in SHOWN.get(command, {})]
     assert not wrong, f"rows of {DOC.name} naming a command whose --help does not show the option: {wrong}"
 
 
@@ -115,8 +112,9 @@ def test_json_and_quiet_on_every_command_that_prints_a_report():
     """Issue 27 item 3: --quiet and --json on every command that prints figures (the commands
     whose main output is a table or a file, and the folder commands, have no --json)."""
     figures = {"info", "ik", "fk", "plan", "observability", "simulate", "identifiability", "identify", "verify",
-               "export", "check linuxcnc", "check klipper", "demo", "reproduce", "study"}
-    report = figures - {"ik", "fk", "simulate", "study"}
+               "export", "check linuxcnc", "check klipper", "demo", "reproduce", "study", "compensate", "correct",
+               "history add", "history list", "history show", "history compare", "history fleet", "history plot"}
+    report = figures - {"ik", "fk", "simulate", "study", "correct"}
     assert {c for c in figures if "--quiet" in SHOWN[c]} == figures
     assert {c for c in report if "--json" in SHOWN[c]} == report
 
@@ -134,13 +132,14 @@ def registered_old_spellings() -> set[tuple[str, str, str]]:
 
 
 def documented_old_spellings() -> set[tuple[str, str, str]]:
-    """The same from the old-spellings table of the page (rows of an old option spelling)."""
+    """The same from the old-spellings table of the page (its rows of a plain old option
+    spelling: the old cell that spelling alone)."""
     found = set()
     for row in doc_tables(DOC.read_text(encoding="utf-8"))["old spelling"]:
-        old = _TICKED.findall(row[0])[0].split()[0]
-        new = max((s.split()[0] for s in _TICKED.findall(row[1])), key=len)
-        if old.startswith("--") and not row[0].startswith("`--poses N`"):
-            found |= {(command, old, new) for command in _TICKED.findall(row[2])}
+        ticked = _TICKED.findall(row[0])
+        if len(ticked) == 1 and row[0] == f"`{ticked[0]}`" and ticked[0].startswith("-"):   # a plain alias
+            new = max((s.split()[0] for s in _TICKED.findall(row[1])), key=len)
+            found |= {(command, ticked[0].split()[0], new) for command in _TICKED.findall(row[2])}
     return found
 
 
@@ -154,6 +153,10 @@ OLD_SPELLINGS = [
     ("demo", ["--held-out", "12"], ["--n-held-out", "12"]),
     ("demo", ["--out", "d"], ["--output", "d"]),
     ("plan", ["m", "--setup", "s", "--n", "12"], ["m", "--setup", "s", "--n-poses", "12"]),
+    ("compensate", ["c.yaml", "m.csv", "--heldout", "h.csv"], ["c.yaml", "m.csv", "--held-out", "h.csv"]),
+    ("compensate", ["c.yaml", "m.csv", "--held-out", "h.csv", "--printer-cfg", "p.cfg"],
+     ["c.yaml", "m.csv", "--held-out", "h.csv", "--config", "p.cfg"]),
+    ("history add", ["c.yaml", "--serial", "S", "--heldout", "v.json"], ["c.yaml", "--serial", "S", "--held-out", "v.json"]),
 ]
 
 
@@ -237,7 +240,7 @@ def _poses(tmp_path) -> Path:
 #: Old option spellings as they would appear in a message or docstring (``--calibration-
 #: measurements``, ``--output`` and ``--n-poses`` are not matches; demo's old ``--held-out N``
 #: is also the new spelling of held-out files, so it is not searched).
-OLD_IN_TEXT = re.compile(r"(?<![\w-])(--heldout\b|--measurements\b|--n(?= [0-9N{])|--out\b(?!put))")
+OLD_IN_TEXT = re.compile(r"(?<![\w-])(--heldout\b|--measurements\b|--n(?= [0-9N{]| cycles)|--out\b(?!put)|--printer-cfg\b)")
 
 #: Texts that still name an old spelling, by file: messages inside the command bodies of
 #: identify, export and verify and the docstrings of calibrated_file, which issue 27 items 1-2
@@ -256,7 +259,7 @@ def test_no_text_names_an_old_spelling():
     """Messages, help texts and docstrings name the new spellings (the declarations of the
     old ones, ``old=(...)``, and cli/options.py's description of the mechanism aside), and so
     do README.md and docs/ (the old-spellings table of docs/options.md aside)."""
-    root = Path(__file__).resolve().parent.parent
+    root = Path(__file__).resolve().parents[2]
     found: dict[str, list[str]] = {}
     texts = [p for p in (root / "src" / "pkmcal").rglob("*.py") if p.name != "options.py"]
     texts += [root / "README.md", *(p for p in (root / "docs").glob("*.md") if p.name != "options.md")]
@@ -274,6 +277,6 @@ def test_no_text_names_an_old_spelling():
 def test_dash_o_of_a_folder_command_is_refused(args):
     """'-o -' is standard output everywhere; the commands that write a folder of files say
     that it cannot hold one (it made a folder named '-')."""
-    root = Path(__file__).resolve().parent.parent
+    root = Path(__file__).resolve().parents[2]
     res = CliRunner().invoke(cli, [str(root / a) if a.startswith("examples/") else a for a in args])
     assert res.exit_code == 2 and res.stderr.startswith("pkmcal: error: -o -:") and "give a folder name" in res.stderr
