@@ -31,7 +31,7 @@ into the firmware's own parameter model and scored on the true printer.
   printer.cfg``, ``import klipper-probe probe.log --machine delta.yaml``, ``identify
   delta.yaml probe.csv --setup z-probe-klipper``, ``export --format klipper``: *default*
   exactly that; *refit* the export with the firmware-limited refit asked for by name
-  (``--measurements probe.csv --setup z-probe-klipper``); *prior* with the rods measured (each rod's true length + N(0, 0.1 mm), as
+  (``--calibration-measurements probe.csv --setup z-probe-klipper``); *prior* with the rods measured (each rod's true length + N(0, 0.1 mm), as
   calipers give) as ``--prior arm_a=M±0.1`` (etc.) to identify.
 * **The printed object** (Klipper's enhanced mode, :func:`klipper_enhanced`): DELTA_CALIBRATE
   on Klipper's 7 default points, the calibration object printed by the true printer under
@@ -90,8 +90,8 @@ TRIGGER_STD = 0.005               # mm, the probe's scatter
 CALIPER_STD = 0.1                 # mm, rods measured
 CALIPER_OBJECT_STD = 0.02         # mm, the printed object's distances (the printed-distance-klipper setup's σ)
 ERRORS = {"arm": 0.3, "angle": 0.3, "radius": 0.3, "endstop": 0.5, "lean": 0.1}   # ± (uniform), mm and degrees
-#: The firmware-limited refit asked for by name (``export --measurements … --setup …``).
-REFIT_ARGS = ("--measurements", "WORK/probe.csv", "--setup", "z-probe-klipper")
+#: The firmware-limited refit asked for by name (``export --calibration-measurements … --setup …``).
+REFIT_ARGS = ("--calibration-measurements", "WORK/probe.csv", "--setup", "z-probe-klipper")
 HOWS = ("nominal", "klipper", "pkmcal_default", "pkmcal_refit", "pkmcal_prior", "klipper_object", "pkmcal_object")
 
 
