@@ -33,7 +33,7 @@ from pkmcal import __version__
 from pkmcal.errors import PkmcalError, PkmcalWarning, name_sources, one_line, recorded_sources
 
 #: Command name → (module, click command object in it, the summary ``pkmcal --help`` shows).
-#: The summary is the first line of the command's own help; ``tests/test_cli_main.py``
+#: The summary is the first line of the command's own help; ``tests/cli/test_main.py``
 #: checks that the two agree, so that the listing never needs to import a command.
 COMMANDS: dict[str, tuple[str, str, str]] = {
     "machines": ("pkmcal.cli.machines_cmd", "machines",
@@ -70,6 +70,8 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
              "Calibrate the built-in prototype end to end on a simulated 'real' machine."),
     "reproduce": ("pkmcal.cli.reproduce_cmd", "reproduce",
                   "Regenerate paper table NAME with our numbers beside the published ones."),
+    "history": ("pkmcal.cli.history_cmd", "history_group",
+                "Keep every calibration of a fleet and compare them (SQLite database)."),
     "study": ("pkmcal.cli.study_cmd", "study",
               "Run the Monte Carlo study STUDY.yaml (plan, simulate, identify, verify per trial) into RESULTS/."),
 }
@@ -173,7 +175,7 @@ def _report_warnings(caught: list[warnings.WarningMessage]) -> None:
 
 
 #: Examples of ``pkmcal --help`` (each command's ``--help`` has its own; all are run by
-#: ``tests/test_cli_examples.py``).
+#: ``tests/cli/test_examples.py``).
 EXAMPLES = (
     "pkmcal machines",
     "pkmcal demo",
