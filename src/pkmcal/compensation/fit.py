@@ -33,7 +33,7 @@ coefficients of a polynomial) and μ = 10⁻⁹ … 1 times the data's mean weig
 (:data:`SMOOTHING`): the smallest sets only what the data leave free (a mesh node no point
 sees) to the smoothest continuation and moves what they determine by far less than the
 noise (a mesh fitted back from its own heights to 10⁻⁷ mm,
-tests/compensation/test_compensation_fit.py); the larger ones tame the nodes the data
+tests/compensation/test_fit.py); the larger ones tame the nodes the data
 barely see (a round bed's rim), whose heights noise would otherwise throw about.
 
 **Complexity by cross-validation.** Candidates: no correction, then meshes of 3×3 … 7×7
