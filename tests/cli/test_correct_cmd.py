@@ -141,3 +141,29 @@ def test_correct_hexapod_program_in_degrees(tmp_path):
     cmd = commands_for(cal, nominal, None, targets, ("leg_collision",)).commands
     np.testing.assert_allclose(got, np.column_stack([cmd[:, :3], np.rad2deg(cmd[:, 3:])]), atol=5e-7)
     assert out[0] == "(hexapod)\n" and out[-1] == "M2\n" and out[2].rstrip().endswith("(p0)")
+
+
+def test_sagging_hexapod_through_the_command_line(tmp_path):
+    """identify (laser tracker) -> compensate (a pose field kept) -> correct a pose file: the
+    commands are the library's for the field read back from the file."""
+    case = cases.hexapod(sagging=True)
+    pkmcal.save_measurements(case.calibration.measurements, case.nominal, case.setup, tmp_path / "meas.csv")
+    pkmcal.save_measurements(case.heldout.measurements, case.nominal, case.setup, tmp_path / "held.csv")
+    r = run("identify", "stewart-prototype", tmp_path / "meas.csv", "--setup", "laser-tracker", "-o",
+            tmp_path / "cal.yaml", "--accept-bad-fit")
+    assert r.exit_code == 0, r.output
+    r = run("compensate", tmp_path / "cal.yaml", tmp_path / "meas.csv", "--heldout", tmp_path / "held.csv",
+            "--degrees", "0,1,2", "-o", tmp_path / "corr.yaml")
+    assert r.exit_code == 0 and "correction KEPT: polynomial of degree 2" in r.output, r.output
+    targets = case.heldout.commanded[case.heldout.kept][:5]
+    lines = ["x,y,z,a,b,c"] + [",".join(repr(float(v)) for v in np.r_[t[:3], np.rad2deg(t[3:])]) for t in targets]
+    (tmp_path / "t.csv").write_text("\n".join(lines) + "\n")
+    r = run("correct", tmp_path / "t.csv", "-m", tmp_path / "cal.yaml", "--correction", tmp_path / "corr.yaml",
+            "--ignore-limit", "leg_collision", "-o", tmp_path / "cmd.csv")
+    assert r.exit_code == 0, r.output
+    got = np.loadtxt(tmp_path / "cmd.csv", delimiter=",", skiprows=1)
+    cal = pkmcal.load_machine(tmp_path / "cal.yaml")
+    fld = load_correction(tmp_path / "corr.yaml", cal)
+    assert fld.kind == "pose-field" and fld.components == ("x", "y", "z")
+    cmd = commands_for(cal, pkmcal.load_machine("stewart-prototype"), fld, targets, ("leg_collision",)).commands
+    np.testing.assert_allclose(got, np.column_stack([cmd[:, :3], np.rad2deg(cmd[:, 3:])]), rtol=1e-12, atol=1e-9)
