@@ -21,7 +21,7 @@ from pkmcal.cli.main import cli
 from pkmcal.cli.options import Option
 from pkmcal.errors import PkmcalWarning
 
-DOC = Path(__file__).resolve().parent.parent / "docs" / "options.md"
+DOC = Path(__file__).resolve().parents[2] / "docs" / "options.md"
 _TICKED = re.compile(r"`([^`]+)`")
 
 
@@ -256,7 +256,7 @@ def test_no_text_names_an_old_spelling():
     """Messages, help texts and docstrings name the new spellings (the declarations of the
     old ones, ``old=(...)``, and cli/options.py's description of the mechanism aside), and so
     do README.md and docs/ (the old-spellings table of docs/options.md aside)."""
-    root = Path(__file__).resolve().parent.parent
+    root = Path(__file__).resolve().parents[2]
     found: dict[str, list[str]] = {}
     texts = [p for p in (root / "src" / "pkmcal").rglob("*.py") if p.name != "options.py"]
     texts += [root / "README.md", *(p for p in (root / "docs").glob("*.md") if p.name != "options.md")]
@@ -274,6 +274,6 @@ def test_no_text_names_an_old_spelling():
 def test_dash_o_of_a_folder_command_is_refused(args):
     """'-o -' is standard output everywhere; the commands that write a folder of files say
     that it cannot hold one (it made a folder named '-')."""
-    root = Path(__file__).resolve().parent.parent
+    root = Path(__file__).resolve().parents[2]
     res = CliRunner().invoke(cli, [str(root / a) if a.startswith("examples/") else a for a in args])
     assert res.exit_code == 2 and res.stderr.startswith("pkmcal: error: -o -:") and "give a folder name" in res.stderr
