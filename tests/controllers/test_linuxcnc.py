@@ -223,7 +223,7 @@ def test_the_comparison_sees_a_micrometre(case):
 # -- pkmcal check linuxcnc -------------------------------------------------------------------
 
 def test_check_command_example_runs_linuxcnc():
-    """The example of 'pkmcal check --help' (run here, not by tests/test_cli_examples.py)."""
+    """The example of 'pkmcal check --help' (run here, not by tests/cli/test_examples.py)."""
     require_controller(lc.missing_reason())
     res = ok(run(*"check linuxcnc stewart-prototype".split()))
     assert "world mode: largest |LinuxCNC joint - pkmcal strut length|" in res.stdout

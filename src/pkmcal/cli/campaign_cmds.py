@@ -235,7 +235,8 @@ def _simulate_sessions(nominal, real, setup, commanded, rng, n_sessions: int, er
     "pkmcal verify calibrated.yaml --real stewart-prototype-real --nominal stewart-prototype --poses heldout.csv",
     "pkmcal verify calibrated.yaml --real stewart-prototype-real --poses heldout.csv --json -o verify.json",
     "pkmcal verify calibrated.yaml --real stewart-prototype-real --setup indicators-prototype --nominal "
-    "stewart-prototype --poses heldout.csv"))
+    "stewart-prototype --poses heldout.csv",
+    "pkmcal verify calibrated.yaml --real stewart-prototype-real --poses iso9283.csv --compare commanded"))
 @click.argument("calibrated")
 @click.option("--measurements", "meas_path", metavar="HELDOUT.csv",
               help="Measured held-out data (a measurement CSV as identify reads, not used in the fit): predict each "
@@ -295,6 +296,11 @@ def verify_cmd(calibrated, meas_path, real_spec, poses, nominal, setup_spec, cal
     says what is compared (stated in the output and the JSON key 'compare'). JSON keys:
     before/after: {position_mean_mm, position_max_mm, position_rms_mm,
     orientation_mean_deg, ..., tilt_*_deg, height_*_mm}, compare, compared.
+
+    Held-out poses in the ISO 9283 pattern ('pkmcal plan --pattern iso9283'; with
+    --measurements, the cmd_x.. columns): also the standard's AP, RP, AD, RD, each with its
+    expanded uncertainty U (k = 2) from the instrument's noise and registration (exact with
+    --real). JSON key iso9283. docs/accuracy-reports.md.
 
     Redundantly actuated machines (planar-2dof-3act, planar-3dof-4act) with --real: the tool
     point should read the tracker value of each held-out pose; each model commands it (the
@@ -364,10 +370,30 @@ def verify_cmd(calibrated, meas_path, real_spec, poses, nominal, setup_spec, cal
         frames = nom if nom is not None or mode == "commanded" else _nominal_from_record(cal)[0]
         if frames is not None and frames.kind != cal.kind:
             frames = None
-    report = verify(cal, real, read_poses(poses, cal, mapping), nominal=nom, ignore_limits=tuple(ignore_limits),
+    held = read_poses(poses, cal, mapping)
+    report = verify(cal, real, held, nominal=nom, ignore_limits=tuple(ignore_limits),
                     compare=mode, sensors=sensors, true_sensor=true_sensor, frames=frames, setup=setup)
-    text = json.dumps(report.to_dict(), indent=2, allow_nan=False) + "\n" if as_json else report.format_table() + "\n"
-    emit(text, output)
+    iso = None
+    if mode != "tool":     # the held-out poses in the ISO 9283 pattern (plan --pattern iso9283): its figures
+        from pkmcal.identification.iso9283 import verification_figures
+
+        iso = verification_figures(report, cal, held, machine_covariance=cal.covariance,
+                                   identified=cal.metadata.get("setup"))
+    emit(_with_iso(report.to_dict() if as_json else report.format_table(), iso, as_json), output)
+
+
+def _with_iso(out, iso, as_json: bool) -> str:
+    """The verification's JSON (dict) or table (text) with the ISO 9283 figures (key
+    'iso9283'), or why the pattern's figures could not be computed."""
+    if as_json:
+        from pkmcal.io.json_out import finite_or_null
+
+        if iso is not None:
+            out["iso9283"] = iso if isinstance(iso, str) else iso.to_dict()
+        return json.dumps(finite_or_null(out), indent=2, allow_nan=False) + "\n"
+    if iso is not None:
+        out += "\n" + (f"ISO 9283: not computed: {iso}" if isinstance(iso, str) else iso.format_table())
+    return out + "\n"
 
 
 def _identified_setup(path: str, cal, what: str):
@@ -470,8 +496,7 @@ def _verify_measured(calibrated, meas_path, nominal, setup_spec, calib_meas, cli
     notes.extend(f"warning: {w}" for w in lines)
     report = heldout_validation(cal, cal_setup, nom, before_sensor, held, source=str(meas_path), before_note=note,
                                 notes=notes, before_sessions=before_sessions, clipped=tuple(c.to_dict(unit[c.actuator]) for c in found))
-    if as_json:
-        from pkmcal.io.json_out import finite_or_null
+    from pkmcal.identification.iso9283 import heldout_figures
 
-        return json.dumps(finite_or_null(report.to_dict()), indent=2, allow_nan=False) + "\n"
-    return report.format_table() + "\n"
+    iso = heldout_figures(cal, cal_setup, held, identified=cal.metadata.get("setup"), machine_covariance=cal.covariance)
+    return _with_iso(report.to_dict() if as_json else report.format_table(), iso, as_json)

@@ -383,7 +383,8 @@ def _report_data(nominal, result, setup, meas, meas_path: str, output: str, vali
 @click.command("identifiability", epilog=examples(
     "pkmcal identifiability stewart-prototype --setup indicators-prototype --poses poses.csv",
     "pkmcal identifiability stewart-prototype --setup full-pose-paper1 --poses poses.csv --json",
-    "pkmcal identifiability stewart-prototype --setup indicators-prototype --poses poses.csv --suggest"))
+    "pkmcal identifiability stewart-prototype --setup indicators-prototype --poses poses.csv --suggest",
+    "pkmcal identifiability stewart-prototype --setup full-pose-paper1 --poses poses.csv --accuracy"))
 @click.argument("machine")
 @click.argument("poses_arg", required=False, cls=DeprecatedArgument)
 @click.option("--setup", "setup_spec", required=True, metavar="SETUP.yaml",
@@ -397,9 +398,14 @@ def _report_data(nominal, result, setup, meas, meas_path: str, output: str, vali
 @click.option("--suggest", is_flag=True, help="Also rank what to measure next: the other built-in setups, printed "
               "distances (deltas) and more planned poses, by the rank and smallest singular value each gives "
               "(JSON key 'suggestions').")
+@click.option("--accuracy", is_flag=True, help="Also predict the accuracy a calibration on these poses gives, before "
+              "anything is measured: the 95 % bound of the position (and orientation) error over the workspace and at "
+              "the ISO 9283 cube's P1..P5, from the setup's noise (JSON key 'predicted_accuracy').")
+@click.option("--accuracy-map", "accuracy_map_path", metavar="FILE.png",
+              help="With --accuracy: also draw the predicted bound over the workspace (PNG or SVG).")
 @import_options
 def identifiability_cmd(machine, poses_arg, setup_spec, poses, method, fix, free, as_json, mapping=None,
-                        suggest=False) -> None:
+                        suggest=False, accuracy=False, accuracy_map_path=None) -> None:
     """Which parameters of MACHINE the SETUP can identify from POSES.csv.
 
     Prints the rank of the column-scaled, noise-weighted identification Jacobian, its
@@ -426,11 +432,31 @@ def identifiability_cmd(machine, poses_arg, setup_spec, poses, method, fix, free
 
         advice = advise(nominal, setup, x, method=method, free=merged_free(_names(free), setup),
                         fix=None if fix_names == ["auto"] else fix_names)
+    predicted = None
+    if accuracy_map_path is not None:
+        if not accuracy:
+            raise PkmcalError("--accuracy-map draws the predicted accuracy: give --accuracy too")
+        if not str(accuracy_map_path).lower().endswith((".png", ".svg")):
+            raise PkmcalError(f"--accuracy-map {accuracy_map_path}: use a .png or .svg file name")
+        check_output(accuracy_map_path, [machine, setup_spec, poses])
+    if accuracy:   # identification/iso9283.py: the covariance of these poses carried over the workspace
+        from pkmcal.identification.iso9283 import accuracy_map
+
+        predicted = accuracy_map(nominal, setup, x, method=method, report=rep)
+        if accuracy_map_path is not None:
+            from pkmcal.io.atomic import atomic_write_bytes
+            from pkmcal.report.figures import accuracy_map_figure, render
+
+            drawn = render(accuracy_map_figure(predicted), "accuracy-map", "")
+            atomic_write_bytes(accuracy_map_path, drawn.svg if str(accuracy_map_path).lower().endswith(".svg")
+                               else drawn.png)
     if as_json:
         d = rep.to_dict()
         d["warnings"] = notes
         if advice is not None:
             d["suggestions"] = advice.to_dict()
+        if predicted is not None:
+            d["predicted_accuracy"] = predicted.to_dict()
         click.echo(json.dumps(d, indent=2, allow_nan=False))
         return
     click.echo(f"{nominal.name} with {setup.sensor.kind} sensor, {len(x)} poses: rank {rep.rank} of "
@@ -453,4 +479,6 @@ def identifiability_cmd(machine, poses_arg, setup_spec, poses, method, fix, free
     for n in notes:
         click.echo(f"warning: {n}")
     for line in advice.lines() if advice is not None else ():
+        click.echo(line)
+    for line in predicted.lines() if predicted is not None else ():
         click.echo(line)

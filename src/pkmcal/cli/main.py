@@ -33,7 +33,7 @@ from pkmcal import __version__
 from pkmcal.errors import PkmcalError, PkmcalWarning, name_sources, one_line, recorded_sources
 
 #: Command name → (module, click command object in it, the summary ``pkmcal --help`` shows).
-#: The summary is the first line of the command's own help; ``tests/test_cli_main.py``
+#: The summary is the first line of the command's own help; ``tests/cli/test_main.py``
 #: checks that the two agree, so that the listing never needs to import a command.
 COMMANDS: dict[str, tuple[str, str, str]] = {
     "machines": ("pkmcal.cli.machines_cmd", "machines",
@@ -58,6 +58,10 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
                "Validate CALIBRATED on held-out data: measured (--measurements) or a true machine (--real)."),
     "export": ("pkmcal.cli.export_cmd", "export_cmd",
                "Export the machine in CALIBRATED.yaml (a machine file or built-in name) for a controller."),
+    "compensate": ("pkmcal.cli.correct_cmd", "compensate_cmd",
+                   "Fit what CALIBRATED leaves on MEAS.csv, keep it only if HELDOUT.csv confirms it."),
+    "correct": ("pkmcal.cli.correct_cmd", "correct_cmd",
+                "Filter PROGRAM through the calibrated model (plus a correction) for a nominal controller."),
     "import": ("pkmcal.cli.import_cmd", "import_group",
                "Make a machine file from a controller's configuration (LinuxCNC, Klipper, Marlin)."),
     "check": ("pkmcal.cli.check_cmd", "check_group",
@@ -171,7 +175,7 @@ def _report_warnings(caught: list[warnings.WarningMessage]) -> None:
 
 
 #: Examples of ``pkmcal --help`` (each command's ``--help`` has its own; all are run by
-#: ``tests/test_cli_examples.py``).
+#: ``tests/cli/test_examples.py``).
 EXAMPLES = (
     "pkmcal machines",
     "pkmcal demo",

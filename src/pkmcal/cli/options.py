@@ -85,7 +85,7 @@ def units_comment_option(command):
 
 def examples(*commands: str) -> str:
     """The epilog of a command's ``--help``: an Examples section, one command line each (not
-    rewrapped; ``tests/test_cli_examples.py`` runs every one of them)."""
+    rewrapped; ``tests/cli/test_examples.py`` runs every one of them)."""
     return "\b\nExamples:\n" + "\n".join(f"  {c}" for c in commands)
 
 

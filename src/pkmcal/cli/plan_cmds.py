@@ -65,7 +65,8 @@ def _format_indices(ind: dict[str, float]) -> str:
     "pkmcal plan stewart-prototype --setup examples/setup-ballbar.yaml --algorithm circle --n 36 -o circle.csv",
     "pkmcal plan kossel-mini --setup z-probe-klipper --n 20 --target-accuracy 0.003 -o probe-points.csv",
     "pkmcal plan kossel-mini --setup z-probe-klipper --n 20 --format klipper -o probe-plan.cfg",
-    "pkmcal plan kossel-mini --setup z-probe-klipper --n 20 --format gcode -o probe-plan.gcode"))
+    "pkmcal plan kossel-mini --setup z-probe-klipper --n 20 --format gcode -o probe-plan.gcode",
+    "pkmcal plan stewart-prototype --setup full-pose-paper1 --pattern iso9283 -o iso9283.csv"))
 @click.argument("machine")
 @click.option("--setup", "setup_spec", required=True, metavar="SETUP.yaml", help=_SETUP_HELP)
 @click.option("--n", "n_poses", type=click.IntRange(min=1), default=30, show_default=True, help="Number of poses to choose.")
@@ -114,6 +115,10 @@ def _format_indices(ind: dict[str, float]) -> str:
 @click.option("--target-accuracy", type=FiniteFloat(min=0.0), metavar="MM",
               help="Z probes: also print how many points the plan needs for a predicted first-layer error "
                    "(rms sigma over the bed) of MM, from the identifiability of the setup.")
+@click.option("--pattern", type=click.Choice(("iso9283",)), default=None,
+              help="Instead of a selection: the ISO 9283 test pattern, P1..P5 on the diagonal plane of the largest "
+                   "cube that passes the checks, visited in --n cycles (ISO 9283: 30); 'pkmcal verify' reports "
+                   "ISO 9283 AP/RP/AD/RD on held-out data in this pattern.")
 @backend_options("in this process")
 @output_option("POSES.csv", "CSV of the chosen poses (or the --format klipper/gcode file)")
 @units_comment_option
@@ -122,7 +127,7 @@ def _format_indices(ind: dict[str, float]) -> str:
 def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, index, algorithm, circle_plane, seed,
              stroke_margin, tilt_margin, clearance_margin, margin, indicator_travel, plate_radius, sight_cone,
              workers, dask_address, output, units_comment=False, quiet=False, mapping=None, probe_anywhere=False,
-             fmt="csv", target_accuracy=None) -> None:
+             fmt="csv", target_accuracy=None, pattern=None) -> None:
     """Choose N poses of MACHINE to measure with SETUP (paper 2 §4, paper 1 §IV).
 
     Every candidate is checked on the nominal machine (stroke, joint tilts, leg collision,
@@ -169,6 +174,13 @@ def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, 
                           "(its limits: workspace box, reach, transmission angle); remove the margin options")
     safety = margin if margin is not None else resolve_margin(mech, stroke_mm=stroke_margin, tilt_deg=tilt_margin,
                                                                 clearance_mm=clearance_margin)
+    if pattern is not None:
+        _emit_pattern(mech, setup, n_poses, safety, _measurability(indicator_travel, plate_radius, sight_cone), output,
+                      units_comment, f"pkmcal plan {mech.name} --setup {setup_spec} --pattern {pattern} --n {n_poses}",
+                      {"--candidates": candidates_path, "--grid": grid, "--index": index,
+                       "--algorithm": None if algorithm == "default" else algorithm,
+                       "--format": None if fmt == "csv" else fmt, "--target-accuracy": target_accuracy})
+        return
     candidates = read_candidates_csv(candidates_path, mech, mapping) if candidates_path else None
     with chunk_map(workers, dask_address) as run_chunks, ProgressBar("plan", quiet=quiet) as bar:
         plan = plan_poses(mech, setup, n_poses, algorithm=algorithm, index=index.upper() if index else None,
@@ -211,6 +223,36 @@ def _emit_csv(plan, mech, command: str, output, units_comment: bool) -> None:
         f"safety margin: {plan.describe_margin()}",
         *(f"note: {n}" for n in plan.notes),
         _format_indices(sel.indices)]), output)
+
+
+def _emit_pattern(mech, setup, cycles: int, safety, measurability, output, units_comment: bool, command: str,
+                  unused: dict) -> None:
+    """``plan --pattern iso9283``: the pattern of :func:`~pkmcal.identification.iso9283.iso9283_pattern`
+    as a CSV (poses, nominal commands, ``iso_pose`` 1..5, ``cycle``) and its summary."""
+    from pkmcal.identification.iso9283 import iso9283_pattern
+
+    for name, value in unused.items():
+        if value is not None:
+            raise PkmcalError(f"{name} chooses among candidates; --pattern iso9283 writes the standard's pattern: "
+                              f"remove {name}")
+    pat = iso9283_pattern(mech, setup, cycles=cycles, margin=safety, measurability=measurability)
+    poses, label, cycle = pat.cycle_poses()
+    cols = {name: to_file_units(poses, mech.pose_is_angle)[:, i] for i, name in enumerate(mech.pose_names)}
+    commands = to_file_units(mech.ik(poses), mech.actuator_is_angle)
+    cols.update({name: commands[:, i] for i, name in enumerate(mech.actuator_names)})
+    cols.update({"iso_pose": label, "cycle": cycle})
+    c = ", ".join(f"{v:.6g}" for v in pat.center)
+    emit(format_table(cols, units_comment=units_comment, comments=[
+        command, f"ISO 9283 cube: centre {c} mm, side {pat.side:.6g} mm; P1..P5 on its diagonal plane C1-C2-C7-C8, "
+        f"{pat.cycles} cycles", *(f"note: {n}" for n in pat.notes)]), output)
+    say = summary_echo(output)
+    say(f"ISO 9283 pattern: cube centre {c} mm, side {pat.side:.6g} mm (the largest whose 3x3x3 grid and P1..P5 pass "
+        f"the limits with the safety margins and the setup's measurability); P1..P5 x {pat.cycles} cycles = "
+        f"{len(poses)} poses")
+    for n in pat.notes:
+        say(f"note: {n}")
+    if output is not None and output != "-":
+        say(f"wrote {output}")
 
 
 def _printer_file(fmt: str, plan, setup, command: str, machine: str, setup_spec: str) -> str:
