@@ -110,6 +110,10 @@ def add_cmd(calibrated, serial, model, heldout, allow_duplicate, db, as_json) ->
                f"({len(rec.names) - held} parameters estimated, {held} held) in {_db_path(db)}")
 
 
+def _g(value) -> str:
+    return "-" if value is None else f"{value:.4g}"
+
+
 def _db_path(db):
     from pkmcal.history.store import default_db_path
 
@@ -162,7 +166,7 @@ def show_cmd(ref, db, as_json) -> None:
     click.echo(f"#{rec.id}: serial {rec.serial}, model {rec.model}, machine {rec.machine} ({rec.kind})")
     click.echo(f"calibrated {rec.date} with pkmcal {rec.pkmcal_version} (recorded {rec.added}); method "
                f"{rec.method or '-'}, instrument {rec.instrument or '-'}, {rec.n_poses} poses, rms residual "
-               f"{rec.rms_residual}, chi2/dof {rec.reduced_chi2}")
+               f"{_g(rec.rms_residual)}, chi2/dof {_g(rec.reduced_chi2)}")
     click.echo(f"covariance: {rec.covariance_kind or '-'}")
     click.echo(f"file: {rec.source or '-'} (sha256 {rec.source_sha256 or '-'})")
     for role, inp in sorted(rec.inputs.items()):
@@ -170,8 +174,8 @@ def show_cmd(ref, db, as_json) -> None:
         click.echo(f"input {role}: {what}")
     if rec.heldout:
         after = rec.heldout.get("after") if isinstance(rec.heldout.get("after"), dict) else None
-        click.echo("held-out, after calibration: " + (", ".join(f"{k} {v:.4g}" for k, v in after.items() if isinstance(v, (int, float))
-                                             and v is not None) if after else "recorded (see --json)"))
+        figures = [f"{k} {v:.4g}" for k, v in (after or {}).items() if isinstance(v, (int, float))]
+        click.echo("held-out, after calibration: " + (", ".join(figures) if figures else "recorded (see --json)"))
     v, s, u = rec.display()
     w = max(len(n) for n in rec.names)
     click.echo(f"{'parameter':<{w}}  {'value':>14}  {'sigma':>10}")
