@@ -1,7 +1,7 @@
 """``pkmcal history``: every calibration of a fleet kept (:mod:`pkmcal.history`).
 
 * ``add CALIBRATED.yaml --serial S``: record a calibrated machine file of ``pkmcal identify``
-  (its calibration record, parameters and covariance, the file's SHA-256; ``--heldout
+  (its calibration record, parameters and covariance, the file's SHA-256; ``--verification
   VERIFY.json``: the held-out figures of ``pkmcal verify --json``).
 * ``list``, ``show REF``: the records; ``compare A B``: whether two calibrations differ
   beyond their combined uncertainty (z per parameter, joint χ²; :mod:`pkmcal.history.stats`);
@@ -21,7 +21,7 @@ import os
 import click
 
 from pkmcal.cli.option_types import FiniteFloat
-from pkmcal.cli.options import examples
+from pkmcal.cli.options import examples, option
 from pkmcal.errors import InputFileError, PkmcalError, one_line
 
 
@@ -52,7 +52,7 @@ def _read_heldout(path: str) -> dict:
         with open(path, encoding="utf-8") as fh:
             text = fh.read()
     except OSError as exc:
-        raise PkmcalError(f"--heldout {one_line(path)}: {exc.strerror}; give the JSON that 'pkmcal verify ... --json' "
+        raise PkmcalError(f"--verification {one_line(path)}: {exc.strerror}; give the JSON that 'pkmcal verify ... --json' "
                           "wrote") from None
     try:
         doc = json.loads(text)
@@ -83,13 +83,14 @@ def history_group() -> None:
 
 @history_group.command("add", epilog=examples(
     "pkmcal history add calibrated.yaml --serial KM-0042 --db farm.sqlite",
-    "pkmcal history add recalibrated.yaml --serial KM-0042 --heldout verify.json --db farm.sqlite --json"))
+    "pkmcal history add recalibrated.yaml --serial KM-0042 --verification verify.json --db farm.sqlite --json"))
 @click.argument("calibrated", metavar="CALIBRATED.yaml")
 @click.option("--serial", required=True, metavar="SERIAL", help="The unit's serial number (one unit = one serial).")
 @click.option("--model", metavar="MODEL", help="The fleet the unit belongs to (default: the machine it was "
                                                "calibrated from, calibration.calibrated_from).")
-@click.option("--heldout", metavar="VERIFY.json", help="Held-out figures to keep with it: the output of 'pkmcal "
-                                                       "verify CALIBRATED.yaml --measurements HELDOUT.csv --json'.")
+@option("--verification", "heldout", old=("--heldout",), metavar="VERIFY.json",
+        help="Held-out figures to keep with it: the output of 'pkmcal verify CALIBRATED.yaml --held-out "
+             "HELDOUT.csv --json'.")
 @click.option("--allow-duplicate", is_flag=True, help="Record the file even if the same file (SHA-256) is already "
                                                       "recorded for this serial.")
 @_db_option
