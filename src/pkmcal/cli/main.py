@@ -55,7 +55,7 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "identify": ("pkmcal.cli.identify_cmds", "identify_cmd",
                  "Identify MACHINE's kinematic parameters from MEAS.csv and write CALIBRATED.yaml."),
     "verify": ("pkmcal.cli.campaign_cmds", "verify_cmd",
-               "Validate CALIBRATED on held-out data: measured (--measurements) or a true machine (--real)."),
+               "Validate CALIBRATED on held-out data: measured (--held-out) or a true machine (--real)."),
     "export": ("pkmcal.cli.export_cmd", "export_cmd",
                "Export the machine in CALIBRATED.yaml (a machine file or built-in name) for a controller."),
     "compensate": ("pkmcal.cli.correct_cmd", "compensate_cmd",
@@ -118,6 +118,10 @@ class PkmcalGroup(click.Group):
                                   and str(w.message) not in str(exc)])
                 _error_line(name_sources(str(exc), sources))
                 sys.exit(exc.exit_code)
+            except click.UsageError:
+                # an old spelling's note (pkmcal.cli.options.deprecated) before the usage error
+                _report_warnings([w for w in caught if issubclass(w.category, PkmcalWarning)])
+                raise
             except MemoryError:
                 _error_line("not enough memory for this request; ask for fewer poses, candidates or samples")
                 sys.exit(PkmcalError.exit_code)
@@ -179,7 +183,7 @@ def _report_warnings(caught: list[warnings.WarningMessage]) -> None:
 EXAMPLES = (
     "pkmcal machines",
     "pkmcal demo",
-    "pkmcal plan stewart-prototype --setup indicators-prototype --n 45 --seed 1 -o poses.csv",
+    "pkmcal plan stewart-prototype --setup indicators-prototype --n-poses 45 --seed 1 -o poses.csv",
     "pkmcal simulate stewart-prototype --real stewart-prototype-real --setup indicators-prototype --poses poses.csv "
     "--seed 2 -o meas.csv",
     "pkmcal identify stewart-prototype meas.csv --setup indicators-prototype -o calibrated.yaml",

@@ -12,7 +12,7 @@ when (θ_B + N t)[g_A] = θ_A[g_A], i.e.
     t = N[g_A]⁻¹ (θ_A[g_A] − θ_B[g_A]),   θ_B' = θ_B + N t,
     Π = I − N N[g_A]⁻¹ E_{g_A},           Σ_B' = Π Σ_B Πᵀ     (Σ_B'[g_A] = 0)
 
-with E_{g_A} the rows of the identity at g_A (tests/history/test_history_gauge.py checks this
+with E_{g_A} the rows of the identity at g_A (tests/history/test_gauge.py checks this
 against a refit of the same data with A's gauge held). N is computed when the calibration is
 recorded (:func:`null_space_of`): the identifiability analysis of the calibrated machine and
 its identified setup at random poses of its workspace (:func:`pkmcal.identification.

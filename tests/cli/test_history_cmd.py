@@ -10,7 +10,7 @@ import shlex
 
 from click.testing import CliRunner
 from helpers import assert_user_error
-from test_cli_examples import examples_of, help_text
+from test_examples import examples_of, help_text
 
 from pkmcal.cli.history_cmd import history_group
 from pkmcal.cli.main import cli
@@ -37,7 +37,7 @@ def test_every_history_example_runs(tmp_path, monkeypatch):
     _campaign(tmp_path)
     _run("identify", "kossel-mini", "m1.csv", *SETUP, "-o", "calibrated.yaml")
     _run("identify", "kossel-mini", "m2.csv", *SETUP, "-o", "recalibrated.yaml")
-    res = _run("verify", "recalibrated.yaml", "--measurements", "held.csv", "--setup", "recalibrated.yaml", "--json")
+    res = _run("verify", "recalibrated.yaml", "--held-out", "held.csv", "--setup", "recalibrated.yaml", "--json")
     (tmp_path / "verify.json").write_text(res.stdout)
     ran = 0
     for name in history_group.commands:           # add first: the others read what it recorded
@@ -60,7 +60,7 @@ def test_identify_records_into_the_history(tmp_path):
     db = tmp_path / "h.sqlite"
     out = tmp_path / "cal.yaml"
     res = _run("identify", "kossel-mini", str(tmp_path / "m1.csv"), *SETUP, "-o", str(out), "--history", str(db),
-               "--serial", "KM-7", "--heldout", str(tmp_path / "held.csv"))
+               "--serial", "KM-7", "--held-out", str(tmp_path / "held.csv"))
     assert f"recorded #1 for serial KM-7 in {db}" in res.stdout
     with open_history(db, create=False) as hist:
         rec = hist.get("KM-7")
@@ -92,7 +92,11 @@ def test_history_user_errors(tmp_path):
     bad_json = tmp_path / "v.json"
     bad_json.write_text('{"after": \n oops}')
     assert_user_error(run.invoke(cli, ["history", "add", str(tmp_path / "c.yaml"), "--serial", "S", "--db", db,
-                                       "--heldout", str(bad_json)]), "v.json, line 2", "pkmcal verify")
+                                       "--verification", str(bad_json)]), "v.json, line 2", "pkmcal verify")
+    # the first spelling still works, with a deprecation note
+    old = run.invoke(cli, ["history", "add", str(tmp_path / "c.yaml"), "--serial", "S", "--db", db, "--heldout",
+                           str(bad_json)])
+    assert "--heldout is deprecated; use --verification" in old.output and "v.json, line 2" in old.output
     assert_user_error(run.invoke(cli, ["history", "add", str(tmp_path / "c.yaml"), "--serial", "", "--db", db]),
                       "--serial")
     _run("history", "add", str(tmp_path / "c.yaml"), "--serial", "S", "--db", db)
