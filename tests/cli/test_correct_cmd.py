@@ -36,7 +36,7 @@ def files(tmp_path_factory):
 
 def test_compensate_keeps_the_mesh_and_writes_klipper_block(files):
     d = files
-    r = run("compensate", d / "cal.yaml", d / "meas.csv", "--heldout", d / "held.csv", "-o", d / "corr.yaml",
+    r = run("compensate", d / "cal.yaml", d / "meas.csv", "--held-out", d / "held.csv", "-o", d / "corr.yaml",
             "--klipper-mesh", d / "mesh.cfg")
     assert r.exit_code == 0, r.output
     assert "correction KEPT" in r.output
@@ -58,7 +58,7 @@ def test_compensate_on_a_flat_bed_writes_nothing(tmp_path):
     r = run("identify", "kossel-mini", tmp_path / "meas.csv", "--setup", "z-probe-klipper", "-o",
             tmp_path / "cal.yaml", "--accept-bad-fit")
     assert r.exit_code == 0, r.output
-    r = run("compensate", tmp_path / "cal.yaml", tmp_path / "meas.csv", "--heldout", tmp_path / "held.csv", "-o",
+    r = run("compensate", tmp_path / "cal.yaml", tmp_path / "meas.csv", "--held-out", tmp_path / "held.csv", "-o",
             tmp_path / "corr.yaml", "--json")
     assert r.exit_code == 0, r.output
     assert '"accepted": false' in r.output and not (tmp_path / "corr.yaml").exists()
@@ -152,7 +152,7 @@ def test_sagging_hexapod_through_the_command_line(tmp_path):
     r = run("identify", "stewart-prototype", tmp_path / "meas.csv", "--setup", "laser-tracker", "-o",
             tmp_path / "cal.yaml", "--accept-bad-fit")
     assert r.exit_code == 0, r.output
-    r = run("compensate", tmp_path / "cal.yaml", tmp_path / "meas.csv", "--heldout", tmp_path / "held.csv",
+    r = run("compensate", tmp_path / "cal.yaml", tmp_path / "meas.csv", "--held-out", tmp_path / "held.csv",
             "--degrees", "0,1,2", "-o", tmp_path / "corr.yaml")
     assert r.exit_code == 0 and "correction KEPT: polynomial of degree 2" in r.output, r.output
     targets = case.heldout.commanded[case.heldout.kept][:5]
