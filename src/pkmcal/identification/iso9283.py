@@ -352,7 +352,8 @@ class Iso9283Report:
                    "instrument-limited": "the instrument alone would show more than 25 % of this repeatability"}[note]
             lines.append(f"  * {name}: {why}")
         if self.predicted_mm is not None:
-            lines.append("  predicted by the calibration's covariance (95 %): AP_P <= " + ", ".join(
+            lines.append("  predicted before measuring (95 %, the calibrated file's covariance max(1, chi2/E[chi2]) x "
+                         "C_prior): AP_P <= " + ", ".join(
                 f"P{i + 1} {1e3 * v:.2f} µm" if v < 0.1 else f"P{i + 1} {v:.4f} mm"
                 for i, v in enumerate(self.predicted_mm)))
         lines.append(f"  uncertainty: {self.uncertainty}")
@@ -612,8 +613,11 @@ def measured_report(mechanism: Mechanism, setup, readings: np.ndarray, commanded
     if sensor_cov is not None:
         what += f" and the registration of the instrument ({covariance_note or 'its identified covariance'})"
     predicted = None
-    if machine_covariance is not None:
-        predicted = predicted_accuracy(mechanism, machine_covariance, cmd5).position
+    if machine_covariance is not None:      # the tool point (its offset exact: the sensor's rows zero)
+        p = len(machine_covariance)
+        joint = np.zeros((p + len(setup.sensor.params),) * 2)
+        joint[:p, :p] = machine_covariance
+        predicted = predicted_accuracy(mechanism, joint, cmd5, sensor=setup.sensor).position
     return iso9283_figures(arrange(label, e), cmd5, row_cov=arrange(label, row_cov), common=common,
                            common_cov=sensor_cov, uncertainty="GUM first order, k = 2, from the " + what,
                            predicted_mm=predicted)
