@@ -300,6 +300,8 @@ class Iso9283Report:
     uncertainty: str
     predicted_mm: tuple[float, ...] | None = None
     notes: tuple[str, ...] = field(default_factory=tuple)
+    #: the key of ``verify --json`` that holds it
+    json_key = "iso9283"
 
     def get(self, name: str, pose: str) -> Figure:
         for f in self.figures:
