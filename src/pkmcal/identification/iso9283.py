@@ -213,12 +213,14 @@ def detect_pattern(mechanism: Mechanism, poses: np.ndarray, *, rtol: float = 1e-
     orientation, P1 the centre of P2…P5, these the corners of a rectangle on a diagonal plane
     of an axis-parallel cube (edges 0.8 s along an axis and 0.8 s√2 along a face diagonal);
     P2…P5 numbered in order of first appearance, P4 the pose opposite P2. Otherwise the
-    reason (one sentence). Poses equal to ``rtol`` × their scale are the same pose."""
+    reason (one sentence). Poses equal to ``rtol`` × the largest |x|, |y|, |z| (lengths) and
+    to ``rtol`` rad (angles) are the same pose."""
     poses = np.asarray(poses, dtype=float)
     if tuple(mechanism.pose_names[:3]) != ("x", "y", "z") or len(poses) < 10:
         return "not five poses repeated in cycles"
     scale = max(1.0, float(np.max(np.abs(poses[:, :3]))))
-    key = np.round(poses / (rtol * scale)).astype(np.int64)
+    unit = np.where(np.arange(poses.shape[1]) < 3, scale, 1.0)          # lengths by their scale, angles (rad)
+    key = np.round(poses / (rtol * unit)).astype(np.int64)
     uniq, first, inverse, counts = np.unique(key, axis=0, return_index=True, return_inverse=True, return_counts=True)
     inverse = inverse.reshape(-1)
     if len(uniq) != 5:
@@ -232,7 +234,7 @@ def detect_pattern(mechanism: Mechanism, poses: np.ndarray, *, rtol: float = 1e-
     p = pts[:, :3]
     centre_of = np.array([np.abs(p[i] - np.delete(p, i, axis=0).mean(axis=0)).max() for i in range(5)])
     i1 = int(np.argmin(centre_of))
-    tol = 1e-6 * scale + rtol * scale
+    tol = 2.0 * rtol * scale                           # the keys' rounding, twice
     if centre_of[i1] > tol:
         return "no pose is the centre of the other four"
     rest = [i for i in range(5) if i != i1]
