@@ -306,7 +306,10 @@ def test_predicted_accuracy_covers_monte_carlo_calibrations():
     machines drawn with that covariance (true ρ = ρ̂ − δρ, δρ ~ N(0, C)), commanded through
     ρ̂ to P1..P5 and solved by FK exactly: the fraction inside the bound is 95 % within the
     binomial band of 1000 draws (FALSE_FAILURE over 10 bounds) widened by 1.5 % for
-    Patnaik's approximation, for position and orientation."""
+    Patnaik's approximation (its quantile within 1.5 %: test_norm_quantile_against_sampling;
+    that moves the coverage by f(q)·q·1.5 % ≤ 0.35·1.5 % ≈ 0.5 % for a norm of 1 to 3
+    Gaussian components, f the norm's density at its 95 % quantile q), for position and
+    orientation."""
     m = load_machine("stewart-prototype")
     setup = load_setup("full-pose-paper1", m)
     rng = np.random.default_rng(8)
