@@ -76,7 +76,7 @@ def test_a_machine_without_a_stroke_has_nothing_clipped():
 def test_identify_reports_drops_keeps_or_refuses_clipped_poses(tmp_path):
     runner = CliRunner()
     poses, meas = tmp_path / "poses.csv", tmp_path / "meas.csv"
-    res = runner.invoke(cli, ["plan", "stewart-prototype", "--setup", "full-pose-paper1", "--n", "20",
+    res = runner.invoke(cli, ["plan", "stewart-prototype", "--setup", "full-pose-paper1", "--n-poses", "20",
                               "--n-candidates", "300", "--seed", "3", "-o", str(poses)])
     assert res.exit_code == 0, res.output
     res = runner.invoke(cli, ["simulate", "stewart-prototype", "--real", "stewart-prototype-real", "--setup",

@@ -54,9 +54,9 @@ def test_measurement_day_on_every_machine(machine, setup, formats, tmp_path):
         (d / setup).write_text(ENCODERS)
         setup = d / setup
     run("info", machine)
-    run("plan", machine, "--setup", setup, "--n", 40, "--seed", 1, "-o", d / "poses.csv")
-    run("plan", machine, "--setup", setup, "--n", 20, "--algorithm", "random", "--seed", 2, "-o", d / "held.csv")
-    run("ik", machine, d / "poses.csv", "-o", d / "legs.csv")
+    run("plan", machine, "--setup", setup, "--n-poses", 40, "--seed", 1, "-o", d / "poses.csv")
+    run("plan", machine, "--setup", setup, "--n-poses", 20, "--algorithm", "random", "--seed", 2, "-o", d / "held.csv")
+    run("ik", machine, "--poses", d / "poses.csv", "-o", d / "legs.csv")
     run("fk", machine, d / "legs.csv", "-o", d / "fk.csv")
     planned, back = _columns(d / "poses.csv"), _columns(d / "fk.csv")
     assert set(back["converged"]) == {"1"}
@@ -72,7 +72,7 @@ def test_measurement_day_on_every_machine(machine, setup, formats, tmp_path):
         "-o", d / "heldmeas.csv")
     run("identify", machine, d / "meas.csv", "--setup", setup, "-o", d / "cal.yaml", "--report", d / "report")
     assert (d / "report" / "report.html").is_file()
-    held = json.loads(run("verify", d / "cal.yaml", "--measurements", d / "heldmeas.csv", "--setup", d / "cal.yaml",
+    held = json.loads(run("verify", d / "cal.yaml", "--held-out", d / "heldmeas.csv", "--setup", d / "cal.yaml",
                           "--json"))
     assert held["after"]["n_poses"] == held["before"]["n_poses"] > 0
     reads = "position_rms_mm" if held["after"]["position_rms_mm"] is not None else "reading_rms_mm"

@@ -70,6 +70,8 @@ def _files(tokens: list[str]) -> tuple[set[str], set[str]]:
                 written.add(tok)
         elif tok.endswith((".csv", ".yaml", ".yml")) and tok not in OUTPUT_OPTIONS:
             read.add(tok)
+        elif i and tokens[i - 1] == "--db":     # pkmcal history: 'add' writes the database, the others read it
+            (written if tokens[1:3] == ["history", "add"] else read).add(tok)
     return read - written, written
 
 

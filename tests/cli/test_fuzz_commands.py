@@ -115,7 +115,7 @@ def templates() -> dict[str, list[str]]:
     obs_poses = ["--poses", "{}/poses.csv"] if _has_option("observability", "--poses") else ["{}/poses.csv"]
     info_n = "--n-poses" if _has_option("info", "--n-poses") else "--poses"
     return {
-        "ik": ["ik", "{}/machine.yaml", "{}/poses.csv", "-o", "{}/out.csv"],
+        "ik": ["ik", "{}/machine.yaml", "--poses", "{}/poses.csv", "-o", "{}/out.csv"],
         "fk": ["fk", "{}/machine.yaml", "{}/legs.csv", "-o", "{}/out.csv", "--guess", "0,0,315,0,0,0"],
         "observability": ["observability", "{}/machine.yaml", *obs_poses, "--setup", "{}/ind.yaml", "--json"],
         "identifiability": ["identifiability", "{}/machine.yaml", "--setup", "{}/ind.yaml", "--poses",
@@ -135,7 +135,7 @@ def templates() -> dict[str, list[str]]:
                    "{}/machine.yaml", "--json", "-o", "{}/out.txt"],
         "export-hal": ["export", "{}/cal.yaml", "--format", "linuxcnc", "-o", "{}/out.hal"],
         "export-json": ["export", "{}/cal.yaml", "--format", "json", "-o", "{}/out.json"],
-        "plan": ["plan", "{}/machine.yaml", "--setup", "{}/ind.yaml", "--n", "14", "--n-candidates", "200",
+        "plan": ["plan", "{}/machine.yaml", "--setup", "{}/ind.yaml", "--n-poses", "14", "--n-candidates", "200",
                  "--algorithm", "random", "-o", "{}/out.csv", "--seed", "1"],
         "info": ["info", "{}/machine.yaml", info_n, "5", "--seed", "1"],
         "info-symmetric": ["info", "symmetric:base_radius=150,platform_radius=80", info_n, "5"],
@@ -241,7 +241,7 @@ def check_contract(res, d: Path, before: dict[str, str], args: list[str]) -> Non
         # warnings that may explain the error (angles that look like radians, ...: never numerical ones)
         assert err.endswith("\n") and err.count("\n") == len(lines), (args, err)
         assert lines[-1].startswith("pkmcal: error: "), (args, err)
-        assert all(line.startswith(("pkmcal: deprecated: ", "pkmcal: warning: ")) for line in lines[:-1]), (args, err)
+        assert all(line.startswith("pkmcal: warning: ") for line in lines[:-1]), (args, err)
         assert set(after) == set(before), f"{args} failed but wrote {set(after) - set(before)}"
         for name, path in _machine_files(args).items():  # an error about a machine names its file
             if f"machine '{name}'" in err:
@@ -393,7 +393,7 @@ def test_fuzz_option_values(base, tmp_path_factory, name, data):
 OUTPUT_SLOTS = {  # command line, the option whose value is replaced (added when missing)
     "ik": "-o", "fk": "-o", "simulate": "-o", "simulate-random": "--save-real", "identify": "--report",
     "identify-indicators": "-o", "verify": "-o", "export-hal": "-o", "export-json": "-o", "plan": "-o",
-    "demo": "--out", "reproduce": "-o"}
+    "demo": "-o", "reproduce": "-o"}
 
 
 @fuzz_settings(40)
@@ -401,7 +401,7 @@ OUTPUT_SLOTS = {  # command line, the option whose value is replaced (added when
 def test_fuzz_bad_output_locations(base, tmp_path_factory, name, data):
     """Every output of every command given an impossible location: refused before anything
     is read, computed or written (exit 2, one line, no file)."""
-    extra = {"demo": ["demo", "--out", "X"], "reproduce": ["reproduce", "paper2-table5", "--quick", "-o", "X"]}
+    extra = {"demo": ["demo", "-o", "X"], "reproduce": ["reproduce", "paper2-table5", "--quick", "-o", "X"]}
     if name in extra:
         d = tmp_path_factory.mktemp("run")
         shutil.copytree(base, d, dirs_exist_ok=True)
@@ -411,7 +411,7 @@ def test_fuzz_bad_output_locations(base, tmp_path_factory, name, data):
     option = OUTPUT_SLOTS[name]
     if option not in args:
         args += [option, "X"]
-    bad = BAD_FOLDERS if option in ("--report", "--out") else BAD_FILES
+    bad = BAD_FOLDERS if option == "--report" or name == "demo" else BAD_FILES
     where = data.draw(st.sampled_from([b for b in bad if not (b == "INPUT" and name in extra)]))
     args[args.index(option) + 1] = _token(where, d, inputs)
     before = snapshot(d)
@@ -812,7 +812,7 @@ def test_uncreatable_report_folder_writes_nothing(tmp_path, base):
 
 def test_uncreatable_demo_folder(tmp_path):
     (tmp_path / "file").write_text("x")
-    assert_user_error(run("demo", "--out", tmp_path / "file" / "out"), "--out", "is not a folder")
+    assert_user_error(run("demo", "-o", tmp_path / "file" / "out"), "-o", "is not a folder")
     assert sorted(os.listdir(tmp_path)) == ["file"]
 
 
@@ -843,12 +843,12 @@ def test_ik_is_written_in_blocks_with_the_same_bytes(tmp_path, base, monkeypatch
     output, to a file and to standard output."""
     from pkmcal.cli import kinematics_cmds
 
-    res = run("ik", base / "machine.yaml", base / "poses.csv", "-o", tmp_path / "one.csv")
+    res = run("ik", base / "machine.yaml", "--poses", base / "poses.csv", "-o", tmp_path / "one.csv")
     assert res.exit_code == 0
     monkeypatch.setattr(kinematics_cmds, "_IK_BLOCK", 5)
-    assert run("ik", base / "machine.yaml", base / "poses.csv", "-o", tmp_path / "blocks.csv").exit_code == 0
+    assert run("ik", base / "machine.yaml", "--poses", base / "poses.csv", "-o", tmp_path / "blocks.csv").exit_code == 0
     assert (tmp_path / "blocks.csv").read_bytes() == (tmp_path / "one.csv").read_bytes()
-    assert run("ik", base / "machine.yaml", base / "poses.csv").stdout == (tmp_path / "one.csv").read_text()
+    assert run("ik", base / "machine.yaml", "--poses", base / "poses.csv").stdout == (tmp_path / "one.csv").read_text()
     lines = (tmp_path / "one.csv").read_text().splitlines()
     assert sum(not s.startswith("#") for s in lines) == 15  # one header, 14 rows
 
@@ -860,17 +860,18 @@ def test_ik_error_after_the_first_block_writes_nothing(tmp_path, base, monkeypat
     text = (base / "poses.csv").read_text().splitlines()
     text[-1] = text[-1].replace(",", ",x", 1)
     (tmp_path / "p.csv").write_text("\n".join(text) + "\n")
-    assert_user_error(run("ik", base / "machine.yaml", tmp_path / "p.csv", "-o", tmp_path / "o.csv"), "is not a number")
+    assert_user_error(run("ik", base / "machine.yaml", "--poses", tmp_path / "p.csv", "-o", tmp_path / "o.csv"), "is not a number")
     assert sorted(os.listdir(tmp_path)) == ["p.csv"]
 
 
 # -- hygiene -------------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("args, fragment", [
-    (("ik", "stewart-prototype"), "Missing argument 'POSES"),
-    (("ik", "stewart-prototype"), "(usage: cli ik [OPTIONS] MACHINE POSES"),
-    (("ik", "stewart-prototype"), "see 'cli ik --help')"),
-    (("ik", "stewart-prototype", "p.csv", "--bogus"), "No such option '--bogus'"),
+    (("fk", "stewart-prototype"), "Missing argument 'LEGS.csv'"),
+    (("fk", "stewart-prototype"), "(usage: cli fk [OPTIONS] MACHINE LEGS.csv"),
+    (("fk", "stewart-prototype"), "see 'cli fk --help')"),
+    (("ik", "stewart-prototype"), "Missing option '--poses'"),
+    (("ik", "stewart-prototype", "--poses", "p.csv", "--bogus"), "No such option '--bogus'"),
     (("export", "stewart-prototype", "--format", "xml"), "'xml' is not one of 'linuxcnc', 'json'"),
     (("no-such-command",), "No such command 'no-such-command'"),
     (("--bogus",), "No such option '--bogus'"),
@@ -942,7 +943,7 @@ def test_atomic_writer_removes_its_temporary_on_error(tmp_path):
 
 
 @pytest.mark.parametrize("command", [
-    ("ik", "stewart-prototype", "POSES", "-o"), ("fk", "stewart-prototype", "LEGS", "-o"),
+    ("ik", "stewart-prototype", "--poses", "POSES", "-o"), ("fk", "stewart-prototype", "LEGS", "-o"),
     ("export", "stewart-prototype", "--format", "json", "-o"),
     ("simulate", "stewart-prototype", "--real", "stewart-prototype-real", "--setup", "indicators-prototype",
      "--poses", "POSES", "-o"),

@@ -118,8 +118,8 @@ FIFO_COMMANDS = {   # (command line, which input is the pipe, what the message c
                     "{}/out.yaml"], "setup file"),
     "measurement file": (["identify", "{}/machine.yaml", "{}/p.csv", "--setup", "{}/ind.yaml", "-o",
                           "{}/out.yaml"], "measurement file"),
-    "pose table": (["ik", "{}/machine.yaml", "{}/p.csv", "-o", "{}/out.csv"], "table"),
-    "candidates": (["plan", "{}/machine.yaml", "--setup", "{}/ind.yaml", "--n", "5", "--candidates", "{}/p.csv",
+    "pose table": (["ik", "{}/machine.yaml", "--poses", "{}/p.csv", "-o", "{}/out.csv"], "table"),
+    "candidates": (["plan", "{}/machine.yaml", "--setup", "{}/ind.yaml", "--n-poses", "5", "--candidates", "{}/p.csv",
                     "-o", "{}/out.csv"], "table"),
     "study file": (["study", "{}/p.yaml", "-o", "{}/res"], "study file"),
 }
@@ -474,7 +474,7 @@ def test_a_failed_study_keeps_only_what_resume_needs(tmp_path, monkeypatch):
 @pytest.mark.parametrize("args", [
     ["identify", "{}/machine.yaml", "{}/meas_ind.csv", "--setup", "{}/ind.yaml", "-o", "{}/out.yaml", "--report",
      "/proc/pkmcal-report"],
-    ["demo", "--out", "/proc/pkmcal-demo"],
+    ["demo", "-o", "/proc/pkmcal-demo"],
     ["study", "{}/study-quick.yaml", "-o", "/proc/pkmcal-study"],
     ["identify", "{}/machine.yaml", "{}/meas_ind.csv", "--setup", "{}/ind.yaml", "-o", "/proc/out.yaml"],
 ])

@@ -44,7 +44,7 @@ def _independent_lengths(machine, poses_deg):
 def test_ik_values_and_reachability(tmp_path):
     _write_poses(tmp_path / "poses.csv")
     out = tmp_path / "legs.csv"
-    result = run("ik", "stewart-prototype", str(tmp_path / "poses.csv"), "-o", str(out))
+    result = run("ik", "stewart-prototype", "--poses", str(tmp_path / "poses.csv"), "-o", str(out))
     assert result.exit_code == 0, result.output
     assert "4 poses, 3 reachable" in result.stderr
     m = stewart_prototype()
@@ -61,7 +61,7 @@ def test_ik_values_and_reachability(tmp_path):
 
 def test_ik_to_stdout_and_fk_round_trip(tmp_path):
     _write_poses(tmp_path / "poses.csv", POSES[:3])
-    ik = run("ik", "stewart-prototype-real", str(tmp_path / "poses.csv"))
+    ik = run("ik", "stewart-prototype-real", "--poses", str(tmp_path / "poses.csv"))
     assert ik.exit_code == 0
     (tmp_path / "legs.csv").write_text(ik.stdout)
     fk = run("fk", "stewart-prototype-real", str(tmp_path / "legs.csv"), "-o", str(tmp_path / "back.csv"))
@@ -104,8 +104,8 @@ def test_fk_reports_non_converged_rows_and_exits_0(tmp_path):
 def test_machine_file_argument(tmp_path):
     save_machine(load_machine("stewart-prototype-real"), tmp_path / "m.yaml")
     _write_poses(tmp_path / "poses.csv", POSES[:2])
-    a = run("ik", str(tmp_path / "m.yaml"), str(tmp_path / "poses.csv"))
-    b = run("ik", "stewart-prototype-real", str(tmp_path / "poses.csv"))
+    a = run("ik", str(tmp_path / "m.yaml"), "--poses", str(tmp_path / "poses.csv"))
+    b = run("ik", "stewart-prototype-real", "--poses", str(tmp_path / "poses.csv"))
     assert a.exit_code == 0 and a.stdout == b.stdout
 
 
@@ -123,7 +123,7 @@ def test_machine_file_argument(tmp_path):
 def test_ik_input_errors(tmp_path, content, fragments):
     (tmp_path / "poses.csv").write_text(content)
     out = tmp_path / "out.csv"
-    res = run("ik", "stewart-prototype", str(tmp_path / "poses.csv"), "-o", str(out))
+    res = run("ik", "stewart-prototype", "--poses", str(tmp_path / "poses.csv"), "-o", str(out))
     assert_user_error(res, *fragments)
     assert not out.exists()
 
@@ -131,23 +131,23 @@ def test_ik_input_errors(tmp_path, content, fragments):
 def test_machine_errors(tmp_path):
     _write_poses(tmp_path / "poses.csv")
     out = tmp_path / "out.csv"
-    assert_user_error(run("ik", "no-such-machine", str(tmp_path / "poses.csv"), "-o", str(out)),
+    assert_user_error(run("ik", "no-such-machine", "--poses", str(tmp_path / "poses.csv"), "-o", str(out)),
                        "unknown machine 'no-such-machine'")
     bad = tmp_path / "bad.yaml"
     bad.write_text("name: x\nlegs:\n  - {base: [0, 0, 0], platform: [0, 0, 0], offset: 1, stroke: [0, 1]}\n")
     assert_user_error(run("fk", str(bad), str(tmp_path / "poses.csv"), "-o", str(out)),
                        "bad.yaml, line 2", "legs: 1 legs given, a hexapod needs exactly 6")
-    assert_user_error(run("ik", str(tmp_path / "missing.yaml"), str(tmp_path / "poses.csv")), "no such machine file")
+    assert_user_error(run("ik", str(tmp_path / "missing.yaml"), "--poses", str(tmp_path / "poses.csv")), "no such machine file")
     assert not out.exists()
 
 
 def test_file_errors(tmp_path):
     out = tmp_path / "out.csv"
-    assert_user_error(run("ik", "stewart-prototype", str(tmp_path / "none.csv"), "-o", str(out)),
+    assert_user_error(run("ik", "stewart-prototype", "--poses", str(tmp_path / "none.csv"), "-o", str(out)),
                        "none.csv", "cannot read the table")
-    assert_user_error(run("ik", "stewart-prototype", str(tmp_path), "-o", str(out)), "cannot read the table")
+    assert_user_error(run("ik", "stewart-prototype", "--poses", str(tmp_path), "-o", str(out)), "cannot read the table")
     _write_poses(tmp_path / "poses.csv")
-    assert_user_error(run("ik", "stewart-prototype", str(tmp_path / "poses.csv"), "-o",
+    assert_user_error(run("ik", "stewart-prototype", "--poses", str(tmp_path / "poses.csv"), "-o",
                            str(tmp_path / "no-dir" / "out.csv")), "cannot write")
     assert sorted(os.listdir(tmp_path)) == ["poses.csv"]
 
@@ -155,10 +155,10 @@ def test_file_errors(tmp_path):
 def test_output_equal_to_input_is_refused(tmp_path):
     _write_poses(tmp_path / "poses.csv")
     before = (tmp_path / "poses.csv").read_bytes()
-    assert_user_error(run("ik", "stewart-prototype", str(tmp_path / "poses.csv"), "-o", str(tmp_path / "poses.csv")),
+    assert_user_error(run("ik", "stewart-prototype", "--poses", str(tmp_path / "poses.csv"), "-o", str(tmp_path / "poses.csv")),
                        "is the input file")
     save_machine(stewart_prototype(), tmp_path / "m.yaml")
-    assert_user_error(run("ik", str(tmp_path / "m.yaml"), str(tmp_path / "poses.csv"), "-o", str(tmp_path / "m.yaml")),
+    assert_user_error(run("ik", str(tmp_path / "m.yaml"), "--poses", str(tmp_path / "poses.csv"), "-o", str(tmp_path / "m.yaml")),
                        "is the input file")
     assert (tmp_path / "poses.csv").read_bytes() == before
 
@@ -240,7 +240,7 @@ def test_single_axis_ranges_are_the_limits():
 def test_planar_machine_ik_fk_round_trip(tmp_path):
     """The commands work for any Mechanism: paper 3's redundant planar machine (x, y, phi; q1..q4)."""
     (tmp_path / "p.csv").write_text("x,y,phi\n0,230,0\n10,200,5\n")
-    ik = run("ik", "planar-3dof-4act", str(tmp_path / "p.csv"), "-o", str(tmp_path / "q.csv"))
+    ik = run("ik", "planar-3dof-4act", "--poses", str(tmp_path / "p.csv"), "-o", str(tmp_path / "q.csv"))
     assert ik.exit_code == 0, ik.output
     assert (tmp_path / "q.csv").read_text().splitlines()[0] == "x,y,phi,q1,q2,q3,q4,reachable"
     fk = run("fk", "planar-3dof-4act", str(tmp_path / "q.csv"))
@@ -253,7 +253,7 @@ def test_planar_machine_ik_fk_round_trip(tmp_path):
 def test_rotary_actuators_are_degrees_in_files(tmp_path):
     m = load_machine("planar-2dof-3act")
     (tmp_path / "p.csv").write_text("x,y\n0,200\n10,220\n")
-    ik = run("ik", "planar-2dof-3act", str(tmp_path / "p.csv"), "-o", str(tmp_path / "q.csv"))
+    ik = run("ik", "planar-2dof-3act", "--poses", str(tmp_path / "p.csv"), "-o", str(tmp_path / "q.csv"))
     assert ik.exit_code == 0, ik.output
     q = read_table(tmp_path / "q.csv", ("q1", "q2", "q3"))
     np.testing.assert_allclose(q.values, np.rad2deg(m.ik(np.array([[0, 200.0], [10, 220.0]]))), rtol=1e-15)
@@ -261,3 +261,28 @@ def test_rotary_actuators_are_degrees_in_files(tmp_path):
     fk = run("fk", "planar-2dof-3act", str(tmp_path / "q.csv"))
     back = read_table("fk", ("x", "y"), text=fk.stdout)
     np.testing.assert_allclose(back.values, [[0, 200], [10, 220]], atol=1e-8)
+
+
+@pytest.mark.parametrize("args", [["stewart-prototype", "--n-poses", "60"], ["planar-3dof-4act"],
+                                  ["kossel-mini", "--n-poses", "40", "--seed", "3"]])
+def test_info_json_is_the_text_and_in_mm_and_degrees(args):
+    """``info --json`` carries every figure the text prints (the text is made from the same
+    dict: info_lines of the parsed JSON is the printed text), its workspace ranges are
+    single_axis_ranges in mm and degrees, and its counts add up."""
+    import json
+
+    from pkmcal.cli.info_cmd import info_lines
+
+    text, js = run("info", *args), run("info", *args, "--json")
+    assert text.exit_code == js.exit_code == 0, js.output
+    data = json.loads(js.stdout)
+    assert info_lines(data) == text.stdout.splitlines()
+    mech, _ = load_machine(args[0]).within_geometry()
+    ranges, stops = single_axis_ranges(mech, np.asarray(mech.home_pose, dtype=float))
+    for k, name in enumerate(mech.pose_names):
+        r = data["workspace"]["ranges"][name]
+        scale = 180.0 / np.pi if mech.pose_is_angle[k] else 1.0
+        assert r["unit"] == ("deg" if mech.pose_is_angle[k] else "mm") and r["stopped_by"] == stops[k]
+        assert [r["min"], r["max"]] == pytest.approx(ranges[k] * scale, rel=1e-12)
+    rt = data["round_trip"]
+    assert rt["returned"] + rt["other_mode"] + rt["other_pose"] + rt["not_converged"] == rt["n"]

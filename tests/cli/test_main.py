@@ -51,7 +51,7 @@ def test_python_dash_m_pkmcal_is_the_pkmcal_command():
     exits 2 with one line)."""
     ok = subprocess.run([sys.executable, "-m", "pkmcal", "--help"], capture_output=True, text=True)
     assert ok.returncode == 0 and ok.stdout.startswith("Usage: pkmcal "), ok.stdout[:200]
-    bad = subprocess.run([sys.executable, "-m", "pkmcal", "ik", "no-such-machine", "poses.csv"],
+    bad = subprocess.run([sys.executable, "-m", "pkmcal", "ik", "no-such-machine", "--poses", "poses.csv"],
                          capture_output=True, text=True)
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1, bad.stderr
 

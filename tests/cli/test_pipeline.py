@@ -87,7 +87,7 @@ def test_outputs_never_replace_inputs(tmp_path):
         (*IDENT, tmp_path / "meas.csv", "-o", tmp_path / "cal.yaml", "--report", tmp_path / "meas.csv"),
         ("verify", "stewart-prototype", "--real", "stewart-prototype-real", "--poses", tmp_path / "poses.csv",
          "-o", tmp_path / "poses.csv"),
-        ("ik", "stewart-prototype", tmp_path / "poses.csv", "-o", tmp_path / "poses.csv"),
+        ("ik", "stewart-prototype", "--poses", tmp_path / "poses.csv", "-o", tmp_path / "poses.csv"),
     ]
     for args in cases:
         res = run(*args)

@@ -16,7 +16,7 @@ from pkmcal.mechanisms import builtin_machine
 def test_plan_writes_poses_and_commands_in_file_units(name, tmp_path):
     mech = builtin_machine(name)
     out = tmp_path / "poses.csv"
-    res = CliRunner().invoke(cli, ["plan", name, "--setup", "planar-tracker", "--n", "6", "--n-candidates", "80",
+    res = CliRunner().invoke(cli, ["plan", name, "--setup", "planar-tracker", "--n-poses", "6", "--n-candidates", "80",
                                    "-o", str(out)])
     assert res.exit_code == 0, res.output
     assert out.read_text().startswith(",".join(mech.pose_names + mech.actuator_names) + "\n")  # plain CSV
@@ -61,7 +61,7 @@ def test_candidate_angles_beyond_180_are_planned_and_written_wrapped(tmp_path):
     cand = tmp_path / "cand.csv"
     cand.write_text("x,y,z,a,b,c\n" + "".join(",".join(repr(float(v)) for v in row) + "\n" for row in turned))
     out = tmp_path / "p.csv"
-    res = CliRunner().invoke(cli, ["plan", "stewart-prototype", "--setup", "full-pose-paper1", "--n", "12",
+    res = CliRunner().invoke(cli, ["plan", "stewart-prototype", "--setup", "full-pose-paper1", "--n-poses", "12",
                                    "--candidates", str(cand), "-o", str(out)])
     assert res.exit_code == 0, res.output
     assert "30 of the 40 candidate poses have angles beyond ±180 deg" in res.output
@@ -86,7 +86,7 @@ def test_declared_workspace_beyond_the_euler_range_is_clipped_with_a_note(tmp_pa
                        + "workspace: {x: [-20, 20], y: [-20, 20], z: [300, 330], a: [-400, 400], b: [-100, 30], "
                        + "c: [-10, 10]}\n")
     out = tmp_path / "p.csv"
-    res = CliRunner().invoke(cli, ["plan", str(machine), "--setup", "full-pose-paper1", "--n", "8",
+    res = CliRunner().invoke(cli, ["plan", str(machine), "--setup", "full-pose-paper1", "--n-poses", "8",
                                    "--n-candidates", "100", "-o", str(out)])
     assert res.exit_code == 0, res.output
     assert "workspace box ('workspace:' in the machine file) is clipped: a [-400, 400] deg -> [-180, 180], " \
@@ -97,3 +97,35 @@ def test_declared_workspace_beyond_the_euler_range_is_clipped_with_a_note(tmp_pa
     # passes): planning draws in the reach from home instead, and says so
     assert "workspace box ('workspace:' in the machine file) is mostly beyond what the machine reaches" in res.output
     assert np.all(np.abs(got[:, 3:5]) < 15.0)
+
+
+@pytest.mark.parametrize("args", [
+    ["stewart-prototype", "--setup", "indicators-prototype", "--n-poses", "15", "--n-candidates", "300", "--seed", "1"],
+    ["kossel-mini", "--setup", "z-probe-klipper", "--n-poses", "20", "--target-accuracy", "0.003"],
+])
+def test_plan_json_is_the_printed_summary(args, tmp_path):
+    """``plan --json`` carries what the text summary prints (the text is made from the same
+    dict); its counts add up, its indices are the written poses' (pkmcal observability); the
+    same plan either way (same seed, same bytes); -o - with --json is refused."""
+    import json
+
+    from pkmcal.cli.plan_cmds import plan_summary_lines
+
+    text = CliRunner().invoke(cli, ["plan", *args, "-o", str(tmp_path / "a.csv")])
+    js = CliRunner().invoke(cli, ["plan", *args, "-o", str(tmp_path / "b.csv"), "--json"])
+    assert text.exit_code == js.exit_code == 0, js.output
+    assert (tmp_path / "a.csv").read_bytes() == (tmp_path / "b.csv").read_bytes()
+    data = json.loads(js.stdout)
+    assert plan_summary_lines(data) + [f"wrote {tmp_path / 'a.csv'}"] == text.stdout.splitlines()
+    cand = data["candidates"]
+    assert cand["accepted"] <= cand["tested"] and data["output"] == str(tmp_path / "b.csv")
+    assert data["selection"]["n_poses"] == int(args[args.index("--n-poses") + 1])
+    obs = CliRunner().invoke(cli, ["observability", args[0], "--setup", args[2], "--poses", str(tmp_path / "a.csv"),
+                                   "--json"])
+    assert obs.exit_code == 0, obs.output
+    observed = json.loads(obs.stdout)
+    for k, v in data["indices"].items():
+        # the same function of the same poses (the CSV holds them in degrees to repr precision: round-off)
+        assert v == pytest.approx(observed[k], rel=1e-9), k
+    res = CliRunner().invoke(cli, ["plan", *args, "--json"])
+    assert res.exit_code == 2 and "-o FILE" in res.stderr

@@ -183,7 +183,7 @@ def test_planar_ik_uses_actuator_is_angle(tmp_path):
     nominal = builtin_machine("planar-2dof-3act")
     poses = _write_poses(tmp_path / "poses.csv", nominal, CASE1_POSES[:2])
     out = tmp_path / "q.csv"
-    _ok(run("ik", nominal.name, poses, "-o", out))
+    _ok(run("ik", nominal.name, "--poses", poses, "-o", out))
     t = read_table(out, ("q1", "q2", "q3"), kinds={})
     np.testing.assert_allclose(t.values, np.rad2deg(nominal.ik(CASE1_POSES[:2])), rtol=0, atol=1e-12)
 

@@ -127,7 +127,7 @@ def verify_json(*args) -> dict:
 
 
 def test_noise_free_after_is_rounding(exact):
-    d = verify_json(exact / "cal.yaml", "--measurements", exact / "held.csv", "--setup", exact / "setup.yaml")
+    d = verify_json(exact / "cal.yaml", "--held-out", exact / "held.csv", "--setup", exact / "setup.yaml")
     for key in ("after", "after_reregistered"):
         assert d[key]["position_max_mm"] < 1e-9, d[key]
         assert d[key]["orientation_rms_deg"] < 1e-9, d[key]
@@ -139,7 +139,7 @@ def test_noise_free_after_is_rounding(exact):
 
 
 def test_json_keys_units_and_pose_numbers(exact):
-    d = verify_json(exact / "cal.yaml", "--measurements", exact / "held.csv")   # the setup from CAL's setup:
+    d = verify_json(exact / "cal.yaml", "--held-out", exact / "held.csv")   # the setup from CAL's setup:
     assert uncovered(d) == []
     for key in MODELS:
         for k in ("position_mean_mm", "position_rms_mm", "position_max_mm", "orientation_rms_deg", "n_poses"):
@@ -158,20 +158,20 @@ def test_failed_and_clipped_poses_are_listed_with_their_numbers(exact, tmp_path)
     lines[4][k] = repr(float(NOMINAL.stroke[0][1]) + 5.0)   # pose 5: beyond the stroke (clipped)
     lines[9][k] = repr(float(NOMINAL.stroke[0][0]))          # pose 10: at the stroke's end (stuck)
     (tmp_path / "h.csv").write_text(rows[0] + "\n" + "".join(",".join(r) + "\n" for r in lines))
-    d = verify_json(exact / "cal.yaml", "--measurements", tmp_path / "h.csv")
+    d = verify_json(exact / "cal.yaml", "--held-out", tmp_path / "h.csv")
     assert sorted(c["pose"] for c in d["clipped"]) == [5, 10]
     assert 5 not in [p["pose"] for p in d["per_pose"]] and d["n_poses"] == 23
-    d = verify_json(exact / "cal.yaml", "--measurements", tmp_path / "h.csv", "--clipped", "keep")
+    d = verify_json(exact / "cal.yaml", "--held-out", tmp_path / "h.csv", "--clipped", "keep")
     assert d["n_poses_file"] == 25
     failed = {f["pose"] for f in d["failed"]}
     assert 5 in failed or 5 in {p["pose"] for p in d["per_pose"]}   # kept: solved or listed, never dropped silently
     assert len(failed) + d["n_poses"] == 25
-    assert_user_error(run("verify", exact / "cal.yaml", "--measurements", tmp_path / "h.csv", "--clipped", "error"),
+    assert_user_error(run("verify", exact / "cal.yaml", "--held-out", tmp_path / "h.csv", "--clipped", "error"),
                       "clipped")
 
 
 def test_noisy_after_is_at_the_noise_level(tracker):
-    d = verify_json(tracker / "cal.yaml", "--measurements", tracker / "held.csv", "--setup", tracker / "setup.yaml")
+    d = verify_json(tracker / "cal.yaml", "--held-out", tracker / "held.csv", "--setup", tracker / "setup.yaml")
     expected = np.sqrt(3) * SIGMA          # |3D noise| rms of the tracker alone
     for key in ("after", "after_reregistered"):
         assert 0.6 * expected < d[key]["position_rms_mm"] < 2.5 * expected, d[key]
@@ -187,13 +187,13 @@ def test_before_registration_is_reproduced_from_the_calibration_data(tracker, tm
     stored = doc["calibration"].pop("before_registration")
     assert set(stored) == set(load_setup(tracker / "setup.yaml").sensor.default_free)
     (tmp_path / "old.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
-    d = verify_json(tmp_path / "old.yaml", "--measurements", tracker / "held.csv")
+    d = verify_json(tmp_path / "old.yaml", "--held-out", tracker / "held.csv")
     assert "before" not in d and any("before_registration" in n for n in d["notes"])
-    text = ok(run("verify", tmp_path / "old.yaml", "--measurements", tracker / "held.csv")).stdout
+    text = ok(run("verify", tmp_path / "old.yaml", "--held-out", tracker / "held.csv")).stdout
     assert "--calibration-measurements" in text
-    d2 = verify_json(tmp_path / "old.yaml", "--measurements", tracker / "held.csv", "--nominal", "stewart-prototype",
+    d2 = verify_json(tmp_path / "old.yaml", "--held-out", tracker / "held.csv", "--nominal", "stewart-prototype",
                      "--calibration-measurements", tracker / "meas.csv", "--setup", tracker / "setup.yaml")
-    ref = verify_json(tracker / "cal.yaml", "--measurements", tracker / "held.csv")
+    ref = verify_json(tracker / "cal.yaml", "--held-out", tracker / "held.csv")
     for k, v in stored.items():
         assert d2["before"]["sensor_parameters"][k] == pytest.approx(v, abs=1e-7), k
     assert d2["before"]["position_rms_mm"] == pytest.approx(ref["before"]["position_rms_mm"], rel=1e-6)
@@ -202,28 +202,28 @@ def test_before_registration_is_reproduced_from_the_calibration_data(tracker, tm
 def test_bad_combinations_exit_2(exact, tmp_path):
     cal, held = exact / "cal.yaml", exact / "held.csv"
     assert_user_error(run("verify", cal), "exactly one of --measurements")
-    assert_user_error(run("verify", cal, "--measurements", held, "--real", "stewart-prototype-real"), "exactly one")
-    assert_user_error(run("verify", cal, "--measurements", held, "--poses", held), "--poses applies to --real")
-    assert_user_error(run("verify", cal, "--measurements", held, "--compare", "aligned"), "--compare applies")
+    assert_user_error(run("verify", cal, "--held-out", held, "--real", "stewart-prototype-real"), "exactly one")
+    assert_user_error(run("verify", cal, "--held-out", held, "--poses", held), "--poses applies to --real")
+    assert_user_error(run("verify", cal, "--held-out", held, "--compare", "aligned"), "--compare applies")
     assert_user_error(run("verify", cal, "--real", "stewart-prototype-real"), "--poses")
     assert_user_error(run("verify", cal, "--real", "stewart-prototype-real", "--poses", held,
                           "--calibration-measurements", held), "--calibration-measurements applies")
     plain = tmp_path / "plain.yaml"
     plain.write_text(machine_to_text(NOMINAL))
-    assert_user_error(run("verify", plain, "--measurements", held), "no identified setup")
-    assert_user_error(run("verify", cal, "--measurements", held, "--setup", "laser-tracker"), "full-pose")
+    assert_user_error(run("verify", plain, "--held-out", held), "no identified setup")
+    assert_user_error(run("verify", cal, "--held-out", held, "--setup", "laser-tracker"), "full-pose")
     assert_user_error(run("verify", cal, "--real", "stewart-prototype-real", "--poses", held, "--setup",
                           "indicators-prototype"), "same kind")
 
 
 def test_identify_heldout_prints_and_reports(exact, tmp_path):
     res = ok(run("identify", "stewart-prototype", exact / "meas.csv", "--setup", exact / "setup.yaml", "-o",
-                 tmp_path / "cal.yaml", "--heldout", exact / "held.csv", "--report", tmp_path / "rep"))
+                 tmp_path / "cal.yaml", "--held-out", exact / "held.csv", "--report", tmp_path / "rep"))
     assert "held-out validation on 25 of 25 poses" in res.stdout and "after_reregistered" in res.stdout
     html = (tmp_path / "rep" / "report.html").read_text()
     assert "Validation on measured held-out data" in html and "after_reregistered" in html
     d = json.loads(ok(run("identify", "stewart-prototype", exact / "meas.csv", "--setup", exact / "setup.yaml",
-                          "-o", tmp_path / "cal2.yaml", "--heldout", exact / "held.csv", "--json")).stdout)
+                          "-o", tmp_path / "cal2.yaml", "--held-out", exact / "held.csv", "--json")).stdout)
     assert d["heldout"]["after"]["position_max_mm"] < 1e-9
     assert uncovered(d) == []
 

@@ -240,7 +240,7 @@ def test_klippers_seven_points_and_its_printed_object_take_the_default_path(prin
         assert res.exit_code == 0, (args, res.output)
     held = load_machine(str(tmp_path / "obj.yaml")).metadata["calibration"]
     assert set(ARMS) <= set(held["free"]) and not set(LEANS) & set(held["free"])
-    res = _invoke(run, tmp_path, ["export", "obj.yaml", "--format", "klipper", "--measurements", "pairs.csv",
+    res = _invoke(run, tmp_path, ["export", "obj.yaml", "--format", "klipper", "--calibration-measurements", "pairs.csv",
                                   "-o", "refit.cfg"])
     assert res.exit_code == 0 and "firmware-limited refit (exported)" in res.output, res.output
 

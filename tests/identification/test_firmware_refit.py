@@ -217,8 +217,8 @@ def test_export_with_measurements_writes_the_refit_and_reports_the_cost(tmp_path
     assert plain.exit_code == 0 and "--measurements MEAS.csv --setup SETUP" in plain.output, plain.output
     assert "exported as accepted with --accept-undetermined" in plain.output
     assert "# pkmcal:" in (tmp_path / "plain.cfg").read_text()
-    res = runner.invoke(cli, ["export", "cal.yaml", "--format", "klipper", "--measurements", "meas.csv",
-                              "--heldout", "held.csv", "-o", "refit.cfg"])   # setup from the calibration record
+    res = runner.invoke(cli, ["export", "cal.yaml", "--format", "klipper", "--calibration-measurements", "meas.csv",
+                              "--held-out", "held.csv", "-o", "refit.cfg"])   # setup from the calibration record
     assert res.exit_code == 0, res.output
     assert "firmware-limited refit (fk-residual" in res.output and "priors from the calibration: arm_a=" in res.output
     assert "exported settings are the firmware-limited refit" in res.output
@@ -239,8 +239,8 @@ def test_export_with_measurements_writes_the_refit_and_reports_the_cost(tmp_path
     assert (tmp_path / "refit.cfg").read_text() == (tmp_path / "default.cfg").read_text()
     line = next(ln for ln in res.output.splitlines() if "firmware-limited refit (exported)" in ln)
     assert f"{ref.refit.heldout_rms['mm']:.4g} mm" in line
-    js = runner.invoke(cli, ["export", "cal.yaml", "--format", "marlin", "--measurements", "meas.csv", "--setup",
-                             "z-probe-klipper", "--heldout", "held.csv", "--json", "-o", "m.gcode"])
+    js = runner.invoke(cli, ["export", "cal.yaml", "--format", "marlin", "--calibration-measurements", "meas.csv", "--setup",
+                             "z-probe-klipper", "--held-out", "held.csv", "--json", "-o", "m.gcode"])
     assert js.exit_code == 0, js.output
     d = json.loads(js.stdout)
     models = {m["model"]: m for m in d["firmware_refit"]["models"]}
@@ -252,9 +252,9 @@ def test_export_with_measurements_writes_the_refit_and_reports_the_cost(tmp_path
 
 
 @pytest.mark.parametrize("args, fragment", [
-    (["--heldout", "held.csv"], "give --measurements"),
-    (["--measurements", "meas.csv", "--json"], "-o FILE"),
-    (["--measurements", "meas.csv"], "no calibration record naming its setup"),
+    (["--held-out", "held.csv"], "give --measurements"),
+    (["--calibration-measurements", "meas.csv", "--json"], "-o FILE"),
+    (["--calibration-measurements", "meas.csv"], "no calibration record naming its setup"),
 ])
 def test_export_refit_misuse_is_named(tmp_path, monkeypatch, args, fragment):
     monkeypatch.chdir(tmp_path)
@@ -267,9 +267,9 @@ def test_export_refit_needs_a_firmware_format_and_a_linear_delta(tmp_path, monke
     monkeypatch.chdir(tmp_path)
     _files(tmp_path)
     runner = CliRunner()
-    res = runner.invoke(cli, ["export", "nominal.yaml", "--format", "json", "--measurements", "meas.csv"])
+    res = runner.invoke(cli, ["export", "nominal.yaml", "--format", "json", "--calibration-measurements", "meas.csv"])
     assert res.exit_code == 2 and "--format klipper or marlin" in res.output
-    res = runner.invoke(cli, ["export", "stewart-prototype", "--format", "klipper", "--measurements", "meas.csv",
+    res = runner.invoke(cli, ["export", "stewart-prototype", "--format", "klipper", "--calibration-measurements", "meas.csv",
                               "--setup", "z-probe-klipper"])
     assert res.exit_code == 2 and "linear delta" in res.output
 

@@ -211,9 +211,9 @@ def test_readers_of_orientations_warn_on_radians_and_scalar_first(campaign, comm
     called the poses reachable, 57 times too small, with no word."""
     def go(f):   # read as scalar-last, the quaternions turn every pose by 180 deg: plan finds none reachable
         if command == "ik":
-            return ok(run("ik", "stewart-prototype", campaign / f, "-o", campaign / f"legs-{f}"))
+            return ok(run("ik", "stewart-prototype", "--poses", campaign / f, "-o", campaign / f"legs-{f}"))
         return run("plan", "stewart-prototype", "--setup", "full-pose-paper1", "--candidates", campaign / f,
-                   "--n", 20, "-o", campaign / f"plan-{f}")
+                   "--n-poses", 20, "-o", campaign / f"plan-{f}")
 
     assert "--angle-unit rad" in go("rotvec_rad.csv").stderr
     assert "--quaternion-order wxyz" in go("quat_wxyz.csv").stderr

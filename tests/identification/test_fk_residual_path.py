@@ -39,7 +39,7 @@ def campaign(tmp_path_factory):
     true_setup.write_text(TRUE_SETUP, encoding="utf-8")
     setup.write_text(SURVEYED_SETUP, encoding="utf-8")
     poses, meas = folder / "poses.csv", folder / "meas.csv"
-    rg.run_pkmcal("plan", machine, "--setup", setup, "--n", 30, "--algorithm", "random", "--seed", 1, "-o", poses,
+    rg.run_pkmcal("plan", machine, "--setup", setup, "--n-poses", 30, "--algorithm", "random", "--seed", 1, "-o", poses,
                   "--quiet")
     rg.run_pkmcal("simulate", machine, "--random-errors", 5, "--setup", true_setup, "--poses", poses, "--seed", 200,
                   "--ignore-limit", "leg_collision", "-o", meas)

@@ -128,7 +128,7 @@ def test_identify_prints_geometry_and_json(tmp_path):
 
     run = CliRunner()
     poses, meas, cal = (str(tmp_path / n) for n in ("p.csv", "m.csv", "cal.yaml"))
-    for args in (["plan", "stewart-prototype", "--setup", "full-pose-paper1", "--n", "25", "--seed", "1", "-o", poses],
+    for args in (["plan", "stewart-prototype", "--setup", "full-pose-paper1", "--n-poses", "25", "--seed", "1", "-o", poses],
                  ["simulate", "stewart-prototype", "--real", "stewart-prototype-real", "--setup", "full-pose-paper1",
                   "--poses", poses, "--seed", "2", "-o", meas]):
         assert run.invoke(cli, args).exit_code == 0

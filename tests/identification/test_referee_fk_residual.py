@@ -29,7 +29,7 @@ def files(tmp_path_factory):
     folder = tmp_path_factory.mktemp("indicators")
     machine, setup = rg.write_builtins(folder, "stewart-prototype", "indicators-prototype")
     poses = folder / "poses.csv"
-    rg.run_pkmcal("plan", machine, "--setup", setup, "--n", N_PLANNED, "--seed", 1, "-o", poses, "--quiet")
+    rg.run_pkmcal("plan", machine, "--setup", setup, "--n-poses", N_PLANNED, "--seed", 1, "-o", poses, "--quiet")
     return folder, machine, setup, poses
 
 

@@ -48,7 +48,7 @@ def files(tmp_path_factory):
     true_setup.write_text(TRUE_SETUP, encoding="utf-8")
     setup.write_text(SURVEYED_SETUP, encoding="utf-8")
     poses = folder / "poses.csv"
-    rg.run_pkmcal("plan", machine, "--setup", setup, "--n", N_PLANNED, "--algorithm", "random", "--seed", 1,
+    rg.run_pkmcal("plan", machine, "--setup", setup, "--n-poses", N_PLANNED, "--algorithm", "random", "--seed", 1,
                   "-o", poses, "--quiet")
     return folder, machine, true_setup, setup, poses
 

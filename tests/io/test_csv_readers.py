@@ -41,10 +41,10 @@ def written(tmp_path_factory) -> dict[str, tuple[Path, list[str]]]:
     """name → (path, documented columns) of every kind of CSV the commands write."""
     d = tmp_path_factory.mktemp("csv")
     out: dict[str, tuple[Path, list[str]]] = {}
-    run("plan", "stewart-prototype", "--setup", "indicators-prototype", "--n", 15, "--n-candidates", 200,
+    run("plan", "stewart-prototype", "--setup", "indicators-prototype", "--n-poses", 15, "--n-candidates", 200,
         "--seed", 1, "-o", d / "poses.csv")
     out["plan"] = (d / "poses.csv", POSE + LAMBDA)
-    run("ik", "stewart-prototype", d / "poses.csv", "-o", d / "legs.csv")
+    run("ik", "stewart-prototype", "--poses", d / "poses.csv", "-o", d / "legs.csv")
     out["ik"] = (d / "legs.csv", POSE + [f"l{i}" for i in range(1, 7)] + LAMBDA + ["reachable"])
     (d / "far.csv").write_text("lambda1,lambda2,lambda3,lambda4,lambda5,lambda6\n" + "25,25,25,25,25,25\n"
                                + "-300,-300,-300,-300,-300,-300\n")
@@ -58,7 +58,7 @@ def written(tmp_path_factory) -> dict[str, tuple[Path, list[str]]]:
     run("simulate", "stewart-prototype", "--real", "stewart-prototype-real", "--setup", "full-pose-paper1",
         "--poses", d / "poses.csv", "--seed", 2, "--ignore-limit", "leg_collision", "-o", d / "meas-full.csv")
     out["simulate-full-pose"] = (d / "meas-full.csv", LAMBDA + POSE + CMD)
-    run("plan", "planar-3dof-4act", "--setup", "planar-tracker", "--n", 8, "--n-candidates", 80, "-o",
+    run("plan", "planar-3dof-4act", "--setup", "planar-tracker", "--n-poses", 8, "--n-candidates", 80, "-o",
         d / "planar-poses.csv")
     out["plan-planar"] = (d / "planar-poses.csv", ["x", "y", "phi", "q1", "q2", "q3", "q4"])
     run("simulate", "planar-3dof-4act", "--random-errors", 0.5, "--setup", "planar-tracker", "--poses",
@@ -146,9 +146,9 @@ def test_units_comment_is_written_only_when_asked_and_still_read(written, tmp_pa
     d = tmp_path
     poses = written["plan"][0]
     args = {
-        "plan": ["plan", "stewart-prototype", "--setup", "indicators-prototype", "--n", 15, "--n-candidates", 200,
+        "plan": ["plan", "stewart-prototype", "--setup", "indicators-prototype", "--n-poses", 15, "--n-candidates", 200,
                  "--seed", 1],
-        "ik": ["ik", "stewart-prototype", poses],
+        "ik": ["ik", "stewart-prototype", "--poses", poses],
         "fk": ["fk", "stewart-prototype", written["ik"][0]],
         "simulate": ["simulate", "stewart-prototype", "--real", "stewart-prototype-real", "--setup",
                      "indicators-prototype", "--poses", poses, "--seed", 2],

@@ -131,6 +131,6 @@ def test_cli_on_random_tables(tmp_path_factory, text, command):
                                   "x,y,z,a,b,c\n0,0,0,0,0,0\n"])
 def test_cli_extreme_but_valid_poses(tmp_path, text):
     (tmp_path / "in.csv").write_text(text)
-    res = CliRunner().invoke(cli, ["ik", "stewart-prototype", str(tmp_path / "in.csv")])
+    res = CliRunner().invoke(cli, ["ik", "stewart-prototype", "--poses", str(tmp_path / "in.csv")])
     assert res.exit_code == 0, res.output
     assert res.stdout.splitlines()[-1].split(",")[-1] != "ok"

@@ -148,8 +148,8 @@ def test_rename_errors_name_file_line_and_column(tmp_path):
 def test_ik_and_fk(tmp_path):
     p = poses_deg(10)
     ref, foreign = write_pose_pair(tmp_path, p)
-    ok(run("ik", "stewart-prototype", ref, "-o", tmp_path / "a.csv"))
-    ok(run("ik", "stewart-prototype", foreign, "-o", tmp_path / "b.csv", *FOREIGN_OPTS))
+    ok(run("ik", "stewart-prototype", "--poses", ref, "-o", tmp_path / "a.csv"))
+    ok(run("ik", "stewart-prototype", "--poses", foreign, "-o", tmp_path / "b.csv", *FOREIGN_OPTS))
     legs = tuple(f"lambda{i}" for i in range(1, 7))
     a, b = read_table(tmp_path / "a.csv", legs), read_table(tmp_path / "b.csv", legs)
     np.testing.assert_allclose(b.values, a.values, rtol=0, atol=1e-9)
@@ -227,7 +227,7 @@ def test_identifiability_observability_plan(tmp_path):
     for k in ("O1", "O2", "O3", "O4", "O5"):
         assert o2[k] == pytest.approx(o1[k], rel=1e-6), k
 
-    plan = ("plan", "stewart-prototype", "--setup", "indicators-prototype", "--n", "15", "--seed", "1")
+    plan = ("plan", "stewart-prototype", "--setup", "indicators-prototype", "--n-poses", "15", "--seed", "1")
     ok(run(*plan, "--candidates", ref, "-o", tmp_path / "p1.csv"))
     ok(run(*plan, "--candidates", foreign, "-o", tmp_path / "p2.csv", *FOREIGN_OPTS))
     np.testing.assert_allclose(read_table(tmp_path / "p2.csv", POSE_NAMES).values,
@@ -236,7 +236,7 @@ def test_identifiability_observability_plan(tmp_path):
 
 def test_bad_options_are_user_errors(tmp_path):
     ref, foreign = write_pose_pair(tmp_path, poses_deg(3))
-    user_error(run("ik", "stewart-prototype", foreign, "--columns", "X [m]"), "--columns", "not OLD=NEW")
-    res = run("ik", "stewart-prototype", foreign, "--length-unit", "furlong")
+    user_error(run("ik", "stewart-prototype", "--poses", foreign, "--columns", "X [m]"), "--columns", "not OLD=NEW")
+    res = run("ik", "stewart-prototype", "--poses", foreign, "--length-unit", "furlong")
     assert res.exit_code == 2 and "Traceback" not in res.output  # click's own usage error
-    user_error(run("ik", "stewart-prototype", ref, "--columns", "nope=x"), "poses.csv, line 1:", "'nope'")
+    user_error(run("ik", "stewart-prototype", "--poses", ref, "--columns", "nope=x"), "poses.csv, line 1:", "'nope'")

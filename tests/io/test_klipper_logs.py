@@ -140,7 +140,7 @@ def test_klipper_macro_round_trip(plan, tmp_path, fmt):
     np.testing.assert_allclose(got.actuators, NOMINAL.ik(truth), rtol=0, atol=2e-3)
     assert np.all(got.readings == 0.0)
     # and through the command line, which names the format
-    res = CliRunner().invoke(cli, ["plan", "kossel-mini", "--setup", "z-probe-klipper", "--n", "16", "--format",
+    res = CliRunner().invoke(cli, ["plan", "kossel-mini", "--setup", "z-probe-klipper", "--n-poses", "16", "--format",
                                    "klipper", "--n-candidates", "300", "-o", str(tmp_path / "cli.cfg")])
     assert res.exit_code == 0, res.output
     assert "[gcode_macro PKMCAL_PROBE_PLAN]" in (tmp_path / "cli.cfg").read_text()
@@ -229,7 +229,7 @@ def test_predicted_first_layer_sigma_is_the_gls_one(plan):
 
 
 def test_plan_prints_the_probe_the_curve_and_the_points_for_a_target():
-    res = CliRunner().invoke(cli, ["plan", "kossel-mini", "--setup", "z-probe-klipper", "--n", "16",
+    res = CliRunner().invoke(cli, ["plan", "kossel-mini", "--setup", "z-probe-klipper", "--n-poses", "16",
                                    "--n-candidates", "300", "--target-accuracy", "0.003", "-o", "-"])
     assert res.exit_code == 0, res.output
     assert "repeatability sigma 0.005 mm (the setup's noise.reading" in res.output
@@ -237,7 +237,7 @@ def test_plan_prints_the_probe_the_curve_and_the_points_for_a_target():
     assert re.search(r"target first-layer sigma 0.003 mm: \d+ points", res.output)
     assert "a common scale of the arm lengths and the radius: not determined" in res.output
     # not for a sensor that is no probe
-    res = CliRunner().invoke(cli, ["plan", "stewart-prototype", "--setup", "full-pose-paper1", "--n", "20",
+    res = CliRunner().invoke(cli, ["plan", "stewart-prototype", "--setup", "full-pose-paper1", "--n-poses", "20",
                                    "--format", "klipper"])
     assert res.exit_code == 2 and "is for a Z probe's plan" in res.output
 
@@ -517,7 +517,7 @@ def test_the_two_configs_of_the_enhanced_procedure_give_the_printer_mixing_them_
 
 
 def test_a_machine_that_cannot_reach_the_bed_is_told_what_to_do():
-    res = CliRunner().invoke(cli, ["plan", "delta-picker", "--setup", "z-probe-klipper", "--n", "20",
+    res = CliRunner().invoke(cli, ["plan", "delta-picker", "--setup", "z-probe-klipper", "--n-poses", "20",
                                    "--n-candidates", "50"])
     assert res.exit_code == 2
     assert "a Z probe's points are planned on the bed, z = 0 mm of the setup" in res.output

@@ -226,15 +226,15 @@ def test_cli_reads_quaternion_poses_with_the_order_option(tmp_path):
     q = np.array([quat_of_euler_deg(*r) for r in abc])
     write(tmp_path / "q.csv", ["x", "y", "z", "q1", "q2", "q3", "q4"], np.hstack([pos, q[:, [3, 0, 1, 2]]]))
     runner = CliRunner()
-    ref = runner.invoke(cli, ["ik", "stewart-prototype", str(tmp_path / "e.csv")])
-    got = runner.invoke(cli, ["ik", "stewart-prototype", str(tmp_path / "q.csv"), "--quaternion-order", "wxyz"])
+    ref = runner.invoke(cli, ["ik", "stewart-prototype", "--poses", str(tmp_path / "e.csv")])
+    got = runner.invoke(cli, ["ik", "stewart-prototype", "--poses", str(tmp_path / "q.csv"), "--quaternion-order", "wxyz"])
     assert ref.exit_code == 0 and got.exit_code == 0, got.output
     ref_lines, got_lines = ref.stdout.splitlines(), got.stdout.splitlines()
     assert ref_lines[0] == got_lines[0]
     a = np.array([[float(v) for v in line.split(",")[:-1]] for line in ref_lines[1:]])
     b = np.array([[float(v) for v in line.split(",")[:-1]] for line in got_lines[1:]])
     np.testing.assert_allclose(b, a, rtol=0, atol=1e-9)
-    bad = runner.invoke(cli, ["ik", "stewart-prototype", str(tmp_path / "q.csv"), "--quaternion-order", "zyxw"])
+    bad = runner.invoke(cli, ["ik", "stewart-prototype", "--poses", str(tmp_path / "q.csv"), "--quaternion-order", "zyxw"])
     assert bad.exit_code == 2
     np.testing.assert_allclose(read_poses(tmp_path / "q.csv", builtin_machine("stewart-prototype"),
                                           ImportMapping(quaternion_order="wxyz"))[:, 3:],

@@ -182,7 +182,7 @@ def _plan_cli(tmp_path, name, *extra):
     from pkmcal.cli.main import cli
 
     out = tmp_path / f"{name}.csv"
-    res = CliRunner().invoke(cli, ["plan", "stewart-prototype", "--setup", "full-pose-paper1", "--n", "12",
+    res = CliRunner().invoke(cli, ["plan", "stewart-prototype", "--setup", "full-pose-paper1", "--n-poses", "12",
                                    "--n-candidates", "400", "--seed", "2", "-o", str(out), "-q", *extra])
     return res, out
 

@@ -90,7 +90,7 @@ def test_default_plan_is_reached_by_the_real_prototype(setup_name, seed):
 def test_plan_command_states_and_uses_its_margin(tmp_path):
     runner = CliRunner()
     out = tmp_path / "p.csv"
-    args = ["plan", "stewart-prototype", "--setup", "indicators-prototype", "--n", "15", "--n-candidates", "300"]
+    args = ["plan", "stewart-prototype", "--setup", "indicators-prototype", "--n-poses", "15", "--n-candidates", "300"]
     res = runner.invoke(cli, [*args, "--tilt-margin", "5", "-o", str(out), "--units-comment"])
     assert res.exit_code == 0, res.output
     assert "safety margin: stroke 3 mm, joint tilts 5 deg, leg clearance 0.1 mm (given: tilt; others default)" \
@@ -105,7 +105,7 @@ def test_plan_command_states_and_uses_its_margin(tmp_path):
     assert rep.margins["stroke"].min() >= 3.0 - 1e-9
     res = runner.invoke(cli, [*args, "--margin", "1", "--tilt-margin", "2", "-o", str(out)])
     assert res.exit_code == 2 and "not both" in res.stderr
-    res = runner.invoke(cli, ["plan", "planar-3dof-4act", "--setup", "planar-tracker", "--n", "8",
+    res = runner.invoke(cli, ["plan", "planar-3dof-4act", "--setup", "planar-tracker", "--n-poses", "8",
                               "--tilt-margin", "2", "-o", str(tmp_path / "q.csv")])
     assert res.exit_code == 2 and "no stroke or joint-tilt limits" in res.stderr
     res = runner.invoke(cli, ["plan", "--help"], terminal_width=200)
@@ -146,7 +146,7 @@ def test_delta_margins_closed_form_and_printed():
         (math.degrees(math.atan(3 / 350)), math.degrees(math.atan(3 / 800)), 9.0), rel=1e-12)
     with pytest.raises(PkmcalError, match="--margin"):
         resolve_margin(load_machine("kossel-mini"), stroke_mm=1.0)
-    out = CliRunner().invoke(cli, ["plan", "kossel-mini", "--setup", "laser-tracker", "--n", "12"])
+    out = CliRunner().invoke(cli, ["plan", "kossel-mini", "--setup", "laser-tracker", "--n-poses", "12"])
     assert out.exit_code == 0, out.output
     assert "safety margin: rail travel 3 mm, arm angle 0.799 deg" in out.output
 
@@ -240,7 +240,7 @@ def test_linuxcnc_sample_plans_inside_its_geometry_with_every_margin_option(tmp_
     machine = tmp_path / "hexapod.yaml"
     _import_sample(runner, hal, ini, machine)
     out = tmp_path / "p.csv"
-    res = runner.invoke(cli, ["plan", str(machine), "--setup", "full-pose-paper1", "--n", "8", "--n-candidates", "300",
+    res = runner.invoke(cli, ["plan", str(machine), "--setup", "full-pose-paper1", "--n-poses", "8", "--n-candidates", "300",
                               "--seed", "3", *options, "--units-comment", "-o", str(out)])
     assert res.exit_code == 0, res.output
     names = ["x", "y", "z", "a", "b", "c"]
@@ -299,7 +299,7 @@ def test_debian_linuxcnc_sample_plans_inside_its_geometry(tmp_path):
     res = _import_sample(runner, tmp_path / "kinematics.hal", tmp_path / "hexapod.ini", machine)
     assert "-25400 to 25400 mm" in res.output
     out = tmp_path / "p.csv"
-    res = runner.invoke(cli, ["plan", str(machine), "--setup", "full-pose-paper1", "--n", "8", "--n-candidates",
+    res = runner.invoke(cli, ["plan", str(machine), "--setup", "full-pose-paper1", "--n-poses", "8", "--n-candidates",
                               "300", "--margin", "3", "-o", str(out)])
     assert res.exit_code == 0, res.output
     names = ["x", "y", "z", "a", "b", "c"]

@@ -203,7 +203,7 @@ def test_plan_is_reproducible(machine):
 def test_cli_plan_and_observability(machine, tmp_path):
     out = tmp_path / "poses.csv"
     runner = CliRunner()
-    res = runner.invoke(cli, ["plan", "stewart-prototype", "--setup", "full-pose-paper1", "--n", "14",
+    res = runner.invoke(cli, ["plan", "stewart-prototype", "--setup", "full-pose-paper1", "--n-poses", "14",
                               "--n-candidates", "300", "--seed", "2", "-o", str(out), "--units-comment"])
     assert res.exit_code == 0, res.output
     table = read_table(out, ["x", "y", "z", "a", "b", "c"] + [f"lambda{i}" for i in range(1, 7)])
@@ -219,7 +219,7 @@ def test_cli_plan_and_observability(machine, tmp_path):
     # the indices printed by plan are those of the written poses
     assert f"O1 = {ind['O1']:.6g}" in out.read_text()
     # user errors: one line, exit code 2
-    res = runner.invoke(cli, ["plan", "stewart-prototype", "--setup", "full-pose-paper1", "--n", "99",
+    res = runner.invoke(cli, ["plan", "stewart-prototype", "--setup", "full-pose-paper1", "--n-poses", "99",
                               "--algorithm", "corners", "-o", str(tmp_path / "x.csv")])
     assert res.exit_code == 2 and "only 64 candidates" in res.output
 

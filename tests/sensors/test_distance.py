@@ -219,15 +219,15 @@ def test_plan_circle_command(tmp_path):
                      "noise: {reading: 0.001, actuator: 0.005}\n")
     out = tmp_path / "circle.csv"
     run = CliRunner().invoke(cli, ["plan", "stewart-prototype", "--setup", str(setup), "--algorithm", "circle",
-                                   "--n", "36", "-o", str(out)])
+                                   "--n-poses", "36", "-o", str(out)])
     assert run.exit_code == 0, run.output
     table = read_table(out, ("x", "y", "z"))
     xy = np.stack([table["x"], table["y"]], axis=1)
     np.testing.assert_allclose(np.hypot(*xy.T), 30.0, atol=1e-9)
     np.testing.assert_allclose(table["z"], 315.0, atol=1e-9)
     bad = CliRunner().invoke(cli, ["plan", "stewart-prototype", "--setup", "laser-tracker", "--algorithm", "circle",
-                                   "--n", "36", "-o", str(tmp_path / "x.csv")])
+                                   "--n-poses", "36", "-o", str(tmp_path / "x.csv")])
     assert bad.exit_code == 2 and "ballbar circle test" in bad.output
     far = CliRunner().invoke(cli, ["plan", "stewart-prototype", "--setup", str(setup), "--algorithm", "circle",
-                                   "--n", "36", "--circle-plane", "yz", "-o", str(tmp_path / "y.csv")])
+                                   "--n-poses", "36", "--circle-plane", "yz", "-o", str(tmp_path / "y.csv")])
     assert far.exit_code == 2 and "circle-test poses" in far.output and "cannot be measured" in far.output

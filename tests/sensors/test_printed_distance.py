@@ -391,11 +391,11 @@ def test_cli_fits_the_printed_distances_and_exports_klippers_numbers(tmp_path):
                            "--object-machine", "kossel-mini", "-o", str(pairs)])   # the example saved nothing between
     assert res.exit_code == 0, res.output
     res = run.invoke(cli, ["identify", "kossel-mini", str(pairs), "--setup", "printed-distance-klipper", "--free",
-                           "angle_*,radius_*,arm_*,endstop_*", "--fix", "auto", "-o", str(cal), "--heldout", str(pairs)])
+                           "angle_*,radius_*,arm_*,endstop_*", "--fix", "auto", "-o", str(cal), "--held-out", str(pairs)])
     assert res.exit_code == 0, res.output
     assert "reading residual rms (mm)" in res.output          # the held-out table reads pairs too
     for setup in (str(cal), "printed-distance-klipper"):   # verify reads pair files as identify does
-        res = run.invoke(cli, ["verify", str(cal), "--measurements", str(pairs), "--setup", setup, "--json"])
+        res = run.invoke(cli, ["verify", str(cal), "--held-out", str(pairs), "--setup", setup, "--json"])
         assert res.exit_code == 0, res.output
         rep = json.loads(res.output)
         assert rep["n_poses"] == 19 and rep["sensor"] == "printed-distance"
@@ -515,7 +515,7 @@ def test_cli_identifiability_reads_pose_pairs_and_refuses_what_pairs_cannot_do(t
     np.testing.assert_allclose(got["singular_values"], want.singular_values, rtol=1e-12)
     for args, hint in ((["identifiability", "kossel-mini", "--setup", "printed-distance-klipper", "--poses", str(poses),
                          "--suggest"], "probe heights alone"),
-                       (["plan", "kossel-mini", "--setup", "printed-distance-klipper", "--n", "15", "-o",
+                       (["plan", "kossel-mini", "--setup", "printed-distance-klipper", "--n-poses", "15", "-o",
                          str(tmp_path / "p.csv")], "z-probe-klipper"),
                        (["simulate", "kossel-mini", "--real", "kossel-mini", "--setup", "printed-distance-klipper",
                          "--poses", str(poses), "-o", str(tmp_path / "m.csv")], "z-probe-klipper")):
