@@ -300,10 +300,10 @@ def verify_cmd(calibrated, meas_path, real_spec, poses, nominal, setup_spec, cal
     orientation_mean_deg, ..., tilt_*_deg, height_*_mm}, compare, compared.
 
     Held-out poses in the ISO 9283 pattern ('pkmcal plan --pattern iso9283'; with
-    --measurements, the cmd_x.. columns): also the standard's AP, RP, AD, RD, each with its
+    --held-out, the cmd_x.. columns): also the standard's AP, RP, AD, RD, each with its
     expanded uncertainty U (k = 2) from the instrument's noise and registration (exact with
     --real). JSON key iso9283. A ballbar's circle test ('plan --algorithm circle') with
-    --measurements: ISO 230-4 F_max, F_min, G with U (JSON key iso230_4).
+    --held-out: ISO 230-4 F_max, F_min, G with U (JSON key iso230_4).
     docs/accuracy-reports.md.
 
     Redundantly actuated machines (planar-2dof-3act, planar-3dof-4act) with --real: the tool
