@@ -35,7 +35,7 @@ from pkmcal.identification.firmware_refit import (
     residual_rms,
 )
 from pkmcal.identification.priors import Prior
-from pkmcal.io.delta_firmware import firmware_subset, read_klipper
+from pkmcal.io.delta_firmware import firmware_subset, klipper_rounded, read_klipper
 from pkmcal.io.machine_file import load_machine, machine_to_text
 from pkmcal.io.measurements import Measurements
 from pkmcal.io.setup_file import load_setup
@@ -232,7 +232,7 @@ def test_export_with_measurements_writes_the_refit_and_reports_the_cost(tmp_path
     # the export is the sections SAVE_CONFIG writes: under a printer.cfg's [printer] kinematics
     (tmp_path / "printer.cfg").write_text("[printer]\nkinematics: delta\n\n" + (tmp_path / "refit.cfg").read_text())
     back = read_klipper("printer.cfg")
-    fw = firmware_subset(ref.machine)[0]
+    fw = klipper_rounded(firmware_subset(ref.machine)[0])      # as Klipper's SAVE_CONFIG writes them: 6 decimals
     assert (back.radius, back.angles_deg, back.arms, back.endstops) == (fw.radius, fw.angles_deg, fw.arms,
                                                                          fw.endstops)
     assert (tmp_path / "refit.cfg").read_text() != (tmp_path / "plain.cfg").read_text()
