@@ -252,9 +252,11 @@ def _number(v: float) -> str:
     (``Marlin/src/module/settings.cpp``). The value is rounded to 6 decimals (1e-6 mm, 1e-6°,
     like Klipper's) and written as the shortest decimal that reads back to the same 32-bit
     float, so the text is exactly what Marlin holds (to about 7 significant digits: 3e-5 mm
-    at 300 mm). ``M503`` prints these settings with fewer decimals (``M665_report``: 2 unless
-    the build sets Configuration_adv.h ``SERIAL_FLOAT_PRECISION``), so a configuration read
-    back from ``M503`` is coarser than the one written."""
+    at 300 mm). ``M503`` prints these settings with fewer decimals (``M665_report`` echoes
+    each float through ``Marlin/src/core/serial.cpp`` ``serial_echopair_PGM``, whose
+    ``SERIAL_DECIMAL`` prints 2 decimals unless the build sets Configuration_adv.h
+    ``SERIAL_FLOAT_PRECISION``), so a configuration read back from ``M503`` is coarser than
+    the one written."""
     v = float(v)
     if not np.isfinite(v):
         raise PkmcalError(f"cannot export a non-finite value ({v}) to Marlin")
