@@ -298,8 +298,8 @@ def next_steps(data: ReportData) -> list[tuple[str, str | None]]:
         steps.append((f"To improve, measure what is weakly determined ({'; '.join(ident.weak[:3])}): rank the "
                       "instruments and poses that determine it best:", suggest))
     else:
-        steps.append(("Every parameter direction is determined; to shrink the uncertainties further, more poses or "
-                      "a more precise instrument (ranked by):", suggest))
+        steps.append(("Every parameter direction is determined; to shrink the uncertainties further, add poses or a "
+                      "more precise instrument: rank what would shrink them most:", suggest))
     if data.held_out is None and data.measured_validation is None:
         cal = data.calibrated_file or "CALIBRATED.yaml"
         steps.append(("No held-out data verified this calibration: measure poses that are not used for the fit and "
