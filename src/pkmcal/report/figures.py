@@ -14,6 +14,11 @@ per reading; histograms of held-out errors before and after; error maps before a
 the error of every parameter against the truth and of every held-out pose (paper 1 Figs.
 10–11); measurement paths and the error at every path point, forward and backward (paper 3
 Figs. 4/5, 7/8).
+
+Colours are defined once: every series of the state before calibration is drawn in
+:data:`BEFORE_COLOUR`, every one after it in :data:`AFTER_COLOUR` (:func:`series_colour`,
+by the label's "before"/"after"), and no other series uses them (:data:`OTHER_COLOURS`, the
+default colour cycle); maps that are compared share one colour scale (:func:`shared_norm`).
 """
 
 from __future__ import annotations
