@@ -546,7 +546,7 @@ def rounding_effect(exact, rounded, n: int = 5, points: np.ndarray | None = None
         # height, its stepper counts the travel H^fw − λ below the switch (Klipper's abs_endstop
         # less the carriage height); a rotary delta's and a hexapod's reading is that already
         q = np.asarray(m.ik(points), dtype=float)
-        return m.reading_reference[None, :] - q if isinstance(m, LinearDelta) else q
+        return m.reading_reference[None, :] - q if m.kind == "linear-delta" else q
 
     with np.errstate(all="ignore"):
         diff = np.abs(counted(rounded) - counted(exact))
