@@ -100,6 +100,11 @@ def test_measured_held_out_data_give_before_and_after():
     assert texts[1].startswith("position error, largest: 1.500 mm → 30.00 µm")
     assert texts[2].startswith("orientation error, rms: 0.05000° → 7.200″")
     assert all(a.n == 12 and "held.csv" in a.source for a in got)
+    # a sensor that reads no position (dial indicators): its reading residuals
+    v = {**v, "before": {"reading_rms_mm": 0.05}, "after": {"reading_rms_mm": 0.004},
+         "rows": [("reading residual rms", "mm", "reading_rms_mm")]}
+    assert [a.text() for a in achieved(replace(base, held_out=None, measured_validation=v))] == [
+        "reading residual, rms: 50.00 µm → 4.000 µm (12.5× smaller)"]
 
 
 # -- colours: one for before, one for after, in every figure ---------------------------------

@@ -251,7 +251,9 @@ def achieved(data: ReportData) -> list[Achieved]:
                 continue
             angle = unit == "deg"
             conv = np.deg2rad if angle else float
-            what = text.replace(" max", " error, largest").replace(" rms", " error, rms")
+            quantity, stat = text.rsplit(" ", 1)           # "position rms", "reading residual max"
+            what = (f"{quantity}{'' if quantity.startswith('reading') else ' error'}, "
+                    f"{'largest' if stat == 'max' else 'rms'}")
             out.append(Achieved(what, float(conv(v["before"][key])), float(conv(v["after"][key])), angle,
                                 int(v["n_poses"]), src))
     return out
