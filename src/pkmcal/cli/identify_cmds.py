@@ -379,7 +379,7 @@ def _report_data(nominal, result, setup, meas, meas_path: str, output: str, vali
     return report_data_from_results(
         nominal, result, setup, poses, setup_summary=setup_text, commanded=meas.commanded,
         facts=(("measurement file", str(meas_path)), ("calibrated machine file", str(output))),
-        heldout=validation)
+        heldout=validation, calibrated_file=None if output.startswith("(") else str(output))
 
 
 @click.command("identifiability", epilog=examples(
