@@ -83,7 +83,7 @@ def test_without_held_out_data_the_opening_says_so_and_what_to_measure(data, tmp
     bare = replace(data, held_out=None, error_map=None, held_out_poses=None)
     assert achieved(bare) == []
     opening = _section(write_report(bare, tmp_path, png=False).html.read_text(encoding="utf-8"))
-    assert "No held-out data" in opening and "pkmcal verify cal.yaml --measurements HELDOUT.csv" in opening
+    assert "No held-out data" in opening and "pkmcal verify cal.yaml --held-out HELDOUT.csv" in opening
 
 
 def test_measured_held_out_data_give_before_and_after():

@@ -228,7 +228,7 @@ class Achieved:
 def achieved(data: ReportData) -> list[Achieved]:
     """Before → after of the calibration, from the best evidence the report has: the
     held-out poses against the true machine (simulation), else the measured held-out data
-    (``identify --heldout``); empty when neither was given (the fit's residuals are no
+    (``identify --held-out``); empty when neither was given (the fit's residuals are no
     measure of accuracy)."""
     out: list[Achieved] = []
     h = data.held_out
@@ -305,7 +305,7 @@ def next_steps(data: ReportData) -> list[tuple[str, str | None]]:
     if data.held_out is None and data.measured_validation is None:
         cal = data.calibrated_file or "CALIBRATED.yaml"
         steps.append(("No held-out data verified this calibration: measure poses that are not used for the fit and "
-                      "validate on them:", f"pkmcal verify {cal} --measurements HELDOUT.csv --setup {cal}"))
+                      "validate on them:", f"pkmcal verify {cal} --held-out HELDOUT.csv --setup {cal}"))
     return steps
 
 
