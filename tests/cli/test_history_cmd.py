@@ -26,7 +26,7 @@ def _run(*args: str):
 
 
 def _campaign(folder):
-    _run("plan", "kossel-mini", *SETUP, "--n-poses", "25", "--seed", "1", "-o", str(folder / "p.csv"))
+    _run("plan", "kossel-mini", *SETUP, "--n", "25", "--seed", "1", "-o", str(folder / "p.csv"))
     for k, name in ((2, "m1"), (3, "m2"), (4, "held")):
         _run("simulate", "kossel-mini", "--real", "kossel-mini", *SETUP, "--poses", str(folder / "p.csv"),
              "--seed", str(k), "-o", str(folder / f"{name}.csv"))
@@ -92,7 +92,11 @@ def test_history_user_errors(tmp_path):
     bad_json = tmp_path / "v.json"
     bad_json.write_text('{"after": \n oops}')
     assert_user_error(run.invoke(cli, ["history", "add", str(tmp_path / "c.yaml"), "--serial", "S", "--db", db,
-                                       "--held-out", str(bad_json)]), "v.json, line 2", "pkmcal verify")
+                                       "--verification", str(bad_json)]), "v.json, line 2", "pkmcal verify")
+    # the first spelling still works, with a deprecation note
+    old = run.invoke(cli, ["history", "add", str(tmp_path / "c.yaml"), "--serial", "S", "--db", db, "--heldout",
+                           str(bad_json)])
+    assert "--heldout is deprecated; use --verification" in old.output and "v.json, line 2" in old.output
     assert_user_error(run.invoke(cli, ["history", "add", str(tmp_path / "c.yaml"), "--serial", "", "--db", db]),
                       "--serial")
     _run("history", "add", str(tmp_path / "c.yaml"), "--serial", "S", "--db", db)

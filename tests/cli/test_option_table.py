@@ -156,7 +156,7 @@ OLD_SPELLINGS = [
     ("compensate", ["c.yaml", "m.csv", "--heldout", "h.csv"], ["c.yaml", "m.csv", "--held-out", "h.csv"]),
     ("compensate", ["c.yaml", "m.csv", "--held-out", "h.csv", "--printer-cfg", "p.cfg"],
      ["c.yaml", "m.csv", "--held-out", "h.csv", "--config", "p.cfg"]),
-    ("history add", ["c.yaml", "--serial", "S", "--heldout", "v.json"], ["c.yaml", "--serial", "S", "--held-out", "v.json"]),
+    ("history add", ["c.yaml", "--serial", "S", "--heldout", "v.json"], ["c.yaml", "--serial", "S", "--verification", "v.json"]),
 ]
 
 
@@ -251,7 +251,6 @@ KNOWN_OLD_TEXTS = {
     "src/pkmcal/cli/calibrated_file.py": 2,
     "src/pkmcal/cli/campaign_cmds.py": 4,
     "src/pkmcal/cli/export_cmd.py": 10,
-    "src/pkmcal/cli/identify_cmds.py": 1,
 }
 
 

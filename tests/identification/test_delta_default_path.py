@@ -116,7 +116,7 @@ def test_identify_and_export_say_what_the_heights_leave_undetermined(printer):
         comments = [ln for ln in text.splitlines() if ln.startswith(mark)]
         assert "a common scale of the arm lengths" in " ".join(comments)
     # the exported Klipper sections still read as Klipper reads them (the comments are comments)
-    from pkmcal.io.delta_firmware import read_klipper
+    from pkmcal.io.delta_firmware import KLIPPER_ROUNDING, read_klipper
 
     (printer / "back.cfg").write_text("[printer]\nkinematics: delta\n\n" + (printer / "plain.klipper").read_text())
     assert read_klipper(str(printer / "back.cfg")).arms == (215.0, 215.0, 215.0)
@@ -126,7 +126,10 @@ def test_identify_and_export_say_what_the_heights_leave_undetermined(printer):
     assert res.exit_code == 0 and "warning: a common scale" not in res.output
     assert "undetermined" not in load_machine(str(printer / "rods.yaml")).metadata["calibration"]
     out = _invoke(run, printer, ["export", "rods.yaml", "--format", "klipper", "-o", "rods.cfg"])
-    assert out.exit_code == 0 and "warning" not in out.output and not (printer / "rods.cfg").read_text().startswith("#")
+    # no comment on what was not determined (the only comment line: how the numbers are rounded)
+    assert out.exit_code == 0 and "warning" not in out.output
+    assert [ln for ln in (printer / "rods.cfg").read_text().splitlines() if ln.startswith("#")] == [
+        f"# pkmcal: {KLIPPER_ROUNDING}"]
 
 
 def test_firmware_sigmas_are_the_covariance_propagated_and_free_of_the_gauge(printer):

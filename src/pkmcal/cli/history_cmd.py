@@ -1,7 +1,7 @@
 """``pkmcal history``: every calibration of a fleet kept (:mod:`pkmcal.history`).
 
 * ``add CALIBRATED.yaml --serial S``: record a calibrated machine file of ``pkmcal identify``
-  (its calibration record, parameters and covariance, the file's SHA-256; ``--held-out
+  (its calibration record, parameters and covariance, the file's SHA-256; ``--verification
   VERIFY.json``: the held-out figures of ``pkmcal verify --json``).
 * ``list``, ``show REF``: the records; ``compare A B``: whether two calibrations differ
   beyond their combined uncertainty (z per parameter, joint χ²; :mod:`pkmcal.history.stats`);
@@ -52,7 +52,7 @@ def _read_heldout(path: str) -> dict:
         with open(path, encoding="utf-8") as fh:
             text = fh.read()
     except OSError as exc:
-        raise PkmcalError(f"--held-out {one_line(path)}: {exc.strerror}; give the JSON that 'pkmcal verify ... --json' "
+        raise PkmcalError(f"--verification {one_line(path)}: {exc.strerror}; give the JSON that 'pkmcal verify ... --json' "
                           "wrote") from None
     try:
         doc = json.loads(text)
@@ -83,14 +83,14 @@ def history_group() -> None:
 
 @history_group.command("add", epilog=examples(
     "pkmcal history add calibrated.yaml --serial KM-0042 --db farm.sqlite",
-    "pkmcal history add recalibrated.yaml --serial KM-0042 --held-out verify.json --db farm.sqlite --json"))
+    "pkmcal history add recalibrated.yaml --serial KM-0042 --verification verify.json --db farm.sqlite --json"))
 @click.argument("calibrated", metavar="CALIBRATED.yaml")
 @click.option("--serial", required=True, metavar="SERIAL", help="The unit's serial number (one unit = one serial).")
 @click.option("--model", metavar="MODEL", help="The fleet the unit belongs to (default: the machine it was "
                                                "calibrated from, calibration.calibrated_from).")
-@option("--held-out", "heldout", old=("--heldout",), metavar="VERIFY.json",
-        help="Held-out figures to keep with it: the output of 'pkmcal verify CALIBRATED.yaml --held-out HELDOUT.csv "
-             "--json'.")
+@option("--verification", "heldout", old=("--heldout",), metavar="VERIFY.json",
+        help="Held-out figures to keep with it: the output of 'pkmcal verify CALIBRATED.yaml --held-out "
+             "HELDOUT.csv --json'.")
 @click.option("--allow-duplicate", is_flag=True, help="Record the file even if the same file (SHA-256) is already "
                                                       "recorded for this serial.")
 @_db_option
@@ -109,6 +109,10 @@ def add_cmd(calibrated, serial, model, heldout, allow_duplicate, db, as_json) ->
     held = int(rec.held.sum())
     click.echo(f"recorded #{rec.id}: serial {rec.serial}, model {rec.model}, calibrated {rec.date} "
                f"({len(rec.names) - held} parameters estimated, {held} held) in {_db_path(db)}")
+
+
+def _g(value) -> str:
+    return "-" if value is None else f"{value:.4g}"
 
 
 def _db_path(db):
@@ -163,7 +167,7 @@ def show_cmd(ref, db, as_json) -> None:
     click.echo(f"#{rec.id}: serial {rec.serial}, model {rec.model}, machine {rec.machine} ({rec.kind})")
     click.echo(f"calibrated {rec.date} with pkmcal {rec.pkmcal_version} (recorded {rec.added}); method "
                f"{rec.method or '-'}, instrument {rec.instrument or '-'}, {rec.n_poses} poses, rms residual "
-               f"{rec.rms_residual}, chi2/dof {rec.reduced_chi2}")
+               f"{_g(rec.rms_residual)}, chi2/dof {_g(rec.reduced_chi2)}")
     click.echo(f"covariance: {rec.covariance_kind or '-'}")
     click.echo(f"file: {rec.source or '-'} (sha256 {rec.source_sha256 or '-'})")
     for role, inp in sorted(rec.inputs.items()):
@@ -171,8 +175,8 @@ def show_cmd(ref, db, as_json) -> None:
         click.echo(f"input {role}: {what}")
     if rec.heldout:
         after = rec.heldout.get("after") if isinstance(rec.heldout.get("after"), dict) else None
-        click.echo("held-out, after calibration: " + (", ".join(f"{k} {v:.4g}" for k, v in after.items() if isinstance(v, (int, float))
-                                             and v is not None) if after else "recorded (see --json)"))
+        figures = [f"{k} {v:.4g}" for k, v in (after or {}).items() if isinstance(v, (int, float))]
+        click.echo("held-out, after calibration: " + (", ".join(figures) if figures else "recorded (see --json)"))
     v, s, u = rec.display()
     w = max(len(n) for n in rec.names)
     click.echo(f"{'parameter':<{w}}  {'value':>14}  {'sigma':>10}")

@@ -25,5 +25,5 @@ from pkmcal.history.store import (
     record_from_machine,
 )
 
-__all__ = ["DB_ENV", "SCHEMA_VERSION", "CalibrationRecord", "History", "add_calibrated_file", "default_db_path", "open_history",
-           "record_from_machine"]
+__all__ = ["DB_ENV", "SCHEMA_VERSION", "CalibrationRecord", "History", "add_calibrated_file", "default_db_path",
+           "open_history", "record_from_machine"]

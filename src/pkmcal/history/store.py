@@ -329,7 +329,8 @@ class History:
                      _json(rec.null_space)))
                 new_id = int(cur.lastrowid)
                 self._conn.executemany(
-                    "INSERT INTO parameters (calibration, idx, name, value, std, unit, held) VALUES (?, ?, ?, ?, ?, ?, ?)",
+                    "INSERT INTO parameters (calibration, idx, name, value, std, unit, held) "
+                    "VALUES (?, ?, ?, ?, ?, ?, ?)",
                     [(new_id, i, n, float(v), None if h else float(s), u, int(h))
                      for i, (n, v, s, u, h) in enumerate(zip(rec.names, rec.values, std, rec.units, held))])
             except BaseException:
@@ -468,9 +469,9 @@ def open_history(path: str | os.PathLike | None = None, create: bool = True) -> 
     exists = _check_new_path(path if explicit else db, explicit)
     if not exists:
         if not create:
+            hint = "" if explicit else f" (or give --db; {DB_ENV} sets the default)"
             raise PkmcalError(f"no calibration history at {shown}: record a calibration first with 'pkmcal history "
-                              "add CALIBRATED.yaml --serial SERIAL'" + ("" if explicit else f" (or give --db; "
-                                                                                            f"{DB_ENV} sets the default)"))
+                              f"add CALIBRATED.yaml --serial SERIAL'{hint}")
         if not db.parent.exists():
             try:
                 db.parent.mkdir(parents=True, exist_ok=True)
@@ -546,5 +547,5 @@ def _ensure_schema(conn: sqlite3.Connection, shown: str) -> None:
     conn.execute("COMMIT")
 
 
-__all__ = ["add_calibrated_file", "check_history_request", "record_identified", "BUSY_TIMEOUT_S", "DB_ENV", "SCHEMA_VERSION", "CalibrationRecord", "History", "default_db_path",
-           "open_history", "record_from_machine"]
+__all__ = ["BUSY_TIMEOUT_S", "DB_ENV", "SCHEMA_VERSION", "CalibrationRecord", "History", "add_calibrated_file",
+           "check_history_request", "default_db_path", "open_history", "record_from_machine", "record_identified"]
