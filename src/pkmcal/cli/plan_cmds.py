@@ -233,8 +233,10 @@ def _printer_file(fmt: str, plan, setup, command: str, machine: str, setup_spec:
 def _probe_summary(say, plan, setup, target: float | None) -> None:
     """What an on-bed Z-probe plan prints: the probe, the predicted first-layer error for
     other numbers of points (:func:`pkmcal.planning.plan.height_sigma`), the points for
-    ``target``, and what heights cannot see (:func:`~pkmcal.identification.identifiability.describe_named`)."""
-    from pkmcal.identification.identifiability import describe_named, identifiability
+    ``target``, and what heights cannot see and what would see it
+    (:func:`~pkmcal.identification.identifiability.undetermined_directions`: the named
+    directions, the rail leans)."""
+    from pkmcal.identification.identifiability import undetermined_directions
     from pkmcal.planning.plan import height_sigma, points_for_height_sigma
 
     x, y, z = np.asarray(setup.sensor.probe_offset, dtype=float)
@@ -264,9 +266,8 @@ def _probe_summary(say, plan, setup, target: float | None) -> None:
             sigma = dict(tried)[need]
             say(f"target first-layer sigma {target:g} mm: {need} points ({sigma:.3g} mm); plan them with --n {need}")
     if curve:
-        for entry in identifiability(plan.model.mechanism, setup, plan.poses).named:
-            if entry["status"] != "identified":
-                say(describe_named(entry))
+        for entry in undetermined_directions(plan.model.mechanism, setup, plan.poses):
+            say(entry["text"])
 
 
 @click.command("observability", epilog=examples(

@@ -40,7 +40,20 @@ for a linear delta, Klipper's printed calibration object (12 distances between p
 points, :mod:`pkmcal.sensors.printed_distance` on :mod:`pkmcal.mechanisms.pose_pairs`); and
 as many poses again from each of the planners ``default`` and ``random``
 (:func:`pkmcal.planning.plan.plan_poses`, fixed seed), taken where the sensor reads when sent
-there (``Sensor.measured_frames``: a Z probe lowered onto the bed).
+there (``Sensor.measured_frames``: a Z probe lowered onto the bed). A placement direction
+(``NamedDirection.placement``: where a delta's tower set stands on the bed) that no option
+sees is said once, not on every row.
+
+What would determine the parameters a bed holds (issue 25 item 6;
+:func:`plane_held_advice`, which ``identify`` and ``export`` print as a note): a delta's rail
+leans, each one's σ from the covariance on the seen directions of the whitened rows with
+unit-norm columns (:func:`parameter_sigmas`: Σ = D V_r diag(1/s_r²) V_rᵀ D, the same under any
+gauge for a parameter with no part in the unseen directions), for the current rows and with
+each addition a printer owner can make: a gauge block probed at 13 places
+(:func:`block_poses`; Klipper's ``DELTA_ANALYZE MANUAL_HEIGHT``), Klipper's printed object,
+both, a laser tracker at the same poses; the rods measured to ±0.1 mm with each where the
+campaign has no prior on them (without the rods, heights at two levels leave the leans at σ
+0.35° on the tutorial's printer, 0.50° from the bed alone: the leans trade with the scale).
 """
 
 from __future__ import annotations

@@ -42,7 +42,9 @@ engine fits them; columns: the candidate parameters) is analysed as follows.
   :func:`undetermined_directions` judges them on every parameter the machine does not hold
   (what the data can see, not what one fit freed), with the fit's priors as rows, and says
   which of the direction's parameters the fit held (issue 25: what ``identify`` and
-  ``export`` print).
+  ``export`` print), each flagged ``note`` (said, not warned: a placement direction, where a
+  delta's tower set stands on the bed) or not, and for a touch probe on a bed what would
+  determine the rail leans (:func:`pkmcal.identification.advice.plane_held_advice`).
 """
 
 from __future__ import annotations
