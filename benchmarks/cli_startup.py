@@ -4,7 +4,7 @@ Workload (each a fresh process, as a user types it; caches warm: one untimed run
 
 * ``pkmcal --help``                                     target ≤ 0.3 s
 * ``pkmcal machines``                                   target ≤ 0.3 s
-* ``pkmcal ik stewart-prototype POSES.csv`` on 10 poses target ≤ 1 s
+* ``pkmcal ik stewart-prototype --poses POSES.csv`` on 10 poses target ≤ 1 s
 
 Each command is run ``--repeats`` times through the installed entry point's interpreter
 (``sys.executable -m pkmcal.cli.main``, no shell or pyenv shim in the way); reported are the
@@ -108,7 +108,7 @@ def main(argv=None) -> dict:
         cmds = {
             "help": [py, "-m", "pkmcal.cli.main", "--help"],
             "machines": [py, "-m", "pkmcal.cli.main", "machines"],
-            "ik_10": [py, "-m", "pkmcal.cli.main", "ik", "stewart-prototype", poses],
+            "ik_10": [py, "-m", "pkmcal.cli.main", "ik", "stewart-prototype", "--poses", poses],
         }
         print(f"machine: {cpu_model()}, {os.cpu_count()} cores, load average "
               f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}; Python {platform.python_version()}")

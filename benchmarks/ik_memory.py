@@ -3,7 +3,7 @@ peaked at 5.1 GB when every pose was computed and formatted at once).
 
 Workload: ``--poses`` random reachable poses of ``stewart-prototype`` (uniform in home ±
 (8, 8, 4 mm, 2, 2, 4 deg), seed 0) written as a pose CSV, then ``pkmcal ik stewart-prototype
-POSES.csv -o LEGS.csv`` in a fresh process (``sys.executable -m pkmcal.cli.main``). Measured:
+--poses POSES.csv -o LEGS.csv`` in a fresh process (``sys.executable -m pkmcal.cli.main``). Measured:
 the child's peak resident set size (``resource.getrusage(RUSAGE_CHILDREN).ru_maxrss``, the
 figure ``/usr/bin/time -v`` prints as "Maximum resident set size"; the one-pose warm-up run
 that loads the compiled kernels' cache first is far smaller), its wall time, the peak
@@ -51,10 +51,10 @@ def main() -> None:
         del p
         with open(os.path.join(d, "warm.csv"), "w") as fh:  # compile/load the numba kernels' cache first
             fh.write("x,y,z,a,b,c\n0,0,365,0,0,0\n")
-        subprocess.run([sys.executable, "-m", "pkmcal.cli.main", "ik", "stewart-prototype", fh.name],
+        subprocess.run([sys.executable, "-m", "pkmcal.cli.main", "ik", "stewart-prototype", "--poses", fh.name],
                        check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         t0 = time.perf_counter()
-        subprocess.run([sys.executable, "-m", "pkmcal.cli.main", "ik", "stewart-prototype", poses, "-o", legs],
+        subprocess.run([sys.executable, "-m", "pkmcal.cli.main", "ik", "stewart-prototype", "--poses", poses, "-o", legs],
                        check=True, stderr=subprocess.DEVNULL)
         wall = time.perf_counter() - t0
         peak_kb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss  # KiB on Linux

@@ -104,8 +104,10 @@ def timed(fn, *args, **kwargs):
 
 def run_child(n_candidates: int, setup: str, seed: int, workers: int | None = None, src: str | None = None,
               n: int = 110) -> dict:
-    """``pkmcal plan --n n`` in a fresh process (with ``--workers``; the package from ``src``
-    when given): wall and CPU seconds, peak RSS (MB), its summary and the poses file's text."""
+    """``pkmcal plan --n-poses n`` in a fresh process (with ``--workers``; the package from ``src``
+    when given): wall and CPU seconds, peak RSS (MB), its summary and the poses file's text. The
+    command is given the old spelling ``--n``, which the trees of ``--baseline-src`` read too
+    (``docs/options.md``)."""
     env = dict(os.environ) if src is None else {**os.environ, "PYTHONPATH": os.path.abspath(src)}
     with tempfile.TemporaryDirectory() as tmp:
         cmd = [sys.executable, "-m", "pkmcal.cli.main", "plan", "stewart-prototype", "--setup", setup, "--n", str(n),
@@ -203,7 +205,7 @@ def large_candidate_sets(setup_name: str, seed: int, skip_million: bool, workers
         med = _median_runs(runs)
         key = f"plan_110_of_100000{tag}"
         res.update({f"{key}_s": med["wall_s"], f"{key}_cpu_s": med["cpu_s"], f"{key}_peak_rss_mb": med["peak_rss_mb"]})
-        print(f"pkmcal plan --n 110 --n-candidates {sizes.large}"
+        print(f"pkmcal plan --n-poses 110 --n-candidates {sizes.large}"
               f"{' (baseline ' + baseline_src + ')' if tag else ''}, median "
               f"of {len(runs)}: {med['wall_s']:.2f} s wall, {med['cpu_s']:.2f} s CPU, peak RSS "
               f"{med['peak_rss_mb']:.0f} MB; {runs[0]['summary']}")
@@ -211,7 +213,7 @@ def large_candidate_sets(setup_name: str, seed: int, skip_million: bool, workers
     res["plan_8_of_100_poses"] = n_small
     res["plan_110_of_100000_above_8_of_100_s"] = res["plan_110_of_100000_s"] - res["plan_8_of_100_s"]
     print(f"start-up floors, medians of {repeat}: python -c pass {res['python_start_s']:.2f} s; one cached numba "
-          f"function {res['numba_floor_s']:.2f} s; pkmcal plan --n {n_small} --n-candidates 100 "
+          f"function {res['numba_floor_s']:.2f} s; pkmcal plan --n-poses {n_small} --n-candidates 100 "
           f"{res['plan_8_of_100_s']:.2f} s, "
           f"so the {sizes.large} plan's own work is {res['plan_110_of_100000_above_8_of_100_s']:.2f} s")
     if base:
@@ -225,7 +227,7 @@ def large_candidate_sets(setup_name: str, seed: int, skip_million: bool, workers
         child = run_child(sizes.million, setup_name, seed, workers=workers)
         res.update({f"{key}_s": child["wall_s"], f"{key}_cpu_s": child["cpu_s"],
                     f"{key}_peak_rss_mb": child["peak_rss_mb"]})
-        print(f"pkmcal plan --n 110 --n-candidates {sizes.million}{f' --workers {workers}' if workers else ''}: "
+        print(f"pkmcal plan --n-poses 110 --n-candidates {sizes.million}{f' --workers {workers}' if workers else ''}: "
               f"{child['wall_s']:.2f} s wall, {child['cpu_s']:.2f} s CPU, peak RSS {child['peak_rss_mb']:.0f} MB; "
               f"{child['summary']}")
     box = workspace_box(machine, setup)

@@ -16,7 +16,7 @@ test's own ``suppress_health_check`` replaces the profile's list, so it names to
 pytest's ``--hypothesis-profile NAME`` chooses too, after this file.
 
 And one shared fixture: every reproduction run once in quick mode per test session (a few
-seconds each; tests/test_reproduce.py and tests/test_reproduce_issue15.py both read them).
+seconds each; tests/reproduce/test_reproduce.py and tests/reproduce/test_reproduce_issue15.py both read them).
 """
 
 from __future__ import annotations

@@ -5,7 +5,8 @@ written), the hypothesis strategies of the loader fuzz tests, the one comparison
 analytic Jacobians with central finite differences that every Jacobian test uses
 (:func:`assert_jacobian_matches_fd`, its tolerance derived from the step and the scale), the
 bands of the Monte Carlo checks (from the sampling distributions, false failure < 1e-6 for
-any seed), and the environment of a pkmcal subprocess."""
+any seed), the environment of a pkmcal subprocess, and every command's and subcommand's
+``--help`` (:func:`command_helps`)."""
 
 from __future__ import annotations
 
@@ -548,3 +549,22 @@ def probe_triggers(nominal, real, sensor, xy, *, noise=0.0, rng=None, z0=5.0):
     h, lam = height(z)
     assert np.max(np.abs(h)) < 1e-11
     return lam, np.c_[xy, z]
+
+
+def command_helps(width: int = 200):
+    """``(path, command, help text)`` of every command and subcommand of ``pkmcal`` (``path``
+    the words after ``pkmcal``, e.g. ``["import", "klipper"]``), the help as ``--help`` prints
+    it at terminal width ``width``."""
+    import click
+    from click.testing import CliRunner
+
+    from pkmcal.cli.main import COMMANDS, cli
+
+    def walk(path, command):
+        yield path, command, CliRunner().invoke(cli, [*path, "--help"], terminal_width=width).output
+        if isinstance(command, click.Group):
+            for name, sub in command.commands.items():
+                yield from walk([*path, name], sub)
+
+    for name in COMMANDS:
+        yield from walk([name], cli.get_command(None, name))

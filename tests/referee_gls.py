@@ -14,7 +14,7 @@ docs/file-formats.md:
   ∂λ_i/∂p = u_iᵀ/g_i, ∂λ_i/∂(a, b, c) = u_iᵀ (∂R/∂angle) a_i / g_i, ∂λ_i/∂b_i = −u_iᵀ/g_i,
   ∂λ_i/∂a_i = (Rᵀu_i)ᵀ/g_i, ∂λ_i/∂L0_i = −1/g_i, ∂λ_i/∂g_i = −(L_i − L0_i)/g_i²;
   the sensors' derivatives by central differences of their closed forms
-  (:func:`central_jacobian`); ``tests/test_referee_ik_residual.py`` checks the analytic ones
+  (:func:`central_jacobian`); ``tests/identification/test_referee_ik_residual.py`` checks the analytic ones
   against the same differences;
 * **sensors** (their models written from their definitions, docs/file-formats.md):
   full pose y = (p_w + R_w (p + R t), euler(R_w R R_t)); position (a tracker on one target)
@@ -48,7 +48,7 @@ tolerances derived from pkmcal's stopping rule and the referee's differences), t
 Carlo statistics (:func:`trials_needed` derives the number of campaigns), and the few lines
 that drive pkmcal to make a campaign's files and fit them (``run_pkmcal``, ``identify``,
 ``identify_api``, ``simulate_reached``), which import pkmcal inside themselves; the referee's
-fit never calls them (``tests/test_referee_ik_residual.py`` fits a campaign in a process
+fit never calls them (``tests/identification/test_referee_ik_residual.py`` fits a campaign in a process
 where pkmcal cannot be imported).
 """
 

@@ -83,6 +83,32 @@ def test_exported_machine_reproduces_the_verification(demo_run):
     assert np.linalg.norm(calibrated.params - real.params) < 0.5 * np.linalg.norm(nominal.params - real.params)
 
 
+def test_demo_json_summary_is_the_printed_one_in_mm_and_degrees(demo_run):
+    """``demo --json``'s numbers (:func:`pkmcal.cli.demo_cmd.summary_json`) are the run's
+    headline (calibration.json: mm and rad, and its own mm/deg copy), keyed as ``verify
+    --json``'s, and round to what the text summary printed."""
+    from types import SimpleNamespace
+
+    from pkmcal.cli.demo_cmd import summary_json
+
+    _, out, proc = demo_run
+    written = json.loads((out / "calibration.json").read_text())
+    result = SimpleNamespace(headline=written["headline_mm_rad"], notes=(), files={"report": out / "report.html"},
+                             verification=SimpleNamespace(to_dict=lambda: {"used": 97}))
+    d = summary_json(result)
+    assert d["held_out_poses"] == 97 and d["files"] == {"report": str(out / "report.html")} and d["notes"] == []
+    for when in ("before", "after"):
+        assert set(d[when]) == {"position_rms_mm", "position_max_mm", "orientation_rms_deg", "orientation_max_deg"}
+        for key, value in d[when].items():
+            quantity, stat, _ = key.split("_")
+            assert value == pytest.approx(written["headline_mm_deg"][f"{quantity}_{stat}_{when}"], rel=1e-12)
+    line = next(line for line in proc.stdout.splitlines() if line.strip().startswith("position error"))
+    rms_before_um, rms_after_um = _micrometres(line)[:2]
+    # printed with 4 significant digits: within half a unit of the 4th digit
+    assert rms_before_um == pytest.approx(1000.0 * d["before"]["position_rms_mm"], rel=5e-4)
+    assert rms_after_um == pytest.approx(1000.0 * d["after"]["position_rms_mm"], rel=5e-4)
+
+
 def test_demo_is_byte_identical_for_the_same_seed(demo_run, tmp_path):
     _, out, _ = demo_run
     again = run_demo(DemoConfig(out=str(tmp_path / "again")))
@@ -108,6 +134,6 @@ def test_demo_refuses_bad_requests(tmp_path):
     taken.write_text("x")
     with pytest.raises(PkmcalError, match="not a folder"):
         run_demo(DemoConfig(out=str(taken)))
-    res = CliRunner().invoke(cli, ["demo", "--out", str(taken)])
+    res = CliRunner().invoke(cli, ["demo", "-o", str(taken)])
     assert res.exit_code == 2 and "not a folder" in res.output and res.exception is not None
     assert "Traceback" not in res.output

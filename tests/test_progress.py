@@ -24,7 +24,7 @@ from pkmcal.progress import ProgressBar, bars_enabled
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals are POSIX")
 
-PLAN = ["plan", "stewart-prototype", "--setup", "indicators-prototype", "--n", "15", "--n-candidates", "300",
+PLAN = ["plan", "stewart-prototype", "--setup", "indicators-prototype", "--n-poses", "15", "--n-candidates", "300",
         "--algorithm", "cuckoo", "--seed", "1"]
 
 

@@ -4,6 +4,7 @@ Hypothesis profile, and no test overrides what the profile decides (derandomize,
 from __future__ import annotations
 
 import importlib
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -32,7 +33,7 @@ def test_no_test_overrides_the_profile():
     deadline, and too_slow is not checked (timing never decides)."""
     loaded = settings.default
     checked = 0
-    for path in sorted(Path(__file__).parent.glob("test_*.py")):
+    for path in sorted(Path(__file__).parent.rglob("test_*.py")):
         module = importlib.import_module(path.stem)
         for name, obj in sorted(vars(module).items()):
             own = getattr(obj, "_hypothesis_internal_use_settings", None)
@@ -43,3 +44,25 @@ def test_no_test_overrides_the_profile():
                 assert HealthCheck.too_slow in own.suppress_health_check, f"{path.name}::{name} checks too_slow"
                 checked += 1
     assert checked >= 60
+
+
+#: Test modules that check the package as a whole, not one of its subpackages, stay in tests/.
+TOP_LEVEL_SUBJECTS = {"api", "allocator", "architecture", "benchmarks", "conventions", "demo", "one_pipeline",
+                      "progress", "registries", "suite_settings", "tutorial"}
+
+
+def test_tests_mirror_the_package():
+    """tests/<package>/test_<module>.py: every test folder is a subpackage of src/pkmcal, every
+    test module in tests/ itself checks the package as a whole, and basenames are unique (the
+    folders are on pytest's ``pythonpath``, so shared fixtures are imported by module name)."""
+    tests = Path(__file__).parent
+    package = tests.parent / "src" / "pkmcal"
+    folders = {p.parent.name for p in tests.rglob("test_*.py") if p.parent != tests}
+    assert folders and all((package / name / "__init__.py").exists() for name in folders), folders
+    top = {p.stem.removeprefix("test_") for p in tests.glob("test_*.py")}
+    assert top <= TOP_LEVEL_SUBJECTS, top - TOP_LEVEL_SUBJECTS
+    names = [p.name for p in tests.rglob("*.py") if p.name != "conftest.py"]
+    assert len(names) == len(set(names)), sorted(n for n in names if names.count(n) > 1)
+    pyproject = tomllib.loads((tests.parent / "pyproject.toml").read_text())
+    on_path = set(pyproject["tool"]["pytest"]["ini_options"]["pythonpath"])
+    assert on_path == {"tests"} | {f"tests/{name}" for name in folders}

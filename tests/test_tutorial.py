@@ -218,7 +218,7 @@ def test_dials_inch_is_the_tutorials_measurements_in_inches(tmp_path, monkeypatc
     monkeypatch.chdir(tmp_path)
     shutil.copy(FILES / "indicators.yaml", tmp_path)
     runner = CliRunner()
-    for argv in (["plan", "stewart-prototype", "--setup", "indicators.yaml", "--n", "45", "--seed", "1",
+    for argv in (["plan", "stewart-prototype", "--setup", "indicators.yaml", "--n-poses", "45", "--seed", "1",
                   "-o", "poses.csv"],
                  ["simulate", "stewart-prototype", "--real", "stewart-prototype-real", "--setup", "indicators.yaml",
                   "--poses", "poses.csv", "--seed", "2", "-o", "meas.csv"]):

@@ -188,7 +188,7 @@ def run_demo(config: DemoConfig = DemoConfig(), progress: Progress | None = None
 
     out = Path(config.out)
     if out.exists() and not out.is_dir():
-        raise PkmcalError(f"demo output '{out}' exists and is not a folder; choose another with --out")
+        raise PkmcalError(f"demo output '{out}' exists and is not a folder; choose another with -o")
     nominal = load_machine(config.machine)
     real = load_machine(config.real)
     setup = load_setup(config.setup)
@@ -260,7 +260,7 @@ def run_demo(config: DemoConfig = DemoConfig(), progress: Progress | None = None
 
     # 5. export -------------------------------------------------------------------------
     step("export")
-    make_folder(out, "--out")
+    make_folder(out, "-o")
     files: dict[str, Path] = {}
     files["calibrated"] = out / f"{calibrated.name}.yaml"
     save_machine(calibrated, files["calibrated"])

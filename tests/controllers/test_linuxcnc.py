@@ -91,7 +91,7 @@ class Case:
 
 def calibrate(d: Path, machine: str, setup: str, real: list[str]) -> Path:
     """plan → simulate → identify through the command line; the calibrated machine file."""
-    ok(run("plan", machine, "--setup", setup, "--n", 30, "--seed", 1, "-o", d / "poses.csv"))
+    ok(run("plan", machine, "--setup", setup, "--n-poses", 30, "--seed", 1, "-o", d / "poses.csv"))
     ok(run("simulate", machine, *real, "--setup", setup, "--poses", d / "poses.csv", "--seed", 2,
            "-o", d / "meas.csv"))
     ok(run("identify", machine, d / "meas.csv", "--setup", setup, "-o", d / "calibrated.yaml"))
@@ -129,7 +129,7 @@ def test_world_mode_joints_are_pkmcal_ik(case):
     poses = np.array(run_.commanded, dtype=float)
     poses[:, :3] *= u                                   # what LinuxCNC was told, in mm and degrees
     write_csv(case.folder / "lc-poses.csv", "x y z a b c".split(), poses)
-    ok(run("ik", case.calibrated, case.folder / "lc-poses.csv", "-o", case.folder / "lc-legs.csv"))
+    ok(run("ik", case.calibrated, "--poses", case.folder / "lc-poses.csv", "-o", case.folder / "lc-legs.csv"))
     legs = read_csv(case.folder / "lc-legs.csv", [f"l{i}" for i in range(1, 7)])
     diff = np.abs(run_.joints * u - legs)
     print(f"{case.name}: largest |LinuxCNC joint - pkmcal ik| over {len(poses)} poses: {diff.max():.3g} mm")
@@ -223,7 +223,7 @@ def test_the_comparison_sees_a_micrometre(case):
 # -- pkmcal check linuxcnc -------------------------------------------------------------------
 
 def test_check_command_example_runs_linuxcnc():
-    """The example of 'pkmcal check --help' (run here, not by tests/test_cli_examples.py)."""
+    """The example of 'pkmcal check --help' (run here, not by tests/cli/test_examples.py)."""
     require_controller(lc.missing_reason())
     res = ok(run(*"check linuxcnc stewart-prototype".split()))
     assert "world mode: largest |LinuxCNC joint - pkmcal strut length|" in res.stdout

@@ -27,7 +27,8 @@ from pkmcal.errors import PkmcalError
 from pkmcal.identification.simulation import perturb_machine, settles_at_equilibrium, simulate_campaign
 from pkmcal.identification.verification import verify
 from pkmcal.cli.import_options import import_options
-from pkmcal.cli.options import check_output, emit, examples, output_option, quiet_option, to_stdout, units_comment_option
+from pkmcal.cli.options import (check_output, emit, examples, option, output_option, quiet_accepted, quiet_option,
+                                to_stdout, units_comment_option)
 from pkmcal.cli.option_types import SEED, FiniteFloat
 from pkmcal.io.atomic import atomic_write_text
 from pkmcal.io.limits import MAX_MAGNITUDE
@@ -228,36 +229,37 @@ def _simulate_sessions(nominal, real, setup, commanded, rng, n_sessions: int, er
 @click.command("verify", epilog=examples(
     "pkmcal simulate stewart-prototype --real stewart-prototype-real --setup indicators-prototype --poses heldout.csv "
     "--seed 3 -o heldout-meas.csv",
-    "pkmcal verify calibrated.yaml --measurements heldout-meas.csv --setup indicators-prototype",
-    "pkmcal verify calibrated.yaml --measurements heldout-meas.csv --setup calibrated.yaml --json -o verify-held.json",
-    "pkmcal verify calibrated.yaml --measurements heldout-meas.csv --setup indicators-prototype --nominal "
+    "pkmcal verify calibrated.yaml --held-out heldout-meas.csv --setup indicators-prototype",
+    "pkmcal verify calibrated.yaml --held-out heldout-meas.csv --setup calibrated.yaml --json -o verify-held.json",
+    "pkmcal verify calibrated.yaml --held-out heldout-meas.csv --setup indicators-prototype --nominal "
     "stewart-prototype --calibration-measurements meas.csv",
     "pkmcal verify calibrated.yaml --real stewart-prototype-real --nominal stewart-prototype --poses heldout.csv",
     "pkmcal verify calibrated.yaml --real stewart-prototype-real --poses heldout.csv --json -o verify.json",
     "pkmcal verify calibrated.yaml --real stewart-prototype-real --setup indicators-prototype --nominal "
-    "stewart-prototype --poses heldout.csv"))
+    "stewart-prototype --poses heldout.csv",
+    "pkmcal verify calibrated.yaml --real stewart-prototype-real --poses iso9283.csv --compare commanded"))
 @click.argument("calibrated")
-@click.option("--measurements", "meas_path", metavar="HELDOUT.csv",
+@option("--held-out", "meas_path", metavar="HELDOUT.csv", old=("--measurements",),
               help="Measured held-out data (a measurement CSV as identify reads, not used in the fit): predict each "
                    "measurement from its actuator readings and compare with what was measured.")
 @click.option("--real", "real_spec", metavar="REAL",
-              help="Instead of --measurements: the true machine (file or built-in name) of a simulation, commanded "
+              help="Instead of --held-out: the true machine (file or built-in name) of a simulation, commanded "
                    "at the --poses through each model.")
 @click.option("--poses", metavar="HELDOUT.csv",
               help="With --real: held-out poses x,y,z (mm), a,b,c (deg); planar machines: their pose names (x,y[,phi]).")
 @click.option("--nominal", metavar="NOMINAL",
-              help="The nominal machine, for the 'before' column. Default with --measurements: the machine the "
+              help="The nominal machine, for the 'before' column. Default with --held-out: the machine the "
                    "calibration record names (a built-in, or a file that still exists). With --real and --compare "
                    "sensor or aligned, the --poses are in its frames (default: the record's machine) and are carried "
                    "into the calibrated model's frames, so that both models command the same physical poses.")
 @click.option("--setup", "setup_spec", metavar="SETUP.yaml",
-              help="With --measurements: the measurement setup (CALIBRATED.yaml itself works; the sensor identified "
+              help="With --held-out: the measurement setup (CALIBRATED.yaml itself works; the sensor identified "
                    "in CALIBRATED.yaml's setup: is used when it has one). With --real: the true instrument, whose "
                    "readings are compared (--compare sensor; a printed-distance setup reads the held-out poses with "
                    "its Z probe); redundant machines: the tracker setup with the 'simulation:' stiffness and load "
                    "(required there).")
 @click.option("--calibration-measurements", "calib_meas", metavar="MEAS.csv",
-              help="With --measurements, for a calibrated file without calibration.before_registration: the "
+              help="With --held-out, for a calibrated file without calibration.before_registration: the "
                    "calibration data on which the nominal machine's sensor frames are registered for 'before'.")
 @click.option("--compare", type=click.Choice(["auto", "sensor", "aligned", "commanded"]), default="auto",
               show_default=True,
@@ -266,18 +268,19 @@ def _simulate_sessions(nominal, real, setup, commanded, rng, n_sessions: int, er
                    "best rigid alignment of base and platform frames; commanded: platform poses as commanded (depends "
                    "on the gauge when sensor frames were identified). auto: sensor with --setup, else aligned.")
 @click.option("--clipped", type=click.Choice(CLIPPED_POLICIES), default=None,
-              help="With --measurements: held-out poses with a clipped or stuck actuator reading are listed and left "
+              help="With --held-out: held-out poses with a clipped or stuck actuator reading are listed and left "
                    "out (drop, the default), used (keep), or an error, as identify does.")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
 @click.option("--ignore-limit", "ignore_limits", multiple=True, metavar="NAME",
               help="With --real: a limit of the real machine not to check (e.g. leg_collision); repeatable.")
 @output_option("FILE", "Write the table/JSON here")
 @import_options
+@quiet_accepted
 def verify_cmd(calibrated, meas_path, real_spec, poses, nominal, setup_spec, calib_meas, compare, clipped, as_json,
                ignore_limits, output, mapping) -> None:
-    """Validate CALIBRATED on held-out data: measured (--measurements) or a true machine (--real).
+    """Validate CALIBRATED on held-out data: measured (--held-out) or a true machine (--real).
 
-    --measurements HELDOUT.csv: each held-out measurement is predicted from its actuator
+    --held-out HELDOUT.csv: each held-out measurement is predicted from its actuator
     readings (FK of CALIBRATED, then the sensor identified with it) and compared with what
     was measured, per pose and in summary (mean, RMS, max): full-pose sensors position
     error (mm) and the rotation angle between measured and predicted rotations (deg);
@@ -295,6 +298,11 @@ def verify_cmd(calibrated, meas_path, real_spec, poses, nominal, setup_spec, cal
     says what is compared (stated in the output and the JSON key 'compare'). JSON keys:
     before/after: {position_mean_mm, position_max_mm, position_rms_mm,
     orientation_mean_deg, ..., tilt_*_deg, height_*_mm}, compare, compared.
+
+    Held-out poses in the ISO 9283 pattern ('pkmcal plan --pattern iso9283'; with
+    --measurements, the cmd_x.. columns): also the standard's AP, RP, AD, RD, each with its
+    expanded uncertainty U (k = 2) from the instrument's noise and registration (exact with
+    --real). JSON key iso9283. docs/accuracy-reports.md.
 
     Redundantly actuated machines (planar-2dof-3act, planar-3dof-4act) with --real: the tool
     point should read the tracker value of each held-out pose; each model commands it (the
@@ -364,10 +372,30 @@ def verify_cmd(calibrated, meas_path, real_spec, poses, nominal, setup_spec, cal
         frames = nom if nom is not None or mode == "commanded" else _nominal_from_record(cal)[0]
         if frames is not None and frames.kind != cal.kind:
             frames = None
-    report = verify(cal, real, read_poses(poses, cal, mapping), nominal=nom, ignore_limits=tuple(ignore_limits),
+    held = read_poses(poses, cal, mapping)
+    report = verify(cal, real, held, nominal=nom, ignore_limits=tuple(ignore_limits),
                     compare=mode, sensors=sensors, true_sensor=true_sensor, frames=frames, setup=setup)
-    text = json.dumps(report.to_dict(), indent=2, allow_nan=False) + "\n" if as_json else report.format_table() + "\n"
-    emit(text, output)
+    iso = None
+    if mode != "tool":     # the held-out poses in the ISO 9283 pattern (plan --pattern iso9283): its figures
+        from pkmcal.identification.iso9283 import verification_figures
+
+        iso = verification_figures(report, cal, held, machine_covariance=cal.covariance,
+                                   identified=cal.metadata.get("setup"))
+    emit(_with_iso(report.to_dict() if as_json else report.format_table(), iso, as_json), output)
+
+
+def _with_iso(out, iso, as_json: bool) -> str:
+    """The verification's JSON (dict) or table (text) with the ISO 9283 figures (key
+    'iso9283'), or why the pattern's figures could not be computed."""
+    if as_json:
+        from pkmcal.io.json_out import finite_or_null
+
+        if iso is not None:
+            out["iso9283"] = iso if isinstance(iso, str) else iso.to_dict()
+        return json.dumps(finite_or_null(out), indent=2, allow_nan=False) + "\n"
+    if iso is not None:
+        out += "\n" + (f"ISO 9283: not computed: {iso}" if isinstance(iso, str) else iso.format_table())
+    return out + "\n"
 
 
 def _identified_setup(path: str, cal, what: str):
@@ -470,8 +498,7 @@ def _verify_measured(calibrated, meas_path, nominal, setup_spec, calib_meas, cli
     notes.extend(f"warning: {w}" for w in lines)
     report = heldout_validation(cal, cal_setup, nom, before_sensor, held, source=str(meas_path), before_note=note,
                                 notes=notes, before_sessions=before_sessions, clipped=tuple(c.to_dict(unit[c.actuator]) for c in found))
-    if as_json:
-        from pkmcal.io.json_out import finite_or_null
+    from pkmcal.identification.iso9283 import heldout_figures
 
-        return json.dumps(finite_or_null(report.to_dict()), indent=2, allow_nan=False) + "\n"
-    return report.format_table() + "\n"
+    iso = heldout_figures(cal, cal_setup, held, identified=cal.metadata.get("setup"), machine_covariance=cal.covariance)
+    return _with_iso(report.to_dict() if as_json else report.format_table(), iso, as_json)

@@ -27,7 +27,7 @@ import sys
 
 import click
 
-from pkmcal.cli.options import examples
+from pkmcal.cli.options import examples, quiet_accepted
 
 
 @click.group("check", epilog=examples("pkmcal check linuxcnc stewart-prototype"))
@@ -52,6 +52,7 @@ def check_group() -> None:
               help="Poses moved in world mode, and as many in joint mode.")
 @click.option("--seed", type=click.IntRange(0), default=0, show_default=True, help="Seed of the poses.")
 @click.option("--json", "as_json", is_flag=True, help="Print the comparison as JSON on standard output.")
+@quiet_accepted
 def linuxcnc_cmd(calibrated: str, hal: str | None, ini: str | None, n_poses: int, seed: int, as_json: bool) -> None:
     """Run the LinuxCNC files of CALIBRATED.yaml through the installed LinuxCNC.
 
@@ -113,6 +114,7 @@ def _report(result, as_json: bool, controller: str, what: str) -> None:
               help="Nozzle positions across the workspace compared.")
 @click.option("--seed", type=click.IntRange(0), default=0, show_default=True, help="Seed of the positions.")
 @click.option("--json", "as_json", is_flag=True, help="Print the comparison as JSON on standard output.")
+@quiet_accepted
 def klipper_cmd(printer_cfg: str, calibrated: str, n_poses: int, seed: int, as_json: bool) -> None:
     """Read PRINTER.cfg with Klipper's own code and compare it with CALIBRATED.yaml.
 

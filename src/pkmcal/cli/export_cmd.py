@@ -8,7 +8,7 @@
   (:func:`pkmcal.io.export_linuxcnc.linuxcnc_ini`; ``pkmcal import linuxcnc`` reads both).
 * ``--format klipper`` / ``marlin`` (linear deltas): the firmware's ten numbers
   (:mod:`pkmcal.io.delta_firmware`), what it cannot hold listed on standard error; with
-  ``--measurements`` (``--setup``, ``--heldout``, ``--json``) the firmware-limited refit is
+  ``--calibration-measurements`` (``--setup``, ``--held-out``, ``--json``) the firmware-limited refit is
   exported instead, with the fit and held-out RMS of the full model, of its firmware numbers
   and of the refit (:mod:`pkmcal.identification.firmware_refit`); without it, the refit on
   the measurements the calibration record names (unchanged: their SHA-256) when the machine
@@ -32,7 +32,7 @@ import os
 
 import click
 
-from pkmcal.cli.options import check_output, emit, examples, output_option, to_stdout
+from pkmcal.cli.options import check_output, emit, examples, option, output_option, quiet_accepted, to_stdout
 from pkmcal.cli.option_types import FiniteFloat
 from pkmcal.errors import PkmcalError
 # the JSON record moved to pkmcal.io.calibration_json; the names stay importable from here
@@ -69,15 +69,15 @@ from pkmcal.io.calibration_json import (  # noqa: F401
               help="linuxcnc: how far inside each end of the stroke the joint limits stand, mm of strut (default 1 % "
                    "of each joint's stroke: room for the following error and the homing repeatability; 0: the "
                    "stroke's ends).")
-@click.option("--measurements", "measurements", metavar="MEAS.csv",
+@option("--calibration-measurements", "measurements", metavar="MEAS.csv", old=("--measurements",),
               help="klipper / marlin: refit the machine with only the firmware's numbers free (rail leans and tool "
                    "offset at 0) on these measurements, export that refit, and report on standard error the fit "
                    "rms of the full model, of its firmware numbers without a refit and of the refit.")
 @click.option("--setup", "setup_spec", metavar="SETUP",
-              help="With --measurements: the setup file or built-in name of the measurements (default: the setup "
+              help="With --calibration-measurements: the setup file or built-in name of the measurements (default: the setup "
                    "of the machine file's calibration record).")
-@click.option("--heldout", "heldout", metavar="HELDOUT.csv",
-              help="With --measurements: measurements not used in any fit; the report adds each model's held-out "
+@option("--held-out", "heldout", metavar="HELDOUT.csv", old=("--heldout",),
+              help="With --calibration-measurements: measurements not used in any fit; the report adds each model's held-out "
                    "rms on them.")
 @click.option("--config", "klipper_config", metavar="PRINTER.cfg",
               help="klipper: write the whole printer.cfg as Klipper's SAVE_CONFIG would leave it with this "
@@ -100,8 +100,9 @@ from pkmcal.io.calibration_json import (  # noqa: F401
                    "arm for lengths; for angles, the angle that moves a tower by that much); without it such an "
                    "export is refused.")
 @click.option("--json", "as_json", is_flag=True,
-              help="With --measurements: print the refit report as JSON on standard output (the settings then need "
+              help="With --calibration-measurements: print the refit report as JSON on standard output (the settings then need "
                    "-o FILE).")
+@quiet_accepted
 def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None, update_ini: str | None = None,
                stroke_margin: float | None = None, measurements: str | None = None, setup_spec: str | None = None,
                heldout: str | None = None, klipper_config: str | None = None, marlin_version: str = "2.1.x",
@@ -134,7 +135,7 @@ def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None, u
     The firmware-limited refit is made by default when the machine has what the firmware
     cannot hold and its calibration record names the measurements and the setup (the file
     unchanged since identify: its SHA-256); --no-refit exports the numbers as they are.
-    With --measurements MEAS.csv (and --setup, --heldout HELDOUT.csv): the firmware-limited
+    With --calibration-measurements MEAS.csv (and --setup, --held-out HELDOUT.csv): the firmware-limited
     refit on those. The machine is fitted again with only the firmware's numbers free (one radius,
     per tower angle, arm, endstop; leans and tool offset held at 0; the calibration's
     method and priors), the refit is what is exported (the best machine the firmware can

@@ -35,7 +35,8 @@ from pkmcal.cli.calibrated_file import (
 from pkmcal.cli.fit_text import fit_summary, free_statement, result_table
 from pkmcal.cli.import_options import import_options
 from pkmcal.cli.option_types import FiniteFloat
-from pkmcal.cli.options import DeprecatedArgument, check_output, emit, examples, output_option, poses_file, to_stdout
+from pkmcal.cli.options import (STDOUT, DeprecatedArgument, check_output, emit, examples, option, output_option,
+                                poses_file, quiet_accepted, to_stdout)
 from pkmcal.io.atomic import check_output_path
 from pkmcal.io.measurements import CLIPPED_POLICIES, apply_clipped_policy, clipped_named_in_errors, load_measurements
 from pkmcal.io.tables import read_poses
@@ -116,7 +117,7 @@ def _firmware_numbers_undetermined(result) -> list[tuple[str, str]]:
                    "parameters and the sensor parameters of the setup's 'free:' list. With --free, the setup's "
                    "'free:' sensor parameters are estimated too: --free adds to that list, it does not replace "
                    "it (hold one of them with --fix). The output states which list each free parameter came from.")
-@output_option("CALIBRATED.yaml", "Calibrated machine file to write", stdout=False)
+@output_option("CALIBRATED.yaml", "Calibrated machine file to write", default=STDOUT)
 @click.option("--name", metavar="NAME",
               help="Name of the calibrated machine (default: MACHINE-calibrated-YYYY-MM-DD, the UTC date).")
 @click.option("--json", "as_json", is_flag=True, help="Print the fit as JSON instead of a table.")
@@ -149,9 +150,9 @@ def _firmware_numbers_undetermined(result) -> list[tuple[str, str]]:
               help="With a 'session' column of several sessions: estimate actuator zero offsets dq_i@LABEL for "
                    "every session but the first (the actuators re-homed between sessions; the first session's "
                    "zeros are the machine's). Same as the setup's 'sessions: {actuator_offsets: true}'.")
-@click.option("--heldout", "heldout", metavar="HELDOUT.csv",
+@option("--held-out", "heldout", metavar="HELDOUT.csv", old=("--heldout",),
               help="Held-out measurements (same columns as MEAS.csv, not used in the fit): print the validation of "
-                   "'pkmcal verify CALIBRATED.yaml --measurements HELDOUT.csv' (before / after / "
+                   "'pkmcal verify CALIBRATED.yaml --held-out HELDOUT.csv' (before / after / "
                    "after_reregistered) and show it in the --report.")
 @click.option("--accept-bad-fit", "accept_bad_fit", is_flag=True,
               help="Write the calibrated file even when the fit is refused (it did not converge; its chi2 is "
@@ -159,10 +160,16 @@ def _firmware_numbers_undetermined(result) -> list[tuple[str, str]]:
                    "noise while the input looks wrong; or a machine parameter moved further than the machine's "
                    "size: the rule of pkmcal.identification.fit_verdict); the file's calibration record says it "
                    "was accepted and why it was refused.")
+@click.option("--history", "history_db", metavar="DB",
+              help="Also record the calibration in the history database DB (pkmcal history; with --serial), with "
+                   "the --heldout figures.")
+@click.option("--serial", metavar="SERIAL", help="With --history: the unit's serial number.")
 @import_options
+@quiet_accepted
 def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fix, free, output, name, as_json,
                  report_dir=None, mapping=None, keep=None, loss="linear", f_scale=None, reject=None,
-                 prior=(), clipped="drop", session_offsets=False, heldout=None, accept_bad_fit=False) -> None:
+                 prior=(), clipped="drop", session_offsets=False, heldout=None, accept_bad_fit=False,
+                 history_db=None, serial=None) -> None:
     """Identify MACHINE's kinematic parameters from MEAS.csv and write CALIBRATED.yaml.
 
     Units: mm, degrees in files and tables. Unidentifiable combinations are fixed
@@ -170,8 +177,8 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     which case an unidentifiable request is an error naming the combination.
     CALIBRATED.yaml carries a calibration record: the machine's new name, the UTC date
     (SOURCE_DATE_EPOCH fixes it), the pkmcal version, the command line and the SHA-256 of
-    every input file. With -o - the machine file goes to standard output and the table to
-    standard error.
+    every input file. Without -o, or with -o -, the machine file goes to standard output and
+    the table to standard error.
 
     Every fit lists its poses beyond the outlier threshold (pose numbers: data rows of
     MEAS.csv counted from 1; how many noise sigmas; the worst residual row); --reject
@@ -189,11 +196,14 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     world/tool/plate/zero... in mm and degrees, with their 1σ 'std:' and the covariance
     they come from), so that '--setup CALIBRATED.yaml' reuses it anywhere, and under
     'calibration.before_registration' the sensor's free parameters fitted with the machine
-    held at nominal (the fair "before" of 'pkmcal verify'). --heldout validates the result
+    held at nominal (the fair "before" of 'pkmcal verify'). --held-out validates the result
     on measurements the fit did not see.
     """
     inputs = [machine, measurements, setup_spec] + ([heldout] if heldout is not None else [])
     check_output(output, inputs)
+    from pkmcal.history.store import check_history_request, record_identified
+
+    check_history_request(history_db, serial, to_stdout(output))
     if f_scale is not None and loss == "linear":
         raise PkmcalError("--f-scale sets where a robust --loss turns from quadratic, and the loss is linear (least "
                           f"squares): give --loss ({', '.join(lo for lo in LOSSES if lo != 'linear')}) with it, or "
@@ -308,6 +318,7 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
         if validation is not None:
             d["heldout"] = validation.to_dict()
     emit(text, output)
+    recorded = None if history_db is None else record_identified(output, history_db, serial, validation)
     if report is not None:
         from pkmcal.report import write_report
 
@@ -315,6 +326,8 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     if as_json:
         if report is not None:
             d["report"] = str(written.html)
+        if recorded is not None:
+            d["history"] = {"db": str(history_db), "id": recorded.id, "serial": recorded.serial}
         click.echo(json.dumps(d, indent=2, allow_nan=False))
     else:
         err = to_stdout(output)
@@ -328,6 +341,8 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
             click.echo(validation.format_table(), err=err)
         if not err:
             click.echo(f"wrote {output}" + (f" and {written.html}" if report is not None else ""))
+        if recorded is not None:
+            click.echo(f"recorded #{recorded.id} for serial {recorded.serial} in {history_db}")
         elif report is not None:
             click.echo(f"wrote {written.html}", err=True)
 
@@ -370,7 +385,8 @@ def _report_data(nominal, result, setup, meas, meas_path: str, output: str, vali
 @click.command("identifiability", epilog=examples(
     "pkmcal identifiability stewart-prototype --setup indicators-prototype --poses poses.csv",
     "pkmcal identifiability stewart-prototype --setup full-pose-paper1 --poses poses.csv --json",
-    "pkmcal identifiability stewart-prototype --setup indicators-prototype --poses poses.csv --suggest"))
+    "pkmcal identifiability stewart-prototype --setup indicators-prototype --poses poses.csv --suggest",
+    "pkmcal identifiability stewart-prototype --setup full-pose-paper1 --poses poses.csv --accuracy"))
 @click.argument("machine")
 @click.argument("poses_arg", required=False, cls=DeprecatedArgument)
 @click.option("--setup", "setup_spec", required=True, metavar="SETUP.yaml",
@@ -384,9 +400,15 @@ def _report_data(nominal, result, setup, meas, meas_path: str, output: str, vali
 @click.option("--suggest", is_flag=True, help="Also rank what to measure next: the other built-in setups, printed "
               "distances (deltas) and more planned poses, by the rank and smallest singular value each gives "
               "(JSON key 'suggestions').")
+@click.option("--accuracy", is_flag=True, help="Also predict the accuracy a calibration on these poses gives, before "
+              "anything is measured: the 95 % bound of the position (and orientation) error over the workspace and at "
+              "the ISO 9283 cube's P1..P5, from the setup's noise (JSON key 'predicted_accuracy').")
+@click.option("--accuracy-map", "accuracy_map_path", metavar="FILE.png",
+              help="With --accuracy: also draw the predicted bound over the workspace (PNG or SVG).")
 @import_options
+@quiet_accepted
 def identifiability_cmd(machine, poses_arg, setup_spec, poses, method, fix, free, as_json, mapping=None,
-                        suggest=False) -> None:
+                        suggest=False, accuracy=False, accuracy_map_path=None) -> None:
     """Which parameters of MACHINE the SETUP can identify from POSES.csv.
 
     Prints the rank of the column-scaled, noise-weighted identification Jacobian, its
@@ -413,11 +435,31 @@ def identifiability_cmd(machine, poses_arg, setup_spec, poses, method, fix, free
 
         advice = advise(nominal, setup, x, method=method, free=merged_free(_names(free), setup),
                         fix=None if fix_names == ["auto"] else fix_names)
+    predicted = None
+    if accuracy_map_path is not None:
+        if not accuracy:
+            raise PkmcalError("--accuracy-map draws the predicted accuracy: give --accuracy too")
+        if not str(accuracy_map_path).lower().endswith((".png", ".svg")):
+            raise PkmcalError(f"--accuracy-map {accuracy_map_path}: use a .png or .svg file name")
+        check_output(accuracy_map_path, [machine, setup_spec, poses])
+    if accuracy:   # identification/iso9283.py: the covariance of these poses carried over the workspace
+        from pkmcal.identification.iso9283 import accuracy_map
+
+        predicted = accuracy_map(nominal, setup, x, method=method, report=rep)
+        if accuracy_map_path is not None:
+            from pkmcal.io.atomic import atomic_write_bytes
+            from pkmcal.report.figures import accuracy_map_figure, render
+
+            drawn = render(accuracy_map_figure(predicted), "accuracy-map", "")
+            atomic_write_bytes(accuracy_map_path, drawn.svg if str(accuracy_map_path).lower().endswith(".svg")
+                               else drawn.png)
     if as_json:
         d = rep.to_dict()
         d["warnings"] = notes
         if advice is not None:
             d["suggestions"] = advice.to_dict()
+        if predicted is not None:
+            d["predicted_accuracy"] = predicted.to_dict()
         click.echo(json.dumps(d, indent=2, allow_nan=False))
         return
     click.echo(f"{nominal.name} with {setup.sensor.kind} sensor, {len(x)} poses: rank {rep.rank} of "
@@ -440,4 +482,6 @@ def identifiability_cmd(machine, poses_arg, setup_spec, poses, method, fix, free
     for n in notes:
         click.echo(f"warning: {n}")
     for line in advice.lines() if advice is not None else ():
+        click.echo(line)
+    for line in predicted.lines() if predicted is not None else ():
         click.echo(line)

@@ -25,10 +25,12 @@ Everything is vectorised over poses (one ``check_limits`` call per bisection ste
 
 from __future__ import annotations
 
+import json
+
 import click
 import numpy as np
 
-from pkmcal.cli.options import count_or_poses_file, examples
+from pkmcal.cli.options import count_or_poses_file, examples, quiet_accepted
 from pkmcal.cli.option_types import SEED
 from pkmcal.conventions import euler_to_matrix, rotation_error
 from pkmcal.errors import PkmcalError
@@ -112,41 +114,27 @@ def single_axis_ranges(mech: Mechanism, home: np.ndarray) -> tuple[np.ndarray, l
     return a, stops
 
 
-def _fmt(value: float, is_angle: bool) -> str:
-    return f"{np.rad2deg(value):9.3f}" if is_angle else f"{value:9.3f}"
-
-
 N_ROUND_TRIP = 300
-
-
-def _parameter_lines(mech) -> str:
-    """The machine's parameter names by unit, wrapped: what ``--free``, ``--fix``, ``--prior``
-    and a study's error groups name."""
-    import textwrap
-
-    by_unit: dict[str, list[str]] = {}
-    for name, unit, angle in zip(mech.param_names, mech.param_units, mech.param_is_angle):
-        by_unit.setdefault("deg" if angle else unit, []).append(name)
-    lines = [f"parameters ({len(mech.param_names)}; the names --free, --fix, --prior and study error groups use):"]
-    for unit, names in by_unit.items():
-        label = "no unit" if unit == "1" else unit    # a hexapod's leg gains (mm per reading unit of mm)
-        lines += textwrap.wrap(", ".join(names), width=100, initial_indent=f"  {label}: ",
-                               subsequent_indent="    ", break_on_hyphens=False)
-    return "\n".join(lines)
 
 
 @click.command("info", epilog=examples(
     "pkmcal info",
     "pkmcal info stewart-prototype-real --n-poses 1000 --seed 2",
     "pkmcal info planar-3dof-4act",
-    "pkmcal info stewart-prototype --poses poses.csv"))
+    "pkmcal info stewart-prototype --poses poses.csv",
+    "pkmcal info kossel-mini --n-poses 50 --json"))
 @click.argument("machine", default=DEFAULT_MACHINE, required=False)
 @click.option("--n-poses", type=click.IntRange(1, 100_000), default=None,
               help=f"Random reachable poses for the IK→FK round trip.  [default: {N_ROUND_TRIP}]")
 @click.option("--poses", metavar="POSES.csv",
               help="Instead: the round trip on the poses of this file (x,y,z mm, a,b,c deg).")
 @click.option("--seed", default=0, show_default=True, type=SEED, help="Seed of the random poses.")
-def info_cmd(machine: str, n_poses: int | None, poses: str | None, seed: int) -> None:
+@click.option("--json", "as_json", is_flag=True,
+              help="Print one JSON object instead of text: summary (its lines), parameters (names by unit), notes, "
+                   "workspace (per pose coordinate min/max in mm or deg and the limits that stop them; the box's "
+                   "reachable fraction), round_trip (counts; max errors in mm and deg).")
+@quiet_accepted
+def info_cmd(machine: str, n_poses: int | None, poses: str | None, seed: int, as_json: bool = False) -> None:
     """Describe MACHINE (default: stewart-prototype): summary, workspace, IK→FK round trip."""
     from pkmcal.io.lookup import load_machine
 
@@ -154,39 +142,44 @@ def info_cmd(machine: str, n_poses: int | None, poses: str | None, seed: int) ->
     if n_poses > 100_000:
         raise PkmcalError(f"--n-poses {n_poses}: at most 100000")
     mech = load_machine(machine)
-    summary = mech.summary()
-    click.echo(summary)
-    click.echo(_parameter_lines(mech))
+    data = machine_info(mech, n_poses, poses_path, seed)
+    if as_json:
+        click.echo(json.dumps(data, indent=2, ensure_ascii=False, allow_nan=False))
+    else:
+        for line in info_lines(data):
+            click.echo(line)
+
+
+def machine_info(mech: Mechanism, n_poses: int, poses_path: str | None, seed: int) -> dict:
+    """Items 1-4 of the module docstring as one JSON-ready dict (mm and degrees); the text of
+    ``pkmcal info`` is :func:`info_lines` of it."""
+    data: dict = {"machine": mech.name, "summary": mech.summary().splitlines(),
+                  "parameters": _parameters_by_unit(mech)}
     mech, notes = mech.within_geometry()     # the workspace of what the geometry reaches, as plan's
-    for note in notes:
-        click.echo(f"note: {note}")
+    data["notes"] = list(notes)
     home = np.asarray(mech.home_pose, dtype=float)
     angle = np.array(mech.pose_is_angle)
-    unit = lambda k: "deg" if angle[k] else "mm"  # noqa: E731
     if not _reachable(mech, home[None])[0]:
         with np.errstate(all="ignore"):
-            why = mech.check_limits(home[None]).verdicts()[0]
-        click.echo(f"home pose violates the limits ({why}): no workspace around it to report")
-        return
+            data["home_violates"] = mech.check_limits(home[None]).verdicts()[0]
+        return data
     ranges, stops = single_axis_ranges(mech, home)
-    click.echo("workspace, single-axis ranges from home (each coordinate moved alone, the others at home; "
-               f"{GRID_POINTS}-point grid, ends refined by bisection to {BISECTION_TOL:g} mm or rad):")
-    for k, name in enumerate(mech.pose_names):
-        click.echo(f"  {name}  {_fmt(ranges[k, 0], angle[k])} .. {_fmt(ranges[k, 1], angle[k])} {unit(k):<3}"
-                   f"  (stopped by {stops[k][0]} / {stops[k][1]})")
+    file_units = lambda row: [float(np.rad2deg(v)) if a else float(v) for v, a in zip(row, angle)]  # noqa: E731
+    workspace: dict = {"grid_points": GRID_POINTS, "bisection_tolerance": BISECTION_TOL, "ranges": {
+        name: {"min": file_units(ranges[:, 0])[k], "max": file_units(ranges[:, 1])[k],
+               "unit": "deg" if angle[k] else "mm", "stopped_by": list(stops[k])}
+        for k, name in enumerate(mech.pose_names)}}
     if mech.workspace is not None:   # the box the machine file declares (workspace_box() is it then)
         ws = mech.workspace_box()
-        text = ", ".join(f"{n} [{_fmt(ws[k, 0], angle[k]).strip()}, {_fmt(ws[k, 1], angle[k]).strip()}]"
-                         for k, n in enumerate(mech.pose_names))
-        click.echo(f"  declared workspace box: {text}")
-
+        workspace["declared_box"] = {name: [file_units(ws[:, 0])[k], file_units(ws[:, 1])[k]]
+                                     for k, name in enumerate(mech.pose_names)}
     rng = np.random.default_rng(seed)
     box = rng.uniform(ranges[:, 0], ranges[:, 1], size=(BOX_SAMPLES, mech.n_dof))
     ok = _reachable(mech, box)
     other = int(np.count_nonzero(~mech.same_branch(box[ok], home))) if ok.any() else 0
-    click.echo(f"  {100.0 * ok.mean():.1f} % of {BOX_SAMPLES} uniform random poses in the box of these ranges "
-               "are reachable" + (f" ({100.0 * other / BOX_SAMPLES:.1f} % on another assembly mode than home)"
-                                  if other else ""))
+    workspace.update(box_samples=BOX_SAMPLES, box_reachable_fraction=float(ok.mean()),
+                     box_other_mode_fraction=other / BOX_SAMPLES)
+    data["workspace"] = workspace
     if poses_path is not None:
         from pkmcal.io.tables import read_poses
 
@@ -202,20 +195,70 @@ def info_cmd(machine: str, n_poses: int | None, poses: str | None, seed: int) ->
         poses = pool[:n_poses]
         what = f"{len(poses)} random reachable poses"
         if len(poses) == 0:
-            click.echo("IK→FK round trip: no reachable random pose found")
-            return
-    readings = mech.ik(poses)
-    result = mech.fk(readings)
-    for line in round_trip_lines(mech, poses, result, what):
-        click.echo(line)
+            data["round_trip"] = {"poses": "no reachable random pose found", "n": 0}
+            return data
+    data["round_trip"] = round_trip_stats(mech, poses, mech.fk(mech.ik(poses)), what)
+    return data
+
+
+def _parameters_by_unit(mech) -> dict[str, list[str]]:
+    """The machine's parameter names by unit ('deg' for angles, 'no unit' for a hexapod's leg
+    gains): what ``--free``, ``--fix``, ``--prior`` and a study's error groups name."""
+    by_unit: dict[str, list[str]] = {}
+    for name, unit, angle in zip(mech.param_names, mech.param_units, mech.param_is_angle):
+        by_unit.setdefault("deg" if angle else ("no unit" if unit == "1" else unit), []).append(name)
+    return by_unit
+
+
+def info_lines(data: dict) -> list[str]:
+    """The text of ``pkmcal info`` from :func:`machine_info`'s dict."""
+    import textwrap
+
+    lines = list(data["summary"])
+    by_unit = data["parameters"]
+    lines.append(f"parameters ({sum(map(len, by_unit.values()))}; the names --free, --fix, --prior and study error "
+                 "groups use):")
+    for label, names in by_unit.items():
+        lines += textwrap.wrap(", ".join(names), width=100, initial_indent=f"  {label}: ",
+                               subsequent_indent="    ", break_on_hyphens=False)
+    lines += [f"note: {note}" for note in data["notes"]]
+    if "home_violates" in data:
+        lines.append(f"home pose violates the limits ({data['home_violates']}): no workspace around it to report")
+        return lines
+    ws = data["workspace"]
+    lines.append(f"workspace, single-axis ranges from home (each coordinate moved alone, the others at home; "
+                 f"{ws['grid_points']}-point grid, ends refined by bisection to {ws['bisection_tolerance']:g} mm or "
+                 "rad):")
+    for name, r in ws["ranges"].items():
+        lines.append(f"  {name}  {r['min']:9.3f} .. {r['max']:9.3f} {r['unit']:<3}"
+                     f"  (stopped by {r['stopped_by'][0]} / {r['stopped_by'][1]})")
+    if "declared_box" in ws:
+        text = ", ".join(f"{n} [{f'{lo:9.3f}'.strip()}, {f'{hi:9.3f}'.strip()}]"
+                         for n, (lo, hi) in ws["declared_box"].items())
+        lines.append(f"  declared workspace box: {text}")
+    other = ws["box_other_mode_fraction"]
+    lines.append(f"  {100.0 * ws['box_reachable_fraction']:.1f} % of {ws['box_samples']} uniform random poses in the "
+                 "box of these ranges are reachable"
+                 + (f" ({100.0 * other:.1f} % on another assembly mode than home)" if other else ""))
+    rt = data["round_trip"]
+    if rt["n"] == 0:
+        lines.append("IK→FK round trip: no reachable random pose found")
+        return lines
+    return lines + round_trip_text(rt)
 
 
 def round_trip_lines(mech: Mechanism, poses: np.ndarray, result, what: str | None = None) -> list[str]:
+    """The round-trip report of module docstring item 4 as text (:func:`round_trip_stats`)."""
+    return round_trip_text(round_trip_stats(mech, poses, result, what))
+
+
+def round_trip_stats(mech: Mechanism, poses: np.ndarray, result, what: str | None = None) -> dict:
     """The round-trip report of module docstring item 4: poses (N, n) the readings came
     from, ``result`` their FK from home. A pose counts as a round trip only when FK
     returned it (converged, on the assembly mode of the pose itself, position within
     :data:`ROUND_TRIP_TOL_MM` and angles within :data:`ROUND_TRIP_TOL_RAD`); errors are
-    reported over those poses only, and every other pose is counted with its reason."""
+    reported over those poses only (mm, deg; None where none returned), and every other
+    pose is counted with its reason."""
     angle = np.array(mech.pose_is_angle)
     conv = np.asarray(result.converged, dtype=bool)
     iters = np.asarray(result.iterations)
@@ -234,28 +277,44 @@ def round_trip_lines(mech: Mechanism, poses: np.ndarray, result, what: str | Non
     back = conv & mode & (pos_err <= ROUND_TRIP_TOL_MM) & (rot_err <= ROUND_TRIP_TOL_RAD)
     other_mode = conv & ~mode
     other_pose = conv & mode & ~back
-    lines = [f"IK→FK round trip on {what or f'{n} poses'} (FK from home):",
-             f"  converged {int(conv.sum())}/{n}; Newton iterations mean {iters.mean():.2f}, max {int(iters.max())}"]
-    if back.any():
-        text = f"  returned the pose they came from: {int(back.sum())}/{n}; max position error {pos_err[back].max():.3g} mm"
-        if angle.any():
-            text += f", max orientation error {np.rad2deg(rot_err[back].max()):.3g} deg"
+    largest = lambda err, rows: float(err[rows].max()) if rows.any() else None  # noqa: E731
+    return {"poses": what or f"{n} poses", "n": n, "converged": int(conv.sum()),
+            "iterations_mean": float(iters.mean()), "iterations_max": int(iters.max()),
+            "returned": int(back.sum()), "max_position_error_mm": largest(pos_err, back),
+            "max_orientation_error_deg": (float(np.rad2deg(rot_err[back].max())) if back.any() and angle.any()
+                                          else None),
+            "other_mode": int(other_mode.sum()), "other_mode_max_position_error_mm": largest(pos_err, other_mode),
+            "other_pose": int(other_pose.sum()), "other_pose_max_position_error_mm": largest(pos_err, other_pose),
+            "not_converged": int((~conv).sum()), "off_home_mode": int((~home_mode).sum())}
+
+
+def round_trip_text(rt: dict) -> list[str]:
+    """The lines of :func:`round_trip_stats`'s dict."""
+    n = rt["n"]
+    lines = [f"IK→FK round trip on {rt['poses']} (FK from home):",
+             f"  converged {rt['converged']}/{n}; Newton iterations mean {rt['iterations_mean']:.2f}, max "
+             f"{rt['iterations_max']}"]
+    if rt["returned"]:
+        text = (f"  returned the pose they came from: {rt['returned']}/{n}; max position error "
+                f"{rt['max_position_error_mm']:.3g} mm")
+        if rt["max_orientation_error_deg"] is not None:
+            text += f", max orientation error {rt['max_orientation_error_deg']:.3g} deg"
         lines.append(text)
     else:
         lines.append(f"  returned the pose they came from: 0/{n}")
-    if other_mode.any():
-        lines.append(f"  NOT round trips: {int(other_mode.sum())} converged on another assembly mode than the pose they "
-                     f"came from (max position error {pos_err[other_mode].max():.3g} mm)")
-    if other_pose.any():
-        lines.append(f"  NOT round trips: {int(other_pose.sum())} converged to another pose of the same assembly mode "
-                     f"(max position error {pos_err[other_pose].max():.3g} mm)")
-    if (~conv).any():
-        lines.append(f"  NOT round trips: {int((~conv).sum())} did not converge")
-    if (~home_mode).any():
-        lines.append(f"  {int((~home_mode).sum())} of the {n} poses satisfy every limit but lie on another assembly "
+    if rt["other_mode"]:
+        lines.append(f"  NOT round trips: {rt['other_mode']} converged on another assembly mode than the pose they "
+                     f"came from (max position error {rt['other_mode_max_position_error_mm']:.3g} mm)")
+    if rt["other_pose"]:
+        lines.append(f"  NOT round trips: {rt['other_pose']} converged to another pose of the same assembly mode "
+                     f"(max position error {rt['other_pose_max_position_error_mm']:.3g} mm)")
+    if rt["not_converged"]:
+        lines.append(f"  NOT round trips: {rt['not_converged']} did not converge")
+    if rt["off_home_mode"]:
+        lines.append(f"  {rt['off_home_mode']} of the {n} poses satisfy every limit but lie on another assembly "
                      "mode than home (sign det J differs: beyond a singularity): FK from home cannot return them, "
                      "and the machine cannot reach them from home without crossing a singularity")
     return lines
 
 
-__all__ = ["info_cmd", "single_axis_ranges"]
+__all__ = ["info_cmd", "info_lines", "machine_info", "round_trip_lines", "round_trip_stats", "single_axis_ranges"]

@@ -20,7 +20,8 @@ import numpy as np
 
 from pkmcal.errors import PkmcalError
 from pkmcal.cli.import_options import import_options
-from pkmcal.cli.options import check_output, emit, examples, output_option, to_stdout, units_comment_option
+from pkmcal.cli.options import (DeprecatedArgument, check_output, emit, examples, output_option, poses_file,
+                                quiet_accepted, to_stdout, units_comment_option)
 from pkmcal.io.atomic import atomic_writer
 from pkmcal.io.tables import LENGTH_COLUMNS, column_kinds, format_table, from_file_units, read_table, to_file_units
 from pkmcal.mechanisms.base import Mechanism
@@ -55,23 +56,28 @@ def parse_pose_option(text: str, mech: Mechanism, option: str) -> np.ndarray:
 
 
 @click.command("ik", epilog=examples(
-    "pkmcal ik stewart-prototype poses.csv -o legs.csv",
-    "pkmcal ik stewart-prototype poses.csv",
-    "pkmcal ik stewart-prototype-real heldout.csv -o heldout-legs.csv"))
+    "pkmcal ik stewart-prototype --poses poses.csv -o legs.csv",
+    "pkmcal ik stewart-prototype --poses poses.csv",
+    "pkmcal ik stewart-prototype-real --poses heldout.csv -o heldout-legs.csv"))
 @click.argument("machine")
-@click.argument("poses", metavar="POSES.csv")
+@click.argument("poses_arg", required=False, cls=DeprecatedArgument)
+@click.option("--poses", metavar="POSES.csv", help="The poses: columns x,y,z (mm), a,b,c (deg).")
 @output_option("LEGS.csv", "Output CSV")
 @units_comment_option
 @import_options
-def ik_cmd(machine: str, poses: str, output: str | None, units_comment: bool = False, mapping=None) -> None:
+@quiet_accepted
+def ik_cmd(machine: str, poses: str | None, output: str | None, units_comment: bool = False, mapping=None,
+           poses_arg: str | None = None) -> None:
     """Inverse kinematics: leg lengths and readings of the poses in POSES.csv.
 
     MACHINE is a built-in name (see 'pkmcal machines') or a machine YAML file. POSES.csv has
     columns x,y,z (mm) and a,b,c (degrees); other columns are ignored. The output repeats
     x..c and adds l1..l6 (leg lengths, mm), lambda1..lambda6 (actuator readings, mm) and
     'reachable': 'ok' or the violated limits joined by '+'. (Other machines: their pose
-    columns, their actuator columns; rotary actuators in degrees.)
+    columns, their actuator columns; rotary actuators in degrees.) The former spelling
+    'ik MACHINE POSES.csv' still works.
     """
+    poses = poses_file(poses, poses_arg, "ik")
     check_output(output, [poses, machine])
     from pkmcal.io.lookup import load_machine
 
@@ -119,6 +125,7 @@ def ik_cmd(machine: str, poses: str, output: str | None, units_comment: bool = F
               "default: the machine's home pose.")
 @units_comment_option
 @import_options
+@quiet_accepted
 def fk_cmd(machine: str, legs: str, output: str | None, guess: str | None, units_comment: bool = False,
            mapping=None) -> None:
     """Forward kinematics: the poses that give the readings in LEGS.csv.

@@ -33,7 +33,7 @@ from pkmcal import __version__
 from pkmcal.errors import PkmcalError, PkmcalWarning, name_sources, one_line, recorded_sources
 
 #: Command name → (module, click command object in it, the summary ``pkmcal --help`` shows).
-#: The summary is the first line of the command's own help; ``tests/test_cli_main.py``
+#: The summary is the first line of the command's own help; ``tests/cli/test_main.py``
 #: checks that the two agree, so that the listing never needs to import a command.
 COMMANDS: dict[str, tuple[str, str, str]] = {
     "machines": ("pkmcal.cli.machines_cmd", "machines",
@@ -55,9 +55,13 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "identify": ("pkmcal.cli.identify_cmds", "identify_cmd",
                  "Identify MACHINE's kinematic parameters from MEAS.csv and write CALIBRATED.yaml."),
     "verify": ("pkmcal.cli.campaign_cmds", "verify_cmd",
-               "Validate CALIBRATED on held-out data: measured (--measurements) or a true machine (--real)."),
+               "Validate CALIBRATED on held-out data: measured (--held-out) or a true machine (--real)."),
     "export": ("pkmcal.cli.export_cmd", "export_cmd",
                "Export the machine in CALIBRATED.yaml (a machine file or built-in name) for a controller."),
+    "compensate": ("pkmcal.cli.correct_cmd", "compensate_cmd",
+                   "Fit what CALIBRATED leaves on MEAS.csv, keep it only if HELDOUT.csv confirms it."),
+    "correct": ("pkmcal.cli.correct_cmd", "correct_cmd",
+                "Filter PROGRAM through the calibrated model (plus a correction) for a nominal controller."),
     "import": ("pkmcal.cli.import_cmd", "import_group",
                "Make a machine file from a controller's configuration (LinuxCNC, Klipper, Marlin)."),
     "check": ("pkmcal.cli.check_cmd", "check_group",
@@ -66,6 +70,8 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
              "Calibrate the built-in prototype end to end on a simulated 'real' machine."),
     "reproduce": ("pkmcal.cli.reproduce_cmd", "reproduce",
                   "Regenerate paper table NAME with our numbers beside the published ones."),
+    "history": ("pkmcal.cli.history_cmd", "history_group",
+                "Keep every calibration of a fleet and compare them (SQLite database)."),
     "study": ("pkmcal.cli.study_cmd", "study",
               "Run the Monte Carlo study STUDY.yaml (plan, simulate, identify, verify per trial) into RESULTS/."),
 }
@@ -112,6 +118,10 @@ class PkmcalGroup(click.Group):
                                   and str(w.message) not in str(exc)])
                 _error_line(name_sources(str(exc), sources))
                 sys.exit(exc.exit_code)
+            except click.UsageError:
+                # an old spelling's note (pkmcal.cli.options.deprecated) before the usage error
+                _report_warnings([w for w in caught if issubclass(w.category, PkmcalWarning)])
+                raise
             except MemoryError:
                 _error_line("not enough memory for this request; ask for fewer poses, candidates or samples")
                 sys.exit(PkmcalError.exit_code)
@@ -169,11 +179,11 @@ def _report_warnings(caught: list[warnings.WarningMessage]) -> None:
 
 
 #: Examples of ``pkmcal --help`` (each command's ``--help`` has its own; all are run by
-#: ``tests/test_cli_examples.py``).
+#: ``tests/cli/test_examples.py``).
 EXAMPLES = (
     "pkmcal machines",
     "pkmcal demo",
-    "pkmcal plan stewart-prototype --setup indicators-prototype --n 45 --seed 1 -o poses.csv",
+    "pkmcal plan stewart-prototype --setup indicators-prototype --n-poses 45 --seed 1 -o poses.csv",
     "pkmcal simulate stewart-prototype --real stewart-prototype-real --setup indicators-prototype --poses poses.csv "
     "--seed 2 -o meas.csv",
     "pkmcal identify stewart-prototype meas.csv --setup indicators-prototype -o calibrated.yaml",

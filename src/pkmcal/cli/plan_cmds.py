@@ -25,10 +25,13 @@ from pkmcal.cli.options import (
     check_output,
     emit,
     examples,
+    option,
     output_option,
     poses_file,
+    quiet_accepted,
     quiet_option,
     summary_echo,
+    to_stdout,
     units_comment_option,
 )
 from pkmcal.errors import PkmcalError
@@ -56,19 +59,21 @@ def _format_indices(ind: dict[str, float]) -> str:
 
 
 @click.command("plan", epilog=examples(
-    "pkmcal plan stewart-prototype --setup indicators-prototype --n 45 --seed 1 -o poses.csv",
-    "pkmcal plan stewart-prototype --setup full-pose-paper1 --n 20 --algorithm cuckoo --n-candidates 500 -o cuckoo.csv",
-    "pkmcal plan stewart-prototype --setup indicators-prototype --n 50 --algorithm random --seed 9 -o heldout.csv",
-    "pkmcal plan stewart-prototype --setup indicators-prototype --n 30 --tilt-margin 5 -o cautious.csv",
-    "pkmcal plan planar-3dof-4act --setup planar-tracker --n 12 -o planar-poses.csv",
-    "pkmcal plan stewart-prototype --setup full-pose-paper1 --n 30 --n-candidates 20000 --workers 2 -o large.csv",
-    "pkmcal plan stewart-prototype --setup examples/setup-ballbar.yaml --algorithm circle --n 36 -o circle.csv",
-    "pkmcal plan kossel-mini --setup z-probe-klipper --n 20 --target-accuracy 0.003 -o probe-points.csv",
-    "pkmcal plan kossel-mini --setup z-probe-klipper --n 20 --format klipper -o probe-plan.cfg",
-    "pkmcal plan kossel-mini --setup z-probe-klipper --n 20 --format gcode -o probe-plan.gcode"))
+    "pkmcal plan stewart-prototype --setup indicators-prototype --n-poses 45 --seed 1 -o poses.csv",
+    "pkmcal plan stewart-prototype --setup full-pose-paper1 --n-poses 20 --algorithm cuckoo --n-candidates 500 -o cuckoo.csv",
+    "pkmcal plan stewart-prototype --setup indicators-prototype --n-poses 50 --algorithm random --seed 9 -o heldout.csv",
+    "pkmcal plan stewart-prototype --setup indicators-prototype --n-poses 30 --tilt-margin 5 -o cautious.csv",
+    "pkmcal plan planar-3dof-4act --setup planar-tracker --n-poses 12 -o planar-poses.csv",
+    "pkmcal plan stewart-prototype --setup full-pose-paper1 --n-poses 30 --n-candidates 20000 --workers 2 -o large.csv",
+    "pkmcal plan stewart-prototype --setup examples/setup-ballbar.yaml --algorithm circle --n-poses 36 -o circle.csv",
+    "pkmcal plan kossel-mini --setup z-probe-klipper --n-poses 20 --target-accuracy 0.003 -o probe-points.csv",
+    "pkmcal plan kossel-mini --setup z-probe-klipper --n-poses 20 --format klipper -o probe-plan.cfg",
+    "pkmcal plan kossel-mini --setup z-probe-klipper --n-poses 20 --format gcode -o probe-plan.gcode",
+    "pkmcal plan stewart-prototype --setup full-pose-paper1 --pattern iso9283 -o iso9283.csv"))
 @click.argument("machine")
 @click.option("--setup", "setup_spec", required=True, metavar="SETUP.yaml", help=_SETUP_HELP)
-@click.option("--n", "n_poses", type=click.IntRange(min=1), default=30, show_default=True, help="Number of poses to choose.")
+@option("--n-poses", "n_poses", old=("--n",), type=click.IntRange(min=1), default=30, show_default=True,
+        help="Number of poses to choose.")
 @click.option("--candidates", "candidates_path", metavar="FILE.csv", type=click.Path(dir_okay=False),
               help="Candidate poses: columns x,y,z (mm), a,b,c (deg). Default: random poses in the workspace box.")
 @click.option("--n-candidates", type=click.IntRange(min=1), default=2000, show_default=True,
@@ -114,15 +119,23 @@ def _format_indices(ind: dict[str, float]) -> str:
 @click.option("--target-accuracy", type=FiniteFloat(min=0.0), metavar="MM",
               help="Z probes: also print how many points the plan needs for a predicted first-layer error "
                    "(rms sigma over the bed) of MM, from the identifiability of the setup.")
+@click.option("--pattern", type=click.Choice(("iso9283",)), default=None,
+              help="Instead of a selection: the ISO 9283 test pattern, P1..P5 on the diagonal plane of the largest "
+                   "cube that passes the checks, visited in --n cycles (ISO 9283: 30); 'pkmcal verify' reports "
+                   "ISO 9283 AP/RP/AD/RD on held-out data in this pattern.")
 @backend_options("in this process")
 @output_option("POSES.csv", "CSV of the chosen poses (or the --format klipper/gcode file)")
 @units_comment_option
 @quiet_option
+@click.option("--json", "as_json", is_flag=True,
+              help="Print the summary as one JSON object on standard output instead of text: candidates (accepted, "
+                   "tested, rejected by reason), safety_margin, identifiable parameters and gauge, the selection and "
+                   "its indices O1..O5; a Z probe's predicted first-layer error (mm). The poses then need -o FILE.")
 @import_options
 def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, index, algorithm, circle_plane, seed,
              stroke_margin, tilt_margin, clearance_margin, margin, indicator_travel, plate_radius, sight_cone,
              workers, dask_address, output, units_comment=False, quiet=False, mapping=None, probe_anywhere=False,
-             fmt="csv", target_accuracy=None) -> None:
+             fmt="csv", target_accuracy=None, pattern=None, as_json=False) -> None:
     """Choose N poses of MACHINE to measure with SETUP (paper 2 §4, paper 1 §IV).
 
     Every candidate is checked on the nominal machine (stroke, joint tilts, leg collision,
@@ -149,6 +162,9 @@ def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, 
 
     check_backend(workers, dask_address)
     check_output(output, [candidates_path, setup_spec, machine])
+    if as_json and to_stdout(output):
+        raise PkmcalError("--json prints the summary on standard output, where the poses would go too: write the "
+                          "poses with -o FILE, or leave out --json")
     mech = load_machine(machine)
     setup = load_setup(setup_spec, mech)
     probe = probes_the_bed(setup.sensor)
@@ -169,6 +185,13 @@ def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, 
                           "(its limits: workspace box, reach, transmission angle); remove the margin options")
     safety = margin if margin is not None else resolve_margin(mech, stroke_mm=stroke_margin, tilt_deg=tilt_margin,
                                                                 clearance_mm=clearance_margin)
+    if pattern is not None:
+        _emit_pattern(mech, setup, n_poses, safety, _measurability(indicator_travel, plate_radius, sight_cone), output,
+                      units_comment, f"pkmcal plan {mech.name} --setup {setup_spec} --pattern {pattern} --n-poses {n_poses}",
+                      {"--candidates": candidates_path, "--grid": grid, "--index": index,
+                       "--algorithm": None if algorithm == "default" else algorithm,
+                       "--format": None if fmt == "csv" else fmt, "--target-accuracy": target_accuracy})
+        return
     candidates = read_candidates_csv(candidates_path, mech, mapping) if candidates_path else None
     with chunk_map(workers, dask_address) as run_chunks, ProgressBar("plan", quiet=quiet) as bar:
         plan = plan_poses(mech, setup, n_poses, algorithm=algorithm, index=index.upper() if index else None,
@@ -176,26 +199,59 @@ def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, 
                           measurability=_measurability(indicator_travel, plate_radius, sight_cone),
                           progress=bar.stage, circle_plane=circle_plane, chunk_map=run_chunks,
                           on_bed=False if probe_anywhere else None)
-    command = (f"pkmcal plan {mech.name} --setup {setup_spec} --n {n_poses} --algorithm {plan.selection.algorithm} "
+    command = (f"pkmcal plan {mech.name} --setup {setup_spec} --n-poses {n_poses} --algorithm {plan.selection.algorithm} "
                f"--seed {seed}")
     if fmt != "csv":
         emit(_printer_file(fmt, plan, setup, command, machine, setup_spec), output)
     else:
         _emit_csv(plan, mech, command, output, units_comment)
+    summary = plan_summary(plan, setup, target_accuracy)
+    if as_json:
+        click.echo(json.dumps({**summary, "output": output}, indent=2, allow_nan=False))
+        return
     say = summary_echo(output)
-    say(f"candidates: {plan.candidates.describe()}")
-    say(f"safety margin: {plan.describe_margin()}")
-    for note in plan.notes:
-        say(f"note: {note}")
-    sel = plan.selection
-    say(f"identifiable parameters: {plan.model.n_params} ({plan.model.method}; gauge fixed: "
-        f"{', '.join(plan.model.report.fixed) or 'none'})")
-    say(f"{sel.algorithm}: {len(sel.chosen)} poses, maximised {sel.criterion}; {sel.message}")
-    say(_format_indices(sel.indices))
-    if plan.on_bed:
-        _probe_summary(say, plan, setup, target_accuracy)
+    for line in plan_summary_lines(summary):
+        say(line)
     if output is not None and output != "-":
         say(f"wrote {output}")
+
+
+def plan_summary(plan, setup, target: float | None) -> dict:
+    """What ``pkmcal plan`` prints, as a JSON-ready dict (:func:`plan_summary_lines` is its
+    text): the candidates, the safety margin, the identifiable parameters, the selection and
+    its indices; for a Z probe on the bed, ``probe`` (:func:`_probe_facts`)."""
+    cand, sel, model = plan.candidates, plan.selection, plan.model
+    out = {"candidates": {"accepted": int(len(cand.poses)), "tested": int(cand.n_tested), "kind": cand.kind,
+                          "rejected": {k: int(v) for k, v in sorted(cand.rejected.items())},
+                          "text": cand.describe()},
+           "safety_margin": plan.describe_margin(), "notes": list(plan.notes),
+           "identifiable_parameters": int(model.n_params), "method": model.method,
+           "gauge_fixed": list(model.report.fixed),
+           "selection": {"algorithm": sel.algorithm, "n_poses": int(len(sel.chosen)), "criterion": sel.criterion,
+                         "message": sel.message},
+           "indices": {k: _number(v) for k, v in sel.indices.items()}}
+    if plan.on_bed:
+        out["probe"] = _probe_facts(plan, setup, target)
+    return out
+
+
+def _number(v) -> float | None:
+    """A float for JSON: None where not finite (an index of a degenerate pose set)."""
+    return float(v) if np.isfinite(v) else None
+
+
+def plan_summary_lines(summary: dict) -> list[str]:
+    """The text of :func:`plan_summary`."""
+    sel = summary["selection"]
+    lines = [f"candidates: {summary['candidates']['text']}", f"safety margin: {summary['safety_margin']}",
+             *(f"note: {note}" for note in summary["notes"]),
+             f"identifiable parameters: {summary['identifiable_parameters']} ({summary['method']}; gauge fixed: "
+             f"{', '.join(summary['gauge_fixed']) or 'none'})",
+             f"{sel['algorithm']}: {sel['n_poses']} poses, maximised {sel['criterion']}; {sel['message']}",
+             _format_indices({k: float("nan") if v is None else v for k, v in summary["indices"].items()})]
+    if "probe" in summary:
+        lines += _probe_lines(summary["probe"], summary["identifiable_parameters"], summary["candidates"]["accepted"])
+    return lines
 
 
 def _emit_csv(plan, mech, command: str, output, units_comment: bool) -> None:
@@ -211,6 +267,36 @@ def _emit_csv(plan, mech, command: str, output, units_comment: bool) -> None:
         f"safety margin: {plan.describe_margin()}",
         *(f"note: {n}" for n in plan.notes),
         _format_indices(sel.indices)]), output)
+
+
+def _emit_pattern(mech, setup, cycles: int, safety, measurability, output, units_comment: bool, command: str,
+                  unused: dict) -> None:
+    """``plan --pattern iso9283``: the pattern of :func:`~pkmcal.identification.iso9283.iso9283_pattern`
+    as a CSV (poses, nominal commands, ``iso_pose`` 1..5, ``cycle``) and its summary."""
+    from pkmcal.identification.iso9283 import iso9283_pattern
+
+    for name, value in unused.items():
+        if value is not None:
+            raise PkmcalError(f"{name} chooses among candidates; --pattern iso9283 writes the standard's pattern: "
+                              f"remove {name}")
+    pat = iso9283_pattern(mech, setup, cycles=cycles, margin=safety, measurability=measurability)
+    poses, label, cycle = pat.cycle_poses()
+    cols = {name: to_file_units(poses, mech.pose_is_angle)[:, i] for i, name in enumerate(mech.pose_names)}
+    commands = to_file_units(mech.ik(poses), mech.actuator_is_angle)
+    cols.update({name: commands[:, i] for i, name in enumerate(mech.actuator_names)})
+    cols.update({"iso_pose": label, "cycle": cycle})
+    c = ", ".join(f"{v:.6g}" for v in pat.center)
+    emit(format_table(cols, units_comment=units_comment, comments=[
+        command, f"ISO 9283 cube: centre {c} mm, side {pat.side:.6g} mm; P1..P5 on its diagonal plane C1-C2-C7-C8, "
+        f"{pat.cycles} cycles", *(f"note: {n}" for n in pat.notes)]), output)
+    say = summary_echo(output)
+    say(f"ISO 9283 pattern: cube centre {c} mm, side {pat.side:.6g} mm (the largest whose 3x3x3 grid and P1..P5 pass "
+        f"the limits with the safety margins and the setup's measurability); P1..P5 x {pat.cycles} cycles = "
+        f"{len(poses)} poses")
+    for n in pat.notes:
+        say(f"note: {n}")
+    if output is not None and output != "-":
+        say(f"wrote {output}")
 
 
 def _printer_file(fmt: str, plan, setup, command: str, machine: str, setup_spec: str) -> str:
@@ -230,44 +316,63 @@ def _printer_file(fmt: str, plan, setup, command: str, machine: str, setup_spec:
         f"  pkmcal import marlin-probe terminal.log --machine {machine} --setup {setup_spec} -o probe.csv"])
 
 
-def _probe_summary(say, plan, setup, target: float | None) -> None:
-    """What an on-bed Z-probe plan prints: the probe, the predicted first-layer error for
-    other numbers of points (:func:`pkmcal.planning.plan.height_sigma`), the points for
-    ``target``, and what heights cannot see and what would see it
-    (:func:`~pkmcal.identification.identifiability.undetermined_directions`: the named
-    directions, the rail leans)."""
+def _probe_facts(plan, setup, target: float | None) -> dict:
+    """An on-bed Z-probe plan's facts: the probe offset (mm) and repeatability (the setup's
+    noise.reading, mm, or None), the predicted first-layer error for other numbers of points
+    (:func:`pkmcal.planning.plan.height_sigma`: ``first_layer_sigma_mm``, ``[points, mm]``), the
+    points for ``target`` (``target``: ``{"sigma_mm", "points"`` (None when not reached),
+    ``"reached_sigma_mm"}``), and what heights cannot see and what would see it
+    (``undetermined``: the sentences of
+    :func:`~pkmcal.identification.identifiability.undetermined_directions`, the named directions
+    and the rail leans, as ``identify`` says them)."""
     from pkmcal.identification.identifiability import undetermined_directions
     from pkmcal.planning.plan import height_sigma, points_for_height_sigma
 
-    x, y, z = np.asarray(setup.sensor.probe_offset, dtype=float)
     noise = setup.noise.reading_std
-    rep = f"{float(noise[0]):g} mm" if noise is not None and np.size(noise) else "not stated"
-    say(f"probe: on the bed, each point where the probe triggers (probe offset x {x:g}, y {y:g}, z {z:g} mm: the "
-        f"nozzle {z:g} mm above the bed, the probe point {x:g}, {y:g} mm beside it and inside the build radius); "
-        f"repeatability sigma {rep} (the setup's noise.reading: give your PROBE_ACCURACY standard deviation)")
     n = len(plan.poses)
     ladder = sorted({k for k in (n // 2, n, 2 * n, 4 * n) if plan.model.n_params <= k <= len(plan.candidates.poses)}
                     | {n})
     curve = [(k, s) for k, s in height_sigma(plan, ladder) if np.isfinite(s)]
-    if not curve:
-        say(f"predicted first-layer error: none ({n} points give fewer readings than the {plan.model.n_params} "
-            "identifiable parameters)")
-    else:
-        say("predicted first-layer error (rms sigma of the height over the reachable bed, from the identifiability of "
-            "the points and the setup's noise): " + ", ".join(f"{k} points {s:.3g} mm" + (" (this plan)" if k == n
-                                                                                          else "") for k, s in curve))
+    facts: dict = {"offset_mm": [float(v) for v in np.asarray(setup.sensor.probe_offset, dtype=float)],
+                   "repeatability_mm": float(noise[0]) if noise is not None and np.size(noise) else None,
+                   "points": n, "first_layer_sigma_mm": [[int(k), float(s)] for k, s in curve]}
     if target is not None:
         need, tried = points_for_height_sigma(plan, target)
-        if need is None:
-            say(f"target first-layer sigma {target:g} mm: not reached with all {len(plan.candidates.poses)} "
-                f"candidates ({tried[-1][1]:.3g} mm); probe each point several times (PROBE SAMPLES=...) or "
-                "use a more repeatable probe")
+        facts["target"] = {"sigma_mm": float(target), "points": None if need is None else int(need),
+                           "reached_sigma_mm": _number(tried[-1][1] if need is None else dict(tried)[need])}
+    facts["undetermined"] = [entry["text"] for entry in
+                             undetermined_directions(plan.model.mechanism, setup, plan.poses)] if curve else []
+    return facts
+
+
+def _probe_lines(facts: dict, n_params: int, n_candidates: int) -> list[str]:
+    """What an on-bed Z-probe plan prints (:func:`_probe_facts`)."""
+    x, y, z = facts["offset_mm"]
+    rep = "not stated" if facts["repeatability_mm"] is None else f"{facts['repeatability_mm']:g} mm"
+    n = facts["points"]
+    lines = [f"probe: on the bed, each point where the probe triggers (probe offset x {x:g}, y {y:g}, z {z:g} mm: the "
+             f"nozzle {z:g} mm above the bed, the probe point {x:g}, {y:g} mm beside it and inside the build "
+             f"radius); repeatability sigma {rep} (the setup's noise.reading: give your PROBE_ACCURACY standard "
+             "deviation)"]
+    curve = facts["first_layer_sigma_mm"]
+    if not curve:
+        lines.append(f"predicted first-layer error: none ({n} points give fewer readings than the {n_params} "
+                     "identifiable parameters)")
+    else:
+        lines.append("predicted first-layer error (rms sigma of the height over the reachable bed, from the "
+                     "identifiability of the points and the setup's noise): "
+                     + ", ".join(f"{k} points {s:.3g} mm" + (" (this plan)" if k == n else "") for k, s in curve))
+    if "target" in facts:
+        t = facts["target"]
+        if t["points"] is None:
+            reached = float("nan") if t["reached_sigma_mm"] is None else t["reached_sigma_mm"]
+            lines.append(f"target first-layer sigma {t['sigma_mm']:g} mm: not reached with all {n_candidates} "
+                         f"candidates ({reached:.3g} mm); probe each point several times (PROBE SAMPLES=...) or "
+                         "use a more repeatable probe")
         else:
-            sigma = dict(tried)[need]
-            say(f"target first-layer sigma {target:g} mm: {need} points ({sigma:.3g} mm); plan them with --n {need}")
-    if curve:
-        for entry in undetermined_directions(plan.model.mechanism, setup, plan.poses):
-            say(entry["text"])
+            lines.append(f"target first-layer sigma {t['sigma_mm']:g} mm: {t['points']} points "
+                         f"({t['reached_sigma_mm']:.3g} mm); plan them with --n-poses {t['points']}")
+    return lines + facts["undetermined"]
 
 
 @click.command("observability", epilog=examples(
@@ -279,6 +384,7 @@ def _probe_summary(say, plan, setup, target: float | None) -> None:
 @click.option("--setup", "setup_spec", required=True, metavar="SETUP.yaml", help=_SETUP_HELP)
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object (keys O1..O5, n_poses).")
 @import_options
+@quiet_accepted
 def observability_cmd(machine, poses_arg, poses, setup_spec, as_json, mapping=None) -> None:
     """Observability indices O1..O5 of the poses in POSES.csv (columns x,y,z mm, a,b,c deg).
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 import click
 
 from pkmcal.cli.option_types import SEED
-from pkmcal.cli.options import examples
+from pkmcal.cli.options import check_output_folder, examples
 
 
 @click.command("study", epilog=examples(
@@ -39,6 +39,7 @@ def study(study_file, output, seed, trials, workers, dask_address, resume, quiet
     from pkmcal.progress import bars_enabled
     from pkmcal.study import load_study, run_study
 
+    check_output_folder(output, "the study's output")
     if workers is not None and dask_address not in (None, "local"):
         raise PkmcalError("--workers applies to local runs and to --dask local; a Dask scheduler's workers are "
                           "started with 'dask worker'")

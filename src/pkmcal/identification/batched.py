@@ -30,7 +30,7 @@ first :data:`FULL_STEPS` steps, then kept, the gradient always exact (a Newton c
 same fixed point J̃ᵀr̃ = 0). The problem is nearly linear in ρ (errors of mm on legs of
 ~1 m), so a fit takes 5–7 evaluations (MINPACK's: 5 residuals, 4 Jacobians) and stops at
 the minimiser the engine's MINPACK run stops at, to their tolerances
-(``tests/test_batched_fit.py`` compares parameters, χ², covariance, rank and condition).
+(``tests/identification/test_batched.py`` compares parameters, χ², covariance, rank and condition).
 
 Every number of fit b is computed from fit b's data by stacked per-pose / per-fit
 operations only (the compiled kernels row by row, NumPy's stacked matmul and solve slice

@@ -12,7 +12,7 @@ on the prior parameters), the posterior covariance is
     C = (J̃ᵀ J̃ + P)⁻¹                                                           (posterior)
 
 and in the linear Gaussian case y = J θ + e, e ~ N(0, Σ), the estimate is the closed form
-θ̂ = (JᵀΣ⁻¹J + P)⁻¹ (JᵀΣ⁻¹ y + P μ) (tests/test_priors.py checks both). A prior pins the
+θ̂ = (JᵀΣ⁻¹J + P)⁻¹ (JᵀΣ⁻¹ y + P μ) (tests/identification/test_priors.py checks both). A prior pins the
 direction it acts on, so a combination the data cannot see (a gauge freedom) becomes
 identifiable, with the prior's σ; the automatic gauge therefore never fixes a parameter
 with a prior (the prior rows enter the identifiability analysis). χ² counts the prior rows

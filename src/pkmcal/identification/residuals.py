@@ -47,7 +47,7 @@ the ρ columns. Parameters are passed explicitly: ``mech.ik_and_jacobians(x, par
     that converges on the start pose's assembly mode, each a function of θ. 2. and 3. are
     for a start pose outside a chain's reach at θ (a mechanism whose IK is NaN there gives
     Newton no direction): on a 6-RSS fit with the shared solver on λ − IK instead of its
-    loop-closure FK (tests/test_engine.py), 93 of 150 commanded poses were outside a rod's
+    loop-closure FK (tests/identification/test_engine.py), 93 of 150 commanded poses were outside a rod's
     reach at the fit's minimum, and 4 poses needed 3.; main's warm starts (one pose solve
     per evaluation) found that minimum in 1.2 s CPU, these in 3.5 s. On machines whose FK finds
     the pose from the start (the hexapod, the loop-closure FK of the 6-RSS and 6-PUS, the
@@ -74,7 +74,7 @@ A :class:`Method` object is the objective of one fit and owns that fit's scratch
 eliminated poses (and the Jacobian pieces A, B, H A⁻¹ computed from them) of the last θ it
 was evaluated at, so that the residual and the Jacobian the solver asks for separately at
 one point share one pose solve (``Method._at``); the fk-residual's poses at θ0 (its
-fallback starts); the warm-start poses of the projection's pose solve; the ik-residual's
+fallback starts); the projection's start poses; the ik-residual's
 measured poses at the last s.
 Machines and sensors hold no state.
 """
@@ -488,7 +488,7 @@ class Method(ABC):
         """``solve(θ)``: a dict of the eliminated poses and what depends on them, kept for
         the last θ together with the pieces :meth:`_piece` adds. A solver asks for the
         residual and then for the Jacobian at the same point; both must see the same poses
-        (the projection's warm-started pose solve would otherwise be re-solved and differ at
+        (the pose solves are not repeated, and an iterative one re-solved could differ at
         round-off), and the engine's start and end evaluations reuse the solver's."""
         theta = np.ascontiguousarray(theta, dtype=float)
         key = theta.tobytes()
@@ -827,12 +827,13 @@ class Projection(Method):
         else:
             self._w = np.ones_like(sig)
         self._sig = sig
-        # start the inner pose solve from the FK of the readings at the nominal machine
+        # every inner pose solve starts from the FK of the readings at the nominal machine (fixed
+        # for the fit, so that x_j*(θ) is a function of θ alone, as for the fk-residual)
         start = model.start_poses()
         if mech.n_actuators == mech.n_dof:
             fk = mech.fk(model.q, guess=start)
             start = np.where(fk.ok[:, None], fk.poses, start)
-        self._x = start
+        self._start = start
 
     def rows_per_pose(self) -> int:
         mech = self.model.mechanism
@@ -860,11 +861,11 @@ class Projection(Method):
         return e, np.concatenate([H, mech.actuator_pose_jacobian(x, rho)], axis=1) * self._w[:, None]
 
     def solve_poses(self, rho, s, q=None) -> tuple[np.ndarray, np.ndarray]:
-        """x_j* = argmin ‖e_j(x)‖ for every pose by batched Gauss–Newton (warm started from
-        this fit's last poses); ``q`` the actuator readings with δq applied (default the
-        model's)."""
+        """x_j* = argmin ‖e_j(x)‖ for every pose by batched Gauss–Newton from the fit's start
+        poses (never from an earlier evaluation's: x_j* is a function of θ alone); ``q`` the
+        actuator readings with δq applied (default the model's)."""
         q = self.model.q if q is None else q
-        x = self._x.copy()
+        x = self._start.copy()
         conv = np.zeros(len(x), dtype=bool)
         for _ in range(_POSE_MAX_ITER):
             e, Q = self._stacked_and_Q(rho, s, x, q)
@@ -874,9 +875,7 @@ class Projection(Method):
             conv = np.max(np.abs(step), axis=1) <= 1e-12 * (1.0 + np.max(np.abs(x), axis=1))
             if conv.all():
                 break
-        ok = conv & np.all(np.isfinite(x), axis=1)
-        self._x = np.where(ok[:, None], x, self._x)
-        return x, ok
+        return x, conv & np.all(np.isfinite(x), axis=1)
 
     def _solve(self, theta):
         rho, s = self.model.parts(theta)

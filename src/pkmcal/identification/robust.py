@@ -55,7 +55,7 @@ LOSSES = ("linear", "soft_l1", "huber", "cauchy")
 #: Default threshold of the outlier screening, in σ of the per-pose normalised residual s_j.
 OUTLIER_SIGMA = 3.0
 #: f_scale (σ units) of 95 % asymptotic efficiency at Gaussian noise (module docstring;
-#: tests/test_robust.py checks these against :func:`efficiency`).
+#: tests/identification/test_robust.py checks these against :func:`efficiency`).
 DEFAULT_F_SCALE = {"huber": 1.345, "cauchy": 2.385, "soft_l1": 1.287}
 #: Rejection stops with an error beyond this fraction of the poses.
 MAX_REJECTED_FRACTION = 0.2

@@ -55,6 +55,7 @@ from pkmcal.conventions import rotation_error
 from pkmcal.errors import PkmcalError
 from pkmcal.identification.simulation import drop_limit_violations, settles_at_equilibrium
 from pkmcal.mechanisms.base import Mechanism
+from pkmcal.mechanisms.frame import Frame
 from pkmcal.sensors.base import MeasurementSetup
 
 #: Error measures: key → (unit, description).
@@ -83,6 +84,9 @@ class PoseErrors:
     #: (N, m) reading residuals (true instrument − model's prediction) of a sensor that
     #: reads neither a position nor an orientation (indicators; compare="sensor" only)
     reading: np.ndarray | None = None
+    #: (N, n) the poses commanded, in the frames the errors compare them in (after the
+    #: alignment with compare="aligned"), for the ISO 9283 figures (:mod:`.iso9283`)
+    commanded: np.ndarray | None = None
 
     def summary(self, mask: np.ndarray | None = None) -> dict[str, float]:
         """``{position_mean_mm, position_max_mm, position_rms_mm, orientation_mean_deg, …}``
@@ -177,7 +181,7 @@ def pose_errors_many(models: tuple[Mechanism, ...] | list[Mechanism], real: Mech
         out.append(PoseErrors(model=model.name, reached=reached[rows], position=(e_p * nan)[rows],
                               orientation=(e_R * nan)[rows] if rotates else None,
                               tilt=(e_n * nan)[rows] if rotates else None, height=(e_z * nan)[rows],
-                              valid=ok[rows], dropped=mine))
+                              valid=ok[rows], dropped=mine, commanded=cmd1))
     return tuple(out)
 
 
@@ -368,7 +372,8 @@ def aligned_errors(pe: PoseErrors, cmd: np.ndarray, mask: np.ndarray, model: Mec
         e_p, e_R, e_n, e_z = frame_errors(f_r.p, f_r.R, p_c, R_c)
     nan = np.where(pe.valid, 1.0, np.nan)
     return replace(pe, position=e_p * nan, orientation=None if pe.orientation is None else e_R * nan,
-                   tilt=None if pe.tilt is None else e_n * nan, height=e_z * nan), a
+                   tilt=None if pe.tilt is None else e_n * nan, height=e_z * nan,
+                   commanded=model.poses_from_frame(Frame(p_c, R_c))), a
 
 
 def _sensed(pe: PoseErrors, model: Mechanism, sensor, real: Mechanism, true_sensor, cmd: np.ndarray) -> PoseErrors:

@@ -49,7 +49,7 @@ within the reachable range. ``[JOINT_N] HOME`` is compared with the strut length
 Round trip: machine → :func:`~pkmcal.io.export_linuxcnc.linuxcnc_hal` +
 :func:`~pkmcal.io.export_linuxcnc.linuxcnc_ini` → :func:`machine_from_linuxcnc` gives the
 same joints, offsets, home pose exactly and the stroke to one rounding
-(``tests/test_linuxcnc_import.py``). Limits pkmcal checks that LinuxCNC has no setting for
+(``tests/io/test_import_linuxcnc.py``). Limits pkmcal checks that LinuxCNC has no setting for
 (joint tilts, leg diameter) are not in the files; a note says to add them. Where each limit
 came from is recorded in ``metadata.limits_from`` (stroke, workspace), which planning's notes
 name.

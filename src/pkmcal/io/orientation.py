@@ -23,7 +23,7 @@ more than :data:`NORM_TOLERANCE` is an error naming the file, the line, the pose
 counted from 1) and the norm: a unit quaternion is what the instruments write, and anything
 else is a wrong column, a scaled export or a truncated line. Within the tolerance it is
 normalised (by scipy). Code used by :func:`pkmcal.io.tables.read_table`; tests:
-``tests/test_orientation_columns.py``.
+``tests/io/test_orientation.py``.
 
 Conventions that look wrong (:func:`small_angle_note`, :func:`quaternion_order_note`; issue 24): every reader of
 orientation columns notes (the table's ``notes``, and a :class:`~pkmcal.errors.PkmcalWarning`)

@@ -340,7 +340,7 @@ class Hexapod(SpatialPlatform):
         Batches of :data:`COMPILED_FROM` poses or more run the compiled kernel; smaller ones
         NumPy (:meth:`leg_vectors`), so that a command on a few poses does not import numba
         (~1 s with the SciPy BLAS check it triggers). Same formula; the two agree to a few
-        ulp of the leg length (``tests/test_hexapod_kinematics.py``). Which one runs depends
+        ulp of the leg length (``tests/mechanisms/test_hexapod.py``). Which one runs depends
         only on the batch size, never on what ran before.
         """
         poses = self.as_pose_array(poses)

@@ -42,7 +42,7 @@ direction and the nozzle position move):
 
 With joint errors of up to δ on every length (angles: δ over their lever arm), every pose of
 a default plan of either delta is reached by the perturbed machine within its limits, where
-3–15 of 30 are not without margins (``tests/test_margins.py``).
+3–15 of 30 are not without margins (``tests/planning/test_margins.py``).
 
 Margins apply to machines whose limits take them (the ``"safety-margins"`` ability:
 the 6-UPS hexapod and the deltas); the planar machines' limits (workspace box, reach,

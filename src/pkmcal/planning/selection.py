@@ -138,7 +138,7 @@ def _over_slices(fn: Callable[[int, int], None], N: int) -> None:
     """``fn(start, stop)`` over the candidates in slices of :data:`_PASS_ROWS`, on local
     threads (:func:`~pkmcal.parallel.thread_map`); each slice writes its own rows.
     The slices depend only on N, and each is computed alone, so the bits do not depend on
-    the threads (tested in ``tests/test_plan_executors.py``)."""
+    the threads (tested in ``tests/planning/test_executors.py``)."""
     from pkmcal.parallel import thread_map
 
     for _ in thread_map(lambda start: fn(start, min(N, start + _PASS_ROWS)), range(0, N, _PASS_ROWS)):

@@ -531,3 +531,31 @@ def error_slices_figure(values: np.ndarray, position: np.ndarray, orientation: n
         fig.suptitle(title or f"Pose error from ±{magnitude:g} mm parameter errors (paper 1 Figs. 4–9)", fontsize=10)
         fig.tight_layout()
     return fig
+
+
+def accuracy_map_figure(amap) -> Figure:
+    """The predicted accuracy over the workspace (:class:`~pkmcal.identification.iso9283.AccuracyMap`):
+    the 95 % bound of the tool point's position error (µm) at the grid points of the three
+    heights with the most reachable points, x against y, one colour scale; the ISO 9283
+    cube's P1..P5 marked in the panel nearest their height."""
+    g = amap.grid
+    z = np.round(g.poses[:, 2], 9)
+    levels, counts = np.unique(z, return_counts=True)
+    shown = np.sort(levels[np.argsort(-counts, kind="stable")[:3]])      # the three fullest heights
+    fig = _new((4.0 * len(shown) + 1.0, 3.8), constrained_layout=True)
+    axes = fig.subplots(1, len(shown), sharex=True, sharey=True, squeeze=False)[0]
+    vmin, vmax = 1e3 * float(np.min(g.position)), 1e3 * float(np.max(g.position))
+    cube = amap.cube.poses
+    near = int(np.argmin(np.abs(shown - float(np.mean(cube[:, 2])))))
+    for k, (ax, level) in enumerate(zip(axes, shown)):
+        m = z == level
+        sc = ax.scatter(g.poses[m, 0], g.poses[m, 1], c=1e3 * g.position[m], vmin=vmin, vmax=vmax, s=60)
+        if k == near:
+            ax.plot(cube[:, 0], cube[:, 1], "k+", ms=8, label="ISO 9283 P1..P5")
+            ax.legend(loc="lower center", bbox_to_anchor=(0.5, 1.06), fontsize=7, frameon=False)
+        ax.set_title(f"z = {level:.4g} mm", loc="left")
+        ax.set_xlabel("x (mm)")
+        ax.set_aspect("equal")
+    axes[0].set_ylabel("y (mm)")
+    fig.colorbar(sc, ax=list(axes), label=f"{100 * g.level:g} % bound of the position error (µm)")
+    return fig

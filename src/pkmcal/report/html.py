@@ -423,7 +423,7 @@ def render_html(data: ReportData, figs: list[F.RenderedFigure]) -> str:
 
 
 def _measured_validation_section(v: dict | None) -> str:
-    """The section on measured held-out data (``identify --heldout``): before / after /
+    """The section on measured held-out data (``identify --held-out``): before / after /
     after_reregistered, the poses left out and the registrations."""
     if v is None:
         return ""
@@ -454,7 +454,7 @@ def write_report(data: ReportData, out_dir: str | os.PathLike, png: bool = True)
     ``out_dir`` (created if needed); every file is written atomically."""
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
-        raise PkmcalError(f"report folder '{out}' exists and is not a folder; choose another --out/--report path")
+        raise PkmcalError(f"report folder '{out}' exists and is not a folder; choose another -o/--report path")
     make_folder(out, "the report folder")
     figs = build_figures(data, png=png)
     written = []
