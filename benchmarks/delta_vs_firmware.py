@@ -588,9 +588,9 @@ def volume_fit(machine, grid: np.ndarray, start: dict) -> dict:
     from ``start``) to pkmcal's calibrated full ``machine`` over the print volume ``grid``:
     each carriage's travel below its switch as the firmware computes it (vertical rails,
     this file's own formula: s = z + √(L² − |p_xy − B|²), switch E + √(L² − R²)) against the
-    machine's (H^fw − λ), with a turn about z and a shift in x, y of the firmware's frame free
-    (they move a print on the bed). The best the firmware can hold of what the calibration
-    knows, the leans included, over the volume rather than on the probed points."""
+    machine's (H^fw − λ), with a shift in x, y of the firmware's frame free (it moves a print on
+    the bed; a turn is the three angles together). The best the firmware can hold of what the
+    calibration knows, the leans included, over the volume rather than on the probed points."""
     from scipy.optimize import least_squares
 
     def travel(x, p):
@@ -600,11 +600,10 @@ def volume_fit(machine, grid: np.ndarray, start: dict) -> dict:
         return (x[7:10] + np.sqrt(x[4:7] ** 2 - x[0] ** 2))[None] - s
 
     def residual(x):
-        c, s = math.cos(math.radians(x[12])), math.sin(math.radians(x[12]))
-        moved = np.c_[c * grid[:, 0] - s * grid[:, 1] + x[10], s * grid[:, 0] + c * grid[:, 1] + x[11], grid[:, 2]]
+        moved = grid + np.r_[x[10], x[11], 0.0][None, :]
         return (travel(x, grid) - (machine.reading_reference[None, :] - machine.ik(moved))).ravel()
 
-    x0 = np.r_[start["radius"], start["angles"], start["arms"], start["endstops"], 0.0, 0.0, 0.0]
+    x0 = np.r_[start["radius"], start["angles"], start["arms"], start["endstops"], 0.0, 0.0]
     x = least_squares(residual, x0, x_scale="jac").x
     return {"radius": float(x[0]), "angles": tuple(map(float, x[1:4])), "arms": tuple(map(float, x[4:7])),
             "endstops": tuple(map(float, x[7:10]))}
