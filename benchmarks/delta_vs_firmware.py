@@ -571,12 +571,13 @@ BLOCK_RINGS = ((0.0, 1), (35.0, 6), (65.0, 6))
 #: and pkmcal_prior: the bed alone; klipper_rods: Klipper with the measured rods typed into
 #: printer.cfg; klipper_block: that and the block's MANUAL_HEIGHTs; pkmcal_block: the block
 #: too, the leans freed, exported; pkmcal_block_full: the same calibration's full model, as a
-#: firmware with rail leans would run it).
+#: firmware with rail leans would run it; the *_norods hows: the bed and the block without the
+#: measured rods, printer.cfg's in Klipper, pkmcal freeing rods and leans).
 LEAN_HOWS = ("nominal", "klipper", "klipper_rods", "pkmcal_prior", "klipper_block", "pkmcal_block",
-             "pkmcal_block_full", "volume_fit")
+             "pkmcal_block_full", "volume_fit", "klipper_block_norods", "pkmcal_block_norods")
 #: Compared with: the Klipper how on the same information.
 LEAN_AGAINST = {"pkmcal_prior": "klipper_rods", "pkmcal_block": "klipper_block", "pkmcal_block_full": "klipper_block",
-                "volume_fit": "klipper_block"}
+                "volume_fit": "klipper_block", "pkmcal_block_norods": "klipper_block_norods"}
 #: The set of unequal tower radii (± this, mm; no leans): what the firmware's one radius and
 #: three angles hold exactly.
 UNEQUAL_RADIUS = 2.0
@@ -658,7 +659,11 @@ def run_leans_block(printers: int, seed: int, work: str, grid: np.ndarray) -> di
         results = {"nominal": (NOMINAL, 0.0, False),
                    "klipper": (*klipper_solve(os.path.join(work, "printer.cfg"), reported), False),
                    "klipper_rods": (*klipper_solve(rods_cfg, rods_reported), False),
-                   "klipper_block": (*klipper_solve(rods_cfg, rods_reported, manual), False)}
+                   "klipper_block": (*klipper_solve(rods_cfg, rods_reported, manual), False),
+                   "klipper_block_norods": (*klipper_solve(os.path.join(work, "printer.cfg"), reported, manual),
+                                            False)}
+        attempt(results, failures, "pkmcal_block_norods", pkmcal_path, work, reported, None,
+                log=log_text(reported, on_block, BLOCK_HEIGHT), identify_args=FREE_LEANS)
         for how, kwargs in (("pkmcal_prior", {}),
                             ("pkmcal_block", {"log": log_text(reported, on_block, BLOCK_HEIGHT),
                                               "identify_args": FREE_LEANS, "keep": True})):

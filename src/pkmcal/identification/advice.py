@@ -37,7 +37,9 @@ Options are ranked by rank, then σ_min, then how many named directions they ide
 measure the machine (:data:`~pkmcal.sensors.library.BUILTIN_SETUPS`), at the current poses
 (where each reads there: a Z probe lowered onto the bed);
 for a linear delta, Klipper's printed calibration object (12 distances between printed
-points, :mod:`pkmcal.sensors.printed_distance` on :mod:`pkmcal.mechanisms.pose_pairs`); and
+points, :mod:`pkmcal.sensors.printed_distance` on :mod:`pkmcal.mechanisms.pose_pairs`); for a
+touch probe on a machine that holds parameters on one plane, a gauge block probed at 13
+places (:func:`block_poses`); and
 as many poses again from each of the planners ``default`` and ``random``
 (:func:`pkmcal.planning.plan.plan_poses`, fixed seed), taken where the sensor reads when sent
 there (``Sensor.measured_frames``: a Z probe lowered onto the bed). A placement direction
@@ -75,7 +77,7 @@ PLAN_SEED = 1
 @dataclass(frozen=True)
 class Option:
     """One campaign scored (module docstring): the current one (``kind="current"``) or it with
-    one addition (``"setup"``, ``"printed-distance"``, ``"poses"``)."""
+    one addition (``"setup"``, ``"printed-distance"``, ``"block"``, ``"poses"``)."""
 
     label: str
     kind: str
@@ -216,6 +218,11 @@ def _additions(machine, setup, poses, method, names, notes):
             out.append((f"+ {name} at the same {n} poses", "setup", _eliminated(J, S)))
     if machine.kind == "linear-delta":
         out.append(_printed_object(machine, names))
+    if "touch-probe" in setup.sensor.abilities and machine.held_on_one_plane:
+        block = block_poses(machine)
+        J, _, n = _rows(machine, setup, block, method, names, same_setup=True)
+        out.append((f"+ a gauge block {BLOCK_HEIGHT:g} mm high probed at {n} places (Klipper: DELTA_ANALYZE "
+                    "MANUAL_HEIGHT)", "block", J))
     for alg in PLANNERS:
         from pkmcal.planning.plan import plan_poses
 
