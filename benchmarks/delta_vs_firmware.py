@@ -64,8 +64,10 @@ into the firmware's own parameter model and scored on the true printer.
   too and the leans freed, ``--free … --fix auto``, exported; ``pkmcal_block_full``: that
   calibration's full model, leans included, as a firmware with rail leans would run it —
   none does; ``volume_fit``: not a pkmcal command, Klipper's ten numbers fitted to that full
-  model over the print volume instead of on the probed points, :func:`volume_fit`), and the
-  leans' fitted error. ``unequal_radii``: printers whose tower radii differ by ±2 mm (no
+  model over the print volume instead of on the probed points, :func:`volume_fit`;
+  ``klipper_block_norods`` and ``pkmcal_block_norods``: the bed and the block without the
+  measured rods, printer.cfg's in Klipper, pkmcal freeing rods and leans), and the leans'
+  fitted error. ``unequal_radii``: printers whose tower radii differ by ±2 mm (no
   leans), which Klipper's one radius and three angles hold exactly (the towers on their
   circle, the origin at its centre).
 
