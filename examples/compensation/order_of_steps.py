@@ -3,7 +3,7 @@ a simulated Kossel Mini (kinematic errors of up to 0.5 mm and 0.03 deg, pkmcal.p
 2), probed with a Z probe at 60 random points (σ 0.005 mm) for the fits and at 40 others
 for the held-out gate, over a flat bed and over a bed with a 0.3 mm bump. A first layer
 (z = 0.3 mm) is commanded on a 10 mm grid within 70 mm of the centre through the firmware's
-nominal kinematics, four ways; printed: the nozzle's height above the real bed minus 0.3 mm
+nominal kinematics, five ways; printed: the nozzle's height above the real bed minus 0.3 mm
 (RMS, max |e|) and its horizontal error (RMS, max), mm. Run from the repository root:
 
     PYTHONPATH=src python3 examples/compensation/order_of_steps.py
@@ -35,9 +35,12 @@ for label, bed in (("flat bed", BedBump(0.0, (0.0, 0.0), 1.0)), ("bed with a 0.3
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         res = pkmcal.identify(m, s, sim.measurements)
+        robust = pkmcal.identify(m, s, sim.measurements, loss="cauchy")        # identify --loss cauchy
     cal, cal_setup = res.mechanism, dataclasses.replace(s, sensor=res.sensor)
+    rob, rob_setup = robust.mechanism, dataclasses.replace(s, sensor=robust.sensor)
     mesh_alone = compensate(m, s, sim.measurements, held.measurements)          # the nominal model's residuals
     mesh_after = compensate(cal, cal_setup, sim.measurements, held.measurements)
+    mesh_robust = compensate(rob, rob_setup, sim.measurements, held.measurements)
 
     def printed(commands):
         fk = real.fk(m.ik(commands), guess=targets)
@@ -53,10 +56,12 @@ for label, bed in (("flat bed", BedBump(0.0, (0.0, 0.0), 1.0)), ("bed with a 0.3
              commands_for(m, m, mesh_alone.field, targets, free).commands),
             ("geometric calibration alone", commands_for(cal, m, None, targets, free).commands),
             ("calibration, then the mesh" + ("" if mesh_after.accepted else " (rejected: none)"),
-             commands_for(cal, m, mesh_after.field, targets, free).commands)]
+             commands_for(cal, m, mesh_after.field, targets, free).commands),
+            ("calibration --loss cauchy, then the mesh" + ("" if mesh_robust.accepted else " (rejected: none)"),
+             commands_for(rob, m, mesh_robust.field, targets, free).commands)]
     print(f"{label}: height error RMS / max, horizontal error RMS / max (mm), {len(targets)} points")
     for name, cmd in rows:
-        print(f"  {name:<42} {' / '.join(f'{v:.3f}' for v in printed(cmd)[:2]):>14}   "
+        print(f"  {name:<48} {' / '.join(f'{v:.3f}' for v in printed(cmd)[:2]):>14}   "
               f"{' / '.join(f'{v:.3f}' for v in printed(cmd)[2:]):>14}")
     for what, rep in (("mesh alone", mesh_alone), ("mesh after calibration", mesh_after)):
         print(f"  {what}: {rep.candidates[rep.chosen].label}; {rep.reason}")

@@ -312,6 +312,7 @@ def run_demo(config: DemoConfig = DemoConfig(), progress: Progress | None = None
                ("held-out poses", f"{int(m.sum())} of {len(held)} (random, other seed)"),
                ("calibrated machine file", files["calibrated"].name),
                ("LinuxCNC settings", files["linuxcnc"].name)),
+        calibrated_file=files["calibrated"].name, setup_name=files["setup"].name,
     )
     written = write_report(data, out, png=config.png)
     files["report"] = written.html

@@ -36,7 +36,7 @@ def files(tmp_path_factory):
 
 def test_compensate_keeps_the_mesh_and_writes_klipper_block(files):
     d = files
-    r = run("compensate", d / "cal.yaml", d / "meas.csv", "--heldout", d / "held.csv", "-o", d / "corr.yaml",
+    r = run("compensate", d / "cal.yaml", d / "meas.csv", "--held-out", d / "held.csv", "-o", d / "corr.yaml",
             "--klipper-mesh", d / "mesh.cfg")
     assert r.exit_code == 0, r.output
     assert "correction KEPT" in r.output
@@ -58,7 +58,7 @@ def test_compensate_on_a_flat_bed_writes_nothing(tmp_path):
     r = run("identify", "kossel-mini", tmp_path / "meas.csv", "--setup", "z-probe-klipper", "-o",
             tmp_path / "cal.yaml", "--accept-bad-fit")
     assert r.exit_code == 0, r.output
-    r = run("compensate", tmp_path / "cal.yaml", tmp_path / "meas.csv", "--heldout", tmp_path / "held.csv", "-o",
+    r = run("compensate", tmp_path / "cal.yaml", tmp_path / "meas.csv", "--held-out", tmp_path / "held.csv", "-o",
             tmp_path / "corr.yaml", "--json")
     assert r.exit_code == 0, r.output
     assert '"accepted": false' in r.output and not (tmp_path / "corr.yaml").exists()
@@ -117,3 +117,53 @@ def test_bad_correction_file_is_one_line_with_its_line(files):
     (d / "p.gcode").write_text("G1 X0 Y0 Z5\n")
     r = run("correct", d / "p.gcode", "-m", d / "cal.yaml", "--correction", d / "bad.yaml", "-o", d / "q.gcode")
     assert r.exit_code == 2 and "bad.yaml:3: basis.algo" in r.output and len(r.output.strip().splitlines()) == 1
+
+
+def test_correct_hexapod_program_in_degrees(tmp_path):
+    """A LinuxCNC program (X Y Z mm, A B C degrees, G21 G90, comments in parentheses) through
+    the calibrated hexapod for a controller with the nominal genhexkins: the words written are
+    the library's commands in mm and degrees."""
+    nominal, cal = pkmcal.load_machine("stewart-prototype"), pkmcal.load_machine("stewart-prototype-real")
+    home = nominal.home_pose
+    rows = [home + [dx, dy, dz, np.deg2rad(a), np.deg2rad(b), 0.0]
+            for dx, dy, dz, a, b in ((0, 0, 0, 0, 0), (4, -3, 2, 1.5, 0), (-2, 5, 3, 0, -1))]
+    words = ["G1 X%.3f Y%.3f Z%.3f A%.4f B%.4f C%.4f (p%d)\n" % (*r[:3], *np.rad2deg(r[3:]), k)
+             for k, r in enumerate(rows)]
+    (tmp_path / "p.ngc").write_text("(hexapod)\nG21 G90\n" + "".join(words) + "M2\n")
+    r = run("correct", tmp_path / "p.ngc", "-m", "stewart-prototype-real", "--nominal", "stewart-prototype",
+            "--ignore-limit", "leg_collision", "-o", tmp_path / "out.ngc")
+    assert r.exit_code == 0, r.output
+    out = (tmp_path / "out.ngc").read_text().splitlines(keepends=True)
+    axes = ("X", "Y", "Z", "A", "B", "C")
+    got = np.array([m.target for m in parse_moves(out, axes, "out.ngc")[0]])
+    given = np.array([m.target for m in parse_moves(words, axes, "p.ngc")[0]])
+    targets = np.column_stack([given[:, :3], np.deg2rad(given[:, 3:])])
+    cmd = commands_for(cal, nominal, None, targets, ("leg_collision",)).commands
+    np.testing.assert_allclose(got, np.column_stack([cmd[:, :3], np.rad2deg(cmd[:, 3:])]), atol=5e-7)
+    assert out[0] == "(hexapod)\n" and out[-1] == "M2\n" and out[2].rstrip().endswith("(p0)")
+
+
+def test_sagging_hexapod_through_the_command_line(tmp_path):
+    """identify (laser tracker) -> compensate (a pose field kept) -> correct a pose file: the
+    commands are the library's for the field read back from the file."""
+    case = cases.hexapod(sagging=True)
+    pkmcal.save_measurements(case.calibration.measurements, case.nominal, case.setup, tmp_path / "meas.csv")
+    pkmcal.save_measurements(case.heldout.measurements, case.nominal, case.setup, tmp_path / "held.csv")
+    r = run("identify", "stewart-prototype", tmp_path / "meas.csv", "--setup", "laser-tracker", "-o",
+            tmp_path / "cal.yaml", "--accept-bad-fit")
+    assert r.exit_code == 0, r.output
+    r = run("compensate", tmp_path / "cal.yaml", tmp_path / "meas.csv", "--held-out", tmp_path / "held.csv",
+            "--degrees", "0,1,2", "-o", tmp_path / "corr.yaml")
+    assert r.exit_code == 0 and "correction KEPT: polynomial of degree 2" in r.output, r.output
+    targets = case.heldout.commanded[case.heldout.kept][:5]
+    lines = ["x,y,z,a,b,c"] + [",".join(repr(float(v)) for v in np.r_[t[:3], np.rad2deg(t[3:])]) for t in targets]
+    (tmp_path / "t.csv").write_text("\n".join(lines) + "\n")
+    r = run("correct", tmp_path / "t.csv", "-m", tmp_path / "cal.yaml", "--correction", tmp_path / "corr.yaml",
+            "--ignore-limit", "leg_collision", "-o", tmp_path / "cmd.csv")
+    assert r.exit_code == 0, r.output
+    got = np.loadtxt(tmp_path / "cmd.csv", delimiter=",", skiprows=1)
+    cal = pkmcal.load_machine(tmp_path / "cal.yaml")
+    fld = load_correction(tmp_path / "corr.yaml", cal)
+    assert fld.kind == "pose-field" and fld.components == ("x", "y", "z")
+    cmd = commands_for(cal, pkmcal.load_machine("stewart-prototype"), fld, targets, ("leg_collision",)).commands
+    np.testing.assert_allclose(got, np.column_stack([cmd[:, :3], np.rad2deg(cmd[:, 3:])]), rtol=1e-12, atol=1e-9)

@@ -13,10 +13,11 @@ import json
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from test_export_linuxcnc import genhexkins_inverse, parse_hal
+from test_export_linuxcnc import HALF_NM, STRUT_ROUNDING, genhexkins_inverse, parse_hal
 
 from pkmcal.cli.main import cli
 from pkmcal.io import load_machine, read_table
+from pkmcal.io.export_linuxcnc import rounded_machine
 from pkmcal.io.tables import format_table
 
 POSE_NAMES = ("x", "y", "z", "a", "b", "c")
@@ -53,15 +54,17 @@ def test_linuxcnc_export_reproduces_calibrated_leg_lengths(calibrated):
     assert text.startswith("# genhexkins configuration") and "Units: mm" in text and "Rz(C) Ry(B) Rx(A)" in text
     base, platform, joints = parse_hal(text)
     cal = load_machine(d / "cal.yaml")
-    np.testing.assert_array_equal(base, cal.base)
-    np.testing.assert_array_equal(platform, cal.platform)
+    # the calibrated joints rounded to 1 nm (export_linuxcnc.LINUXCNC_DECIMALS), exactly
+    np.testing.assert_array_equal(base, rounded_machine(cal).base)
+    np.testing.assert_array_equal(platform, rounded_machine(cal).platform)
+    np.testing.assert_allclose(base, cal.base, rtol=0, atol=HALF_NM)
     assert not np.array_equal(cal.base, load_machine("stewart-prototype").base)  # it is the calibrated one
     # random poses: genhexkins' struts = the calibrated model's leg lengths
     rng = np.random.default_rng(2)
     poses = cal.home_pose + rng.uniform(-1, 1, (50, 6)) * np.array([20, 20, 10, *np.deg2rad([10, 10, 30])])
     deg = np.column_stack([poses[:, :3], np.rad2deg(poses[:, 3:])])
     ghk = np.array([genhexkins_inverse(base, platform, q) for q in deg])
-    np.testing.assert_allclose(ghk, cal.leg_lengths(poses), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(ghk, cal.leg_lengths(poses), rtol=0, atol=STRUT_ROUNDING + 1e-9)
     # measured poses: the calibrated FK of the readings, through genhexkins, gives L0 + λ
     lam = read_table(d / "meas.csv", [f"lambda{i}" for i in range(1, 7)]).values
     fk = cal.fk(lam)
@@ -69,8 +72,8 @@ def test_linuxcnc_export_reproduces_calibrated_leg_lengths(calibrated):
     fk_deg = np.column_stack([fk.poses[:, :3], np.rad2deg(fk.poses[:, 3:])])
     ghk = np.array([genhexkins_inverse(base, platform, q) for q in fk_deg])
     L0 = np.array([joints[n][0] for n in range(6)])
-    np.testing.assert_array_equal(L0, cal.offset)
-    np.testing.assert_allclose(ghk, L0 + lam, rtol=0, atol=1e-8)
+    np.testing.assert_array_equal(L0, rounded_machine(cal).offset)
+    np.testing.assert_allclose(ghk, L0 + lam, rtol=0, atol=1e-8 + STRUT_ROUNDING + HALF_NM)
 
 
 def test_json_export_parameters_std_correlation(calibrated):

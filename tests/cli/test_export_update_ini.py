@@ -15,7 +15,7 @@ from helpers import assert_user_error
 
 from pkmcal.cli.main import cli
 from pkmcal.io import load_machine
-from pkmcal.io.export_linuxcnc import OWNED_KEYS, joint_settings, linuxcnc_ini
+from pkmcal.io.export_linuxcnc import LINUXCNC_DECIMALS, OWNED_KEYS, joint_settings, linuxcnc_ini, rounded_machine
 from pkmcal.io.import_linuxcnc import machine_from_linuxcnc, read_ini
 from pkmcal.io.machine_file import machine_to_text
 from pkmcal.mechanisms.library import builtin_machine
@@ -105,14 +105,18 @@ def test_update_ini_changes_only_pkmcals_keys_in_the_files_unit(tmp_path, unit, 
         assert got.get(section, key)[0] == want.get(section, key)[0], (section, key)
     s = joint_settings(m, factor)
     assert float(got.get("JOINT_2", "MAX_LIMIT")[0]) == s["MAX_LIMIT"][2]
-    np.testing.assert_allclose(s["MAX_LIMIT"] * factor, m.offset + m.stroke[:, 1] - 0.5, rtol=1e-15)
+    # rounded to LinuxCNC's decimals of the unit (1 nm or finer: half a unit of the last one)
+    half = 0.5 * 10.0 ** -LINUXCNC_DECIMALS[unit] * factor + np.spacing(1e3)
+    np.testing.assert_allclose(s["MAX_LIMIT"] * factor, m.offset + m.stroke[:, 1] - 0.5, rtol=0, atol=half)
     assert got.get("TRAJ", "LINEAR_UNITS")[0] == unit and got.get("EMC", "MACHINE")[0] == "shop hexapod"
     # and the updated file with the HAL file of the same export is the machine (the joint limits
     # are the stroke less the margin: a user's INI carries no pkmcal margin comment)
     back = machine_from_linuxcnc(tmp_path / "k.hal", tmp_path / "new.ini").machine
-    np.testing.assert_array_equal(back.base, m.base)
-    np.testing.assert_array_equal(back.offset, m.offset)
-    np.testing.assert_allclose(back.stroke, m.stroke + [0.5, -0.5], rtol=0, atol=1e-12)
+    # the numbers as written, exactly (export_linuxcnc.rounded_machine), within half a unit of the last decimal
+    np.testing.assert_array_equal(back.base, rounded_machine(m, unit).base)
+    np.testing.assert_array_equal(back.offset, rounded_machine(m, unit).offset)
+    np.testing.assert_allclose(back.base, m.base, rtol=0, atol=half)
+    np.testing.assert_allclose(back.stroke, m.stroke + [0.5, -0.5], rtol=0, atol=2 * half)
 
 
 def test_update_ini_never_writes_over_its_input_and_needs_an_output(tmp_path):
@@ -155,8 +159,10 @@ def test_stroke_margin_is_stated_and_settable(tmp_path):
     text = ok(run("export", "stewart-prototype", "--format", "linuxcnc", "--ini", tmp_path / "a.ini")).stdout
     assert "MIN_LIMIT=305.5 MAX_LIMIT=354.5" in text
     assert "# pkmcal.stroke_margin_mm = 0.5 0.5 0.5 0.5 0.5 0.5" in (tmp_path / "a.ini").read_text()
-    text = ok(run("export", "stewart-prototype", "--format", "linuxcnc", "--stroke-margin", 0)).stdout
-    assert "MIN_LIMIT=305.0 MAX_LIMIT=355.0" in text
+    res = ok(run("export", "stewart-prototype", "--format", "linuxcnc", "--stroke-margin", 0))
+    assert "MIN_LIMIT=305.0 MAX_LIMIT=355.0" in res.stdout
+    # the rounding said on standard error, with what it changes (the prototype's joints have 3 decimals: nothing)
+    assert "pkmcal: note: numbers rounded to 1 nm" in res.stderr and "by less than 1 nm over the workspace" in res.stderr
     assert_user_error(run("export", "stewart-prototype", "--format", "linuxcnc", "--stroke-margin", 25),
                       "--stroke-margin 25", "no travel")
     assert_user_error(run("export", "stewart-prototype", "--format", "linuxcnc", "--stroke-margin", -1), ">= 0")

@@ -31,11 +31,11 @@ def campaign(tmp_path_factory):
     """A calibration of the prototype on 30 planned full-pose measurements, and the ISO 9283
     pattern in 5 cycles."""
     d = tmp_path_factory.mktemp("iso")
-    _run("plan", "stewart-prototype", "--setup", "full-pose-paper1", "--n", 30, "--seed", 1, "-o", d / "poses.csv")
+    _run("plan", "stewart-prototype", "--setup", "full-pose-paper1", "--n-poses", 30, "--seed", 1, "-o", d / "poses.csv")
     _run("simulate", "stewart-prototype", "--real", "stewart-prototype-real", "--setup", "full-pose-paper1",
          "--poses", d / "poses.csv", "--seed", 2, "--ignore-limit", "leg_collision", "-o", d / "meas.csv")
     _run("identify", "stewart-prototype", d / "meas.csv", "--setup", "full-pose-paper1", "-o", d / "cal.yaml")
-    _run("plan", "stewart-prototype", "--setup", "full-pose-paper1", "--pattern", "iso9283", "--n", CYCLES,
+    _run("plan", "stewart-prototype", "--setup", "full-pose-paper1", "--pattern", "iso9283", "--n-poses", CYCLES,
          "-o", d / "iso.csv")
     return d
 
@@ -90,7 +90,7 @@ def test_verify_measured_reports_figures_with_uncertainty(campaign):
     U of AP_x is 2 σ/√n exactly (σ = 0.025/√3 mm, uniform), of AP_a 2 σ_a/√n."""
     _run("simulate", campaign / "cal.yaml", "--real", "stewart-prototype-real", "--setup", "full-pose-paper1",
          "--poses", campaign / "iso.csv", "--seed", 5, "-o", campaign / "iso-meas.csv")
-    res = _run("verify", campaign / "cal.yaml", "--measurements", campaign / "iso-meas.csv", "--setup",
+    res = _run("verify", campaign / "cal.yaml", "--held-out", campaign / "iso-meas.csv", "--setup",
                "full-pose-paper1", "--json")
     iso = json.loads(res.stdout)["iso9283"]
     by = {(f["figure"], f["pose"]): f for f in iso["figures"]}
@@ -186,3 +186,28 @@ def load_setup_full_pose():
     from pkmcal.api import load_setup
 
     return load_setup("full-pose-paper1", load_machine("stewart-prototype"))
+
+
+def test_verify_reports_the_ballbar_circle(tmp_path):
+    """A ballbar calibration, then its circle test (plan --algorithm circle) measured on the
+    real machine: verify prints the ISO 230-4 figures, F_max the largest reading itself."""
+    from pathlib import Path
+
+    bar = Path(__file__).resolve().parents[2] / "examples" / "setup-ballbar.yaml"
+    _run("plan", "stewart-prototype", "--setup", bar, "--n-poses", 60, "-o", tmp_path / "poses.csv")
+    _run("simulate", "stewart-prototype", "--real", "stewart-prototype-real", "--setup", bar, "--poses",
+         tmp_path / "poses.csv", "--seed", 4, "-o", tmp_path / "meas.csv")
+    _run("identify", "stewart-prototype", tmp_path / "meas.csv", "--setup", bar, "-o", tmp_path / "cal.yaml")
+    _run("plan", "stewart-prototype", "--setup", bar, "--algorithm", "circle", "--n-poses", 36, "-o", tmp_path / "circle.csv")
+    _run("simulate", tmp_path / "cal.yaml", "--real", "stewart-prototype-real", "--setup", bar, "--poses",
+         tmp_path / "circle.csv", "--seed", 5, "-o", tmp_path / "circle-meas.csv")
+    res = _run("verify", tmp_path / "cal.yaml", "--held-out", tmp_path / "circle-meas.csv", "--setup",
+               tmp_path / "cal.yaml", "--json")
+    circle = json.loads(res.stdout)["iso230_4"]
+    readings = read_table(tmp_path / "circle-meas.csv", ["dist1"], kinds={})["dist1"]
+    by = {f["figure"]: f for f in circle["figures"]}
+    assert by["F_max"]["value_mm"] == pytest.approx(readings.max(), abs=1e-12)
+    assert by["F_min"]["value_mm"] == pytest.approx(readings.min(), abs=1e-12)
+    assert by["F_max"]["U_mm"] == pytest.approx(2 * 0.001, rel=1e-12)      # the bar's sigma, one reading
+    assert by["G"]["value_mm"] > 0 and by["G"]["U_mm"] > 0
+    assert "iso9283" not in json.loads(res.stdout)

@@ -154,6 +154,7 @@ OLD_SPELLINGS = [
     ("demo", ["--held-out", "12"], ["--n-held-out", "12"]),
     ("demo", ["--out", "d"], ["--output", "d"]),
     ("plan", ["m", "--setup", "s", "--n", "12"], ["m", "--setup", "s", "--n-poses", "12"]),
+    ("history add", ["c.yaml", "--serial", "S", "--heldout", "v.json"], ["c.yaml", "--serial", "S", "--verification", "v.json"]),
 ]
 
 
@@ -248,7 +249,6 @@ KNOWN_OLD_TEXTS = {
     "src/pkmcal/cli/calibrated_file.py": 2,
     "src/pkmcal/cli/campaign_cmds.py": 4,
     "src/pkmcal/cli/export_cmd.py": 10,
-    "src/pkmcal/cli/identify_cmds.py": 1,
 }
 
 

@@ -139,7 +139,8 @@ def test_split_moves_follow_the_bump_between_their_ends():
         return np.abs(fk.poses[:, 2] - case.error(fk.poses[:, :2]) - 0.3)
 
     ends_only, split = path_error(None), path_error(5.0)
-    print(f"height error along the line: ends only max {np.max(ends_only):.3f} mm, split every 5 mm {np.max(split):.3f} mm")
+    print(f"height error along the line: ends only max {np.max(ends_only):.3f} mm, "
+          f"split every 5 mm {np.max(split):.3f} mm")
     tol = float(np.sqrt(np.mean(held_residuals**2))) * 4        # a few times what the model + mesh leave
     assert np.max(split) <= tol, (np.max(split), tol)
     assert np.max(ends_only) > 2 * tol

@@ -12,7 +12,7 @@ import pkmcal
 from pkmcal.compensation.basis import MeshBasis, PolynomialBasis
 from pkmcal.compensation.files import klipper_block, klipper_profile, load_correction, save_correction
 from pkmcal.compensation.fit import Field
-from pkmcal.errors import PkmcalError
+from pkmcal.errors import PkmcalError, PkmcalWarning
 
 HEX = pkmcal.load_machine("stewart-prototype")
 DELTA = pkmcal.load_machine("kossel-mini")
@@ -86,9 +86,18 @@ def test_bad_files_are_one_line_errors(tmp_path, edit, where):
     assert "bad.yaml" in str(exc.value) and "\n" not in str(exc.value)
 
 
+def test_a_correction_of_another_calibration_is_warned_about(tmp_path):
+    from pkmcal.errors import PkmcalWarning
+
+    save_correction(tmp_path / "m.yaml", _mesh(), DELTA)
+    other = DELTA.with_params(DELTA.params, name="kossel-mini-2026-12-03")
+    with pytest.warns(PkmcalWarning, match="fitted for machine 'kossel-mini'"):
+        load_correction(tmp_path / "m.yaml", other)
+
+
 def test_a_pose_field_for_another_machine_is_refused(tmp_path):
     save_correction(tmp_path / "p.yaml", _pose_field(), HEX)
-    with pytest.raises(PkmcalError, match="basis.variables"):
+    with pytest.raises(PkmcalError, match="basis.variables"), pytest.warns(PkmcalWarning):
         load_correction(tmp_path / "p.yaml", DELTA)
     with pytest.raises(PkmcalError, match="cannot read"):
         load_correction(tmp_path / "missing.yaml", HEX)

@@ -122,7 +122,7 @@ def test_identify_and_export_say_what_the_heights_leave_undetermined(printer):
         comments = [ln for ln in text.splitlines() if ln.startswith(mark)]
         assert "a common scale of the arm lengths" in " ".join(comments)
     # the exported Klipper sections still read as Klipper reads them (the comments are comments)
-    from pkmcal.io.delta_firmware import read_klipper
+    from pkmcal.io.delta_firmware import KLIPPER_ROUNDING, read_klipper
 
     (printer / "back.cfg").write_text("[printer]\nkinematics: delta\n\n" + (printer / "plain.klipper").read_text())
     assert read_klipper(str(printer / "back.cfg")).arms == (215.0, 215.0, 215.0)
@@ -138,6 +138,8 @@ def test_identify_and_export_say_what_the_heights_leave_undetermined(printer):
     assert "pkmcal: note: where the tower set stands along x on the bed" in out.output
     comments = [ln for ln in (printer / "rods.cfg").read_text().splitlines() if ln.startswith("#")]
     assert "measure it by hand" in " ".join(comments) and "sigma unbounded" in " ".join(comments)
+    # nothing on the scale; how the numbers are rounded, as every export says
+    assert not any("a common scale" in ln for ln in comments) and f"# pkmcal: {KLIPPER_ROUNDING}" in comments
 
 
 def test_firmware_sigmas_are_the_covariance_propagated_and_free_of_the_gauge(printer):

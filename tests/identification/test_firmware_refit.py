@@ -35,7 +35,8 @@ from pkmcal.identification.firmware_refit import (
     residual_rms,
 )
 from pkmcal.identification.priors import Prior
-from pkmcal.io.delta_firmware import firmware_subset, read_klipper
+from pkmcal.io.delta_firmware import firmware_subset, klipper_rounded, read_klipper
+from pkmcal.io.marlin_settings import marlin_rounded
 from pkmcal.io.machine_file import load_machine, machine_to_text
 from pkmcal.io.measurements import Measurements
 from pkmcal.io.setup_file import load_setup
@@ -149,6 +150,35 @@ def test_a_printer_without_leans_loses_nothing_to_the_firmware():
     assert abs(hr - hf) < 0.25 * hf and hr < 2.5 * TRIGGER_STD
 
 
+def test_the_firmwares_resolution_changes_the_held_out_figure_far_below_the_noise():
+    """The numbers as Klipper (6 decimals) and Marlin (32-bit floats) hold them, scored on the
+    held-out probe heights as the refit is: the held-out rms moves by less than a hundredth of
+    the probe's noise (measured on the delta tutorial: 1.3e-7 mm for Klipper, 2.5e-6 mm for
+    Marlin, against a held-out rms of 8.7e-3 mm)."""
+    nominal, setup, _, meas, held, priors = _campaign(3, 0.0)
+    full = identify(nominal, setup, meas, priors=priors)
+    ref = firmware_refit(full.mechanism, setup, meas, held, priors=priors)
+    m = ref.machine
+    fw, left = firmware_subset(m)
+    assert left == [] and fw.origin == (0.0, 0.0)        # one radius, no tool offset: the numbers are the params
+    fitted = dataclasses.replace(setup, sensor=ref.refit.sensor)
+
+    def machine_of(f):
+        rho = m.params.copy()
+        for i, t in enumerate("abc"):
+            for name, v in (("angle", np.deg2rad(f.angles_deg[i])), ("radius", f.radius), ("arm", f.arms[i]),
+                            ("endstop", f.endstops[i])):
+                rho[PARAM_NAMES.index(f"{name}_{t}")] = v
+        return m.with_params(rho)
+
+    exact, _ = residual_rms(machine_of(fw), fitted, held, ref.method)
+    assert exact["mm"] == pytest.approx(ref.refit.heldout_rms["mm"], rel=1e-9)   # the params are the numbers
+    for rounded in (klipper_rounded(fw), marlin_rounded(fw)):
+        assert rounded != fw
+        got, _ = residual_rms(machine_of(rounded), fitted, held, ref.method)
+        assert abs(got["mm"] - exact["mm"]) < 0.01 * TRIGGER_STD
+
+
 def test_unequal_radii_on_vertical_rails_cost_nothing_without_a_refit():
     """A calibration with the rails held vertical (its gauge puts the sideways slide into
     unequal radii): the firmware's numbers are its exact rewrite (io/delta_firmware.py), so
@@ -232,7 +262,7 @@ def test_export_with_measurements_writes_the_refit_and_reports_the_cost(tmp_path
     # the export is the sections SAVE_CONFIG writes: under a printer.cfg's [printer] kinematics
     (tmp_path / "printer.cfg").write_text("[printer]\nkinematics: delta\n\n" + (tmp_path / "refit.cfg").read_text())
     back = read_klipper("printer.cfg")
-    fw = firmware_subset(ref.machine)[0]
+    fw = klipper_rounded(firmware_subset(ref.machine)[0])      # as Klipper's SAVE_CONFIG writes them: 6 decimals
     assert (back.radius, back.angles_deg, back.arms, back.endstops) == (fw.radius, fw.angles_deg, fw.arms,
                                                                          fw.endstops)
     assert (tmp_path / "refit.cfg").read_text() != (tmp_path / "plain.cfg").read_text()

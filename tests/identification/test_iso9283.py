@@ -9,9 +9,11 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 from scipy.stats import binom
 
-from helpers import FALSE_FAILURE, mc_std_ratio_band
+from helpers import FALSE_FAILURE, fuzz_settings, mc_std_ratio_band
 from pkmcal.api import load_machine, load_setup
 from pkmcal.identification import iso9283 as iso
 from pkmcal.identification.simulation import perturb_machine
@@ -304,7 +306,10 @@ def test_predicted_accuracy_covers_monte_carlo_calibrations():
     machines drawn with that covariance (true ρ = ρ̂ − δρ, δρ ~ N(0, C)), commanded through
     ρ̂ to P1..P5 and solved by FK exactly: the fraction inside the bound is 95 % within the
     binomial band of 1000 draws (FALSE_FAILURE over 10 bounds) widened by 1.5 % for
-    Patnaik's approximation, for position and orientation."""
+    Patnaik's approximation (its quantile within 1.5 %: test_norm_quantile_against_sampling;
+    that moves the coverage by f(q)·q·1.5 % ≤ 0.35·1.5 % ≈ 0.5 % for a norm of 1 to 3
+    Gaussian components, f the norm's density at its 95 % quantile q), for position and
+    orientation."""
     m = load_machine("stewart-prototype")
     setup = load_setup("full-pose-paper1", m)
     rng = np.random.default_rng(8)
@@ -383,3 +388,21 @@ def test_tool_error_jacobian_matches_finite_differences(setup_name):
             dt[col - p] = h
         fd = (tool_error(rho0 + dr, th0 + dt) - tool_error(rho0 - dr, th0 - dt)) / (2 * h)
         np.testing.assert_allclose(J[:, :fd.shape[1], col], fd, atol=1e-6, err_msg=str(col))
+
+
+@given(center=st.tuples(*[st.floats(-500, 500)] * 3), side=st.floats(1.0, 400.0),
+       abc=st.tuples(*[st.floats(-0.5, 0.5)] * 3), cycles=st.integers(2, 6), seed=st.integers(0, 2**32 - 1))
+@fuzz_settings(50)
+def test_any_pattern_in_any_order_is_detected(center, side, abc, cycles, seed):
+    """Any cube (centre, side, orientation), any number of cycles, rows in any order: the
+    pattern is found, P1 its centre, P4 opposite P2, and each row labelled with its pose."""
+    m = load_machine("stewart-prototype")
+    pat = iso.cube_pattern(np.array(center), side, np.array([0, 0, 0, *abc]))
+    poses = np.tile(pat, (cycles, 1))
+    order = np.random.default_rng(seed).permutation(len(poses))
+    found = iso.detect_pattern(m, poses[order])
+    assert not isinstance(found, str), found
+    label, cmd = found
+    assert np.array_equal(cmd[0], pat[0])
+    assert np.allclose(cmd[1, :3] + cmd[3, :3], 2 * pat[0, :3], atol=1e-9 * max(1.0, np.abs(pat[:, :3]).max()))
+    assert np.array_equal(cmd[label - 1], poses[order])

@@ -4,13 +4,19 @@ the tower positions and switch heights, exact round trips, and what an export dr
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pkmcal.errors import InputFileError
+from pkmcal.io.marlin_settings import MARLIN_ROUNDING, marlin_rounded
 from pkmcal.io.delta_firmware import (
+    KLIPPER_ROUNDING,
+    klipper_rounded,
+    rounding_effect,
     DeltaFirmware,
     RotaryFirmware,
     firmware_subset,
@@ -254,15 +260,23 @@ def firmwares(draw):
 
 @settings(max_examples=50, deadline=None)
 @given(fw=firmwares())
-def test_round_trips_are_exact(tmp_path_factory, fw):
+def test_round_trips_give_the_firmwares_rounded_numbers_exactly(tmp_path_factory, fw):
     d = tmp_path_factory.mktemp("rt")
-    cfg = "[printer]\nkinematics: delta\nprint_radius: {!r}\n\n".format(fw.print_radius) + klipper_text(fw)
+    text = klipper_text(fw)
+    # Klipper: every number as its SAVE_CONFIG writes it, "%.6f", and a comment line says so
+    assert text.splitlines()[0] == f"# pkmcal: {KLIPPER_ROUNDING}"
+    values = [line.split(" = ")[1] for line in text.splitlines() if " = " in line]
+    assert len(values) == 10 and all(re.fullmatch(r"-?\d+\.\d{6}", v) for v in values), values
+    cfg = "[printer]\nkinematics: delta\nprint_radius: {!r}\n\n".format(fw.print_radius) + text
     back = read_klipper(_write(d, "printer.cfg", cfg))
-    # the ten numbers exactly; the build radius is Klipper's, min(print_radius, ...)
-    assert (back.radius, back.angles_deg, back.arms, back.endstops) == (fw.radius, fw.angles_deg, fw.arms,
-                                                                          fw.endstops)
+    r = klipper_rounded(fw)
+    # the ten numbers exactly as rounded; each within half a unit of the 6th decimal of the
+    # exact one (plus the decimal conversion's round-off of numbers below 1e3: 1.2e-13)
+    numbers = lambda f: (f.radius, *f.angles_deg, *f.arms, *f.endstops)  # noqa: E731
+    assert numbers(back) == numbers(r)
+    np.testing.assert_allclose(numbers(r), numbers(fw), rtol=0, atol=0.5e-6 + np.spacing(1e3))
     assert back.print_radius <= fw.print_radius
-    # machine → firmware numbers → machine: lengths bit for bit; angles through one
+    # machine → firmware numbers → machine (no text): lengths bit for bit; angles through one
     # radian → degree → radian conversion, each correctly rounded: within 2 ulp
     m = fw.machine("m")
     fw2, dropped = firmware_subset(m)
@@ -271,12 +285,36 @@ def test_round_trips_are_exact(tmp_path_factory, fw):
     back_rho = fw2.machine("m").params
     np.testing.assert_array_equal(back_rho[~is_angle], m.params[~is_angle])
     np.testing.assert_allclose(back_rho[is_angle], m.params[is_angle], rtol=0, atol=2 * np.spacing(2 * np.pi))
-    # Marlin: each number written to 6 decimals (half a unit of 1e-6 off at most), then
-    # summed (L + trim, H − adj, 210 + trim: two written numbers each)
-    mb = read_marlin(_write(d, "m503.txt", "echo:; Delta settings:\necho:  " + marlin_text(fw).split("\n", 1)[1]))
-    for got, want in ((mb.arms, fw.arms), (mb.endstops, fw.endstops), (mb.angles_deg, fw.angles_deg),
-                      ((mb.radius,), (fw.radius,))):
-        np.testing.assert_allclose(got, want, rtol=0, atol=1e-6 + 1e-12 * 1e3)
+    # Marlin: every word is the 32-bit float Marlin holds (the shortest decimal of it, at most
+    # 6 decimals); the import gives marlin_rounded's numbers exactly
+    gcode = marlin_text(fw)
+    assert gcode.splitlines()[4] == f"; pkmcal: {MARLIN_ROUNDING}"
+    words = re.findall(r"\b[A-Z](-?[\d.]+)", " ".join(gcode.splitlines()[1:3]))
+    for w in words:
+        assert float(np.float32(w)) == float(np.float32(float(w)))
+        assert np.format_float_positional(np.float32(w), unique=True, trim="-") == w
+        assert len(w.partition(".")[2]) <= 6
+    mb = read_marlin(_write(d, "m503.txt", "echo:; Delta settings:\necho:  " + gcode.split("\n", 1)[1]))
+    mr = marlin_rounded(fw)
+    assert numbers(mb) == numbers(mr)
+    # each number within the words' rounding of the exact ones: half a unit of the 6th decimal
+    # and half the float32 spacing at 1e3 (3.1e-5) for each of the two words summed
+    # (L + trim, H − adj, 210 + trim)
+    np.testing.assert_allclose(numbers(mr), numbers(fw), rtol=0,
+                               atol=2 * (0.5e-6 + 0.5 * float(np.spacing(np.float32(1e3)))))
+
+
+def test_rounding_effect_is_the_largest_change_of_the_commanded_actuators():
+    """rounding_effect against a hand-built case: a machine whose endstop is 1e-4 mm higher
+    commands that carriage 1e-4 mm higher everywhere (carriage = z + sqrt(arm² − ρ²) + ...),
+    so the largest change over the workspace is 1e-4 mm exactly (to round-off)."""
+    from dataclasses import replace
+
+    fw = DeltaFirmware(radius=105.2, angles_deg=(210.0, 330.0, 90.0), arms=(215.0,) * 3,
+                       endstops=(250.0,) * 3, print_radius=90.0, min_z=0.0)
+    moved = replace(fw, endstops=(250.0, 250.0001, 250.0))
+    assert rounding_effect(fw.machine("a"), moved.machine("b")) == pytest.approx(1e-4, abs=1e-10)
+    assert rounding_effect(fw.machine("a"), fw.machine("b")) == 0.0
 
 
 # M503 output of each Marlin version, written from the report each prints (cited in
@@ -353,21 +391,33 @@ def test_marlin_version_must_be_stated_when_the_text_cannot_tell(tmp_path):
 @pytest.mark.parametrize("version, steps", [("1.1.9", None), ("2.0.x", 80.0), ("2.1.x", None)])
 def test_marlin_export_round_trips_through_each_version(tmp_path, version, steps):
     """marlin_text chooses H and M666 so that the version's homing puts each switch at the
-    firmware's position_endstop; reading back as that version returns them (6 decimals)."""
+    firmware's position_endstop; reading back as that version returns the numbers of the
+    words as written (marlin_rounded: 32-bit floats of at most 6 decimals), each within the
+    words' rounding of the exact ones."""
     from pkmcal.io.marlin_settings import marlin_text as text_for, read_marlin_settings
 
     fw = DeltaFirmware(radius=95.0, angles_deg=(210.25, 329.9, 89.85), arms=(217.2, 217.0, 216.7),
                        endstops=(300.9, 300.5, 300.52))
-    text, lost = text_for(fw, version, None if steps is None else (steps,) * 3)
+    spm = None if steps is None else (steps,) * 3
+    text, lost = text_for(fw, version, spm)
     if steps is not None:
         text = f"M92 X{steps} Y{steps} Z{steps}\n" + text
     back = read_marlin_settings(_write(tmp_path, "m.gcode", text), version).firmware
-    np.testing.assert_allclose(back.endstops, fw.endstops, rtol=0, atol=2e-6)
-    np.testing.assert_allclose(back.angles_deg, fw.angles_deg, rtol=0, atol=2e-6)
+    held = marlin_rounded(fw, version, spm)
+    # the reader sums H and the homing drop in its own order (1.1.9, 2.0.x: H + (|adj| + extra)):
+    # one rounding of a number below 1e3 apart
+    for got, want in ((back.endstops, held.endstops), (back.angles_deg, held.angles_deg), (back.arms, held.arms),
+                      ((back.radius,), (held.radius,))):
+        np.testing.assert_allclose(got, want, rtol=0, atol=2 * np.spacing(1e3))
+    # two words summed, each 32-bit (half its spacing at 256..512: 1.5e-5) and 6 decimals
+    word = 0.5e-6 + 0.5 * float(np.spacing(np.float32(300.0)))
+    np.testing.assert_allclose(held.endstops, fw.endstops, rtol=0, atol=2 * word)
+    np.testing.assert_allclose(held.angles_deg, fw.angles_deg, rtol=0, atol=2 * word)
     if version in ("1.1.9", "2.0.x"):                # no per-tower rods in their M665
-        assert lost and "one rod length" in lost[0] and back.arms == (pytest.approx(216.966667, abs=1e-6),) * 3
+        assert lost and "one rod length" in lost[0]
+        np.testing.assert_allclose(held.arms, (np.mean(fw.arms),) * 3, rtol=0, atol=word)
     else:
-        np.testing.assert_allclose(back.arms, fw.arms, rtol=0, atol=2e-6)
+        np.testing.assert_allclose(held.arms, fw.arms, rtol=0, atol=2 * word)
 
 
 def test_export_names_what_the_firmware_cannot_hold():

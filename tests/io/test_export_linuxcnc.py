@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pkmcal.errors import PkmcalError
-from pkmcal.io.export_linuxcnc import linuxcnc_hal
+from pkmcal.io.export_linuxcnc import LINUXCNC_ROUNDING, linuxcnc_hal, linuxcnc_ini, rounded_machine
 from pkmcal.mechanisms import builtin_machine, symmetric_hexapod
 
 SETP = re.compile(r"^setp\s+genhexkins\.(base|platform)\.([0-5])\.([xyz])\s+(\S+)\s*$")
@@ -82,13 +82,34 @@ def perturbed(machine, seed, scale=2.0):
     return machine.with_params(rho, name=machine.name + "-calibrated")
 
 
+#: Half a unit of the 6th decimal LinuxCNC exports are rounded to (1 nm, export_linuxcnc
+#: LINUXCNC_DECIMALS), plus the decimal conversion's round-off of numbers below 1e3.
+HALF_NM = 0.5e-6 + np.spacing(1e3)
+#: The largest change of a strut length |p + R a − b| when each coordinate of a and b moves
+#: by up to HALF_NM: |Δb| + |Δa| (R keeps lengths) ≤ 2·√3·HALF_NM.
+STRUT_ROUNDING = 2 * np.sqrt(3) * HALF_NM
+
+
+def assert_rounded_to_nm(text_values, exact):
+    """The written numbers are the exact ones rounded to 6 decimals: at most 6 decimals each,
+    and within half a unit of the 6th of the exact value."""
+    for t in text_values:
+        assert len(t.partition(".")[2]) <= 6, t
+    np.testing.assert_allclose(np.array([float(t) for t in text_values]), np.ravel(exact), rtol=0, atol=HALF_NM)
+
+
 def check_against_genhexkins(machine, seed, n=100):
-    base, platform, joints = parse_hal(linuxcnc_hal(machine))
+    text = linuxcnc_hal(machine)
+    base, platform, joints = parse_hal(text)
+    assert_rounded_to_nm([line.split()[-1] for line in text.splitlines() if line.startswith("setp")],
+                         np.concatenate([machine.base.ravel(), machine.platform.ravel()]))
     poses = random_poses(machine, n, seed)
     L = machine.leg_lengths(poses)
     deg = np.column_stack([poses[:, :3], np.rad2deg(poses[:, 3:])])
     ghk = np.array([genhexkins_inverse(base, platform, q) for q in deg])
-    np.testing.assert_allclose(ghk, L, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(ghk, L, rtol=0, atol=STRUT_ROUNDING + 1e-9)
+    # and exactly the struts of the machine as written (export_linuxcnc.rounded_machine)
+    np.testing.assert_allclose(ghk, rounded_machine(machine).leg_lengths(poses), rtol=0, atol=1e-9)
     return base, platform, joints
 
 
@@ -102,9 +123,9 @@ def test_builtin_machines_reproduce_leg_lengths_through_genhexkins(name):
 def test_calibrated_machine_reproduces_leg_lengths_through_genhexkins(seed, scale):
     m = perturbed(builtin_machine("stewart-prototype"), seed, scale)
     base, platform, _ = check_against_genhexkins(m, seed)
-    # the numbers are exact, not rounded
-    np.testing.assert_array_equal(base, m.base)
-    np.testing.assert_array_equal(platform, m.platform)
+    # the numbers read back are those of the machine as written, exactly
+    np.testing.assert_array_equal(base, rounded_machine(m).base)
+    np.testing.assert_array_equal(platform, rounded_machine(m).platform)
 
 
 def test_joint_comments_carry_offsets_limits_and_home():
@@ -112,22 +133,26 @@ def test_joint_comments_carry_offsets_limits_and_home():
     _, _, joints = parse_hal(linuxcnc_hal(m))
     assert sorted(joints) == list(range(6))
     J = np.array([joints[n] for n in range(6)])
-    np.testing.assert_array_equal(J[:, 0], m.offset)
+    np.testing.assert_array_equal(J[:, 0], rounded_machine(m).offset)
     # the joint limits stand the default stroke margin (1 % of the 80 mm stroke) inside it
-    np.testing.assert_array_equal(J[:, 1], m.offset + m.stroke[:, 0] + 0.8)
-    np.testing.assert_array_equal(J[:, 2], m.offset + m.stroke[:, 1] - 0.8)
+    np.testing.assert_allclose(J[:, 1], m.offset + m.stroke[:, 0] + 0.8, rtol=0, atol=HALF_NM)
+    np.testing.assert_allclose(J[:, 2], m.offset + m.stroke[:, 1] - 0.8, rtol=0, atol=HALF_NM)
     _, _, joints = parse_hal(linuxcnc_hal(m, stroke_margin=0.0))
-    np.testing.assert_array_equal([joints[n][1] for n in range(6)], m.offset + m.stroke[:, 0])
-    np.testing.assert_array_equal(J[:, 3], m.leg_lengths(m.home_pose)[0])
+    np.testing.assert_allclose([joints[n][1] for n in range(6)], m.offset + m.stroke[:, 0], rtol=0, atol=HALF_NM)
+    np.testing.assert_allclose(J[:, 3], m.leg_lengths(m.home_pose)[0], rtol=0, atol=HALF_NM)
     # homing: a joint set to L0 + λ is the strut length genhexkins expects at that reading
+    # (the offset rounded to 1 nm: half a unit of its 6th decimal)
     poses = random_poses(m, 20, 2)
     lam = m.ik(poses)
-    np.testing.assert_allclose(J[:, 0] + lam, m.leg_lengths(poses), atol=1e-9)
+    np.testing.assert_allclose(J[:, 0] + lam, m.leg_lengths(poses), rtol=0, atol=HALF_NM + 1e-9)
 
 
 def test_header_states_units_and_convention():
     text = linuxcnc_hal(builtin_machine("stewart-prototype"))
     head = "\n".join(line for line in text.splitlines() if line.startswith("#"))
+    # the rounding is said in a comment line of both files
+    assert f"# pkmcal: {LINUXCNC_ROUNDING}" in text.splitlines()
+    assert f"# pkmcal: {LINUXCNC_ROUNDING}" in linuxcnc_ini(builtin_machine("stewart-prototype")).splitlines()
     for needle in ("mm", "degrees", "Rz(C) Ry(B) Rx(A)", "spindle-offset", "screw-lead", "HOME_OFFSET"):
         assert needle in head
     assert text.count("\nsetp ") + text.startswith("setp ") == 36

@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 
 from pkmcal.cli.main import cli
 from pkmcal.errors import InputFileError, PkmcalError
-from pkmcal.io.export_linuxcnc import check_home, joint_settings, linuxcnc_hal, linuxcnc_ini
+from pkmcal.io.export_linuxcnc import check_home, joint_settings, linuxcnc_hal, linuxcnc_ini, rounded_machine
 from pkmcal.io.import_linuxcnc import machine_from_linuxcnc, read_hal_genhexkins, read_ini
 from pkmcal.io.machine_file import load_machine, machine_from_text, machine_to_text
 from pkmcal.mechanisms.hexapod import Hexapod
@@ -51,12 +51,26 @@ def export_files(tmp_path, machine, stem="m"):
     return hal, ini
 
 
+#: Half a unit of the 6th decimal of the exported lengths (1 nm: export_linuxcnc
+#: LINUXCNC_DECIMALS) and of the 7th of the exported degrees (ANGLE_DECIMALS), in mm and rad,
+#: plus the decimal conversion's round-off of numbers below 1e3.
+HALF_NM = 0.5e-6 + np.spacing(1e3)
+HALF_ANGLE = np.deg2rad(0.5e-7) + np.spacing(np.pi)
+
+
 def assert_same_kinematics(back, machine, stroke_tol=STROKE_TOL_MM):
-    np.testing.assert_array_equal(back.base, machine.base)
-    np.testing.assert_array_equal(back.platform, machine.platform)
-    np.testing.assert_array_equal(back.offset, machine.offset)
-    np.testing.assert_allclose(back.stroke, machine.stroke, rtol=0, atol=stroke_tol)
-    np.testing.assert_array_equal(back.home_pose, machine.home_pose)
+    """``back`` (imported from ``machine``'s export) is the machine as exported, exactly
+    (export_linuxcnc.rounded_machine), and each number within half a unit of the last
+    decimal written of ``machine``'s."""
+    exported = rounded_machine(machine)
+    np.testing.assert_array_equal(back.base, exported.base)
+    np.testing.assert_array_equal(back.platform, exported.platform)
+    np.testing.assert_array_equal(back.offset, exported.offset)
+    for got, want in ((back.base, machine.base), (back.platform, machine.platform), (back.offset, machine.offset)):
+        np.testing.assert_allclose(got, want, rtol=0, atol=HALF_NM)
+    np.testing.assert_allclose(back.stroke, machine.stroke, rtol=0, atol=stroke_tol + 3 * HALF_NM)
+    np.testing.assert_allclose(back.home_pose[:3], machine.home_pose[:3], rtol=0, atol=HALF_NM)
+    np.testing.assert_allclose(back.home_pose[3:], machine.home_pose[3:], rtol=0, atol=HALF_ANGLE)
 
 
 @st.composite
@@ -248,8 +262,8 @@ def test_ini_syntax_include_first_key_continuation(tmp_path):
     (("JOINTS = 6", "JOINTS = 9"), "[KINS] JOINTS = 9: genhexkins has 6 joints"),
     (("LINEAR_UNITS = mm", "LINEAR_UNITS = furlong"), "[TRAJ] LINEAR_UNITS = 'furlong': unknown unit"),
     (("[JOINT_2]\nTYPE = LINEAR", "[JOINT_2]\nTYPE = ANGULAR"), "[JOINT_2] TYPE = ANGULAR"),
-    (("MAX_LIMIT = 354.5\nHOME_OFFSET = 305.0\nHOME = 330.00000017978624\n\n[JOINT_3]",
-      "MAX_LIMIT = abc\nHOME_OFFSET = 305.0\nHOME = 330.00000017978624\n\n[JOINT_3]"),
+    (("MAX_LIMIT = 354.5\nHOME_OFFSET = 305.0\nHOME = 330.0\n\n[JOINT_3]",
+      "MAX_LIMIT = abc\nHOME_OFFSET = 305.0\nHOME = 330.0\n\n[JOINT_3]"),
      "[JOINT_2] MAX_LIMIT = 'abc' is not a number"),
 ])
 def test_bad_ini_files_are_errors_naming_file_and_line(tmp_path, edit, fragment):

@@ -300,9 +300,11 @@ def verify_cmd(calibrated, meas_path, real_spec, poses, nominal, setup_spec, cal
     orientation_mean_deg, ..., tilt_*_deg, height_*_mm}, compare, compared.
 
     Held-out poses in the ISO 9283 pattern ('pkmcal plan --pattern iso9283'; with
-    --measurements, the cmd_x.. columns): also the standard's AP, RP, AD, RD, each with its
+    --held-out, the cmd_x.. columns): also the standard's AP, RP, AD, RD, each with its
     expanded uncertainty U (k = 2) from the instrument's noise and registration (exact with
-    --real). JSON key iso9283. docs/accuracy-reports.md.
+    --real). JSON key iso9283. A ballbar's circle test ('plan --algorithm circle') with
+    --held-out: ISO 230-4 F_max, F_min, G with U (JSON key iso230_4).
+    docs/accuracy-reports.md.
 
     Redundantly actuated machines (planar-2dof-3act, planar-3dof-4act) with --real: the tool
     point should read the tracker value of each held-out pose; each model commands it (the
@@ -386,12 +388,13 @@ def verify_cmd(calibrated, meas_path, real_spec, poses, nominal, setup_spec, cal
 
 def _with_iso(out, iso, as_json: bool) -> str:
     """The verification's JSON (dict) or table (text) with the ISO 9283 figures (key
-    'iso9283'), or why the pattern's figures could not be computed."""
+    'iso9283') or the ISO 230-4 circle's ('iso230_4'), or why the pattern's figures could
+    not be computed."""
     if as_json:
         from pkmcal.io.json_out import finite_or_null
 
         if iso is not None:
-            out["iso9283"] = iso if isinstance(iso, str) else iso.to_dict()
+            out["iso9283" if isinstance(iso, str) else iso.json_key] = iso if isinstance(iso, str) else iso.to_dict()
         return json.dumps(finite_or_null(out), indent=2, allow_nan=False) + "\n"
     if iso is not None:
         out += "\n" + (f"ISO 9283: not computed: {iso}" if isinstance(iso, str) else iso.format_table())
@@ -498,7 +501,10 @@ def _verify_measured(calibrated, meas_path, nominal, setup_spec, calib_meas, cli
     notes.extend(f"warning: {w}" for w in lines)
     report = heldout_validation(cal, cal_setup, nom, before_sensor, held, source=str(meas_path), before_note=note,
                                 notes=notes, before_sessions=before_sessions, clipped=tuple(c.to_dict(unit[c.actuator]) for c in found))
+    from pkmcal.identification.iso230_4 import heldout_circle
     from pkmcal.identification.iso9283 import heldout_figures
 
     iso = heldout_figures(cal, cal_setup, held, identified=cal.metadata.get("setup"), machine_covariance=cal.covariance)
+    if iso is None:       # a ballbar's circle test (plan --algorithm circle)
+        iso = heldout_circle(cal, cal_setup, held)
     return _with_iso(report.to_dict() if as_json else report.format_table(), iso, as_json)

@@ -20,7 +20,7 @@ import numpy as np
 
 from pkmcal.cli.import_options import import_options
 from pkmcal.cli.option_types import FiniteFloat
-from pkmcal.cli.options import check_output, emit, examples, output_option, summary_echo, to_stdout
+from pkmcal.cli.options import check_output, emit, examples, output_option, quiet_option, summary_echo, to_stdout
 from pkmcal.errors import PkmcalError, PkmcalWarning
 
 
@@ -40,13 +40,13 @@ def _counts(text: str | None, what: str, low: int, high: int) -> tuple[int, ...]
 @click.command("compensate", epilog=examples(
     "pkmcal identify kossel-mini examples/compensation/warped-bed-meas.csv --setup z-probe-klipper --accept-bad-fit "
     "-o warped-cal.yaml",
-    "pkmcal compensate warped-cal.yaml examples/compensation/warped-bed-meas.csv --heldout "
+    "pkmcal compensate warped-cal.yaml examples/compensation/warped-bed-meas.csv --held-out "
     "examples/compensation/warped-bed-heldout.csv -o bed-correction.yaml --klipper-mesh bed-mesh.cfg",
-    "pkmcal compensate warped-cal.yaml examples/compensation/warped-bed-meas.csv --heldout "
+    "pkmcal compensate warped-cal.yaml examples/compensation/warped-bed-meas.csv --held-out "
     "examples/compensation/warped-bed-heldout.csv --json -o bed-correction-2.yaml"))
 @click.argument("calibrated")
 @click.argument("measurements")
-@click.option("--heldout", "heldout_path", required=True, metavar="HELDOUT.csv",
+@click.option("--held-out", "heldout_path", required=True, metavar="HELDOUT.csv",
               help="Held-out measurements (as MEAS.csv, not used by the calibration): the correction is kept only "
                    "when it lowers their error significantly.")
 @click.option("--setup", "setup_spec", metavar="SETUP.yaml",
@@ -67,9 +67,10 @@ def _counts(text: str | None, what: str, low: int, high: int) -> tuple[int, ...]
 @click.option("--profile", default="default", show_default=True, help="Klipper's profile name.")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
 @output_option("CORRECTION.yaml", "The correction file (written only when the correction is kept)")
+@quiet_option
 @import_options
 def compensate_cmd(calibrated, measurements, heldout_path, setup_spec, field, counts, degrees, seed, mesh_out,
-                   printer_cfg, profile, as_json, output, mapping) -> None:
+                   printer_cfg, profile, as_json, output, quiet, mapping) -> None:
     """Fit what CALIBRATED leaves on MEAS.csv, keep it only if HELDOUT.csv confirms it.
 
     The residuals the calibrated model leaves on its calibration data are fitted by a smooth
@@ -150,7 +151,7 @@ def _is_pose_file(path: str) -> bool:
     "pkmcal correct examples/compensation/hexapod.ngc -m calibrated.yaml --nominal stewart-prototype "
     "--ignore-limit leg_collision -o hexapod-corrected.ngc"))
 @click.argument("program")
-@click.option("-m", "--machine", "calibrated", required=True, metavar="CALIBRATED",
+@click.option("-m", "--calibrated", "calibrated", required=True, metavar="CALIBRATED",
               help="The calibrated machine (pkmcal identify's output).")
 @click.option("--nominal", metavar="NOMINAL",
               help="The kinematics the controller runs (default: the nominal machine the calibration record names).")

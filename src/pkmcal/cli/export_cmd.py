@@ -201,6 +201,7 @@ def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None, u
                 click.echo(f"pkmcal: warning: {exc}", err=True)
         for line in ex.home_warnings(machine):
             click.echo(f"pkmcal: warning: {line}", err=True)
+        _rounding_note(ex.LINUXCNC_ROUNDING, machine, ex.rounded_machine(machine, unit), "the strut lengths")
     elif fmt in ("klipper", "marlin"):
         refit = None
         if measurements is not None:
@@ -357,8 +358,15 @@ def _delta_firmware_text(machine, fmt: str, refit=None, klipper_config: str | No
         also = " and, to Klipper, rotary deltas" if fmt == "klipper" else ""
         raise PkmcalError(f"--format {fmt} exports linear delta printers{also}; machine '{machine.name}' is a "
                           f"{machine.kind or 'machine of another kind'}")
-    from pkmcal.io.delta_firmware import firmware_subset, klipper_saved_config, klipper_text, rotary_firmware_subset
-    from pkmcal.io.marlin_settings import marlin_text
+    from pkmcal.io.delta_firmware import (
+        KLIPPER_ROUNDING,
+        firmware_subset,
+        klipper_rounded,
+        klipper_saved_config,
+        klipper_text,
+        rotary_firmware_subset,
+    )
+    from pkmcal.io.marlin_settings import MARLIN_ROUNDING, marlin_rounded, marlin_text
 
     fw, dropped = (rotary_firmware_subset if rotary else firmware_subset)(machine)
     angles = dict(zip(machine.param_names, machine.param_is_angle))
@@ -378,14 +386,34 @@ def _delta_firmware_text(machine, fmt: str, refit=None, klipper_config: str | No
         click.echo(f"pkmcal: note: the firmware uses the machine without these {len(dropped)} parameter(s); for the "
                    "best machine it can hold and what dropping them costs, give the measurements: "
                    "--measurements MEAS.csv --setup SETUP (and --heldout HELDOUT.csv)", err=True)
-    if fmt == "klipper" and klipper_config is not None:
-        return klipper_saved_config(klipper_config, fw)
+    steps = None if steps_per_mm is None else (steps_per_mm,) * 3
     if fmt == "klipper":
-        return klipper_text(fw)
-    text, lost = marlin_text(fw, marlin_version, None if steps_per_mm is None else (steps_per_mm,) * 3)
+        text = klipper_saved_config(klipper_config, fw) if klipper_config is not None else klipper_text(fw)
+        _rounding_note(KLIPPER_ROUNDING, fw.machine("exact"), klipper_rounded(fw).machine("rounded"),
+                       "the arm angles" if rotary else "the carriage travels")
+        return text
+    text, lost = marlin_text(fw, marlin_version, steps)
     for line in lost:
         click.echo(f"pkmcal: warning: {line}", err=True)
+    _rounding_note(MARLIN_ROUNDING, fw.machine("exact"), marlin_rounded(fw, marlin_version, steps).machine("rounded"),
+                   "the carriage travels")
     return text
+
+
+def _rounding_note(rule: str, exact, rounded, what: str) -> None:
+    """The export's line on how its numbers are rounded (``rule``, also a comment line of
+    the file) and what the rounding changes: the largest change of ``what`` the controller
+    commands over the workspace (:func:`pkmcal.io.delta_firmware.rounding_effect`)."""
+    from pkmcal.conventions import angle_text, length_text
+    from pkmcal.io.delta_firmware import rounding_effect
+
+    change = rounding_effect(exact, rounded)
+    if all(exact.actuator_is_angle):     # below 1e-3″ (5e-9 rad) or 1 nm: said so, not in digits of round-off
+        shown = f"at most {angle_text(change)}" if change >= 5e-9 else "less than 0.001″"
+    else:
+        shown = f"at most {length_text(change)}" if change >= 1e-6 else "less than 1 nm"
+    click.echo(f"pkmcal: note: {rule}; the rounding changes {what} the controller commands by {shown} "
+               "over the workspace", err=True)
 
 
 __all__ = ["calibration_json", "export_cmd", "format_calibration_json"]

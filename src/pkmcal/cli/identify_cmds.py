@@ -162,7 +162,7 @@ def _firmware_numbers_undetermined(result) -> list[tuple[str, str]]:
                    "was accepted and why it was refused.")
 @click.option("--history", "history_db", metavar="DB",
               help="Also record the calibration in the history database DB (pkmcal history; with --serial), with "
-                   "the --heldout figures.")
+                   "the --held-out figures.")
 @click.option("--serial", metavar="SERIAL", help="With --history: the unit's serial number.")
 @import_options
 @quiet_accepted
@@ -292,7 +292,7 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     validation = None
     if heldout is not None:
         if cal_setup is None:
-            raise PkmcalError(f"--heldout: the {baseline} baseline identifies a reduced model; validate the full "
+            raise PkmcalError(f"--held-out: the {baseline} baseline identifies a reduced model; validate the full "
                               "calibration (leave out --method) on held-out data")
         validation = identify_heldout_validation(read_by(result.mechanism, setup.sensor), cal_setup, nominal,
                                                  before, heldout, mapping, clipped)
@@ -379,7 +379,7 @@ def _report_data(nominal, result, setup, meas, meas_path: str, output: str, vali
     return report_data_from_results(
         nominal, result, setup, poses, setup_summary=setup_text, commanded=meas.commanded,
         facts=(("measurement file", str(meas_path)), ("calibrated machine file", str(output))),
-        heldout=validation)
+        heldout=validation, calibrated_file=None if output.startswith("(") else str(output))
 
 
 @click.command("identifiability", epilog=examples(

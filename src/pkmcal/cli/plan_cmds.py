@@ -121,7 +121,7 @@ def _format_indices(ind: dict[str, float]) -> str:
                    "(rms sigma over the bed) of MM, from the identifiability of the setup.")
 @click.option("--pattern", type=click.Choice(("iso9283",)), default=None,
               help="Instead of a selection: the ISO 9283 test pattern, P1..P5 on the diagonal plane of the largest "
-                   "cube that passes the checks, visited in --n cycles (ISO 9283: 30); 'pkmcal verify' reports "
+                   "cube that passes the checks, visited in --n-poses cycles (ISO 9283: 30); 'pkmcal verify' reports "
                    "ISO 9283 AP/RP/AD/RD on held-out data in this pattern.")
 @backend_options("in this process")
 @output_option("POSES.csv", "CSV of the chosen poses (or the --format klipper/gcode file)")

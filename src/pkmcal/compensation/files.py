@@ -106,6 +106,15 @@ def load_correction(path: str | os.PathLike, machine: Mechanism) -> Field:
 
     if not isinstance(doc, dict):
         raise PkmcalError(f"{src}: not a correction file (a mapping with kind, basis, coefficients expected)")
+    fitted_for = doc.get("machine")
+    if isinstance(fitted_for, str) and fitted_for != machine.name:
+        import warnings
+
+        from pkmcal.errors import PkmcalWarning
+
+        warnings.warn(f"{src}: the correction was fitted for machine '{fitted_for}', not '{machine.name}': it "
+                      "describes what that calibration left; refit it for this one (pkmcal compensate)",
+                      PkmcalWarning, stacklevel=2)
     kind = doc.get("kind")
     if kind not in KINDS:
         raise bad(("kind",), f"must be one of {', '.join(KINDS)}")

@@ -393,7 +393,8 @@ class CompensationReport:
                "n_calibration_poses": self.n_calibration, "n_heldout_poses": self.n_heldout,
                "chosen": self.candidates[self.chosen].label,
                "candidates": [{"label": c.label, "n_coefficients": c.n_coefficients, "cv_score": c.cv_score,
-                               "cv_se": c.cv_se, "smoothing": c.smoothing, "effective_parameters": c.dof} for c in self.candidates]}
+                               "cv_se": c.cv_se, "smoothing": c.smoothing, "effective_parameters": c.dof}
+                              for c in self.candidates]}
         if self.gate is not None:
             g = self.gate
             out["heldout"] = {"rms_before_mm": g.rms_before_mm, "rms_after_mm": g.rms_after_mm,

@@ -75,7 +75,8 @@ def with_sag(sim: SimulationResult, real: Mechanism, sensor: Sensor, sag: Sag) -
     sensor reading the moved platform (with the same noise)."""
     moved = sim.real_poses + sag.displacement(real, sim.real_poses)
     y = sensor.predict(real.frame(moved))
-    return dataclasses.replace(sim, real_poses=moved, sensor_true=y, sensor_readings=sim.sensor_readings - sim.sensor_true + y)
+    return dataclasses.replace(sim, real_poses=moved, sensor_true=y,
+                               sensor_readings=sim.sensor_readings - sim.sensor_true + y)
 
 
 __all__ = ["BedBump", "Sag", "with_bed", "with_sag"]

@@ -188,6 +188,9 @@ def klipper_kinematics(path: str | os.PathLike) -> KlipperKinematics:
 #: Largest difference (mm, or rad for a rotary delta's arms) between Klipper's numbers and
 #: pkmcal's accepted by ``pkmcal check klipper``: both are double-precision evaluations of
 #: the same closed forms (measured about 1e-13 on the exports: tests/controllers/test_klipper.py).
+#: The rail positions are allowed the export's rounding besides (:attr:`KlipperCheck.rounding`):
+#: the config holds the numbers to Klipper's 6 decimals
+#: (:data:`pkmcal.io.delta_firmware.KLIPPER_DECIMALS`), the calibrated machine in full.
 TOLERANCE = 1e-9
 
 
@@ -201,18 +204,24 @@ class KlipperCheck:
     max_stepper_diff: float
     max_position_diff: float
     stepper_unit: str
+    #: The largest change of the rail positions at these nozzle positions that rounding the
+    #: machine's firmware numbers to Klipper's 6 decimals makes (what an export writes;
+    #: :func:`pkmcal.io.delta_firmware.rounding_effect`), allowed on top of :data:`TOLERANCE`.
+    rounding: float = 0.0
 
     @property
     def ok(self) -> bool:
-        return self.max_stepper_diff <= TOLERANCE and self.max_position_diff <= TOLERANCE
+        return self.max_stepper_diff <= TOLERANCE + self.rounding and self.max_position_diff <= TOLERANCE
 
     def to_dict(self) -> dict:
         return {"n_poses": self.n_poses, "max_stepper_diff": self.max_stepper_diff, "stepper_unit": self.stepper_unit,
-                "max_position_diff_mm": self.max_position_diff, "tolerance": TOLERANCE, "ok": self.ok}
+                "max_position_diff_mm": self.max_position_diff, "tolerance": TOLERANCE,
+                "export_rounding": self.rounding, "ok": self.ok}
 
     def lines(self) -> list[str]:
         return [f"Klipper's rails against pkmcal's inverse kinematics over {self.n_poses} nozzle positions: largest "
-                f"difference {self.max_stepper_diff:.3g} {self.stepper_unit} (tolerance {TOLERANCE:g})",
+                f"difference {self.max_stepper_diff:.3g} {self.stepper_unit} (tolerance {TOLERANCE:g} + "
+                f"{self.rounding:.3g} {self.stepper_unit}, what rounding the numbers to Klipper's 6 decimals changes)",
                 f"Klipper's forward kinematics of those rails against the positions: largest difference "
                 f"{self.max_position_diff:.3g} mm (tolerance {TOLERANCE:g})"]
 
@@ -240,7 +249,7 @@ def check_klipper(printer_cfg: str | os.PathLike, machine, poses: np.ndarray | N
     :func:`pkmcal.io.delta_firmware.firmware_subset`), against pkmcal's H^fw − λ (linear)
     or λ (rotary: the angle turned down from the switch); and Klipper's forward kinematics
     of its rail positions against the nozzle positions."""
-    from pkmcal.io.delta_firmware import firmware_subset
+    from pkmcal.io.delta_firmware import firmware_subset, klipper_rounded, rotary_firmware_subset, rounding_effect
 
     kin = klipper_kinematics(printer_cfg)
     expected_kind = {"delta": "linear-delta", "rotary_delta": "rotary-delta"}[kin.kind]
@@ -259,9 +268,11 @@ def check_klipper(printer_cfg: str | os.PathLike, machine, poses: np.ndarray | N
     rails = kin.stepper_positions(local)
     got = kin.abs_endstops()[None, :] - rails
     back = kin.nozzle_positions(rails)
+    fw = (firmware_subset if kin.kind == "delta" else rotary_firmware_subset)(machine)[0]
+    rounding = rounding_effect(fw.machine("exact"), klipper_rounded(fw).machine("rounded"), points=local)
     return KlipperCheck(n_poses=len(poses), max_stepper_diff=float(np.max(np.abs(got - want))),
                         max_position_diff=float(np.max(np.abs(back - local))),
-                        stepper_unit="rad" if kin.kind == "rotary_delta" else "mm")
+                        stepper_unit="rad" if kin.kind == "rotary_delta" else "mm", rounding=rounding)
 
 
 __all__ = ["REQUIREMENT", "KlipperCheck", "KlipperKinematics", "check_klipper", "klipper_fileconfig",

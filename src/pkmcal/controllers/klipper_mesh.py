@@ -13,7 +13,7 @@ import os
 
 import numpy as np
 
-from pkmcal.controllers.klipper import _klippy, _Printer, klipper_fileconfig
+from pkmcal.controllers.klipper import _klippy, klipper_fileconfig
 from pkmcal.errors import PkmcalError
 
 

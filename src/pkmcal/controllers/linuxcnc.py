@@ -83,7 +83,9 @@ GENHEXKINS_CONVERGENCE = 1e-9
 #: error limits them.
 _SPEED_MM, _ACCEL_MM, _SPEED_DEG, _ACCEL_DEG = 2000.0, 20000.0, 720.0, 7200.0
 #: LinuxCNC's joints at a commanded pose must equal pkmcal's strut lengths to this (mm): both
-#: evaluate the same closed form, so what is left is rounding (about 1e-13 mm seen).
+#: evaluate the same closed form, so what is left is rounding (about 1e-13 mm seen). The
+#: export's rounding of the numbers to 1 nm (:data:`pkmcal.io.export_linuxcnc.LINUXCNC_ROUNDING`)
+#: is allowed besides (:attr:`LinuxcncCheck.rounding`).
 IK_TOLERANCE_MM = 1e-9
 #: Servo period of the generated configuration (s).
 _SERVO_PERIOD = 1e-3
@@ -406,6 +408,9 @@ class LinuxcncCheck:
     fk_bound: np.ndarray             # (M,) 2 ‖J⁻¹‖₂ ‖r‖₂ + rounding: bound on each |fk_diff| row
     fk_residual: np.ndarray          # (M, 6) pkmcal's strut lengths at LinuxCNC's FK pose − the joints held (mm)
     jog_miss: np.ndarray             # (M, 6) joints held − jog targets (mm)
+    #: The largest change of the strut lengths at the commanded poses that the export's rounding
+    #: of the machine's numbers (to 1 nm) makes, allowed on top of IK_TOLERANCE_MM (mm).
+    rounding: float = 0.0
 
     @property
     def ik_max(self) -> float:
@@ -421,12 +426,12 @@ class LinuxcncCheck:
 
     @property
     def ok(self) -> bool:
-        """World mode to :data:`IK_TOLERANCE_MM`; homing within the joint planner's stopping
+        """World mode to :data:`IK_TOLERANCE_MM` plus the export's rounding; homing within the joint planner's stopping
         tolerance of the exported HOME and jogs within twice it of their targets (an
         incremental jog starts from the previous target, not from where the joint stopped);
         joint mode within its bound."""
         stop = self.run.stop_tolerance * self.run.mm_per_unit
-        return (self.ik_max <= IK_TOLERANCE_MM and float(np.max(np.abs(self.home_joint_diff))) <= stop
+        return (self.ik_max <= IK_TOLERANCE_MM + self.rounding and float(np.max(np.abs(self.home_joint_diff))) <= stop
                 and (not len(self.jog_miss) or float(np.max(np.abs(self.jog_miss))) <= 2 * stop)
                 and bool(np.all(np.abs(self.fk_diff) <= self.fk_bound[:, None])))
 
@@ -438,7 +443,7 @@ class LinuxcncCheck:
         stop = r.stop_tolerance * r.mm_per_unit
         return {"machine": self.machine, "linear_unit": r.linear_unit, "seconds": r.seconds, "ok": self.ok,
                 "world_mode": {"poses": len(self.poses), "max_joint_diff_mm": self.ik_max,
-                               "tolerance_mm": IK_TOLERANCE_MM},
+                               "tolerance_mm": IK_TOLERANCE_MM, "export_rounding_mm": self.rounding},
                 "homing": {"max_joint_diff_mm": float(np.max(np.abs(self.home_joint_diff))), "tolerance_mm": stop},
                 "joint_mode": {"jogs": len(self.fk_diff), "max_pose_diff_mm": self.fk_max_mm,
                                "max_pose_diff_deg": self.fk_max_deg,
@@ -456,7 +461,7 @@ class LinuxcncCheck:
             f"LinuxCNC ran machine '{self.machine}' ({r.linear_unit}) in {r.seconds:.1f} s: "
             f"{len(self.poses)} poses by MDI G53 G0, {len(self.fk_diff)} by joint jogs",
             f"world mode: largest |LinuxCNC joint - pkmcal strut length| {self.ik_max:.3g} mm (tolerance "
-            f"{IK_TOLERANCE_MM:g} mm)",
+            f"{IK_TOLERANCE_MM:g} mm + {self.rounding:.3g} mm, what rounding the numbers to 1 nm changes)",
             f"homing: joints within {float(np.max(np.abs(self.home_joint_diff))):.3g} mm of the exported HOME "
             f"(LinuxCNC's joint planner stops within {stop:.3g} mm)",
             f"joint mode: largest |LinuxCNC pose - pkmcal fk| of the joints held {self.fk_max_mm:.3g} mm, "
@@ -620,9 +625,14 @@ def compare(machine, run: LinuxcncRun) -> LinuxcncCheck:
     bound_internal = inv_norm * (2.0 * np.linalg.norm(residual, axis=1) + 64 * np.finfo(float).eps * scale)
     # one bound in mm for x, y, z and its radians in degrees for a, b, c: the larger of the two
     fk_bound = np.maximum(bound_internal, np.rad2deg(bound_internal))
+    from pkmcal.io.export_linuxcnc import EXPORT_UNITS, rounded_machine
+
+    unit = next((n for n, f in EXPORT_UNITS.items() if f == u), None)
+    rounding = 0.0 if unit is None else float(np.max(np.abs(rounded_machine(machine, unit).leg_lengths(poses)
+                                                              - machine.leg_lengths(poses))))
     return LinuxcncCheck(machine=machine.name, run=run, poses=poses, ik_diff=ik_diff, world_diff=world_diff,
                          home_joint_diff=home_joint_diff, fk_diff=fk_diff, fk_bound=fk_bound, fk_residual=residual,
-                         jog_miss=(run.joints_held - run.jog_targets) * u,
+                         jog_miss=(run.joints_held - run.jog_targets) * u, rounding=rounding,
                          ignored_limits=limits_violated_at_home(machine))
 
 

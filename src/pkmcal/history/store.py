@@ -240,7 +240,7 @@ def add_calibrated_file(path: str | os.PathLike, *, serial: str, db: str | os.Pa
 def record_identified(path: str | os.PathLike, db: str | os.PathLike, serial: str | None,
                       validation=None) -> CalibrationRecord:
     """What ``pkmcal identify --history DB --serial SERIAL`` does after writing ``path``:
-    :func:`add_calibrated_file` with the held-out validation of ``--heldout`` (its
+    :func:`add_calibrated_file` with the held-out validation of ``--held-out`` (its
     ``to_dict()``) as the record's held-out figures."""
     if serial is None:
         raise PkmcalError("--history records the calibration under the unit's serial number: give --serial SERIAL")

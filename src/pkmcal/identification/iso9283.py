@@ -213,12 +213,14 @@ def detect_pattern(mechanism: Mechanism, poses: np.ndarray, *, rtol: float = 1e-
     orientation, P1 the centre of P2…P5, these the corners of a rectangle on a diagonal plane
     of an axis-parallel cube (edges 0.8 s along an axis and 0.8 s√2 along a face diagonal);
     P2…P5 numbered in order of first appearance, P4 the pose opposite P2. Otherwise the
-    reason (one sentence). Poses equal to ``rtol`` × their scale are the same pose."""
+    reason (one sentence). Poses equal to ``rtol`` × the largest |x|, |y|, |z| (lengths) and
+    to ``rtol`` rad (angles) are the same pose."""
     poses = np.asarray(poses, dtype=float)
     if tuple(mechanism.pose_names[:3]) != ("x", "y", "z") or len(poses) < 10:
         return "not five poses repeated in cycles"
     scale = max(1.0, float(np.max(np.abs(poses[:, :3]))))
-    key = np.round(poses / (rtol * scale)).astype(np.int64)
+    unit = np.where(np.arange(poses.shape[1]) < 3, scale, 1.0)          # lengths by their scale, angles (rad)
+    key = np.round(poses / (rtol * unit)).astype(np.int64)
     uniq, first, inverse, counts = np.unique(key, axis=0, return_index=True, return_inverse=True, return_counts=True)
     inverse = inverse.reshape(-1)
     if len(uniq) != 5:
@@ -232,7 +234,7 @@ def detect_pattern(mechanism: Mechanism, poses: np.ndarray, *, rtol: float = 1e-
     p = pts[:, :3]
     centre_of = np.array([np.abs(p[i] - np.delete(p, i, axis=0).mean(axis=0)).max() for i in range(5)])
     i1 = int(np.argmin(centre_of))
-    tol = 1e-6 * scale + rtol * scale
+    tol = 2.0 * rtol * scale                           # the keys' rounding, twice
     if centre_of[i1] > tol:
         return "no pose is the centre of the other four"
     rest = [i for i in range(5) if i != i1]
@@ -300,6 +302,8 @@ class Iso9283Report:
     uncertainty: str
     predicted_mm: tuple[float, ...] | None = None
     notes: tuple[str, ...] = field(default_factory=tuple)
+    #: the key of ``verify --json`` that holds it
+    json_key = "iso9283"
 
     def get(self, name: str, pose: str) -> Figure:
         for f in self.figures:
@@ -352,7 +356,8 @@ class Iso9283Report:
                    "instrument-limited": "the instrument alone would show more than 25 % of this repeatability"}[note]
             lines.append(f"  * {name}: {why}")
         if self.predicted_mm is not None:
-            lines.append("  predicted by the calibration's covariance (95 %): AP_P <= " + ", ".join(
+            lines.append("  predicted before measuring (95 %, the calibrated file's covariance max(1, chi2/E[chi2]) x "
+                         "C_prior): AP_P <= " + ", ".join(
                 f"P{i + 1} {1e3 * v:.2f} µm" if v < 0.1 else f"P{i + 1} {v:.4f} mm"
                 for i, v in enumerate(self.predicted_mm)))
         lines.append(f"  uncertainty: {self.uncertainty}")
@@ -612,8 +617,11 @@ def measured_report(mechanism: Mechanism, setup, readings: np.ndarray, commanded
     if sensor_cov is not None:
         what += f" and the registration of the instrument ({covariance_note or 'its identified covariance'})"
     predicted = None
-    if machine_covariance is not None:
-        predicted = predicted_accuracy(mechanism, machine_covariance, cmd5).position
+    if machine_covariance is not None:      # the tool point (its offset exact: the sensor's rows zero)
+        p = len(machine_covariance)
+        joint = np.zeros((p + len(setup.sensor.params),) * 2)
+        joint[:p, :p] = machine_covariance
+        predicted = predicted_accuracy(mechanism, joint, cmd5, sensor=setup.sensor).position
     return iso9283_figures(arrange(label, e), cmd5, row_cov=arrange(label, row_cov), common=common,
                            common_cov=sensor_cov, uncertainty="GUM first order, k = 2, from the " + what,
                            predicted_mm=predicted)

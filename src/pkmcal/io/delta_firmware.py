@@ -41,9 +41,17 @@ the firmware's own frame, free of the fit's gauge.
 What neither firmware can hold otherwise — rail leans (and, on leaning rails, the radius
 differences and tool offset, replaced by their mean and 0) — is listed by
 :func:`firmware_subset` with the value that was dropped, so that an export never loses a
-parameter silently. Numbers are written with Python's shortest round-trip repr, so that
-machine → Klipper config → machine is exact (Marlin: to the 6 decimals written, beyond its
-32-bit floats).
+parameter silently.
+
+Numbers are written at the firmware's own resolution, and the file says so in a comment line
+(:data:`KLIPPER_ROUNDING`, :data:`pkmcal.io.marlin_settings.MARLIN_ROUNDING`): Klipper's to 6
+decimals, as its ``SAVE_CONFIG`` writes a delta's calibration (``"%.6f"`` in
+``klippy/kinematics/delta.py`` ``DeltaCalibration.save_state`` and
+``klippy/kinematics/rotary_delta.py`` ``RotaryDeltaCalibration.save_state``), so that an
+export reads as Klipper's own and importing it gives the rounded numbers exactly
+(:func:`klipper_rounded`). What the rounding changes is measured by :func:`rounding_effect`:
+the largest change of the actuator positions the firmware commands over the machine's
+workspace (about 1e-6 mm for the 6th decimal, far below any probe's noise).
 """
 
 from __future__ import annotations
@@ -486,26 +494,88 @@ def read_klipper(path: str) -> DeltaFirmware | RotaryFirmware:
     return read_klipper_printer(path).firmware
 
 
+#: Decimals of the numbers Klipper's SAVE_CONFIG writes for a delta: ``"%.6f"`` in
+#: klippy/kinematics/delta.py ``DeltaCalibration.save_state`` (delta_radius, angle,
+#: arm_length, position_endstop) and klippy/kinematics/rotary_delta.py
+#: ``RotaryDeltaCalibration.save_state`` (shoulder_radius, shoulder_height, angle,
+#: position_endstop). pkmcal writes every number of its Klipper exports so.
+KLIPPER_DECIMALS = 6
+#: The comment line (after ``# ``) of a Klipper export, and the export's message.
+KLIPPER_ROUNDING = ("numbers to 6 decimals (1e-6 mm, 1e-6 deg), as Klipper's SAVE_CONFIG writes them "
+                    "(klippy/kinematics/delta.py DeltaCalibration.save_state)")
+
+
+def klipper_number(v: float) -> str:
+    """``v`` as Klipper's SAVE_CONFIG writes it, ``"%.6f"`` (:data:`KLIPPER_DECIMALS`); a
+    rounded zero without its sign."""
+    v = float(v)
+    if not np.isfinite(v):
+        raise PkmcalError(f"cannot export a non-finite value ({v}) to Klipper")
+    text = f"{v:.{KLIPPER_DECIMALS}f}"
+    return f"{0.0:.{KLIPPER_DECIMALS}f}" if float(text) == 0.0 else text
+
+
+def klipper_rounded(fw: DeltaFirmware | RotaryFirmware) -> DeltaFirmware | RotaryFirmware:
+    """``fw`` with every number Klipper's export writes rounded as written
+    (:func:`klipper_number`): what Klipper reads back from the export, exactly."""
+    from dataclasses import replace
+
+    r = lambda vs: tuple(float(klipper_number(v)) for v in vs)  # noqa: E731
+    if isinstance(fw, RotaryFirmware):
+        return replace(fw, shoulder_radius=float(klipper_number(fw.shoulder_radius)),
+                       shoulder_height=float(klipper_number(fw.shoulder_height)), angles_deg=r(fw.angles_deg),
+                       upper_arms=r(fw.upper_arms), lower_arms=r(fw.lower_arms), endstops=r(fw.endstops))
+    return replace(fw, radius=float(klipper_number(fw.radius)), angles_deg=r(fw.angles_deg), arms=r(fw.arms),
+                   endstops=r(fw.endstops))
+
+
+def rounding_effect(exact, rounded, n: int = 5, points: np.ndarray | None = None) -> float:
+    """The largest change of the actuator positions counted from their switches (internal
+    units: mm of a carriage's travel or a strut, rad of an arm) that the firmware commands
+    with the ``rounded`` machine instead of the ``exact`` one, at ``points`` (poses of both
+    machines' frame; default a grid of ``n`` points per coordinate of the ``exact`` machine's
+    workspace box), over the points both machines reach: what writing the numbers at the
+    firmware's resolution costs."""
+    if points is None:
+        box = np.asarray(exact.workspace_box(), dtype=float)
+        axes = [np.linspace(lo, hi, n) for lo, hi in box]
+        points = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, box.shape[0])
+
+    def counted(m):
+        # what the motors count from their switches: a linear delta's reading is a carriage
+        # height, its stepper counts the travel H^fw − λ below the switch (Klipper's abs_endstop
+        # less the carriage height); a rotary delta's and a hexapod's reading is that already
+        q = np.asarray(m.ik(points), dtype=float)
+        return m.reading_reference[None, :] - q if m.kind == "linear-delta" else q
+
+    with np.errstate(all="ignore"):
+        diff = np.abs(counted(rounded) - counted(exact))
+    diff = diff[np.all(np.isfinite(diff), axis=1)]
+    return float(diff.max()) if diff.size else 0.0
+
+
 def klipper_values(fw: DeltaFirmware | RotaryFirmware) -> dict[str, dict[str, str]]:
     """Section → option → text of what Klipper's SAVE_CONFIG saves after DELTA_CALIBRATE
     (delta.py / rotary_delta.py ``save_state``), plus a rotary delta's arm lengths; numbers
-    in shortest round-trip form (Klipper writes ``%.6f``)."""
+    as Klipper writes them, ``"%.6f"`` (:func:`klipper_number`)."""
+    k = klipper_number
     if isinstance(fw, RotaryFirmware):
-        out = {"printer": {"shoulder_radius": repr(fw.shoulder_radius), "shoulder_height": repr(fw.shoulder_height)}}
+        out = {"printer": {"shoulder_radius": k(fw.shoulder_radius), "shoulder_height": k(fw.shoulder_height)}}
         for t, ang, ua, la, end in zip(TOWERS, fw.angles_deg, fw.upper_arms, fw.lower_arms, fw.endstops):
-            out[f"stepper_{t}"] = {"angle": repr(ang), "position_endstop": repr(end), "upper_arm_length": repr(ua),
-                                   "lower_arm_length": repr(la)}
+            out[f"stepper_{t}"] = {"angle": k(ang), "position_endstop": k(end), "upper_arm_length": k(ua),
+                                   "lower_arm_length": k(la)}
         return out
-    out = {"printer": {"delta_radius": repr(fw.radius)}}
+    out = {"printer": {"delta_radius": k(fw.radius)}}
     for t, ang, arm, end in zip(TOWERS, fw.angles_deg, fw.arms, fw.endstops):
-        out[f"stepper_{t}"] = {"angle": repr(ang), "arm_length": repr(arm), "position_endstop": repr(end)}
+        out[f"stepper_{t}"] = {"angle": k(ang), "arm_length": k(arm), "position_endstop": k(end)}
     return out
 
 
 def klipper_text(fw: DeltaFirmware | RotaryFirmware) -> str:
     """The sections Klipper's ``SAVE_CONFIG`` writes for a delta, to paste into (or replace
-    in) printer.cfg; numbers in shortest round-trip form."""
-    lines = []
+    in) printer.cfg, after a comment line saying how the numbers are rounded
+    (:data:`KLIPPER_ROUNDING`)."""
+    lines = [f"# pkmcal: {KLIPPER_ROUNDING}"]
     for section, opts in klipper_values(fw).items():
         lines += [f"[{section}]"] + [f"{k} = {v}" for k, v in opts.items()] + [""]
     return "\n".join(lines)
@@ -514,7 +584,8 @@ def klipper_text(fw: DeltaFirmware | RotaryFirmware) -> str:
 def klipper_saved_config(path: str, fw: DeltaFirmware | RotaryFirmware) -> str:
     """The user's printer.cfg ``path`` as Klipper's SAVE_CONFIG leaves it with ``fw`` saved
     (:func:`pkmcal.io.klipper_config.save_config_text`): the ``#*#`` block updated, the main
-    file's copies of the saved options commented out."""
+    file's copies of the saved options commented out, and the comment line on the rounding
+    (:data:`KLIPPER_ROUNDING`) first unless the file already has it."""
     from pkmcal.io.klipper_config import save_config_text
 
     kin = read_klipper(path)
@@ -522,7 +593,9 @@ def klipper_saved_config(path: str, fw: DeltaFirmware | RotaryFirmware) -> str:
         what = {DeltaFirmware: "delta", RotaryFirmware: "rotary_delta"}
         raise InputFileError(path, f"this printer.cfg is a '{what[type(kin)]}' printer; the machine is a "
                              f"'{what[type(fw)]}'")
-    return save_config_text(path, klipper_values(fw))
+    text = save_config_text(path, klipper_values(fw))
+    note = f"# pkmcal: {KLIPPER_ROUNDING}"
+    return text if note in text.splitlines() else f"{note}\n{text}"
 
 
 # -- Marlin -------------------------------------------------------------------------------------
@@ -543,6 +616,7 @@ def marlin_text(fw: DeltaFirmware, version: str = "2.1.x", **options) -> str:
     return text(fw, version, **options)[0]
 
 
-__all__ = ["DeltaFirmware", "Dropped", "KlipperPrinter", "RotaryFirmware", "exact_rewrite", "firmware_subset",
-           "klipper_saved_config", "klipper_text", "klipper_values", "marlin_text", "read_klipper",
-           "read_klipper_printer", "read_marlin", "rotary_firmware_subset"]
+__all__ = ["KLIPPER_DECIMALS", "KLIPPER_ROUNDING", "DeltaFirmware", "Dropped", "KlipperPrinter", "RotaryFirmware",
+           "exact_rewrite", "firmware_subset", "klipper_number", "klipper_rounded", "klipper_saved_config",
+           "klipper_text", "klipper_values", "marlin_text", "read_klipper", "read_klipper_printer", "read_marlin",
+           "rotary_firmware_subset", "rounding_effect"]

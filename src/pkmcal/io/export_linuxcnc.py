@@ -27,8 +27,21 @@ settings that match the machine (:func:`joint_settings`):
 LinuxCNC homes the joints to HOME_N, so the INI is refused for a home pose outside the joint
 limits or the machine's joint tilts (:func:`check_home`). Lengths are written in mm, or in
 the unit of the machine's INI file (:func:`export_unit`: ``[TRAJ] LINEAR_UNITS`` of the file
-it was imported from, or of the user's file :func:`updated_ini` updates), each the shortest
-decimal that the import turns back into the same millimetres. :func:`updated_ini` writes the
+it was imported from, or of the user's file :func:`updated_ini` updates).
+
+Numbers are rounded to a resolution chosen from the machine's, and the files say so in a
+comment line (:data:`LINUXCNC_ROUNDING`). LinuxCNC itself has none to offer: it reads HAL
+``setp`` values and INI values as C doubles (``strtod``) and computes genhexkins in double.
+What is meaningful is the machine's resolution: its joints count encoder or step increments
+([JOINT_N] SCALE counts per unit), 0.1 µm on the finest linear encoders of precision
+hexapods' struts, and it is calibrated to micrometres. The rule: lengths to the first decimal
+whose step is at most 1 nm, a hundredth of such a count (6 decimals in mm, 8 in inch,
+:data:`LINUXCNC_DECIMALS`), and the angles of [TRAJ] HOME to 1e-7° (an arc of 1.7 nm at 1
+m, :data:`ANGLE_DECIMALS`); the leg gains, which are comments, are written in full. Importing
+an export gives the rounded numbers exactly (in inch: each times 25.4, one rounding);
+:func:`rounded_machine` is that machine and
+:func:`pkmcal.io.delta_firmware.rounding_effect` what the rounding changes in the strut
+lengths LinuxCNC commands (below 1e-5 mm). :func:`updated_ini` writes the
 keys pkmcal owns (:data:`OWNED_KEYS`) into a copy of the user's own INI file and keeps every
 other byte.
 
@@ -56,7 +69,6 @@ import os
 import numpy as np
 
 from pkmcal import __version__
-from pkmcal.conventions import poses_to_file_units
 from pkmcal.errors import PkmcalError, one_line
 from pkmcal.mechanisms.hexapod import Hexapod
 
@@ -85,26 +97,57 @@ def comment_lines(text: str, first: str = "# ", rest: str = "#   ") -> list[str]
             return out
 
 
+#: Decimals of the exported lengths per unit (module docstring): the first whose step is at
+#: most 1 nm (mm: 1e-6 mm; inch: 1e-8 inch = 0.254 nm, as 1e-7 inch is 2.54 nm).
+LINUXCNC_DECIMALS = {"mm": 6, "inch": 8}
+#: Decimals of the exported angles (degrees: 1e-7° is an arc of 1.7 nm at 1 m).
+ANGLE_DECIMALS = 7
+#: The comment line (after ``# ``) of a LinuxCNC export, and the export's message.
+LINUXCNC_ROUNDING = ("numbers rounded to 1 nm (6 decimals in mm, 8 in inch) and 1e-7 deg: LinuxCNC reads doubles; "
+                     "1 nm is a hundredth of a 0.1 um encoder count")
+
+
 def _num(v: float) -> str:
-    """Shortest text that reads back to the same double (so the export is exact)."""
+    """``v`` as the shortest positional decimal that reads back to the same double (of a
+    value already rounded by :func:`_in_unit` or :func:`_deg`, that rounded decimal)."""
     v = float(v)
     if not np.isfinite(v):
         raise PkmcalError(f"cannot export a non-finite value ({v}) to LinuxCNC")
-    return repr(v + 0.0)  # + 0.0 turns -0.0 into 0.0
+    return np.format_float_positional(v + 0.0, unique=True, trim="0")  # + 0.0 turns -0.0 into 0.0
+
+
+def _decimals(mm_per_unit: float) -> int:
+    """:data:`LINUXCNC_DECIMALS` of the unit of ``mm_per_unit`` (:data:`EXPORT_UNITS`)."""
+    name = next((n for n, f in EXPORT_UNITS.items() if f == mm_per_unit), None)
+    if name is None:
+        raise PkmcalError(f"no LinuxCNC export unit of {mm_per_unit} mm")
+    return LINUXCNC_DECIMALS[name]
 
 
 def _in_unit(v_mm: float, mm_per_unit: float) -> float:
-    """``v_mm`` in the export's unit: the shortest decimal whose value times ``mm_per_unit``
-    is ``v_mm`` again (what the import computes), so a machine exported in inch and imported
-    back has the same millimetres; else the nearest double to v_mm / mm_per_unit."""
-    v_mm = float(v_mm)
-    if mm_per_unit == 1.0 or not np.isfinite(v_mm):
-        return v_mm
-    for digits in range(1, 18):
-        t = float(f"{v_mm / mm_per_unit:.{digits}g}")
-        if t * mm_per_unit == v_mm:
-            return t
-    return v_mm / mm_per_unit
+    """``v_mm`` in the export's unit (mm / ``mm_per_unit``), rounded to its
+    :data:`LINUXCNC_DECIMALS`: the number written, and what the import reads."""
+    v = float(v_mm) / mm_per_unit
+    if not np.isfinite(v):
+        raise PkmcalError(f"cannot export a non-finite value ({v_mm}) to LinuxCNC")
+    return round(v, _decimals(mm_per_unit)) + 0.0
+
+
+def _deg(v_rad: float) -> float:
+    """An angle (rad) in degrees, rounded to :data:`ANGLE_DECIMALS`."""
+    return round(float(np.rad2deg(float(v_rad))), ANGLE_DECIMALS) + 0.0
+
+
+def rounded_machine(machine: Hexapod, linear_unit: str | None = None) -> Hexapod:
+    """``machine`` with the numbers the export writes of it (joints b_i, a_i, offsets L0_i)
+    as written, in mm (:func:`_in_unit` times the unit): the machine LinuxCNC runs."""
+    _, factor = export_unit(machine, linear_unit)
+    rho = np.array(machine.params, dtype=float)
+    names = machine.param_names
+    for k, n in enumerate(names):
+        if n.startswith(("b", "a", "L0_")) and not n.startswith("gain"):
+            rho[k] = _in_unit(rho[k], factor) * factor
+    return machine.with_params(rho)
 
 
 def check_hexapod(machine) -> None:
@@ -253,12 +296,10 @@ def home_warnings(machine: Hexapod) -> list[str]:
 
 
 def _home_pose_text(machine: Hexapod, mm_per_unit: float = 1.0) -> str:
-    """X Y Z A B C of the home pose (the export's unit, degrees), each angle as the degree
-    text that reads back to the same radians (:func:`pkmcal.io._yaml.rad_to_deg_text`)."""
-    from pkmcal.io._yaml import rad_to_deg_text
-
+    """X Y Z A B C of the home pose (the export's unit, degrees), rounded (:func:`_in_unit`,
+    :func:`_deg`)."""
     return " ".join([_num(_in_unit(v, mm_per_unit)) for v in machine.home_pose[:3]]
-                    + [rad_to_deg_text(float(v) + 0.0) for v in machine.home_pose[3:]])
+                    + [_num(_deg(v)) for v in machine.home_pose[3:]])
 
 
 def linuxcnc_ini(machine: Hexapod, linear_unit: str | None = None, stroke_margin: float | None = None) -> str:
@@ -272,14 +313,14 @@ def linuxcnc_ini(machine: Hexapod, linear_unit: str | None = None, stroke_margin
     check_home(machine, s, unit)
     lines = comment_lines(f"genhexkins joints of machine '{machine.name}', written by pkmcal {__version__}, "
                           "to match the HAL file of the same export.")
-    lines += [
+    lines += [f"# pkmcal: {LINUXCNC_ROUNDING}",
         "# Merge these keys into the machine's INI file (LinuxCNC uses the first of repeated keys), or",
         "# let 'pkmcal export --update-ini MACHINE.ini' write them into a copy of it.",
         f"# Joint N = strut length of pkmcal leg N+1 ({unit}): HOME_OFFSET = L0 + gain * (reading at the",
         "# home switch), MIN_LIMIT/MAX_LIMIT = L0 + gain * stroke, each the stroke margin inside (room",
         "# for the following error and the homing repeatability before the end of the stroke), HOME =",
         f"# strut length at the home pose [TRAJ] HOME (X Y Z {unit}, A B C degrees). Stroke margins (mm):",
-        f"{STROKE_MARGIN_COMMENT} {' '.join(_num(v) for v in s['margin'])}",
+        f"{STROKE_MARGIN_COMMENT} {' '.join(_num(_in_unit(v, 1.0)) for v in s['margin'])}",
     ]
     if np.any(s["gain"] != 1.0) or machine.actuator_unit != "mm":
         runit = one_line(machine.actuator_unit)
@@ -309,11 +350,10 @@ def linuxcnc_hal(machine: Hexapod, linear_unit: str | None = None, stroke_margin
     """
     unit, factor = export_unit(machine, linear_unit)
     s = joint_settings(machine, factor, stroke_margin)
-    home_file = poses_to_file_units(machine.home_pose)
-    home_file[:3] = [_in_unit(v, factor) for v in machine.home_pose[:3]]
+    home_file = [_in_unit(v, factor) for v in machine.home_pose[:3]] + [_deg(v) for v in machine.home_pose[3:]]
     offset = np.array([_in_unit(v, factor) for v in machine.offset])
     lines = comment_lines(f"genhexkins configuration for machine '{machine.name}', written by pkmcal {__version__}.")
-    lines += [
+    lines += [f"# pkmcal: {LINUXCNC_ROUNDING}",
         f"# Units: {unit} (set [TRAJ] LINEAR_UNITS = {unit}); A B C in degrees.",
         "# Pose X Y Z A B C = pkmcal x y z a b c: the platform frame in the base (world) frame,",
         "#   R = Rz(C) Ry(B) Rx(A), roll-pitch-yaw about the fixed base axes (pmRpyMatConvert).",
@@ -335,7 +375,7 @@ def linuxcnc_hal(machine: Hexapod, linear_unit: str | None = None, stroke_margin
         "# Leg offsets and homing. pkmcal's actuator reading is lambda_i = L_i - L0_i; genhexkins'",
         "# joint is the strut length L_i = L0_i + lambda_i. With the home switch at reading",
         "# lambda_i = 0 set [JOINT_N] HOME_OFFSET = L0 below (else L0 + the reading at the switch).",
-        f"# MIN_LIMIT/MAX_LIMIT = L0 + stroke, each the stroke margin inside (up to {_num(max(s['margin']))} mm);",
+        f"# MIN_LIMIT/MAX_LIMIT = L0 + stroke, each the stroke margin inside (up to {_num(_in_unit(max(s['margin']), 1.0))} mm);",
         "# HOME = strut length at pkmcal's home pose",
         f"# x y z a b c = {' '.join(_num(v) for v in home_file)} ({unit}, deg).",
         "# 'pkmcal export --format linuxcnc --ini FILE' writes these as INI sections [JOINT_N].",

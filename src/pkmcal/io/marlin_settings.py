@@ -239,11 +239,29 @@ def _homing_drop(path, version, adj, m92, min_steps, notes) -> np.ndarray:
     return np.where(moved, -adj, 0.0)
 
 
+#: The comment line (after ``; ``) of a Marlin export, and the export's message.
+MARLIN_ROUNDING = ("numbers as Marlin holds them: 32-bit floats (about 7 significant digits), "
+                   "at most 6 decimals (M665.cpp GcodeSuite::M665, parser.value_float)")
+
+
 def _number(v: float) -> str:
-    """Marlin keeps 32-bit floats (about 7 significant digits): 6 decimals (1 nm, 1e-6°)
-    are beyond what it holds, and short enough to read."""
-    text = f"{v:.6f}".rstrip("0").rstrip(".")
-    return "0" if text in ("-0", "") else text
+    """``v`` at Marlin's own resolution: Marlin parses every ``M665``/``M666`` word into a
+    32-bit float (``Marlin/src/gcode/calibrate/M665.cpp`` ``GcodeSuite::M665``,
+    ``parser.value_linear_units``/``value_float``, strtof), keeps its delta settings as
+    ``float`` (``Marlin/src/module/delta.cpp``) and stores them so in EEPROM
+    (``Marlin/src/module/settings.cpp``). The value is rounded to 6 decimals (1e-6 mm, 1e-6°,
+    like Klipper's) and written as the shortest decimal that reads back to the same 32-bit
+    float, so the text is exactly what Marlin holds (to about 7 significant digits: 3e-5 mm
+    at 300 mm). ``M503`` prints these settings with fewer decimals (``M665_report`` echoes
+    each float through ``Marlin/src/core/serial.cpp`` ``serial_echopair_PGM``, whose
+    ``SERIAL_DECIMAL`` prints 2 decimals unless the build sets Configuration_adv.h
+    ``SERIAL_FLOAT_PRECISION``), so a configuration read back from ``M503`` is coarser than
+    the one written."""
+    v = float(v)
+    if not np.isfinite(v):
+        raise PkmcalError(f"cannot export a non-finite value ({v}) to Marlin")
+    text = np.format_float_positional(np.float32(round(v, 6)), unique=True, trim="-")
+    return "0" if float(text) == 0.0 else text
 
 
 #: How far below the lowest switch the exported H is for 2.1.x, so that every M666 is more
@@ -251,12 +269,9 @@ def _number(v: float) -> str:
 HOME_MARGIN_21 = 0.5
 
 
-def marlin_text(fw, version: str = "2.1.x", steps_per_mm: tuple | None = None,
-                min_steps_per_segment: int = MIN_STEPS_PER_SEGMENT) -> tuple[str, list[str]]:
-    """(``M665``/``M666`` lines then ``M500``, what the version cannot hold) for ``fw``
-    (module docstring; numbers to 6 decimals). The height and adjustments are chosen so
-    that the version's homing puts each switch at the firmware's position_endstop: E_i =
-    H + d_i."""
+def _marlin_words(fw, version: str, steps_per_mm: tuple | None, min_steps_per_segment: int):
+    """(M665 words, M666 adjustments (3,), the homing's extra drop (3,), what the version
+    cannot hold) for ``fw`` in Marlin ``version``, unrounded (:func:`marlin_text`)."""
     if version not in DIALECTS:
         raise PkmcalError(f"--marlin-version {version}: choose one of {', '.join(MARLIN_VERSIONS)}")
     if version == "1.1.x":
@@ -281,16 +296,44 @@ def marlin_text(fw, version: str = "2.1.x", steps_per_mm: tuple | None = None,
     # E_i = H + extra_i − adj_i with every adj ≤ 0 (2.1.x: < −MIN_STEPS_PER_SEGMENT steps)
     margin = HOME_MARGIN_21 if version == "2.1.x" else 0.0
     H = float(np.min(ends - extra)) - margin
-    adj = H + extra - ends
+    adj = np.minimum(H + extra - ends, 0.0)
     words = {"L": L, "R": fw.radius, "H": H}
     words.update({c: a - n for c, a, n in zip("XYZ", fw.angles_deg, TOWER_ANGLES_DEG)})
     if d.rod_trims:
         words.update({c: a - L for c, a in zip("ABC", fw.arms)})
+    return words, adj, extra, dropped
+
+
+def marlin_text(fw, version: str = "2.1.x", steps_per_mm: tuple | None = None,
+                min_steps_per_segment: int = MIN_STEPS_PER_SEGMENT) -> tuple[str, list[str]]:
+    """(``M665``/``M666`` lines then ``M500``, what the version cannot hold) for ``fw``
+    (module docstring), after a comment line saying how the numbers are rounded
+    (:data:`MARLIN_ROUNDING`, :func:`_number`). The height and adjustments are chosen so
+    that the version's homing puts each switch at the firmware's position_endstop: E_i =
+    H + d_i."""
+    words, adj, _, dropped = _marlin_words(fw, version, steps_per_mm, min_steps_per_segment)
     m665 = "M665 " + " ".join(f"{c}{_number(v)}" for c, v in words.items())
-    m666 = "M666 " + " ".join(f"{c}{_number(min(0.0, v))}" for c, v in zip("XYZ", adj))
-    head = f"; Marlin {version}: M665 {' '.join(d.words)}"
-    return "\n".join([head, m665, m666, "M500 ; store in EEPROM", ""]), dropped
+    m666 = "M666 " + " ".join(f"{c}{_number(v)}" for c, v in zip("XYZ", adj))
+    head = f"; Marlin {version}: M665 {' '.join(DIALECTS[version].words)}"
+    return "\n".join([head, m665, m666, "M500 ; store in EEPROM", f"; pkmcal: {MARLIN_ROUNDING}", ""]), dropped
 
 
-__all__ = ["DIALECTS", "MARLIN_VERSIONS", "MIN_STEPS_PER_SEGMENT", "MarlinImport", "marlin_text",
-           "read_marlin_settings"]
+def marlin_rounded(fw, version: str = "2.1.x", steps_per_mm: tuple | None = None,
+                   min_steps_per_segment: int = MIN_STEPS_PER_SEGMENT):
+    """The firmware numbers (a :class:`~pkmcal.io.delta_firmware.DeltaFirmware`) that the
+    words :func:`marlin_text` writes stand for, each word as written (what an import of the
+    export gives): radius R, tower angles 210/330/90° + trims, rods L (+ trims where the
+    version has them, else L for every tower), switches E_i = H + d_i − adj_i."""
+    from dataclasses import replace
+
+    words, adj, extra, _ = _marlin_words(fw, version, steps_per_mm, min_steps_per_segment)
+    w = {c: float(_number(v)) for c, v in words.items()}
+    a = np.array([float(_number(v)) for v in adj])
+    trims = DIALECTS[version].rod_trims
+    arms = tuple(w["L"] + w[c] for c in trims) if trims else (w["L"],) * 3
+    return replace(fw, radius=w["R"], angles_deg=tuple(n + w[c] for c, n in zip("XYZ", TOWER_ANGLES_DEG)),
+                   arms=arms, endstops=tuple(float(e) for e in w["H"] + extra - a))
+
+
+__all__ = ["DIALECTS", "MARLIN_ROUNDING", "MARLIN_VERSIONS", "MIN_STEPS_PER_SEGMENT", "MarlinImport", "marlin_rounded",
+           "marlin_text", "read_marlin_settings"]

@@ -359,7 +359,10 @@ class ReportData:
     ``screening`` the outlier screening of the fit, ``priors`` its Gaussian priors;
     ``measured_validation`` the validation on measured held-out data
     (:meth:`pkmcal.identification.heldout.HeldoutReport.to_dict`, with its ``rows``: the
-    (quantity, unit, key) lines to show), None when no held-out measurements were given.
+    (quantity, unit, key) lines to show), None when no held-out measurements were given;
+    ``calibrated_file`` and ``setup_name`` the calibrated machine file and the setup (file or
+    built-in name) as a command line names them, for the commands the report's opening
+    suggests (None: a placeholder is shown).
     """
 
     title: str
@@ -382,6 +385,8 @@ class ReportData:
     screening: Screening | None = None
     priors: tuple[PriorRow, ...] = ()
     measured_validation: dict | None = None
+    calibrated_file: str | None = None
+    setup_name: str | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "priors", tuple(self.priors))

@@ -14,6 +14,11 @@ per reading; histograms of held-out errors before and after; error maps before a
 the error of every parameter against the truth and of every held-out pose (paper 1 Figs.
 10–11); measurement paths and the error at every path point, forward and backward (paper 3
 Figs. 4/5, 7/8).
+
+Colours are defined once: every series of the state before calibration is drawn in
+:data:`BEFORE_COLOUR`, every one after it in :data:`AFTER_COLOUR` (:func:`series_colour`,
+by the label's "before"/"after"), and no other series uses them (:data:`OTHER_COLOURS`, the
+default colour cycle); maps that are compared share one colour scale (:func:`shared_norm`).
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ import matplotlib
 matplotlib.use("Agg", force=False)
 
 import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.colors  # noqa: E402
 import matplotlib.ticker  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
@@ -39,6 +45,16 @@ from pkmcal.report.data import (  # noqa: E402
     Residuals,
     pose_points,
 )
+
+#: The two colours of the report: every series or bar of the state before calibration (the
+#: nominal model) is drawn in BEFORE_COLOUR, every one after it (the identified model) in
+#: AFTER_COLOUR, in every figure; no other series uses them (:data:`OTHER_COLOURS`).
+BEFORE_COLOUR = "#d62728"
+AFTER_COLOUR = "#1f77b4"
+#: Colours of the series that are neither before nor after (the default colour cycle too).
+OTHER_COLOURS = ("#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf")
+#: The colour map of the error maps; compared maps share one scale (:func:`shared_norm`).
+ERROR_CMAP = "magma"
 
 #: Fixed style: the same bytes on every run and every machine with the same matplotlib.
 RC = {
@@ -54,13 +70,35 @@ RC = {
     "grid.alpha": 0.3,
     "image.cmap": "viridis",
     "path.simplify": False,
-    "axes.prop_cycle": matplotlib.cycler(color=["#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b"]),
+    "axes.prop_cycle": matplotlib.cycler(color=list(OTHER_COLOURS)),
 }
-BEFORE_COLOUR = "#d62728"
-AFTER_COLOUR = "#1f77b4"
 ARCSEC_PER_RAD = 180.0 / np.pi * 3600.0
 #: Residual unit (:class:`~pkmcal.report.data.Residuals`) → (display unit, scale).
 RESIDUAL_DISPLAY = {"mm": ("µm", 1000.0), "rad": ("arcsec", ARCSEC_PER_RAD), "1": ("1", 1.0)}
+
+
+def series_colour(label: str, k: int) -> str:
+    """The colour of the ``k``-th series labelled ``label``: :data:`BEFORE_COLOUR` for a
+    label that starts with "before", :data:`AFTER_COLOUR` for one that starts with "after",
+    else the ``k``-th of :data:`OTHER_COLOURS`."""
+    low = label.strip().lower()
+    if low.startswith("before"):
+        return BEFORE_COLOUR
+    if low.startswith("after"):
+        return AFTER_COLOUR
+    return OTHER_COLOURS[k % len(OTHER_COLOURS)]
+
+
+def shared_norm(*grids: np.ndarray) -> matplotlib.colors.Normalize:
+    """One colour scale for maps that are compared: logarithmic from the smallest positive
+    finite value of all ``grids`` to the largest (errors before and after differ by orders of
+    magnitude), linear over [0, 1] when none is positive."""
+    v = np.concatenate([np.ravel(np.asarray(g, dtype=float)) for g in grids])
+    v = v[np.isfinite(v) & (v > 0)]
+    if not v.size:
+        return matplotlib.colors.Normalize(vmin=0.0, vmax=1.0)
+    lo, hi = float(v.min()), float(v.max())
+    return matplotlib.colors.LogNorm(vmin=lo, vmax=hi if hi > lo else lo * 10.0)
 
 
 def residual_display(unit: str) -> tuple[str, float]:
@@ -139,10 +177,10 @@ def machine_poses_figure(machine, poses: np.ndarray, titles: list[str] | None = 
             b = np.vstack([base, base[:1]])
             t = np.vstack([tops[k], tops[k, :1]])
             ax.plot(b[:, 0], b[:, 1], b[:, 2], color="0.35", lw=1.5)
-            ax.plot(t[:, 0], t[:, 1], t[:, 2], color=AFTER_COLOUR, lw=1.8)
+            ax.plot(t[:, 0], t[:, 1], t[:, 2], color=OTHER_COLOURS[0], lw=1.8)
             for i in range(base.shape[0]):
                 ax.plot([base[i, 0], tops[k, i, 0]], [base[i, 1], tops[k, i, 1]], [base[i, 2], tops[k, i, 2]],
-                        color=BEFORE_COLOUR, lw=1.2)
+                        color=OTHER_COLOURS[1], lw=1.2)
             p = poses[k, :3]
             ax.scatter([p[0]], [p[1]], [p[2]], color="k", s=8)
             for dim, setter in enumerate((ax.set_xlim, ax.set_ylim, ax.set_zlim)):
@@ -169,7 +207,7 @@ def pose_cloud_figure(shown: PosePoints, held_out: PosePoints | None = None) -> 
         p = shown.points
         pairs = np.zeros(len(p), dtype=bool) if shown.second is None else np.any(shown.second != p, axis=1)
         single = ~pairs
-        colour = dict(color=AFTER_COLOUR) if shown.tilt is None else dict(c=np.rad2deg(shown.tilt)[single],
+        colour = dict(color=OTHER_COLOURS[0]) if shown.tilt is None else dict(c=np.rad2deg(shown.tilt)[single],
                                                                            cmap="viridis")
         label = f"measured ({len(p)})" if shown.second is None else f"probe points ({int(single.sum())})"
         sc = ax.scatter(p[single, 0], p[single, 1], p[single, 2], s=16, depthshade=False, label=label, **colour)
@@ -178,7 +216,7 @@ def pose_cloud_figure(shown: PosePoints, held_out: PosePoints | None = None) -> 
             for i in np.flatnonzero(pairs):
                 ax.plot(*np.stack([p[i], q[i]]).T, color="0.55", lw=0.8)
             ends = np.concatenate([p[pairs], q[pairs]])
-            ax.scatter(ends[:, 0], ends[:, 1], ends[:, 2], s=10, color=BEFORE_COLOUR, depthshade=False,
+            ax.scatter(ends[:, 0], ends[:, 1], ends[:, 2], s=10, color=OTHER_COLOURS[1], depthshade=False,
                        label=f"distance pairs ({int(pairs.sum())})")
         if held_out is not None and len(held_out.points):
             h = held_out.points
@@ -208,7 +246,7 @@ def singular_values_figure(singular_values: np.ndarray, rank: int) -> Figure:
         fig = _new((6.4, 3.2))
         ax = fig.add_subplot(1, 1, 1)
         pos = np.where(s > 0, s, np.nan)
-        ax.semilogy(idx[:rank], pos[:rank], "o-", color=AFTER_COLOUR, ms=4, label=f"rank {rank}")
+        ax.semilogy(idx[:rank], pos[:rank], "o-", color=OTHER_COLOURS[0], ms=4, label=f"rank {rank}")
         if rank < s.size:
             ax.semilogy(idx[rank:], pos[rank:], "o", color="0.6", ms=4, label="beyond rank")
         ax.set_xlabel("index")
@@ -236,12 +274,12 @@ def parameter_figure(table: ParameterTable) -> Figure:
             idx = np.arange(len(cols))
             free = table.free[cols]
             err = np.where(free & np.isfinite(std[cols]), 2.0 * std[cols], 0.0)
-            ax.errorbar(idx[free], dev[cols][free], yerr=err[free], fmt="o", ms=3.5, color=AFTER_COLOUR,
-                        ecolor=AFTER_COLOUR, elinewidth=1, capsize=2, label="identified ± 2σ")
+            ax.errorbar(idx[free], dev[cols][free], yerr=err[free], fmt="o", ms=3.5, color=OTHER_COLOURS[0],
+                        ecolor=OTHER_COLOURS[0], elinewidth=1, capsize=2, label="identified ± 2σ")
             if (~free).any():
                 ax.plot(idx[~free], dev[cols][~free], "s", ms=3.5, color="0.6", label="fixed")
             if true_dev is not None:
-                ax.plot(idx, true_dev[cols], "o", mfc="none", mec=BEFORE_COLOUR, ms=6, label="true (simulation)")
+                ax.plot(idx, true_dev[cols], "o", mfc="none", mec=OTHER_COLOURS[1], ms=6, label="true (simulation)")
             ax.axhline(0.0, color="0.3", lw=0.8)
             ax.set_xticks(idx)
             ax.set_xticklabels([table.names[c] for c in cols], rotation=90, fontsize=6)
@@ -360,24 +398,29 @@ def held_out_figure(err: HeldOutErrors) -> Figure:
 
 
 def error_map_figure(em: ErrorMap) -> Figure:
-    """Position error (µm) over an x–y grid at height z, before and after, on a shared
-    colour scale of the 'before' map and on its own scale for 'after'."""
+    """Position error (µm) over an x–y grid at height z, before and after, on one colour
+    scale (:func:`shared_norm`: the same limits for both maps, logarithmic), with one colour
+    bar; each map's title in its colour (:data:`BEFORE_COLOUR`, :data:`AFTER_COLOUR`)."""
     with style():
-        fig = _new((7.6, 3.3))
+        fig = _new((7.6, 3.3), layout="constrained")     # the colour bar shared by both maps
         extent = (em.x[0], em.x[-1], em.y[0], em.y[-1])
-        for k, (grid, label) in enumerate(((em.before, "before (nominal)"), (em.after, "after (identified)"))):
+        grids = (em.before * 1000.0, em.after * 1000.0)
+        norm = shared_norm(*grids)
+        axes = []
+        for k, (grid, label) in enumerate(zip(grids, ("before (nominal)", "after (identified)"))):
             ax = fig.add_subplot(1, 2, k + 1)
-            im = ax.imshow(np.ma.masked_invalid(grid * 1000.0), origin="lower", extent=extent, cmap="magma",
+            shown = np.where(grid > 0, grid, np.nan) if isinstance(norm, matplotlib.colors.LogNorm) else grid
+            im = ax.imshow(np.ma.masked_invalid(shown), origin="lower", extent=extent, cmap=ERROR_CMAP, norm=norm,
                            interpolation="nearest", aspect="equal")
             ax.set_xlabel("x (mm)")
             ax.set_ylabel("y (mm)")
             ax.grid(False)
-            ax.set_title(label, fontsize=9)
-            cb = fig.colorbar(im, ax=ax, shrink=0.85)
-            cb.set_label("position error (µm)")
+            ax.set_title(label, fontsize=9, color=series_colour(label, k))
+            axes.append(ax)
+        cb = fig.colorbar(im, ax=axes, shrink=0.85)
+        cb.set_label("position error (µm), one scale for both")
         a, b, c = np.rad2deg(em.abc)
         fig.suptitle(f"Error map at z = {em.z:.1f} mm, a b c = {a:.1f} {b:.1f} {c:.1f}°", fontsize=10)
-        fig.tight_layout()
     return fig
 
 
@@ -407,7 +450,7 @@ def parameter_errors_figure(names, errors: dict[str, np.ndarray], is_angle=None,
                 e = np.rad2deg(e) if unit == "deg" else e
                 mean = np.nanmean(e) if np.isfinite(e).any() else float("nan")
                 ax.semilogy(idx, _log_positive(e), markers[k % len(markers)], ms=4, mfc="none" if k else None,
-                            label=f"{label} (mean {mean:.3g} {unit})")
+                            color=series_colour(label, k), label=f"{label} (mean {mean:.3g} {unit})")
             ax.set_xticks(idx)
             ax.set_xticklabels([names[c] for c in cols], rotation=90, fontsize=6)
             ax.set_xlim(-0.8, len(idx) - 0.2)
@@ -435,7 +478,7 @@ def per_pose_errors_figure(position: dict[str, np.ndarray], orientation: dict[st
             for k, (name, e) in enumerate(series.items()):
                 e = np.asarray(e, dtype=float)
                 ax.semilogy(np.arange(1, e.size + 1), _log_positive(e * scale), markers[k % len(markers)] + "-",
-                            lw=0.6, ms=4, mfc="none" if k else None, label=name)
+                            lw=0.6, ms=4, mfc="none" if k else None, color=series_colour(name, k), label=name)
             ax.set_ylabel(label)
             ax.legend(fontsize=7, loc="best")
             ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))
@@ -463,7 +506,7 @@ def path_figure(points: np.ndarray, forward: np.ndarray, calibration: np.ndarray
                                    (~fwd & ~cal, "+", "verification, backward")):
             if sel.any():
                 ax.plot(pts[sel, 0], pts[sel, 1], marker, ms=6, mfc="none", label=f"{label} ({int(sel.sum())})",
-                        color=AFTER_COLOUR if "calibration" in label else BEFORE_COLOUR, zorder=2)
+                        color=OTHER_COLOURS[0] if "calibration" in label else OTHER_COLOURS[1], zorder=2)
         for k in (0, len(pts) - 1):
             ax.annotate("start" if k == 0 else "end", pts[k], textcoords="offset points", xytext=(5, 5), fontsize=7)
         ax.set_xlabel("x (mm)")
@@ -479,13 +522,16 @@ def path_errors_figure(before: np.ndarray, after: dict[str, np.ndarray], forward
                        calibration: np.ndarray | None = None, title: str = "Position error along the path") -> Figure:
     """Tool-point error (µm) at every point of a measurement path, before (nominal model) and
     after calibration by each model of ``after`` (label → (N,) mm), forward points as circles
-    and backward points as crosses, as paper 3 Figs. 5 and 8 (○/× before, ◇/+ after);
-    points not used for calibration are shaded."""
+    and backward points as crosses, as paper 3 Figs. 5 and 8 (○/× before, ◇/+ after; further
+    models after: □/1, △/2, ▽/3, all in :data:`AFTER_COLOUR`); points not used for
+    calibration are shaded."""
     fwd = np.asarray(forward, dtype=bool)
     idx = np.arange(1, fwd.size + 1)
-    series = [("before", np.asarray(before, dtype=float), BEFORE_COLOUR)]
-    colours = [AFTER_COLOUR, "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b"]
-    series += [(f"after: {k}", np.asarray(v, dtype=float), colours[i % len(colours)]) for i, (k, v) in enumerate(after.items())]
+    # every model after in AFTER_COLOUR, told apart by its markers (forward, backward)
+    markers = [("o", "x"), ("D", "+"), ("s", "1"), ("^", "2"), ("v", "3")]
+    series = [("before", np.asarray(before, dtype=float), BEFORE_COLOUR, markers[0])]
+    series += [(f"after: {k}", np.asarray(v, dtype=float), AFTER_COLOUR, markers[1 + i % (len(markers) - 1)])
+               for i, (k, v) in enumerate(after.items())]
     with style():
         fig = _new((7.6, 3.8))
         ax = fig.add_subplot(1, 1, 1)
@@ -493,11 +539,10 @@ def path_errors_figure(before: np.ndarray, after: dict[str, np.ndarray], forward
             cal = np.asarray(calibration, dtype=bool)
             for k in np.flatnonzero(~cal):
                 ax.axvspan(idx[k] - 0.5, idx[k] + 0.5, color="0.92", lw=0, zorder=0)
-        for k, (label, e, colour) in enumerate(series):
+        for label, e, colour, (m_fwd, m_bwd) in series:
             e = _log_positive(e * 1000.0)
-            ax.semilogy(idx[fwd], e[fwd], "o" if k == 0 else "D", ms=4, mfc="none", color=colour,
-                        label=f"{label}, forward")
-            ax.semilogy(idx[~fwd], e[~fwd], "x" if k == 0 else "+", ms=5, color=colour, label=f"{label}, backward")
+            ax.semilogy(idx[fwd], e[fwd], m_fwd, ms=4, mfc="none", color=colour, label=f"{label}, forward")
+            ax.semilogy(idx[~fwd], e[~fwd], m_bwd, ms=5, color=colour, label=f"{label}, backward")
         ax.set_xlabel("measurement point (path order)" + ("; shaded: not used for calibration"
                                                           if calibration is not None else ""))
         ax.set_ylabel("position error (µm)")

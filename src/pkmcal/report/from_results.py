@@ -167,6 +167,8 @@ def report_data_from_results(
     held_out_poses: np.ndarray | None = None,
     commanded: np.ndarray | None = None,
     heldout=None,
+    calibrated_file: str | None = None,
+    setup_name: str | None = None,
 ) -> ReportData:
     """The report of an :class:`~pkmcal.identification.engine.IdentificationResult`.
 
@@ -177,7 +179,8 @@ def report_data_from_results(
     beside the estimates; ``commanded`` (N, n) the commanded poses of the measurements, from
     which a redundant machine's load deflection is estimated (a warning line when visible);
     ``heldout`` a :class:`~pkmcal.identification.heldout.HeldoutReport` (validation on
-    measured held-out data), shown in its own section.
+    measured held-out data), shown in its own section; ``calibrated_file`` and ``setup_name``
+    name the calibrated machine file and the setup in the commands the report suggests.
     """
     table = parameter_table(nominal, result, true_machine, true_sensor)
     corr = np.asarray(result.correlation, dtype=float)
@@ -220,4 +223,6 @@ def report_data_from_results(
         screening=screening_from_result(result),
         priors=priors_from_result(result),
         measured_validation=None if heldout is None else {**heldout.to_dict(), "rows": heldout.summary_rows()},
+        calibrated_file=calibrated_file,
+        setup_name=setup_name,
     )

@@ -6,7 +6,9 @@ into the output folder, and writes ``report.html`` with inline CSS and every fig
 embedded as inline SVG (element ids prefixed per figure so they cannot collide): no
 JavaScript, no external URL, one file to mail or archive. Same input → same bytes.
 
-Sections: machine and setup; pose plan (machine in a few poses, pose cloud);
+Sections: what was achieved (before → after on held-out data, in people's units) and what
+to do next (the export command for the machine's controller, what to measure to improve,
+from the identifiability of the fit); machine and setup; pose plan (machine in a few poses, pose cloud);
 identifiability (rank, singular values, fixed gauge, weak directions, paper 2 §4 /
 paper 3 §3); identified parameters ± 1σ against nominal (and the simulation's truth when
 known), each in its unit: mm, degrees for the parameters declared angles with the correlation matrix ρ_ij = C_ij/√(C_ii C_jj); residuals per pose and per
@@ -25,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from pkmcal import __version__
+from pkmcal.conventions import angle_text, length_text
 from pkmcal.errors import PkmcalError
 from pkmcal.io.atomic import atomic_write_bytes, make_folder
 from pkmcal.report import figures as F
@@ -200,6 +203,134 @@ def _table(header: list[str], rows: list[list[str]], left: int = 1, row_class: l
     return f"<table>\n<tr>{th}</tr>\n" + "\n".join(body) + "\n</table>"
 
 
+@dataclass(frozen=True)
+class Achieved:
+    """One line of what a calibration achieved: ``quantity`` (e.g. "position error, rms"),
+    its value ``before`` and ``after`` calibration in internal units (mm, or rad when
+    ``angle``), over ``n`` poses of ``source``."""
+
+    quantity: str
+    before: float
+    after: float
+    angle: bool
+    n: int
+    source: str
+
+    def text(self) -> str:
+        """``position error, rms: 4.921 mm → 13.33 µm`` (people's units:
+        :func:`pkmcal.conventions.length_text`, :func:`~pkmcal.conventions.angle_text`)."""
+        show = angle_text if self.angle else length_text
+        ratio = (f" ({self.before / self.after:.3g}× smaller)" if self.after > 0 and self.before > self.after
+                 else "")
+        return f"{self.quantity}: {show(self.before)} → {show(self.after)}{ratio}"
+
+
+def achieved(data: ReportData) -> list[Achieved]:
+    """Before → after of the calibration, from the best evidence the report has: the
+    held-out poses against the true machine (simulation), else the measured held-out data
+    (``identify --held-out``); empty when neither was given (the fit's residuals are no
+    measure of accuracy)."""
+    out: list[Achieved] = []
+    h = data.held_out
+    if h is not None and h.n_poses:
+        s = h.summary()
+        src = "held-out poses against the true machine (simulation)"
+        out.append(Achieved("position error, rms", s["position_before"]["rms"], s["position_after"]["rms"], False,
+                            h.n_poses, src))
+        out.append(Achieved("position error, largest", s["position_before"]["max"], s["position_after"]["max"], False,
+                            h.n_poses, src))
+        if np.isfinite(s["orientation_before"]["rms"]) and s["orientation_before"]["rms"] > 0:
+            out.append(Achieved("orientation error, rms", s["orientation_before"]["rms"],
+                                s["orientation_after"]["rms"], True, h.n_poses, src))
+        return out
+    v = data.measured_validation
+    if v is not None and "before" in v and "after" in v:
+        src = f"measured held-out data ({v['measurements']})"
+        for text, unit, key in v["rows"]:
+            if not text.endswith(("rms", "max")) or v["before"].get(key) is None or v["after"].get(key) is None:
+                continue
+            angle = unit == "deg"
+            conv = np.deg2rad if angle else float
+            quantity, stat = text.rsplit(" ", 1)           # "position rms", "reading residual max"
+            what = (f"{quantity}{'' if quantity.startswith('reading') else ' error'}, "
+                    f"{'largest' if stat == 'max' else 'rms'}")
+            out.append(Achieved(what, float(conv(v["before"][key])), float(conv(v["after"][key])), angle,
+                                int(v["n_poses"]), src))
+    return out
+
+
+def export_command(data: ReportData) -> str:
+    """The command that writes this calibration for the machine's controller: LinuxCNC's
+    genhexkins files for a hexapod it runs, Klipper's config for a delta printer (Marlin:
+    ``--format marlin``), else the JSON record."""
+    cal = data.calibrated_file or "CALIBRATED.yaml"
+    m = data.identified
+    if "linuxcnc" in m.abilities:
+        return f"pkmcal export {cal} --format linuxcnc -o kinematics.hal --ini joints.ini"
+    if m.kind in ("linear-delta", "rotary-delta"):
+        return f"pkmcal export {cal} --format klipper -o printer-calibrated.cfg"
+    return f"pkmcal export {cal} --format json -o calibration.json"
+
+
+def next_steps(data: ReportData) -> list[tuple[str, str | None]]:
+    """What to do next, as (plain line, command or None): export; what to measure to improve,
+    from the identifiability of the fit (the combinations the data do not see, the weak ones)
+    and the calibration record's undetermined directions; held-out data when none was given."""
+    m = data.identified
+    steps: list[tuple[str, str | None]] = []
+    where = {"linuxcnc": "LinuxCNC (genhexkins HAL and INI settings; --update-ini MACHINE.ini writes them into a "
+                         "copy of your INI)",
+             "linear-delta": "Klipper (the sections SAVE_CONFIG writes; --config printer.cfg updates your file; "
+                             "Marlin: --format marlin)",
+             "rotary-delta": "Klipper (the sections SAVE_CONFIG writes)"}
+    key = "linuxcnc" if "linuxcnc" in m.abilities else m.kind
+    steps.append((f"Export the calibration to {where.get(key, 'a JSON record of the parameters')}:",
+                  export_command(data)))
+    ident = data.identifiability
+    setup = data.setup_name or "SETUP"
+    suggest = f"pkmcal identifiability {data.nominal.name} --setup {setup} --poses POSES.csv --suggest"
+    record = (m.metadata or {}).get("calibration") or {} if isinstance(m.metadata, dict) else {}
+    undetermined = [str(e.get("text") or e.get("meaning")) for e in record.get("undetermined") or ()]
+    if ident.rank < ident.n_params or undetermined:
+        seen = list(ident.null_space[:3]) + undetermined[:3]
+        steps.append(("To improve, measure what this sensor and pose set do not see"
+                      + (f" ({'; '.join(seen)})" if seen else "")
+                      + ": rank the instruments, printed distances and poses that would see it:", suggest))
+    elif ident.weak:
+        steps.append((f"To improve, measure what is weakly determined ({'; '.join(ident.weak[:3])}): rank the "
+                      "instruments and poses that determine it best:", suggest))
+    else:
+        steps.append(("Every parameter direction is determined; to shrink the uncertainties further, add poses or a "
+                      "more precise instrument: rank what would shrink them most:", suggest))
+    if data.held_out is None and data.measured_validation is None:
+        cal = data.calibrated_file or "CALIBRATED.yaml"
+        steps.append(("No held-out data verified this calibration: measure poses that are not used for the fit and "
+                      "validate on them:", f"pkmcal verify {cal} --held-out HELDOUT.csv --setup {cal}"))
+    return steps
+
+
+def _opening(data: ReportData) -> str:
+    """The report's first section: what was achieved (before → after, people's units) and
+    what to do next (the export command, what to measure to improve)."""
+    out = ['<section id="summary">', "<h2>What was achieved</h2>"]
+    got = achieved(data)
+    if got:
+        out.append("<ul>" + "".join(f"<li>{_esc(a.text())}</li>" for a in got) + "</ul>")
+        out.append(f'<p class="muted">Over {got[0].n} {_esc(got[0].source)}; '
+                   f'<span style="color:{F.BEFORE_COLOUR}">before</span>: the nominal machine, '
+                   f'<span style="color:{F.AFTER_COLOUR}">after</span>: the calibrated one (these colours in every '
+                   "figure).</p>")
+    else:
+        out.append('<p class="warn">No held-out data: the accuracy of the calibrated machine has not been '
+                   "verified (the fit's residuals below show only how well the model explains the data it was "
+                   "fitted to).</p>")
+    out.append("<h2>What to do next</h2>\n<ol>")
+    for text, command in next_steps(data):
+        out.append(f"<li>{_esc(text)}" + (f"<pre>{_esc(command)}</pre>" if command else "") + "</li>")
+    out.append("</ol>\n</section>")
+    return "\n".join(out)
+
+
 def _held_out_rows(data: ReportData) -> tuple[str, list[list[str]]]:
     s = data.held_out.summary()
     rows = []
@@ -310,14 +441,14 @@ def render_html(data: ReportData, figs: list[F.RenderedFigure]) -> str:
         "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n"
         f"<title>{_esc(data.title)}</title>\n<style>{CSS}</style>\n</head>\n<body>")
     add(f"<h1>{_esc(data.title)}</h1>")
-    add('<nav><a href="#machine">Machine</a><a href="#plan">Pose plan</a><a href="#identifiability">'
+    add(_opening(data))
+    add('<nav><a href="#summary">Summary</a><a href="#machine">Machine</a><a href="#plan">Pose plan</a><a href="#identifiability">'
         'Identifiability</a><a href="#parameters">Parameters</a>'
         + ('<a href="#priors">Priors</a>' if data.priors else '')
         + '<a href="#residuals">Residuals</a><a href="#outliers">Outliers</a>'
         '<a href="#verification">Verification</a></nav>')
     if data.held_out is not None and data.held_out.n_poses:
         headline, held_rows = _held_out_rows(data)
-        add(f'<p class="headline">{_esc(headline)}</p>')
 
     # -- machine -----------------------------------------------------------------------
     add('<h2 id="machine">Machine and measurement setup</h2>')
@@ -399,6 +530,7 @@ def render_html(data: ReportData, figs: list[F.RenderedFigure]) -> str:
     # -- verification ------------------------------------------------------------------
     add('<h2 id="verification">Verification on held-out poses</h2>')
     if data.held_out is not None and data.held_out.n_poses:
+        add(f'<p class="headline">{_esc(headline)}</p>')
         add(f"<p>{data.held_out.n_poses} held-out poses compared"
             + (f" of {data.held_out_total} given" if data.held_out_total is not None else "")
             + ": the poses the real machine reaches when commanded through both models, so that before and "
