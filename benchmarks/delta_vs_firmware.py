@@ -50,18 +50,41 @@ into the firmware's own parameter model and scored on the true printer.
   and shift in x, y (which move a print on the bed without changing it), and the first-layer
   error, the rms of the true nozzle heights where the firmware puts z = 0.
 
+* **Where pkmcal's model is richer** (issue 25 item 6), two more sets. ``leans_block``: the
+  printers of the leans set (the same draws and probe readings), each also probed with the
+  nozzle on a gauge block (a 1-2-3 block, 50.8 mm, its height off by N(0, 0.005 mm), one
+  error per printer) at 13 places, entered as Klipper's ``DELTA_ANALYZE MANUAL_HEIGHT``, and
+  its rods measured to 0.1 mm — the measurements that determine the leans best among those a
+  printer owner can make (``pkmcal identify``'s note: σ 0.24° from the bed with the rods,
+  0.049° with the block, 0.045° with Klipper's printed object, 0.027° with both; without the
+  rods 0.35° with the block). Klipper's own solver on the same readings (``klipper_rods``:
+  the measured rods typed into printer.cfg, the bed; ``klipper_block``: that and the block's
+  manual heights, which ``calculate_params`` fits with the probe heights) against pkmcal
+  (``pkmcal_prior``: the bed, the rods as a prior, leans held; ``pkmcal_block``: the block
+  too and the leans freed, ``--free … --fix auto``, exported; ``pkmcal_block_full``: that
+  calibration's full model, leans included, as a firmware with rail leans would run it —
+  none does; ``volume_fit``: not a pkmcal command, Klipper's ten numbers fitted to that full
+  model over the print volume instead of on the probed points, :func:`volume_fit`;
+  ``klipper_block_norods`` and ``pkmcal_block_norods``: the bed and the block without the
+  measured rods, printer.cfg's in Klipper, pkmcal freeing rods and leans), and the leans'
+  fitted error. ``unequal_radii``: printers whose tower radii differ by ±2 mm (no
+  leans), which Klipper's one radius and three angles hold exactly (the towers on their
+  circle, the origin at its centre).
+
 Printed: per set and per how (``nominal`` = printer.cfg unchanged, ``klipper``,
 ``pkmcal_default``, ``pkmcal_refit``, ``pkmcal_prior``, ``klipper_object``,
 ``pkmcal_object``) the median and worst 3-D rms and first-layer rms (mm), the median solve
 time (s; pkmcal: its commands after ``import klipper``, in this process; Klipper:
 ``probe_finalize``, and the extended calibration for the object), failures and refusals, and
 for pkmcal's paths how many printers they are worse than Klipper on (3-D rms, beyond 0.5 µm;
-the object path against Klipper's enhanced mode) and the median improvement (%). Last line:
-one JSON object.
+the object path against Klipper's enhanced mode, the leans_block paths against Klipper on the
+same information, :data:`LEAN_AGAINST`) and the median improvement (%). Last line: one JSON
+object.
 
-    python benchmarks/delta_vs_firmware.py [--printers 20] [--seed 0] [--quick]
+    python benchmarks/delta_vs_firmware.py [--printers 20] [--seed 0] [--sets no_leans,leans,...] [--quick]
 
-``--quick``: 2 printers per set (the same sets, paths and scores; key ``quick``).
+``--quick``: 2 printers per set (the same sets, paths and scores; key ``quick``). ``--sets``:
+the sets to run (default all four; the JSON has only those).
 """
 
 from __future__ import annotations
@@ -133,11 +156,13 @@ class Truth:
         return p
 
 
-def random_truth(rng, leans: bool) -> tuple[Truth, np.ndarray]:
-    """A simulated printer (module docstring) and its true arm lengths."""
+def random_truth(rng, leans: bool, radius_error: float | None = None) -> tuple[Truth, np.ndarray]:
+    """A simulated printer (module docstring) and its true arm lengths; ``radius_error``
+    (mm, ± uniform) instead of ERRORS' for the set of unequal tower radii."""
     e = ERRORS
     angles = np.array(NOMINAL["angles"]) + rng.uniform(-e["angle"], e["angle"], 3)
-    radii = NOMINAL["radius"] + rng.uniform(-e["radius"], e["radius"], 3)
+    dr = e["radius"] if radius_error is None else radius_error
+    radii = NOMINAL["radius"] + rng.uniform(-dr, dr, 3)
     arms = np.array(NOMINAL["arms"]) + rng.uniform(-e["arm"], e["arm"], 3)
     endstops = np.array(NOMINAL["endstops"]) + rng.uniform(-e["endstop"], e["endstop"], 3)
     lr = rng.uniform(-e["lean"], e["lean"], 3) if leans else np.zeros(3)
@@ -162,16 +187,17 @@ def truth_at(truth: Truth, fw, p: np.ndarray) -> np.ndarray:
     return truth.nozzle(truth.switch[None, :] - steps * STEP, p)
 
 
-def probe(truth: Truth, fw, xy: np.ndarray, rng) -> tuple[np.ndarray, np.ndarray]:
-    """Klipper's PROBE at (x, y) points on a printer running the config ``fw``: the
+def probe(truth: Truth, fw, xy: np.ndarray, rng, surface: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Klipper's PROBE at (x, y) points on a printer running the config ``fw``, touching a
+    surface ``surface`` mm above the bed (a gauge block's top; the bed itself by default): the
     firmware's reported positions (N, 3) and the step counts below the switches (N, 3)."""
-    target = rng.standard_normal(len(xy)) * TRIGGER_STD
+    target = surface + rng.standard_normal(len(xy)) * TRIGGER_STD
 
     def height(z):
         p = np.c_[xy, z]
         return truth_at(truth, fw, p)[:, 2] - target
 
-    z, dz = np.zeros(len(xy)), 1e-3
+    z, dz = np.full(len(xy), float(surface)), 1e-3
     for _ in range(30):                      # secant steps down the firmware's vertical line
         h0, h1 = height(z), height(z + dz)
         z = z - h0 * dz / (h1 - h0)
@@ -295,9 +321,14 @@ def klipper_enhanced(printer_cfg: str, truth: Truth, rng) -> tuple[dict, float, 
     return _saved(store), seconds, block
 
 
-def klipper_solve(printer_cfg: str, reported: np.ndarray) -> tuple[dict, float]:
-    """DELTA_CALIBRATE's result on the probe positions (its ``probe_finalize``) and its time."""
+def klipper_solve(printer_cfg: str, reported: np.ndarray, manual: list | None = None) -> tuple[dict, float]:
+    """DELTA_CALIBRATE's result on the probe positions (its ``probe_finalize``) and its time;
+    ``manual``: (height, steps below the switches) of DELTA_ANALYZE MANUAL_HEIGHT entries,
+    which its solver fits with the probe heights (``DeltaCalibrate.calculate_params``:
+    ``manual_heights + probe_positions``)."""
     dc, store = klipper_delta_calibrate(printer_cfg)
+    if manual:
+        dc.manual_heights = [(float(h), [float(v) for v in st]) for h, st in manual]
     t0 = time.perf_counter()
     dc.probe_finalize((0.0, 0.0, 0.0), [list(map(float, p)) for p in reported])
     seconds = time.perf_counter() - t0
@@ -329,11 +360,16 @@ def pkmcal(*args: str) -> None:
                            + (f" {res.exception!r}" if res.exception else ""))
 
 
-def log_text(reported: np.ndarray) -> str:
-    """The console lines Klipper prints for PROBE (klippy/extras/probe.py)."""
+def log_text(reported: np.ndarray, manual: np.ndarray | None = None, height: float = 0.0) -> str:
+    """The console lines Klipper prints for PROBE (klippy/extras/probe.py), and for
+    ``DELTA_ANALYZE MANUAL_HEIGHT=height`` after each of the ``manual`` positions
+    (klippy/extras/delta_calibrate.py ``DeltaCalibrate.add_manual_height``)."""
     lines = ["// PROBE_RINGS"]
     for x, y, z in reported:
         lines += ["PROBE", f"// probe: at {x:.3f},{y:.3f} bed will contact at z={z:.6f}", f"// Result is z={z:.6f}"]
+    for x, y, z in (() if manual is None else manual):
+        lines += [f"DELTA_ANALYZE MANUAL_HEIGHT={height:.3f}",
+                  f"// Adding manual height: {x:.3f},{y:.3f},{z:.3f} is actually z={height:.3f}"]
     return "\n".join(lines) + "\n"
 
 
@@ -379,22 +415,28 @@ def pkmcal_object_path(work: str, block: str) -> tuple[dict, float, bool]:
     return out, seconds, refused
 
 
+#: ``identify`` freeing the rail leans with the rest (``--free … --fix auto``, the tutorial's command).
+FREE_LEANS = ("--free", "angle_*,radius_*,arm_*,endstop_*,lean_*", "--fix", "auto")
+
+
 def pkmcal_path(work: str, reported: np.ndarray, arm_prior: np.ndarray | None,
-                *export_args: str) -> tuple[dict, float, bool]:
-    """pkmcal's commands after ``import klipper`` on one printer's probe log: the exported
-    config's ten numbers and the commands' time."""
+                *export_args: str, log: str | None = None, identify_args: tuple = (),
+                keep: bool = False) -> tuple[dict, float, bool]:
+    """pkmcal's commands after ``import klipper`` on one printer's probe log (``log``, else
+    the PROBE lines of ``reported``): the exported config's ten numbers and the commands'
+    time; ``keep``: the calibrated machine file cal.yaml is left for the caller."""
     with open(os.path.join(work, "probe.log"), "w", encoding="utf-8") as fh:
-        fh.write(log_text(reported))
+        fh.write(log_text(reported) if log is None else log)
     t0 = time.perf_counter()
     pkmcal("import", "klipper-probe", os.path.join(work, "probe.log"), "--machine", os.path.join(work, "delta.yaml"),
            "-o", os.path.join(work, "probe.csv"))
     prior = [] if arm_prior is None else [a for t, m in zip("abc", arm_prior)
                                           for a in ("--prior", f"arm_{t}={m:.3f}±{CALIPER_STD}")]
     pkmcal("identify", os.path.join(work, "delta.yaml"), os.path.join(work, "probe.csv"), "--setup",
-           "z-probe-klipper", *prior, "-o", os.path.join(work, "cal.yaml"))
+           "z-probe-klipper", *prior, *identify_args, "-o", os.path.join(work, "cal.yaml"))
     refused = export(work, *export_args)
     seconds = time.perf_counter() - t0
-    for f in ("probe.csv", "cal.yaml"):
+    for f in ("probe.csv",) + (() if keep else ("cal.yaml",)):
         os.remove(os.path.join(work, f))
     cfg = read_exported(os.path.join(work, "out.cfg"))
     os.remove(os.path.join(work, "out.cfg"))
@@ -411,10 +453,21 @@ def volume_grid() -> np.ndarray:
     return np.concatenate([np.c_[xy, np.full(len(xy), z)] for z in np.arange(0.0, 150.0 + 1e-9, 30.0)])
 
 
-def score(truth: Truth, cfg: dict, grid: np.ndarray) -> tuple[float, float]:
+def model_at(truth: Truth, machine, p: np.ndarray) -> np.ndarray:
+    """Where the true printer puts the nozzle when a firmware running pkmcal's ``machine``
+    (its full model, rail leans included: what no firmware holds today) is commanded to
+    ``p`` (N, 3): each carriage the model's travel below its switch, H^fw − λ (the machine's
+    readings are the old firmware's, :class:`pkmcal.mechanisms.linear_delta.LinearDelta`),
+    the true carriages there."""
+    travel = machine.reading_reference[None, :] - machine.ik(p)
+    return truth.nozzle(truth.switch[None, :] - travel, p)
+
+
+def score(truth: Truth, cfg, grid: np.ndarray) -> tuple[float, float]:
     """3-D rms (after the best turn about z and shift in x, y) and first-layer rms (mm) of
-    the true printer running the firmware config ``cfg`` over ``grid``."""
-    q = truth_at(truth, klipper_calibration(cfg), grid)
+    the true printer running the firmware config ``cfg`` (ten numbers; or a pkmcal machine,
+    :func:`model_at`) over ``grid``."""
+    q = model_at(truth, cfg, grid) if hasattr(cfg, "ik") else truth_at(truth, klipper_calibration(cfg), grid)
     # the best planar rigid motion q -> p (2-D Procrustes on x, y; z untouched)
     a, b = q[:, :2] - q[:, :2].mean(0), grid[:, :2] - grid[:, :2].mean(0)
     u, _, vt = np.linalg.svd(a.T @ b)
@@ -428,6 +481,31 @@ def score(truth: Truth, cfg: dict, grid: np.ndarray) -> tuple[float, float]:
 
 # -- the Monte Carlo ------------------------------------------------------------------------------------------------
 
+def tables(hows) -> tuple[dict, dict, dict]:
+    """Empty per-how score lists, failure and refusal counts."""
+    return ({h: {"rms3d": [], "first_layer": [], "solve_s": []} for h in hows}, dict.fromkeys(hows, 0),
+            dict.fromkeys(hows, 0))
+
+
+def attempt(results: dict, failures: dict, how: str, path, *args, **kwargs) -> None:
+    """``results[how] = path(*args, **kwargs)``; a pkmcal command that fails is counted, not fatal."""
+    try:
+        results[how] = path(*args, **kwargs)
+    except RuntimeError as exc:
+        print(f"{how}: {exc}", file=sys.stderr)
+        failures[how] += 1
+
+
+def record(rows: dict, refusals: dict, truth: Truth, results: dict, grid: np.ndarray) -> None:
+    """Each result (config, seconds, refused) scored on ``truth`` into ``rows``."""
+    for how, (cfg, seconds, refused) in results.items():
+        refusals[how] += int(refused)
+        r3, fl = score(truth, cfg, grid)
+        rows[how]["rms3d"].append(r3)
+        rows[how]["first_layer"].append(fl)
+        rows[how]["solve_s"].append(seconds)
+
+
 def rings() -> np.ndarray:
     return np.array([(r * math.cos(a), r * math.sin(a)) for r, n in ((0.0, 1), (25.0, 6), (50.0, 12), (75.0, 18))
                      for a in 2 * math.pi * np.arange(n) / n])
@@ -438,9 +516,7 @@ def run_set(leans: bool, printers: int, seed: int, work: str, grid: np.ndarray) 
     rng_object = np.random.default_rng([seed, int(leans), 1])    # its own stream: the other paths' draws unchanged
     fw0 = klipper_calibration(NOMINAL)
     xy = rings()
-    rows = {h: {"rms3d": [], "first_layer": [], "solve_s": []} for h in HOWS}
-    failures = {h: 0 for h in HOWS}
-    refusals = {h: 0 for h in HOWS}
+    rows, failures, refusals = tables(HOWS)
     for _ in range(printers):
         truth, arms = random_truth(rng, leans)
         reported, _ = probe(truth, fw0, xy, rng)
@@ -449,24 +525,20 @@ def run_set(leans: bool, printers: int, seed: int, work: str, grid: np.ndarray) 
                    "klipper": (*klipper_solve(os.path.join(work, "printer.cfg"), reported), False)}
         cfg, seconds, block = klipper_enhanced(os.path.join(work, "printer.cfg"), truth, rng_object)
         results["klipper_object"] = (cfg, seconds, False)
-        try:
-            results["pkmcal_object"] = pkmcal_object_path(work, block)
-        except RuntimeError as exc:
-            print(f"pkmcal_object: {exc}", file=sys.stderr)
-            failures["pkmcal_object"] += 1
+        attempt(results, failures, "pkmcal_object", pkmcal_object_path, work, block)
         for how, prior, export_args in (("pkmcal_default", None, ()),
                                         ("pkmcal_refit", None, REFIT_ARGS), ("pkmcal_prior", measured, ())):
-            try:
-                results[how] = pkmcal_path(work, reported, prior, *export_args)
-            except RuntimeError as exc:
-                print(f"{how}: {exc}", file=sys.stderr)
-                failures[how] += 1
-        for how, (cfg, seconds, refused) in results.items():
-            refusals[how] += int(refused)
-            r3, fl = score(truth, cfg, grid)
-            rows[how]["rms3d"].append(r3)
-            rows[how]["first_layer"].append(fl)
-            rows[how]["solve_s"].append(seconds)
+            attempt(results, failures, how, pkmcal_path, work, reported, prior, *export_args)
+        record(rows, refusals, truth, results, grid)
+    return summarise(rows, failures, refusals,
+                     {h: "klipper_object" if h == "pkmcal_object" else "klipper" for h in HOWS[2:]
+                      if h != "klipper_object"})
+
+
+def summarise(rows: dict, failures: dict, refusals: dict, against: dict) -> dict:
+    """Per how: medians and worsts of the scores, failures, refusals; and for each how of
+    ``against`` (how → the Klipper how it is compared with) how many printers it is worse on
+    (3-D rms beyond 0.5 µm) and its median improvement (%)."""
     out = {}
     for how, r in rows.items():
         a = {k: np.array(v) for k, v in r.items()}
@@ -477,10 +549,8 @@ def run_set(leans: bool, printers: int, seed: int, work: str, grid: np.ndarray) 
                     "solve_s_median": float(np.median(a["solve_s"])) if len(a["rms3d"]) else None,
                     "failures": failures[how], "refused_then_accepted": refusals[how],
                     "rms3d_mm": [round(v, 6) for v in r["rms3d"]]}
-    for how in HOWS[2:]:
-        if how == "klipper_object":
-            continue
-        k = np.array(rows["klipper_object" if how == "pkmcal_object" else "klipper"]["rms3d"])
+    for how, base in against.items():
+        k = np.array(rows[base]["rms3d"])
         p = np.array(rows[how]["rms3d"])
         if len(p) == len(k):
             out[how]["worse_than_klipper"] = int(np.sum(p > k + 5e-4))
@@ -491,10 +561,178 @@ def run_set(leans: bool, printers: int, seed: int, work: str, grid: np.ndarray) 
     return out
 
 
+#: The second probe height (issue 25 item 6): a gauge block ("1-2-3 block" standing on its
+#: 2-inch side) of this height (mm), ground to BLOCK_STD (mm, one error per printer: the
+#: same block at every place), probed at BLOCK_PLACES with the nozzle-probe and entered
+#: with DELTA_ANALYZE MANUAL_HEIGHT, which Klipper's own solver fits too.
+BLOCK_HEIGHT = 50.8
+BLOCK_STD = 0.005
+#: Where the block stands: the centre and 6 places on each of two rings (mm).
+BLOCK_RINGS = ((0.0, 1), (35.0, 6), (65.0, 6))
+#: The set with leans and a second height: every how on the same probe readings (klipper
+#: and pkmcal_prior: the bed alone; klipper_rods: Klipper with the measured rods typed into
+#: printer.cfg; klipper_block: that and the block's MANUAL_HEIGHTs; pkmcal_block: the block
+#: too, the leans freed, exported; pkmcal_block_full: the same calibration's full model, as a
+#: firmware with rail leans would run it; the *_norods hows: the bed and the block without the
+#: measured rods, printer.cfg's in Klipper, pkmcal freeing rods and leans).
+LEAN_HOWS = ("nominal", "klipper", "klipper_rods", "pkmcal_prior", "klipper_block", "pkmcal_block",
+             "pkmcal_block_full", "volume_fit", "klipper_block_norods", "pkmcal_block_norods")
+#: Compared with: the Klipper how on the same information.
+LEAN_AGAINST = {"pkmcal_prior": "klipper_rods", "pkmcal_block": "klipper_block", "pkmcal_block_full": "klipper_block",
+                "volume_fit": "klipper_block", "pkmcal_block_norods": "klipper_block_norods"}
+#: The set of unequal tower radii (± this, mm; no leans): what the firmware's one radius and
+#: three angles hold exactly.
+UNEQUAL_RADIUS = 2.0
+RADII_HOWS = ("nominal", "klipper", "pkmcal_default", "pkmcal_prior")
+
+
+def volume_fit(machine, grid: np.ndarray, start: dict) -> dict:
+    """Not a pkmcal command: the ten numbers of Klipper's model fitted (scipy's least_squares,
+    from ``start``) to pkmcal's calibrated full ``machine`` over the print volume ``grid``:
+    each carriage's travel below its switch as the firmware computes it (vertical rails,
+    this file's own formula: s = z + √(L² − |p_xy − B|²), switch E + √(L² − R²)) against the
+    machine's (H^fw − λ), with a shift in x, y of the firmware's frame free (it moves a print on
+    the bed; a turn is the three angles together). The best the firmware can hold of what the
+    calibration knows, the leans included, over the volume rather than on the probed points."""
+    from scipy.optimize import least_squares
+
+    def travel(x, p):
+        th = np.radians(x[1:4])
+        foot = np.c_[x[0] * np.cos(th), x[0] * np.sin(th)]
+        s = p[:, None, 2] + np.sqrt(x[4:7][None] ** 2 - ((p[:, None, :2] - foot[None]) ** 2).sum(-1))
+        return (x[7:10] + np.sqrt(x[4:7] ** 2 - x[0] ** 2))[None] - s
+
+    def residual(x):
+        moved = grid + np.r_[x[10], x[11], 0.0][None, :]
+        return (travel(x, grid) - (machine.reading_reference[None, :] - machine.ik(moved))).ravel()
+
+    x0 = np.r_[start["radius"], start["angles"], start["arms"], start["endstops"], 0.0, 0.0]
+    x = least_squares(residual, x0, x_scale="jac").x
+    return {"radius": float(x[0]), "angles": tuple(map(float, x[1:4])), "arms": tuple(map(float, x[4:7])),
+            "endstops": tuple(map(float, x[7:10]))}
+
+
+def with_rods(cfg_text: str, rods) -> str:
+    """printer.cfg with the measured rods typed in (each stepper's ``arm_length``, 3 decimals)."""
+    out = re.sub(r"(?m)^arm_length:.*\n", "", cfg_text)
+    for t, rod in zip("abc", rods):
+        out = out.replace(f"[stepper_{t}]\n", f"[stepper_{t}]\narm_length: {rod:.3f}\n", 1)
+    return out
+
+
+def lean_error_deg(cal_path: str, truth_leans: np.ndarray) -> float:
+    """rms (deg) of the calibrated leans (lean_radial_a, lean_tangential_a, …) less the true ones."""
+    from pkmcal.io.lookup import load_machine
+
+    m = load_machine(cal_path)
+    fitted = np.degrees([m.params[m.param_names.index(f"{k}_{t}")] for t in "abc"
+                         for k in ("lean_radial", "lean_tangential")])
+    return float(np.sqrt(np.mean((fitted - truth_leans) ** 2)))
+
+
+def run_leans_block(printers: int, seed: int, work: str, grid: np.ndarray) -> dict:
+    """The printers of the ``leans`` set (the same draws), each also probed on a gauge block
+    (module docstring) and its rods measured: Klipper's solver and pkmcal on the same readings."""
+    from pkmcal.io.lookup import load_machine
+
+    rng = np.random.default_rng([seed, 1])                      # the leans set's printers and readings
+    rng_block = np.random.default_rng([seed, 1, 2])             # the block's own stream
+    fw0 = klipper_calibration(NOMINAL)
+    xy = rings()
+    places = np.array([(r * math.cos(a), r * math.sin(a)) for r, n in BLOCK_RINGS
+                       for a in 2 * math.pi * np.arange(n) / n])
+    with open(os.path.join(work, "printer.cfg"), encoding="utf-8") as fh:
+        cfg_text = fh.read()
+    rows, failures, refusals = tables(LEAN_HOWS)
+    lean_rms = []
+    true_lean_rms = []
+    for _ in range(printers):
+        truth, arms = random_truth(rng, True)                   # the leans set's draws, in its order
+        reported, bed_steps = probe(truth, fw0, xy, rng)
+        measured = arms + rng.standard_normal(3) * CALIPER_STD
+        block = BLOCK_HEIGHT + rng_block.standard_normal() * BLOCK_STD
+        on_block, steps = probe(truth, fw0, places, rng_block, surface=block)
+        rods_cfg = os.path.join(work, "printer-rods.cfg")
+        with open(rods_cfg, "w", encoding="utf-8") as fh:
+            fh.write(with_rods(cfg_text, measured))
+        manual = [(BLOCK_HEIGHT, st) for st in steps]
+        rods_fw = klipper_calibration(dict(NOMINAL, arms=tuple(float(f"{m:.3f}") for m in measured)))
+        rods_reported = np.array([rods_fw.get_position_from_stable(list(st)) for st in bed_steps])
+        results = {"nominal": (NOMINAL, 0.0, False),
+                   "klipper": (*klipper_solve(os.path.join(work, "printer.cfg"), reported), False),
+                   "klipper_rods": (*klipper_solve(rods_cfg, rods_reported), False),
+                   "klipper_block": (*klipper_solve(rods_cfg, rods_reported, manual), False),
+                   "klipper_block_norods": (*klipper_solve(os.path.join(work, "printer.cfg"), reported, manual),
+                                            False)}
+        attempt(results, failures, "pkmcal_block_norods", pkmcal_path, work, reported, None,
+                log=log_text(reported, on_block, BLOCK_HEIGHT), identify_args=FREE_LEANS)
+        for how, kwargs in (("pkmcal_prior", {}),
+                            ("pkmcal_block", {"log": log_text(reported, on_block, BLOCK_HEIGHT),
+                                              "identify_args": FREE_LEANS, "keep": True})):
+            attempt(results, failures, how, pkmcal_path, work, reported, measured, **kwargs)
+        cal = os.path.join(work, "cal.yaml")
+        if os.path.exists(cal):
+            full = load_machine(cal)
+            results["pkmcal_block_full"] = (full, results["pkmcal_block"][1], False)
+            t0 = time.perf_counter()
+            results["volume_fit"] = (volume_fit(full, grid, results["pkmcal_block"][0]), time.perf_counter() - t0,
+                                     False)
+            true_leans = _true_leans(truth)
+            lean_rms.append(lean_error_deg(cal, true_leans))
+            true_lean_rms.append(float(np.sqrt(np.mean(true_leans ** 2))))
+            os.remove(cal)
+        else:
+            failures["pkmcal_block_full"] += 1
+            failures["volume_fit"] += 1
+        record(rows, refusals, truth, results, grid)
+    out = summarise(rows, failures, refusals, LEAN_AGAINST)
+    out["lean_error_rms_deg_median"] = float(np.median(lean_rms)) if lean_rms else None
+    out["true_lean_rms_deg_median"] = float(np.median(true_lean_rms)) if true_lean_rms else None
+    return out
+
+
+def _true_leans(truth: Truth) -> np.ndarray:
+    """(6,) the true leans (deg) in pkmcal's order per tower: radial (towards the centre),
+    tangential; from the rail directions u = −sin α e_r + cos α sin β e_t + cos α cos β e_z."""
+    out = []
+    for i in range(3):
+        th = math.atan2(truth.base[i, 1], truth.base[i, 0])
+        e_r = np.array([math.cos(th), math.sin(th), 0.0])
+        e_t = np.array([-math.sin(th), math.cos(th), 0.0])
+        al = math.asin(-truth.u[i] @ e_r)
+        be = math.asin((truth.u[i] @ e_t) / math.cos(al))
+        out += [math.degrees(al), math.degrees(be)]
+    return np.array(out)
+
+
+def run_unequal_radii(printers: int, seed: int, work: str, grid: np.ndarray) -> dict:
+    """Printers whose tower radii differ by up to ±UNEQUAL_RADIUS (no leans): Klipper and
+    pkmcal's default path (and with the rods measured) on the same 37 probe heights."""
+    rng = np.random.default_rng([seed, 2])
+    fw0 = klipper_calibration(NOMINAL)
+    xy = rings()
+    rows, failures, refusals = tables(RADII_HOWS)
+    for _ in range(printers):
+        truth, arms = random_truth(rng, False, radius_error=UNEQUAL_RADIUS)
+        reported, _ = probe(truth, fw0, xy, rng)
+        measured = arms + rng.standard_normal(3) * CALIPER_STD
+        results = {"nominal": (NOMINAL, 0.0, False),
+                   "klipper": (*klipper_solve(os.path.join(work, "printer.cfg"), reported), False)}
+        for how, prior in (("pkmcal_default", None), ("pkmcal_prior", measured)):
+            attempt(results, failures, how, pkmcal_path, work, reported, prior)
+        record(rows, refusals, truth, results, grid)
+    return summarise(rows, failures, refusals, {"pkmcal_default": "klipper", "pkmcal_prior": "klipper"})
+
+
+#: The sets of printers, in the order they run.
+SETS = ("no_leans", "leans", "leans_block", "unequal_radii")
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--printers", type=int, default=20, help="simulated printers per set")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--sets", default=",".join(SETS), help="comma-separated sets to run (default: all)")
     args = parse_args(ap, argv, printers=2)
     t0 = time.perf_counter()
     grid = volume_grid()
@@ -504,12 +742,19 @@ def main(argv: list[str] | None = None) -> dict:
         shutil.copy(PRINTER_CFG, os.path.join(work, "printer.cfg"))
         pkmcal("import", "klipper", os.path.join(work, "printer.cfg"), "--name", "bench", "-o",
                os.path.join(work, "delta.yaml"))
-        for name, leans in (("no_leans", False), ("leans", True)):
-            out[name] = run_set(leans, args.printers, args.seed, work, grid)
-            for how in HOWS:
+        runs = {"no_leans": (lambda: run_set(False, args.printers, args.seed, work, grid), HOWS),
+                "leans": (lambda: run_set(True, args.printers, args.seed, work, grid), HOWS),
+                "leans_block": (lambda: run_leans_block(args.printers, args.seed, work, grid), LEAN_HOWS),
+                "unequal_radii": (lambda: run_unequal_radii(args.printers, args.seed, work, grid), RADII_HOWS)}
+        for name in args.sets.split(","):
+            if name not in runs:
+                ap.error(f"--sets: unknown set {name!r} (sets: {', '.join(runs)})")
+            run, hows = runs[name]
+            out[name] = run()
+            for how in hows:
                 r = out[name][how]
-                print(f"{name:9s} {how:15s} 3-D rms median {r['rms3d_median_mm']:.4f} (worst {r['rms3d_worst_mm']:.4f})"
-                      f" mm, first layer median {r['first_layer_median_mm']:.4f} (worst "
+                print(f"{name:13s} {how:17s} 3-D rms median {r['rms3d_median_mm']:.4f} (worst "
+                      f"{r['rms3d_worst_mm']:.4f}) mm, first layer median {r['first_layer_median_mm']:.4f} (worst "
                       f"{r['first_layer_worst_mm']:.4f}) mm, solve {r['solve_s_median']:.3f} s"
                       + (f", worse than Klipper on {r['worse_than_klipper']}, median improvement "
                          f"{r['improvement_over_klipper_pct']:.1f} %" if r.get("improvement_over_klipper_pct")
@@ -517,6 +762,9 @@ def main(argv: list[str] | None = None) -> dict:
                       + (f", export refused (undetermined numbers) and accepted by name on "
                          f"{r['refused_then_accepted']}" if r["refused_then_accepted"] else "")
                       + (f", failed on {r['failures']}" if r["failures"] else ""))
+            if name == "leans_block" and out[name]["lean_error_rms_deg_median"] is not None:
+                print(f"{name:13s} leans fitted by pkmcal_block: rms error {out[name]['lean_error_rms_deg_median']:.4f}"
+                      f" deg (median), the true leans rms {out[name]['true_lean_rms_deg_median']:.4f} deg")
     out["seconds"] = time.perf_counter() - t0
     if args.quick:
         out["quick"] = True

@@ -44,6 +44,9 @@ _SELECTIONS = ("default_30_of_2000", "default_110_of_10000", "cuckoo_30_of_2000"
 _PLANS = ("plan_110_of_100000", "plan_110_of_1000000")
 _DELTA_HOWS = ("nominal", "klipper", "pkmcal_default", "pkmcal_refit", "pkmcal_prior", "klipper_object",
                "pkmcal_object")
+_DELTA_LEAN_HOWS = ("nominal", "klipper", "klipper_rods", "pkmcal_prior", "klipper_block", "pkmcal_block",
+                    "pkmcal_block_full", "volume_fit", "klipper_block_norods", "pkmcal_block_norods")
+_DELTA_RADII_HOWS = ("nominal", "klipper", "pkmcal_default", "pkmcal_prior")
 _MC_SETUPS = ("full-pose-paper1", "indicators-prototype")
 
 #: Per benchmark: the keys (paths into the JSON object) its docstring promises.
@@ -56,7 +59,15 @@ PROMISED: dict[str, list[tuple[str, ...]]] = {
             ("rms3d_median_mm", "rms3d_worst_mm", "first_layer_median_mm", "first_layer_worst_mm", "solve_s_median",
              "failures", "refused_then_accepted"))
     + _each([(s, h) for s in ("no_leans", "leans") for h in _DELTA_HOWS[2:] if h != "klipper_object"],
-            ("worse_than_klipper", "improvement_over_klipper_pct")),
+            ("worse_than_klipper", "improvement_over_klipper_pct"))
+    + _each([("leans_block", h) for h in _DELTA_LEAN_HOWS] + [("unequal_radii", h) for h in _DELTA_RADII_HOWS],
+            ("rms3d_median_mm", "rms3d_worst_mm", "first_layer_median_mm", "first_layer_worst_mm", "solve_s_median",
+             "failures", "refused_then_accepted"))
+    + _each([("leans_block", h) for h in ("pkmcal_prior", "pkmcal_block", "pkmcal_block_full", "volume_fit",
+                                          "pkmcal_block_norods")]
+            + [("unequal_radii", h) for h in ("pkmcal_default", "pkmcal_prior")],
+            ("worse_than_klipper", "improvement_over_klipper_pct"))
+    + [("leans_block", "lean_error_rms_deg_median"), ("leans_block", "true_lean_rms_deg_median")],
     "identification": [(f"{fit}_{f}",) for fit in ("ik_residual", "fk_residual") for f in _FIT_FIGURES]
     + [(f"{fit}_problems",) for fit in ("ik_residual", "fk_residual")]
     + _each([("ik_residual_problems", 0), ("fk_residual_problems", 0)],

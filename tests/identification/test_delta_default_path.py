@@ -41,6 +41,8 @@ from pkmcal.io.setup_file import load_setup
 FILES = Path(__file__).resolve().parents[2] / "docs" / "tutorial-files" / "delta"
 ARMS = ("arm_a", "arm_b", "arm_c")
 LEANS = tuple(f"lean_{k}_{t}" for k in ("radial", "tangential") for t in "abc")
+#: the machine's parameter order (per tower: radial, tangential)
+LEANS_ORDER = (lambda n: (n[-1], "tangential" in n))
 
 
 @pytest.fixture(scope="module")
@@ -104,8 +106,12 @@ def test_identify_and_export_say_what_the_heights_leave_undetermined(printer):
     line = next(ln for ln in res.output.splitlines() if ln.startswith("warning: a common scale"))
     assert "not determined by these measurements (sigma 1.5 %" in line and "--prior 'arm_*=215±0.1'" in line
     assert "this fit held arm_a, arm_b, arm_c at the machine file's values" in line
-    (entry,) = load_machine(str(printer / "plain.yaml")).metadata["calibration"]["undetermined"]
-    assert entry["status"] == "not determined" and entry["held"] == list(ARMS)
+    entry, *slide = load_machine(str(printer / "plain.yaml")).metadata["calibration"]["undetermined"]
+    assert entry["status"] == "not determined" and entry["held"] == list(ARMS) and not entry["placement"]
+    *slide, lean = slide
+    assert [(e["status"], e["placement"], e["note"], e["sigma"]) for e in slide] == [
+        ("unidentifiable", True, True, None)] * 2
+    assert lean["meaning"] == "the rail leans" and lean["note"] and lean["held"] == sorted(LEANS, key=LEANS_ORDER)
     assert entry["sigma"] == pytest.approx(0.0149, rel=0.02) and entry["tolerance"] == 1e-3
     for fmt, mark in (("klipper", "#"), ("marlin", ";")):
         out = _invoke(run, printer, ["export", "plain.yaml", "--format", fmt, "-o", f"plain.{fmt}"])
@@ -120,16 +126,20 @@ def test_identify_and_export_say_what_the_heights_leave_undetermined(printer):
 
     (printer / "back.cfg").write_text("[printer]\nkinematics: delta\n\n" + (printer / "plain.klipper").read_text())
     assert read_klipper(str(printer / "back.cfg")).arms == (215.0, 215.0, 215.0)
-    # with the rods measured, nothing is left undetermined
+    # with the rods measured, nothing that shapes the print is left undetermined: only where it sits on the bed,
+    # said as a note (no warning) by identify and export, and a comment in the file
     res = _invoke(run, printer, ["identify", "delta.yaml", "probe.csv", "--setup", "z-probe-klipper", "--prior",
                                  "arm_*=215±0.1", "-o", "rods.yaml"])
     assert res.exit_code == 0 and "warning: a common scale" not in res.output
-    assert "undetermined" not in load_machine(str(printer / "rods.yaml")).metadata["calibration"]
+    undetermined = load_machine(str(printer / "rods.yaml")).metadata["calibration"]["undetermined"]
+    assert [(e["placement"], e["note"]) for e in undetermined] == [(True, True)] * 2 + [(False, True)]
     out = _invoke(run, printer, ["export", "rods.yaml", "--format", "klipper", "-o", "rods.cfg"])
-    # no comment on what was not determined (the only comment line: how the numbers are rounded)
-    assert out.exit_code == 0 and "warning" not in out.output
-    assert [ln for ln in (printer / "rods.cfg").read_text().splitlines() if ln.startswith("#")] == [
-        f"# pkmcal: {KLIPPER_ROUNDING}"]
+    assert out.exit_code == 0 and "warning" not in out.output, out.output
+    assert "pkmcal: note: where the tower set stands along x on the bed" in out.output
+    comments = [ln for ln in (printer / "rods.cfg").read_text().splitlines() if ln.startswith("#")]
+    assert "measure it by hand" in " ".join(comments) and "sigma unbounded" in " ".join(comments)
+    # nothing on the scale; how the numbers are rounded, as every export says
+    assert not any("a common scale" in ln for ln in comments) and f"# pkmcal: {KLIPPER_ROUNDING}" in comments
 
 
 def test_firmware_sigmas_are_the_covariance_propagated_and_free_of_the_gauge(printer):
@@ -263,3 +273,36 @@ def test_rods_freed_from_heights_are_announced_by_identify_and_refused_by_export
                                  "--accept-undetermined", "arm_*"])
     assert out.exit_code == 0, out.output
     assert ";   arm_b: the measurements do not determine it" in (printer / "r.gcode").read_text()
+
+
+def test_the_lean_advice_is_the_fits_own_sigma_and_the_block_is_seen(printer):
+    """The rail leans' σ that identify's note gives (advice.plane_held_advice, from the design
+    Jacobian at the nominal machine, gauge-free) against an independent one: the engine's
+    covariance of a fit that frees them, gauge fixed, at its solution (the Jacobians differ
+    by the fitted geometry, ~1 % of the radius, and the covariance is not rescaled by χ²:
+    within 10 %). Then the advice's options in the fit's own terms: probing a gauge block
+    (readings of its height at its 13 places) lowers the fitted leans' σ as the note says."""
+    from pkmcal.identification.advice import BLOCK_HEIGHT, block_poses
+    from pkmcal.identification.identifiability import undetermined_directions
+
+    rods = (Prior("arm_*", 215.0, 0.1),)
+    nominal, setup, meas, fit = _fit(printer, free=["angle_*", "radius_*", "arm_*", "endstop_*", "lean_*"],
+                                     fix="auto", priors=rods)
+    fitted = np.degrees(max(fit.std[fit.free.index(n)] for n in LEANS))
+    (lean,) = [e for e in undetermined_directions(nominal, setup, meas.commanded, priors=rods)
+               if e["meaning"] == "the rail leans"]
+    assert lean["held"] == [] and "these measurements determine them to" in lean["text"]
+    assert lean["sigma"] == pytest.approx(fitted, rel=0.1)
+    # the block, measured: its 13 readings of its height added to the campaign, noise-free at the fitted machine
+    poses = block_poses(nominal)
+    assert np.allclose(poses[:, 2], BLOCK_HEIGHT)
+    lam = fit.mechanism.ik(poses)
+    both = Measurements(actuators=np.vstack([meas.actuators, lam]),
+                        readings=np.vstack([meas.readings, np.full((len(poses), 1), BLOCK_HEIGHT)]),
+                        commanded=np.vstack([meas.commanded, poses]))
+    with_block = identify(nominal, setup, both, free=["angle_*", "radius_*", "arm_*", "endstop_*", "lean_*"],
+                          fix="auto", priors=rods)
+    sigma_block = np.degrees(max(with_block.std[with_block.free.index(n)] for n in LEANS))
+    said = float(lean["remedy"].split("MANUAL_HEIGHT): sigma ")[1].split(" deg")[0])
+    assert sigma_block < 0.5 * fitted
+    assert sigma_block == pytest.approx(said, rel=0.1)

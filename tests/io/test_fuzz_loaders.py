@@ -121,7 +121,7 @@ def test_cli_on_random_tables(tmp_path_factory, text, command):
     d = tmp_path_factory.mktemp("cli")
     (d / "in.csv").write_text(text, encoding="utf-8")
     out = d / "out.csv"
-    poses = ["--poses"] if command == "ik" else []     # fk's readings file is its argument
+    poses = ["--poses"] if command == "ik" else []          # fk reads its actuator file as the argument
     res = CliRunner().invoke(cli, [command, "stewart-prototype", *poses, str(d / "in.csv"), "-o", str(out)])
     assert_ok_or_user_error(res, out)
     if res.exit_code == 0:

@@ -236,6 +236,10 @@ def test_plan_prints_the_probe_the_curve_and_the_points_for_a_target():
     assert re.search(r"predicted first-layer error .*16 points [0-9.e-]+ mm \(this plan\)", res.output)
     assert re.search(r"target first-layer sigma 0.003 mm: \d+ points", res.output)
     assert "a common scale of the arm lengths and the radius: not determined" in res.output
+    # and, as identify says them, where the tower set stands and what would see the rail leans
+    assert "where the tower set stands along x on the bed" in res.output
+    assert re.search(r"the rail leans: these measurements determine them to sigma [0-9.]+ deg .* a gauge block "
+                     r"50.8 mm high probed at 13 places", res.output)
     # not for a sensor that is no probe
     res = CliRunner().invoke(cli, ["plan", "stewart-prototype", "--setup", "full-pose-paper1", "--n-poses", "20",
                                    "--format", "klipper"])

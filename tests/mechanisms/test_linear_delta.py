@@ -184,3 +184,28 @@ def test_fk_of_unreachable_readings_is_not_converged():
     lam[0, 0] += 500.0      # one carriage far above the others: the spheres do not meet
     fk = m.fk(lam)
     assert not fk.converged[0] and np.isnan(fk.poses[0]).all()
+
+
+@settings(max_examples=30, deadline=None)
+@given(m=deltas(), seed=st.integers(0, 2**31), axis=st.sampled_from([0, 1]))
+def test_the_tower_shift_moves_the_machine_as_a_whole(m, seed, axis):
+    """LinearDelta.tower_shift (the named direction "where the tower set stands", issue 25):
+    the parameters moved by ε along it read at pose p what the machine read at p − ε e_axis,
+    checked on the IK itself (not its Jacobian). The remainder is second order: ε² times a
+    curvature of λ in p of at most ~1/(arm · sin³ 20°) ~ 0.1/mm here, i.e. ~1e-7 mm at
+    ε = 1e-3 mm, against the shift's own effect of ~ε; leaving out a lean term (β up to 2°)
+    gives ~s·ε·sin β / r ~ 1e-4 mm, an endstop term ~ε."""
+    p = _poses(m, 12, seed)
+    d = m.tower_shift(axis)
+    v = np.array([d.get(n, 0.0) for n in PARAM_NAMES])
+    eps = 1e-3
+    delta = np.zeros(3)
+    delta[axis] = eps
+    moved = m.ik(p - delta)
+    plain = np.max(np.abs(m.ik(p) - moved))
+    err = np.max(np.abs(m.ik(p, m.params + eps * v) - moved))
+    assert plain > 0.1 * eps
+    assert err < 1e-3 * plain, (err, plain)
+    # vertical rails: no lean in it (a direction with a held lean would not be judged)
+    vertical = m.with_params(np.where([n.startswith("lean_") for n in PARAM_NAMES], 0.0, m.params))
+    assert not any(n.startswith("lean_") for n in vertical.tower_shift(axis))

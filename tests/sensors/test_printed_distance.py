@@ -201,12 +201,14 @@ def test_heights_alone_leave_the_scale_open_and_the_distances_fix_it():
     heights = meas.commanded[:-12, :3]
     free = list(KLIPPER_SET)
     z_only = identifiability(FIRMWARE, builtin_setup("z-probe-klipper", FIRMWARE), heights, free=free)
-    (scale,) = z_only.named
+    scale = z_only.named[0]
     assert scale["status"] == "not determined"
     pairs = PosePairs(FIRMWARE)
     both = identifiability(pairs, builtin_setup("printed-distance-klipper", pairs), meas.commanded, free=free)
-    (scale2,) = both.named
+    scale2 = both.named[0]
     assert scale2["status"] == "identified", scale2
+    # distances do not see where the towers stand on the bed either
+    assert [e["status"] for e in both.named[1:]] == ["unidentifiable"] * 2
     assert scale2["sigma"] < scale2["tolerance"] < scale["sigma"]
     # the heights see the scale only weakly (numerically of full rank); what neither sees is the rotation
     # about z and the sideways slide of the towers

@@ -355,8 +355,10 @@ def test_z_heights_alone_do_not_determine_the_arm_scale(tmp_path):
     poses = tmp_path / "P.csv"
     poses.write_text("x,y,z\n" + "\n".join(f"{float(x)!r},{float(y)!r},0.0" for x, y in xy) + "\n")
     rep = identifiability(nominal, setup, np.c_[xy, np.zeros(60)])
-    (scale,) = rep.named
+    scale, shift_x, shift_y = rep.named
     assert scale["meaning"] == "a common scale of the arm lengths and the radius"
+    # the towers' slide on the bed: unseen, said so with its unbounded sigma (issue 25 item 2)
+    assert shift_x["status"] == shift_y["status"] == "unidentifiable" and shift_x["placement"]
     assert scale["status"] == "not determined" and scale["sigma"] > 5e-3
     # the rotation about z (the three tower angles together) is in the unseen span
     N = np.array([[d.get(n, 0.0) for n in rep.names] for d in rep.null_space]).T
@@ -371,6 +373,8 @@ def test_z_heights_alone_do_not_determine_the_arm_scale(tmp_path):
     # a tracker sees lengths: the same poses determine the scale
     tracker = identifiability(nominal, load_setup("laser-tracker", nominal), np.c_[xy, np.full(60, 50.0)])
     assert tracker.named[0]["status"] == "identified"
+    # and, its frame being the machine's, where the towers stand
+    assert [e["status"] for e in tracker.named[1:]] == ["identified"] * 2
     # with the Klipper parameters only, the gauge held, the probe identifies every one of them
     klip = identifiability(nominal, setup, np.c_[xy, np.zeros(60)], free=[n for n in KLIPPER_SET if n not in GAUGE])
     assert klip.identifiable

@@ -188,6 +188,7 @@ def with_calibration_record(result, machine: str, measurements: str, setup_spec:
         record["undetermined"] = [{"meaning": e["meaning"], "status": e["status"], "unit": e["unit"],
                                    "sigma": float(e["sigma"]) if np.isfinite(e["sigma"]) else None,
                                    "tolerance": float(e["tolerance"]), "held": list(e["held"]), "remedy": e["remedy"],
+                                   "placement": bool(e["placement"]), "note": bool(e["note"]),
                                    "text": e["text"]}
                                   for e in undetermined]
     sc = result.screening

@@ -214,8 +214,10 @@ def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None, u
                            f"(setup {recorded[1]}; --no-refit exports the calibrated numbers as they are)", err=True)
                 refit = _refit(machine, recorded[0], recorded[1], None, calibrated)
         comments = _undetermined_lines(machine, accept_undetermined, refit)
+        notes = {str(e.get("text")) for e in ((machine.metadata or {}).get("calibration") or {}).get(
+            "undetermined") or () if e.get("note")}       # where prints sit on the bed, the leans: said
         for line in comments:
-            click.echo(f"pkmcal: warning: {line}", err=True)
+            click.echo(f"pkmcal: {'note' if line in notes else 'warning'}: {line}", err=True)
         text = _delta_firmware_text(machine, fmt, refit, klipper_config, marlin_version, steps_per_mm)
         text = _with_comments(text, comments, "#" if fmt == "klipper" else ";")
     else:
@@ -268,7 +270,8 @@ def _undetermined_lines(machine, accepted: tuple[str, ...], refit=None) -> list[
         else:
             refused.append(line)
     if refused:
-        remedy = next((str(e["remedy"]) for e in record.get("undetermined") or () if e.get("remedy")),
+        remedy = next((str(e["remedy"]) for e in record.get("undetermined") or ()
+                       if e.get("remedy") and not e.get("note")),
                       "add measurements that see it, or a prior on its measured value")
         raise PkmcalError("the export is refused: " + "; ".join(refused) + "; the firmware would hold these numbers "
                           f"as if they were known: {remedy}; or export them anyway with "

@@ -269,7 +269,7 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
                                   "and run again, or write it anyway with --accept-bad-fit (recorded in the file)")
     undetermined = _undetermined(nominal, setup, meas, result, priors) if baseline is None else []
     hints = [f"warning: {w}" for w in clipped_lines] + [f"warning: {c}" for c in causes] + \
-        [f"warning: {e['text']}" for e in undetermined] + \
+        [e["text"] if e["note"] else f"warning: {e['text']}" for e in undetermined] + \
         [f"warning: {line}: 'pkmcal export --format klipper|marlin' will refuse it unless accepted by name "
          f"(--accept-undetermined {n})" for n, line in _firmware_numbers_undetermined(result)]
     if not verdict.acceptable:

@@ -341,9 +341,11 @@ def _probe_facts(plan, setup, target: float | None) -> dict:
     noise.reading, mm, or None), the predicted first-layer error for other numbers of points
     (:func:`pkmcal.planning.plan.height_sigma`: ``first_layer_sigma_mm``, ``[points, mm]``), the
     points for ``target`` (``target``: ``{"sigma_mm", "points"`` (None when not reached),
-    ``"reached_sigma_mm"}``), and what heights cannot see (``undetermined``: the sentences of
-    :func:`~pkmcal.identification.identifiability.describe_named`)."""
-    from pkmcal.identification.identifiability import describe_named, identifiability
+    ``"reached_sigma_mm"}``), and what heights cannot see and what would see it
+    (``undetermined``: the sentences of
+    :func:`~pkmcal.identification.identifiability.undetermined_directions`, the named directions
+    and the rail leans, as ``identify`` says them)."""
+    from pkmcal.identification.identifiability import undetermined_directions
     from pkmcal.planning.plan import height_sigma, points_for_height_sigma
 
     noise = setup.noise.reading_std
@@ -358,9 +360,8 @@ def _probe_facts(plan, setup, target: float | None) -> dict:
         need, tried = points_for_height_sigma(plan, target)
         facts["target"] = {"sigma_mm": float(target), "points": None if need is None else int(need),
                            "reached_sigma_mm": _number(tried[-1][1] if need is None else dict(tried)[need])}
-    facts["undetermined"] = [describe_named(entry) for entry in
-                             identifiability(plan.model.mechanism, setup, plan.poses).named
-                             if entry["status"] != "identified"] if curve else []
+    facts["undetermined"] = [entry["text"] for entry in
+                             undetermined_directions(plan.model.mechanism, setup, plan.poses)] if curve else []
     return facts
 
 

@@ -37,10 +37,25 @@ Options are ranked by rank, then σ_min, then how many named directions they ide
 measure the machine (:data:`~pkmcal.sensors.library.BUILTIN_SETUPS`), at the current poses
 (where each reads there: a Z probe lowered onto the bed);
 for a linear delta, Klipper's printed calibration object (12 distances between printed
-points, :mod:`pkmcal.sensors.printed_distance` on :mod:`pkmcal.mechanisms.pose_pairs`); and
+points, :mod:`pkmcal.sensors.printed_distance` on :mod:`pkmcal.mechanisms.pose_pairs`); for a
+touch probe on a machine that holds parameters on one plane, a gauge block probed at 13
+places (:func:`block_poses`); and
 as many poses again from each of the planners ``default`` and ``random``
 (:func:`pkmcal.planning.plan.plan_poses`, fixed seed), taken where the sensor reads when sent
-there (``Sensor.measured_frames``: a Z probe lowered onto the bed).
+there (``Sensor.measured_frames``: a Z probe lowered onto the bed). A placement direction
+(``NamedDirection.placement``: where a delta's tower set stands on the bed) that no option
+sees is said once, not on every row.
+
+What would determine the parameters a bed holds (issue 25 item 6;
+:func:`plane_held_advice`, which ``identify`` and ``export`` print as a note): a delta's rail
+leans, each one's σ from the covariance on the seen directions of the whitened rows with
+unit-norm columns (:func:`parameter_sigmas`: Σ = D V_r diag(1/s_r²) V_rᵀ D, the same under any
+gauge for a parameter with no part in the unseen directions), for the current rows and with
+each addition a printer owner can make: a gauge block probed at 13 places
+(:func:`block_poses`; Klipper's ``DELTA_ANALYZE MANUAL_HEIGHT``), Klipper's printed object,
+both, a laser tracker at the same poses; the rods measured to ±0.1 mm with each where the
+campaign has no prior on them (without the rods, heights at two levels leave the leans at σ
+0.35° on the tutorial's printer, 0.50° from the bed alone: the leans trade with the scale).
 """
 
 from __future__ import annotations
@@ -62,7 +77,7 @@ PLAN_SEED = 1
 @dataclass(frozen=True)
 class Option:
     """One campaign scored (module docstring): the current one (``kind="current"``) or it with
-    one addition (``"setup"``, ``"printed-distance"``, ``"poses"``)."""
+    one addition (``"setup"``, ``"printed-distance"``, ``"block"``, ``"poses"``)."""
 
     label: str
     kind: str
@@ -116,8 +131,12 @@ class Advice:
                f"value of the identification Jacobian (unit-norm columns, noise-whitened) on the {P - g} of {P} "
                "parameter directions some available measurement sees:"]
 
+        everyone = (self.current,) + tuple(self.options)
+        unseen = [e["meaning"] for e in self.current.named if e.get("placement") and all(
+            f["status"] == "unidentifiable" for o in everyone for f in o.named if f["meaning"] == e["meaning"])]
+
         def row(o: Option, head: str) -> str:
-            words = "; ".join(f"{e['meaning']}: {e['status']}" for e in o.named)
+            words = "; ".join(f"{e['meaning']}: {e['status']}" for e in o.named if e["meaning"] not in unseen)
             g = f"x{o.gain:.3g}" if np.isfinite(o.gain) else "none before"
             sv = (f"smallest singular value {o.sigma_min:.3g} ({g})" if o.rank == o.n_seen else
                   f"smallest non-zero singular value {o.sigma_rank:.3g} ({g})")
@@ -128,6 +147,7 @@ class Advice:
         if self.gauge:
             out.append(f"no available measurement sees {g} direction(s) (a gauge: fix them, e.g. with --fix auto):")
             out.extend(f"  {format_direction(d)}" for d in self.gauge)
+        out.extend(f"no available measurement sees {m} (it only places prints on the bed)" for m in unseen)
         out.extend(f"note: {n}" for n in self.notes)
         return out
 
@@ -198,6 +218,11 @@ def _additions(machine, setup, poses, method, names, notes):
             out.append((f"+ {name} at the same {n} poses", "setup", _eliminated(J, S)))
     if machine.kind == "linear-delta":
         out.append(_printed_object(machine, names))
+    if "touch-probe" in setup.sensor.abilities and machine.held_on_one_plane:
+        block = block_poses(machine)
+        J, _, n = _rows(machine, setup, block, method, names, same_setup=True)
+        out.append((f"+ a gauge block {BLOCK_HEIGHT:g} mm high probed at {n} places (Klipper: DELTA_ANALYZE "
+                    "MANUAL_HEIGHT)", "block", J))
     for alg in PLANNERS:
         from pkmcal.planning.plan import plan_poses
 
@@ -224,6 +249,108 @@ def _printed_object(machine, names):
     J, S, n = _rows(pairs, builtin_setup("printed-distance-klipper", pairs), np.c_[p1, p2], None, names)
     return (f"+ printed distances (Klipper's calibration object, DELTA_ANALYZE: {n} distances)", "printed-distance",
             _eliminated(J, S))
+
+
+#: The second probe height advised for what a bed alone cannot see (a delta's rail leans):
+#: a gauge block ("1-2-3 block" on its 2-inch side, mm) probed at :func:`block_poses`, as
+#: Klipper's ``DELTA_ANALYZE MANUAL_HEIGHT`` enters it.
+BLOCK_HEIGHT = 50.8
+#: The rods measured with calipers (mm, a prior's σ) that the advice adds where none is given.
+ROD_STD = 0.1
+#: How far (mm) a carriage may stray over the print height before a lean counts as undetermined.
+LEAN_STRAY = 0.05
+
+
+def block_poses(machine, height: float = BLOCK_HEIGHT) -> np.ndarray:
+    """(13, 3) where a gauge block of ``height`` is probed: the centre and 6 places on each of
+    two rings at 0.4 and 0.75 of the machine's print radius (its workspace box's x half-width)."""
+    r = 0.5 * float(np.diff(machine.workspace_box()[0])[0])
+    xy = [(0.0, 0.0)] + [(f * r * np.cos(a), f * r * np.sin(a)) for f in (0.4, 0.75)
+                         for a in 2 * np.pi * np.arange(6) / 6]
+    return np.c_[np.array(xy), np.full(len(xy), float(height))]
+
+
+def parameter_sigmas(rows: np.ndarray, names, which) -> dict[str, float]:
+    """σ of each parameter ``which`` (internal units) from the whitened rows (M, P) on
+    ``names``: the covariance on the directions the rows see (unit-norm columns, rank at
+    :data:`RANK_RTOL`), the same for any gauge when the parameter has no part in the unseen
+    directions; inf when it has (1e-6 of the unseen basis vector, unit-norm columns)."""
+    names = list(names)
+    col = np.linalg.norm(rows, axis=0)
+    D = np.where(col > 0, 1.0 / np.where(col > 0, col, 1.0), 1.0)
+    _, s, Vt = np.linalg.svd(rows * D, full_matrices=True)
+    full = np.zeros(len(names))
+    full[:s.size] = s[:len(names)]
+    r = int(np.sum(full > RANK_RTOL * full[0])) if full.size and full[0] > 0 else 0
+    seen, unseen = Vt[:r], Vt[r:]
+    out = {}
+    for n in which:
+        j = names.index(n)
+        if unseen.size and np.max(np.abs(unseen[:, j])) > 1e-6:
+            out[n] = float("inf")
+        else:
+            out[n] = float(D[j] * np.sqrt(np.sum((seen[:, j] / full[:r]) ** 2)))
+    return out
+
+
+def plane_held_advice(machine, setup, rows: np.ndarray, names, poses: np.ndarray, method: str | None,
+                      held=(), rods_given: bool = False) -> dict | None:
+    """What would determine the parameters a machine holds when every reading is on one plane
+    (:attr:`~pkmcal.mechanisms.base.Mechanism.held_on_one_plane`: a delta's rail leans) for a
+    touch probe on a bed, measured (issue 25 item 6): their largest σ from the current whitened
+    ``rows`` on ``names`` (priors included), and with each addition a printer owner can make —
+    a gauge block probed at :func:`block_poses` (Klipper's ``DELTA_ANALYZE MANUAL_HEIGHT``),
+    Klipper's printed object, both, a laser tracker at the same poses — each with the rods
+    measured to ±:data:`ROD_STD` unless ``rods_given``. The tolerance: the lean that strays a
+    carriage :data:`LEAN_STRAY` mm over the machine's height (its workspace box). None when
+    nothing applies. A named-direction entry (``meaning``, ``status``, ``sigma`` in degrees,
+    ``tolerance``, ``remedy``, ``text``, ``note`` True: said, not warned)."""
+    from fnmatch import fnmatchcase
+
+    from pkmcal.sensors.library import builtin_setup
+
+    names = tuple(names)
+    plane = [n for n in names if any(fnmatchcase(n, p) for p in machine.held_on_one_plane)]
+    if not plane or not setup.sensor.reads_one_plane or "touch-probe" not in setup.sensor.abilities:
+        return None
+    arms = [n for n in names if any(fnmatchcase(n, p) for p in machine.held_without_length)]
+    rods = np.zeros((0 if rods_given else len(arms), len(names)))
+    for k, n in enumerate([] if rods_given else arms):
+        rods[k, names.index(n)] = 1.0 / ROD_STD
+    height = float(np.diff(machine.workspace_box()[2])[0])
+    tol = float(np.degrees(np.arctan(LEAN_STRAY / height)))
+
+    def worst(*extra) -> float:
+        return float(np.degrees(max(parameter_sigmas(np.vstack((rows,) + extra), names, plane).values())))
+
+    with np.errstate(invalid="ignore"):
+        block, _, _ = _rows(machine, setup, block_poses(machine), method, names, same_setup=True)
+        printed = _printed_object(machine, names)[2]
+        J, S, _ = _rows(machine, builtin_setup("laser-tracker", machine), poses, None, names)
+    tracker = _eliminated(J, S)
+    now = worst()
+    options = [(f"a gauge block {BLOCK_HEIGHT:g} mm high probed at {len(block)} places (Klipper: DELTA_ANALYZE "
+                "MANUAL_HEIGHT)", worst(rods, block)),
+               ("Klipper's printed object (DELTA_ANALYZE)", worst(rods, printed)),
+               ("both", worst(rods, block, printed)),
+               (f"a laser tracker at these {len(poses)} poses", worst(rods, tracker))]
+    best = min(v for _, v in options)
+    status = "unidentifiable" if not np.isfinite(now) else "identified" if now <= tol else "not determined"
+    was_held = [n for n in plane if n in set(held)]
+    head = ("the rail leans: held at the machine file's values by this fit, as Klipper holds them; freed, these "
+            "measurements would determine them to" if was_held else
+            "the rail leans: these measurements determine them to")
+    amount = "unbounded" if not np.isfinite(now) else f"{now:.2g} deg"
+    text = (f"{head} sigma {amount} (largest of the {len(plane)}; tolerance {tol:.2g} deg: a carriage "
+            f"{LEAN_STRAY:g} mm astray over the {height:.4g} mm height); with "
+            + ("" if rods_given else f"the rods measured to ±{ROD_STD:g} mm and ")
+            + "; ".join(f"{label}: {v:.2g} deg" for label, v in options)
+            + (" — none reaches the tolerance" if best > tol else "")
+            + "; no firmware holds leans (Klipper, Marlin): a lean found is squared on the frame")
+    return {"meaning": "the rail leans", "status": status, "ratio": float("nan"), "sigma": now, "unit": "deg",
+            "tolerance": tol, "tolerance_why": f"a carriage {LEAN_STRAY:g} mm astray over the {height:.4g} mm height",
+            "remedy": "; ".join(f"{label}: sigma {v:.2g} deg" for label, v in options), "direction": {},
+            "placement": False, "note": True, "held": was_held, "text": text}
 
 
 def _score(E: np.ndarray, D: np.ndarray, U: np.ndarray) -> tuple[int, float, float]:
@@ -289,4 +416,5 @@ def advise(machine, setup, poses: np.ndarray, *, method: str | None = None, free
     return Advice(gain(current), tuple(scored), names, gauge, tuple(notes))
 
 
-__all__ = ["Advice", "Option", "PLANNERS", "advise", "where_read"]
+__all__ = ["Advice", "BLOCK_HEIGHT", "Option", "PLANNERS", "advise", "block_poses", "parameter_sigmas",
+           "plane_held_advice", "where_read"]

@@ -42,13 +42,16 @@ engine fits them; columns: the candidate parameters) is analysed as follows.
   :func:`undetermined_directions` judges them on every parameter the machine does not hold
   (what the data can see, not what one fit freed), with the fit's priors as rows, and says
   which of the direction's parameters the fit held (issue 25: what ``identify`` and
-  ``export`` print).
+  ``export`` print), each flagged ``note`` (said, not warned: a placement direction, where a
+  delta's tower set stands on the bed) or not, and for a touch probe on a bed what would
+  determine the rail leans (:func:`pkmcal.identification.advice.plane_held_advice`).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import re
+from fnmatch import fnmatchcase
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -165,8 +168,8 @@ def describe_named(entry: dict) -> str:
         return f"{100 * v:.2g} %" if unit == "1" else f"{v:.3g} {unit}"
 
     if entry["status"] == "unidentifiable":
-        return f"{entry['meaning']}: cannot be seen by these measurements (no reading changes along it); " \
-               f"{entry['remedy']}"
+        return f"{entry['meaning']}: cannot be seen by these measurements (no reading changes along it: sigma " \
+               f"unbounded, tolerance {amount(entry['tolerance'])}); {entry['remedy']}"
     text = (f"sigma {amount(sigma)} with this setup's noise, tolerance {amount(entry['tolerance'])} "
             f"({entry['tolerance_why']}); ratio {entry['ratio']:.2g}")
     if entry["status"] == "identified":
@@ -218,7 +221,7 @@ def named_directions_report(J: np.ndarray, names, directions, *, rtol: float = R
                   else "not determined" if sigma > nd.tolerance else "identified")
         out.append({"meaning": nd.meaning, "status": status, "ratio": ratio, "sigma": sigma, "unit": nd.unit,
                     "tolerance": nd.tolerance, "tolerance_why": nd.tolerance_why, "remedy": nd.remedy,
-                    "direction": dict(nd.direction)})
+                    "direction": dict(nd.direction), "placement": nd.placement})
     return out
 
 
@@ -520,7 +523,12 @@ def undetermined_directions(machine, setup, poses, priors=(), held=(), method: s
         rp = resolve(tuple(getattr(setup, "priors", ()) or ()) + tuple(priors or ()), model.names,
                      model.param_is_angle, model.theta0)
         rows, _ = rp.augment(rows, cand, "")
-        named = named_directions_report(rows, tuple(names[i] for i in cand), directions)
+        cand_names = tuple(names[i] for i in cand)
+        named = named_directions_report(rows, cand_names, directions)
+        from pkmcal.identification.advice import plane_held_advice
+
+        rods_given = any(fnmatchcase(n, pat) for n in rp.names for pat in machine.held_without_length)
+        lean = plane_held_advice(machine, setup, rows, cand_names, poses[ok], method, held, rods_given)
     out = []
     for e in named:
         if e["status"] == "identified":
@@ -528,12 +536,15 @@ def undetermined_directions(machine, setup, poses, priors=(), held=(), method: s
         e = dict(e, held=[n for n in e["direction"] if n in set(held)])
         text = describe_named(e)
         others = [names[i] for i in cand if names[i] in set(held) and names[i] not in e["direction"]]
-        if others:
+        if others and not e["placement"]:
             text += (f" (judged with the {len(others)} parameter(s) this fit held, {', '.join(others[:3])}"
                      f"{', ...' if len(others) > 3 else ''}, free too: what the data alone can tell)")
         if e["held"]:
             text += (f"; this fit held {', '.join(e['held'])} at the machine file's values, so the result is as right "
                      "along it as those values are")
         e["text"] = text
+        e["note"] = e["placement"]
         out.append(e)
+    if lean is not None and lean["status"] != "identified":
+        out.append(lean)
     return out

@@ -130,7 +130,9 @@ class NamedDirection:
     ``unit`` the unit of the amount ("1" for a relative change, "rad", "mm");
     ``tolerance`` the amount's standard deviation beyond which the measurements are said
     not to determine it (with ``tolerance_why``, the reason for that figure);
-    ``remedy`` what measurement or prior would fix it."""
+    ``remedy`` what measurement or prior would fix it; ``placement`` True for a direction
+    that only places the machine's motions as a whole (a delta's tower set slid across the
+    bed): harmless to their shape and size, and no firmware number depends on it."""
 
     meaning: str
     direction: dict
@@ -138,6 +140,7 @@ class NamedDirection:
     tolerance: float
     tolerance_why: str
     remedy: str
+    placement: bool = False
 
 
 class Mechanism(ABC):

@@ -78,6 +78,9 @@ PARAM_NAMES = LAYOUT.names
 PARAM_IS_ANGLE = LAYOUT.is_angle
 #: Klipper's default tower angles (degrees): stepper_a, b, c.
 KLIPPER_TOWER_ANGLES_DEG = (210.0, 330.0, 90.0)
+#: The tower set's slide (mm) beyond which a print sits noticeably off its place on the bed
+#: (the named direction's tolerance, :meth:`LinearDelta.named_directions`).
+TOWER_SHIFT_TOLERANCE = 1.0
 #: FK is converged where the IK of its pose reproduces the readings within this (mm).
 FK_TOL = 1e-9
 param_position = LAYOUT.position
@@ -179,17 +182,53 @@ class LinearDelta(TranslatingMechanism):
     def named_directions(self) -> tuple[NamedDirection, ...]:
         """The common scale ε of the three arms and radii (arm_i += ε L_i, radius_i += ε r_i):
         what Z-probe heights barely see (issue 13; Klipper's DELTA_CALIBRATE leaves the arms
-        alone without DELTA_ANALYZE's printed distances)."""
+        alone without DELTA_ANALYZE's printed distances); and the slide of the tower set in x
+        and in y (:meth:`tower_shift`), which no height on a flat bed sees (issue 25 item 2)."""
         g = _towers(self.rho)
         direction = {f"arm_{t}": float(g["arm"][i]) for i, t in enumerate(TOWERS)}
         direction.update({f"radius_{t}": float(g["radius"][i]) for i, t in enumerate(TOWERS)})
         arm = float(np.mean(g["arm"]))
-        return (NamedDirection(
+        scale = NamedDirection(
             meaning="a common scale of the arm lengths and the radius", direction=direction, unit="1",
             tolerance=1e-3,
             tolerance_why=f"0.1 % of the size, {1e-3 * arm:.2g} mm of a {arm:.4g} mm arm: a 100 mm print 0.1 mm off",
             remedy="add measurements that see a length (printed-object distances, a ballbar, a position sensor) or "
-                   "priors on the measured arm lengths, e.g. --prior 'arm_*=" + f"{arm:.6g}" + "±0.1'"),)
+                   "priors on the measured arm lengths, e.g. --prior 'arm_*=" + f"{arm:.6g}" + "±0.1'")
+        shifts = tuple(NamedDirection(
+            meaning=f"where the tower set stands along {axis} on the bed (the firmware's origin; the probe's "
+                    f"{axis}_offset likewise)", direction=self.tower_shift(k), unit="mm",
+            tolerance=TOWER_SHIFT_TOLERANCE,
+            tolerance_why=f"a print placed {TOWER_SHIFT_TOLERANCE:g} mm off on the bed",
+            remedy="harmless to the print's shape and size (it moves prints on the bed as a whole; export puts the "
+                   f"firmware's origin at the towers' centre); heights cannot check the probe's {axis}_offset either: "
+                   "measure it by hand (the nozzle and the probe over one mark on the bed); to place prints exactly, "
+                   "measure a printed mark from the bed's edge, or the nozzle with a position sensor",
+            placement=True) for k, axis in enumerate("xy"))
+        return (scale,) + shifts
+
+    def tower_shift(self, axis: int) -> dict[str, float]:
+        """The parameter change per mm that slides the tower set by 1 mm along base axis
+        ``axis`` (0: x, 1: y) without changing any reading (first order): the machine moved
+        as a whole, FK'(λ) = FK(λ) + δ. Rail i's foot B_i = r_i e_r(θ_i) moves by δ (dr_i =
+        δ·e_r, dθ_i = δ·e_t / r_i); its direction u_i stays (its leans are measured in the
+        tower's turned frame: dα_i = −dθ_i sin β_i, dβ_i = dθ_i tan α_i cos β_i, zero on a
+        vertical rail and then left out); its switch keeps its rail position S_i, found at the
+        nozzle (0, 0, E_i'): ∂s/∂p = wᵀ/D at the switch gives dE_i = w·δ / w_z, w = C_i − q there."""
+        g = _towers(self.rho)
+        e_r, e_t, u, *_ = _frames(g)
+        _, W = self._switch(g, u, g["radius"][:, None] * e_r)
+        delta = np.zeros(3)
+        delta[axis] = 1.0
+        out: dict[str, float] = {}
+        for i, t in enumerate(TOWERS):
+            dth = float(delta @ e_t[i]) / g["radius"][i]
+            out[f"angle_{t}"] = dth
+            out[f"radius_{t}"] = float(delta @ e_r[i])
+            out[f"endstop_{t}"] = float(W[i] @ delta / W[i, 2])
+            al, be = g["lean_radial"][i], g["lean_tangential"][i]
+            out[f"lean_radial_{t}"] = float(-dth * np.sin(be))
+            out[f"lean_tangential_{t}"] = float(dth * np.tan(al) * np.cos(be))
+        return {n: c for n, c in out.items() if c != 0.0}
 
     def parameter_problem(self) -> tuple[str, str] | None:
         """``(name, why)`` of the first parameter that makes the machine impossible."""
