@@ -25,7 +25,6 @@ import numpy as np
 
 from pkmcal.errors import PkmcalError
 from pkmcal.identification.simulation import perturb_machine, settles_at_equilibrium, simulate_campaign
-from pkmcal.identification.verification import verify
 from pkmcal.cli.import_options import import_options
 from pkmcal.cli.options import check_output, emit, examples, output_option, quiet_option, to_stdout, units_comment_option
 from pkmcal.cli.option_types import SEED, FiniteFloat
@@ -33,7 +32,9 @@ from pkmcal.io.atomic import atomic_write_text
 from pkmcal.io.limits import MAX_MAGNITUDE
 from pkmcal.io.measurements import CLIPPED_POLICIES, measurement_columns
 from pkmcal.io.tables import format_table, read_poses
+from pkmcal.io.json_out import finite_or_null
 from pkmcal.sensors.library import BUILTIN_SETUPS
+from pkmcal.workflow.verify import verify_against_real, verify_measured
 
 
 @click.command("simulate", epilog=examples(
@@ -314,164 +315,17 @@ def verify_cmd(calibrated, meas_path, real_spec, poses, nominal, setup_spec, cal
             if value is not None:
                 raise PkmcalError(f"{name} applies to --real; with --measurements the held-out poses are the rows "
                                   "of HELDOUT.csv")
-        text = _verify_measured(calibrated, meas_path, nominal, setup_spec, calib_meas, clipped or "drop", as_json,
-                                mapping)
-        emit(text, output)
+        report = verify_measured(calibrated, meas_path, nominal=nominal, setup=setup_spec,
+                                 calibration_measurements=calib_meas, clipped=clipped or "drop", mapping=mapping)
+        emit(json.dumps(finite_or_null(report.to_dict()), indent=2, allow_nan=False) + "\n" if as_json
+             else report.format_table() + "\n", output)
         return
     if poses is None:
         raise PkmcalError("--real needs the held-out poses: give --poses HELDOUT.csv")
     for name, value in (("--calibration-measurements", calib_meas), ("--clipped", clipped)):
         if value is not None:
             raise PkmcalError(f"{name} applies to --measurements (measured held-out data), not to --real")
-    from pkmcal.cli.klipper_probe_cmd import single_pose_setup_of
-    from pkmcal.io.lookup import load_machine
-    from pkmcal.io.lookup import load_setup
-
-    cal = load_machine(calibrated)
-    real = load_machine(real_spec)
-    nom = None if nominal is None else load_machine(nominal)
-    for other in (real, nom):
-        if other is not None and other.kind != cal.kind:
-            raise PkmcalError(f"machine '{other.name}' is not of the kind of '{cal.name}' "
-                              f"({other.kind} vs {cal.kind})")
-    setup = sensors = true_sensor = frames = None
-    if settles_at_equilibrium(cal):
-        if setup_spec is None:
-            raise PkmcalError(f"machine '{cal.name}' is redundantly actuated: give --setup SETUP with the "
-                              "'simulation:' stiffness and load the real machine settles under")
-        if compare not in ("auto", "sensor"):
-            raise PkmcalError(f"--compare {compare}: a redundantly actuated machine is verified on what its tracker "
-                              "reads (the tool point); leave out --compare")
-        mode, setup = "tool", load_setup(setup_spec, cal)
-    else:
-        mode = ("sensor" if setup_spec is not None else "aligned") if compare == "auto" else compare
-        if mode == "sensor":
-            if setup_spec is None:
-                raise PkmcalError("--compare sensor compares what the true instrument reads: give it with --setup "
-                                  "TRUE-SETUP.yaml (the setup the measurements were simulated with)")
-            true_sensor = single_pose_setup_of(setup_spec, real).sensor     # printed distances: the probe
-            cal_setup = _identified_setup(calibrated, cal, "--compare sensor")
-            if cal_setup.sensor.kind != true_sensor.kind:
-                raise PkmcalError(f"the true instrument ({setup_spec}) is a '{true_sensor.kind}' sensor, the one "
-                                  f"identified in {calibrated} a '{cal_setup.sensor.kind}' sensor; give the same kind")
-            before_sensor = None
-            if nom is not None:
-                before_sensor = _before_sensor(cal, cal_setup, nom, None, None, mapping)[0]
-            sensors = (cal_setup.sensor, before_sensor)
-        elif setup_spec is not None:
-            raise PkmcalError(f"--setup is the true instrument, whose readings --compare sensor compares; with "
-                              f"--compare {mode} remove it")
-        frames = nom if nom is not None or mode == "commanded" else _nominal_from_record(cal)[0]
-        if frames is not None and frames.kind != cal.kind:
-            frames = None
-    report = verify(cal, real, read_poses(poses, cal, mapping), nominal=nom, ignore_limits=tuple(ignore_limits),
-                    compare=mode, sensors=sensors, true_sensor=true_sensor, frames=frames, setup=setup)
+    report = verify_against_real(calibrated, real_spec, poses, nominal=nominal,
+                                 setup=setup_spec, compare=compare, ignore_limits=tuple(ignore_limits), mapping=mapping)
     text = json.dumps(report.to_dict(), indent=2, allow_nan=False) + "\n" if as_json else report.format_table() + "\n"
     emit(text, output)
-
-
-def _identified_setup(path: str, cal, what: str):
-    """The setup identified with the calibrated machine (its file's ``setup:``) as it reads
-    single poses (a printed-distance calibration: its identified Z probe)."""
-    from pkmcal.cli.klipper_probe_cmd import single_pose_setup_of
-
-    if "setup" not in cal.metadata or not os.path.exists(path):
-        raise PkmcalError(f"{what}: {path} has no identified setup (setup:, written by 'pkmcal identify' since "
-                          "2026-12); recalibrate, or compare without the sensor")
-    return single_pose_setup_of(path, cal)
-
-
-def _nominal_from_record(cal):
-    """The nominal machine the calibration record names, when it is a built-in or a file
-    that still exists; ``(machine or None, why not)``."""
-    from pkmcal.io.lookup import load_machine
-    from pkmcal.mechanisms.library import is_builtin_name
-
-    record = dict(cal.metadata.get("calibration") or {})
-    src = (record.get("inputs") or {}).get("machine") or {}
-    spec = src.get("builtin") or src.get("file")
-    if not isinstance(spec, str):
-        return None, "the calibration record names no nominal machine; give --nominal"
-    if "builtin" in src and is_builtin_name(spec) or os.path.isfile(spec):
-        return load_machine(spec), ""
-    return None, f"the nominal machine of the calibration record ('{spec}') is neither a built-in nor an existing " \
-                 "file; give --nominal"
-
-
-def _before_sensor(cal, cal_setup, nominal, setup, calib_meas, mapping):
-    """``(sensor, note)`` of the nominal machine for 'before': the sensor registered on the
-    calibration data (calibration.before_registration, else a registration on
-    --calibration-measurements), or (None, why); third, with sessions, each session's
-    ((label, sensor), ...) from calibration.before_registration_sessions."""
-    from pkmcal.identification.heldout import register_sensor, sensor_from_values
-
-    record = dict(cal.metadata.get("calibration") or {})
-    stored = record.get("before_registration")
-    if not cal_setup.sensor.default_free:
-        return cal_setup.sensor, "no free sensor parameter: the sensor as the setup gives it", ()
-    if calib_meas is not None:
-        from pkmcal.io.measurements import load_measurements
-
-        base = setup if setup is not None else cal_setup
-        reg = register_sensor(nominal, base, load_measurements(calib_meas, nominal, base, mapping),
-                              what=f"the calibration data ({calib_meas})")
-        return reg.sensor, reg.note, ()
-    if isinstance(stored, dict):
-        per = record.get("before_registration_sessions") or {}
-        sessions = tuple((str(lab), sensor_from_values(cal_setup.sensor, v, "calibration.before_registration_sessions"))
-                         for lab, v in per.items()) if isinstance(per, dict) else ()
-        return (sensor_from_values(cal_setup.sensor, stored, "calibration.before_registration"),
-                f"{', '.join(stored)} registered on the calibration data with the nominal machine held "
-                "(calibration.before_registration" + (", per session" if sessions else "") + ")", sessions)
-    return None, ("the calibrated file has no calibration.before_registration (written by 'pkmcal identify' since "
-                  "2026-12): give --nominal and --calibration-measurements MEAS.csv to register the nominal machine's "
-                  "sensor frames on the calibration data"), ()
-
-
-def _verify_measured(calibrated, meas_path, nominal, setup_spec, calib_meas, clipped, as_json, mapping) -> str:
-    """``verify --measurements``: the text or JSON of the held-out validation."""
-    from pkmcal.cli.klipper_probe_cmd import machine_and_setup
-    from pkmcal.identification.heldout import heldout_validation
-    from pkmcal.io.lookup import load_machine
-    from pkmcal.io.measurements import apply_clipped_policy, load_measurements
-    from pkmcal.io.lookup import load_setup
-    from pkmcal.mechanisms.pose_pairs import read_by
-
-    cal = load_machine(calibrated)
-    if "setup" in cal.metadata:     # read as the identified sensor reads it (pose pairs: printed distances)
-        cal, cal_setup = machine_and_setup(calibrated, calibrated)
-    given = None if setup_spec is None else load_setup(setup_spec, cal)
-    if "setup" in cal.metadata:
-        if given is not None and given.sensor.kind != cal_setup.sensor.kind:
-            raise PkmcalError(f"--setup {setup_spec} has a '{given.sensor.kind}' sensor, {calibrated} was identified "
-                              f"with a '{cal_setup.sensor.kind}' sensor; give the setup of the calibration")
-    elif given is not None:
-        cal, cal_setup = machine_and_setup(calibrated, setup_spec)
-    else:
-        raise PkmcalError(f"{calibrated} has no identified setup (setup:): give the measurement setup with --setup")
-    if settles_at_equilibrium(cal):
-        raise PkmcalError(f"machine '{cal.name}' is redundantly actuated: held-out measurements need FK from the "
-                          "actuator readings alone; verify it against a true machine with --real")
-    notes: list[str] = []
-    if nominal is not None:
-        nom, why = load_machine(nominal), ""
-    else:
-        nom, why = _nominal_from_record(cal)
-    if nom is not None:
-        nom = read_by(nom, cal_setup.sensor)
-        if nom.kind != cal.kind:
-            raise PkmcalError(f"machine '{nom.name}' is not of the kind of '{cal.name}' ({nom.kind} vs {cal.kind})")
-    if calib_meas is not None and nom is None:
-        raise PkmcalError(f"--calibration-measurements registers the nominal machine's sensor frames: {why}")
-    before_sensor, note, before_sessions = (None, why, ()) if nom is None else \
-        _before_sensor(cal, cal_setup, nom, given, calib_meas, mapping)
-    held, found, lines = apply_clipped_policy(load_measurements(meas_path, cal, cal_setup, mapping), cal, clipped)
-    unit = {n: ("deg" if a else "mm") for n, a in zip(cal.actuator_names, cal.actuator_is_angle)}
-    notes.extend(f"warning: {w}" for w in lines)
-    report = heldout_validation(cal, cal_setup, nom, before_sensor, held, source=str(meas_path), before_note=note,
-                                notes=notes, before_sessions=before_sessions, clipped=tuple(c.to_dict(unit[c.actuator]) for c in found))
-    if as_json:
-        from pkmcal.io.json_out import finite_or_null
-
-        return json.dumps(finite_or_null(report.to_dict()), indent=2, allow_nan=False) + "\n"
-    return report.format_table() + "\n"

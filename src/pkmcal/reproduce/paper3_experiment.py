@@ -12,7 +12,7 @@ start by pivoted QR and named in ``identifiability``):
   the commanded poses and the nominal parameters (the engine's ``projection-single``);
 * ``projection-unweighted`` — rows in raw mm and rad (W = I);
 * ``ignore-redundancy``, ``actuator-subset`` — the baselines of paper 3 §1
-  (:mod:`pkmcal.reproduce.paper3_baselines`).
+  (:mod:`pkmcal.identification.baselines`).
 
 :func:`calibration_experiment` is paper 3 §3 in simulation: the real machine settles at
 static equilibrium (:func:`~pkmcal.identification.simulation.simulate_campaign`), each
@@ -31,7 +31,7 @@ from pkmcal.identification.engine import IdentificationResult, identify
 from pkmcal.identification.simulation import SimulationResult, simulate_campaign
 from pkmcal.identification.tool_errors import tool_errors
 from pkmcal.mechanisms.base import Mechanism
-from pkmcal.reproduce.paper3_baselines import BASELINES, baseline_inputs, baseline_result
+from pkmcal.identification.baselines import BASELINES, baseline_inputs, baseline_result
 from pkmcal.sensors.base import MeasurementSetup, NoiseModel, Sensor
 
 #: The paper-3 fits :func:`fit_redundant` knows (the reproduction's and benchmark's rows).
