@@ -378,8 +378,7 @@ def calibrate(machine, setup, measurements, *, method: str | None = None, keep=N
     options : the engine's (``weighted``, ``form``, ``loss``, ``f_scale``, ``reject``,
         ``session_offsets``, ...: :func:`pkmcal.identification.engine.identify`).
     """
-    from pkmcal.identification.baselines import BASELINES, baseline_inputs, baseline_result
-    from pkmcal.identification.engine import identify
+    from pkmcal.identification.baselines import BASELINES, identify_by_method
     from pkmcal.identification.fit_verdict import diagnose, input_causes, judge
     from pkmcal.identification.priors import parse_prior
     from pkmcal.io.measurements import Measurements, apply_clipped_policy, clipped_named_in_errors, load_measurements
@@ -401,29 +400,26 @@ def calibrate(machine, setup, measurements, *, method: str | None = None, keep=N
     if keep is not None and method != "actuator-subset":
         raise PkmcalError("--keep selects the actuators of --method actuator-subset; use them together")
     baseline = method if method in BASELINES else None
-    fit_machine, fit_setup, fit_meas = nominal, setup_, meas
-    if baseline is not None:
-        parts = names_of(keep) if keep is not None and not isinstance(keep, (list, tuple)) else keep
-        if parts is not None and not all(str(k).isdigit() for k in parts):
+    keep_idx = None
+    if keep is not None:
+        parts = names_of(keep) if isinstance(keep, str) else [str(k) for k in keep] or None
+        if parts is not None and not all(k.isdigit() for k in parts):
             raise PkmcalError(f"--keep '{keep}': give actuator numbers separated by commas, e.g. 1,2")
         keep_idx = None if parts is None else [int(k) - 1 for k in parts]
-        fit_machine, fit_setup, fit_meas = baseline_inputs(baseline, nominal, setup_, meas, keep_idx)
-        method = "projection"
     fix_names = names_of(fix)
     if fix_names == ["auto"]:
         fix_names = "auto"
     free_names = names_of(free) if merge_setup_free else free
-    free_fit = merged_free(free_names, fit_setup) if merge_setup_free else free_names
+    # (a baseline changes the setup's noise, not its sensor: the setup's free sensor parameters hold)
+    free_fit = merged_free(free_names, setup_) if merge_setup_free else free_names
     priors = tuple(parse_prior(p) if isinstance(p, str) else p for p in (priors or ()))
 
     def fit(with_priors=True):
-        return identify(fit_machine, fit_setup, fit_meas, method=method, free=free_fit, fix=fix_names,
-                        priors=priors if with_priors else (), **options)
+        return identify_by_method(nominal, setup_, meas, method, keep_idx, free=free_fit, fix=fix_names,
+                                  priors=priors if with_priors else (), **options)
 
     with clipped_named_in_errors(clipped_lines):
         result = fit()
-        if baseline is not None:
-            result = baseline_result(result, nominal, baseline)
         if nominal is not single_machine(nominal):    # pose pairs: the machine file holds the machine
             result = dataclasses.replace(result, mechanism=single_machine(result.mechanism))
         u = result.uncertainty
@@ -456,7 +452,7 @@ def calibrate(machine, setup, measurements, *, method: str | None = None, keep=N
     if hints:
         result = dataclasses.replace(result, warnings=tuple(result.warnings) + tuple(hints))
     return Calibration(result=result, nominal=nominal, nominal_setup=setup_, measurements=meas, read=read,
-                       verdict=verdict, sources=(machine, measurements, setup), fit_setup=fit_setup,
+                       verdict=verdict, sources=(machine, measurements, setup), fit_setup=setup_,
                        clipped=tuple(clipped_found), clipped_lines=tuple(clipped_lines), causes=tuple(causes),
                        baseline=baseline, priors=priors,
                        free_option=None if free_names is None else tuple(free_names),
