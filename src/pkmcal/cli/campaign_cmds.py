@@ -3,8 +3,10 @@
 * ``simulate``: commanded poses → nominal IK → real FK → sensor and encoder readings with
   seeded noise (:func:`pkmcal.identification.simulation.simulate_campaign`; paper 1 §IV,
   paper 2 §5), written as a measurement CSV (:mod:`pkmcal.io.measurements`).
-* ``verify``: pose errors of the real machine commanded through the calibrated (and the
-  nominal) model on held-out poses (:mod:`pkmcal.identification.verification`).
+* ``verify``: measured held-out validation, or pose errors of the real machine commanded
+  through the calibrated (and the nominal) model on held-out poses
+  (:mod:`pkmcal.workflow.verify`: :mod:`pkmcal.identification.heldout`,
+  :mod:`pkmcal.identification.verification`).
 
 Redundantly actuated machines (more actuators than pose coordinates, paper 3) are simulated
 at static equilibrium under the setup's actuator stiffness and tool load, by the same

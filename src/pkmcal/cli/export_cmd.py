@@ -22,7 +22,9 @@
   conventions and calibration metadata (:func:`pkmcal.io.calibration_json.calibration_json`).
 
 Both are deterministic: the same machine file gives the same bytes. Written atomically;
-the output may not be the input file.
+the output may not be the input file. The command checks its options, calls
+:func:`pkmcal.workflow.export.export_machine` (which makes the texts and the refit, and whose
+notes it prints on standard error as they come) and writes.
 """
 
 from __future__ import annotations

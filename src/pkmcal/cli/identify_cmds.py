@@ -7,7 +7,9 @@
   machine, setup and pose set (:mod:`pkmcal.identification.identifiability`).
 
 Everything is read, validated and computed before the output file is written (atomically);
-on a user error nothing is written and the exit code is 2.
+on a user error nothing is written and the exit code is 2. ``identify`` checks its options,
+calls :func:`pkmcal.workflow.calibrate` (the fit, its verdict, the calibrated file, the
+held-out validation and the report are the :class:`~pkmcal.workflow.Calibration`'s) and prints.
 """
 
 from __future__ import annotations
