@@ -19,15 +19,13 @@ import json
 import click
 
 from pkmcal.errors import PkmcalError
-from pkmcal.identification.identifiability import describe_named, format_direction
-from pkmcal.cli._limits import unreachable_notes
 from pkmcal.cli.import_options import import_options
 from pkmcal.cli.main import command_line
 from pkmcal.cli.option_types import FiniteFloat
 from pkmcal.cli.options import DeprecatedArgument, check_output, emit, examples, output_option, poses_file, to_stdout
-from pkmcal.io.tables import read_poses
-from pkmcal.workflow.calibration import calibrate, check_report_dir, merged_free, names_of, write_report
-from pkmcal.workflow.text import fit_summary, result_table
+from pkmcal.workflow.analysis import identifiability_of
+from pkmcal.workflow.calibration import calibrate, check_report_dir, write_report
+from pkmcal.workflow.text import describe_named, fit_summary, format_direction, result_table
 from pkmcal.workflow.vocabulary import (
     BASELINES,
     BUILTIN_SETUPS,
@@ -229,25 +227,11 @@ def identifiability_cmd(machine, poses_arg, setup_spec, poses, method, fix, free
     directions, and a minimal set of parameters to fix (the gauge). JSON keys: n_params,
     rank, singular_values, null_space, fixed, weak, ...
     """
-    from pkmcal.workflow.inputs import machine_and_setup
-    from pkmcal.identification.identifiability import identifiability
-
     poses = poses_file(poses, poses_arg, "identifiability")
-    nominal, setup = machine_and_setup(machine, setup_spec)   # pose pairs for printed distances
-    x = read_poses(poses, nominal, mapping)
-    fix_names = names_of(fix)
-    rep = identifiability(nominal, setup, x, method=method, free=merged_free(names_of(free), setup),
-                          fix=None if fix_names == ["auto"] else fix_names)
-    notes = unreachable_notes(nominal, x, poses)
-    if rep.n_unsolved:
-        notes.append(f"{rep.n_unsolved} of the {len(x)} poses were left out: their readings or pose cannot be "
-                     "computed on this machine (outside the reach of a chain, or the pose does not solve)")
-    advice = None
-    if suggest:   # identification/advice.py: the candidate additions ranked
-        from pkmcal.identification.advice import advise
-
-        advice = advise(nominal, setup, x, method=method, free=merged_free(names_of(free), setup),
-                        fix=None if fix_names == ["auto"] else fix_names)
+    found = identifiability_of(machine, setup_spec, poses, method=method, free=free, fix=fix, suggest=suggest,
+                               mapping=mapping)
+    nominal, setup, x, rep, notes, advice = found.nominal, found.setup, found.poses, found.report, found.notes, \
+        found.advice
     if as_json:
         d = rep.to_dict()
         d["warnings"] = notes
