@@ -57,10 +57,12 @@ def test_objects_and_files_give_the_same_fit(folder, monkeypatch):
     assert from_files.machine.metadata["calibration"]["inputs"]["measurements"]["file"] == "meas.csv"
 
 
-def test_measured_validation_of_the_object_is_that_of_its_file(folder, tmp_path, monkeypatch):
+def test_validation_and_export_of_the_object_are_those_of_its_file(folder, tmp_path, monkeypatch):
     monkeypatch.chdir(folder)
     cal = pkmcal.identify("stewart-prototype", "indicators-prototype", "meas.csv")
     cal.save(tmp_path / "cal.yaml")
+    # its exports are those of the file it saved ('pkmcal export CAL --format json' names the file)
+    assert pkmcal.export(cal, "json") == pkmcal.export(tmp_path / "cal.yaml", "json")
     mine = cal.verify("heldmeas.csv").to_dict()
     theirs = pkmcal.verify(tmp_path / "cal.yaml", heldout="heldmeas.csv").to_dict()
     for when in ("before", "after", "after_reregistered"):

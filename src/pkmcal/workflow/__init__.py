@@ -12,7 +12,9 @@ values:
 * :mod:`~pkmcal.workflow.record`: the calibrated file's record, ``setup:`` and "before";
   :mod:`~pkmcal.workflow.provenance`: dates and input fingerprints;
   :mod:`~pkmcal.workflow.inputs`: a machine as its setup's sensor reads it;
-  :mod:`~pkmcal.workflow.text`: a fit in plain text.
+  :mod:`~pkmcal.workflow.text`: a fit in plain text;
+* :mod:`~pkmcal.workflow.analysis`: what a pose set lets a setup identify (``pkmcal identifiability``);
+  :mod:`~pkmcal.workflow.vocabulary`: the options' closed vocabularies (methods, losses, ...).
 
 The command line (:mod:`pkmcal.cli`) parses options, calls this layer and prints.
 """

@@ -232,6 +232,7 @@ class Calibration:
         from pkmcal.workflow.export import export_machine
 
         options.setdefault("campaign", self)
+        options.setdefault("source", self._cache.get("saved"))     # json's source: the file save() wrote
         return export_machine(self.machine, fmt, **options)
 
     def report_data(self, heldout=None, *, measurement_file: str | None = None, output: str | None = None):
