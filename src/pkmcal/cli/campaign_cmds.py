@@ -1,7 +1,8 @@
 """``pkmcal simulate`` and ``pkmcal verify``: simulated campaigns and held-out verification.
 
 * ``simulate``: commanded poses → nominal IK → real FK → sensor and encoder readings with
-  seeded noise (:func:`pkmcal.identification.simulation.simulate_campaign`; paper 1 §IV,
+  seeded noise (:func:`pkmcal.workflow.simulate.simulate_files`:
+  :func:`pkmcal.identification.simulation.simulate_campaign`; paper 1 §IV,
   paper 2 §5), written as a measurement CSV (:mod:`pkmcal.io.measurements`).
 * ``verify``: measured held-out validation, or pose errors of the real machine commanded
   through the calibrated (and the nominal) model on held-out poses
@@ -20,23 +21,21 @@ a user error nothing is written and the exit code is 2.
 from __future__ import annotations
 
 import json
-import os
 
 import click
-import numpy as np
 
 from pkmcal.errors import PkmcalError
-from pkmcal.identification.simulation import perturb_machine, settles_at_equilibrium, simulate_campaign
 from pkmcal.cli.import_options import import_options
 from pkmcal.cli.options import check_output, emit, examples, output_option, quiet_option, to_stdout, units_comment_option
 from pkmcal.cli.option_types import SEED, FiniteFloat
 from pkmcal.io.atomic import atomic_write_text
 from pkmcal.io.limits import MAX_MAGNITUDE
 from pkmcal.io.measurements import CLIPPED_POLICIES, measurement_columns
-from pkmcal.io.tables import format_table, read_poses
+from pkmcal.io.tables import format_table
 from pkmcal.io.json_out import finite_or_null
-from pkmcal.sensors.library import BUILTIN_SETUPS
+from pkmcal.workflow.simulate import simulate_files
 from pkmcal.workflow.verify import verify_against_real, verify_measured
+from pkmcal.workflow.vocabulary import BUILTIN_SETUPS
 
 
 @click.command("simulate", epilog=examples(
@@ -114,38 +113,16 @@ def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_rea
         check_output(save_real, inputs)
     if output is not None and save_real is not None and output == save_real:
         raise PkmcalError("-o and --save-real name the same file; choose two paths")
-    from pkmcal.io.machine_file import load_machine, machine_to_text
-    from pkmcal.io.lookup import load_setup
+    from pkmcal.io.machine_file import machine_to_text
+    from pkmcal.progress import ProgressBar
 
-    nominal = load_machine(machine)
-    setup = load_setup(setup_spec, nominal)
-    commanded = read_poses(poses, nominal, mapping)
-    if not probe_anywhere and _refuse_off_bed(nominal, setup, commanded, poses):
-        # probe points on the bed: the real nozzle may be found below it (study.printed.BED_LIMITS)
-        from pkmcal.study.printed import bed_limits
-
-        ignore_limits = tuple(dict.fromkeys(tuple(ignore_limits) + bed_limits(nominal)))
-    rng = np.random.default_rng(seed)
-    if random_errors is not None:
-        real = perturb_machine(nominal, random_errors, rng, distribution=error_distribution,
-                       name=f"{nominal.name}-random-{random_errors:g}mm-seed{seed}")
-    else:
-        real = load_machine(real_spec)
-    if real.kind != nominal.kind:
-        raise PkmcalError(f"the real machine '{real.name}' is not of the kind of '{nominal.name}' "
-                          f"({real.kind} vs {nominal.kind})")
-    if session_offsets is not None and n_sessions is None:
-        raise PkmcalError("--session-offsets re-homes the actuators between sessions; give --sessions S too")
-    session_text: list[str] = []
-    if n_sessions is not None:
-        result, session_text = _simulate_sessions(nominal, real, setup, commanded, rng, n_sessions, session_errors,
-                                                  session_offsets, tuple(ignore_limits))
-    else:
-        from pkmcal.progress import ProgressBar
-
-        with ProgressBar("simulate", quiet=quiet, unit="poses") as bar:
-            result = simulate_campaign(nominal, real, setup, commanded, rng, ignore_limits=tuple(ignore_limits),
-                                       progress=bar)
+    done = simulate_files(machine, setup_spec, poses, real=real_spec, random_errors=random_errors,
+                          error_distribution=error_distribution, seed=seed, ignore_limits=tuple(ignore_limits),
+                          n_sessions=n_sessions, session_errors=session_errors, session_offsets=session_offsets,
+                          probe_anywhere=probe_anywhere, mapping=mapping,
+                          progress=lambda: ProgressBar("simulate", quiet=quiet, unit="poses"))
+    nominal, real, setup, commanded, result, session_text = done.nominal, done.real, done.setup, done.commanded, \
+        done.result, done.session_lines
     if len(result.kept) == 0:
         raise PkmcalError(f"the real machine '{real.name}' reaches none of the {len(commanded)} poses of "
                           f"'{poses}' ({'; '.join(sorted(set(result.dropped.values())))}); nothing written")
@@ -168,64 +145,6 @@ def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_rea
     else:
         click.echo(summary)
         click.echo(f"wrote {output}" + (f" and {save_real}" if save_real else ""))
-
-
-#: How far from the bed (mm) a commanded probe point may be and still be read as on it: the
-#: 0.001 mm to which Klipper prints positions (a pose file rounded to 3 decimals is on the bed).
-BED_TOLERANCE_MM = 1e-3
-
-
-def _refuse_off_bed(nominal, setup, commanded: np.ndarray, path: str) -> bool:
-    """A Z probe reads where it touches the bed: refuse the first commanded pose whose probe
-    point the nominal machine puts more than :data:`BED_TOLERANCE_MM` off the bed (the
-    sensor's reading there, :mod:`pkmcal.sensors.z_probe`). Whether the setup is a Z probe
-    (then every pose is on the bed, and the real machine's bed limits are not checked at
-    them, as a study's ``on_bed``: :mod:`pkmcal.study.printed`)."""
-    from pkmcal.study.printed import probes_the_bed
-
-    if not probes_the_bed(setup.sensor):
-        return False
-    with np.errstate(invalid="ignore"):
-        height = setup.sensor.predict(nominal.frame(commanded))[:, 0]
-    off = np.flatnonzero(~(np.abs(height) <= BED_TOLERANCE_MM))
-    if off.size:
-        k = int(off[0])
-        where = ", ".join(f"{n} {v:g}" for n, v in zip(nominal.pose_names, commanded[k]))
-        raise PkmcalError(f"{path}, pose {k + 1} ({where}): the Z probe's point is {height[k]:.4g} mm from the bed "
-                          f"there ({off.size} of {len(commanded)} poses off the bed); a probe reads only where it "
-                          "touches the bed: plan the poses with 'pkmcal plan' (on the bed by default), or give "
-                          "--probe-anywhere for a probe on gauge blocks")
-    return True
-
-
-def _simulate_sessions(nominal, real, setup, commanded, rng, n_sessions: int, errors: float, offsets_mm,
-                       ignore_limits) -> tuple:
-    """``simulate --sessions``: the campaign in sessions (:func:`simulate_sessions`) and the
-    summary lines of each session's true sensor and offsets (file units)."""
-    from pkmcal.identification.simulation import session_sensors_drawn, simulate_sessions
-    from pkmcal.sensors.sessions import SessionSensor, Sessions, session_setup_values
-
-    sensors = session_sensors_drawn(setup.sensor, n_sessions, errors, rng, dict(setup.session_sensors))
-    offsets = None
-    if offsets_mm is not None:
-        if settles_at_equilibrium(nominal):
-            raise PkmcalError("--session-offsets: a redundantly actuated machine settles at equilibrium under its "
-                              "encoders; re-homing is not simulated there")
-        delta = rng.uniform(-offsets_mm, offsets_mm, size=(n_sessions, nominal.n_actuators))
-        offsets = np.where(np.array(nominal.actuator_is_angle, dtype=bool), delta / 1000.0, delta)
-        offsets[0] = 0.0
-    result = simulate_sessions(nominal, real, setup, commanded, sensors, rng, offsets, ignore_limits=ignore_limits)
-    labels = tuple(str(s + 1) for s in range(n_sessions))
-    truth = SessionSensor(sensors, Sessions(labels, np.zeros(0, dtype=np.intp)))
-    values = session_setup_values(truth, None if offsets is None else dict(zip(labels[1:], offsets[1:])),
-                                  nominal.actuator_is_angle)
-    counts = result.sessions.counts()
-    lines = [f"{n_sessions} sessions (column 'session'), true sensor of each (mm, deg):"]
-    for (lab, groups), n in zip(values.items(), counts):
-        parts = [f"{key}: " + (", ".join(f"{k} {v!r}" for k, v in val.items()) if isinstance(val, dict)
-                               else ", ".join(repr(v) for v in val)) for key, val in groups.items()]
-        lines.append(f"  session {lab} ({int(n)} poses): " + "; ".join(parts))
-    return result, lines
 
 
 @click.command("verify", epilog=examples(
