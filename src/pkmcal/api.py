@@ -26,12 +26,12 @@ A campaign from planning to export (docs/api.md has more)::
 from __future__ import annotations
 
 import os
+import types
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     import numpy as np
 
-    from pkmcal.identification.engine import IdentificationResult
     from pkmcal.identification.identifiability import IdentifiabilityReport
     from pkmcal.identification.simulation import SimulationResult
     from pkmcal.identification.verification import VerificationReport
@@ -39,8 +39,9 @@ if TYPE_CHECKING:
     from pkmcal.mechanisms.base import Mechanism
     from pkmcal.planning.plan import Plan
     from pkmcal.sensors.base import MeasurementSetup
+    from pkmcal.workflow.calibration import Calibration
 
-#: Formats of :func:`export` (those of ``pkmcal export --format``).
+#: Formats of :func:`export` (those of ``pkmcal export --format``; :data:`pkmcal.workflow.export.EXPORT_FORMATS`).
 EXPORT_FORMATS = ("linuxcnc", "linuxcnc-ini", "json", "klipper", "marlin")
 
 
@@ -152,72 +153,169 @@ def identifiability(machine: Mechanism, setup: MeasurementSetup, poses: np.ndarr
     return _identifiability(machine, setup, poses, **options)
 
 
-def identify(machine: Mechanism, setup: MeasurementSetup, measurements, **options) -> IdentificationResult:
-    """Identify the parameters (``pkmcal identify``; the ``options`` of
-    :func:`pkmcal.identification.engine.identify`: method, free, fix, loss, reject, priors,
-    ...). ``result.mechanism`` is the calibrated machine (with its covariance),
-    ``result.sensor`` the identified sensor, ``result.parameters`` one
-    :class:`~pkmcal.identification.engine.ParameterEstimate` per parameter in file units.
+def _mapping(columns=None, length_unit=None, angle_unit=None, quaternion_order=None):
+    """The :class:`~pkmcal.io.import_mapping.ImportMapping` of the command line's ``--columns``,
+    ``--length-unit``, ``--angle-unit``, ``--quaternion-order`` (None when none is given)."""
+    from pkmcal.io.import_mapping import make_mapping
+
+    return make_mapping(columns, length_unit, angle_unit, quaternion_order)
+
+
+def identify(machine: Mechanism | str | os.PathLike, setup: MeasurementSetup | str | os.PathLike, measurements, *,
+             bad_fit: str = "warn", columns: str | None = None, length_unit: str | None = None,
+             angle_unit: str | None = None, quaternion_order: str | None = None, **options) -> Calibration:
+    """Identify the parameters (``pkmcal identify``): a :class:`~pkmcal.workflow.Calibration`
+    that can ``save`` the calibrated machine file (the bytes of ``pkmcal identify -o``),
+    ``verify`` on held-out data, ``export`` to a controller (with the firmware-limited refit)
+    and write its ``report``.
+
+    ``machine``, ``setup`` and ``measurements`` are objects or, as on the command line,
+    files and built-in names (recorded in the calibration record with their SHA-256; a
+    measurement file read with ``columns``, ``length_unit``, ``angle_unit``,
+    ``quaternion_order`` as ``--columns`` ...). ``options``: those of
+    :func:`pkmcal.workflow.calibrate` (``method``, ``free``, ``fix``, ``priors`` (strings
+    ``"L0_*=±1"`` too), ``clipped``, ``merge_setup_free`` (``--free``'s rule: the setup's free
+    sensor parameters added), ``name``, ...) and of
+    :func:`pkmcal.identification.engine.identify` (``loss``, ``reject``, ``weighted``, ...).
+    ``calibration.mechanism`` is the calibrated machine (with its covariance),
+    ``calibration.machine`` the same under its new name with its calibration record,
+    ``calibration.sensor`` the identified sensor, ``calibration.parameters`` one
+    :class:`~pkmcal.identification.engine.ParameterEstimate` per parameter in file units
+    (every attribute of the engine's :class:`~pkmcal.identification.engine.IdentificationResult`
+    is the calibration's too).
 
     A fit that ``pkmcal identify`` would refuse to write
     (:mod:`pkmcal.identification.fit_verdict`: χ² beyond what the noise allows, absurd
     geometry, not converged) is returned with a :class:`~pkmcal.errors.PkmcalWarning` that
-    says why; ``result.verdict`` is the verdict on the fit alone (without the readers' notes)."""
-    import warnings
+    says why (``bad_fit="refuse"``: a :class:`~pkmcal.errors.PkmcalError`, as the command);
+    ``calibration.verdict`` is the verdict, and the record says it was written although refused."""
+    from pkmcal.workflow.calibration import calibrate
 
-    from pkmcal.errors import PkmcalWarning
-    from pkmcal.identification.engine import identify as _identify
-    from pkmcal.identification.fit_verdict import input_causes, judge
-    from pkmcal.io.measurements import Measurements
-
-    result = _identify(machine, setup, measurements, **options)
-    causes = input_causes(machine, setup, measurements) if isinstance(measurements, Measurements) else []
-    verdict = judge(result, causes)
-    if not verdict.acceptable:
-        warnings.warn(f"pkmcal identify would refuse this fit: {verdict.with_diagnoses(causes).text()}", PkmcalWarning,
-                      stacklevel=2)
-    return result
+    return calibrate(machine, setup, measurements, bad_fit=bad_fit,
+                     mapping=_mapping(columns, length_unit, angle_unit, quaternion_order), **options)
 
 
-def verify(calibrated: Mechanism, real: Mechanism, poses: np.ndarray, nominal: Mechanism | None = None,
-           **options) -> VerificationReport:
-    """Pose errors of the ``real`` machine commanded through ``calibrated`` (and ``nominal``
-    for "before") on held-out ``poses`` (``pkmcal verify --real``); ``.to_dict()`` the
-    figures of ``verify --json``. A redundantly actuated machine needs ``setup=`` (its
-    ``simulation:`` stiffness and load) and is compared on what its tracker reads."""
+def verify(calibrated, real: Mechanism | str | None = None, poses=None, nominal: Mechanism | str | None = None, *,
+           heldout=None, setup=None, calibration_measurements=None, clipped: str | None = None,
+           columns: str | None = None, length_unit: str | None = None, angle_unit: str | None = None,
+           quaternion_order: str | None = None, **options):
+    """Validate a calibration on held-out data (``pkmcal verify``).
+
+    * ``heldout``: **measured** held-out data (a measurement file or loaded measurements, not
+      used in the fit; read with ``columns`` ... as ``--columns`` ...): each held-out
+      measurement predicted from its actuator readings and compared with what was measured,
+      before / after / after re-registering the instrument (a
+      :class:`~pkmcal.identification.heldout.HeldoutValidation`; ``pkmcal verify
+      --measurements``). ``calibrated`` a :class:`~pkmcal.workflow.Calibration` or a
+      calibrated machine file (its ``setup:``; else give ``setup``); ``nominal``,
+      ``calibration_measurements`` and ``clipped`` as ``--nominal``,
+      ``--calibration-measurements``, ``--clipped``.
+    * ``real`` and ``poses``: pose errors of the ``real`` machine commanded through
+      ``calibrated`` (a machine, a file, or a calibration) and ``nominal`` for "before" on
+      held-out ``poses`` (``pkmcal verify --real``; a file of poses or an array in internal
+      units); ``.to_dict()`` the figures of ``verify --json``. A redundantly actuated machine
+      needs ``setup=`` (its ``simulation:`` stiffness and load) and is compared on what its
+      tracker reads; ``options``: :func:`pkmcal.identification.verification.verify`'s."""
+    from pkmcal.workflow.calibration import Calibration
+
+    mapping = _mapping(columns, length_unit, angle_unit, quaternion_order)
+    given = calibrated
+    campaign = given if isinstance(given, Calibration) else None
+    if heldout is not None:
+        if real is not None or poses is not None:
+            from pkmcal.errors import PkmcalError
+
+            raise PkmcalError("verify: give the held-out measurements or a real machine with poses, not both")
+        if campaign is not None:
+            return campaign.verify(heldout, mapping=mapping, clipped=clipped)
+        from pkmcal.workflow.verify import verify_measured
+
+        return verify_measured(calibrated, heldout, nominal=nominal, setup=setup,
+                               calibration_measurements=calibration_measurements, clipped=clipped or "drop",
+                               mapping=mapping)
+    if campaign is not None:
+        if nominal is not None:
+            options["nominal"] = nominal
+        if setup is not None:
+            options["setup"] = setup
+        return campaign.verify(real=real, poses=poses, **options)
+    if any(isinstance(v, (str, os.PathLike)) for v in (given, real, poses)):
+        from pkmcal.workflow.verify import verify_against_real
+
+        return verify_against_real(calibrated, real, poses, nominal=nominal, setup=setup, mapping=mapping, **options)
     from pkmcal.identification.verification import verify as _verify
 
+    if setup is not None:
+        options["setup"] = setup
     return _verify(calibrated, real, poses, nominal, **options)
 
 
-def export(machine: Mechanism, fmt: str) -> str:
+def export(machine, fmt: str, **options) -> str:
     """The text ``pkmcal export --format fmt`` writes: ``linuxcnc`` (genhexkins HAL lines),
     ``linuxcnc-ini`` (the matching INI sections), ``json``, ``klipper`` or ``marlin`` (linear
-    deltas; the parameters the firmware cannot hold are dropped:
-    :func:`pkmcal.io.delta_firmware.firmware_subset` lists them)."""
+    deltas; Klipper also rotary deltas). ``machine``: a :class:`~pkmcal.workflow.Calibration`,
+    a machine, or a machine file / built-in name. A linear delta with what its firmware cannot
+    hold (rail leans, a tool offset) is exported as the firmware-limited refit, by default on
+    the calibration's own measurements (those the calibration record names, for a machine or
+    a file), as ``pkmcal export`` does; ``options``:
+    :func:`pkmcal.workflow.export.export_machine`'s (``refit=False`` as ``--no-refit``,
+    ``measurements=``, ``heldout=``, ``accept_undetermined=``, ``stroke_margin=``,
+    ``klipper_config=``, ...). What the export says to the user (what the firmware cannot
+    hold, the refit's report) is :attr:`pkmcal.workflow.export.Exported.notes`, from
+    :meth:`pkmcal.workflow.Calibration.export` or :func:`~pkmcal.workflow.export.export_machine`."""
+    from pkmcal.workflow.calibration import Calibration
+    from pkmcal.workflow.export import export_machine
+
+    given = machine
+    if isinstance(given, Calibration):
+        return given.export(fmt, **options).text
+    return export_machine(machine, fmt, **options).text
+
+
+def report(calibration: Calibration, folder: str | os.PathLike, heldout=None, **options):
+    """Write the HTML calibration report of ``calibration`` (``report.html`` and its figures)
+    into ``folder``, as ``pkmcal identify --report`` does; ``heldout``: a held-out validation
+    (:func:`verify`'s) or held-out measurements to validate and show. Returns the written
+    report (``.html`` the page's path)."""
+    return calibration.report(folder, heldout, **options)
+
+
+def study(spec, output: str | os.PathLike, *, seed: int | None = None, trials: int | None = None,
+          workers: int | None = None, dask: str | None = None, resume: bool = False, progress: bool = False,
+          figures: bool = True):
+    """Run a Monte Carlo study of campaigns (``pkmcal study STUDY.yaml -o RESULTS/``): ``spec``
+    a study file or a loaded :class:`~pkmcal.study.schema.StudySpec`; ``seed`` and ``trials``
+    override the file's; ``workers`` local processes, ``dask`` a scheduler address or
+    ``"local"``. Returns the :class:`~pkmcal.study.runner.StudyResult` (``.summary``,
+    ``.columns``), with trials.csv, summary.csv and (``figures``) index.html in ``output``."""
     from pkmcal.errors import PkmcalError
+    from pkmcal.study import load_study, run_study
 
-    if fmt == "linuxcnc":
-        from pkmcal.io.export_linuxcnc import linuxcnc_hal
+    if workers is not None and dask not in (None, "local"):
+        raise PkmcalError("workers applies to local runs and to dask='local'; a Dask scheduler's workers are "
+                          "started with 'dask worker'")
+    if isinstance(spec, (str, os.PathLike)):
+        spec = load_study(spec)
+    if seed is not None:
+        spec = spec.with_seed(seed)
+    if trials is not None:
+        if trials < 1:
+            raise PkmcalError(f"--trials must be at least 1; got {trials}")
+        spec = spec.with_trials(trials)
+    return run_study(spec, os.fspath(output), workers=workers, dask=dask, resume=resume, progress=progress,
+                     figures=figures)
 
-        return linuxcnc_hal(machine)
-    if fmt == "linuxcnc-ini":
-        from pkmcal.io.export_linuxcnc import linuxcnc_ini
 
-        return linuxcnc_ini(machine)
-    if fmt == "json":
-        from pkmcal.io.calibration_json import format_calibration_json
+class CallablePackage(types.ModuleType):
+    """The class of the subpackages that are also API functions of their name
+    (``pkmcal.report``, ``pkmcal.study``): calling the package calls :func:`report` or
+    :func:`study`, so that ``pkmcal.report(...)`` is the API's whether or not the subpackage
+    has been imported (importing it makes it the ``pkmcal`` attribute of that name)."""
 
-        return format_calibration_json(machine)
-    if fmt in ("klipper", "marlin"):
-        if machine.kind != "linear-delta":
-            raise PkmcalError(f"format '{fmt}' exports linear delta printers; '{machine.name}' is a {machine.kind}")
-        from pkmcal.io.delta_firmware import firmware_subset, klipper_text, marlin_text
-
-        fw, _ = firmware_subset(machine)
-        return klipper_text(fw) if fmt == "klipper" else marlin_text(fw)
-    raise PkmcalError(f"unknown export format '{fmt}'; use one of {', '.join(EXPORT_FORMATS)}")
+    def __call__(self, *args, **kwargs):
+        return globals()[self.__name__.rsplit(".", 1)[1]](*args, **kwargs)
 
 
 __all__ = ["EXPORT_FORMATS", "export", "identifiability", "identify", "load_machine", "load_measurements",
-           "load_setup", "perturb", "plan", "save_machine", "save_measurements", "save_setup", "simulate", "verify"]
+           "load_setup", "perturb", "plan", "report", "save_machine", "save_measurements", "save_setup", "simulate",
+           "study", "verify"]

@@ -13,7 +13,8 @@ counterpart (``stewart-prototype-real``: Table 4's joint and offset errors of 1�
    poses file) the plan is that file instead;
 2. **simulate** the campaign on the real machine (:mod:`pkmcal.identification.simulation`,
    paper 1 §IV): q = IK(x_c, ρ_nom), x_r = FK(q, ρ_real), y = h(x_r) + noise;
-3. **identify** the 42 parameters (:func:`pkmcal.identification.engine.identify`, the
+3. **identify** the 42 parameters (:func:`pkmcal.workflow.calibrate`, as ``pkmcal identify``:
+   :func:`pkmcal.identification.engine.identify` and the refusal of a bad fit; the
    method the setup calls for: ``ik-residual`` for full pose, paper 1 §V; ``fk-residual``
    for indicators, paper 2 §3);
 4. **verify** on held-out poses, not used for identification
@@ -165,7 +166,6 @@ def run_demo(config: DemoConfig = DemoConfig(), progress: Progress | None = None
     ``progress(k, n, step, message)`` is called when each of the :data:`STEPS` starts
     (message "") and ends (message: what it did).
     """
-    from pkmcal.identification.engine import identify
     from pkmcal.identification.simulation import simulate_campaign
     from pkmcal.identification.verification import verify
     from pkmcal.io.atomic import atomic_write_text, make_folder
@@ -179,6 +179,7 @@ def run_demo(config: DemoConfig = DemoConfig(), progress: Progress | None = None
     from pkmcal.planning.plan import plan_poses
     from pkmcal.report import write_report
     from pkmcal.report.from_results import error_map, report_data_from_results
+    from pkmcal.workflow.calibration import calibrate
 
     report = progress or (lambda k, n, step, msg: None)
     n_steps = len(STEPS)
@@ -234,7 +235,9 @@ def run_demo(config: DemoConfig = DemoConfig(), progress: Progress | None = None
 
     # 3. identify -----------------------------------------------------------------------
     step("identify")
-    result = identify(nominal, setup, sim.measurements, method=method)
+    # the fit and its verdict as 'pkmcal identify' makes them (a refused fit is an error); every
+    # simulated pose is used (a reading at a stroke's end is the simulation's, not a clipped one)
+    result = calibrate(nominal, setup, sim.measurements, method=method, clipped="keep", where=str(out)).result
     calibrated = result.mechanism.with_params(result.mechanism.params, name=f"{nominal.name}-calibrated",
                                               covariance=result.mechanism.covariance)
     calibrated = replace(calibrated, description=f"{nominal.name} calibrated by pkmcal demo (seed {config.seed}, "

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import pkmcal
-from pkmcal.cli.calibrated_file import with_calibration_record
+from pkmcal.workflow.record import with_calibration_record
 from pkmcal.history.gauge import regauge
 from pkmcal.history.stats import compare
 from pkmcal.history.store import add_calibrated_file
@@ -79,7 +79,7 @@ def test_a_fleet_takes_a_unit_in_another_gauge_in_the_reference_gauge(two_gauges
 def test_a_tight_hexapod_gets_its_null_space_from_poses_of_its_nominal_machine(tmp_path):
     """The calibrated stewart-prototype's home pose sits at a limit (no plan on it): the poses
     come from the nominal machine its record names; the indicators leave 3 directions."""
-    from pkmcal.cli.calibrated_file import identified_setup_of
+    from pkmcal.workflow.record import identified_setup_of
 
     machine = pkmcal.load_machine("stewart-prototype")
     setup = pkmcal.load_setup("indicators-prototype", machine)

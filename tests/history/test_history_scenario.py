@@ -20,7 +20,7 @@ import pytest
 from click.testing import CliRunner
 
 import pkmcal
-from pkmcal.cli.calibrated_file import with_calibration_record
+from pkmcal.workflow.record import with_calibration_record
 from pkmcal.cli.main import cli
 from pkmcal.history.stats import compare, consecutive, fleet
 from pkmcal.history.store import add_calibrated_file, open_history

@@ -91,7 +91,7 @@ def test_a_z_probe_fit_holds_the_arms_and_leans_unless_freed_or_measured(printer
     # which sensor holds what: heights only on the bed, lengths on the bed, lengths anywhere
     assert set(sensor_held_parameters(nominal, setup.sensor)) == set(ARMS + LEANS)
     assert set(sensor_held_parameters(nominal, setup.sensor, ["arm_*=215±0.1"])) == set(LEANS)
-    from pkmcal.cli.klipper_probe_cmd import machine_and_setup
+    from pkmcal.workflow.inputs import machine_and_setup
 
     pairs, printed = machine_and_setup("kossel-mini", "printed-distance-klipper")
     assert set(sensor_held_parameters(pairs, printed.sensor)) == set(LEANS)

@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from scipy.spatial.transform import Rotation
 
-from pkmcal.cli.fit_text import _angle_names
+from pkmcal.workflow.text import _angle_names
 from pkmcal.conventions import euler_to_matrix
 from pkmcal.errors import PkmcalError
 from pkmcal.mechanisms.hexapod import HEXAPOD_PARAM_NAMES

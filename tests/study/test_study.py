@@ -332,6 +332,22 @@ def test_cli_study(tmp_path):
     assert not (tmp_path / "y" / "index.html").exists()
 
 
+def test_study_from_python_is_the_command(tmp_path):
+    """pkmcal.study (the Python API, issue 27) and 'pkmcal study' run the same study: the same
+    trial table byte for byte with the same seed and trial overrides."""
+    import pkmcal
+
+    p = _write(tmp_path, SMALL)
+    run = pkmcal.study(p, tmp_path / "py", seed=5, trials=1, workers=1, figures=False)
+    assert run.trials_run == 2                              # 2 configurations x 1 trial
+    r = CliRunner().invoke(cli, ["study", str(p), "-o", str(tmp_path / "cli"), "-q", "--seed", "5", "--trials", "1",
+                                 "--workers", "1", "--no-figures"])
+    assert r.exit_code == 0, r.output
+    assert (tmp_path / "py" / "trials.csv").read_bytes() == (tmp_path / "cli" / "trials.csv").read_bytes()
+    with pytest.raises(PkmcalError, match="at least 1"):
+        pkmcal.study(p, tmp_path / "z", trials=0)
+
+
 def test_examples_load():
     files = sorted(EXAMPLES.glob("study-*.yaml"))
     assert len(files) >= 3

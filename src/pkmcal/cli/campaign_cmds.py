@@ -1,10 +1,13 @@
 """``pkmcal simulate`` and ``pkmcal verify``: simulated campaigns and held-out verification.
 
 * ``simulate``: commanded poses → nominal IK → real FK → sensor and encoder readings with
-  seeded noise (:func:`pkmcal.identification.simulation.simulate_campaign`; paper 1 §IV,
+  seeded noise (:func:`pkmcal.workflow.simulate.simulate_files`:
+  :func:`pkmcal.identification.simulation.simulate_campaign`; paper 1 §IV,
   paper 2 §5), written as a measurement CSV (:mod:`pkmcal.io.measurements`).
-* ``verify``: pose errors of the real machine commanded through the calibrated (and the
-  nominal) model on held-out poses (:mod:`pkmcal.identification.verification`).
+* ``verify``: measured held-out validation, or pose errors of the real machine commanded
+  through the calibrated (and the nominal) model on held-out poses
+  (:mod:`pkmcal.workflow.verify`: :mod:`pkmcal.identification.heldout`,
+  :mod:`pkmcal.identification.verification`).
 
 Redundantly actuated machines (more actuators than pose coordinates, paper 3) are simulated
 at static equilibrium under the setup's actuator stiffness and tool load, by the same
@@ -18,14 +21,10 @@ a user error nothing is written and the exit code is 2.
 from __future__ import annotations
 
 import json
-import os
 
 import click
-import numpy as np
 
 from pkmcal.errors import PkmcalError
-from pkmcal.identification.simulation import perturb_machine, settles_at_equilibrium, simulate_campaign
-from pkmcal.identification.verification import verify
 from pkmcal.cli.import_options import import_options
 from pkmcal.cli.options import (check_output, emit, examples, option, output_option, quiet_accepted, quiet_option,
                                 to_stdout, units_comment_option)
@@ -33,8 +32,11 @@ from pkmcal.cli.option_types import SEED, FiniteFloat
 from pkmcal.io.atomic import atomic_write_text
 from pkmcal.io.limits import MAX_MAGNITUDE
 from pkmcal.io.measurements import CLIPPED_POLICIES, measurement_columns
-from pkmcal.io.tables import format_table, read_poses
-from pkmcal.sensors.library import BUILTIN_SETUPS
+from pkmcal.io.tables import format_table
+from pkmcal.io.json_out import finite_or_null
+from pkmcal.workflow.simulate import simulate_files
+from pkmcal.workflow.verify import verify_against_real, verify_measured
+from pkmcal.workflow.vocabulary import BUILTIN_SETUPS
 
 
 @click.command("simulate", epilog=examples(
@@ -112,38 +114,16 @@ def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_rea
         check_output(save_real, inputs)
     if output is not None and save_real is not None and output == save_real:
         raise PkmcalError("-o and --save-real name the same file; choose two paths")
-    from pkmcal.io.machine_file import load_machine, machine_to_text
-    from pkmcal.io.lookup import load_setup
+    from pkmcal.io.machine_file import machine_to_text
+    from pkmcal.progress import ProgressBar
 
-    nominal = load_machine(machine)
-    setup = load_setup(setup_spec, nominal)
-    commanded = read_poses(poses, nominal, mapping)
-    if not probe_anywhere and _refuse_off_bed(nominal, setup, commanded, poses):
-        # probe points on the bed: the real nozzle may be found below it (study.printed.BED_LIMITS)
-        from pkmcal.study.printed import bed_limits
-
-        ignore_limits = tuple(dict.fromkeys(tuple(ignore_limits) + bed_limits(nominal)))
-    rng = np.random.default_rng(seed)
-    if random_errors is not None:
-        real = perturb_machine(nominal, random_errors, rng, distribution=error_distribution,
-                       name=f"{nominal.name}-random-{random_errors:g}mm-seed{seed}")
-    else:
-        real = load_machine(real_spec)
-    if real.kind != nominal.kind:
-        raise PkmcalError(f"the real machine '{real.name}' is not of the kind of '{nominal.name}' "
-                          f"({real.kind} vs {nominal.kind})")
-    if session_offsets is not None and n_sessions is None:
-        raise PkmcalError("--session-offsets re-homes the actuators between sessions; give --sessions S too")
-    session_text: list[str] = []
-    if n_sessions is not None:
-        result, session_text = _simulate_sessions(nominal, real, setup, commanded, rng, n_sessions, session_errors,
-                                                  session_offsets, tuple(ignore_limits))
-    else:
-        from pkmcal.progress import ProgressBar
-
-        with ProgressBar("simulate", quiet=quiet, unit="poses") as bar:
-            result = simulate_campaign(nominal, real, setup, commanded, rng, ignore_limits=tuple(ignore_limits),
-                                       progress=bar)
+    done = simulate_files(machine, setup_spec, poses, real=real_spec, random_errors=random_errors,
+                          error_distribution=error_distribution, seed=seed, ignore_limits=tuple(ignore_limits),
+                          n_sessions=n_sessions, session_errors=session_errors, session_offsets=session_offsets,
+                          probe_anywhere=probe_anywhere, mapping=mapping,
+                          progress=lambda: ProgressBar("simulate", quiet=quiet, unit="poses"))
+    nominal, real, setup, commanded, result, session_text = done.nominal, done.real, done.setup, done.commanded, \
+        done.result, done.session_lines
     if len(result.kept) == 0:
         raise PkmcalError(f"the real machine '{real.name}' reaches none of the {len(commanded)} poses of "
                           f"'{poses}' ({'; '.join(sorted(set(result.dropped.values())))}); nothing written")
@@ -166,64 +146,6 @@ def simulate_cmd(machine, real_spec, random_errors, error_distribution, save_rea
     else:
         click.echo(summary)
         click.echo(f"wrote {output}" + (f" and {save_real}" if save_real else ""))
-
-
-#: How far from the bed (mm) a commanded probe point may be and still be read as on it: the
-#: 0.001 mm to which Klipper prints positions (a pose file rounded to 3 decimals is on the bed).
-BED_TOLERANCE_MM = 1e-3
-
-
-def _refuse_off_bed(nominal, setup, commanded: np.ndarray, path: str) -> bool:
-    """A Z probe reads where it touches the bed: refuse the first commanded pose whose probe
-    point the nominal machine puts more than :data:`BED_TOLERANCE_MM` off the bed (the
-    sensor's reading there, :mod:`pkmcal.sensors.z_probe`). Whether the setup is a Z probe
-    (then every pose is on the bed, and the real machine's bed limits are not checked at
-    them, as a study's ``on_bed``: :mod:`pkmcal.study.printed`)."""
-    from pkmcal.study.printed import probes_the_bed
-
-    if not probes_the_bed(setup.sensor):
-        return False
-    with np.errstate(invalid="ignore"):
-        height = setup.sensor.predict(nominal.frame(commanded))[:, 0]
-    off = np.flatnonzero(~(np.abs(height) <= BED_TOLERANCE_MM))
-    if off.size:
-        k = int(off[0])
-        where = ", ".join(f"{n} {v:g}" for n, v in zip(nominal.pose_names, commanded[k]))
-        raise PkmcalError(f"{path}, pose {k + 1} ({where}): the Z probe's point is {height[k]:.4g} mm from the bed "
-                          f"there ({off.size} of {len(commanded)} poses off the bed); a probe reads only where it "
-                          "touches the bed: plan the poses with 'pkmcal plan' (on the bed by default), or give "
-                          "--probe-anywhere for a probe on gauge blocks")
-    return True
-
-
-def _simulate_sessions(nominal, real, setup, commanded, rng, n_sessions: int, errors: float, offsets_mm,
-                       ignore_limits) -> tuple:
-    """``simulate --sessions``: the campaign in sessions (:func:`simulate_sessions`) and the
-    summary lines of each session's true sensor and offsets (file units)."""
-    from pkmcal.identification.simulation import session_sensors_drawn, simulate_sessions
-    from pkmcal.sensors.sessions import SessionSensor, Sessions, session_setup_values
-
-    sensors = session_sensors_drawn(setup.sensor, n_sessions, errors, rng, dict(setup.session_sensors))
-    offsets = None
-    if offsets_mm is not None:
-        if settles_at_equilibrium(nominal):
-            raise PkmcalError("--session-offsets: a redundantly actuated machine settles at equilibrium under its "
-                              "encoders; re-homing is not simulated there")
-        delta = rng.uniform(-offsets_mm, offsets_mm, size=(n_sessions, nominal.n_actuators))
-        offsets = np.where(np.array(nominal.actuator_is_angle, dtype=bool), delta / 1000.0, delta)
-        offsets[0] = 0.0
-    result = simulate_sessions(nominal, real, setup, commanded, sensors, rng, offsets, ignore_limits=ignore_limits)
-    labels = tuple(str(s + 1) for s in range(n_sessions))
-    truth = SessionSensor(sensors, Sessions(labels, np.zeros(0, dtype=np.intp)))
-    values = session_setup_values(truth, None if offsets is None else dict(zip(labels[1:], offsets[1:])),
-                                  nominal.actuator_is_angle)
-    counts = result.sessions.counts()
-    lines = [f"{n_sessions} sessions (column 'session'), true sensor of each (mm, deg):"]
-    for (lab, groups), n in zip(values.items(), counts):
-        parts = [f"{key}: " + (", ".join(f"{k} {v!r}" for k, v in val.items()) if isinstance(val, dict)
-                               else ", ".join(repr(v) for v in val)) for key, val in groups.items()]
-        lines.append(f"  session {lab} ({int(n)} poses): " + "; ".join(parts))
-    return result, lines
 
 
 @click.command("verify", epilog=examples(
@@ -324,187 +246,17 @@ def verify_cmd(calibrated, meas_path, real_spec, poses, nominal, setup_spec, cal
             if value is not None:
                 raise PkmcalError(f"{name} applies to --real; with --measurements the held-out poses are the rows "
                                   "of HELDOUT.csv")
-        text = _verify_measured(calibrated, meas_path, nominal, setup_spec, calib_meas, clipped or "drop", as_json,
-                                mapping)
-        emit(text, output)
+        report = verify_measured(calibrated, meas_path, nominal=nominal, setup=setup_spec,
+                                 calibration_measurements=calib_meas, clipped=clipped or "drop", mapping=mapping)
+        emit(json.dumps(finite_or_null(report.to_dict()), indent=2, allow_nan=False) + "\n" if as_json
+             else report.format_table() + "\n", output)
         return
     if poses is None:
         raise PkmcalError("--real needs the held-out poses: give --poses HELDOUT.csv")
     for name, value in (("--calibration-measurements", calib_meas), ("--clipped", clipped)):
         if value is not None:
             raise PkmcalError(f"{name} applies to --measurements (measured held-out data), not to --real")
-    from pkmcal.cli.klipper_probe_cmd import single_pose_setup_of
-    from pkmcal.io.lookup import load_machine
-    from pkmcal.io.lookup import load_setup
-
-    cal = load_machine(calibrated)
-    real = load_machine(real_spec)
-    nom = None if nominal is None else load_machine(nominal)
-    for other in (real, nom):
-        if other is not None and other.kind != cal.kind:
-            raise PkmcalError(f"machine '{other.name}' is not of the kind of '{cal.name}' "
-                              f"({other.kind} vs {cal.kind})")
-    setup = sensors = true_sensor = frames = None
-    if settles_at_equilibrium(cal):
-        if setup_spec is None:
-            raise PkmcalError(f"machine '{cal.name}' is redundantly actuated: give --setup SETUP with the "
-                              "'simulation:' stiffness and load the real machine settles under")
-        if compare not in ("auto", "sensor"):
-            raise PkmcalError(f"--compare {compare}: a redundantly actuated machine is verified on what its tracker "
-                              "reads (the tool point); leave out --compare")
-        mode, setup = "tool", load_setup(setup_spec, cal)
-    else:
-        mode = ("sensor" if setup_spec is not None else "aligned") if compare == "auto" else compare
-        if mode == "sensor":
-            if setup_spec is None:
-                raise PkmcalError("--compare sensor compares what the true instrument reads: give it with --setup "
-                                  "TRUE-SETUP.yaml (the setup the measurements were simulated with)")
-            true_sensor = single_pose_setup_of(setup_spec, real).sensor     # printed distances: the probe
-            cal_setup = _identified_setup(calibrated, cal, "--compare sensor")
-            if cal_setup.sensor.kind != true_sensor.kind:
-                raise PkmcalError(f"the true instrument ({setup_spec}) is a '{true_sensor.kind}' sensor, the one "
-                                  f"identified in {calibrated} a '{cal_setup.sensor.kind}' sensor; give the same kind")
-            before_sensor = None
-            if nom is not None:
-                before_sensor = _before_sensor(cal, cal_setup, nom, None, None, mapping)[0]
-            sensors = (cal_setup.sensor, before_sensor)
-        elif setup_spec is not None:
-            raise PkmcalError(f"--setup is the true instrument, whose readings --compare sensor compares; with "
-                              f"--compare {mode} remove it")
-        frames = nom if nom is not None or mode == "commanded" else _nominal_from_record(cal)[0]
-        if frames is not None and frames.kind != cal.kind:
-            frames = None
-    held = read_poses(poses, cal, mapping)
-    report = verify(cal, real, held, nominal=nom, ignore_limits=tuple(ignore_limits),
-                    compare=mode, sensors=sensors, true_sensor=true_sensor, frames=frames, setup=setup)
-    iso = None
-    if mode != "tool":     # the held-out poses in the ISO 9283 pattern (plan --pattern iso9283): its figures
-        from pkmcal.identification.iso9283 import verification_figures
-
-        iso = verification_figures(report, cal, held, machine_covariance=cal.covariance,
-                                   identified=cal.metadata.get("setup"))
-    emit(_with_iso(report.to_dict() if as_json else report.format_table(), iso, as_json), output)
-
-
-def _with_iso(out, iso, as_json: bool) -> str:
-    """The verification's JSON (dict) or table (text) with the ISO 9283 figures (key
-    'iso9283') or the ISO 230-4 circle's ('iso230_4'), or why the pattern's figures could
-    not be computed."""
-    if as_json:
-        from pkmcal.io.json_out import finite_or_null
-
-        if iso is not None:
-            out["iso9283" if isinstance(iso, str) else iso.json_key] = iso if isinstance(iso, str) else iso.to_dict()
-        return json.dumps(finite_or_null(out), indent=2, allow_nan=False) + "\n"
-    if iso is not None:
-        out += "\n" + (f"ISO 9283: not computed: {iso}" if isinstance(iso, str) else iso.format_table())
-    return out + "\n"
-
-
-def _identified_setup(path: str, cal, what: str):
-    """The setup identified with the calibrated machine (its file's ``setup:``) as it reads
-    single poses (a printed-distance calibration: its identified Z probe)."""
-    from pkmcal.cli.klipper_probe_cmd import single_pose_setup_of
-
-    if "setup" not in cal.metadata or not os.path.exists(path):
-        raise PkmcalError(f"{what}: {path} has no identified setup (setup:, written by 'pkmcal identify' since "
-                          "2026-12); recalibrate, or compare without the sensor")
-    return single_pose_setup_of(path, cal)
-
-
-def _nominal_from_record(cal):
-    """The nominal machine the calibration record names, when it is a built-in or a file
-    that still exists; ``(machine or None, why not)``."""
-    from pkmcal.io.lookup import load_machine
-    from pkmcal.mechanisms.library import is_builtin_name
-
-    record = dict(cal.metadata.get("calibration") or {})
-    src = (record.get("inputs") or {}).get("machine") or {}
-    spec = src.get("builtin") or src.get("file")
-    if not isinstance(spec, str):
-        return None, "the calibration record names no nominal machine; give --nominal"
-    if "builtin" in src and is_builtin_name(spec) or os.path.isfile(spec):
-        return load_machine(spec), ""
-    return None, f"the nominal machine of the calibration record ('{spec}') is neither a built-in nor an existing " \
-                 "file; give --nominal"
-
-
-def _before_sensor(cal, cal_setup, nominal, setup, calib_meas, mapping):
-    """``(sensor, note)`` of the nominal machine for 'before': the sensor registered on the
-    calibration data (calibration.before_registration, else a registration on
-    --calibration-measurements), or (None, why); third, with sessions, each session's
-    ((label, sensor), ...) from calibration.before_registration_sessions."""
-    from pkmcal.identification.heldout import register_sensor, sensor_from_values
-
-    record = dict(cal.metadata.get("calibration") or {})
-    stored = record.get("before_registration")
-    if not cal_setup.sensor.default_free:
-        return cal_setup.sensor, "no free sensor parameter: the sensor as the setup gives it", ()
-    if calib_meas is not None:
-        from pkmcal.io.measurements import load_measurements
-
-        base = setup if setup is not None else cal_setup
-        reg = register_sensor(nominal, base, load_measurements(calib_meas, nominal, base, mapping),
-                              what=f"the calibration data ({calib_meas})")
-        return reg.sensor, reg.note, ()
-    if isinstance(stored, dict):
-        per = record.get("before_registration_sessions") or {}
-        sessions = tuple((str(lab), sensor_from_values(cal_setup.sensor, v, "calibration.before_registration_sessions"))
-                         for lab, v in per.items()) if isinstance(per, dict) else ()
-        return (sensor_from_values(cal_setup.sensor, stored, "calibration.before_registration"),
-                f"{', '.join(stored)} registered on the calibration data with the nominal machine held "
-                "(calibration.before_registration" + (", per session" if sessions else "") + ")", sessions)
-    return None, ("the calibrated file has no calibration.before_registration (written by 'pkmcal identify' since "
-                  "2026-12): give --nominal and --calibration-measurements MEAS.csv to register the nominal machine's "
-                  "sensor frames on the calibration data"), ()
-
-
-def _verify_measured(calibrated, meas_path, nominal, setup_spec, calib_meas, clipped, as_json, mapping) -> str:
-    """``verify --measurements``: the text or JSON of the held-out validation."""
-    from pkmcal.cli.klipper_probe_cmd import machine_and_setup
-    from pkmcal.identification.heldout import heldout_validation
-    from pkmcal.io.lookup import load_machine
-    from pkmcal.io.measurements import apply_clipped_policy, load_measurements
-    from pkmcal.io.lookup import load_setup
-    from pkmcal.mechanisms.pose_pairs import read_by
-
-    cal = load_machine(calibrated)
-    if "setup" in cal.metadata:     # read as the identified sensor reads it (pose pairs: printed distances)
-        cal, cal_setup = machine_and_setup(calibrated, calibrated)
-    given = None if setup_spec is None else load_setup(setup_spec, cal)
-    if "setup" in cal.metadata:
-        if given is not None and given.sensor.kind != cal_setup.sensor.kind:
-            raise PkmcalError(f"--setup {setup_spec} has a '{given.sensor.kind}' sensor, {calibrated} was identified "
-                              f"with a '{cal_setup.sensor.kind}' sensor; give the setup of the calibration")
-    elif given is not None:
-        cal, cal_setup = machine_and_setup(calibrated, setup_spec)
-    else:
-        raise PkmcalError(f"{calibrated} has no identified setup (setup:): give the measurement setup with --setup")
-    if settles_at_equilibrium(cal):
-        raise PkmcalError(f"machine '{cal.name}' is redundantly actuated: held-out measurements need FK from the "
-                          "actuator readings alone; verify it against a true machine with --real")
-    notes: list[str] = []
-    if nominal is not None:
-        nom, why = load_machine(nominal), ""
-    else:
-        nom, why = _nominal_from_record(cal)
-    if nom is not None:
-        nom = read_by(nom, cal_setup.sensor)
-        if nom.kind != cal.kind:
-            raise PkmcalError(f"machine '{nom.name}' is not of the kind of '{cal.name}' ({nom.kind} vs {cal.kind})")
-    if calib_meas is not None and nom is None:
-        raise PkmcalError(f"--calibration-measurements registers the nominal machine's sensor frames: {why}")
-    before_sensor, note, before_sessions = (None, why, ()) if nom is None else \
-        _before_sensor(cal, cal_setup, nom, given, calib_meas, mapping)
-    held, found, lines = apply_clipped_policy(load_measurements(meas_path, cal, cal_setup, mapping), cal, clipped)
-    unit = {n: ("deg" if a else "mm") for n, a in zip(cal.actuator_names, cal.actuator_is_angle)}
-    notes.extend(f"warning: {w}" for w in lines)
-    report = heldout_validation(cal, cal_setup, nom, before_sensor, held, source=str(meas_path), before_note=note,
-                                notes=notes, before_sessions=before_sessions, clipped=tuple(c.to_dict(unit[c.actuator]) for c in found))
-    from pkmcal.identification.iso230_4 import heldout_circle
-    from pkmcal.identification.iso9283 import heldout_figures
-
-    iso = heldout_figures(cal, cal_setup, held, identified=cal.metadata.get("setup"), machine_covariance=cal.covariance)
-    if iso is None:       # a ballbar's circle test (plan --algorithm circle)
-        iso = heldout_circle(cal, cal_setup, held)
-    return _with_iso(report.to_dict() if as_json else report.format_table(), iso, as_json)
+    report = verify_against_real(calibrated, real_spec, poses, nominal=nominal,
+                                 setup=setup_spec, compare=compare, ignore_limits=tuple(ignore_limits), mapping=mapping)
+    emit(json.dumps(finite_or_null(report.to_dict()), indent=2, allow_nan=False) + "\n" if as_json
+         else report.format_table() + "\n", output)

@@ -85,7 +85,7 @@ def compensate_cmd(calibrated, measurements, heldout_path, setup_spec, field, co
     --klipper-mesh, as Klipper's bed_mesh profile. Nothing is written when it is rejected
     (exit code 0: a rejection is an answer).
     """
-    from pkmcal.cli.klipper_probe_cmd import machine_and_setup
+    from pkmcal.workflow.inputs import machine_and_setup
     from pkmcal.compensation.files import klipper_block, klipper_profile, save_correction
     from pkmcal.compensation.fit import compensate
     from pkmcal.io.atomic import atomic_write_text, check_output_path

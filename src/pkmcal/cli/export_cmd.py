@@ -22,7 +22,9 @@
   conventions and calibration metadata (:func:`pkmcal.io.calibration_json.calibration_json`).
 
 Both are deterministic: the same machine file gives the same bytes. Written atomically;
-the output may not be the input file.
+the output may not be the input file. The command checks its options, calls
+:func:`pkmcal.workflow.export.export_machine` (which makes the texts and the refit, and whose
+notes it prints on standard error as they come) and writes.
 """
 
 from __future__ import annotations
@@ -35,13 +37,7 @@ import click
 from pkmcal.cli.options import check_output, emit, examples, option, output_option, quiet_accepted, to_stdout
 from pkmcal.cli.option_types import FiniteFloat
 from pkmcal.errors import PkmcalError
-# the JSON record moved to pkmcal.io.calibration_json; the names stay importable from here
-from pkmcal.io.calibration_json import (  # noqa: F401
-    CONVENTIONS,
-    JSON_FORMAT_VERSION,
-    calibration_json,
-    format_calibration_json,
-)
+from pkmcal.workflow.export import export_machine
 
 @click.command("export", epilog=examples(
     "pkmcal export calibrated.yaml --format linuxcnc -o kinematics.hal",
@@ -181,47 +177,12 @@ def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None, u
         check_output(ini, [calibrated] + ([update_ini] if update_ini is not None else []))
         if output is not None and os.path.abspath(ini) == os.path.abspath(output):
             raise PkmcalError("-o and --ini name the same file; choose two paths")
-    from pkmcal.io.lookup import load_machine
-
-    machine = load_machine(calibrated)
-    ini_text = None
-    if fmt == "linuxcnc":
-        from pkmcal.io import export_linuxcnc as ex
-
-        unit = ex.ini_units(update_ini) if update_ini is not None else None
-        text = ex.linuxcnc_hal(machine, unit, stroke_margin)
-        if update_ini is not None:
-            ini_text = ex.updated_ini(update_ini, machine, stroke_margin)
-        elif ini is not None:
-            ini_text = ex.linuxcnc_ini(machine, unit, stroke_margin)
-        else:                               # the HAL file alone: its comments give the home, so say it
-            try:
-                ex.check_home(machine, ex.joint_settings(machine, ex.export_unit(machine)[1], stroke_margin))
-            except PkmcalError as exc:
-                click.echo(f"pkmcal: warning: {exc}", err=True)
-        for line in ex.home_warnings(machine):
-            click.echo(f"pkmcal: warning: {line}", err=True)
-        _rounding_note(ex.LINUXCNC_ROUNDING, machine, ex.rounded_machine(machine, unit), "the strut lengths")
-    elif fmt in ("klipper", "marlin"):
-        refit = None
-        if measurements is not None:
-            refit = _refit(machine, measurements, setup_spec, heldout, calibrated)
-        elif not no_refit:
-            recorded = _recorded_measurements(machine, calibrated)
-            if recorded is not None:
-                check_output(output, [recorded[0]])
-                click.echo(f"pkmcal: note: refitting for the firmware on the calibration's measurements {recorded[0]} "
-                           f"(setup {recorded[1]}; --no-refit exports the calibrated numbers as they are)", err=True)
-                refit = _refit(machine, recorded[0], recorded[1], None, calibrated)
-        comments = _undetermined_lines(machine, accept_undetermined, refit)
-        notes = {str(e.get("text")) for e in ((machine.metadata or {}).get("calibration") or {}).get(
-            "undetermined") or () if e.get("note")}       # where prints sit on the bed, the leans: said
-        for line in comments:
-            click.echo(f"pkmcal: {'note' if line in notes else 'warning'}: {line}", err=True)
-        text = _delta_firmware_text(machine, fmt, refit, klipper_config, marlin_version, steps_per_mm)
-        text = _with_comments(text, comments, "#" if fmt == "klipper" else ";")
-    else:
-        text = format_calibration_json(machine, source=os.fspath(calibrated))
+    done = export_machine(calibrated, fmt, ini=ini is not None, update_ini=update_ini, stroke_margin=stroke_margin,
+                          measurements=measurements, setup=setup_spec, heldout=heldout, klipper_config=klipper_config,
+                          marlin_version=marlin_version, steps_per_mm=steps_per_mm, refit=not no_refit,
+                          accept_undetermined=accept_undetermined, output=output,
+                          note=lambda line: click.echo(line, err=True))
+    text, ini_text, refit = done.text, done.ini_text, done.refit
     if ini_text is not None:
         emit(ini_text, ini)
     emit(text, output)
@@ -238,182 +199,4 @@ def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None, u
         click.echo(f"wrote {ini} ({what})", err=True)
 
 
-def _undetermined_lines(machine, accepted: tuple[str, ...], refit=None) -> list[str]:
-    """What the calibration's measurements leave undetermined, one plain line each (printed on
-    standard error and written as comments): the record's ``undetermined`` directions (from
-    identify) and each firmware number whose standard deviation is above its tolerance
-    (:func:`pkmcal.io.delta_firmware.undetermined_firmware_numbers` of the calibrated
-    ``machine``'s covariance, or of the firmware-limited ``refit``'s own when it is what is
-    exported), which is an error unless ``accepted`` names it."""
-    from fnmatch import fnmatchcase
-
-    from pkmcal.identification.firmware_refit import FIRMWARE_FREE, RADII
-    from pkmcal.io.delta_firmware import FIRMWARE_NUMBERS, undetermined_firmware_numbers
-
-    if machine.kind != "linear-delta":
-        return []
-    record = (machine.metadata or {}).get("calibration") or {}
-    lines = [str(e.get("text") or e.get("meaning")) for e in record.get("undetermined") or ()]
-    known = tuple(FIRMWARE_NUMBERS) + FIRMWARE_FREE + RADII
-    for pat in accepted:
-        if not any(fnmatchcase(n, pat) for n in known):
-            raise PkmcalError(f"--accept-undetermined '{pat}': no firmware number has this name; the names are "
-                              f"{', '.join(FIRMWARE_NUMBERS)}")
-    source = refit.machine if refit is not None else machine
-    cov = refit.covariance if refit is not None else machine.covariance
-    if cov is None:
-        return lines
-    refused = []
-    for n, line in undetermined_firmware_numbers(source, cov):
-        if any(fnmatchcase(n, pat) for pat in accepted):
-            lines.append(f"{line}; exported as accepted with --accept-undetermined")
-        else:
-            refused.append(line)
-    if refused:
-        remedy = next((str(e["remedy"]) for e in record.get("undetermined") or ()
-                       if e.get("remedy") and not e.get("note")),
-                      "add measurements that see it, or a prior on its measured value")
-        raise PkmcalError("the export is refused: " + "; ".join(refused) + "; the firmware would hold these numbers "
-                          f"as if they were known: {remedy}; or export them anyway with "
-                          "--accept-undetermined NAME")
-    return lines
-
-
-def _with_comments(text: str, lines: list[str], mark: str) -> str:
-    """``text`` after comment lines (``mark``: '#' for Klipper, ';' for Marlin's G-code) that
-    say what the measurements did not determine."""
-    if not lines:
-        return text
-    import textwrap
-
-    head = [f"{mark} pkmcal: what the calibration's measurements did not determine:"]
-    for line in lines:
-        head += textwrap.wrap(line, width=100, initial_indent=f"{mark}   ", subsequent_indent=f"{mark}     ",
-                              break_on_hyphens=False)
-    return "\n".join(head) + "\n\n" + text
-
-
-def _recorded_measurements(machine, calibrated: str) -> tuple[str, str] | None:
-    """The measurement file and setup the calibration record names, when the machine has
-    what its firmware cannot hold (so that a refit changes what is exported) and the file
-    is there unchanged (the record's SHA-256); else None, with a note on standard error
-    saying why there is no refit."""
-    from pkmcal.cli.provenance import input_record
-    from pkmcal.io.delta_firmware import firmware_subset
-
-    if machine.kind != "linear-delta" or not firmware_subset(machine)[1]:
-        return None                                # the firmware holds this machine exactly: nothing to refit
-    record = (machine.metadata or {}).get("calibration") or {}
-    path, setup = record.get("measurements"), record.get("setup")
-    if not path or not setup:
-        click.echo(f"pkmcal: note: {calibrated} has no calibration record naming its measurements and setup: no "
-                   "firmware-limited refit (give --measurements MEAS.csv --setup SETUP)", err=True)
-        return None
-    want = ((record.get("inputs") or {}).get("measurements") or {}).get("sha256")
-    candidates = [path] if os.path.isabs(path) else [path, os.path.join(os.path.dirname(os.fspath(calibrated)), path)]
-    for p in candidates:
-        if os.path.isfile(p):
-            if want is not None and input_record(p).get("sha256") != want:
-                click.echo(f"pkmcal: note: {p} has changed since the calibration (its SHA-256 differs from the "
-                           "record's): no firmware-limited refit on it (give --measurements MEAS.csv to refit)",
-                           err=True)
-                return None
-            setup_path = setup if os.path.isabs(setup) or os.path.exists(setup) else \
-                os.path.join(os.path.dirname(os.fspath(calibrated)), setup)
-            return p, setup_path if os.path.exists(setup_path) else setup
-    click.echo(f"pkmcal: note: the calibration's measurements {path} are not found: no firmware-limited refit "
-               "(give --measurements MEAS.csv)", err=True)
-    return None
-
-
-def _refit(machine, measurements: str, setup_spec: str | None, heldout: str | None, calibrated: str):
-    """The firmware-limited refit of ``machine`` on the measurement files
-    (:func:`pkmcal.identification.firmware_refit.firmware_refit`)."""
-    if machine.kind != "linear-delta":
-        raise PkmcalError(f"--measurements refits a linear delta for its firmware; machine '{machine.name}' is a "
-                          f"{machine.kind or 'machine of another kind'}")
-    from pkmcal.cli.klipper_probe_cmd import machine_read_by
-    from pkmcal.identification.firmware_refit import firmware_refit
-    from pkmcal.io.measurements import load_measurements
-
-    if setup_spec is None:
-        setup_spec = ((machine.metadata or {}).get("calibration") or {}).get("setup")
-        if setup_spec is None:
-            raise PkmcalError(f"{calibrated} has no calibration record naming its setup: give --setup SETUP (the "
-                              "setup of the measurements, e.g. z-probe-klipper)")
-    read, setup = machine_read_by(machine, setup_spec)     # printed distances: the machine read as pose pairs
-    meas = load_measurements(measurements, read, setup)
-    held = None if heldout is None else load_measurements(heldout, read, setup)
-    return firmware_refit(read, setup, meas, held)
-
-
-def _delta_firmware_text(machine, fmt: str, refit=None, klipper_config: str | None = None,
-                         marlin_version: str = "2.1.x", steps_per_mm: float | None = None) -> str:
-    """The Klipper or Marlin text of a linear delta (or of its firmware-limited ``refit``),
-    or Klipper's of a rotary delta; what the machine has that the firmware cannot hold, and
-    what the refit costs, on standard error. With ``klipper_config`` the user's printer.cfg
-    as Klipper's SAVE_CONFIG leaves it."""
-    rotary = fmt == "klipper" and machine.kind == "rotary-delta" and refit is None
-    if machine.kind != "linear-delta" and not rotary:
-        also = " and, to Klipper, rotary deltas" if fmt == "klipper" else ""
-        raise PkmcalError(f"--format {fmt} exports linear delta printers{also}; machine '{machine.name}' is a "
-                          f"{machine.kind or 'machine of another kind'}")
-    from pkmcal.io.delta_firmware import (
-        KLIPPER_ROUNDING,
-        firmware_subset,
-        klipper_rounded,
-        klipper_saved_config,
-        klipper_text,
-        rotary_firmware_subset,
-    )
-    from pkmcal.io.marlin_settings import MARLIN_ROUNDING, marlin_rounded, marlin_text
-
-    fw, dropped = (rotary_firmware_subset if rotary else firmware_subset)(machine)
-    angles = dict(zip(machine.param_names, machine.param_is_angle))
-    for d in dropped:
-        click.echo(f"pkmcal: warning: {d.describe(angles[d.name])}", err=True)
-    if refit is None and getattr(fw, "origin", (0.0, 0.0)) != (0.0, 0.0):   # the exact rewrite of unequal radii (io/delta_firmware.py)
-        click.echo(f"pkmcal: note: the towers are written about their circle's centre, x {fw.origin[0]:.6g}, y "
-                   f"{fw.origin[1]:.6g} mm of the calibrated frame: the firmware's x, y are the calibrated ones less "
-                   "that (z unchanged), and its machine is the calibrated one exactly", err=True)
-    if refit is not None:
-        for line in refit.lines():
-            click.echo(f"pkmcal: {line}", err=True)
-        fw, _ = firmware_subset(refit.machine)   # nothing left out: leans and tool at 0, one radius
-        click.echo("pkmcal: note: the exported settings are the firmware-limited refit: the best machine the "
-                   "firmware can hold on these measurements", err=True)
-    elif dropped:
-        click.echo(f"pkmcal: note: the firmware uses the machine without these {len(dropped)} parameter(s); for the "
-                   "best machine it can hold and what dropping them costs, give the measurements: "
-                   "--measurements MEAS.csv --setup SETUP (and --heldout HELDOUT.csv)", err=True)
-    steps = None if steps_per_mm is None else (steps_per_mm,) * 3
-    if fmt == "klipper":
-        text = klipper_saved_config(klipper_config, fw) if klipper_config is not None else klipper_text(fw)
-        _rounding_note(KLIPPER_ROUNDING, fw.machine("exact"), klipper_rounded(fw).machine("rounded"),
-                       "the arm angles" if rotary else "the carriage travels")
-        return text
-    text, lost = marlin_text(fw, marlin_version, steps)
-    for line in lost:
-        click.echo(f"pkmcal: warning: {line}", err=True)
-    _rounding_note(MARLIN_ROUNDING, fw.machine("exact"), marlin_rounded(fw, marlin_version, steps).machine("rounded"),
-                   "the carriage travels")
-    return text
-
-
-def _rounding_note(rule: str, exact, rounded, what: str) -> None:
-    """The export's line on how its numbers are rounded (``rule``, also a comment line of
-    the file) and what the rounding changes: the largest change of ``what`` the controller
-    commands over the workspace (:func:`pkmcal.io.delta_firmware.rounding_effect`)."""
-    from pkmcal.conventions import angle_text, length_text
-    from pkmcal.io.delta_firmware import rounding_effect
-
-    change = rounding_effect(exact, rounded)
-    if all(exact.actuator_is_angle):     # below 1e-3″ (5e-9 rad) or 1 nm: said so, not in digits of round-off
-        shown = f"at most {angle_text(change)}" if change >= 5e-9 else "less than 0.001″"
-    else:
-        shown = f"at most {length_text(change)}" if change >= 1e-6 else "less than 1 nm"
-    click.echo(f"pkmcal: note: {rule}; the rounding changes {what} the controller commands by {shown} "
-               "over the workspace", err=True)
-
-
-__all__ = ["calibration_json", "export_cmd", "format_calibration_json"]
+__all__ = ["export_cmd"]

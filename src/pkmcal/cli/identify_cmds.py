@@ -7,85 +7,36 @@
   machine, setup and pose set (:mod:`pkmcal.identification.identifiability`).
 
 Everything is read, validated and computed before the output file is written (atomically);
-on a user error nothing is written and the exit code is 2.
+on a user error nothing is written and the exit code is 2. ``identify`` checks its options,
+calls :func:`pkmcal.workflow.calibrate` (the fit, its verdict, the calibrated file, the
+held-out validation and the report are the :class:`~pkmcal.workflow.Calibration`'s) and prints.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import json
 
 import click
-import numpy as np
 
 from pkmcal.errors import PkmcalError
-from pkmcal.identification.fit_verdict import diagnose, input_causes, judge
-from pkmcal.identification.identifiability import describe_named, format_direction
-from pkmcal.identification.residuals import DEFAULT_METHOD_RULE, METHODS
-from pkmcal.identification.robust import DEFAULT_F_SCALE, LOSSES, OUTLIER_SIGMA
-from pkmcal.cli._limits import unreachable_notes
-from pkmcal.cli.calibrated_file import (
-    before_registration,
-    check_loads_back,
-    identified_setup_of,
-    identify_heldout_validation,
-    setup_json,
-    with_calibration_record,
-)
-from pkmcal.cli.fit_text import fit_summary, free_statement, result_table
 from pkmcal.cli.import_options import import_options
+from pkmcal.cli.main import command_line
 from pkmcal.cli.option_types import FiniteFloat
 from pkmcal.cli.options import (STDOUT, DeprecatedArgument, check_output, emit, examples, option, output_option,
                                 poses_file, quiet_accepted, to_stdout)
-from pkmcal.io.atomic import check_output_path
-from pkmcal.io.measurements import CLIPPED_POLICIES, apply_clipped_policy, clipped_named_in_errors, load_measurements
-from pkmcal.io.tables import read_poses
-from pkmcal.reproduce.paper3_baselines import BASELINES, baseline_inputs, baseline_result
-from pkmcal.sensors.library import BUILTIN_SETUPS
-
-
-def _names(values: tuple[str, ...]) -> list[str] | None:
-    out = [n for v in values for n in v.replace(",", " ").split() if n]
-    return out or None
-
-
-def merged_free(free: list[str] | None, setup) -> list[str] | None:
-    """The free list the fit gets from ``--free`` and the setup (the rule of ``identify
-    --help``): None without ``--free`` (the engine's default: every machine parameter and the
-    setup's free sensor parameters); else the ``--free`` names and patterns followed by the
-    setup's ``free:`` sensor parameters (merged, not replaced; ``--fix`` holds any of them)."""
-    if free is None:
-        return None
-    return list(free) + [n for n in setup.sensor.default_free if n not in free]
-
-
-def _undetermined(nominal, setup, meas, result, priors) -> list[dict]:
-    """The named directions (a delta's common scale of arms and radius) these measurements
-    and priors leave undetermined, at the measurements' commanded poses (else the poses the
-    fit solved): :func:`pkmcal.identification.identifiability.undetermined_directions`."""
-    from pkmcal.identification.engine import measurement_arrays
-    from pkmcal.identification.identifiability import undetermined_directions
-
-    if result.sessions is not None or not nominal.named_directions():
-        return []
-    cmd = measurement_arrays(meas)[2]
-    poses = cmd if cmd is not None else result.poses
-    held = [n for n in result.mechanism.param_names if n not in result.free and n not in result.gauge]
-    return undetermined_directions(nominal, setup, poses, priors=priors, held=held, method=result.method)
-
-
-def _firmware_numbers_undetermined(result) -> list[tuple[str, str]]:
-    """The firmware numbers of a calibrated linear delta with vertical rails that its
-    covariance leaves beyond tolerance (what export refuses:
-    :func:`pkmcal.io.delta_firmware.undetermined_firmware_numbers`); none for other machines
-    and for leaning rails, which export refits first."""
-    from pkmcal.identification.firmware_refit import machine_covariance
-    from pkmcal.io.delta_firmware import exact_rewrite, undetermined_firmware_numbers
-
-    mech = result.mechanism
-    if mech.kind != "linear-delta" or exact_rewrite(mech) is None:
-        return []
-    return undetermined_firmware_numbers(mech, machine_covariance(result))
+from pkmcal.workflow.analysis import identifiability_of
+from pkmcal.workflow.calibration import calibrate, check_report_dir, write_report
+from pkmcal.workflow.text import describe_named, fit_summary, format_direction, result_table
+from pkmcal.workflow.vocabulary import (
+    BASELINES,
+    BUILTIN_SETUPS,
+    CLIPPED_POLICIES,
+    DEFAULT_F_SCALE,
+    DEFAULT_METHOD_RULE,
+    LOSSES,
+    METHODS,
+    OUTLIER_SIGMA,
+)
 
 
 @click.command("identify", epilog=examples(
@@ -201,7 +152,7 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     """
     inputs = [machine, measurements, setup_spec] + ([heldout] if heldout is not None else [])
     check_output(output, inputs)
-    from pkmcal.history.store import check_history_request, record_identified
+    from pkmcal.workflow.history import check_history_request, record_identified
 
     check_history_request(history_db, serial, to_stdout(output))
     if f_scale is not None and loss == "linear":
@@ -212,116 +163,33 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
         raise PkmcalError("-o - puts the machine file on standard output; --json would go there too: "
                           "write the machine file to a file, or leave out --json")
     if report_dir is not None:
-        _check_report_dir(report_dir, inputs)
-    from pkmcal.cli.klipper_probe_cmd import machine_and_setup
-    from pkmcal.identification.engine import identify
-    from pkmcal.io.machine_file import machine_to_text
-    from pkmcal.mechanisms.pose_pairs import read_by, single_machine
-
-    nominal, setup = machine_and_setup(machine, setup_spec)   # pose pairs for printed distances
-    read = load_measurements(measurements, nominal, setup, mapping)
-    meas, clipped_found, clipped_lines = apply_clipped_policy(read, nominal, clipped)
-    if keep is not None and method != "actuator-subset":
-        raise PkmcalError("--keep selects the actuators of --method actuator-subset; use them together")
-    baseline = method if method in BASELINES else None
-    fit_machine, fit_setup, fit_meas = nominal, setup, meas
-    if baseline is not None:
-        parts = _names((keep,)) if keep is not None else None
-        if parts is not None and not all(k.isdigit() for k in parts):
-            raise PkmcalError(f"--keep '{keep}': give actuator numbers separated by commas, e.g. 1,2")
-        keep_idx = None if parts is None else [int(k) - 1 for k in parts]
-        fit_machine, fit_setup, fit_meas = baseline_inputs(baseline, nominal, setup, meas, keep_idx)
-        method = "projection"
-    fix_names = _names(fix)
-    if fix_names == ["auto"]:
-        fix_names = "auto"
-    free_opt = _names(free)
-    from pkmcal.identification.priors import parse_prior
-
-    priors = tuple(parse_prior(p) for p in prior)
-
-    def fit(with_priors=True):
-        return identify(fit_machine, fit_setup, fit_meas, method=method, free=merged_free(free_opt, fit_setup),
-                        fix=fix_names, weighted=not unweighted, form=form, loss=loss, f_scale=f_scale,
-                        reject=reject, priors=priors if with_priors else (),
-                        session_offsets=True if session_offsets else None)
-
-    with clipped_named_in_errors(clipped_lines):
-        result = fit()
-        if baseline is not None:
-            result = baseline_result(result, nominal, baseline)
-        if nominal is not single_machine(nominal):    # pose pairs: the machine file holds the machine
-            result = dataclasses.replace(result, mechanism=single_machine(result.mechanism))
-        u = result.uncertainty
-        if u.dof <= 0:
-            raise PkmcalError(
-                f"{len(result.used_poses)} poses give {u.dof + len(result.free)} residuals for {len(result.free)} free "
-                f"parameters{' (after fixing the gauge)' if result.gauge else ''}: no degree of freedom is left to "
-                "check the fit (chi2/dof undefined); measure more poses or fix parameters; nothing written")
-        causes = input_causes(nominal, setup, meas)
-        verdict = judge(result, causes)
-        if not verdict.acceptable:
-            verdict = verdict.with_diagnoses(diagnose(
-                result, setup, meas, causes, n_read=len(read.actuators),
-                refit_without_priors=(lambda: fit(with_priors=False)) if baseline is None and priors else None))
-            if not accept_bad_fit:
-                raise PkmcalError(f"the fit is refused: {verdict.text()}; nothing written to {output}: mend the cause "
-                                  "and run again, or write it anyway with --accept-bad-fit (recorded in the file)")
-    undetermined = _undetermined(nominal, setup, meas, result, priors) if baseline is None else []
-    hints = [f"warning: {w}" for w in clipped_lines] + [f"warning: {c}" for c in causes] + \
-        [e["text"] if e["note"] else f"warning: {e['text']}" for e in undetermined] + \
-        [f"warning: {line}: 'pkmcal export --format klipper|marlin' will refuse it unless accepted by name "
-         f"(--accept-undetermined {n})" for n, line in _firmware_numbers_undetermined(result)]
-    if not verdict.acceptable:
-        hints.append(f"warning: written with --accept-bad-fit although the fit is refused: {verdict.text()}")
-    if hints:
-        result = dataclasses.replace(result, warnings=tuple(result.warnings) + tuple(hints))
-    free_line = free_statement(result, free_opt, fit_setup)
-    geometry = None
-    if result.mechanism.point_sets or "leg-lengths" in result.mechanism.abilities:
-        from pkmcal.identification.geometry import readable_geometry
-
-        geometry = readable_geometry(nominal, result.mechanism, "the covariance written to the machine file")
-    before = before_registration(nominal, setup, meas, result) if baseline is None else None
-    cal_setup = identified_setup_of(setup, result) if baseline is None else None
-    text = machine_to_text(with_calibration_record(result, machine, measurements, setup_spec, name,
-                                                   setup=cal_setup, before=before,
-                                                   accepted=None if verdict.acceptable else verdict,
-                                                   undetermined=undetermined))
-    check_loads_back(text, "(standard output)" if to_stdout(output) else output)
+        check_report_dir(report_dir, inputs)
+    where = "(standard output)" if to_stdout(output) else output
+    cal = calibrate(machine, setup_spec, measurements, method=method, keep=keep, free=free, fix=fix,
+                    merge_setup_free=True, priors=prior, clipped=clipped, mapping=mapping,
+                    bad_fit="accept" if accept_bad_fit else "refuse", name=name, command=command_line(), where=where,
+                    weighted=not unweighted, form=form, loss=loss, f_scale=f_scale, reject=reject,
+                    session_offsets=True if session_offsets else None)
+    result, geometry, before = cal.result, cal.geometry, cal.before
+    text = cal.text(where)
     validation = None
     if heldout is not None:
-        if cal_setup is None:
-            raise PkmcalError(f"--held-out: the {baseline} baseline identifies a reduced model; validate the full "
+        if cal.setup is None:
+            raise PkmcalError(f"--held-out: the {cal.baseline} baseline identifies a reduced model; validate the full "
                               "calibration (leave out --method) on held-out data")
-        validation = identify_heldout_validation(read_by(result.mechanism, setup.sensor), cal_setup, nominal,
-                                                 before, heldout, mapping, clipped)
-    report = None if report_dir is None else _report_data(nominal, result, setup, meas, measurements,
-                                                           "(standard output)" if to_stdout(output) else output,
-                                                           validation)
+        validation = cal.verify(heldout)
+    report = None if report_dir is None else cal.report_data(validation, output=where)
     if as_json:  # everything printed is made before anything is written
-        from pkmcal.io.json_out import finite_or_null
-
-        d = finite_or_null(result.to_dict())
-        d["free_rule"] = free_line
-        d["verdict"] = verdict.to_dict()
-        units = dict(zip(nominal.actuator_names, nominal.actuator_units))
-        d["clipped"] = [c.to_dict(units[c.actuator]) for c in clipped_found]
-        d["output"] = output
-        if geometry is not None:
-            d["geometry"] = finite_or_null(geometry.to_dict())
-        if cal_setup is not None and cal_setup.sensor.param_names:
-            d["setup"] = setup_json(result, cal_setup)
-        if before is not None:
-            d["before_registration"] = {"values": before[0], "note": before[1],
-                                        "units": {"values": "file units: mm, deg for angle parameters"}}
+        d = {}
+        for key, value in cal.to_dict().items():     # the keys in the order identify --json has always had
+            d[key] = value
+            if key == "clipped":
+                d["output"] = output
         if validation is not None:
             d["heldout"] = validation.to_dict()
     emit(text, output)
     recorded = None if history_db is None else record_identified(output, history_db, serial, validation)
     if report is not None:
-        from pkmcal.report import write_report
-
         written = write_report(report, report_dir)
     if as_json:
         if report is not None:
@@ -332,7 +200,7 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
     else:
         err = to_stdout(output)
         click.echo(result_table(result), err=err)
-        click.echo(fit_summary(result, free_line), err=err)
+        click.echo(fit_summary(result, cal.free_rule), err=err)
         if geometry is not None:
             click.echo(geometry.format(), err=err)
         if before is not None:
@@ -345,41 +213,6 @@ def identify_cmd(machine, measurements, setup_spec, method, unweighted, form, fi
             click.echo(f"recorded #{recorded.id} for serial {recorded.serial} in {history_db}")
         elif report is not None:
             click.echo(f"wrote {written.html}", err=True)
-
-
-def _check_report_dir(report_dir: str, inputs) -> None:
-    """The report folder must be a folder that can be created or written into, and must not
-    hold an input file under a report file's name."""
-    import os
-
-    from pkmcal.io.atomic import check_output_dir
-    from pkmcal.report import REPORT_NAME
-
-    check_output_dir(report_dir, "--report")
-    if os.path.isdir(report_dir):
-        check_output_path(os.path.join(report_dir, REPORT_NAME), inputs)
-
-
-def _report_data(nominal, result, setup, meas, meas_path: str, output: str, validation=None):
-    """The report of ``pkmcal identify``: the measured poses are the commanded ones of the
-    file (cmd_x..), else the nominal machine's FK of the actuator readings."""
-    from pkmcal.io.setup_file import setup_to_yaml
-    from pkmcal.report.from_results import report_data_from_results
-
-    if meas.commanded is not None:
-        poses = meas.commanded
-    else:
-        with np.errstate(all="ignore"):
-            fk = nominal.fk(meas.actuators)
-        poses = np.asarray(fk.poses)[fk.ok]
-    try:
-        setup_text = setup_to_yaml(setup)
-    except PkmcalError:
-        setup_text = setup.sensor.kind
-    return report_data_from_results(
-        nominal, result, setup, poses, setup_summary=setup_text, commanded=meas.commanded,
-        facts=(("measurement file", str(meas_path)), ("calibrated machine file", str(output))),
-        heldout=validation, calibrated_file=None if output.startswith("(") else str(output))
 
 
 @click.command("identifiability", epilog=examples(
@@ -416,43 +249,21 @@ def identifiability_cmd(machine, poses_arg, setup_spec, poses, method, fix, free
     directions, and a minimal set of parameters to fix (the gauge). JSON keys: n_params,
     rank, singular_values, null_space, fixed, weak, ...
     """
-    from pkmcal.cli.klipper_probe_cmd import machine_and_setup
-    from pkmcal.identification.identifiability import identifiability
-
     poses = poses_file(poses, poses_arg, "identifiability")
-    nominal, setup = machine_and_setup(machine, setup_spec)   # pose pairs for printed distances
-    x = read_poses(poses, nominal, mapping)
-    fix_names = _names(fix)
-    rep = identifiability(nominal, setup, x, method=method, free=merged_free(_names(free), setup),
-                          fix=None if fix_names == ["auto"] else fix_names)
-    notes = unreachable_notes(nominal, x, poses)
-    if rep.n_unsolved:
-        notes.append(f"{rep.n_unsolved} of the {len(x)} poses were left out: their readings or pose cannot be "
-                     "computed on this machine (outside the reach of a chain, or the pose does not solve)")
-    advice = None
-    if suggest:   # identification/advice.py: the candidate additions ranked
-        from pkmcal.identification.advice import advise
-
-        advice = advise(nominal, setup, x, method=method, free=merged_free(_names(free), setup),
-                        fix=None if fix_names == ["auto"] else fix_names)
-    predicted = None
-    if accuracy_map_path is not None:
+    predicted_map = accuracy_map_path is not None
+    if predicted_map:
         if not accuracy:
             raise PkmcalError("--accuracy-map draws the predicted accuracy: give --accuracy too")
         if not str(accuracy_map_path).lower().endswith((".png", ".svg")):
             raise PkmcalError(f"--accuracy-map {accuracy_map_path}: use a .png or .svg file name")
         check_output(accuracy_map_path, [machine, setup_spec, poses])
-    if accuracy:   # identification/iso9283.py: the covariance of these poses carried over the workspace
-        from pkmcal.identification.iso9283 import accuracy_map
-
-        predicted = accuracy_map(nominal, setup, x, method=method, report=rep)
-        if accuracy_map_path is not None:
-            from pkmcal.io.atomic import atomic_write_bytes
-            from pkmcal.report.figures import accuracy_map_figure, render
-
-            drawn = render(accuracy_map_figure(predicted), "accuracy-map", "")
-            atomic_write_bytes(accuracy_map_path, drawn.svg if str(accuracy_map_path).lower().endswith(".svg")
-                               else drawn.png)
+    found = identifiability_of(machine, setup_spec, poses, method=method, free=free, fix=fix, suggest=suggest,
+                               accuracy=accuracy, mapping=mapping)
+    nominal, setup, x, rep, notes, advice = found.nominal, found.setup, found.poses, found.report, found.notes, \
+        found.advice
+    predicted = found.predicted
+    if predicted_map:
+        found.write_accuracy_map(accuracy_map_path)
     if as_json:
         d = rep.to_dict()
         d["warnings"] = notes

@@ -109,45 +109,6 @@ def input_files(source: str, *specs: str | None) -> list[str]:
     return files + [s for s in specs if s is not None]
 
 
-def machine_and_setup(machine_spec: str, setup_spec: str):
-    """The machine of ``machine_spec`` as the setup's sensor reads it and the setup bound to
-    it: the machine itself, or, for a sensor of two poses (printed distances), the machine
-    read as pose pairs (:func:`pkmcal.mechanisms.pose_pairs.read_by`). A setup that neither
-    can take is the error of the machine itself."""
-    from pkmcal.io.lookup import load_machine
-
-    return machine_read_by(load_machine(machine_spec), setup_spec)
-
-
-def single_pose_setup_of(setup_spec: str, machine):
-    """The setup ``setup_spec`` as it reads single poses of ``machine`` (held-out poses of
-    ``verify --real``): the setup, or the Z probe of a printed-distance setup
-    (:func:`pkmcal.sensors.printed_distance.single_pose_setup`)."""
-    from pkmcal.sensors.printed_distance import single_pose_setup
-
-    return single_pose_setup(machine_read_by(machine, setup_spec)[1])
-
-
-def machine_read_by(nominal, setup_spec: str):
-    """:func:`machine_and_setup` of a loaded machine ``nominal``."""
-    from pkmcal.errors import PkmcalError
-    from pkmcal.io.lookup import load_setup
-    from pkmcal.mechanisms.pose_pairs import PosePairs
-
-    try:
-        return nominal, load_setup(setup_spec, nominal)
-    except PkmcalError as exc:
-        first = exc
-    pairs = PosePairs(nominal)
-    try:
-        setup = load_setup(setup_spec, pairs)
-    except PkmcalError:
-        raise first from None
-    if not setup.sensor.reads_pose_pairs:
-        raise first
-    return pairs, setup
-
-
 def _setup_of_kind(setup_spec: str, machine, kind: str, what: str):
     """The setup ``setup_spec`` for ``machine``; an error unless its sensor is ``kind``."""
     from pkmcal.errors import PkmcalError
@@ -223,5 +184,4 @@ def klipper_analyze_cmd(source: str, machine_spec: str, setup_spec: str, output:
            "row(s)")
 
 
-__all__ = ["input_files", "klipper_analyze_cmd", "klipper_probe_cmd", "machine_and_setup", "machine_read_by",
-           "marlin_probe_cmd", "single_pose_setup_of"]
+__all__ = ["input_files", "klipper_analyze_cmd", "klipper_probe_cmd", "marlin_probe_cmd"]

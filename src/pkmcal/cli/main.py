@@ -78,8 +78,18 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
 
 
 #: Key of the command line's arguments in the root ``click.Context.meta`` (for records of
-#: how a file was made, :mod:`pkmcal.cli.provenance`).
+#: how a file was made, :mod:`pkmcal.workflow.provenance`).
 ARGV_KEY = "pkmcal.argv"
+
+
+def command_line() -> str | None:
+    """``pkmcal ARGS...`` as typed, quoted for a POSIX shell (None outside a ``pkmcal``
+    command): the calibration record's ``command`` (:mod:`pkmcal.workflow.record`)."""
+    import shlex
+
+    ctx = click.get_current_context(silent=True)
+    argv = None if ctx is None else ctx.find_root().meta.get(ARGV_KEY)
+    return None if argv is None else shlex.join(["pkmcal", *argv])
 
 
 class PkmcalGroup(click.Group):

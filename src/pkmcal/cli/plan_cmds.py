@@ -17,7 +17,7 @@ import json
 import click
 import numpy as np
 
-from pkmcal.cli._limits import unreachable_notes
+from pkmcal.workflow.analysis import unreachable_notes
 from pkmcal.cli.backend_options import backend_options, check_backend
 from pkmcal.cli.import_options import import_options
 from pkmcal.cli.options import (

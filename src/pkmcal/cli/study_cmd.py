@@ -35,24 +35,21 @@ def study(study_file, output, seed, trials, workers, dask_address, resume, quiet
     Same seed, same bits, whatever the number of workers or the backend. The progress bar
     (stderr) shows only on a terminal.
     """
+    from pkmcal.api import study as run_study
     from pkmcal.errors import PkmcalError, one_line
     from pkmcal.progress import bars_enabled
-    from pkmcal.study import load_study, run_study
+    from pkmcal.study import load_study
 
     check_output_folder(output, "the study's output")
     if workers is not None and dask_address not in (None, "local"):
         raise PkmcalError("--workers applies to local runs and to --dask local; a Dask scheduler's workers are "
                           "started with 'dask worker'")
     spec = load_study(study_file)
-    if seed is not None:
-        spec = spec.with_seed(seed)
-    if trials is not None:
-        if trials < 1:
-            raise PkmcalError(f"--trials must be at least 1; got {trials}")
-        spec = spec.with_trials(trials)
     show = bars_enabled(quiet)
-    result = run_study(spec, output, workers=workers, dask=dask_address, resume=resume, progress=show,
-                       figures=not no_figures)
+    result = run_study(spec, output, seed=seed, trials=trials, workers=workers, dask=dask_address, resume=resume,
+                       progress=show, figures=not no_figures)
+    if trials is not None:
+        spec = spec.with_trials(trials)      # for the summary line
     if quiet:
         return
     n_cfg = len({int(c) for c in result.columns["config"]})

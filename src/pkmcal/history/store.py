@@ -216,7 +216,7 @@ def add_calibrated_file(path: str | os.PathLike, *, serial: str, db: str | os.Pa
     """Record the calibrated machine file ``path`` (written by ``pkmcal identify``) for unit
     ``serial`` in the history ``db`` (:func:`open_history`); the stored record, with its id.
     The file's SHA-256 is kept (``source_sha256``) beside its calibration record's inputs."""
-    from pkmcal.cli.provenance import input_record
+    from pkmcal.workflow.provenance import input_record
     from pkmcal.io.lookup import load_machine
 
     shown = one_line(os.fspath(path))

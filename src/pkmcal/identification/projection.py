@@ -13,7 +13,7 @@ mechanism parameters (reading = true position + dq), so the paper's −R₂ Δq_
 dq columns of H. :func:`single_linearisation` is eq. 10 at the commanded poses.
 
 :class:`ActuatorSubset` is a machine seen through n of its l actuators (the
-``actuator-subset`` baseline of paper 3 §1, :mod:`pkmcal.reproduce.paper3_baselines`). The
+``actuator-subset`` baseline of paper 3 §1, :mod:`pkmcal.identification.baselines`). The
 paper-3 experiment (each method's fit, held-out tool errors) is
 :mod:`pkmcal.reproduce.paper3_experiment`.
 """

@@ -42,6 +42,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pkmcal.covariance import correlation, standard_deviations  # noqa: F401  (below io/: pkmcal.covariance)
+
 #: :attr:`Uncertainty.kind` → what ``covariance_prior`` is.
 KINDS = {
     "gls": "a-priori (noise model) covariance of the noise-weighted fit",
@@ -125,16 +127,6 @@ class Uncertainty:
     @property
     def correlation(self) -> np.ndarray:
         return correlation(self.covariance_prior)
-
-
-def correlation(cov: np.ndarray) -> np.ndarray:
-    """Correlation matrix of a covariance (zero rows/columns stay zero, diagonal 1)."""
-    sd = standard_deviations(cov)
-    inv = np.where(sd > 0, 1.0 / np.where(sd > 0, sd, 1.0), 0.0)
-    C = cov * inv[:, None] * inv[None, :]     # in this order: no overflow for tiny σ
-    C = 0.5 * (C + C.T)                       # exactly symmetric
-    np.fill_diagonal(C, np.where(sd > 0, 1.0, 0.0))
-    return C
 
 
 def _inverse_normal(J: np.ndarray) -> np.ndarray:
@@ -225,8 +217,3 @@ def embed(cov_free: np.ndarray, free_index: np.ndarray, n_total: int) -> np.ndar
     idx = np.asarray(free_index, dtype=int)
     C[np.ix_(idx, idx)] = cov_free
     return C
-
-
-def standard_deviations(cov: np.ndarray) -> np.ndarray:
-    """σ_i = √max(Σ_ii, 0): the standard deviations of a covariance Σ (round-off below zero → 0)."""
-    return np.sqrt(np.clip(np.diag(np.asarray(cov, dtype=float)), 0.0, None))

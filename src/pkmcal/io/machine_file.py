@@ -41,7 +41,7 @@ from pydantic import (
 )
 
 from pkmcal.errors import InputFileError, PkmcalError, line_problem, one_line, record_source
-from pkmcal.identification.uncertainty import correlation, standard_deviations
+from pkmcal.covariance import correlation, standard_deviations
 from pkmcal.io._yaml import (
     FlowList,
     RawFloat,
@@ -589,7 +589,7 @@ def identified_uncertainty(covariance: np.ndarray) -> tuple[np.ndarray, np.ndarr
     """What a machine file or an export states of a covariance Σ (p, p): the indices ``used``
     of the parameters with a non-zero row or column (the others were held fixed), their
     Σ_used, σ_i = √Σ_ii and ρ_ij = Σ_ij / (σ_i σ_j)
-    (:func:`~pkmcal.identification.uncertainty.correlation`), written exactly symmetric and
+    (:func:`~pkmcal.covariance.correlation`), written exactly symmetric and
     with 1 on the diagonal (the file format's rule, also where σ = 0)."""
     cov = np.asarray(covariance, dtype=float)
     used = np.flatnonzero(np.any(cov != 0, axis=0) | np.any(cov != 0, axis=1))

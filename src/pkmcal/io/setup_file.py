@@ -454,9 +454,9 @@ def _setup_mapping(path, data: dict, lines: dict) -> tuple[dict, dict]:
 
 
 def _priors(path, lines, prior: dict) -> tuple:
-    """The ``prior:`` mapping as :class:`~pkmcal.identification.priors.Prior` objects
+    """The ``prior:`` mapping as :class:`~pkmcal.prior.Prior` objects
     (file units; each names the file and line it came from, for later errors)."""
-    from pkmcal.identification.priors import Prior, parse_value
+    from pkmcal.prior import Prior, parse_value
 
     out = []
     for pattern, value in prior.items():

@@ -24,3 +24,9 @@ __all__ = [
     "correlation_from_covariance",
     "write_report",
 ]
+
+import sys as _sys  # noqa: E402
+
+from pkmcal.api import CallablePackage as _CallablePackage  # noqa: E402
+
+_sys.modules[__name__].__class__ = _CallablePackage   # pkmcal.report(calibration, folder) is pkmcal.api.report (issue 27)

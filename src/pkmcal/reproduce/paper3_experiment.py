@@ -12,7 +12,7 @@ start by pivoted QR and named in ``identifiability``):
   the commanded poses and the nominal parameters (the engine's ``projection-single``);
 * ``projection-unweighted`` — rows in raw mm and rad (W = I);
 * ``ignore-redundancy``, ``actuator-subset`` — the baselines of paper 3 §1
-  (:mod:`pkmcal.reproduce.paper3_baselines`).
+  (:mod:`pkmcal.identification.baselines`).
 
 :func:`calibration_experiment` is paper 3 §3 in simulation: the real machine settles at
 static equilibrium (:func:`~pkmcal.identification.simulation.simulate_campaign`), each
@@ -27,11 +27,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from pkmcal.errors import PkmcalError
-from pkmcal.identification.engine import IdentificationResult, identify
+from pkmcal.identification.engine import IdentificationResult
 from pkmcal.identification.simulation import SimulationResult, simulate_campaign
 from pkmcal.identification.tool_errors import tool_errors
 from pkmcal.mechanisms.base import Mechanism
-from pkmcal.reproduce.paper3_baselines import BASELINES, baseline_inputs, baseline_result
+from pkmcal.identification.baselines import BASELINES, identify_by_method
 from pkmcal.sensors.base import MeasurementSetup, NoiseModel, Sensor
 
 #: The paper-3 fits :func:`fit_redundant` knows (the reproduction's and benchmark's rows).
@@ -45,12 +45,9 @@ def fit_redundant(method: str, machine: Mechanism, setup: MeasurementSetup, meas
     with the automatic gauge. ``keep``: the actuators (0-based) of ``actuator-subset``."""
     if method not in METHODS:
         raise PkmcalError(f"unknown paper-3 method '{method}'; use one of {', '.join(METHODS)}")
-    fit_machine, fit_setup, data = machine, setup, measurements
-    if method in BASELINES:
-        fit_machine, fit_setup, data = baseline_inputs(method, machine, setup, measurements, keep)
-    result = identify(fit_machine, fit_setup, data, method="projection-single" if method == "projection-single"
-                      else "projection", free=free, fix="auto", weighted=method != "projection-unweighted")
-    return baseline_result(result, machine, method) if method in BASELINES else result
+    engine_method = method if method in BASELINES or method == "projection-single" else "projection"
+    return identify_by_method(machine, setup, measurements, engine_method, keep, free=free, fix="auto",
+                              weighted=method != "projection-unweighted")
 
 
 @dataclass(frozen=True)

@@ -16,3 +16,9 @@ from pkmcal.study.schema import ErrorGroup, MachineSpec, MethodSpec, PlanSpec, S
 
 __all__ = ["COLUMNS", "ErrorGroup", "MachineSpec", "MethodSpec", "PlanSpec", "SetupSpec", "Study", "StudyRun",
            "load_study", "read_trials", "run_study"]
+
+import sys as _sys  # noqa: E402
+
+from pkmcal.api import CallablePackage as _CallablePackage  # noqa: E402
+
+_sys.modules[__name__].__class__ = _CallablePackage   # pkmcal.study(STUDY.yaml, RESULTS) is pkmcal.api.study (issue 27)

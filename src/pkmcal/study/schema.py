@@ -88,7 +88,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from pkmcal.errors import InputFileError, PkmcalError
 from pkmcal.identification.residuals import METHODS as ENGINE_METHODS, pattern_matches
-from pkmcal.reproduce.paper3_baselines import BASELINES
+from pkmcal.identification.baselines import BASELINES
 from pkmcal.io._yaml import YamlSyntaxError, parse_yaml
 from pkmcal.io.inputs import read_input_text
 from pkmcal.io.limits import MAX_MAGNITUDE, magnitude_problem

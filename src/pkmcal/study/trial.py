@@ -53,7 +53,7 @@ import numpy as np
 
 from pkmcal.errors import PkmcalError
 from pkmcal.identification.advice import where_read
-from pkmcal.identification.engine import IdentificationResult, identify
+from pkmcal.identification.engine import IdentificationResult
 from pkmcal.identification.simulation import parameter_errors, settles_at_equilibrium, simulate_campaign
 from pkmcal.identification.tool_errors import ToolErrors, tool_errors
 from pkmcal.identification.verification import (
@@ -68,7 +68,7 @@ from pkmcal.mechanisms.pose_pairs import read_by
 from pkmcal.planning.candidates import generate_candidates
 from pkmcal.planning.plan import plan_poses
 from pkmcal.planning.selection import select, select_random
-from pkmcal.reproduce.paper3_baselines import BASELINES, baseline_inputs, baseline_result
+from pkmcal.identification.baselines import identify_by_method
 from pkmcal.sensors.base import MeasurementSetup
 from pkmcal.sensors.printed_distance import single_pose_setup
 from pkmcal.study import printed
@@ -273,12 +273,8 @@ def fit_campaign(nominal, setup, measurements, method: str, weighted: bool, free
     """Step 3 for one trial: :func:`~pkmcal.identification.engine.identify` by ``method``, or a
     paper 3 baseline for a redundantly actuated machine (``ignore-redundancy``,
     ``actuator-subset``: the engine's ``projection`` fit on the inputs the baseline changes,
-    :mod:`pkmcal.reproduce.paper3_baselines`), as ``pkmcal identify --method`` fits it."""
-    if method not in BASELINES:
-        return identify(nominal, setup, measurements, method=method, weighted=weighted, free=free, fix=fix)
-    machine, fit_setup, data = baseline_inputs(method, nominal, setup, measurements)
-    result = identify(machine, fit_setup, data, method="projection", weighted=weighted, free=free, fix=fix)
-    return baseline_result(result, nominal, method)
+    :mod:`pkmcal.identification.baselines`), as ``pkmcal identify --method`` fits it."""
+    return identify_by_method(nominal, setup, measurements, method, weighted=weighted, free=free, fix=fix)
 
 
 def _abs_stats(values: np.ndarray | None, scale: float = 1.0, mask: np.ndarray | None = None) -> tuple[float, float]:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pkmcal.identification.identifiability import format_direction
+from pkmcal.identification.identifiability import describe_named, format_direction  # noqa: F401  (printing)
 
 
 def _fmt(v: float, angle: bool) -> str:

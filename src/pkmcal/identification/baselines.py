@@ -9,7 +9,10 @@ changed inputs (:func:`baseline_inputs`), as ``pkmcal identify --method …``:
 * ``actuator-subset``: only n of the l actuators are used
   (:class:`~pkmcal.identification.projection.ActuatorSubset`), a non-redundant fit.
 
-:func:`baseline_result` turns the engine's result back into one of the nominal machine's kind.
+:func:`baseline_result` turns the engine's result back into one of the nominal machine's kind;
+:func:`identify_by_method` is the one call of the engine by a method name that may be a baseline
+(``pkmcal identify`` through :func:`pkmcal.workflow.calibrate`, the studies' trials, paper 3's
+reproduction).
 """
 
 from __future__ import annotations
@@ -67,3 +70,19 @@ def baseline_result(result, nominal: Mechanism, method: str):
         cov = embed(np.asarray(result.covariance)[np.ix_(sel, sel)], idx, len(names)) if sel else None
         mech = base.with_params(base.params, covariance=cov)
     return dataclasses.replace(result, mechanism=mech, method=method)
+
+
+def identify_by_method(nominal: Mechanism, setup: MeasurementSetup, measurements, method: str | None = None,
+                       keep=None, **options):
+    """:func:`~pkmcal.identification.engine.identify` by ``method``, or, for a baseline of
+    :data:`BASELINES`, the engine's ``projection`` fit on the inputs the baseline changes
+    (:func:`baseline_inputs`; ``keep`` the actuators of ``actuator-subset``, 0-based) returned
+    as a result of ``nominal``'s kind (:func:`baseline_result`). ``options``: the engine's."""
+    from pkmcal.identification.engine import identify
+
+    if method not in BASELINES:
+        if keep is not None:
+            raise PkmcalError("--keep selects the actuators of --method actuator-subset; use them together")
+        return identify(nominal, setup, measurements, method=method, **options)
+    machine, fit_setup, data = baseline_inputs(method, nominal, setup, measurements, keep)
+    return baseline_result(identify(machine, fit_setup, data, method="projection", **options), nominal, method)

@@ -6,8 +6,8 @@ for the calibration record ``pkmcal identify`` writes into the calibrated machin
   environment variable ``SOURCE_DATE_EPOCH`` is set (seconds since 1970-01-01 UTC, the
   reproducible-builds convention) that time instead, so that the same inputs give the same
   bytes.
-* **Command line**: ``pkmcal`` and the arguments as given (:data:`ARGV_KEY` in the click
-  context's ``meta``, stored by the ``pkmcal`` group), quoted for a POSIX shell.
+* **Command line**: given by the caller (``pkmcal`` and the arguments as typed, quoted for a
+  POSIX shell, from the command line: :func:`pkmcal.cli.main.command_line`; None from Python).
 * **Inputs**: a file's path, size and SHA-256; a built-in name as ``{"builtin": name}``
   (the pkmcal version identifies it).
 """
@@ -16,12 +16,8 @@ from __future__ import annotations
 
 import hashlib
 import os
-import shlex
 from datetime import datetime, timezone
 
-import click
-
-from pkmcal.cli.main import ARGV_KEY
 from pkmcal.errors import PkmcalError
 
 
@@ -43,13 +39,6 @@ def utc_timestamp() -> str:
     return moment.strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
-def command_line() -> str | None:
-    """``pkmcal ARGS...`` as typed (None outside a ``pkmcal`` command)."""
-    ctx = click.get_current_context(silent=True)
-    argv = None if ctx is None else ctx.find_root().meta.get(ARGV_KEY)
-    return None if argv is None else shlex.join(["pkmcal", *argv])
-
-
 def input_record(spec: str | os.PathLike) -> dict:
     """``{"file", "size_bytes", "sha256"}`` of an input file, or ``{"builtin": name}``."""
     path = os.fspath(spec)
@@ -62,4 +51,4 @@ def input_record(spec: str | os.PathLike) -> dict:
     return {"file": path, "size_bytes": os.path.getsize(path), "sha256": digest.hexdigest()}
 
 
-__all__ = ["ARGV_KEY", "command_line", "input_record", "utc_timestamp"]
+__all__ = ["input_record", "utc_timestamp"]

@@ -1,8 +1,8 @@
-"""The calibrated machine file of ``pkmcal identify``: its ``calibration`` record, its
-identified ``setup:`` block, the nominal machine's registered sensor (``before_registration``)
-and the held-out validation of ``identify --heldout``.
+"""The calibrated machine file (``pkmcal identify``, :meth:`pkmcal.workflow.Calibration.save`):
+its ``calibration`` record, its identified ``setup:`` block, the nominal machine's registered
+sensor (``before_registration``) and the held-out validation of ``identify --held-out``.
 
-The record names the inputs with their SHA-256 (:mod:`pkmcal.cli.provenance`) and the fit
+The record names the inputs with their SHA-256 (:mod:`pkmcal.workflow.provenance`) and the fit
 (method, poses, gauge, rms residual, chi²/dof, which covariance); ``setup:`` holds the
 identified sensor in setup-file form (:func:`pkmcal.io.setup_file.identified_setup`) with the
 1σ of its estimated parameters, so that ``--setup CALIBRATED.yaml`` reads it back; a machine
@@ -13,6 +13,7 @@ that settles at equilibrium also gets ``calibration.sensor``, the identified tra
 from __future__ import annotations
 
 import dataclasses
+import os
 
 import numpy as np
 
@@ -124,12 +125,13 @@ def before_registration(nominal, setup, meas, result) -> tuple[dict, str, dict] 
     return per[used.sessions.labels[0]], "; ".join(notes), per
 
 
-def identify_heldout_validation(calibrated, cal_setup, nominal, before, path: str, mapping, clipped: str):
-    """The held-out validation of ``identify --heldout`` (:mod:`pkmcal.identification.heldout`)."""
+def identify_heldout_validation(calibrated, cal_setup, nominal, before, path, mapping, clipped: str):
+    """The held-out validation of ``identify --held-out`` (:mod:`pkmcal.identification.heldout`);
+    ``path`` a measurement file or loaded :class:`~pkmcal.io.measurements.Measurements`."""
     from pkmcal.identification.heldout import heldout_validation, sensor_from_values
 
-    held, found, lines = apply_clipped_policy(load_measurements(path, calibrated, cal_setup, mapping), calibrated,
-                                              clipped)
+    read = load_measurements(path, calibrated, cal_setup, mapping) if isinstance(path, (str, os.PathLike)) else path
+    held, found, lines = apply_clipped_policy(read, calibrated, clipped)
     if before is not None:
         before_sensor, note = sensor_from_values(cal_setup.sensor, before[0], "before_registration"), before[1]
         before_sessions = tuple((lab, sensor_from_values(cal_setup.sensor, v, "before_registration"))
@@ -138,17 +140,19 @@ def identify_heldout_validation(calibrated, cal_setup, nominal, before, path: st
         before_sensor, note = cal_setup.sensor, "no free sensor parameter: the sensor as the setup gives it"
         before_sessions = ()
     unit = {n: ("deg" if a else "mm") for n, a in zip(calibrated.actuator_names, calibrated.actuator_is_angle)}
-    return heldout_validation(calibrated, cal_setup, nominal, before_sensor, held, source=str(path),
+    source = str(path) if isinstance(path, (str, os.PathLike)) else "the held-out measurements"
+    return heldout_validation(calibrated, cal_setup, nominal, before_sensor, held, source=source,
                               before_note=note, before_sessions=before_sessions, notes=[f"warning: {w}" for w in lines],
                               clipped=tuple(c.to_dict(unit[c.actuator]) for c in found))
 
 
-def with_calibration_record(result, machine: str, measurements: str, setup_spec: str, name: str | None,
-                             setup=None, before=None, accepted=None, undetermined=()):
+def with_calibration_record(result, machine, measurements, setup_spec, name: str | None,
+                             setup=None, before=None, accepted=None, undetermined=(), command: str | None = None):
     """The identified machine under its own name with a ``calibration`` record in its
     metadata (kept in the machine file; ``pkmcal export --format json`` shows it): name,
-    calibrated-from, UTC date, pkmcal version, command line, the inputs with their SHA-256
-    (:mod:`pkmcal.cli.provenance`), and the fit; ``before`` (values, note) is stored as
+    calibrated-from, UTC date, pkmcal version, ``command`` (the command line; None from
+    Python), the inputs with their SHA-256 (:mod:`pkmcal.workflow.provenance`; ``machine``,
+    ``measurements``, ``setup_spec`` are file paths or built-in names), and the fit; ``before`` (values, note) is stored as
     ``calibration.before_registration``. With ``setup`` (the setup with the identified
     sensor) the identified setup goes under ``setup:`` (:func:`setup_block`).
     ``accepted``: the :class:`~pkmcal.identification.fit_verdict.FitVerdict` of a refused fit
@@ -158,7 +162,7 @@ def with_calibration_record(result, machine: str, measurements: str, setup_spec:
     ``calibration.undetermined`` (what ``export`` prints and writes as comments).
     ``SOURCE_DATE_EPOCH`` fixes the date, so that the same inputs give the same bytes."""
     from pkmcal import __version__
-    from pkmcal.cli.provenance import command_line, input_record, utc_timestamp
+    from pkmcal.workflow.provenance import utc_timestamp
 
     mech = result.mechanism
     if not dataclasses.is_dataclass(mech) or "metadata" not in {f.name for f in dataclasses.fields(mech)}:
@@ -170,11 +174,10 @@ def with_calibration_record(result, machine: str, measurements: str, setup_spec:
     u = result.uncertainty
     record = {
         "name": new_name, "calibrated_from": mech.name, "date": date, "pkmcal_version": __version__,
-        "command": command_line(),
-        "inputs": {"machine": input_record(machine), "setup": input_record(setup_spec),
-                   "measurements": input_record(measurements)},
-        "method": result.method, "weighted": bool(result.weighted), "measurements": str(measurements),
-        "setup": str(setup_spec), "n_poses": int(len(result.used_poses)), "n_free": int(len(result.free)),
+        "command": command,
+        "inputs": {"machine": _input(machine), "setup": _input(setup_spec), "measurements": _input(measurements)},
+        "method": result.method, "weighted": bool(result.weighted), "measurements": _spec_text(measurements),
+        "setup": _spec_text(setup_spec), "n_poses": int(len(result.used_poses)), "n_free": int(len(result.free)),
         "free": [str(n) for n in result.free],
         "gauge": list(result.gauge), "rms_residual": float(result.rms_residual),
         # undefined (null) without degrees of freedom
@@ -212,6 +215,27 @@ def with_calibration_record(result, machine: str, measurements: str, setup_spec:
     if block is not None:
         metadata["setup"] = block
     return dataclasses.replace(mech, name=new_name, metadata=metadata)
+
+
+def _is_spec(spec) -> bool:
+    return isinstance(spec, (str, os.PathLike))
+
+
+def _input(spec) -> dict:
+    """The record of an input: :func:`~pkmcal.workflow.provenance.input_record` of a file or
+    built-in name; ``{"python": what}`` of an object given from Python (no file to name)."""
+    from pkmcal.workflow.provenance import input_record
+
+    return input_record(spec) if _is_spec(spec) else {"python": _spec_text(spec)}
+
+
+def _spec_text(spec) -> str:
+    """A file path or built-in name as given; an object given from Python as
+    ``(python KIND 'NAME')``."""
+    if _is_spec(spec):
+        return os.fspath(spec)
+    name = getattr(spec, "name", None)
+    return f"(python {type(spec).__name__}" + (f" '{name}')" if isinstance(name, str) else ")")
 
 
 def check_loads_back(text: str, output: str) -> None:

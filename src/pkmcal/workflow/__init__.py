@@ -1,0 +1,24 @@
+"""The workflow layer: a calibration campaign from files or objects to a saved, verified,
+exported and reported calibration: the steps ``pkmcal identify``, ``verify``, ``export``
+and the Python API (:mod:`pkmcal.api`) share. Algorithms are functions, results are rich
+values:
+
+* :func:`~pkmcal.workflow.calibration.calibrate` → :class:`~pkmcal.workflow.calibration.Calibration`
+  (``save``, ``verify``, ``export``, ``report``, ``to_dict``);
+* :mod:`~pkmcal.workflow.verify`: measured held-out validation of a calibrated machine file
+  (``pkmcal verify --held-out``);
+* :mod:`~pkmcal.workflow.export`: every controller format, with the firmware-limited refit
+  (``pkmcal export``);
+* :mod:`~pkmcal.workflow.record`: the calibrated file's record, ``setup:`` and "before";
+  :mod:`~pkmcal.workflow.provenance`: dates and input fingerprints;
+  :mod:`~pkmcal.workflow.inputs`: a machine as its setup's sensor reads it;
+  :mod:`~pkmcal.workflow.text`: a fit in plain text;
+* :mod:`~pkmcal.workflow.analysis`: what a pose set lets a setup identify (``pkmcal identifiability``);
+  :mod:`~pkmcal.workflow.vocabulary`: the options' closed vocabularies (methods, losses, ...).
+
+The command line (:mod:`pkmcal.cli`) parses options, calls this layer and prints.
+"""
+
+from pkmcal.workflow.calibration import Calibration, calibrate
+
+__all__ = ["Calibration", "calibrate"]
