@@ -206,7 +206,7 @@ def verify(calibrated, real: Mechanism | str | None = None, poses=None, nominal:
       measurement predicted from its actuator readings and compared with what was measured,
       before / after / after re-registering the instrument (a
       :class:`~pkmcal.identification.heldout.HeldoutValidation`; ``pkmcal verify
-      --measurements``). ``calibrated`` a :class:`~pkmcal.workflow.Calibration` or a
+      --held-out``). ``calibrated`` a :class:`~pkmcal.workflow.Calibration` or a
       calibrated machine file (its ``setup:``; else give ``setup``); ``nominal``,
       ``calibration_measurements`` and ``clipped`` as ``--nominal``,
       ``--calibration-measurements``, ``--clipped``.

@@ -242,17 +242,6 @@ def _poses(tmp_path) -> Path:
 #: is also the new spelling of held-out files, so it is not searched).
 OLD_IN_TEXT = re.compile(r"(?<![\w-])(--heldout\b|--measurements\b|--n(?= [0-9N{]| cycles)|--out\b(?!put)|--printer-cfg\b)")
 
-#: Texts that still name an old spelling, by file: messages inside the command bodies of
-#: identify, export and verify and the docstrings of calibrated_file, which issue 27 items 1-2
-#: move into the library at the same time as this vocabulary lands (the old spellings they
-#: name still work). Where those texts land, this test names them; update them there and
-#: empty this table.
-KNOWN_OLD_TEXTS = {
-    "src/pkmcal/cli/calibrated_file.py": 2,
-    "src/pkmcal/cli/campaign_cmds.py": 4,
-    "src/pkmcal/cli/export_cmd.py": 10,
-}
-
 
 def test_no_text_names_an_old_spelling():
     """Messages, help texts and docstrings name the new spellings (the declarations of the
@@ -268,8 +257,7 @@ def test_no_text_names_an_old_spelling():
                 found.setdefault(str(path.relative_to(root)), []).extend(
                     f"{number}: {m.group(1)}" for m in OLD_IN_TEXT.finditer(line))
     counts = {path: len(hits) for path, hits in found.items() if hits}
-    assert counts == KNOWN_OLD_TEXTS, {path: found.get(path) for path in counts.keys() | KNOWN_OLD_TEXTS.keys()
-                                       if counts.get(path) != KNOWN_OLD_TEXTS.get(path)}
+    assert not counts, {path: found[path] for path in counts}
 
 
 @pytest.mark.parametrize("args", [["demo", "-o", "-"], ["study", "examples/study-quick.yaml", "-o", "-"]])

@@ -237,14 +237,14 @@ def verify_cmd(calibrated, meas_path, real_spec, poses, nominal, setup_spec, cal
     improvement_pct, dropped.
     """
     if (real_spec is None) == (meas_path is None):
-        raise PkmcalError("give exactly one of --measurements HELDOUT.csv (measured held-out data) or --real REAL "
+        raise PkmcalError("give exactly one of --held-out HELDOUT.csv (measured held-out data) or --real REAL "
                           "(a true machine, with --poses)")
     check_output(output, [calibrated, real_spec, poses, nominal, setup_spec, meas_path, calib_meas])
     if meas_path is not None:
         for name, value in (("--poses", poses), ("--ignore-limit", ignore_limits or None),
                             ("--compare", None if compare == "auto" else compare)):
             if value is not None:
-                raise PkmcalError(f"{name} applies to --real; with --measurements the held-out poses are the rows "
+                raise PkmcalError(f"{name} applies to --real; with --held-out the held-out poses are the rows "
                                   "of HELDOUT.csv")
         report = verify_measured(calibrated, meas_path, nominal=nominal, setup=setup_spec,
                                  calibration_measurements=calib_meas, clipped=clipped or "drop", mapping=mapping)
@@ -255,7 +255,7 @@ def verify_cmd(calibrated, meas_path, real_spec, poses, nominal, setup_spec, cal
         raise PkmcalError("--real needs the held-out poses: give --poses HELDOUT.csv")
     for name, value in (("--calibration-measurements", calib_meas), ("--clipped", clipped)):
         if value is not None:
-            raise PkmcalError(f"{name} applies to --measurements (measured held-out data), not to --real")
+            raise PkmcalError(f"{name} applies to --held-out (measured held-out data), not to --real")
     report = verify_against_real(calibrated, real_spec, poses, nominal=nominal,
                                  setup=setup_spec, compare=compare, ignore_limits=tuple(ignore_limits), mapping=mapping)
     emit(json.dumps(finite_or_null(report.to_dict()), indent=2, allow_nan=False) + "\n" if as_json

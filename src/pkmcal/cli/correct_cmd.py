@@ -181,7 +181,7 @@ def correct_cmd(program, calibrated, nominal, correction_path, ignore_limits, se
     columns, written back in mm and degrees). A target the calibrated machine cannot reach
     is refused with its line.
     """
-    from pkmcal.cli.campaign_cmds import _nominal_from_record
+    from pkmcal.workflow.verify import nominal_from_record
     from pkmcal.compensation.apply import commands_for
     from pkmcal.compensation.files import load_correction
     from pkmcal.io.atomic import atomic_write_bytes
@@ -192,7 +192,7 @@ def correct_cmd(program, calibrated, nominal, correction_path, ignore_limits, se
     if nominal is not None:
         nom = load_machine(nominal)
     else:
-        nom, why = _nominal_from_record(cal)
+        nom, why = nominal_from_record(cal)
         if nom is None:
             raise PkmcalError(f"the controller's kinematics: {why}")
     fld = None if correction_path is None else load_correction(correction_path, cal)

@@ -140,14 +140,14 @@ def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None, u
     MEAS.csv and on HELDOUT.csv.
     """
     if (setup_spec is not None or heldout is not None or as_json) and measurements is None:
-        raise PkmcalError("--setup, --heldout and --json belong to the firmware-limited refit: give --measurements "
+        raise PkmcalError("--setup, --held-out and --json belong to the firmware-limited refit: give --calibration-measurements "
                           "MEAS.csv too")
     if (no_refit or accept_undetermined) and fmt not in ("klipper", "marlin"):
         raise PkmcalError(f"--no-refit and --accept-undetermined are for --format klipper or marlin, not {fmt}")
     if no_refit and measurements is not None:
-        raise PkmcalError("--no-refit exports without the refit that --measurements asks for: give one of them")
+        raise PkmcalError("--no-refit exports without the refit that --calibration-measurements asks for: give one of them")
     if measurements is not None and fmt not in ("klipper", "marlin"):
-        raise PkmcalError(f"--measurements refits a linear delta for its firmware: use it with --format klipper or "
+        raise PkmcalError(f"--calibration-measurements refits a linear delta for its firmware: use it with --format klipper or "
                           f"marlin, not {fmt}")
     if as_json and to_stdout(output):
         raise PkmcalError("--json prints the refit report on standard output; write the settings to a file with "

@@ -87,7 +87,7 @@ def verify_against_real(calibrated, real_spec, poses, *, nominal=None, setup=Non
         elif setup_spec is not None:
             raise PkmcalError(f"--setup is the true instrument, whose readings --compare sensor compares; with "
                               f"--compare {mode} remove it")
-        frames = nom if nom is not None or mode == "commanded" else _nominal_from_record(cal)[0]
+        frames = nom if nom is not None or mode == "commanded" else nominal_from_record(cal)[0]
         if frames is not None and frames.kind != cal.kind:
             frames = None
     x = read_poses(poses, cal, mapping) if _is_spec(poses) else np.asarray(poses, dtype=float)
@@ -113,7 +113,7 @@ def _identified_setup(path: str, cal, what: str):
     return single_pose_setup_of(path, cal)
 
 
-def _nominal_from_record(cal):
+def nominal_from_record(cal):
     """The nominal machine the calibration record names, when it is a built-in or a file
     that still exists; ``(machine or None, why not)``."""
     from pkmcal.io.lookup import load_machine
@@ -197,7 +197,7 @@ def verify_measured(calibrated, heldout, *, nominal=None, setup=None, calibratio
     if nominal is not None:
         nom, why = _machine(nominal), ""
     else:
-        nom, why = _nominal_from_record(cal)
+        nom, why = nominal_from_record(cal)
     if nom is not None:
         nom = read_by(nom, cal_setup.sensor)
         if nom.kind != cal.kind:
@@ -254,4 +254,4 @@ class WithStandardFigures:
         return out if self.iso is None else out + "\n" + self.iso.format_table()
 
 
-__all__ = ["WithStandardFigures", "verify_against_real", "verify_measured"]
+__all__ = ["WithStandardFigures", "nominal_from_record", "verify_against_real", "verify_measured"]
