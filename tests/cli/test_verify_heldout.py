@@ -201,7 +201,7 @@ def test_before_registration_is_reproduced_from_the_calibration_data(tracker, tm
 
 def test_bad_combinations_exit_2(exact, tmp_path):
     cal, held = exact / "cal.yaml", exact / "held.csv"
-    assert_user_error(run("verify", cal), "exactly one of --measurements")
+    assert_user_error(run("verify", cal), "exactly one of --held-out")
     assert_user_error(run("verify", cal, "--held-out", held, "--real", "stewart-prototype-real"), "exactly one")
     assert_user_error(run("verify", cal, "--held-out", held, "--poses", held), "--poses applies to --real")
     assert_user_error(run("verify", cal, "--held-out", held, "--compare", "aligned"), "--compare applies")

@@ -174,8 +174,8 @@ def test_study_rows_do_not_depend_on_the_fit_batch(paper1_study, monkeypatch):
     ctx = paper1_study
     c = ctx.campaigns[0]
     calls = []
-    engine = trial.identify
-    monkeypatch.setattr(trial, "identify", lambda *a, **k: calls.append(1) or engine(*a, **k))
+    engine = trial.identify_by_method
+    monkeypatch.setattr(trial, "identify_by_method", lambda *a, **k: calls.append(1) or engine(*a, **k))
     together = trial.run_trials(ctx, c, range(8))
     assert calls == []                     # every fit batched, no truth refit (all errors on free parameters)
     monkeypatch.setattr(trial, "FIT_BATCH", 3)

@@ -244,7 +244,7 @@ def test_export_with_measurements_writes_the_refit_and_reports_the_cost(tmp_path
     plain = runner.invoke(cli, ["export", "cal.yaml", "--format", "klipper", "--no-refit", "-o", "plain.cfg",
                                 "--accept-undetermined", "radius_*", "--accept-undetermined", "angle_*",
                                 "--accept-undetermined", "endstop_*"])
-    assert plain.exit_code == 0 and "--measurements MEAS.csv --setup SETUP" in plain.output, plain.output
+    assert plain.exit_code == 0 and "--calibration-measurements MEAS.csv --setup SETUP" in plain.output, plain.output
     assert "exported as accepted with --accept-undetermined" in plain.output
     assert "# pkmcal:" in (tmp_path / "plain.cfg").read_text()
     res = runner.invoke(cli, ["export", "cal.yaml", "--format", "klipper", "--calibration-measurements", "meas.csv",
@@ -282,7 +282,7 @@ def test_export_with_measurements_writes_the_refit_and_reports_the_cost(tmp_path
 
 
 @pytest.mark.parametrize("args, fragment", [
-    (["--held-out", "held.csv"], "give --measurements"),
+    (["--held-out", "held.csv"], "give --calibration-measurements"),
     (["--calibration-measurements", "meas.csv", "--json"], "-o FILE"),
     (["--calibration-measurements", "meas.csv"], "no calibration record naming its setup"),
 ])
