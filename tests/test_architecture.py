@@ -102,7 +102,6 @@ CLI_ALLOWED = {
     ("info_cmd.py", "pkmcal.mechanisms.library", "info's built-in names: to the workflow vocabulary"),
     ("kinematics_cmds.py", "pkmcal.mechanisms.base", "ik/fk's reach verdicts: to the workflow layer"),
     ("klipper_probe_cmd.py", "pkmcal.mechanisms.pose_pairs", "import klipper-analyze: to the workflow layer"),
-    ("machines_cmd.py", "pkmcal.mechanisms.catalogue", "the machines' catalogue: to the workflow vocabulary"),
     ("plan_cmds.py", "pkmcal.identification.identifiability", "observability: to the workflow layer"),
     ("plan_cmds.py", "pkmcal.planning.candidates", "plan: to the workflow layer"),
     ("plan_cmds.py", "pkmcal.planning.executors", "plan --workers: to the workflow layer"),

@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from pkmcal.cli.options import examples
-from pkmcal.mechanisms.catalogue import BUILTIN_CATALOGUE, SYMMETRIC_DESCRIPTION, SYMMETRIC_KIND, SYMMETRIC_PREFIX
+from pkmcal.workflow.vocabulary import builtin_machines
 
 
 @click.command("machines", epilog=examples(
@@ -16,8 +16,7 @@ def machines() -> None:
 
     The default machine (used when a command's MACHINE is left out) says so in its line.
     """
-    rows = [(name, kind, text) for name, (kind, text) in BUILTIN_CATALOGUE.items()]
-    rows.append((f"{SYMMETRIC_PREFIX}KEY=VALUE,...", SYMMETRIC_KIND, SYMMETRIC_DESCRIPTION))
+    rows = builtin_machines()
     width = max(len(n) for n, _, _ in rows[:-1])
     kind_width = max(len(k) for _, k, _ in rows)
     for name, kind, text in rows:

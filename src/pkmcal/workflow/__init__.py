@@ -19,6 +19,14 @@ values:
 The command line (:mod:`pkmcal.cli`) parses options, calls this layer and prints.
 """
 
-from pkmcal.workflow.calibration import Calibration, calibrate
-
 __all__ = ["Calibration", "calibrate"]
+
+
+def __getattr__(name: str):
+    """``Calibration`` and ``calibrate`` on first use: a light submodule (the vocabulary's
+    machines' catalogue) is imported without NumPy."""
+    if name in __all__:
+        from pkmcal.workflow import calibration
+
+        return getattr(calibration, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
