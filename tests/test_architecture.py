@@ -97,7 +97,6 @@ CLI_ALLOWED = {
     ("history_cmd.py", "pkmcal.history.stats", "the history's library entry"),
     ("history_cmd.py", "pkmcal.history.store", "the history's library entry"),
     ("plan_cmds.py", "pkmcal.identification.iso9283", "plan --pattern iso9283: to the workflow layer"),
-    ("import_cmd.py", "pkmcal.sensors.library", "import's --setup help: to the workflow vocabulary"),
     ("info_cmd.py", "pkmcal.mechanisms.base", "info's workspace summary: to the workflow layer"),
     ("info_cmd.py", "pkmcal.mechanisms.library", "info's built-in names: to the workflow vocabulary"),
     ("kinematics_cmds.py", "pkmcal.mechanisms.base", "ik/fk's reach verdicts: to the workflow layer"),

@@ -166,16 +166,10 @@ def klipper_cmd(config: str, output: str | None, name: str | None, setup_output:
                    + ("" if setup_output else " (write them as a setup with --setup-output PROBE.yaml, or give them "
                       "as probe_offset in your setup file)"), err=True)
     if setup_output is not None:
-        from dataclasses import replace
-
-        import numpy as np
-
         from pkmcal.io.setup_file import save_setup
-        from pkmcal.sensors.library import builtin_setup
+        from pkmcal.workflow.inputs import klipper_probe_setup
 
-        setup = builtin_setup("z-probe-klipper")
-        setup = replace(setup, sensor=replace(setup.sensor, probe_offset=np.array(printer.probe_offset)))
-        save_setup(setup, setup_output)
+        save_setup(klipper_probe_setup(printer.probe_offset), setup_output)
         click.echo(f"wrote {setup_output} (z-probe setup with the probe offset of {config})", err=True)
 
 

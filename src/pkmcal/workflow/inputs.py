@@ -56,4 +56,18 @@ def machine_read_by(nominal, setup_spec):
     return pairs, setup
 
 
-__all__ = ["machine_and_setup", "machine_read_by", "single_pose_setup_of"]
+def klipper_probe_setup(probe_offset):
+    """The built-in ``z-probe-klipper`` setup with a printer's probe offset (Klipper's [probe]
+    or [bltouch] x_offset, y_offset, z_offset, mm): the setup ``pkmcal import klipper
+    --setup-output`` writes."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    from pkmcal.sensors.library import builtin_setup
+
+    setup = builtin_setup("z-probe-klipper")
+    return replace(setup, sensor=replace(setup.sensor, probe_offset=np.array(probe_offset)))
+
+
+__all__ = ["klipper_probe_setup", "machine_and_setup", "machine_read_by", "single_pose_setup_of"]
