@@ -18,13 +18,12 @@ import contextlib
 import click
 import numpy as np
 
-from pkmcal.errors import PkmcalError
 from pkmcal.cli.import_options import import_options
 from pkmcal.cli.options import (DeprecatedArgument, check_output, emit, examples, output_option, poses_file,
                                 quiet_accepted, to_stdout, units_comment_option)
 from pkmcal.io.atomic import atomic_writer
-from pkmcal.io.tables import LENGTH_COLUMNS, column_kinds, format_table, from_file_units, read_table, to_file_units
-from pkmcal.mechanisms.base import Mechanism
+from pkmcal.io.tables import LENGTH_COLUMNS, column_kinds, format_table, read_table
+from pkmcal.workflow.kinematics import fk_columns, ik_columns, parse_pose_option
 
 _MAX_LISTED = 20
 #: Poses computed and written at a time by ``pkmcal ik``.
@@ -38,21 +37,6 @@ def _note(message: str) -> None:
 def _line_list(lines: np.ndarray) -> str:
     shown = ", ".join(str(int(n)) for n in lines[:_MAX_LISTED])
     return shown + (f" and {len(lines) - _MAX_LISTED} more" if len(lines) > _MAX_LISTED else "")
-
-
-def parse_pose_option(text: str, mech: Mechanism, option: str) -> np.ndarray:
-    """A pose given on the command line as ``x,y,z,a,b,c`` (mm, deg) → internal units."""
-    parts = [p.strip() for p in text.split(",")]
-    if len(parts) != mech.n_dof:
-        raise PkmcalError(f"{option} '{text}': needs {mech.n_dof} comma-separated numbers "
-                          f"{','.join(mech.pose_names)} (mm, deg), got {len(parts)}")
-    try:
-        values = np.array([float(p) for p in parts])
-    except ValueError:
-        raise PkmcalError(f"{option} '{text}': not all of {','.join(mech.pose_names)} are numbers") from None
-    if not np.all(np.isfinite(values)):
-        raise PkmcalError(f"{option} '{text}': the pose must be finite")
-    return from_file_units(values, mech.pose_is_angle)
 
 
 @click.command("ik", epilog=examples(
@@ -93,24 +77,14 @@ def ik_cmd(machine: str, poses: str | None, output: str | None, units_comment: b
     with (atomic_writer(output) if not to_stdout(output) else contextlib.nullcontext()) as fh:
         for start in range(0, len(table), _IK_BLOCK):
             file_poses = table.values[start:start + _IK_BLOCK]
-            internal = from_file_units(file_poses, mech.pose_is_angle)
-            with np.errstate(all="ignore"):
-                readings = mech.ik(internal)
-                limits = mech.check_limits(internal)
-                lengths = mech.leg_lengths(internal) if "leg-lengths" in mech.abilities else None
-            columns: dict[str, np.ndarray] = {n: file_poses[:, k] for k, n in enumerate(mech.pose_names)}
-            if lengths is not None:
-                columns.update({f"l{i + 1}": lengths[:, i] for i in range(lengths.shape[1])})
-            readings = to_file_units(readings, mech.actuator_is_angle)
-            columns.update({n: readings[:, i] for i, n in enumerate(mech.actuator_names)})
-            columns["reachable"] = limits.verdicts()
+            columns, violating = ik_columns(mech, file_poses)
             text = format_table(columns, head=start == 0, units_comment=units_comment,
                                 comments=(f"pkmcal ik {mech.name} {poses}",))
             if fh is None:
                 click.echo(text, nl=False)
             else:
                 fh.write(text)
-            n_bad += int(np.count_nonzero(~limits.ok))
+            n_bad += violating
     _note(f"ik: {len(table)} poses, {len(table) - n_bad} reachable"
           + (f"; {n_bad} violate limits (column 'reachable')" if n_bad else ""))
 
@@ -161,27 +135,11 @@ def fk_cmd(machine: str, legs: str, output: str | None, guess: str | None, units
     if len(groups) > 1:
         kinds.update({c: "length" for c in groups[1]})
     table = read_table(legs, either=groups, kinds=kinds, mapping=mapping)
-    with np.errstate(all="ignore"):
-        if table.columns == tuple(mech.actuator_names):
-            result = mech.fk(from_file_units(table.values, rotary), guess=start)
-        else:
-            result = mech.fk_lengths(table.values, guess=start)
-        conv = np.asarray(result.converged, dtype=bool)
-        same = np.asarray(result.same_branch, dtype=bool)
-        verdicts = np.array(mech.check_limits(np.where(conv[:, None], result.poses, mech.home_pose)).verdicts(),
-                            dtype=object)
-    verdicts[~conv] = "not-solved"
-    poses = to_file_units(result.poses, mech.pose_is_angle)
-    poses[~conv] = np.nan
-    columns: dict[str, np.ndarray] = {n: poses[:, k] for k, n in enumerate(mech.pose_names)}
-    columns["converged"] = conv.astype(int)
-    columns["iterations"] = np.asarray(result.iterations, dtype=int)
-    columns["same_branch"] = (same & conv).astype(int)
-    columns["reachable"] = verdicts.tolist()
+    rows = fk_columns(mech, table.values, table.columns == tuple(mech.actuator_names), start)
+    columns, conv, same, iters = rows.columns, rows.converged, rows.same_branch, rows.iterations
     text = format_table(columns, units_comment=units_comment, comments=(f"pkmcal fk {mech.name} {legs}",))
     emit(text, output)
     n = len(table)
-    iters = np.asarray(result.iterations)
     good = conv & same
     _note(f"fk: {n} rows, {int(good.sum())} converged on the start pose's assembly mode"
           + (f" (at most {int(iters[conv].max())} iterations)" if conv.any() else ""))
@@ -193,10 +151,10 @@ def fk_cmd(machine: str, legs: str, output: str | None, guess: str | None, units
         _note(f"fk: {int(changed.sum())} rows converged on another assembly mode than the start pose "
               f"(same_branch 0: a mirror solution, not where the machine is): lines "
               f"{_line_list(table.lines[changed])} of {legs}; give --guess on the machine's assembly mode")
-    beyond = conv & (verdicts != "ok")
+    beyond = rows.violating
     if beyond.any():
         _note(f"fk: {int(beyond.sum())} rows violate the machine's limits (column 'reachable'): lines "
               f"{_line_list(table.lines[beyond])} of {legs}")
 
 
-__all__ = ["fk_cmd", "ik_cmd", "parse_pose_option"]
+__all__ = ["fk_cmd", "ik_cmd"]
