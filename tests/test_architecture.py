@@ -99,7 +99,6 @@ CLI_ALLOWED = {
     ("plan_cmds.py", "pkmcal.identification.iso9283", "plan --pattern iso9283: to the workflow layer"),
     ("info_cmd.py", "pkmcal.mechanisms.base", "info's workspace summary: to the workflow layer"),
     ("info_cmd.py", "pkmcal.mechanisms.library", "info's built-in names: to the workflow vocabulary"),
-    ("klipper_probe_cmd.py", "pkmcal.mechanisms.pose_pairs", "import klipper-analyze: to the workflow layer"),
     ("plan_cmds.py", "pkmcal.identification.identifiability", "observability: to the workflow layer"),
     ("plan_cmds.py", "pkmcal.planning.candidates", "plan: to the workflow layer"),
     ("plan_cmds.py", "pkmcal.planning.executors", "plan --workers: to the workflow layer"),

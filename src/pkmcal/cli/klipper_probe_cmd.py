@@ -24,6 +24,7 @@ import contextlib
 import click
 
 from pkmcal.cli.options import check_output, examples, output_option, to_stdout
+from pkmcal.workflow.inputs import klipper_analyze_pairs, setup_of_kind
 
 
 @click.command("klipper-probe", epilog=examples(
@@ -59,7 +60,7 @@ def klipper_probe_cmd(source: str, machine_spec: str, setup_spec: str, output: s
 
     machine = load_machine(machine_spec)
     require_linear_delta(machine, "Klipper's probe results", f"--machine {machine_spec}")
-    setup = _setup_of_kind(setup_spec, machine, "z-probe", "Klipper's probe results")
+    setup = setup_of_kind(setup_spec, machine, "z-probe", "Klipper's probe results")
     result = read_klipper_probe(source, machine, setup.sensor.probe_offset)
     _write(result, machine, setup, output, f"from Klipper probe results {source}", "pose(s)")
 
@@ -90,7 +91,7 @@ def marlin_probe_cmd(source: str, machine_spec: str, setup_spec: str, output: st
 
     machine = load_machine(machine_spec)
     require_linear_delta(machine, "Marlin's probe results", f"--machine {machine_spec}")
-    setup = _setup_of_kind(setup_spec, machine, "z-probe", "Marlin's probe results")
+    setup = setup_of_kind(setup_spec, machine, "z-probe", "Marlin's probe results")
     result = read_marlin_probe(source, machine, setup.sensor.probe_offset)
     _write(result, machine, setup, output, f"from Marlin G30 probe results {source}", "pose(s)")
 
@@ -107,18 +108,6 @@ def input_files(source: str, *specs: str | None) -> list[str]:
     with contextlib.suppress(PkmcalError, OSError, ValueError):
         files += [f for f in read_config(source).files if f not in files]
     return files + [s for s in specs if s is not None]
-
-
-def _setup_of_kind(setup_spec: str, machine, kind: str, what: str):
-    """The setup ``setup_spec`` for ``machine``; an error unless its sensor is ``kind``."""
-    from pkmcal.errors import PkmcalError
-    from pkmcal.io.lookup import load_setup
-
-    setup = load_setup(setup_spec, machine)
-    if setup.sensor.kind != kind:
-        raise PkmcalError(f"--setup {setup_spec}: a '{setup.sensor.kind}' setup; {what} are read with a 'sensor: "
-                          f"{kind}' setup")
-    return setup
 
 
 def _write(result, machine, setup, output: str | None, comment: str, rows: str) -> None:
@@ -166,20 +155,7 @@ def klipper_analyze_cmd(source: str, machine_spec: str, setup_spec: str, output:
     is refused as a likely typo.
     """
     check_output(output, input_files(source, machine_spec, setup_spec, object_spec))
-    from pkmcal.io.klipper_analyze import read_klipper_analyze
-    from pkmcal.io.klipper_probe import require_linear_delta
-    from pkmcal.io.lookup import load_machine
-    from pkmcal.mechanisms.pose_pairs import PosePairs
-
-    machine = load_machine(machine_spec)
-    require_linear_delta(machine, "DELTA_ANALYZE results", f"--machine {machine_spec}")
-    pairs = PosePairs(machine)
-    setup = _setup_of_kind(setup_spec, pairs, "printed-distance", "DELTA_ANALYZE results")
-    printed_by = None
-    if object_spec is not None:
-        printed_by = load_machine(object_spec)
-        require_linear_delta(printed_by, "DELTA_ANALYZE results", f"--object-machine {object_spec}")
-    result = read_klipper_analyze(source, machine, setup.sensor.probe_offset, printed_by)
+    result, pairs, setup = klipper_analyze_pairs(source, machine_spec, setup_spec, object_spec)
     _write(result, pairs, setup, output, f"from Klipper DELTA_ANALYZE results {source}; each row a pair of poses",
            "row(s)")
 

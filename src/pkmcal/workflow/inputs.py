@@ -70,4 +70,38 @@ def klipper_probe_setup(probe_offset):
     return replace(setup, sensor=replace(setup.sensor, probe_offset=np.array(probe_offset)))
 
 
-__all__ = ["klipper_probe_setup", "machine_and_setup", "machine_read_by", "single_pose_setup_of"]
+def setup_of_kind(setup_spec, machine, kind: str, what: str):
+    """The setup ``setup_spec`` for ``machine``; an error unless its sensor is ``kind``."""
+    from pkmcal.io.lookup import load_setup
+
+    setup = load_setup(setup_spec, machine)
+    if setup.sensor.kind != kind:
+        raise PkmcalError(f"--setup {setup_spec}: a '{setup.sensor.kind}' setup; {what} are read with a 'sensor: "
+                          f"{kind}' setup")
+    return setup
+
+
+def klipper_analyze_pairs(source, machine_spec, setup_spec, object_spec=None):
+    """``(result, pairs, setup)`` of ``pkmcal import klipper-analyze``: Klipper's DELTA_ANALYZE
+    distances and probe heights of ``source`` (:func:`pkmcal.io.klipper_analyze.read_klipper_analyze`)
+    as measurements of pose pairs of the linear delta ``machine_spec`` (the config the probe
+    ran with; ``object_spec`` the one the object was printed with),
+    :class:`~pkmcal.mechanisms.pose_pairs.PosePairs` of it and the ``printed-distance``
+    setup bound to them."""
+    from pkmcal.io.klipper_analyze import read_klipper_analyze
+    from pkmcal.io.klipper_probe import require_linear_delta
+    from pkmcal.io.lookup import load_machine
+    from pkmcal.mechanisms.pose_pairs import PosePairs
+
+    machine = load_machine(machine_spec)
+    require_linear_delta(machine, "DELTA_ANALYZE results", f"--machine {machine_spec}")
+    pairs = PosePairs(machine)
+    setup = setup_of_kind(setup_spec, pairs, "printed-distance", "DELTA_ANALYZE results")
+    printed_by = None
+    if object_spec is not None:
+        printed_by = load_machine(object_spec)
+        require_linear_delta(printed_by, "DELTA_ANALYZE results", f"--object-machine {object_spec}")
+    return read_klipper_analyze(source, machine, setup.sensor.probe_offset, printed_by), pairs, setup
+
+
+__all__ = ["klipper_analyze_pairs", "klipper_probe_setup", "machine_and_setup", "machine_read_by", "setup_of_kind", "single_pose_setup_of"]
