@@ -97,8 +97,6 @@ CLI_ALLOWED = {
     ("history_cmd.py", "pkmcal.history.stats", "the history's library entry"),
     ("history_cmd.py", "pkmcal.history.store", "the history's library entry"),
     ("plan_cmds.py", "pkmcal.identification.iso9283", "plan --pattern iso9283: to the workflow layer"),
-    ("info_cmd.py", "pkmcal.mechanisms.base", "info's workspace summary: to the workflow layer"),
-    ("info_cmd.py", "pkmcal.mechanisms.library", "info's built-in names: to the workflow vocabulary"),
     ("plan_cmds.py", "pkmcal.identification.identifiability", "observability: to the workflow layer"),
     ("plan_cmds.py", "pkmcal.planning.candidates", "plan: to the workflow layer"),
     ("plan_cmds.py", "pkmcal.planning.executors", "plan --workers: to the workflow layer"),

@@ -11,7 +11,7 @@ from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
 from helpers import assert_user_error
 
-from pkmcal.cli.info_cmd import single_axis_ranges
+from pkmcal.workflow.machine_info import single_axis_ranges
 from pkmcal.cli.main import cli
 from pkmcal.io import load_machine, read_table, save_machine
 from pkmcal.io.tables import format_table
