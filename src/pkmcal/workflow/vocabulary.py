@@ -10,7 +10,18 @@ NumPy); every other name is imported from its home on first use.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from pkmcal.mechanisms.catalogue import BUILTIN_CATALOGUE, SYMMETRIC_DESCRIPTION, SYMMETRIC_KIND, SYMMETRIC_PREFIX
+
+if TYPE_CHECKING:                       # the names of _HOMES, for readers and checkers
+    from pkmcal.identification.baselines import BASELINES
+    from pkmcal.identification.residuals import DEFAULT_METHOD_RULE, METHODS
+    from pkmcal.identification.robust import DEFAULT_F_SCALE, LOSSES, OUTLIER_SIGMA
+    from pkmcal.io.measurements import CLIPPED_POLICIES
+    from pkmcal.mechanisms.library import DEFAULT_MACHINE
+    from pkmcal.sensors.library import BUILTIN_SETUPS
+    from pkmcal.workflow.export import EXPORT_FORMATS
 
 #: name → the module that defines it (imported on first use: they need NumPy).
 _HOMES = {
