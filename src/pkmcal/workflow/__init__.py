@@ -14,7 +14,11 @@ values:
   :mod:`~pkmcal.workflow.inputs`: a machine as its setup's sensor reads it;
   :mod:`~pkmcal.workflow.text`: a fit in plain text;
 * :mod:`~pkmcal.workflow.analysis`: what a pose set lets a setup identify (``pkmcal identifiability``);
-  :mod:`~pkmcal.workflow.vocabulary`: the options' closed vocabularies (methods, losses, ...).
+  :mod:`~pkmcal.workflow.vocabulary`: the options' closed vocabularies (methods, losses, built-in
+  machines, ...);
+* :mod:`~pkmcal.workflow.machine_info`: a machine's summary, workspace and IK→FK round trip
+  (``pkmcal info``); :mod:`~pkmcal.workflow.kinematics`: IK and FK over a table with each row's
+  reach verdict (``pkmcal ik``, ``fk``).
 
 The command line (:mod:`pkmcal.cli`) parses options, calls this layer and prints.
 """
