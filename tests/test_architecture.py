@@ -96,22 +96,12 @@ CLI_ALLOWED = {
     ("history_cmd.py", "pkmcal.history.plot", "the history's library entry"),
     ("history_cmd.py", "pkmcal.history.stats", "the history's library entry"),
     ("history_cmd.py", "pkmcal.history.store", "the history's library entry"),
-    ("plan_cmds.py", "pkmcal.identification.iso9283", "plan --pattern iso9283: to the workflow layer"),
     ("import_cmd.py", "pkmcal.sensors.library", "import's --setup help: to the workflow vocabulary"),
     ("info_cmd.py", "pkmcal.mechanisms.base", "info's workspace summary: to the workflow layer"),
     ("info_cmd.py", "pkmcal.mechanisms.library", "info's built-in names: to the workflow vocabulary"),
     ("kinematics_cmds.py", "pkmcal.mechanisms.base", "ik/fk's reach verdicts: to the workflow layer"),
     ("klipper_probe_cmd.py", "pkmcal.mechanisms.pose_pairs", "import klipper-analyze: to the workflow layer"),
     ("machines_cmd.py", "pkmcal.mechanisms.catalogue", "the machines' catalogue: to the workflow vocabulary"),
-    ("plan_cmds.py", "pkmcal.identification.identifiability", "observability: to the workflow layer"),
-    ("plan_cmds.py", "pkmcal.planning.candidates", "plan: to the workflow layer"),
-    ("plan_cmds.py", "pkmcal.planning.executors", "plan --workers: to the workflow layer"),
-    ("plan_cmds.py", "pkmcal.planning.indices", "observability: to the workflow layer"),
-    ("plan_cmds.py", "pkmcal.planning.margins", "plan's margins: to the workflow layer"),
-    ("plan_cmds.py", "pkmcal.planning.plan", "plan: to the workflow layer"),
-    ("plan_cmds.py", "pkmcal.planning.selection", "plan: to the workflow layer"),
-    ("plan_cmds.py", "pkmcal.sensors.library", "plan's --setup help: to the workflow vocabulary"),
-    ("plan_cmds.py", "pkmcal.study.printed", "plan of printed objects: to the workflow layer"),
 }
 
 
