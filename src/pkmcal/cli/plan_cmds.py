@@ -185,7 +185,7 @@ def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, 
                       circle_plane=circle_plane, probe_anywhere=probe_anywhere, workers=workers,
                       dask_address=dask_address, progress=lambda: ProgressBar("plan", quiet=quiet))
     command = (f"pkmcal plan {mech.name} --setup {setup_spec} --n-poses {n_poses} "
-               f"--algorithm {planned.plan.selection.algorithm} --seed {seed}")
+               f"--algorithm {planned.selection.algorithm} --seed {seed}")
     if fmt != "csv":
         emit(planned.printer_file(fmt, command, machine, setup_spec), output)
     else:

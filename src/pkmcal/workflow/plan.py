@@ -18,12 +18,14 @@ observability``; the Python API's :func:`pkmcal.plan` works on objects).
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import numpy as np
 
 from pkmcal.errors import PkmcalError
+from pkmcal.planning.plan import Plan
 
 #: What ``plan --format`` writes: the poses, a Klipper macro, Marlin G-code (Z probes).
 PLAN_FORMATS = ("csv", "klipper", "gcode")
@@ -87,22 +89,27 @@ def plan_inputs(machine, setup, *, probe_anywhere: bool = False, target_accuracy
     return mech, setup, safety
 
 
-@dataclass
-class PosePlan:
-    """What :func:`plan_of` chose: the nominal machine, the setup and the
-    :class:`~pkmcal.planning.plan.Plan` (``poses``, ``commands``, ``selection``, ``candidates``,
-    ``model``, ``notes``, ``on_bed``)."""
+@dataclass(frozen=True)
+class PosePlan(Plan):
+    """A :class:`~pkmcal.planning.plan.Plan` (``poses``, ``commands``, ``selection``,
+    ``candidates``, ``model``, ``notes``, ``on_bed``) with the nominal machine and the setup it
+    was chosen for, which knows its files and its summary (what ``pkmcal plan`` writes and
+    prints): :meth:`csv`, :meth:`printer_file`, :meth:`summary`, :meth:`probe_facts`."""
 
-    nominal: Any
-    setup: Any
-    plan: Any
+    nominal: Any = None
+    setup: Any = None
+
+    @classmethod
+    def of(cls, plan, nominal, setup) -> "PosePlan":
+        """``plan`` (a :class:`~pkmcal.planning.plan.Plan`) with its ``nominal`` machine and ``setup``."""
+        return cls(**{f.name: getattr(plan, f.name) for f in dataclasses.fields(plan)}, nominal=nominal, setup=setup)
 
     def csv(self, command: str, units_comment: bool = False) -> str:
         """The plan's poses and nominal commands as a CSV (file units), its comments the
         ``command``, the safety margin, the notes and the indices."""
         from pkmcal.io.tables import format_table, to_file_units
 
-        mech, plan = self.nominal, self.plan
+        mech, plan = self.nominal, self
         poses = to_file_units(plan.poses, mech.pose_is_angle)
         commands = to_file_units(plan.commands, mech.actuator_is_angle)
         cols = {name: poses[:, i] for i, name in enumerate(mech.pose_names)}
@@ -121,7 +128,7 @@ class PosePlan:
         from pkmcal.io.probe_gcode import klipper_probe_macro, marlin_probe_gcode
 
         offset = np.asarray(self.setup.sensor.probe_offset, dtype=float)
-        nozzle = self.plan.poses[:, 0:2]
+        nozzle = self.poses[:, 0:2]
         if fmt == "klipper":
             return klipper_probe_macro(nozzle, offset, [
                 f"{command} --format klipper", "Paste into printer.cfg (or [include] this file), RESTART, run "
@@ -137,7 +144,7 @@ class PosePlan:
         margin, the identifiable parameters, the selection and its indices; for a Z probe on
         the bed, ``probe`` (:meth:`probe_facts`, with the points for the first-layer
         ``target`` sigma in mm)."""
-        plan = self.plan
+        plan = self
         cand, sel, model = plan.candidates, plan.selection, plan.model
         out = {"candidates": {"accepted": int(len(cand.poses)), "tested": int(cand.n_tested), "kind": cand.kind,
                               "rejected": {k: int(v) for k, v in sorted(cand.rejected.items())},
@@ -164,7 +171,7 @@ class PosePlan:
         from pkmcal.identification.identifiability import undetermined_directions
         from pkmcal.planning.plan import height_sigma, points_for_height_sigma
 
-        plan, setup = self.plan, self.setup
+        plan, setup = self, self.setup
         noise = setup.noise.reading_std
         n = len(plan.poses)
         ladder = sorted({k for k in (n // 2, n, 2 * n, 4 * n)
@@ -205,7 +212,7 @@ def plan_of(nominal, setup, n_poses: int, *, algorithm: str = "default", index: 
                           measurability=Measurability() if measurability is None else measurability,
                           progress=None if bar is None else bar.stage, circle_plane=circle_plane,
                           chunk_map=run_chunks, on_bed=False if probe_anywhere else None)
-    return PosePlan(nominal, setup, plan)
+    return PosePlan.of(plan, nominal, setup)
 
 
 @dataclass
