@@ -96,16 +96,6 @@ CLI_ALLOWED = {
     ("history_cmd.py", "pkmcal.history.plot", "the history's library entry"),
     ("history_cmd.py", "pkmcal.history.stats", "the history's library entry"),
     ("history_cmd.py", "pkmcal.history.store", "the history's library entry"),
-    ("plan_cmds.py", "pkmcal.identification.iso9283", "plan --pattern iso9283: to the workflow layer"),
-    ("plan_cmds.py", "pkmcal.identification.identifiability", "observability: to the workflow layer"),
-    ("plan_cmds.py", "pkmcal.planning.candidates", "plan: to the workflow layer"),
-    ("plan_cmds.py", "pkmcal.planning.executors", "plan --workers: to the workflow layer"),
-    ("plan_cmds.py", "pkmcal.planning.indices", "observability: to the workflow layer"),
-    ("plan_cmds.py", "pkmcal.planning.margins", "plan's margins: to the workflow layer"),
-    ("plan_cmds.py", "pkmcal.planning.plan", "plan: to the workflow layer"),
-    ("plan_cmds.py", "pkmcal.planning.selection", "plan: to the workflow layer"),
-    ("plan_cmds.py", "pkmcal.sensors.library", "plan's --setup help: to the workflow vocabulary"),
-    ("plan_cmds.py", "pkmcal.study.printed", "plan of printed objects: to the workflow layer"),
 }
 
 

@@ -37,7 +37,7 @@ if TYPE_CHECKING:
     from pkmcal.identification.verification import VerificationReport
     from pkmcal.io.measurements import Measurements
     from pkmcal.mechanisms.base import Mechanism
-    from pkmcal.planning.plan import Plan
+    from pkmcal.workflow.plan import PosePlan
     from pkmcal.sensors.base import MeasurementSetup
     from pkmcal.workflow.calibration import Calibration
 
@@ -97,22 +97,28 @@ def save_measurements(measurements: Measurements, machine: Mechanism, setup: Mea
 
 
 def plan(machine: Mechanism, setup: MeasurementSetup, n: int, *, algorithm: str = "default",
-         seed: int | None = 0, n_candidates: int = 2000, **options) -> Plan:
+         seed: int | None = 0, n_candidates: int = 2000, **options) -> PosePlan:
     """Choose ``n`` poses to measure (``pkmcal plan``; :func:`pkmcal.planning.plan.plan_poses`
     takes the other ``options``). ``plan.poses`` (n, n_dof) internal units, ``plan.commands``
     the nominal actuator commands, ``plan.selection.indices`` O1..O5. A Z probe's points lie
     on the bed (``plan.on_bed``; ``on_bed=False`` plans them anywhere in the volume), and
-    :func:`pkmcal.planning.plan.height_sigma` predicts their first-layer error.
+    :func:`pkmcal.planning.plan.height_sigma` predicts their first-layer error. The plan
+    (a :class:`~pkmcal.workflow.plan.PosePlan`) writes what ``pkmcal plan`` writes and prints:
+    ``plan.csv(command)`` the pose file, ``plan.printer_file("klipper" | "gcode", ...)`` a Z
+    probe's macro or G-code, ``plan.summary(target)`` the summary (``--json``'s keys; a Z
+    probe's predicted first-layer error under ``"probe"``).
 
     >>> import pkmcal
     >>> m = pkmcal.load_machine("stewart-prototype")
     >>> p = pkmcal.plan(m, pkmcal.load_setup("indicators-prototype", m), 45, seed=1, n_candidates=400)
-    >>> p.poses.shape
-    (45, 6)
+    >>> p.poses.shape, p.summary()["selection"]["n_poses"]
+    ((45, 6), 45)
     """
     from pkmcal.planning.plan import plan_poses
+    from pkmcal.workflow.plan import PosePlan
 
-    return plan_poses(machine, setup, n, algorithm=algorithm, seed=seed, n_candidates=n_candidates, **options)
+    return PosePlan.of(plan_poses(machine, setup, n, algorithm=algorithm, seed=seed, n_candidates=n_candidates,
+                                  **options), machine, setup)
 
 
 def perturb(machine: Mechanism, magnitude_mm: float, seed: int | None = None, *,

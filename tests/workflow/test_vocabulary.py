@@ -14,7 +14,8 @@ from pkmcal.mechanisms.catalogue import BUILTIN_CATALOGUE, SYMMETRIC_KIND, SYMME
 
 def test_every_name_is_its_homes():
     for name, home in vocabulary._HOMES.items():
-        assert getattr(vocabulary, name) is getattr(importlib.import_module(home), name), name
+        module, there = home if isinstance(home, tuple) else (home, name)
+        assert getattr(vocabulary, name) is getattr(importlib.import_module(module), there), name
     assert set(vocabulary.__all__) == set(vocabulary._HOMES) | {"BUILTIN_CATALOGUE", "builtin_machines"}
 
 

@@ -8,6 +8,8 @@
   actuators of other machines in degrees).
 * ``observability``: the indices O1..O5 (:mod:`pkmcal.planning.indices`) of a pose set,
   on the same identifiable parameters and column scaling as ``plan``.
+
+Both are a shell over :mod:`pkmcal.workflow.plan`: they parse options, call it and print.
 """
 
 from __future__ import annotations
@@ -15,9 +17,7 @@ from __future__ import annotations
 import json
 
 import click
-import numpy as np
 
-from pkmcal.workflow.analysis import unreachable_notes
 from pkmcal.cli.backend_options import backend_options, check_backend
 from pkmcal.cli.import_options import import_options
 from pkmcal.cli.options import (
@@ -36,27 +36,19 @@ from pkmcal.cli.options import (
     units_comment_option,
 )
 from pkmcal.errors import PkmcalError
-from pkmcal.io.tables import format_table, to_file_units
-from pkmcal.planning.candidates import Measurability, read_candidates_csv
 from pkmcal.cli.option_types import SEED, FiniteFloat
-from pkmcal.planning.indices import INDEX_DESCRIPTIONS, INDEX_NAMES
-from pkmcal.planning.margins import ASSUMED_JOINT_ERROR_MM, CLEARANCE_MARGIN_MM
-from pkmcal.planning.selection import ALGORITHMS
-from pkmcal.sensors.library import BUILTIN_SETUPS
+from pkmcal.workflow.plan import format_indices, measurability
+from pkmcal.workflow.vocabulary import (
+    ASSUMED_JOINT_ERROR_MM,
+    BUILTIN_SETUPS,
+    CLEARANCE_MARGIN_MM,
+    INDEX_DESCRIPTIONS,
+    INDEX_NAMES,
+    PLAN_ALGORITHMS,
+    PLAN_FORMATS,
+)
 
-#: What ``plan --format`` writes: the poses, a Klipper macro, Marlin G-code (Z probes).
-PLAN_FORMATS = ("csv", "klipper", "gcode")
 _SETUP_HELP = f"Measurement setup file or built-in ({', '.join(BUILTIN_SETUPS)})."
-
-
-def _measurability(travel, plate_radius, sight_cone) -> Measurability:
-    return Measurability(travel=None if travel is None else (float(travel[0]), float(travel[1])),
-                         plate_radius=plate_radius,
-                         sight_cone=None if sight_cone is None else float(np.deg2rad(sight_cone)))
-
-
-def _format_indices(ind: dict[str, float]) -> str:
-    return "  ".join(f"{k} = {ind[k]:.6g}" for k in INDEX_NAMES)
 
 
 @click.command("plan", epilog=examples(
@@ -84,7 +76,7 @@ def _format_indices(ind: dict[str, float]) -> str:
 @click.option("--index", type=click.Choice(INDEX_NAMES, case_sensitive=False), default=None,
               help="Index to maximise: detmax and cuckoo (default O4); the default algorithm maximises O1, "
                    "then polishes the set on this index if given.")
-@click.option("--algorithm", type=click.Choice(ALGORITHMS, case_sensitive=False), default="default", show_default=True,
+@click.option("--algorithm", type=click.Choice(PLAN_ALGORITHMS, case_sensitive=False), default="default", show_default=True,
               help="default: D-optimal exchange (O1); detmax / cuckoo: paper 2 add/remove search on --index; "
                    "corners: random corners of the workspace box (paper 1); random; circle: the ballbar circle "
                    "test of a distance setup (N poses on the circle about pivot 1, in order).")
@@ -154,72 +146,51 @@ def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, 
     setup's noise.reading) and the predicted first-layer error for other numbers of
     points. --format klipper / gcode write it as a printer runs it.
     """
-    from pkmcal.io.lookup import load_machine
-    from pkmcal.io.lookup import load_setup
-    from pkmcal.planning.executors import chunk_map
-    from pkmcal.planning.margins import has_margins, resolve_margin
-    from pkmcal.planning.plan import plan_poses
     from pkmcal.progress import ProgressBar
-
-    from pkmcal.study.printed import probes_the_bed
+    from pkmcal.workflow.plan import iso9283_plan, plan_inputs, plan_of
 
     check_backend(workers, dask_address)
     check_output(output, [candidates_path, setup_spec, machine])
     if as_json and to_stdout(output):
         raise PkmcalError("--json prints the summary on standard output, where the poses would go too: write the "
                           "poses with -o FILE, or leave out --json")
-    mech = load_machine(machine)
-    setup = load_setup(setup_spec, mech)
-    probe = probes_the_bed(setup.sensor)
-    for given, name in ((probe_anywhere, "--probe-anywhere"), (target_accuracy is not None, "--target-accuracy"),
-                        (fmt != "csv", f"--format {fmt}")):
-        if given and not probe:
-            raise PkmcalError(f"{name} is for a Z probe's plan; the setup's '{setup.sensor.kind}' sensor is not one")
-    if fmt != "csv" and probe_anywhere:
-        raise PkmcalError(f"--format {fmt} writes probes a printer runs on its bed; drop --probe-anywhere")
-    if fmt != "csv" and units_comment:
-        raise PkmcalError(f"--units-comment begins a CSV; --format {fmt} writes G-code")
-    given = [n for n, v in (("--stroke-margin", stroke_margin), ("--tilt-margin", tilt_margin),
-                            ("--clearance-margin", clearance_margin)) if v is not None]
-    if margin is not None and given:
-        raise PkmcalError(f"--margin sets every limit's margin; give it or {', '.join(given)}, not both")
-    if (given or margin is not None) and not has_margins(mech):
-        raise PkmcalError(f"machine '{mech.name}' has no stroke or joint-tilt limits to keep a margin from "
-                          "(its limits: workspace box, reach, transmission angle); remove the margin options")
-    safety = margin if margin is not None else resolve_margin(mech, stroke_mm=stroke_margin, tilt_deg=tilt_margin,
-                                                                clearance_mm=clearance_margin)
+    mech, setup, safety = plan_inputs(machine, setup_spec, probe_anywhere=probe_anywhere,
+                                      target_accuracy=target_accuracy, fmt=fmt, units_comment=units_comment,
+                                      stroke_margin=stroke_margin, tilt_margin=tilt_margin,
+                                      clearance_margin=clearance_margin, margin=margin)
     if pattern is None and cycles is not None:
         raise PkmcalError("--cycles counts the cycles of --pattern iso9283; a selection's size is --n-poses")
     if pattern is not None:
-        from pkmcal.identification.iso9283 import CYCLES
-
         if click.get_current_context().get_parameter_source("n_poses") is not click.core.ParameterSource.DEFAULT:
             if cycles is not None:
                 raise PkmcalError(f"--pattern iso9283 visits P1..P5 in --cycles {cycles}; leave out --n-poses (a "
                                   "selection's size)")
             deprecated(f"--n-poses {n_poses} (or --n) with --pattern iso9283", f"--cycles {n_poses}")
             cycles = n_poses
-        cycles = CYCLES if cycles is None else cycles
-        _emit_pattern(mech, setup, cycles, safety, _measurability(indicator_travel, plate_radius, sight_cone), output,
-                      units_comment, f"pkmcal plan {mech.name} --setup {setup_spec} --pattern {pattern} --cycles {cycles}",
-                      {"--candidates": candidates_path, "--grid": grid, "--index": index,
-                       "--algorithm": None if algorithm == "default" else algorithm,
-                       "--format": None if fmt == "csv" else fmt, "--target-accuracy": target_accuracy}, as_json)
+        for name, value in {"--candidates": candidates_path, "--grid": grid, "--index": index,
+                            "--algorithm": None if algorithm == "default" else algorithm,
+                            "--format": None if fmt == "csv" else fmt, "--target-accuracy": target_accuracy}.items():
+            if value is not None:
+                raise PkmcalError(f"{name} chooses among candidates; --pattern iso9283 writes the standard's pattern: "
+                                  f"remove {name}")
+        pat = iso9283_plan(mech, setup, cycles, margin=safety,
+                           measurability=measurability(indicator_travel, plate_radius, sight_cone))
+        _emit_pattern(pat, output, units_comment,
+                      f"pkmcal plan {mech.name} --setup {setup_spec} --pattern {pattern} --cycles {pat.pattern.cycles}",
+                      as_json)
         return
-    candidates = read_candidates_csv(candidates_path, mech, mapping) if candidates_path else None
-    with chunk_map(workers, dask_address) as run_chunks, ProgressBar("plan", quiet=quiet) as bar:
-        plan = plan_poses(mech, setup, n_poses, algorithm=algorithm, index=index.upper() if index else None,
-                          candidates=candidates, n_candidates=n_candidates, grid=grid, seed=seed, margin=safety,
-                          measurability=_measurability(indicator_travel, plate_radius, sight_cone),
-                          progress=bar.stage, circle_plane=circle_plane, chunk_map=run_chunks,
-                          on_bed=False if probe_anywhere else None)
-    command = (f"pkmcal plan {mech.name} --setup {setup_spec} --n-poses {n_poses} --algorithm {plan.selection.algorithm} "
-               f"--seed {seed}")
+    planned = plan_of(mech, setup, n_poses, algorithm=algorithm, index=index, candidates=candidates_path,
+                      mapping=mapping, n_candidates=n_candidates, grid=grid, seed=seed, margin=safety,
+                      measurability=measurability(indicator_travel, plate_radius, sight_cone),
+                      circle_plane=circle_plane, probe_anywhere=probe_anywhere, workers=workers,
+                      dask_address=dask_address, progress=lambda: ProgressBar("plan", quiet=quiet))
+    command = (f"pkmcal plan {mech.name} --setup {setup_spec} --n-poses {n_poses} "
+               f"--algorithm {planned.selection.algorithm} --seed {seed}")
     if fmt != "csv":
-        emit(_printer_file(fmt, plan, setup, command, machine, setup_spec), output)
+        emit(planned.printer_file(fmt, command, machine, setup_spec), output)
     else:
-        _emit_csv(plan, mech, command, output, units_comment)
-    summary = plan_summary(plan, setup, target_accuracy)
+        emit(planned.csv(command, units_comment), output)
+    summary = planned.summary(target_accuracy)
     if as_json:
         click.echo(json.dumps({**summary, "output": output}, indent=2, allow_nan=False))
         return
@@ -230,143 +201,40 @@ def plan_cmd(machine, setup_spec, n_poses, candidates_path, n_candidates, grid, 
         say(f"wrote {output}")
 
 
-def plan_summary(plan, setup, target: float | None) -> dict:
-    """What ``pkmcal plan`` prints, as a JSON-ready dict (:func:`plan_summary_lines` is its
-    text): the candidates, the safety margin, the identifiable parameters, the selection and
-    its indices; for a Z probe on the bed, ``probe`` (:func:`_probe_facts`)."""
-    cand, sel, model = plan.candidates, plan.selection, plan.model
-    out = {"candidates": {"accepted": int(len(cand.poses)), "tested": int(cand.n_tested), "kind": cand.kind,
-                          "rejected": {k: int(v) for k, v in sorted(cand.rejected.items())},
-                          "text": cand.describe()},
-           "safety_margin": plan.describe_margin(), "notes": list(plan.notes),
-           "identifiable_parameters": int(model.n_params), "method": model.method,
-           "gauge_fixed": list(model.report.fixed),
-           "selection": {"algorithm": sel.algorithm, "n_poses": int(len(sel.chosen)), "criterion": sel.criterion,
-                         "message": sel.message},
-           "indices": {k: _number(v) for k, v in sel.indices.items()}}
-    if plan.on_bed:
-        out["probe"] = _probe_facts(plan, setup, target)
-    return out
-
-
-def _number(v) -> float | None:
-    """A float for JSON: None where not finite (an index of a degenerate pose set)."""
-    return float(v) if np.isfinite(v) else None
-
-
 def plan_summary_lines(summary: dict) -> list[str]:
-    """The text of :func:`plan_summary`."""
+    """The text of a plan's summary (:meth:`pkmcal.workflow.plan.PosePlan.summary`)."""
     sel = summary["selection"]
     lines = [f"candidates: {summary['candidates']['text']}", f"safety margin: {summary['safety_margin']}",
              *(f"note: {note}" for note in summary["notes"]),
              f"identifiable parameters: {summary['identifiable_parameters']} ({summary['method']}; gauge fixed: "
              f"{', '.join(summary['gauge_fixed']) or 'none'})",
              f"{sel['algorithm']}: {sel['n_poses']} poses, maximised {sel['criterion']}; {sel['message']}",
-             _format_indices({k: float("nan") if v is None else v for k, v in summary["indices"].items()})]
+             format_indices({k: float("nan") if v is None else v for k, v in summary["indices"].items()})]
     if "probe" in summary:
         lines += _probe_lines(summary["probe"], summary["identifiable_parameters"], summary["candidates"]["accepted"])
     return lines
 
 
-def _emit_csv(plan, mech, command: str, output, units_comment: bool) -> None:
-    """The plan's poses and nominal commands as a CSV."""
-    sel = plan.selection
-    poses = to_file_units(plan.poses, mech.pose_is_angle)
-    commands = to_file_units(plan.commands, mech.actuator_is_angle)
-    cols = {name: poses[:, i] for i, name in enumerate(mech.pose_names)}
-    cols.update({name: commands[:, i] for i, name in enumerate(mech.actuator_names)})
-    sel = plan.selection
-    emit(format_table(cols, units_comment=units_comment, comments=[
-        f"{command}; maximised {sel.criterion}",
-        f"safety margin: {plan.describe_margin()}",
-        *(f"note: {n}" for n in plan.notes),
-        _format_indices(sel.indices)]), output)
-
-
-def _emit_pattern(mech, setup, cycles: int, safety, measurability, output, units_comment: bool, command: str,
-                  unused: dict, as_json: bool = False) -> None:
-    """``plan --pattern iso9283``: the pattern of :func:`~pkmcal.identification.iso9283.iso9283_pattern`
-    as a CSV (poses, nominal commands, ``iso_pose`` 1..5, ``cycle``) and its summary (``--json``:
-    ``pattern``, ``centre_mm``, ``side_mm``, ``cycles``, ``n_poses``, ``notes``, ``output``)."""
-    from pkmcal.identification.iso9283 import iso9283_pattern
-
-    for name, value in unused.items():
-        if value is not None:
-            raise PkmcalError(f"{name} chooses among candidates; --pattern iso9283 writes the standard's pattern: "
-                              f"remove {name}")
-    pat = iso9283_pattern(mech, setup, cycles=cycles, margin=safety, measurability=measurability)
-    poses, label, cycle = pat.cycle_poses()
-    cols = {name: to_file_units(poses, mech.pose_is_angle)[:, i] for i, name in enumerate(mech.pose_names)}
-    commands = to_file_units(mech.ik(poses), mech.actuator_is_angle)
-    cols.update({name: commands[:, i] for i, name in enumerate(mech.actuator_names)})
-    cols.update({"iso_pose": label, "cycle": cycle})
-    c = ", ".join(f"{v:.6g}" for v in pat.center)
-    emit(format_table(cols, units_comment=units_comment, comments=[
-        command, f"ISO 9283 cube: centre {c} mm, side {pat.side:.6g} mm; P1..P5 on its diagonal plane C1-C2-C7-C8, "
-        f"{pat.cycles} cycles", *(f"note: {n}" for n in pat.notes)]), output)
+def _emit_pattern(pat, output, units_comment: bool, command: str, as_json: bool = False) -> None:
+    """``plan --pattern iso9283``: the pattern's CSV (:meth:`pkmcal.workflow.plan.PatternPlan.csv`)
+    and its summary (``--json``: ``pattern``, ``centre_mm``, ``side_mm``, ``cycles``, ``n_poses``,
+    ``notes``, ``output``)."""
+    emit(pat.csv(command, units_comment), output)
     if as_json:
-        click.echo(json.dumps({"pattern": "iso9283", "centre_mm": [float(v) for v in pat.center],
-                               "side_mm": float(pat.side), "cycles": int(pat.cycles), "n_poses": int(len(poses)),
-                               "notes": list(pat.notes), "output": output}, indent=2, allow_nan=False))
+        click.echo(json.dumps({**pat.summary(), "output": output}, indent=2, allow_nan=False))
         return
     say = summary_echo(output)
-    say(f"ISO 9283 pattern: cube centre {c} mm, side {pat.side:.6g} mm (the largest whose 3x3x3 grid and P1..P5 pass "
-        f"the limits with the safety margins and the setup's measurability); P1..P5 x {pat.cycles} cycles = "
-        f"{len(poses)} poses")
-    for n in pat.notes:
+    say(f"ISO 9283 pattern: cube centre {pat.centre_text} mm, side {pat.pattern.side:.6g} mm (the largest whose 3x3x3 "
+        f"grid and P1..P5 pass the limits with the safety margins and the setup's measurability); P1..P5 x "
+        f"{pat.pattern.cycles} cycles = {pat.n_poses} poses")
+    for n in pat.pattern.notes:
         say(f"note: {n}")
     if output is not None and output != "-":
         say(f"wrote {output}")
 
 
-def _printer_file(fmt: str, plan, setup, command: str, machine: str, setup_spec: str) -> str:
-    """The Klipper macro or Marlin G-code of an on-bed Z-probe plan (:mod:`pkmcal.io.probe_gcode`)."""
-    from pkmcal.io.probe_gcode import klipper_probe_macro, marlin_probe_gcode
-
-    offset = np.asarray(setup.sensor.probe_offset, dtype=float)
-    nozzle = plan.poses[:, 0:2]
-    if fmt == "klipper":
-        return klipper_probe_macro(nozzle, offset, [
-            f"{command} --format klipper", "Paste into printer.cfg (or [include] this file), RESTART, run "
-            "PKMCAL_PROBE_PLAN, save the console (or klippy.log), then:",
-            f"  pkmcal import klipper-probe console.log --machine {machine} --setup {setup_spec} -o probe.csv"])
-    return marlin_probe_gcode(nozzle + offset[None, 0:2], offset, [
-        f"{command} --format gcode", "Run on the printer (print it from SD or send it), save the terminal's "
-        "output, then:",
-        f"  pkmcal import marlin-probe terminal.log --machine {machine} --setup {setup_spec} -o probe.csv"])
-
-
-def _probe_facts(plan, setup, target: float | None) -> dict:
-    """An on-bed Z-probe plan's facts: the probe offset (mm) and repeatability (the setup's
-    noise.reading, mm, or None), the predicted first-layer error for other numbers of points
-    (:func:`pkmcal.planning.plan.height_sigma`: ``first_layer_sigma_mm``, ``[points, mm]``), the
-    points for ``target`` (``target``: ``{"sigma_mm", "points"`` (None when not reached),
-    ``"reached_sigma_mm"}``), and what heights cannot see and what would see it
-    (``undetermined``: the sentences of
-    :func:`~pkmcal.identification.identifiability.undetermined_directions`, the named directions
-    and the rail leans, as ``identify`` says them)."""
-    from pkmcal.identification.identifiability import undetermined_directions
-    from pkmcal.planning.plan import height_sigma, points_for_height_sigma
-
-    noise = setup.noise.reading_std
-    n = len(plan.poses)
-    ladder = sorted({k for k in (n // 2, n, 2 * n, 4 * n) if plan.model.n_params <= k <= len(plan.candidates.poses)}
-                    | {n})
-    curve = [(k, s) for k, s in height_sigma(plan, ladder) if np.isfinite(s)]
-    facts: dict = {"offset_mm": [float(v) for v in np.asarray(setup.sensor.probe_offset, dtype=float)],
-                   "repeatability_mm": float(noise[0]) if noise is not None and np.size(noise) else None,
-                   "points": n, "first_layer_sigma_mm": [[int(k), float(s)] for k, s in curve]}
-    if target is not None:
-        need, tried = points_for_height_sigma(plan, target)
-        facts["target"] = {"sigma_mm": float(target), "points": None if need is None else int(need),
-                           "reached_sigma_mm": _number(tried[-1][1] if need is None else dict(tried)[need])}
-    facts["undetermined"] = [entry["text"] for entry in
-                             undetermined_directions(plan.model.mechanism, setup, plan.poses)] if curve else []
-    return facts
-
-
 def _probe_lines(facts: dict, n_params: int, n_candidates: int) -> list[str]:
-    """What an on-bed Z-probe plan prints (:func:`_probe_facts`)."""
+    """What an on-bed Z-probe plan prints (:meth:`pkmcal.workflow.plan.PosePlan.probe_facts`)."""
     x, y, z = facts["offset_mm"]
     rep = "not stated" if facts["repeatability_mm"] is None else f"{facts['repeatability_mm']:g} mm"
     n = facts["points"]
@@ -412,21 +280,16 @@ def observability_cmd(machine, poses_arg, poses, setup_spec, as_json, mapping=No
     parameters (as 'pkmcal plan'). O1 is D-optimality, O4 the noise amplification index.
     (The former spelling 'observability MACHINE POSES.csv' still works.)
     """
-    from pkmcal.io.lookup import load_machine
-    from pkmcal.io.lookup import load_setup
-    from pkmcal.planning.plan import pose_set_indices
+    from pkmcal.workflow.plan import observability_of
 
     poses = poses_file(poses, poses_arg, "observability")
-    mech = load_machine(machine)
-    setup = load_setup(setup_spec, mech)
-    pose_arr = read_candidates_csv(poses, mech, mapping)
-    ind = pose_set_indices(mech, setup, pose_arr)
-    notes = unreachable_notes(mech, pose_arr, poses)
+    found = observability_of(machine, setup_spec, poses, mapping=mapping)
+    ind, notes = found.indices, found.notes
     if as_json:
-        click.echo(json.dumps({**ind, "n_poses": int(len(pose_arr)), "warnings": notes,
+        click.echo(json.dumps({**ind, "n_poses": int(len(found.poses)), "warnings": notes,
                                "units": {**{k: "1" for k in INDEX_NAMES}, "n_poses": "1"}}))
         return
-    click.echo(f"{len(pose_arr)} poses")
+    click.echo(f"{len(found.poses)} poses")
     for k in INDEX_NAMES:
         click.echo(f"{k} = {ind[k]:.6g}   {INDEX_DESCRIPTIONS[k]}")
     for n in notes:

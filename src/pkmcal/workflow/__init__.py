@@ -13,6 +13,9 @@ values:
   :mod:`~pkmcal.workflow.provenance`: dates and input fingerprints;
   :mod:`~pkmcal.workflow.inputs`: a machine as its setup's sensor reads it;
   :mod:`~pkmcal.workflow.text`: a fit in plain text;
+* :mod:`~pkmcal.workflow.plan`: which poses to measure (``pkmcal plan``: a
+  :class:`~pkmcal.workflow.plan.PosePlan` writes its pose file, a Z probe's macro or G-code,
+  and its summary; the ISO 9283 pattern) and how good a set is (``pkmcal observability``);
 * :mod:`~pkmcal.workflow.analysis`: what a pose set lets a setup identify (``pkmcal identifiability``);
   :mod:`~pkmcal.workflow.vocabulary`: the options' closed vocabularies (methods, losses, built-in
   machines, ...);
