@@ -26,6 +26,7 @@ import numpy as np
 
 from pkmcal.compensation.fit import Field
 from pkmcal.errors import PkmcalError
+from pkmcal.identification.simulation import limits_violated
 from pkmcal.mechanisms.base import Mechanism
 
 #: Fixed-point iterations for x_m and the largest step left (mm or rad) that counts as solved.
@@ -72,15 +73,7 @@ def commands_for(calibrated: Mechanism, nominal: Mechanism, fld: Field | None, t
         raise PkmcalError(f"the nominal machine '{nominal.name}' ({nominal.kind}) is not of the kind of the "
                           f"calibrated one '{calibrated.name}' ({calibrated.kind})")
     x_m = model_poses(calibrated, fld, targets)
-    report = calibrated.check_limits(x_m, margins=False)
-    unknown = [n for n in ignore_limits if n not in report.violations]
-    if unknown:
-        raise PkmcalError(f"machine '{calibrated.name}' has no limit {', '.join(unknown)}; its limits are "
-                          f"{', '.join(report.violations)}")
-    checked = {n: v for n, v in report.violations.items() if n not in ignore_limits}
-    bad = np.zeros(len(x_m), dtype=bool)
-    for v in checked.values():
-        bad |= v
+    bad, checked = limits_violated(calibrated, x_m, tuple(ignore_limits))
     reasons = ["outside the calibrated machine's limits (" + ", ".join(n for n, v in checked.items() if v[k]) + ")"
                if bad[k] else "" for k in range(len(x_m))]
     with np.errstate(invalid="ignore"):

@@ -203,19 +203,15 @@ def klipper_block(fld: Field, name: str = "default") -> str:
     printer.cfg that has no block yet; a printer.cfg with a block is updated by
     :func:`pkmcal.io.klipper_config.save_config_text`."""
     import configparser
-    import io
 
-    from pkmcal.io.klipper_config import AUTOSAVE_HEADER
+    from pkmcal.io.klipper_config import AUTOSAVE_HEADER, autosave_lines
 
     parser = configparser.RawConfigParser()
     for section, opts in klipper_profile(fld, name).items():
         parser.add_section(section)
         for k, v in opts.items():
             parser.set(section, k, v)
-    buf = io.StringIO()
-    parser.write(buf)
-    lines = [("#*# " + line).strip() for line in buf.getvalue().strip().split("\n")]
-    return AUTOSAVE_HEADER.lstrip("\n") + "\n".join(lines) + "\n"
+    return AUTOSAVE_HEADER.lstrip("\n") + "\n".join(autosave_lines(parser)) + "\n"
 
 
 __all__ = ["KLIPPER_PROFILE_VERSION", "correction_document", "klipper_block", "klipper_profile", "load_correction",

@@ -407,6 +407,24 @@ def parameter_errors(
     raise PkmcalError(f"unknown error distribution '{distribution}'; use uniform or gaussian")
 
 
+def limits_violated(machine: Mechanism, poses: np.ndarray,
+                    ignore_limits: tuple[str, ...] = ()) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """``(bad (N,), {limit: verdicts (N,)})``: the poses outside ``machine``'s limits, all but
+    ``ignore_limits`` (an ignored name that is not a limit is a user error), and per limit
+    checked which poses break it. Only the verdicts are used: a hexapod checks without its
+    margins (same verdicts, faster)."""
+    report = machine.check_limits(poses, margins=False)
+    unknown = [n for n in ignore_limits if n not in report.violations]
+    if unknown:
+        raise PkmcalError(f"machine '{machine.name}' has no limit {', '.join(unknown)}; "
+                          f"its limits are {', '.join(report.violations)}")
+    violated = {n: v for n, v in report.violations.items() if n not in ignore_limits}
+    bad = np.zeros(len(poses), dtype=bool)
+    for v in violated.values():
+        bad |= v
+    return bad, violated
+
+
 def drop_limit_violations(
     real: Mechanism,
     poses: np.ndarray,
@@ -416,18 +434,8 @@ def drop_limit_violations(
 ) -> np.ndarray:
     """``ok`` (N,) with the poses outside ``real``'s limits (all but ``ignore_limits``) turned
     False; each such pose that was ok gets the reason ``"real-limits: name+name"`` in
-    ``dropped`` (updated in place). An ignored name that is not a limit is a user error.
-    Only the verdicts are used: a hexapod checks without its margins (same verdicts, faster)."""
-
-    report = real.check_limits(poses, margins=False)
-    unknown = [n for n in ignore_limits if n not in report.violations]
-    if unknown:
-        raise PkmcalError(f"machine '{real.name}' has no limit {', '.join(unknown)}; "
-                          f"its limits are {', '.join(report.violations)}")
-    violated = {n: v for n, v in report.violations.items() if n not in ignore_limits}
-    bad = np.zeros(len(ok), dtype=bool)
-    for v in violated.values():
-        bad |= v
+    ``dropped`` (updated in place) (:func:`limits_violated`)."""
+    bad, violated = limits_violated(real, poses, ignore_limits)
     for k in np.flatnonzero(ok & bad):
         dropped[int(k)] = "real-limits: " + "+".join(n for n, v in violated.items() if v[k])
     return ok & ~bad

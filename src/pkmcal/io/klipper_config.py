@@ -304,6 +304,15 @@ def read_config(path: str) -> KlipperConfig:
 # -- SAVE_CONFIG ---------------------------------------------------------------------------------
 
 
+def autosave_lines(parser) -> list[str]:
+    """The sections of ``parser`` (a ``RawConfigParser``) as Klipper writes them into its
+    SAVE_CONFIG block: ``RawConfigParser.write``'s lines, each behind ``#*# ``
+    (klippy/configfile.py ``cmd_SAVE_CONFIG``)."""
+    sfile = io.StringIO()
+    parser.write(sfile)
+    return [("#*# " + line).strip() for line in sfile.getvalue().strip().split("\n")]
+
+
 def save_config_text(path: str, values: dict[str, dict[str, str]]) -> str:
     """The text of ``path`` after Klipper's ``SAVE_CONFIG`` with ``values`` (section →
     option → text) set by a calibration (klippy/configfile.py ``cmd_SAVE_CONFIG``): the
@@ -325,9 +334,7 @@ def save_config_text(path: str, values: dict[str, dict[str, str]]) -> str:
             block.add_section(section)
         for option, text in opts.items():
             block.set(section, option, text)
-    sfile = io.StringIO()
-    block.write(sfile)
-    lines = [("#*# " + line).strip() for line in sfile.getvalue().strip().split("\n")]
+    lines = autosave_lines(block)
     lines.insert(0, "\n" + AUTOSAVE_HEADER.rstrip())
     lines.append("")
     new_regular = _strip_duplicates(regular, block)
