@@ -317,109 +317,6 @@ def test_rounding_effect_is_the_largest_change_of_the_commanded_actuators():
     assert rounding_effect(fw.machine("a"), fw.machine("b")) == 0.0
 
 
-# M503 output of each Marlin version, written from the report each prints (cited in
-# pkmcal/io/marlin_settings.py): the same printer, rods 217.2/217/216.7 where the version holds
-# per-tower rods, angle trims 0.25/-0.1/-0.15, H 300.5, M666 -0.4/0/-1.2, 80 steps/mm.
-M503_11X = """\
-echo:Endstop adjustment (mm):
-echo:  M666 X-0.40 Y0.00 Z-1.20
-echo:Delta settings: L=diagonal rod, R=radius, S=segments-per-second, ABC=diagonal rod trim, IJK=tower angle trim
-echo:  M665 L217.00 R95.00 S200.00 A0.20 B0.00 C-0.30 I0.25 J-0.10 K-0.15
-"""
-M503_119 = """\
-echo:Steps per unit:
-echo:  M92 X80.00 Y80.00 Z80.00 E90.00
-echo:Endstop adjustment:
-echo:  M666 X-0.40 Y0.00 Z-1.20
-echo:Delta settings: L<diagonal_rod> R<radius> H<height> S<segments_per_s> B<calibration radius> XYZ<tower angle corrections>
-echo:  M665 L217.00 R95.00 H300.50 S200.00 B70.00 X0.25 Y-0.10 Z-0.15
-"""
-M503_21X = """\
-echo:; Steps per unit:
-echo:  M92 X80.00 Y80.00 Z80.00 E90.00
-echo:; Endstop adjustment:
-echo:  M666 X-0.40 Y0.00 Z-1.20
-echo:; Delta settings: L<diagonal rod> R<radius> H<height> S<segments per sec> XYZ<tower angle trim> ABC<rod trim>
-echo:  M665 L217.00 R95.00 H300.50 S200.00 X0.25 Y-0.10 Z-0.15 A0.20 B0.00 C-0.30
-echo:; Z-Probe Offset (mm):
-echo:  M851 X0.00 Y0.00 Z-1.50
-"""
-
-
-@pytest.mark.parametrize("text, version, options, arms, endstops", [
-    # 1.1.x: A B C rod trims, I J K angle trims, no H (given); homing moves |adj|
-    (M503_11X, None, {"height": 300.5}, (217.2, 217.0, 216.7), (300.9, 300.5, 301.7)),
-    # 1.1.9: B is the calibration radius (not tower B's rod: 217, not 287); homing 0.1 mm further
-    (M503_119, "1.1.9", {}, (217.0,) * 3, (301.0, 300.6, 301.8)),
-    # 2.0.x: the same words; homing (6 + 1) steps of 1/80 mm further
-    (M503_119, "2.0.x", {}, (217.0,) * 3, (300.9875, 300.5875, 301.7875)),
-    # 2.1.x: A B C rod trims; the M851 Z offset in the home height (300.5 + 1.5)
-    (M503_21X, None, {}, (217.2, 217.0, 216.7), (302.4, 302.0, 303.2)),
-])
-def test_marlin_m503_of_each_version_imports_to_what_it_runs(tmp_path, text, version, options, arms, endstops):
-    from pkmcal.io.marlin_settings import read_marlin_settings
-
-    res = read_marlin_settings(_write(tmp_path, "m503.txt", text), version, **options)
-    fw = res.firmware
-    assert fw.radius == 95.0
-    np.testing.assert_allclose(fw.arms, arms, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(fw.angles_deg, (210.25, 329.9, 89.85), rtol=0, atol=1e-12)
-    np.testing.assert_allclose(fw.endstops, endstops, rtol=0, atol=1e-12)
-
-
-def test_marlin_version_must_be_stated_when_the_text_cannot_tell(tmp_path):
-    from pkmcal.io.marlin_settings import read_marlin_settings
-
-    path = _write(tmp_path, "m503.txt", M503_119)
-    with pytest.raises(InputFileError, match="B is the calibration radius in 1.1.9 and 2.0.x.*--marlin-version"):
-        read_marlin_settings(path)
-    with pytest.raises(InputFileError, match="M665 B is not a Marlin 2.1.x word|is the version right"):
-        read_marlin_settings(_write(tmp_path, "m.txt", M503_11X), "2.1.x")
-    # 2.1.x skips an adjustment of 6 steps or fewer (0.075 mm at 80 steps/mm), and says so
-    res = read_marlin_settings(_write(tmp_path, "m.txt", M503_21X.replace("Z-1.20", "Z-0.05")))
-    assert res.firmware.endstops == (302.4, 302.0, 302.0)
-    assert any("skips adjustments of 6 steps" in n for n in res.notes)
-    # a 1.1.x text without --height; missing words are an error unless taken as 0
-    with pytest.raises(InputFileError, match="has no H: give the nozzle height"):
-        read_marlin_settings(_write(tmp_path, "m.txt", M503_11X))
-    with pytest.raises(InputFileError, match="no M665 A B C X Y Z and M666 X Y Z"):
-        read_marlin_settings(_write(tmp_path, "m.txt", "M665 L217 R95 H300\n"), "2.1.x")
-    res = read_marlin_settings(_write(tmp_path, "m.txt", "M665 L217 R95 H300\n"), "2.1.x", missing="zero")
-    assert res.firmware.endstops == (300.0,) * 3 and any("taken as 0" in n for n in res.notes)
-
-
-@pytest.mark.parametrize("version, steps", [("1.1.9", None), ("2.0.x", 80.0), ("2.1.x", None)])
-def test_marlin_export_round_trips_through_each_version(tmp_path, version, steps):
-    """marlin_text chooses H and M666 so that the version's homing puts each switch at the
-    firmware's position_endstop; reading back as that version returns the numbers of the
-    words as written (marlin_rounded: 32-bit floats of at most 6 decimals), each within the
-    words' rounding of the exact ones."""
-    from pkmcal.io.marlin_settings import marlin_text as text_for, read_marlin_settings
-
-    fw = DeltaFirmware(radius=95.0, angles_deg=(210.25, 329.9, 89.85), arms=(217.2, 217.0, 216.7),
-                       endstops=(300.9, 300.5, 300.52))
-    spm = None if steps is None else (steps,) * 3
-    text, lost = text_for(fw, version, spm)
-    if steps is not None:
-        text = f"M92 X{steps} Y{steps} Z{steps}\n" + text
-    back = read_marlin_settings(_write(tmp_path, "m.gcode", text), version).firmware
-    held = marlin_rounded(fw, version, spm)
-    # the reader sums H and the homing drop in its own order (1.1.9, 2.0.x: H + (|adj| + extra)):
-    # one rounding of a number below 1e3 apart
-    for got, want in ((back.endstops, held.endstops), (back.angles_deg, held.angles_deg), (back.arms, held.arms),
-                      ((back.radius,), (held.radius,))):
-        np.testing.assert_allclose(got, want, rtol=0, atol=2 * np.spacing(1e3))
-    # two words summed, each 32-bit (half its spacing at 256..512: 1.5e-5) and 6 decimals
-    word = 0.5e-6 + 0.5 * float(np.spacing(np.float32(300.0)))
-    np.testing.assert_allclose(held.endstops, fw.endstops, rtol=0, atol=2 * word)
-    np.testing.assert_allclose(held.angles_deg, fw.angles_deg, rtol=0, atol=2 * word)
-    if version in ("1.1.9", "2.0.x"):                # no per-tower rods in their M665
-        assert lost and "one rod length" in lost[0]
-        np.testing.assert_allclose(held.arms, (np.mean(fw.arms),) * 3, rtol=0, atol=word)
-    else:
-        np.testing.assert_allclose(held.arms, fw.arms, rtol=0, atol=2 * word)
-
-
 def test_export_names_what_the_firmware_cannot_hold():
     fw = DeltaFirmware(radius=100.0, angles_deg=(210.0, 330.0, 90.0), arms=(215.0,) * 3, endstops=(300.0,) * 3)
     m = fw.machine("m")
@@ -474,10 +371,10 @@ def test_cli_klipper_and_marlin_both_ways(tmp_path):
     np.testing.assert_array_equal(back.reading_reference, kossel.reading_reference)
     res = run(cli, ["export", "kossel-mini", "--format", "marlin", "-o", str(tmp_path / "m.gcode")])
     assert res.exit_code == 0, res.output
-    # Marlin 2.1.x by default: H 0.5 mm below the lowest switch, so that homing moves every
+    # Marlin 2.1.x by default (2.0.6 on): H 0.5 mm below the lowest switch, so that homing moves every
     # M666 (it skips adjustments of MIN_STEPS_PER_SEGMENT steps or fewer; was H250, M666 X0 Y0 Z0)
     assert (tmp_path / "m.gcode").read_text().splitlines()[:3] == [
-        "; Marlin 2.1.x: M665 L R H S X Y Z A B C", "M665 L215 R105.2 H249.5 X0 Y0 Z0 A0 B0 C0",
+        "; Marlin 2.0.6-2.1.x: M665 L R H S X Y Z A B C", "M665 L215 R105.2 H249.5 X0 Y0 Z0 A0 B0 C0",
         "M666 X-0.5 Y-0.5 Z-0.5"]
     res = run(cli, ["import", "marlin", str(tmp_path / "m.gcode"), "-o", str(tmp_path / "m.yaml")])
     assert res.exit_code == 0, res.output

@@ -47,7 +47,8 @@ from pkmcal.workflow.export import export_machine
     "pkmcal export stewart-prototype --format linuxcnc",
     "pkmcal export kossel-mini --format klipper",
     "pkmcal export kossel-mini --format marlin",
-    "pkmcal export kossel-mini --format marlin --marlin-version 1.1.9",
+    "pkmcal export kossel-mini --format marlin --marlin-version 1.1.8",
+    "pkmcal export kossel-mini --format marlin --marlin-version 2.0.5.3 --steps-per-mm 80",
     "pkmcal export kossel-mini --format klipper --config examples/klipper/printer.cfg -o printer-saved.cfg"))
 @click.argument("calibrated", metavar="CALIBRATED.yaml")
 @click.option("--format", "fmt", type=click.Choice(["linuxcnc", "json", "klipper", "marlin"]), required=True,
@@ -79,13 +80,13 @@ from pkmcal.workflow.export import export_machine
               help="klipper: write the whole printer.cfg as Klipper's SAVE_CONFIG would leave it with this "
                    "calibration: the #*# block updated (its other sections kept) and the main file's copies of the "
                    "saved options commented out, so that Klipper runs the saved values. Needs -o (never the input).")
-@click.option("--marlin-version", "marlin_version", type=click.Choice(["1.1.9", "2.0.x", "2.1.x"]), default="2.1.x",
-              show_default=True,
-              help="marlin: the Marlin the settings are for (M665's letters and homing differ: 1.1.9 and 2.0.x "
-                   "have no rod trims in M665 and read B as the calibration radius).")
+@click.option("--marlin-version", "marlin_version", metavar="VERSION", default="2.1.x", show_default=True,
+              help="marlin: the Marlin the settings are for, as M115 prints it (e.g. 1.1.8, 2.0.9.3, 2.1.2; or "
+                   "2.1.x): M665's letters and homing differ (1.1.x and 2.0.0-2.0.5.x have no rod trims in M665; "
+                   "1.1.0-1.1.5 hold tower C at 90 deg).")
 @click.option("--steps-per-mm", "steps_per_mm", type=FiniteFloat(min=0.0, min_open=True), metavar="STEPS",
-              help="marlin, --marlin-version 2.0.x: the towers' steps per mm (M92), for its homing's extra "
-                   "MIN_STEPS_PER_SEGMENT + 1 steps.")
+              help="marlin, --marlin-version 1.1.9 to 2.0.5.x: the towers' steps per mm (M92), for their homing's "
+                   "extra MIN_STEPS_PER_SEGMENT + 1 steps.")
 @click.option("--no-refit", "no_refit", is_flag=True,
               help="klipper / marlin: export the calibrated machine's own numbers, without the firmware-limited "
                    "refit that export otherwise makes from the measurements its calibration record names when the "
@@ -142,6 +143,10 @@ def export_cmd(calibrated: str, fmt: str, output: str | None, ini: str | None, u
     if (setup_spec is not None or heldout is not None or as_json) and measurements is None:
         raise PkmcalError("--setup, --held-out and --json belong to the firmware-limited refit: give --calibration-measurements "
                           "MEAS.csv too")
+    if fmt == "marlin":                            # the version's error before any work
+        from pkmcal.io.marlin_settings import marlin_dialect
+
+        marlin_dialect(marlin_version)
     if (no_refit or accept_undetermined) and fmt not in ("klipper", "marlin"):
         raise PkmcalError(f"--no-refit and --accept-undetermined are for --format klipper or marlin, not {fmt}")
     if no_refit and measurements is not None:

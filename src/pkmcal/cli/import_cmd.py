@@ -179,24 +179,28 @@ def klipper_cmd(config: str, output: str | None, name: str | None, setup_output:
 @click.argument("settings", metavar="M503.txt")
 @output_option("DELTA.yaml", "Machine file to write")
 @click.option("--name", metavar="NAME", help="Machine name (default: the file's name).")
-@click.option("--marlin-version", "version", type=click.Choice(["1.1.x", "1.1.9", "2.0.x", "2.1.x"]),
-              help="The Marlin that printed the settings (M115 prints it): M665's letters and homing differ between "
-                   "versions. Needed unless the text tells (I J K: 1.1.x; A, C: 2.1.x).")
+@click.option("--marlin-version", "version", metavar="VERSION",
+              help="The Marlin that printed the settings, as M115 prints it (e.g. 1.1.8, 2.0.5.3, 2.0.9.3, 2.1.2; "
+                   "1.1.0-RC8; or 2.1.x): M665's letters and homing differ between releases. Needed unless the text "
+                   "tells (I J K, or A C without H: a 1.1.0 release candidate; A C with H: 2.0.6 to 2.1.x).")
 @click.option("--missing", type=click.Choice(["error", "zero"]), default="error", show_default=True,
               help="A trim or M666 adjustment the version prints but the file lacks: an error, or 0 (noted).")
 @click.option("--height", type=FiniteFloat(), metavar="MM",
-              help="Marlin 1.1.x only (its M665 has no H): the nozzle height at home, MANUAL_Z_HOME_POS plus M206 Z.")
+              help="Marlin 1.1.0 release candidates only (their M665 has no H): the nozzle height at home, "
+                   "MANUAL_Z_HOME_POS plus M206 Z.")
 def marlin_cmd(settings: str, output: str | None, name: str | None, version: str | None, missing: str,
                height: float | None) -> None:
     """Read a Marlin delta printer's M665/M666 settings as a pkmcal linear-delta machine file.
 
     A text file with the printer's M665 and M666 lines (the output of M503, 'echo:' and ';'
-    comments allowed, or a G-code file), read as the stated Marlin version runs them: 1.1.x
-    M665 L R S A B C (rod trims) I J K (angle trims); 1.1.9 and 2.0.x M665 L R H S B X Y Z (B
-    the calibration radius, not geometry); 2.1.x M665 L R H S X Y Z A B C; M666 X Y Z endstop
-    adjustments (<= 0), with each version's homing (1.1.9 moves 0.1 mm further, 2.0.x 7 steps
-    further, needing M92; 2.1.x skips adjustments of 6 steps or fewer) and, on 2.x, the M851
-    Z probe offset in the home height. The inverse of 'pkmcal export --format marlin'.
+    comments allowed, or a G-code file), read as the stated Marlin release runs them: 1.1.0
+    release candidates M665 L R S A B C (rod trims) [I J K] (no H: --height); 1.1.0-1.1.9
+    M665 L R H S B X Y Z (B the calibration radius, not geometry; up to 1.1.5 M665 Z turns
+    towers A and B); 2.0.0-2.0.5.x M665 L R H S X Y Z; 2.0.6-2.1.x M665 L R H S X Y Z A B C;
+    M666 X Y Z endstop adjustments (<= 0), with each release's homing (1.1.2-1.1.8 move 0.1
+    mm further, 1.1.9-2.0.5.x 7 steps further, needing M92; 2.0.6 on skip adjustments of 6
+    steps or fewer) and, on 2.x, the M851 Z probe offset in the home height. The inverse of
+    'pkmcal export --format marlin'.
     """
     check_output(output, [settings])
     from pkmcal.io.marlin_settings import read_marlin_settings

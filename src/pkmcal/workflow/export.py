@@ -295,7 +295,7 @@ def delta_firmware_text(machine, fmt: str, refit=None, klipper_config: str | Non
         klipper_text,
         rotary_firmware_subset,
     )
-    from pkmcal.io.marlin_settings import MARLIN_ROUNDING, marlin_rounded, marlin_text
+    from pkmcal.io.marlin_settings import MARLIN_ROUNDING, marlin_held, marlin_rounded, marlin_text
 
     fw, dropped = (rotary_firmware_subset if rotary else firmware_subset)(machine)
     angles = dict(zip(machine.param_names, machine.param_is_angle))
@@ -324,8 +324,9 @@ def delta_firmware_text(machine, fmt: str, refit=None, klipper_config: str | Non
     text, lost = marlin_text(fw, marlin_version, steps)
     for line in lost:
         note(f"pkmcal: warning: {line}")
-    rounding_note(MARLIN_ROUNDING, fw.machine("exact"), marlin_rounded(fw, marlin_version, steps).machine("rounded"),
-                  "the carriage travels", note)
+    # against what the version holds (one rod, tower C at 90 deg: said above), the rounding alone
+    rounding_note(MARLIN_ROUNDING, marlin_held(fw, marlin_version, steps).machine("exact"),
+                  marlin_rounded(fw, marlin_version, steps).machine("rounded"), "the carriage travels", note)
     return text
 
 
