@@ -127,12 +127,16 @@ def test_releases_map_to_the_dialect_of_their_rules():
     assert marlin_dialect("2.0.x", {"L", "R", "H", "A", "C"})[0] == "2.0.6-2.1.x"
     assert marlin_dialect("2.0.x", {"L", "R", "H", "B"})[0] == "2.0.0-2.0.5"
     assert marlin_dialect("1.1.x", {"L", "R", "S", "A", "B", "C", "I", "J", "K"})[0] == "1.1.0-RC"
-    with pytest.raises(PkmcalError, match=r"1\.1\.x: .*give the release as M115 prints it \(1\.1\.0 \.\.\. 1\.1\.9\)"):
+    with pytest.raises(PkmcalError, match=r"1\.1\.x: .*give the release as M115 prints it \(1\.1\.0 \.\.\. 1\.1\.9;"):
         marlin_dialect("1.1.x", {"L", "R", "H", "B", "X", "Y", "Z"})
     with pytest.raises(PkmcalError, match=r"2\.0\.x: .*e\.g\. 2\.0\.5\.3 or 2\.0\.9\.3"):
         marlin_dialect("2.0.x")
+    # bugfix builds: bugfix-2.1.x began with 2.0.6's rules; bugfix-2.0.x changed three times
+    assert marlin_dialect("bugfix-2.1.x")[0] == "2.0.6-2.1.x"
+    assert marlin_dialect("bugfix-2.0.x", {"L", "R", "H", "A", "C"})[0] == "2.0.6-2.1.x"
     for bad, message in (("1.0.2", "knows Marlin 1.1.0 to 2.1.x"), ("2.2.0", "knows Marlin 1.1.0 to 2.1.x"),
-                         ("latest", "as M115 prints it")):
+                         ("latest", "as M115 prints it"), ("bugfix-2.0.x", "the release it was taken after"),
+                         ("bugfix-1.1.x", "the release it was taken after")):
         with pytest.raises(PkmcalError, match=message):
             marlin_dialect(bad)
 
@@ -286,3 +290,29 @@ def test_marlin_version_must_be_stated_when_the_text_cannot_tell(tmp_path):
         read_marlin_settings(_write(tmp_path, "M665 L217 R95 H300\n"), "2.1.x")
     res = read_marlin_settings(_write(tmp_path, "M665 L217 R95 H300\n"), "2.1.x", missing="zero")
     assert res.firmware.endstops == (300.0,) * 3 and any("taken as 0" in n for n in res.notes)
+
+
+def test_cli_states_a_release_and_names_the_releases_it_cannot_tell(tmp_path):
+    """The command line takes a release as M115 prints it; a family the text cannot settle is
+    one line naming the releases, exit code 2."""
+    from click.testing import CliRunner
+
+    from pkmcal.cli.main import cli
+    from pkmcal.io.machine_file import load_machine
+
+    run = CliRunner().invoke
+    m503 = _write(tmp_path, M503_116)
+    res = run(cli, ["import", "marlin", m503, "--marlin-version", "1.1.9", "-o", str(tmp_path / "d.yaml")])
+    assert res.exit_code == 0, res.output
+    want = DeltaFirmware(radius=95.0, angles_deg=TRIMMED, arms=(217.0,) * 3,
+                         endstops=tuple(300.5 + 7 * STEP + ADJ)).machine("d")
+    np.testing.assert_allclose(load_machine(str(tmp_path / "d.yaml")).params, want.params, rtol=0, atol=1e-9)
+    res = run(cli, ["import", "marlin", m503, "--marlin-version", "1.1.x"])
+    assert res.exit_code == 2 and "(1.1.0 ... 1.1.9; 1.1.0-RC8" in res.output and "Traceback" not in res.output
+    assert len(res.output.strip().splitlines()) == 1
+    res = run(cli, ["export", "kossel-mini", "--format", "marlin", "--marlin-version", "2.0.9", "-o",
+                    str(tmp_path / "m.gcode")])
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "m.gcode").read_text().startswith("; Marlin 2.0.6-2.1.x: M665 L R H S X Y Z A B C\n")
+    res = run(cli, ["export", "kossel-mini", "--format", "marlin", "--marlin-version", "2.0.x"])
+    assert res.exit_code == 2 and "give the release as M115 prints it, e.g. 2.0.5.3 or 2.0.9.3" in res.output

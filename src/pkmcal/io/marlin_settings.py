@@ -99,7 +99,8 @@ the same release as the words): one dialect. 1.1.9's homing is 2.0.0–2.0.5's, 
   (the release notes read do not list it). A printer on such a build reads as H, not H − Z.
 
 The version a user states (``version``) is a release as ``M115`` prints it (``1.1.8``,
-``2.0.9.3``, ``2.1.2``), ``1.1.0-RC8``/``1.1.0-RCBugFix``, a dialect's name, or one of the
+``2.0.9.3``, ``2.1.2``), ``1.1.0-RC8``/``1.1.0-RCBugFix``, ``bugfix-2.1.x`` (``bugfix-2.0.x``
+only with A B C in the text: its rules changed three times), a dialect's name, or one of the
 earlier values ``1.1.x``, ``1.1.9``, ``2.0.x``, ``2.1.x`` (:func:`marlin_dialect`). What
 cannot be told from the text must be stated: a text with I J K, or A or C without H, is a
 1.1.0 release candidate's; one with A or C and H is 2.0.6–2.1.x's; any other text (B without
@@ -175,15 +176,24 @@ def marlin_dialect(version: str, letters: set[str] | None = None) -> tuple[str, 
         return v, []
     if re.fullmatch(r"1\.1\.0-?RC\w*", v, flags=re.IGNORECASE):
         return "1.1.0-RC", []
-    if v == "2.1.x":
-        return "2.0.6-2.1.x", []
+    if v in ("2.1.x", "bugfix-2.1.x"):
+        # bugfix-2.1.x began after 2.0.9.4 (d08223429b, 2022-06-03) with 2.0.6's rules
+        return "2.0.6-2.1.x", [] if v == "2.1.x" else [
+            "bugfix-2.1.x read as 2.0.6-2.1.x (from 2023-10-06 to 2024-05-16 its home height left out the M851 Z "
+            "offset unless USE_PROBE_FOR_Z_HOMING: #26297, reverted by #27088)"]
     letters = set() if letters is None else letters
+    if v.lower().startswith("bugfix"):
+        if v == "bugfix-2.0.x" and letters & set("AC"):
+            return "2.0.6-2.1.x", ["bugfix-2.0.x with M665 A B C (from 2020-06-27, #18423): read as 2.0.6-2.1.x"]
+        raise PkmcalError(f"--marlin-version {v}: a bugfix build's rules changed over time (bugfix-2.0.x: B until "
+                          "2019-11-21, 7 extra homing steps until 2020-04-20, A B C from 2020-06-27): give the release "
+                          "it was taken after, as M115 of that release prints it (e.g. 2.0.5.3)")
     if v == "1.1.x":
         if letters & set("IJK") or (letters & set("AC") and "H" not in letters):
             return "1.1.0-RC", ["M665 A B C without H (or with I J K): the words of the 1.1.0 release candidates"]
         raise PkmcalError("--marlin-version 1.1.x: Marlin 1.1.0-1.1.1, 1.1.2-1.1.8 and 1.1.9 home differently and "
                           "1.1.0-1.1.5 turn towers A and B with M665 Z: give the release as M115 prints it "
-                          "(1.1.0 ... 1.1.9)")
+                          "(1.1.0 ... 1.1.9; 1.1.0-RC8 for a release candidate)")
     if v == "2.0.x":
         if letters & set("AC"):
             return "2.0.6-2.1.x", ["M665 A B C rod trims: Marlin 2.0.6 or later (2.0.6-2.0.9.x read and home as "
