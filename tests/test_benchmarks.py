@@ -47,6 +47,10 @@ _DELTA_HOWS = ("nominal", "klipper", "pkmcal_default", "pkmcal_refit", "pkmcal_p
 _DELTA_LEAN_HOWS = ("nominal", "klipper", "klipper_rods", "pkmcal_prior", "klipper_block", "pkmcal_block",
                     "pkmcal_block_full", "volume_fit", "klipper_block_norods", "pkmcal_block_norods")
 _DELTA_RADII_HOWS = ("nominal", "klipper", "pkmcal_default", "pkmcal_prior")
+_DELTA_OBJECT_HOWS = ("nominal", "klipper_object", "pkmcal_object", "pkmcal_object_rods", "klipper_object_rings",
+                      "pkmcal_object_rings", "pkmcal_object_rings_rods")
+_DELTA_BOUNDS = ("object", "object_pkmcal_model", "object_klipper_weights", "object_rods", "object_rings",
+                 "object_rings_klipper_weights", "object_rings_rods", "object_heights_exact", "object_distances_exact")
 _MC_SETUPS = ("full-pose-paper1", "indicators-prototype")
 
 #: Per benchmark: the keys (paths into the JSON object) its docstring promises.
@@ -67,7 +71,14 @@ PROMISED: dict[str, list[tuple[str, ...]]] = {
                                           "pkmcal_block_norods")]
             + [("unequal_radii", h) for h in ("pkmcal_default", "pkmcal_prior")],
             ("worse_than_klipper", "improvement_over_klipper_pct"))
-    + [("leans_block", "lean_error_rms_deg_median"), ("leans_block", "true_lean_rms_deg_median")],
+    + [("leans_block", "lean_error_rms_deg_median"), ("leans_block", "true_lean_rms_deg_median")]
+    + _each([("printed_object", h) for h in _DELTA_OBJECT_HOWS],
+            ("rms3d_median_mm", "rms3d_worst_mm", "first_layer_median_mm", "first_layer_worst_mm", "solve_s_median",
+             "failures", "refused_then_accepted"))
+    + _each([("printed_object", h) for h in _DELTA_OBJECT_HOWS[2:]],
+            ("worse_than_klipper", "improvement_over_klipper_pct"))
+    + _each([("printed_object", "bound", b) for b in _DELTA_BOUNDS],
+            ("rms3d_expected_median_mm", "rms3d_predicted_median_mm")),
     "identification": [(f"{fit}_{f}",) for fit in ("ik_residual", "fk_residual") for f in _FIT_FIGURES]
     + [(f"{fit}_problems",) for fit in ("ik_residual", "fk_residual")]
     + _each([("ik_residual_problems", 0), ("fk_residual_problems", 0)],
