@@ -113,19 +113,21 @@ into the firmware's own parameter model and scored on the true printer.
   against 0.0125 for Klipper's weighting (expected rms 0.0126 against 0.0133; measured, the
   rms over the 20 printers 0.0131 against 0.0138), and 20 % better on those readings is
   impossible — the most any solver can gain there is about 6 %. The bound is the calipers':
-  0.0015 with the distances exact, 0.0053 with the heights exact. What moves it is more data:
+  0.0015 with the distances exact, 0.0052 with the heights exact. What moves it is more data:
   the rods (11 % by the bound, 15 % measured), 37 more heights (36 % by the bound, 46 %
   measured, which Klipper's solver also takes: pkmcal's 11 % over it is the weighting, 9.5 %
   by the bound), both (48 % over the enhanced mode as Klipper runs it, 15.5 % over Klipper
-  given the same heights). Per printer
-  neither estimator wins every time (pkmcal worse by up to 1.6 µm on 4): one estimator at the
-  bound is better on average, not on each draw of the noise.
+  given the same heights). Rods known only from the build's tolerance (±0.3 mm: σ 0.17 as a
+  prior) would gain 6 % by the bound (0.0111). Per printer neither estimator wins every time
+  (pkmcal worse by up to 1.6 µm on 4): one estimator at the bound is better on average, not
+  on each draw of the noise. The set took 350 s (20 printers; 2 cores at a load of 5-6).
 
 Printed: per set and per how (``nominal`` = printer.cfg unchanged, ``klipper``,
 ``pkmcal_default``, ``pkmcal_refit``, ``pkmcal_prior``, ``klipper_object``,
-``pkmcal_object``; the printed_object set's :data:`OBJECT_HOWS` and ``bound``) the median and worst 3-D rms and first-layer rms (mm), the median solve
-time (s; pkmcal: its commands after ``import klipper``, in this process; Klipper:
-``probe_finalize``, and the extended calibration for the object), failures and refusals, and
+``pkmcal_object``; the printed_object set's :data:`OBJECT_HOWS` and ``bound``) the median and
+worst 3-D rms and first-layer rms (mm), the median solve time (s; pkmcal: its commands after
+``import klipper``, in this process; Klipper: ``probe_finalize``, and the extended calibration
+for the object), failures and refusals, and
 for pkmcal's paths how many printers they are worse than Klipper on (3-D rms, beyond 0.5 µm;
 the object path against Klipper's enhanced mode, the leans_block paths against Klipper on the
 same information, :data:`LEAN_AGAINST`; the printed_object paths :data:`OBJECT_AGAINST`) and
@@ -861,9 +863,14 @@ OBJECT_AGAINST = {"pkmcal_object": "klipper_object", "pkmcal_object_rods": "klip
 #: radius, arm and endstop, through its own LinearDelta; the same bound if both are right),
 #: Klipper's estimator on them (``object_klipper_weights``: its weighting, linearised: not a
 #: bound, its predicted error), the bounds of the more-data paths (``object_rods``,
-#: ``object_rings``, ``object_rings_rods``), and where the bound comes from (:data:`EXACT`).
-BOUNDS = ("object", "object_pkmcal_model", "object_klipper_weights", "object_rods", "object_rings",
-          "object_rings_klipper_weights", "object_rings_rods", "object_heights_exact", "object_distances_exact")
+#: ``object_rings``, ``object_rings_rods``; ``object_rods_tolerance``: no path, the rods from
+#: the build's tolerance, :data:`ROD_TOLERANCE_STD`), and where the bound comes from (:data:`EXACT`).
+BOUNDS = ("object", "object_pkmcal_model", "object_klipper_weights", "object_rods", "object_rods_tolerance",
+          "object_rings", "object_rings_klipper_weights", "object_rings_rods", "object_heights_exact",
+          "object_distances_exact")
+#: The rods not measured but known from the build's tolerance, as a user may state it
+#: (``--prior 'arm_*=215±0.17'``): the simulated printers' ±0.3 mm (ERRORS, uniform) as a σ.
+ROD_TOLERANCE_STD = ERRORS["arm"] / math.sqrt(3.0)
 #: Where the bound comes from: the same readings with the heights' σ (``object_heights_exact``)
 #: or the distances' (``object_distances_exact``) times this, i.e. one kind of reading exact.
 EXACT = 1e-3
@@ -1013,25 +1020,26 @@ def object_bound(truth: Truth, block: str, bed_steps: np.ndarray, grid: np.ndarr
     sd = np.full(len(pairs), CALIPER_OBJECT_STD)
     arms = [cols.index(k) for k in (4, 5, 6)]
 
-    def fisher(hs, rods=False, heights_scale=1.0, distances_scale=1.0):
+    def fisher(hs, rods=None, heights_scale=1.0, distances_scale=1.0):
         J = central_jacobian(lambda v: firmware_readings(v, hs, pairs), v0, cols, steps)
         F = J.T @ (J / np.r_[height_sigmas(truth, hs) * heights_scale, sd * distances_scale][:, None] ** 2)
-        if rods:
-            F[arms, arms] += 1.0 / CALIPER_STD ** 2
+        if rods is not None:
+            F[arms, arms] += 1.0 / rods ** 2
         return J, F
 
     J, F = fisher(heights)
     both = np.concatenate([heights, bed_steps])
     out = {"object": _spread(G, np.linalg.inv(F), rng),
-           "object_rods": _spread(G, np.linalg.inv(fisher(heights, True)[1]), rng),
+           "object_rods": _spread(G, np.linalg.inv(fisher(heights, CALIPER_STD)[1]), rng),
+           "object_rods_tolerance": _spread(G, np.linalg.inv(fisher(heights, ROD_TOLERANCE_STD)[1]), rng),
            "object_rings": _spread(G, np.linalg.inv(fisher(both)[1]), rng),
-           "object_rings_rods": _spread(G, np.linalg.inv(fisher(both, True)[1]), rng),
+           "object_rings_rods": _spread(G, np.linalg.inv(fisher(both, CALIPER_STD)[1]), rng),
            "object_heights_exact": _spread(G, np.linalg.inv(fisher(heights, heights_scale=EXACT)[1]), rng),
            "object_distances_exact": _spread(G, np.linalg.inv(fisher(heights, distances_scale=EXACT)[1]), rng)}
-    out["object_klipper_weights"] = _spread(G, klipper_weighted(J, len(heights), height_sigmas(truth, heights), sd), rng)
+    probed = len(heights)
+    out["object_klipper_weights"] = _spread(G, klipper_weighted(J, probed, height_sigmas(truth, heights), sd), rng)
     Jr = central_jacobian(lambda v: firmware_readings(v, both, pairs), v0, cols, steps)
-    out["object_rings_klipper_weights"] = _spread(G, klipper_weighted(Jr, len(heights), height_sigmas(truth, both), sd),
-                                                  rng)
+    out["object_rings_klipper_weights"] = _spread(G, klipper_weighted(Jr, probed, height_sigmas(truth, both), sd), rng)
     # the same readings in pkmcal's model and kinematics; its gauge (a turn about z, a slide in
     # x, y: three directions no reading and no score sees) left to the pseudo-inverse
     machine, free = pkmcal_truth(truth)

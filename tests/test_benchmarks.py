@@ -49,8 +49,9 @@ _DELTA_LEAN_HOWS = ("nominal", "klipper", "klipper_rods", "pkmcal_prior", "klipp
 _DELTA_RADII_HOWS = ("nominal", "klipper", "pkmcal_default", "pkmcal_prior")
 _DELTA_OBJECT_HOWS = ("nominal", "klipper_object", "pkmcal_object", "pkmcal_object_rods", "klipper_object_rings",
                       "pkmcal_object_rings", "pkmcal_object_rings_rods")
-_DELTA_BOUNDS = ("object", "object_pkmcal_model", "object_klipper_weights", "object_rods", "object_rings",
-                 "object_rings_klipper_weights", "object_rings_rods", "object_heights_exact", "object_distances_exact")
+_DELTA_BOUNDS = ("object", "object_pkmcal_model", "object_klipper_weights", "object_rods", "object_rods_tolerance",
+                 "object_rings", "object_rings_klipper_weights", "object_rings_rods", "object_heights_exact",
+                 "object_distances_exact")
 _MC_SETUPS = ("full-pose-paper1", "indicators-prototype")
 
 #: Per benchmark: the keys (paths into the JSON object) its docstring promises.
