@@ -71,20 +71,72 @@ into the firmware's own parameter model and scored on the true printer.
   leans), which Klipper's one radius and three angles hold exactly (the towers on their
   circle, the origin at its centre).
 
+* **The printed object against its bound** (issue 25, "better by 20 % where an object is
+  printed"; set ``printed_object``: the no_leans printers and readings, the same draws, so
+  ``klipper_object`` and ``pkmcal_object`` repeat no_leans' figures). On a printer without
+  leans Klipper's ten numbers are an exact model (:func:`klipper_truth`), so the Cramér–Rao
+  bound of the 3-D rms is computable (:func:`object_bound`): the Fisher information JᵀΣ⁻¹J
+  of the readings (the SAVE_CONFIG block's 7 heights, σ the trigger and the whole steps
+  through ∂z/∂s, 0.0056 mm; its 12 distances, σ 0.02 mm) over Klipper's nine adjusted
+  numbers, carried to the score's aligned errors over the grid (central differences of this
+  file's truth through Klipper's DeltaCalibration), per printer its expected rms and the
+  median of linear-Gaussian draws (``bound`` in the JSON, beside the scores). The same in
+  pkmcal's parameters and kinematics (``object_pkmcal_model``: per tower angle, radius, arm,
+  endstop through its LinearDelta, the gauge to a pseudo-inverse) must agree to 1e-6
+  (checked on every printer; 2e-10 measured); ``object_klipper_weights`` is Klipper's
+  estimator linearised (its height weight 12 / (0.5 · 7) = 3.4 against the 13 the noise
+  asks): not a bound. pkmcal given more (each a named path): ``pkmcal_object_rods`` the block
+  and the rods measured (±0.1 mm, as ``--prior``; Klipper's extended calibration fits the
+  arms, a typed rod only starts its search, so it has no counterpart); ``pkmcal_object_rings``
+  the object with the 37-point PROBE_RINGS: the console log of the whole procedure
+  (:func:`object_log`, read with ``--object-machine``, 44 heights instead of 7: more data),
+  against ``klipper_object_rings``, Klipper's solver given the same 37 heights as
+  ``DELTA_ANALYZE MANUAL_HEIGHT=0`` entries (:func:`klipper_extended_with`);
+  ``pkmcal_object_rings_rods`` both. ``object_heights_exact`` and
+  ``object_distances_exact``: the bound with one kind of reading exact (where it comes from).
+
+  Measured (``--printers 20 --sets printed_object``, seed 0, 2026-12-03), 3-D rms in mm:
+
+  ===========================  =================  ==================  ========================
+  how                          median (worst)     bound, predicted    against Klipper, same data
+                                                  median (Klipper's)
+  ===========================  =================  ==================  ========================
+  klipper_object (7 + object)  0.0125 (0.0209)    0.0118 (0.0125)
+  pkmcal_object                0.0125 (0.0214)    0.0118              −0.4 %, worse on 4
+  pkmcal_object_rods           0.0105 (0.0220)    0.0105              +15.4 % (no Klipper path)
+  klipper_object_rings         0.0076 (0.0156)    0.0075 (0.0083)     +38.8 % on klipper_object
+  pkmcal_object_rings          0.0068 (0.0151)    0.0075              +11.1 %, worse on 5
+  pkmcal_object_rings_rods     0.0064 (0.0134)    0.0068              +15.5 %, worse on 1
+  ===========================  =================  ==================  ========================
+
+  So on Klipper's own readings both solvers sit at the bound: its predicted median is 0.0118
+  against 0.0125 for Klipper's weighting (expected rms 0.0126 against 0.0133; measured, the
+  rms over the 20 printers 0.0131 against 0.0138), and 20 % better on those readings is
+  impossible — the most any solver can gain there is about 6 %. The bound is the calipers':
+  0.0015 with the distances exact, 0.0052 with the heights exact. What moves it is more data:
+  the rods (11 % by the bound, 15 % measured), 37 more heights (36 % by the bound, 46 %
+  measured, which Klipper's solver also takes: pkmcal's 11 % over it is the weighting, 9.5 %
+  by the bound), both (48 % over the enhanced mode as Klipper runs it, 15.5 % over Klipper
+  given the same heights). Rods known only from the build's tolerance (±0.3 mm: σ 0.17 as a
+  prior) would gain 6 % by the bound (0.0111). Per printer neither estimator wins every time
+  (pkmcal worse by up to 1.6 µm on 4): one estimator at the bound is better on average, not
+  on each draw of the noise. The set took 350 s (20 printers; 2 cores at a load of 5-6).
+
 Printed: per set and per how (``nominal`` = printer.cfg unchanged, ``klipper``,
 ``pkmcal_default``, ``pkmcal_refit``, ``pkmcal_prior``, ``klipper_object``,
-``pkmcal_object``) the median and worst 3-D rms and first-layer rms (mm), the median solve
-time (s; pkmcal: its commands after ``import klipper``, in this process; Klipper:
-``probe_finalize``, and the extended calibration for the object), failures and refusals, and
+``pkmcal_object``; the printed_object set's :data:`OBJECT_HOWS` and ``bound``) the median and
+worst 3-D rms and first-layer rms (mm), the median solve time (s; pkmcal: its commands after
+``import klipper``, in this process; Klipper: ``probe_finalize``, and the extended calibration
+for the object), failures and refusals, and
 for pkmcal's paths how many printers they are worse than Klipper on (3-D rms, beyond 0.5 µm;
 the object path against Klipper's enhanced mode, the leans_block paths against Klipper on the
-same information, :data:`LEAN_AGAINST`) and the median improvement (%). Last line: one JSON
-object.
+same information, :data:`LEAN_AGAINST`; the printed_object paths :data:`OBJECT_AGAINST`) and
+the median improvement (%). Last line: one JSON object.
 
     python benchmarks/delta_vs_firmware.py [--printers 20] [--seed 0] [--sets no_leans,leans,...] [--quick]
 
 ``--quick``: 2 printers per set (the same sets, paths and scores; key ``quick``). ``--sets``:
-the sets to run (default all four; the JSON has only those).
+the sets to run (default all five; the JSON has only those).
 """
 
 from __future__ import annotations
@@ -275,7 +327,7 @@ def _saved(store: _ConfigFile) -> dict:
             "endstops": tuple(float(s[(f"stepper_{t}", "position_endstop")]) for t in "abc")}
 
 
-def klipper_enhanced(printer_cfg: str, truth: Truth, rng) -> tuple[dict, float, str]:
+def klipper_enhanced(printer_cfg: str, truth: Truth, rng, extras: dict | None = None) -> tuple[dict, float, str]:
     """Klipper's enhanced delta calibration (docs/Delta_Calibrate.md): DELTA_CALIBRATE on its
     own 7 default points (the ``[delta_calibrate]`` radius), SAVE_CONFIG, the calibration
     object (docs/prints/calibrate_size.stl) printed with that config and measured with
@@ -283,7 +335,11 @@ def klipper_enhanced(printer_cfg: str, truth: Truth, rng) -> tuple[dict, float, 
     ``measurements_to_distances``: pillar widths given as 0, the distances as the measured
     centre-to-centre ones) and ``CALIBRATE=extended``. Returns the saved numbers, the time of
     the two solves, and the SAVE_CONFIG block Klipper writes (its ``[delta_calibrate]``
-    heights and distances in steps below the endstops)."""
+    heights and distances in steps below the endstops). ``extras`` (a dict, when given)
+    receives what a console log of the procedure shows: ``basic`` (DELTA_CALIBRATE's ten
+    numbers, the config the object is printed with), ``reported`` (its 7 probe positions) and
+    ``distances`` (the 12 caliper readings, mm); and what :func:`klipper_extended_with` needs
+    to run the extended calibration again (``probe_positions``, ``entry``)."""
     from types import SimpleNamespace
 
     from klippy.extras.delta_calibrate import measurements_to_distances
@@ -294,7 +350,8 @@ def klipper_enhanced(printer_cfg: str, truth: Truth, rng) -> tuple[dict, float, 
     t0 = time.perf_counter()
     dc.probe_finalize((0.0, 0.0, 0.0), [list(map(float, p)) for p in reported])
     seconds = time.perf_counter() - t0
-    basic = klipper_calibration(_saved(store))                 # SAVE_CONFIG, RESTART
+    basic_cfg = _saved(store)
+    basic = klipper_calibration(basic_cfg)                     # SAVE_CONFIG, RESTART
     dc.last_probe_positions = [(0.0, fw0.calc_stable_position(list(map(float, p)))) for p in reported]
     dc.printer._objects["toolhead"] = _Toolhead(SimpleNamespace(get_calibration=lambda: basic))
     # the object's points (Klipper's own geometry) printed by the real printer under the new config
@@ -311,6 +368,9 @@ def klipper_enhanced(printer_cfg: str, truth: Truth, rng) -> tuple[dict, float, 
     t0 = time.perf_counter()
     dc.do_extended_calibration()
     seconds += time.perf_counter() - t0
+    if extras is not None:
+        extras.update(basic=basic_cfg, reported=reported, distances=measured, probe_positions=dc.last_probe_positions,
+                      entry=dc.delta_analyze_entry)
     from pkmcal.io.klipper_config import AUTOSAVE_HEADER
 
     sections: dict = {}
@@ -319,6 +379,27 @@ def klipper_enhanced(printer_cfg: str, truth: Truth, rng) -> tuple[dict, float, 
     block = AUTOSAVE_HEADER + "\n".join(f"#*# [{sec}]\n" + "\n".join(f"#*# {o}" for o in opts) + "\n#*#"
                                          for sec, opts in sections.items()) + "\n"
     return _saved(store), seconds, block
+
+
+def klipper_extended_with(printer_cfg: str, seen: dict, manual_steps: np.ndarray) -> tuple[dict, float]:
+    """Klipper's extended calibration (``DELTA_ANALYZE CALIBRATE=extended``) on the readings of
+    :func:`klipper_enhanced` (``seen``, its ``extras``: DELTA_CALIBRATE's 7 heights, the object's
+    distances, the config it was printed with) and more probe heights: each of
+    ``manual_steps`` (K, 3, steps below the switches) entered as Klipper lets a user enter a
+    height, ``DELTA_ANALYZE MANUAL_HEIGHT=0`` with the nozzle where a PROBE stopped
+    (``DeltaCalibrate.add_manual_height``), which ``calculate_params`` fits with its probe
+    heights (with its own weight, z_weight, on all of them). Its saved numbers and the solve's time."""
+    from types import SimpleNamespace
+
+    dc, store = klipper_delta_calibrate(printer_cfg)
+    basic = klipper_calibration(seen["basic"])
+    dc.printer._objects["toolhead"] = _Toolhead(SimpleNamespace(get_calibration=lambda: basic))
+    dc.last_probe_positions = list(seen["probe_positions"])
+    dc.manual_heights = [(0.0, [float(v) for v in st]) for st in manual_steps]
+    dc.delta_analyze_entry = dict(seen["entry"])
+    t0 = time.perf_counter()
+    dc.do_extended_calibration()
+    return _saved(store), time.perf_counter() - t0
 
 
 def klipper_solve(printer_cfg: str, reported: np.ndarray, manual: list | None = None) -> tuple[dict, float]:
@@ -393,10 +474,11 @@ def export(work: str, *args: str) -> bool:
         return True
 
 
-def pkmcal_object_path(work: str, block: str) -> tuple[dict, float, bool]:
+def pkmcal_object_path(work: str, block: str, arm_prior=None) -> tuple[dict, float, bool]:
     """pkmcal on Klipper's enhanced-mode data: ``import klipper-analyze`` of the printer.cfg
     with the SAVE_CONFIG block (heights and distances), ``identify --setup
-    printed-distance-klipper``, ``export --format klipper``."""
+    printed-distance-klipper`` (with the measured rods ``arm_prior`` as priors when given),
+    ``export --format klipper``."""
     with open(os.path.join(work, "printer.cfg"), encoding="utf-8") as fh:
         cfg = fh.read()
     saved = os.path.join(work, "saved-printer.cfg")
@@ -406,7 +488,7 @@ def pkmcal_object_path(work: str, block: str) -> tuple[dict, float, bool]:
     pkmcal("import", "klipper-analyze", saved, "--machine", os.path.join(work, "delta.yaml"), "-o",
            os.path.join(work, "pairs.csv"))
     pkmcal("identify", os.path.join(work, "delta.yaml"), os.path.join(work, "pairs.csv"), "--setup",
-           "printed-distance-klipper", "-o", os.path.join(work, "cal.yaml"))
+           "printed-distance-klipper", *rod_priors(arm_prior), "-o", os.path.join(work, "cal.yaml"))
     refused = export(work)
     seconds = time.perf_counter() - t0
     out = read_exported(os.path.join(work, "out.cfg"))
@@ -463,18 +545,24 @@ def model_at(truth: Truth, machine, p: np.ndarray) -> np.ndarray:
     return truth.nozzle(truth.switch[None, :] - travel, p)
 
 
-def score(truth: Truth, cfg, grid: np.ndarray) -> tuple[float, float]:
-    """3-D rms (after the best turn about z and shift in x, y) and first-layer rms (mm) of
-    the true printer running the firmware config ``cfg`` (ten numbers; or a pkmcal machine,
-    :func:`model_at`) over ``grid``."""
-    q = model_at(truth, cfg, grid) if hasattr(cfg, "ik") else truth_at(truth, klipper_calibration(cfg), grid)
-    # the best planar rigid motion q -> p (2-D Procrustes on x, y; z untouched)
+def aligned_errors(q: np.ndarray, grid: np.ndarray) -> np.ndarray:
+    """(N, 3) where the nozzle went (``q``) less where it was sent (``grid``), after the best
+    planar rigid motion of q onto the grid (2-D Procrustes on x, y; z untouched): the errors
+    :func:`score` takes the rms of."""
     a, b = q[:, :2] - q[:, :2].mean(0), grid[:, :2] - grid[:, :2].mean(0)
     u, _, vt = np.linalg.svd(a.T @ b)
     d = np.sign(np.linalg.det(u @ vt))
     rot = u @ np.diag([1.0, d]) @ vt
     xy = a @ rot + grid[:, :2].mean(0)
-    err = np.c_[xy - grid[:, :2], q[:, 2] - grid[:, 2]]
+    return np.c_[xy - grid[:, :2], q[:, 2] - grid[:, 2]]
+
+
+def score(truth: Truth, cfg, grid: np.ndarray) -> tuple[float, float]:
+    """3-D rms (after the best turn about z and shift in x, y) and first-layer rms (mm) of
+    the true printer running the firmware config ``cfg`` (ten numbers; or a pkmcal machine,
+    :func:`model_at`) over ``grid``."""
+    q = model_at(truth, cfg, grid) if hasattr(cfg, "ik") else truth_at(truth, klipper_calibration(cfg), grid)
+    err = aligned_errors(q, grid)
     first = grid[:, 2] == 0.0
     return float(np.sqrt(np.mean(np.sum(err**2, axis=1)))), float(np.sqrt(np.mean(q[first, 2] ** 2)))
 
@@ -724,8 +812,368 @@ def run_unequal_radii(printers: int, seed: int, work: str, grid: np.ndarray) -> 
     return summarise(rows, failures, refusals, {"pkmcal_default": "klipper", "pkmcal_prior": "klipper"})
 
 
+# -- the printed object: its Cramér–Rao bound, and what more data give (issue 25, "better by 20 %") ------------
+
+#: Klipper's ten numbers as one vector (mm, deg), the order of :func:`cfg_vector`.
+CFG_NAMES = ("radius", "angle_a", "angle_b", "angle_c", "arm_a", "arm_b", "arm_c", "endstop_a", "endstop_b",
+             "endstop_c")
+#: What Klipper's extended calibration adjusts (klippy/kinematics/delta.py,
+#: ``DeltaCalibration.coordinate_descent_params`` with distances): all but angle_c, which
+#: holds the turn about z (a turn the score removes).
+KLIPPER_EXTENDED = (0, 1, 2, 4, 5, 6, 7, 8, 9)
+#: Klipper's weight of its probe heights against its distances (klippy/extras/delta_calibrate.py,
+#: ``DeltaCalibrate.calculate_params``: z_weight = len(distances) / (MEASURE_WEIGHT ·
+#: len(probe_positions)), MEASURE_WEIGHT = 0.5): 3.4 for 12 distances and 7 heights, where the
+#: noise says (0.02 / 0.0056)² = 13.
+KLIPPER_MEASURE_WEIGHT = 0.5
+#: Central-difference step of the bound's Jacobians (mm; deg for Klipper's angles; this/100
+#: rad for pkmcal's, 1 µm at the towers): the bound moves by 4e-9 of itself from a step 10
+#: times larger to one 10 times smaller (measured), truncation and round-off together.
+FD_STEP = 1e-3
+#: Draws per printer of the linear-Gaussian prediction of the median 3-D rms.
+BOUND_DRAWS = 2000
+#: :func:`klipper_truth` must put the true printer's nozzle within this (mm, 3-D rms) of
+#: where it is sent (round-off of the Newton FK and the Procrustes: 1e-13 measured).
+BOUND_EXACT_MM = 1e-9
+#: The bound in Klipper's parameters and kinematics and in pkmcal's (:func:`object_bound`)
+#: agree within this fraction: two parameterisations of one model class in one frame, so
+#: equal but for the central differences (4e-9 of the bound, FD_STEP) and the gauge pkmcal's
+#: pseudo-inverse drops (the score moves by 5e-10 mm per unit of it, measured); the frame of
+#: the truth instead of Klipper's moved them by 2e-4, a wrong Jacobian or σ moves them by %.
+BOUND_AGREE = 1e-6
+#: The printed-object set (``printed_object``): the no_leans printers and readings (the same
+#: draws), Klipper's enhanced mode and pkmcal on its SAVE_CONFIG block as in no_leans, beside
+#: the Cramér–Rao bound of those readings (:func:`object_bound`) and pkmcal given more:
+#: ``pkmcal_object_rods`` the same block and the rods measured (the no_leans set's
+#: calipers, ±0.1 mm, as ``--prior``); ``pkmcal_object_rings`` the block's object and the
+#: console log of the whole procedure (the 37-point PROBE_RINGS, DELTA_CALIBRATE's 7 points,
+#: SAVE_CONFIG, the DELTA_ANALYZE values as a user types them, 0.01 mm): 44 probe heights
+#: instead of 7; ``pkmcal_object_rings_rods`` both.
+OBJECT_HOWS = ("nominal", "klipper_object", "pkmcal_object", "pkmcal_object_rods", "klipper_object_rings",
+               "pkmcal_object_rings", "pkmcal_object_rings_rods")
+#: Compared with: Klipper on the same readings (the rings: Klipper given them too); the rods
+#: have no Klipper counterpart (its extended calibration fits the arms, a typed rod is only
+#: where its search starts), so ``pkmcal_object_rods`` is compared with ``klipper_object``.
+OBJECT_AGAINST = {"pkmcal_object": "klipper_object", "pkmcal_object_rods": "klipper_object",
+                  "pkmcal_object_rings": "klipper_object_rings", "pkmcal_object_rings_rods": "klipper_object_rings",
+                  "klipper_object_rings": "klipper_object"}
+#: The bounds :func:`object_bound` computes: the readings of ``klipper_object`` and
+#: ``pkmcal_object`` in Klipper's parameters (``object``) and in pkmcal's
+#: (``object_pkmcal_model``: its default free set on a printed object, per tower angle,
+#: radius, arm and endstop, through its own LinearDelta; the same bound if both are right),
+#: Klipper's estimator on them (``object_klipper_weights``: its weighting, linearised: not a
+#: bound, its predicted error), the bounds of the more-data paths (``object_rods``,
+#: ``object_rings``, ``object_rings_rods``; ``object_rods_tolerance``: no path, the rods from
+#: the build's tolerance, :data:`ROD_TOLERANCE_STD`), and where the bound comes from (:data:`EXACT`).
+BOUNDS = ("object", "object_pkmcal_model", "object_klipper_weights", "object_rods", "object_rods_tolerance",
+          "object_rings", "object_rings_klipper_weights", "object_rings_rods", "object_heights_exact",
+          "object_distances_exact")
+#: The rods not measured but known from the build's tolerance, as a user may state it
+#: (``--prior 'arm_*=215±0.17'``): the simulated printers' ±0.3 mm (ERRORS, uniform) as a σ.
+ROD_TOLERANCE_STD = ERRORS["arm"] / math.sqrt(3.0)
+#: Where the bound comes from: the same readings with the heights' σ (``object_heights_exact``)
+#: or the distances' (``object_distances_exact``) times this, i.e. one kind of reading exact.
+EXACT = 1e-3
+
+
+def cfg_vector(cfg: dict) -> np.ndarray:
+    """Klipper's ten numbers (a config dict) as one vector, :data:`CFG_NAMES`' order."""
+    return np.r_[cfg["radius"], cfg["angles"], cfg["arms"], cfg["endstops"]].astype(float)
+
+
+def cfg_of_vector(v: np.ndarray) -> dict:
+    return {"radius": float(v[0]), "angles": tuple(map(float, v[1:4])), "arms": tuple(map(float, v[4:7])),
+            "endstops": tuple(map(float, v[7:10]))}
+
+
+def klipper_truth(truth: Truth) -> dict:
+    """Klipper's ten numbers that hold a printer without rail leans exactly: the three rail
+    feet lie on one circle, whose radius is ``delta_radius`` and about whose centre their
+    angles are the towers' (turned so that angle_c is printer.cfg's 90°, which Klipper
+    holds); the arms; the endstops at the true switch heights less √(L² − R²) (Klipper's
+    ``abs_endstop``). The printer running them puts the nozzle where it is sent up to a turn
+    about z and a shift in x, y, which the score removes (0 to round-off: tested)."""
+    if np.max(np.abs(truth.u[:, :2])) > 0.0:
+        raise ValueError("Klipper's model holds a printer without rail leans only")
+    (ax, ay), (bx, by), (cx, cy) = truth.base[:, :2]
+    d = 2.0 * (ax * (by - cy) + bx * (cy - ay) + cx * (ay - by))
+    sq = truth.base[:, 0] ** 2 + truth.base[:, 1] ** 2
+    centre = np.array([sq[0] * (by - cy) + sq[1] * (cy - ay) + sq[2] * (ay - by),
+                       sq[0] * (cx - bx) + sq[1] * (ax - cx) + sq[2] * (bx - ax)]) / d
+    rel = truth.base[:, :2] - centre
+    radius = float(np.mean(np.linalg.norm(rel, axis=1)))
+    angles = np.degrees(np.arctan2(rel[:, 1], rel[:, 0]))
+    angles = np.mod(angles + NOMINAL["angles"][2] - angles[2], 360.0)
+    return {"radius": radius, "angles": tuple(map(float, angles)), "arms": tuple(map(float, truth.arms)),
+            "endstops": tuple(map(float, truth.switch - np.sqrt(truth.arms ** 2 - radius ** 2)))}
+
+
+def saved_positions(block: str) -> tuple[np.ndarray, np.ndarray]:
+    """The probe heights' (K, 3) and the printed distances' (M, 2, 3) stable positions
+    (steps below the switches) of a SAVE_CONFIG block Klipper wrote
+    (klippy/extras/delta_calibrate.py ``DeltaCalibrate.save_state``: ``heightN_pos``,
+    ``distanceN_pos1``, ``distanceN_pos2``)."""
+    values = dict(re.findall(r"(?m)^#\*# (\w+) = (.*)$", block))
+
+    def steps(key):
+        return [float(v) for v in values[key].split(",")]
+
+    heights = [steps(f"height{k}_pos") for k in range(len(values)) if f"height{k}_pos" in values]
+    pairs = [[steps(f"distance{k}_pos1"), steps(f"distance{k}_pos2")] for k in range(len(values))
+             if f"distance{k}_pos1" in values]
+    return np.array(heights), np.array(pairs).reshape(-1, 2, 3)
+
+
+def firmware_readings(v: np.ndarray, heights: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """What Klipper's extended calibration compares with the measurements when its ten
+    numbers are ``v`` (``calculate_params``' error function): the height of each probe
+    point (z of ``get_position_from_stable``), then each printed pair's distance."""
+    fw = klipper_calibration(cfg_of_vector(v))
+    def at(steps):
+        return fw.get_position_from_stable([float(c) for c in steps])
+
+    return np.array([at(s)[2] for s in heights] + [math.dist(at(a), at(b)) for a, b in pairs])
+
+
+#: pkmcal's parameters a printed object frees by default on a delta (its identify: the rods
+#: with a sensor that sees a length, the leans held on one plane, the tool held): per tower.
+PKMCAL_OBJECT_FREE = ("angle", "radius", "arm", "endstop")
+
+
+def pkmcal_truth(truth: Truth):
+    """The true printer as pkmcal's :class:`~pkmcal.mechanisms.linear_delta.LinearDelta`
+    (vertical rails: per tower angle, radius, arm, endstop) in the frame of
+    :func:`klipper_truth` (the towers' circle centred, angle_c 90°: the score's grid then
+    covers the same part of the printer as in Klipper's numbers; in the truth's own frame,
+    0.1–0.3 mm away, the bound differs by 2e-4), its readings referred to the true switches (a
+    step count s below switch i is the reading S_i − s·STEP); and the indices of
+    :data:`PKMCAL_OBJECT_FREE` in its parameter vector."""
+    from pkmcal.mechanisms.linear_delta import PARAM_NAMES, LinearDelta, param_position
+
+    cfg = klipper_truth(truth)
+    rho = np.zeros(len(PARAM_NAMES))
+    for i in range(3):
+        for name, value in (("angle", math.radians(cfg["angles"][i])), ("radius", cfg["radius"]),
+                            ("arm", cfg["arms"][i]), ("endstop", cfg["endstops"][i])):
+            rho[param_position(name, i)] = value
+    machine = LinearDelta(name="truth", rho=rho, reading_reference=truth.switch.copy())
+    free = [param_position(name, i) for i in range(3) for name in PKMCAL_OBJECT_FREE]
+    return machine, free
+
+
+def pkmcal_readings(machine, rho: np.ndarray, heights: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """:func:`firmware_readings` through pkmcal's closed-form FK at parameters ``rho``."""
+    lam = machine.reading_reference[None, :] - STEP * np.concatenate([heights, pairs.reshape(-1, 3)])
+    p = machine.fk(lam, params=rho).poses
+    k = len(heights)
+    return np.r_[p[:k, 2], np.linalg.norm(p[k::2] - p[k + 1::2], axis=1)]
+
+
+def central_jacobian(f, x: np.ndarray, cols, steps) -> np.ndarray:
+    """(len(f(x)), len(cols)) central differences of ``f`` at ``x`` in the ``cols`` of x,
+    step ``steps[k]`` in column ``cols[k]``."""
+    out = []
+    for k, h in zip(cols, steps):
+        e = np.zeros(len(x))
+        e[k] = h
+        out.append((f(x + e) - f(x - e)) / (2.0 * h))
+    return np.array(out).T
+
+
+def height_sigmas(truth: Truth, heights: np.ndarray) -> np.ndarray:
+    """σ (mm) of each probe height's reading: the trigger scatter and the steppers' stop on
+    whole steps (uniform, STEP/√12 per carriage) through the true printer's ∂z/∂s there."""
+    s = truth.switch[None, :] - heights * STEP
+    p0 = truth.nozzle(s, np.zeros((len(s), 3)))
+    dz = np.stack([(truth.nozzle(s + STEP * np.eye(3)[i], p0)[:, 2] - truth.nozzle(s - STEP * np.eye(3)[i], p0)[:, 2])
+                   / (2.0 * STEP) for i in range(3)], axis=1)
+    return np.sqrt(TRIGGER_STD ** 2 + np.sum(dz ** 2, axis=1) * STEP ** 2 / 12.0)
+
+
+def _spread(G: np.ndarray, C: np.ndarray, rng) -> tuple[float, np.ndarray]:
+    """The 3-D rms an estimate of covariance ``C`` gives when its errors map to the score's
+    aligned errors by ``G`` (3N, p): its expectation √(tr(G C Gᵀ)/N) and BOUND_DRAWS draws."""
+    n = G.shape[0] // 3
+    w, V = np.linalg.eigh(C)
+    root = V * np.sqrt(np.clip(w, 0.0, None))
+    draws = G @ root @ rng.standard_normal((C.shape[0], BOUND_DRAWS))
+    return math.sqrt(float(np.trace(G @ C @ G.T)) / n), np.sqrt(np.sum(draws ** 2, axis=0) / n)
+
+
+def object_bound(truth: Truth, block: str, bed_steps: np.ndarray, grid: np.ndarray, rng) -> dict:
+    """The Cramér–Rao bound of the 3-D rms (:data:`BOUNDS`) on one printer without leans,
+    linearised at the truth (exact there: :func:`klipper_truth`): F = Jᵀ Σ⁻¹ J of the
+    readings (the SAVE_CONFIG ``block``'s 7 heights and 12 distances; ``bed_steps``: the 37
+    points' step counts, for the rings) with the true noise (:func:`height_sigmas`,
+    CALIPER_OBJECT_STD; measured rods CALIPER_STD as prior rows), carried to the score's
+    aligned errors over ``grid`` (G = ∂e/∂θ, the same central differences):
+    name → (expected rms, draws)."""
+    heights, pairs = saved_positions(block)
+    v0 = cfg_vector(klipper_truth(truth))
+    exact = score(truth, cfg_of_vector(v0), grid)[0]
+    if exact > BOUND_EXACT_MM:
+        raise AssertionError(f"Klipper's numbers of the true printer are {exact:.2e} mm off: no linearisation there")
+    cols = KLIPPER_EXTENDED
+    steps = [FD_STEP] * len(cols)
+    G = central_jacobian(lambda v: aligned_errors(truth_at(truth, klipper_calibration(cfg_of_vector(v)), grid),
+                                                  grid).ravel(), v0, cols, steps)
+    sd = np.full(len(pairs), CALIPER_OBJECT_STD)
+    arms = [cols.index(k) for k in (4, 5, 6)]
+
+    def fisher(hs, rods=None, heights_scale=1.0, distances_scale=1.0):
+        J = central_jacobian(lambda v: firmware_readings(v, hs, pairs), v0, cols, steps)
+        F = J.T @ (J / np.r_[height_sigmas(truth, hs) * heights_scale, sd * distances_scale][:, None] ** 2)
+        if rods is not None:
+            F[arms, arms] += 1.0 / rods ** 2
+        return J, F
+
+    J, F = fisher(heights)
+    both = np.concatenate([heights, bed_steps])
+    out = {"object": _spread(G, np.linalg.inv(F), rng),
+           "object_rods": _spread(G, np.linalg.inv(fisher(heights, CALIPER_STD)[1]), rng),
+           "object_rods_tolerance": _spread(G, np.linalg.inv(fisher(heights, ROD_TOLERANCE_STD)[1]), rng),
+           "object_rings": _spread(G, np.linalg.inv(fisher(both)[1]), rng),
+           "object_rings_rods": _spread(G, np.linalg.inv(fisher(both, CALIPER_STD)[1]), rng),
+           "object_heights_exact": _spread(G, np.linalg.inv(fisher(heights, heights_scale=EXACT)[1]), rng),
+           "object_distances_exact": _spread(G, np.linalg.inv(fisher(heights, distances_scale=EXACT)[1]), rng)}
+    probed = len(heights)
+    out["object_klipper_weights"] = _spread(G, klipper_weighted(J, probed, height_sigmas(truth, heights), sd), rng)
+    Jr = central_jacobian(lambda v: firmware_readings(v, both, pairs), v0, cols, steps)
+    out["object_rings_klipper_weights"] = _spread(G, klipper_weighted(Jr, probed, height_sigmas(truth, both), sd), rng)
+    # the same readings in pkmcal's model and kinematics; its gauge (a turn about z, a slide in
+    # x, y: three directions no reading and no score sees) left to the pseudo-inverse
+    machine, free = pkmcal_truth(truth)
+    ref = machine.reading_reference
+    rho0 = np.asarray(machine.params, dtype=float)
+    angles = {free[k] for k, name in enumerate(PKMCAL_OBJECT_FREE * 3) if name == "angle"}
+    psteps = [FD_STEP * (0.01 if k in angles else 1.0) for k in free]
+
+    def model_errors(rho):
+        q = truth.nozzle(truth.switch[None, :] - (ref[None, :] - machine.ik(grid, params=rho)), grid)
+        return aligned_errors(q, grid).ravel()
+
+    Jp = central_jacobian(lambda r: pkmcal_readings(machine, r, heights, pairs), rho0, free, psteps)
+    Gp = central_jacobian(model_errors, rho0, free, psteps)
+    Fp = Jp.T @ (Jp / np.r_[height_sigmas(truth, heights), sd][:, None] ** 2)
+    out["object_pkmcal_model"] = _spread(Gp, np.linalg.pinv(Fp, rcond=1e-9, hermitian=True), rng)
+    a, b = out["object"][0], out["object_pkmcal_model"][0]
+    if abs(a - b) > BOUND_AGREE * a:
+        raise AssertionError(f"the bound in Klipper's parameters ({a:.6g} mm) and in pkmcal's ({b:.6g} mm) differ: "
+                             "one of the two Jacobians is wrong")
+    return out
+
+
+def klipper_weighted(J: np.ndarray, probed: int, height_sd: np.ndarray, distance_sd: np.ndarray) -> np.ndarray:
+    """The covariance of Klipper's estimate, linearised: weighted least squares with its
+    weights (KLIPPER_MEASURE_WEIGHT: z_weight on every height, of ``probed`` DELTA_CALIBRATE
+    points; 1 on a distance) on readings of σ ``height_sd``, ``distance_sd``: the sandwich
+    A Σ Aᵀ, A = (Jᵀ V J)⁻¹ Jᵀ V. Not a bound: what its weighting gives."""
+    weights = np.r_[np.full(len(height_sd), len(distance_sd) / (KLIPPER_MEASURE_WEIGHT * probed)),
+                    np.ones(len(distance_sd))]
+    A = np.linalg.solve(J.T @ (J * weights[:, None]), (J * weights[:, None]).T)
+    return A @ (A.T * np.r_[height_sd, distance_sd][:, None] ** 2)
+
+
+def summarise_bounds(bounds: list[dict]) -> dict:
+    """Per bound over the printers: the median expected 3-D rms and the predicted median of
+    the benchmark's figure (the median of all printers' linear-Gaussian draws)."""
+    return {name: {"rms3d_expected_median_mm": float(np.median([b[name][0] for b in bounds])),
+                   "rms3d_predicted_median_mm": float(np.median(np.concatenate([b[name][1] for b in bounds])))}
+            for name in BOUNDS}
+
+
+def with_config(cfg_text: str, cfg: dict) -> str:
+    """printer.cfg with Klipper's ten numbers ``cfg`` typed in (as SAVE_CONFIG leaves them in
+    effect): ``delta_radius``, and each stepper's ``angle``, ``arm_length``, ``position_endstop``."""
+    out = re.sub(r"(?m)^(arm_length|position_endstop|angle):.*\n", "", cfg_text)
+    out = re.sub(r"(?m)^delta_radius:.*$", f"delta_radius: {cfg['radius']:.6f}", out)
+    for i, t in enumerate("abc"):
+        out = out.replace(f"[stepper_{t}]\n", f"[stepper_{t}]\nangle: {cfg['angles'][i]:.6f}\n"
+                          f"arm_length: {cfg['arms'][i]:.6f}\nposition_endstop: {cfg['endstops'][i]:.6f}\n", 1)
+    return out
+
+
+def object_log(reported_rings: np.ndarray, reported7: np.ndarray, distances: np.ndarray) -> str:
+    """The console of the whole procedure with a PROBE_RINGS first: its probe lines, then
+    DELTA_CALIBRATE's 7 (both with printer.cfg), SAVE_CONFIG, and the caliper readings typed
+    as DELTA_ANALYZE values (0.01 mm; pillar widths 0: the distances are centre to centre)."""
+    def typed(values):
+        return ",".join(f"{v:.2f}" for v in values)
+
+    return (log_text(reported_rings) + "DELTA_CALIBRATE\n" + log_text(reported7).split("\n", 1)[1] + "SAVE_CONFIG\n"
+            + f"DELTA_ANALYZE CENTER_DISTS={typed(distances[:6])}\nDELTA_ANALYZE CENTER_PILLAR_WIDTHS=0,0,0\n"
+            f"DELTA_ANALYZE OUTER_DISTS={typed(distances[6:])}\nDELTA_ANALYZE OUTER_PILLAR_WIDTHS=0,0,0,0,0,0\n"
+            "DELTA_ANALYZE CALIBRATE=extended\n")
+
+
+def rod_priors(arm_prior) -> list[str]:
+    """``--prior arm_a=M±σ`` … for the measured rods (none when ``arm_prior`` is None)."""
+    return [] if arm_prior is None else [a for t, m in zip("abc", arm_prior)
+                                         for a in ("--prior", f"arm_{t}={m:.3f}±{CALIPER_STD}")]
+
+
+def pkmcal_object_log_path(work: str, log: str, basic: dict, arm_prior=None) -> tuple[dict, float, bool]:
+    """pkmcal on the console log of the procedure (:func:`object_log`): ``import klipper``
+    of the printer.cfg SAVE_CONFIG left (``basic``), ``import klipper-analyze LOG --machine
+    delta.yaml --object-machine saved.yaml``, ``identify --setup printed-distance-klipper``
+    (with the rods as priors when measured), ``export --format klipper``."""
+    with open(os.path.join(work, "printer.cfg"), encoding="utf-8") as fh:
+        cfg_text = fh.read()
+    paths = {k: os.path.join(work, k) for k in ("object.log", "saved.cfg", "saved.yaml", "pairs.csv", "cal.yaml",
+                                                 "out.cfg")}
+    with open(paths["object.log"], "w", encoding="utf-8") as fh:
+        fh.write(log)
+    with open(paths["saved.cfg"], "w", encoding="utf-8") as fh:
+        fh.write(with_config(cfg_text, basic))
+    t0 = time.perf_counter()
+    pkmcal("import", "klipper", paths["saved.cfg"], "--name", "bench", "-o", paths["saved.yaml"])
+    pkmcal("import", "klipper-analyze", paths["object.log"], "--machine", os.path.join(work, "delta.yaml"),
+           "--object-machine", paths["saved.yaml"], "-o", paths["pairs.csv"])
+    pkmcal("identify", os.path.join(work, "delta.yaml"), paths["pairs.csv"], "--setup", "printed-distance-klipper",
+           *rod_priors(arm_prior), "-o", paths["cal.yaml"])
+    refused = export(work)
+    seconds = time.perf_counter() - t0
+    out = read_exported(paths["out.cfg"])
+    for path in paths.values():
+        os.remove(path)
+    return out, seconds, refused
+
+
+def run_printed_object(printers: int, seed: int, work: str, grid: np.ndarray) -> dict:
+    """The no_leans printers and readings (the same draws, in the same order): Klipper's
+    enhanced mode and pkmcal on its block, the Cramér–Rao bound of those readings, and pkmcal
+    given more (:data:`OBJECT_HOWS`)."""
+    rng = np.random.default_rng([seed, 0])                       # the no_leans set's stream
+    rng_object = np.random.default_rng([seed, 0, 1])             # its object's
+    rng_bound = np.random.default_rng([seed, 3])                 # the bound's draws
+    fw0 = klipper_calibration(NOMINAL)
+    xy = rings()
+    rows, failures, refusals = tables(OBJECT_HOWS)
+    bounds = []
+    for _ in range(printers):
+        truth, arms = random_truth(rng, False)
+        reported, bed_steps = probe(truth, fw0, xy, rng)
+        measured = arms + rng.standard_normal(3) * CALIPER_STD
+        seen: dict = {}
+        cfg, seconds, block = klipper_enhanced(os.path.join(work, "printer.cfg"), truth, rng_object, seen)
+        results = {"nominal": (NOMINAL, 0.0, False), "klipper_object": (cfg, seconds, False),
+                   "klipper_object_rings": (*klipper_extended_with(os.path.join(work, "printer.cfg"), seen, bed_steps),
+                                            False)}
+        log = object_log(reported, seen["reported"], seen["distances"])
+        for how, path, args in (("pkmcal_object", pkmcal_object_path, (block,)),
+                                ("pkmcal_object_rods", pkmcal_object_path, (block, measured)),
+                                ("pkmcal_object_rings", pkmcal_object_log_path, (log, seen["basic"])),
+                                ("pkmcal_object_rings_rods", pkmcal_object_log_path, (log, seen["basic"], measured))):
+            attempt(results, failures, how, path, work, *args)
+        record(rows, refusals, truth, results, grid)
+        bounds.append(object_bound(truth, block, bed_steps, grid, rng_bound))
+    out = summarise(rows, failures, refusals, OBJECT_AGAINST)
+    out["bound"] = summarise_bounds(bounds)
+    return out
+
+
 #: The sets of printers, in the order they run.
-SETS = ("no_leans", "leans", "leans_block", "unequal_radii")
+SETS = ("no_leans", "leans", "leans_block", "unequal_radii", "printed_object")
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -745,7 +1193,8 @@ def main(argv: list[str] | None = None) -> dict:
         runs = {"no_leans": (lambda: run_set(False, args.printers, args.seed, work, grid), HOWS),
                 "leans": (lambda: run_set(True, args.printers, args.seed, work, grid), HOWS),
                 "leans_block": (lambda: run_leans_block(args.printers, args.seed, work, grid), LEAN_HOWS),
-                "unequal_radii": (lambda: run_unequal_radii(args.printers, args.seed, work, grid), RADII_HOWS)}
+                "unequal_radii": (lambda: run_unequal_radii(args.printers, args.seed, work, grid), RADII_HOWS),
+                "printed_object": (lambda: run_printed_object(args.printers, args.seed, work, grid), OBJECT_HOWS)}
         for name in args.sets.split(","):
             if name not in runs:
                 ap.error(f"--sets: unknown set {name!r} (sets: {', '.join(runs)})")
@@ -762,6 +1211,9 @@ def main(argv: list[str] | None = None) -> dict:
                       + (f", export refused (undetermined numbers) and accepted by name on "
                          f"{r['refused_then_accepted']}" if r["refused_then_accepted"] else "")
                       + (f", failed on {r['failures']}" if r["failures"] else ""))
+            for bound, b in out[name].get("bound", {}).items():
+                print(f"{name:13s} bound {bound:28s} 3-D rms predicted median {b['rms3d_predicted_median_mm']:.4f} mm"
+                      f" (expected rms, median over the printers {b['rms3d_expected_median_mm']:.4f} mm)")
             if name == "leans_block" and out[name]["lean_error_rms_deg_median"] is not None:
                 print(f"{name:13s} leans fitted by pkmcal_block: rms error {out[name]['lean_error_rms_deg_median']:.4f}"
                       f" deg (median), the true leans rms {out[name]['true_lean_rms_deg_median']:.4f} deg")

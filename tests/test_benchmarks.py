@@ -47,6 +47,11 @@ _DELTA_HOWS = ("nominal", "klipper", "pkmcal_default", "pkmcal_refit", "pkmcal_p
 _DELTA_LEAN_HOWS = ("nominal", "klipper", "klipper_rods", "pkmcal_prior", "klipper_block", "pkmcal_block",
                     "pkmcal_block_full", "volume_fit", "klipper_block_norods", "pkmcal_block_norods")
 _DELTA_RADII_HOWS = ("nominal", "klipper", "pkmcal_default", "pkmcal_prior")
+_DELTA_OBJECT_HOWS = ("nominal", "klipper_object", "pkmcal_object", "pkmcal_object_rods", "klipper_object_rings",
+                      "pkmcal_object_rings", "pkmcal_object_rings_rods")
+_DELTA_BOUNDS = ("object", "object_pkmcal_model", "object_klipper_weights", "object_rods", "object_rods_tolerance",
+                 "object_rings", "object_rings_klipper_weights", "object_rings_rods", "object_heights_exact",
+                 "object_distances_exact")
 _MC_SETUPS = ("full-pose-paper1", "indicators-prototype")
 
 #: Per benchmark: the keys (paths into the JSON object) its docstring promises.
@@ -67,7 +72,14 @@ PROMISED: dict[str, list[tuple[str, ...]]] = {
                                           "pkmcal_block_norods")]
             + [("unequal_radii", h) for h in ("pkmcal_default", "pkmcal_prior")],
             ("worse_than_klipper", "improvement_over_klipper_pct"))
-    + [("leans_block", "lean_error_rms_deg_median"), ("leans_block", "true_lean_rms_deg_median")],
+    + [("leans_block", "lean_error_rms_deg_median"), ("leans_block", "true_lean_rms_deg_median")]
+    + _each([("printed_object", h) for h in _DELTA_OBJECT_HOWS],
+            ("rms3d_median_mm", "rms3d_worst_mm", "first_layer_median_mm", "first_layer_worst_mm", "solve_s_median",
+             "failures", "refused_then_accepted"))
+    + _each([("printed_object", h) for h in _DELTA_OBJECT_HOWS[2:]],
+            ("worse_than_klipper", "improvement_over_klipper_pct"))
+    + _each([("printed_object", "bound", b) for b in _DELTA_BOUNDS],
+            ("rms3d_expected_median_mm", "rms3d_predicted_median_mm")),
     "identification": [(f"{fit}_{f}",) for fit in ("ik_residual", "fk_residual") for f in _FIT_FIGURES]
     + [(f"{fit}_problems",) for fit in ("ik_residual", "fk_residual")]
     + _each([("ik_residual_problems", 0), ("fk_residual_problems", 0)],
@@ -195,3 +207,64 @@ def test_quick_defaults(monkeypatch):
     assert (given.trials, given.quick) == (7, True)
     with pytest.raises(ValueError, match="trails"):
         parse_args(parser(), ["--quick"], trails=3)
+
+
+def test_delta_object_bound_is_what_a_weighted_fit_reaches(monkeypatch, tmp_path):
+    """``delta_vs_firmware.object_bound`` (the Cramér–Rao bound of the printed-object set)
+    against a referee it does not share: scipy's least_squares fitting Klipper's nine numbers
+    to noisy readings weighted by their σ, each fit scored by the benchmark's own score (the
+    true printer run by Klipper's DeltaCalibration). The mean of the scores' squares over the
+    draws is the bound's expected square within 4 standard errors of that mean (measured: 1.0
+    of them), and each draw's score is its linearised prediction within 1 % (measured 0.3 %:
+    second-order terms, ~(0.05 mm)² / 200 mm against a 0.013 mm score). 60 draws know the mean
+    square to 7 %: enough to catch a wrong σ or a Jacobian off by a factor, not the 6 %
+    between the bound and Klipper's weighting (the last line, Gauss–Markov, checks that)."""
+    pytest.importorskip("klippy.kinematics.delta")
+    import shutil
+
+    import numpy as np
+    from scipy.optimize import least_squares
+
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    import delta_vs_firmware as bench
+
+    cfg = tmp_path / "printer.cfg"
+    shutil.copy(bench.PRINTER_CFG, cfg)
+    rng = np.random.default_rng(7)
+    truth, _ = bench.random_truth(rng, False)
+    _, _, block = bench.klipper_enhanced(str(cfg), truth, rng)
+    grid = bench.volume_grid()[::5]
+    bound = bench.object_bound(truth, block, np.zeros((0, 3)), grid, rng)
+    heights, pairs = bench.saved_positions(block)
+    v0 = bench.cfg_vector(bench.klipper_truth(truth))
+    free = list(bench.KLIPPER_EXTENDED)
+    sigma = np.r_[bench.height_sigmas(truth, heights), np.full(len(pairs), bench.CALIPER_OBJECT_STD)]
+    exact = bench.firmware_readings(v0, heights, pairs)
+    J = bench.central_jacobian(lambda v: bench.firmware_readings(v, heights, pairs), v0, free,
+                               [bench.FD_STEP] * len(free))
+    G = bench.central_jacobian(lambda v: bench.aligned_errors(
+        bench.truth_at(truth, bench.klipper_calibration(bench.cfg_of_vector(v)), grid), grid).ravel(),
+        v0, free, [bench.FD_STEP] * len(free))
+    Jw = J / sigma[:, None]
+    scores, predicted = [], []
+    for _ in range(60):
+        noise = rng.standard_normal(len(sigma)) * sigma
+        y = exact + noise
+
+        def residual(x):
+            v = v0.copy()
+            v[free] = x
+            return (bench.firmware_readings(v, heights, pairs) - y) / sigma
+
+        x = least_squares(residual, v0[free], x_scale="jac", xtol=1e-12, ftol=1e-12, gtol=1e-12).x
+        v = v0.copy()
+        v[free] = x
+        scores.append(bench.score(truth, bench.cfg_of_vector(v), grid)[0])
+        dv = np.linalg.lstsq(Jw, noise / sigma, rcond=None)[0]
+        predicted.append(math.sqrt(np.sum((G @ dv) ** 2) / len(grid)))
+    scores, predicted = np.array(scores), np.array(predicted)
+    assert np.max(np.abs(scores - predicted) / predicted) < 0.01
+    expected = bound["object"][0] ** 2
+    square = scores ** 2
+    assert abs(square.mean() - expected) < 4.0 * square.std(ddof=1) / math.sqrt(len(square))
+    assert bound["object"][0] < bound["object_klipper_weights"][0]       # Gauss–Markov
